@@ -1,0 +1,23 @@
+# Two set-up-free entry points: `make demo` (the main job) and `make test`.
+# Each creates a local virtual environment in .venv and installs the package into it.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[dev,notebooks]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/flexctrl modal-report models/subedi3link.toml --out out/modal
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+clean:
+	rm -rf $(VENV) out .flexctrl-cache

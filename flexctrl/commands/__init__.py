@@ -1,0 +1,1 @@
+"""Sub-commands of the ``flexctrl`` CLI, one module each (``add_parser`` and ``run``)."""

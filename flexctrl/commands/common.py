@@ -1,0 +1,34 @@
+"""Argument helpers shared by sub-commands (model, payload, configuration, --set, --fidelity)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from flexctrl.fidelity import SPELLINGS, Fidelity, parse_fidelity
+from flexctrl.spec.arm import ArmSpec, load_arm
+
+
+def add_model_arguments(parser: argparse.ArgumentParser, *, fidelity_default: str | None = None) -> None:
+    """Add MODEL, --payload, --q, --set and --fidelity."""
+    parser.add_argument("model", metavar="MODEL", help="robot description, e.g. models/subedi3link.toml")
+    parser.add_argument("--payload", type=float, metavar="KG", help="payload mass in kg (default: the model file's)")
+    parser.add_argument("--q", type=float, nargs="+", metavar="DEG", help="joint angles in degrees, one per joint (default: the model file's)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any model-file key, e.g. boundary_inertia=paper (repeatable)")
+    parser.add_argument("--fidelity", default=fidelity_default, metavar="F", help=f"model fidelity: {SPELLINGS}")
+
+
+def load_arm_from_args(args: argparse.Namespace) -> tuple[ArmSpec, np.ndarray]:
+    """The validated arm (payload applied) and the configuration in radians."""
+    arm = load_arm(args.model, overrides=args.set)
+    if args.payload is not None:
+        arm = arm.with_payload(args.payload)
+    q = arm.configuration_or_default(None if args.q is None else [math.radians(a) for a in args.q])
+    return arm, q
+
+
+def fidelity_from_args(args: argparse.Namespace) -> Fidelity | None:
+    """The parsed ``--fidelity`` or None."""
+    return None if args.fidelity is None else parse_fidelity(args.fidelity, source="--fidelity")

@@ -1,0 +1,212 @@
+"""Validated reading of TOML tables into plain values.
+
+One :class:`TableReader` wraps one TOML table.  Each accessor checks type,
+finiteness and bounds and raises :class:`~flexctrl.errors.SpecError` naming the
+file, the dotted key, the value and what is allowed.  :meth:`TableReader.finish`
+rejects keys that were never read, with a "did you mean" hint, so a misspelt
+key can never be silently ignored.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from pathlib import Path
+from typing import Any, Sequence
+
+from flexctrl.errors import SpecError
+
+_MISSING = object()
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax errors into :class:`SpecError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError(f"file not found (looked at '{path.resolve()}')", source=str(path))
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"not valid TOML: {exc}", source=str(path)) from None
+
+
+def _describe_bounds(low: float | None, high: float | None, low_open: bool) -> str:
+    parts = []
+    if low is not None:
+        parts.append(f"{'>' if low_open else '>='} {low:g}")
+    if high is not None:
+        parts.append(f"<= {high:g}")
+    return "a finite number " + " and ".join(parts) if parts else "a finite number"
+
+
+class TableReader:
+    """Read and validate the keys of one TOML table.
+
+    Parameters
+    ----------
+    table
+        The parsed table.
+    source
+        File name used in error messages.
+    prefix
+        Dotted key prefix of this table (``""`` at the top level).
+    """
+
+    def __init__(self, table: Any, source: str, prefix: str = ""):
+        if not isinstance(table, dict):
+            raise SpecError(
+                f"expected a table, got {type(table).__name__} {table!r}",
+                source=source,
+                key=prefix or None,
+            )
+        self.table = table
+        self.source = source
+        self.prefix = prefix
+        self._seen: set[str] = set()
+
+    # -- helpers ---------------------------------------------------------------
+    def key(self, name: str) -> str:
+        """The dotted key of ``name`` inside this table."""
+        return f"{self.prefix}.{name}" if self.prefix else name
+
+    def error(self, name: str, message: str) -> SpecError:
+        """A :class:`SpecError` about key ``name`` of this table."""
+        return SpecError(message, source=self.source, key=self.key(name))
+
+    def has(self, name: str) -> bool:
+        """Whether the table holds ``name``."""
+        return name in self.table
+
+    def raw(self, name: str, default: Any = _MISSING) -> Any:
+        """The unvalidated value of ``name`` (marks it as read)."""
+        self._seen.add(name)
+        if name not in self.table:
+            if default is _MISSING:
+                close = difflib.get_close_matches(name, [k for k in self.table if k not in self._seen], n=1)
+                hint = f" (found '{self.key(close[0])}': did you mean '{name}'?)" if close else ""
+                raise self.error(name, f"missing required key{hint}")
+            return default
+        return self.table[name]
+
+    # -- typed accessors ---------------------------------------------------------
+    def number(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        unit: str = "",
+    ) -> float:
+        """A finite float within ``[low, high]`` (``(low, high]`` if ``low_open``)."""
+        value = self.raw(name, default)
+        return self.check_number(name, value, low=low, high=high, low_open=low_open, unit=unit)
+
+    def check_number(
+        self,
+        name: str,
+        value: Any,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        unit: str = "",
+    ) -> float:
+        """Validate ``value`` as a number for key ``name`` (see :meth:`number`)."""
+        allowed = _describe_bounds(low, high, low_open) + (f" ({unit})" if unit else "")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(name, f"value {value!r} is not a number; allowed: {allowed}")
+        value = float(value)
+        bad = (
+            not math.isfinite(value)
+            or (low is not None and (value <= low if low_open else value < low))
+            or (high is not None and value > high)
+        )
+        if bad:
+            raise self.error(name, f"value {value!r} is out of range; allowed: {allowed}")
+        return value
+
+    def positive(self, name: str, default: Any = _MISSING, *, unit: str = "") -> float:
+        """A finite number > 0."""
+        return self.number(name, default, low=0.0, low_open=True, unit=unit)
+
+    def nonnegative(self, name: str, default: Any = _MISSING, *, unit: str = "") -> float:
+        """A finite number >= 0."""
+        return self.number(name, default, low=0.0, unit=unit)
+
+    def integer(self, name: str, default: Any = _MISSING, *, low: int | None = None, high: int | None = None) -> int:
+        """An integer within ``[low, high]``."""
+        value = self.raw(name, default)
+        allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(name, f"value {value!r} is not an integer; allowed: {allowed}")
+        if (low is not None and value < low) or (high is not None and value > high):
+            raise self.error(name, f"value {value!r} is out of range; allowed: {allowed}")
+        return value
+
+    def boolean(self, name: str, default: Any = _MISSING) -> bool:
+        """``true`` or ``false``."""
+        value = self.raw(name, default)
+        if not isinstance(value, bool):
+            raise self.error(name, f"value {value!r} is not a boolean; allowed: true or false")
+        return value
+
+    def string(self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None) -> str:
+        """A string, optionally one of ``choices``."""
+        value = self.raw(name, default)
+        if not isinstance(value, str):
+            raise self.error(name, f"value {value!r} is not a string")
+        if choices is not None and value not in choices:
+            hint = difflib.get_close_matches(value, list(choices), n=1)
+            extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise self.error(name, f"value {value!r} is not allowed; allowed: {', '.join(map(repr, choices))}{extra}")
+        return value
+
+    def numbers(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        length: int | None = None,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        unit: str = "",
+    ) -> tuple[float, ...]:
+        """A list of finite numbers, each within bounds, optionally of fixed length."""
+        value = self.raw(name, default)
+        if not isinstance(value, (list, tuple)):
+            raise self.error(name, f"value {value!r} is not a list of numbers")
+        if length is not None and len(value) != length:
+            raise self.error(name, f"value {value!r} has {len(value)} entries; allowed: exactly {length}")
+        return tuple(
+            self.check_number(f"{name}[{i}]", v, low=low, high=high, low_open=low_open, unit=unit)
+            for i, v in enumerate(value)
+        )
+
+    def table_of(self, name: str, default: Any = _MISSING) -> "TableReader":
+        """The sub-table ``name`` as a reader."""
+        value = self.raw(name, default)
+        return TableReader(value, self.source, self.key(name))
+
+    def tables(self, name: str, *, min_count: int = 0) -> list["TableReader"]:
+        """An array of tables (``[[name]]``) as readers."""
+        value = self.raw(name)
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(name, f"expected an array of tables ([[{name}]]), got {value!r}")
+        if len(value) < min_count:
+            raise self.error(name, f"has {len(value)} entries; allowed: at least {min_count}")
+        return [TableReader(v, self.source, f"{self.key(name)}[{i + 1}]") for i, v in enumerate(value)]
+
+    def finish(self) -> None:
+        """Reject every key of the table that was not read, with a suggestion."""
+        unknown = [k for k in self.table if k not in self._seen]
+        if unknown:
+            name = unknown[0]
+            hint = difflib.get_close_matches(name, sorted(self._seen), n=1)
+            extra = f"; did you mean '{hint[0]}'?" if hint else ""
+            known = ", ".join(sorted(self._seen))
+            raise self.error(name, f"unknown key (value {self.table[name]!r}){extra} Known keys here: {known}")
