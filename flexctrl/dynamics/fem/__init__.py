@@ -1,0 +1,1 @@
+"""Floating-frame finite-element models (Pan, Scott & Ulsoy 1990)."""
