@@ -1,0 +1,235 @@
+"""Differentiable lookup of modal parameters over the arm configuration.
+
+Subedi et al. (2021, Section 3) tabulate the configuration-dependent modes
+offline and interpolate.  Here each link gets a table over the joint angles that
+change its boundary values (:func:`flexctrl.modal.boundary.scheduling_joints`),
+on a uniform grid over one period, interpolated by cubic B-splines
+(``casadi.interpolant(..., "bspline", ...)``) so the result can be differentiated
+by CasADi (scheduled-mode dynamics, linearisation).  Angles are wrapped to
+(-pi, pi] before the lookup; the grid overlaps the period by two cells on each
+side so the spline is smooth across the wrap.
+
+Mode signs are made continuous over the grid (each mode is aligned with its
+grid neighbour by the sign of the overlap of their shapes), otherwise the
+interpolant would average modes of opposite sign.
+
+Tables are cached on disk (``$FLEXCTRL_CACHE`` or ``.flexctrl-cache/``) as
+``.npz`` files keyed by a hash of everything they depend on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.modal.arm_modes import link_modes
+from flexctrl.modal.boundary import scheduling_joints
+from flexctrl.spec.arm import ArmSpec
+
+FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
+_FORMAT_VERSION = 1
+_SAMPLES = np.linspace(0.0, 1.0, 41)  # fractions of the link length for sign alignment
+
+
+def cache_dir() -> Path:
+    """Folder of cached tables and compiled code (``$FLEXCTRL_CACHE`` or ``.flexctrl-cache``)."""
+    return Path(os.environ.get("FLEXCTRL_CACHE", ".flexctrl-cache"))
+
+
+def _wrap(q):
+    return ca.atan2(ca.sin(q), ca.cos(q))
+
+
+@dataclass
+class ModalLookup:
+    """Interpolated modal parameters of one link.
+
+    Attributes
+    ----------
+    link : int
+        0-based link index.
+    n_modes : int
+    n_joints : int
+        Joints of the arm (length of the input ``q``).
+    joints : tuple of int
+        0-based joints the table depends on.
+    grid_deg : numpy.ndarray
+        Grid of each scheduling angle (degrees), including the overlap.
+    values : dict of str to numpy.ndarray
+        Tabulated fields, shape ``grid shape + field shape``.
+    function : casadi.Function
+        Input ``q`` (all n joint angles, rad); outputs ``omega`` (rad/s),
+        ``tip_deflection``, ``tip_slope`` (1/m), ``v`` (kg), ``w`` (kg m), each
+        (n_modes, 1), and ``z`` (kg), (n_modes, n_modes).
+    build_time_s : float
+        Wall time to compute the table (0 when read from the cache).
+    """
+
+    link: int
+    n_modes: int
+    n_joints: int
+    joints: tuple[int, ...]
+    grid_deg: np.ndarray
+    values: dict[str, np.ndarray]
+    function: ca.Function = field(init=False)
+    build_time_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.function = self._make_function()
+
+    def _make_function(self) -> ca.Function:
+        q = ca.SX.sym("q", self.n_joints)
+        outputs = {}
+        if not self.joints:
+            for name in FIELDS:
+                outputs[name] = ca.DM(self.values[name])
+        else:
+            grid = [np.radians(self.grid_deg)] * len(self.joints)
+            arrays = [self.values[name].reshape(self.values[name].shape[: len(self.joints)] + (-1,)) for name in FIELDS]
+            stacked = np.concatenate(arrays, axis=-1)  # grid..., m
+            m = stacked.shape[-1]
+            flat = np.moveaxis(stacked, -1, 0).reshape(m, -1, order="F").ravel(order="F")
+            spline = ca.interpolant(f"modal_table_link{self.link + 1}", "bspline", grid, flat)
+            point = ca.vertcat(*[_wrap(q[j]) for j in self.joints])
+            out = spline(point)
+            offset = 0
+            for name in FIELDS:
+                size = int(np.prod(self.values[name].shape[len(self.joints) :]))
+                piece = out[offset : offset + size]
+                offset += size
+                outputs[name] = ca.reshape(piece, self.n_modes, self.n_modes) if name == "z" else piece
+        names = list(FIELDS)
+        return ca.Function(
+            f"modal_link{self.link + 1}", [q], [outputs[n] if isinstance(outputs[n], ca.SX) else ca.SX(outputs[n]) for n in names], ["q"], names
+        )
+
+    def evaluate(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Interpolated fields at joint angles ``q`` (rad), as numpy arrays."""
+        result = self.function(q=np.asarray(q, dtype=float))
+        return {k: np.array(v, dtype=float).squeeze(axis=-1) if k != "z" else np.array(v, dtype=float) for k, v in result.items()}
+
+
+def _key(arm: ArmSpec, link: int, n_modes: int, step_deg: float) -> str:
+    outboard = {
+        "links": [vars(l) | {"section": None, "source": ""} for l in arm.links[link:]],
+        "joints": [vars(j) | {"source": ""} for j in arm.joints[link + 1 :]],
+        "payload": [arm.payload.mass, arm.payload.effective_inertia],
+        "convention": arm.boundary_inertia,
+        "n_modes": n_modes,
+        "step": step_deg,
+        "version": _FORMAT_VERSION,
+    }
+    text = json.dumps(outboard, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def _modal_fields(modes) -> dict[str, np.ndarray]:
+    return {
+        "omega": modes.omega,
+        "tip_deflection": modes.tip_deflection,
+        "tip_slope": modes.tip_slope,
+        "v": modes.v,
+        "w": modes.w,
+        "z": modes.z,
+    }
+
+
+def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], grid_deg: np.ndarray) -> dict[str, np.ndarray]:
+    shape = (grid_deg.size,) * len(joints)
+    table: dict[str, np.ndarray] = {}
+    shapes_ref: dict[tuple[int, ...], np.ndarray] = {}
+    x = _SAMPLES * arm.links[link].length
+    for index in np.ndindex(*shape):
+        q = np.zeros(arm.n_links)
+        for j, i in zip(joints, index):
+            q[j] = np.radians(grid_deg[i])
+        modes = link_modes(arm, q, link, n_modes)
+        shapes = modes.shape(x)
+        # align signs with the previous grid point (along the last varying axis, else the first)
+        neighbour = None
+        for axis in reversed(range(len(index))):
+            if index[axis] > 0:
+                neighbour = index[:axis] + (index[axis] - 1,) + index[axis + 1 :]
+                break
+        signs = np.ones(n_modes)
+        if neighbour is not None:
+            signs = np.where(np.sum(shapes * shapes_ref[neighbour], axis=1) < 0.0, -1.0, 1.0)
+        else:
+            signs = np.where(modes.tip_deflection < 0.0, -1.0, 1.0)
+        shapes_ref[index] = shapes * signs[:, None]
+        fields = _modal_fields(modes)
+        fields = {
+            "omega": fields["omega"],
+            "tip_deflection": fields["tip_deflection"] * signs,
+            "tip_slope": fields["tip_slope"] * signs,
+            "v": fields["v"] * signs,
+            "w": fields["w"] * signs,
+            "z": fields["z"] * np.outer(signs, signs),
+        }
+        for name, value in fields.items():
+            if name not in table:
+                table[name] = np.zeros(shape + np.shape(value))
+            table[name][index] = value
+    return table
+
+
+def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_deg: float = 10.0, use_cache: bool = True) -> ModalLookup:
+    """Build (or read from the cache) the modal table of ``link`` (0-based).
+
+    Parameters
+    ----------
+    arm
+        Arm description (payload and ``boundary_inertia`` included).
+    link
+        0-based link index.
+    n_modes
+        Modes (default: the link's ``n_modes``).
+    step_deg
+        Grid step (degrees); must divide 360.
+    use_cache
+        Read and write the on-disk cache.
+    """
+    n_modes = arm.links[link].n_modes if n_modes is None else n_modes
+    if not (0 < step_deg <= 90 and abs(360.0 / step_deg - round(360.0 / step_deg)) < 1e-9):
+        raise ValueError(f"step_deg {step_deg!r} is not allowed; allowed: a divisor of 360 in (0, 90]")
+    joints = scheduling_joints(arm, link)
+    overlap = 2 * step_deg
+    grid_deg = np.arange(-180.0 - overlap, 180.0 + overlap + step_deg / 2, step_deg) if joints else np.zeros(1)
+    path = cache_dir() / "modal" / f"link{link + 1}-{_key(arm, link, n_modes, step_deg)}.npz"
+    if use_cache and path.is_file():
+        with np.load(path) as data:
+            values = {name: data[name] for name in FIELDS}
+        return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, 0.0)
+    start = time.perf_counter()
+    if joints:
+        values = _tabulate(arm, link, n_modes, joints, grid_deg)
+    else:
+        values = {k: np.asarray(v) for k, v in _modal_fields(link_modes(arm, np.zeros(arm.n_links), link, n_modes)).items()}
+    elapsed = time.perf_counter() - start
+    if use_cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **values)
+        os.replace(tmp, path)
+    return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, elapsed)
+
+
+def interpolation_error_hz(arm: ArmSpec, lookup: ModalLookup, samples: int = 200, seed: int = 0) -> float:
+    """Worst |interpolated - exact| natural frequency (Hz) at random configurations."""
+    if not lookup.joints:
+        return 0.0
+    rng = np.random.default_rng(seed)
+    worst = 0.0
+    for _ in range(samples):
+        q = rng.uniform(-np.pi, np.pi, arm.n_links)
+        exact = link_modes(arm, q, lookup.link, lookup.n_modes).frequency_hz
+        interp = lookup.evaluate(q)["omega"] / (2 * np.pi)
+        worst = max(worst, float(np.max(np.abs(interp - exact))))
+    return worst
