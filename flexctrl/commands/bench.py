@@ -1,0 +1,58 @@
+"""``flexctrl bench sim``: measured simulation speed (see :mod:`flexctrl.bench.sim`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from flexctrl.errors import SpecError
+
+BENCHMARKS = ("sim",)
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "bench",
+        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp",
+        description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
+        "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
+        "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs.",
+    )
+    parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--repeats", type=int, default=3, metavar="N", help="runs per variant; medians are reported (default 3)")
+    parser.add_argument("--model", default=None, metavar="MODEL", help="model file (default models/subedi3link.toml)")
+    parser.add_argument("--fidelity", default="amm:2", metavar="F", help="model fidelity (default amm:2)")
+    parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="simulated seconds per RK4 run (default 10)")
+    parser.add_argument("--scipy-span", type=float, default=1.0, metavar="S", help="simulated seconds per scipy run (default 1; scaled)")
+    parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
+
+    if args.repeats < 1:
+        raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
+    for key, value in (("--duration", args.duration), ("--scipy-span", args.scipy_span)):
+        if not value > 0:
+            raise SpecError(f"value {value!r} is out of range; allowed: a number > 0 (s)", key=key)
+    result = bench_sim(args.model or DEFAULT_MODEL, fidelity=args.fidelity, duration=args.duration,
+                       repeats=args.repeats, scipy_span=args.scipy_span, use_cache=args.use_cache)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"flexctrl bench sim: {result['model']} ({result['fidelity']}, {result['n_states']} states), "
+          f"RK4 dt = {result['dt']:g} s, medians of {result['repeats']} runs")
+    print(f"  compiled RK4   {result['realtime_factor_compiled']:9.1f}x real time "
+          f"({result['duration_s']:g} s runs; compile {result['compile_time_s']:.2f} s, flags {' '.join(result['flags'])})")
+    print(f"  VM RK4         {result['realtime_factor_vm']:9.1f}x real time")
+    sp = result["scipy"]
+    print(f"  scipy {sp['method']:8s} {result['realtime_factor_scipy']:9.4f}x real time "
+          f"(rtol {sp['rtol']:g}, {sp['span_s']:g} s runs, scaled)")
+    cpu = result["cpu_time_based"]
+    print(f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM {cpu['realtime_factor_vm']:.1f}x, "
+          f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})")
+    print(f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= {result['targets']['realtime_factor_compiled']:g}x "
+          f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}")
+    return 0

@@ -1,0 +1,321 @@
+"""Assumed-modes model of a planar flexible arm (Subedi et al. 2021), for n >= 1 links.
+
+Built symbolically in CasADi SX from the Lagrangian ``L = T - U_g - U_el``
+(kinematics and energies in :mod:`flexctrl.dynamics.amm_kinematics`):
+
+* ``M(q) = d^2 T / d qd^2`` (T is exactly quadratic in qd; M is formed as
+  ``sum J^T G J`` over the bodies, see the kinematics module);
+* ``c(q, qd) = (d(M qd)/dq) qd - dT/dq`` (equal to Eq 62's Christoffel form);
+* ``g(q) = dU_g/dq`` (Eq 63) and ``K = diag(0, m_l omega^2)`` (Eqs 64-66);
+* ``D = diag(b, d)`` (Eqs 67-68), joint friction ``b`` from the file;
+* ``M qdd + c + g + K q + D qd = B tau``, ``B = [I_n; 0]``, solved for qdd by an
+  explicit symbolic LDL^T factorisation (no square roots, no pivoting: M is
+  symmetric positive definite), which generates smaller and faster code than
+  ``casadi.solve`` (symbolic QR) for these sizes.
+
+Modal damping
+    Eq 68 prints ``d = 2 zeta sqrt(k/m_l) = 2 zeta omega``.  With the modes
+    normalised to the link mass (Eq 40) the modal mass is ``m_l``, so that
+    coefficient gives a damping ratio of ``zeta / m_l`` (and the wrong unit,
+    1/s instead of kg/s).  ``damping="ratio"`` (default) uses
+    ``d = 2 zeta omega m_l``, which makes ``zeta`` the damping ratio of the isolated
+    mode as the file's ``damping_ratio`` says; ``damping="paper"`` uses Eq 68 as printed.
+
+Frozen and scheduled modes
+    ``modes="frozen"``: the clamped-mass modes of each link are computed once, at
+    ``reference_q`` (default: the arm's ``configuration``) with the arm's payload;
+    all modal parameters are constants.
+
+    ``modes="scheduled"``: the modal parameters ``p = (omega, phi(L), phi'(L), v, w, z)``
+    of each link follow the configuration through the differentiable lookup
+    (:func:`flexctrl.modal.lookup.modal_lookup`) and are put *into the Lagrangian*:
+    ``T = 1/2 qd^T M(q, p(q_r)) qd``, ``U = U_g(q, p(q_r)) + 1/2 sum m_l omega(q_r)^2 q_f^2``,
+    and the equations are derived from that Lagrangian with every q-derivative
+    (including ``dp/dq_r``) taken.  The model is therefore an exact Lagrangian
+    system and conserves ``T + U`` without damping.  What it neglects: the
+    kinetic energy is formed from velocities computed as if the shapes were frozen,
+    i.e. the elastic velocity ``sum phi_j qd_fj`` lacks ``sum (d phi_j/d q_r) qd_r q_fj``.
+    That term is a product of a deflection, a joint rate and the sensitivity of the
+    shapes to the configuration (second order in small quantities); keeping it would
+    need the derivative of whole mode shapes, not just of the tabulated integrals,
+    and would make T depend on d p/d q_r -- the assumed-modes basis would no longer
+    be a fixed Ritz basis at any instant.  Consequences for the interface: ``K`` and
+    ``D`` take ``q``; ``g`` holds every potential force not in ``K q``, i.e.
+    ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
+    ``1/2 q_f^T (dK/dq_r) q_f`` on the joint rows).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Literal, Sequence
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+
+from flexctrl.dynamics.amm_kinematics import (
+    ArmExpressions,
+    LinkModal,
+    arm_expressions,
+    coordinate_names,
+    flexible_offsets,
+)
+from flexctrl.dynamics.model import Model
+from flexctrl.errors import SpecError
+from flexctrl.fidelity import Fidelity
+from flexctrl.spec.arm import ArmSpec
+
+MODES = ("frozen", "scheduled")
+DAMPING = ("ratio", "paper")
+SOLVERS = ("ldl", "qr")
+CORIOLIS = ("bodies", "lagrange")
+
+
+def ldl_solve(A, b):
+    """Solve ``A x = b`` for symmetric positive definite ``A`` by an explicit LDL^T (symbolic).
+
+    Structural zeros of ``A`` are skipped.  No pivoting: only for matrices known to be
+    positive definite (mass matrices).  One division per pivot.
+    """
+    n = A.shape[0]
+    if n == 0:
+        return type(A).zeros(0, 1)
+    L = [[None] * n for _ in range(n)]  # unit lower factor
+    a = [[None] * n for _ in range(n)]  # a[j][k] = L[j][k] d[k]
+    inv_d = [None] * n
+
+    def dot(row_a, row_l, stop):
+        terms = [row_a[m] * row_l[m] for m in range(stop) if row_a[m] is not None and row_l[m] is not None]
+        return sum(terms[1:], terms[0]) if terms else None
+
+    def minus(x, y):
+        if y is None:
+            return x
+        return -y if x is None else x - y
+
+    for j in range(n):
+        for k in range(j):
+            s = minus(None if A[j, k].is_zero() else A[j, k], dot(a[j], L[k], k))
+            if s is not None:
+                a[j][k], L[j][k] = s, s * inv_d[k]
+        inv_d[j] = 1 / minus(A[j, j], dot(a[j], L[j], j))
+    y = [None] * n
+    for i in range(n):  # L y = b
+        s = b[i]
+        for k in range(i):
+            if L[i][k] is not None:
+                s = s - L[i][k] * y[k]
+        y[i] = s
+    x = [None] * n
+    for i in reversed(range(n)):  # L^T x = D^-1 y
+        s = y[i] * inv_d[i]
+        for k in range(i + 1, n):
+            if L[k][i] is not None:
+                s = s - L[k][i] * x[k]
+        x[i] = s
+    return ca.vertcat(*x)
+
+
+def _check_choice(value: str, allowed: tuple[str, ...], key: str) -> str:
+    if value not in allowed:
+        raise SpecError(f"value {value!r} is not allowed; allowed: {', '.join(repr(a) for a in allowed)}", key=key)
+    return value
+
+
+def _frozen_modal(arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int]):
+    from flexctrl.modal.arm_modes import link_modes
+
+    modal, freqs = [], []
+    for i, nf in enumerate(n_modes):
+        modes = link_modes(arm, q_ref, i, nf) if nf else None
+        modal.append(LinkModal.from_modes(modes, nf))
+        freqs.append([float(x) for x in np.asarray(modes.omega)] if nf else [])
+    return modal, freqs
+
+
+def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
+    """Modal expressions p(q_r) from the lookup functions (one per link, None for n_f = 0)."""
+    if lookups is None:
+        from flexctrl.modal.lookup import modal_lookup
+
+        lookups = [modal_lookup(arm, i, nf).function if nf else None for i, nf in enumerate(n_modes)]
+    modal = []
+    for i, nf in enumerate(n_modes):
+        if nf == 0:
+            modal.append(LinkModal.from_modes(None, 0))
+            continue
+        out = lookups[i](q=q[: arm.n_links])
+        modal.append(LinkModal(*(out[name] for name in ("omega", "tip_deflection", "tip_slope", "v", "w", "z"))))
+    return modal
+
+
+def _substitute(arm: ArmSpec, q, n_modes: Sequence[int], modal: Sequence[LinkModal]) -> ArmExpressions:
+    """Expressions built with frozen-shape kinematics, then the modal parameters replaced by ``modal``."""
+    symbols = [LinkModal.symbols(ca.SX, i, nf) for i, nf in enumerate(n_modes)]
+    ex = arm_expressions(arm, symbols, q)
+    p_sym = ca.vertcat(*(s.vector() for s in symbols))
+    p_val = ca.vertcat(*(m.vector() for m in modal))
+    fields = ("positions", "tip_deflection", "tip_slope", "orientations", "mass_matrix", "gravity_energy", "elastic_energy")
+    core = ca.Function("amm_core", [q, p_sym], [getattr(ex, f) for f in fields])
+    return ArmExpressions(*core(q, p_val))
+
+
+def build_amm(
+    arm: ArmSpec,
+    n_modes: int | Sequence[int],
+    *,
+    modes: Literal["frozen", "scheduled"] = "frozen",
+    reference_q: Sequence[float] | None = None,
+    damping: Literal["ratio", "paper"] = "ratio",
+    solver: Literal["ldl", "qr"] = "ldl",
+    fidelity: Fidelity | None = None,
+    lookups: Sequence[ca.Function | None] | None = None,
+    coriolis: Literal["bodies", "lagrange"] = "bodies",
+) -> Model:
+    """Build the assumed-modes model of ``arm``.
+
+    Parameters
+    ----------
+    arm
+        The arm (payload included).
+    n_modes
+        Modes per link (one number for every link, or one per link), 0..6.
+    modes
+        ``"frozen"`` (modes at ``reference_q``) or ``"scheduled"`` (modal parameters
+        looked up from the configuration; see the module docstring).
+    reference_q
+        Joint angles (rad) of the frozen modes and of ``omega_max``; default the
+        arm's ``configuration``.
+    damping
+        ``"ratio"`` (d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed, 2 zeta omega).
+    solver
+        Symbolic solve of ``M qdd = rhs`` in ``f``: ``"ldl"`` (explicit LDL^T) or
+        ``"qr"`` (``casadi.solve``).
+    fidelity
+        Recorded in the model (default ``amm:N`` when all links have N modes).
+    coriolis
+        How ``c`` is formed for frozen modes: ``"bodies"`` (``sum J^T G Jdot qd`` over
+        the bodies, smaller code) or ``"lagrange"`` (``d(M qd)/dq qd - dT/dq``, the
+        form always used for scheduled modes).  Both are exact.
+    lookups
+        For ``"scheduled"``: one CasADi Function per link with the signature of
+        :attr:`flexctrl.modal.lookup.ModalLookup.function` (None for links without
+        modes); default: built by :func:`~flexctrl.modal.lookup.modal_lookup`.
+
+    Returns
+    -------
+    Model
+        Functions ``M, c, g, K, D, f, energies, tip, hubs, deflection``
+        (see :mod:`flexctrl.dynamics.model`).
+    """
+    start = time.perf_counter()
+    _check_choice(modes, MODES, "modes")
+    _check_choice(damping, DAMPING, "damping")
+    _check_choice(solver, SOLVERS, "solver")
+    _check_choice(coriolis, CORIOLIS, "coriolis")
+    n = arm.n_links
+    n_modes = [int(n_modes)] * n if np.isscalar(n_modes) else [int(k) for k in n_modes]
+    if len(n_modes) != n or any(not 0 <= k <= 6 for k in n_modes):
+        raise SpecError(f"n_modes {n_modes!r} is not allowed; allowed: one count 0..6 or one per link ({n} links)", key="n_modes")
+    q_ref = arm.configuration_or_default(reference_q)
+    if fidelity is None:
+        fidelity = Fidelity("amm", n_modes[0]) if len(set(n_modes)) == 1 else Fidelity("amm")
+    names = coordinate_names(n, n_modes)
+    N = len(names)
+    offsets = flexible_offsets(n, n_modes)
+    flex = np.arange(n, N)
+
+    q, qd, u = ca.SX.sym("q", N), ca.SX.sym("qd", N), ca.SX.sym("u", n)
+    frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes)
+    scheduled = modes == "scheduled" and N > n
+    if scheduled:
+        modal = _scheduled_modal(arm, q, n_modes, lookups)
+        ex = _substitute(arm, q, n_modes, modal)
+    else:
+        modal = frozen_modal
+        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None)
+
+    # stiffness and damping (Eqs 65-68)
+    stiffness, damp = [ca.SX(0)] * n, [ca.SX(arm.joints[i].friction) for i in range(n)]
+    for i, (link, md) in enumerate(zip(arm.links, modal)):
+        for j in range(n_modes[i]):
+            omega = md.omega[j]
+            stiffness.append(link.mass * omega**2)
+            scale = link.mass if damping == "ratio" else 1.0
+            damp.append(2.0 * link.damping_ratio(j) * omega * scale)
+    K = ca.diag(ca.vertcat(*stiffness))
+    D = ca.diag(ca.vertcat(*damp))
+
+    # Lagrange's equations
+    M = ex.mass_matrix
+    Mqd = ca.mtimes(M, qd)
+    E_kin = 0.5 * ca.dot(qd, Mqd)
+    if ex.coriolis is not None:
+        c = ex.coriolis
+    else:
+        c = ca.jtimes(Mqd, q, qd) - ca.gradient(E_kin, q)
+    g = ca.gradient(ex.gravity_energy, q)
+    if scheduled:
+        g = g + ca.gradient(ex.elastic_energy, q) - ca.mtimes(K, q)
+    B = ca.vertcat(ca.SX.eye(n), ca.SX.zeros(N - n, n))
+    rhs = ca.mtimes(B, u) - c - g - ca.mtimes(K, q) - ca.mtimes(D, qd)
+    qdd = ldl_solve(M, rhs) if solver == "ldl" else ca.solve(M, rhs)
+    x = ca.vertcat(q, qd)
+
+    opts = {"cse": True}
+    tip = ex.positions[:, n]
+    functions = {
+        "M": ca.Function("M", [q], [M], ["q"], ["M"], opts),
+        "c": ca.Function("c", [q, qd], [c], ["q", "qd"], ["c"], opts),
+        "g": ca.Function("g", [q], [g], ["q"], ["g"], opts),
+        "K": ca.Function("K", [q], [K], ["q"], ["K"], opts) if scheduled else ca.Function("K", [], [K], [], ["K"]),
+        "D": ca.Function("D", [q], [D], ["q"], ["D"], opts) if scheduled else ca.Function("D", [], [D], [], ["D"]),
+        "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
+        "energies": ca.Function(
+            "energies", [q, qd], [E_kin, ex.elastic_energy, ex.gravity_energy], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+        ),
+        "tip": ca.Function("tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts),
+        "hubs": ca.Function("hubs", [q], [ex.positions], ["q"], ["p"], opts),
+        "deflection": ca.Function("deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts),
+    }
+
+    # locked-joint linearisation at the reference configuration (joints clamped, q_f = 0, qd = 0)
+    q0 = np.concatenate([q_ref, np.zeros(N - n)])
+    locked, free = np.zeros(0), np.zeros(0)
+    if N > n:
+        M0 = np.array(functions["M"](q0))
+        K0 = np.array(functions["K"](q0) if scheduled else functions["K"]()["K"])[np.ix_(flex, flex)]
+        M_ff = M0[np.ix_(flex, flex)]
+        locked = np.sqrt(np.clip(scipy.linalg.eigh(K0, M_ff, eigvals_only=True), 0.0, None))
+        # free joints (no gravity): the elastic coordinates see the Schur complement of M
+        schur = M_ff - M0[n:, :n] @ np.linalg.solve(M0[:n, :n], M0[:n, n:])
+        free = np.sqrt(np.clip(scipy.linalg.eigh(K0, 0.5 * (schur + schur.T), eigvals_only=True), 0.0, None))
+    info = {
+        "family": "amm",
+        "modes": "scheduled" if scheduled else "frozen",
+        "modes_requested": modes,
+        "n_modes": list(n_modes),
+        "flexible_offsets": offsets,
+        "reference_q": q_ref.tolist(),
+        "link_frequencies_rad_s": link_freqs,
+        "locked_frequencies_rad_s": locked.tolist(),
+        "free_frequencies_rad_s": free.tolist(),
+        "damping": damping,
+        "solver": solver,
+        "coriolis": "lagrange" if scheduled else coriolis,
+        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)",
+        "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
+        "input_matrix": "tau acts on q1..qn",
+        "build_time_s": time.perf_counter() - start,
+    }
+    return Model(
+        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}",
+        fidelity=fidelity,
+        n_joints=n,
+        coordinate_names=names,
+        functions=functions,
+        omega_max=float(locked.max()) if locked.size else 0.0,
+        spec=arm,
+        info=info,
+    )

@@ -1,0 +1,244 @@
+"""Kinematics and energies of the planar assumed-modes arm (Subedi et al. 2021, Eqs 1-53).
+
+Everything here is a CasADi expression in the generalised coordinates
+``q = (q_r, q_f)`` and in the modal parameters of each link, which are either
+numeric constants (frozen modes) or symbols (scheduled modes; substituted by the
+lookup afterwards, see :mod:`flexctrl.dynamics.amm`).  The code is generic over
+``casadi.SX`` and ``casadi.MX``.
+
+Kinematics (Eqs 1-9)
+    ``W_i = W_{i-1} E_{i-1} A_i`` with ``A_i`` the rotation by ``q_i`` and the
+    paper's *linearised* tip rotation ``E_i = [[1, -w'_ie], [w'_ie, 1]]`` (Eq 7),
+    kept as printed: ``W_i`` is then a rotation by ``alpha_i`` (Eq 8) times
+    ``prod_k sqrt(1 + w'_ke^2)``, a second-order stretch of the outboard arm that is
+    consistent with the small-deflection assumption.  ``p_i(x) = r_i + W_i (x, w_i(x))``,
+    ``r_{i+1} = r_i + W_i (L_i, w_ie)`` (Eqs 3-4), ``r_1 = 0``.
+
+Link kinetic energy (Eq 43) in closed form
+    ``p_i(x) = sum_a N_a(x) P_a(q)`` with ``N = (1, x, phi_1, ..., phi_nf)`` and
+    ``P = (r_i, W_i e_1, W_i e_2 q_f1, ..., W_i e_2 q_fnf)``, so
+    ``int rho |p_i'|^2 dx = sum_ab G_ab Pdot_a . Pdot_b`` with the Gram matrix
+    ``G = [[m, m L/2, v^T], [m L/2, J_l + m L^2/4, w^T], [v, w, z]]`` of Eqs 50-52
+    (``int rho x^2 dx = J_l + m L^2/4`` from the file's centroidal inertia ``J_l``).
+    ``M = sum J^T (G kron I_2) J`` with ``J = dP/dq``; hubs (Eq 42) and payload (Eq 44)
+    add ``m J_r^T J_r + J (d alpha/dq)^T (d alpha/dq)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.spec.arm import ArmSpec
+
+#: Modal fields per link, in packing order; ``z`` is (n_f, n_f), the others (n_f, 1).
+MODAL_FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
+
+
+@dataclass(frozen=True)
+class LinkModal:
+    """Modal parameters of one link as CasADi column vectors / matrices (SX, MX or DM).
+
+    ``omega`` (rad/s), ``tip_deflection`` phi(L) (-), ``tip_slope`` phi'(L) (1/m),
+    ``v`` (kg), ``w`` (kg m), ``z`` (kg); mass-orthonormal to the link mass (Eq 40).
+    """
+
+    omega: object
+    tip_deflection: object
+    tip_slope: object
+    v: object
+    w: object
+    z: object
+
+    @property
+    def n_modes(self) -> int:
+        """Number of modes n_f."""
+        return int(self.omega.shape[0]) if self.omega.numel() else 0
+
+    @staticmethod
+    def from_modes(modes, n_modes: int) -> "LinkModal":
+        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None if n_f = 0)."""
+        if n_modes == 0:
+            empty = ca.DM.zeros(0, 1)
+            return LinkModal(empty, empty, empty, empty, empty, ca.DM.zeros(0, 0))
+        return LinkModal(
+            *(ca.DM(np.reshape(np.asarray(getattr(modes, name), dtype=float), (n_modes, n_modes) if name == "z" else (n_modes, 1)))
+              for name in MODAL_FIELDS)
+        )
+
+    @staticmethod
+    def symbols(sym: type, link: int, n_modes: int) -> "LinkModal":
+        """Free symbols of type ``sym`` (``ca.SX`` or ``ca.MX``) for link ``link`` (0-based)."""
+        return LinkModal(
+            *(sym.sym(f"{name}{link + 1}", n_modes, n_modes if name == "z" else 1) for name in MODAL_FIELDS)
+        )
+
+    def vector(self):
+        """All fields stacked in a column (``z`` column-major)."""
+        return ca.vertcat(*(ca.vec(getattr(self, name)) for name in MODAL_FIELDS))
+
+
+def _rotation(angle):
+    c, s = ca.cos(angle), ca.sin(angle)
+    return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
+
+
+def _elastic_rotation(slope):
+    """Eq 7: the linearised rotation by the tip slope, ``[[1, -w'], [w', 1]]``."""
+    return ca.vertcat(ca.horzcat(1, -slope), ca.horzcat(slope, 1))
+
+
+@dataclass(frozen=True)
+class ArmExpressions:
+    """Kinematic and energy expressions of the arm in ``q`` (and the modal parameters).
+
+    Attributes
+    ----------
+    positions : expression (2, n+1)
+        ``r_1 .. r_{n+1}``: joints in the world frame and, last, the tip of link n (m).
+    tip_deflection, tip_slope : expression (n, 1)
+        ``w_ie`` (m) and ``w'_ie`` (rad) of every link (Eq 2, Eq 7).
+    orientations : expression (n+1, 1)
+        ``alpha_1 .. alpha_n`` (Eq 8) and ``alpha-hat_{n+1}`` (Eq 9), rad.
+    mass_matrix : expression (N, N)
+        M(q) with the modal parameters held fixed (their q-dependence, if any, is
+        *not* differentiated here: see :mod:`flexctrl.dynamics.amm`).
+    gravity_energy, elastic_energy : scalar expressions
+        U_g (Eqs 47-49) and U_el (Eq 46 with Eq 53), J.
+    coriolis : expression (N, 1) or None
+        ``c(q, qd)`` when ``qd`` was given; valid only for constant modal parameters.
+    """
+
+    positions: object
+    tip_deflection: object
+    tip_slope: object
+    orientations: object
+    mass_matrix: object
+    gravity_energy: object
+    elastic_energy: object
+    coriolis: object = None
+
+
+def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
+    """Index of the first elastic coordinate of each link in ``q`` (joints first)."""
+    offsets, k = [], n_links
+    for nf in n_modes:
+        offsets.append(k)
+        k += nf
+    return offsets
+
+
+def coordinate_names(n_links: int, n_modes: Sequence[int]) -> tuple[str, ...]:
+    """``q1..qn`` then ``qf11, qf12, ...`` (link, mode)."""
+    names = [f"q{i + 1}" for i in range(n_links)]
+    for i, nf in enumerate(n_modes):
+        names += [f"qf{i + 1}{j + 1}" for j in range(nf)]
+    return tuple(names)
+
+
+class _Inertia:
+    """Accumulates ``M = sum J^T G J`` and, given ``qd``, ``c = sum J^T G (d/dt J) qd``.
+
+    The second sum is the Coriolis vector for constant ``G`` and a true Jacobian
+    ``J = dP/dq``: with ``T = 1/2 Pdot^T G Pdot``, Lagrange's equations give
+    ``J^T G Pddot = J^T G (J qdd + Jdot qd)``.
+    """
+
+    def __init__(self, q, qd):
+        self.q, self.qd = q, qd
+        self.M = type(q).zeros(q.shape[0], q.shape[0])
+        self.c = None if qd is None else type(q).zeros(q.shape[0], 1)
+
+    def add(self, P, G) -> None:
+        jac = ca.jacobian(P, self.q)
+        self.M = self.M + ca.mtimes(jac.T, ca.mtimes(G, jac))
+        if self.c is not None:
+            accel = ca.jtimes(ca.mtimes(jac, self.qd), self.q, self.qd)
+            self.c = self.c + ca.mtimes(jac.T, ca.mtimes(G, accel))
+
+    def add_scalar(self, mass: float, P) -> None:
+        if mass != 0.0:
+            self.add(P, mass * ca.DM.eye(P.shape[0]))
+
+
+def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None) -> ArmExpressions:
+    """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
+
+    Parameters
+    ----------
+    arm
+        The arm; hubs, links and payload as in :mod:`flexctrl.spec.arm`.
+    modal
+        One :class:`LinkModal` per link (its ``n_modes`` sets the link's n_f).
+    q
+        Generalised coordinates, a column symbol of length ``n + sum n_f``.
+    qd
+        Their rates; when given, the Coriolis vector is formed body by body from
+        the convective accelerations (only valid if ``modal`` holds constants).
+    """
+    n = arm.n_links
+    n_modes = [m.n_modes for m in modal]
+    offsets = flexible_offsets(n, n_modes)
+    gravity = ca.DM(np.asarray(arm.gravity, dtype=float).reshape(2, 1))
+    sym = type(q)
+    zero_dm = ca.DM.zeros(2, 1)
+    inertia = _Inertia(q, qd)
+    U_g = sym(0)
+    U_el = sym(0)
+    r = sym(zero_dm)
+    W_hat = sym(ca.DM.eye(2))  # \hat W_{i-1} = W_{i-1} E_{i-1}
+    alpha_hat = sym(0)  # \hat alpha_i (Eq 9)
+    positions, deflections, slopes, orientations = [r], [], [], []
+    e1, e2 = ca.DM([1.0, 0.0]), ca.DM([0.0, 1.0])
+    for i, (link, joint, md) in enumerate(zip(arm.links, arm.joints, modal)):
+        nf = md.n_modes
+        qf = q[offsets[i] : offsets[i] + nf] if nf else sym.zeros(0, 1)
+        W = ca.mtimes(W_hat, _rotation(q[i]))  # Eq 5
+        alpha = alpha_hat + q[i]  # Eq 8
+        orientations.append(alpha)
+        # hub i (Eq 42, 47): point mass at r_i, rotor inertia turning with alpha_i
+        inertia.add_scalar(joint.hub_mass, r)
+        inertia.add_scalar(joint.hub_inertia, alpha)
+        U_g = U_g - joint.hub_mass * ca.dot(gravity, r)
+        # link i (Eq 43, 48): generalised positions P_a and their Gram matrix
+        m, length = link.mass, link.length
+        frame_x, frame_y = ca.mtimes(W, e1), ca.mtimes(W, e2)
+        pieces = [r, frame_x] + [frame_y * qf[j] for j in range(nf)]
+        P = ca.vertcat(*pieces)
+        rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
+        moments = sym(ca.horzcat(md.v, md.w))
+        gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
+        inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
+        first_moment = m * r + 0.5 * m * length * frame_x
+        if nf:
+            first_moment = first_moment + frame_y * ca.dot(md.v, qf)
+        U_g = U_g - ca.dot(gravity, first_moment)
+        if nf:
+            U_el = U_el + 0.5 * link.mass * ca.sumsqr(md.omega * qf)  # Eqs 46, 53
+        # tip of link i (Eqs 2, 4, 7, 9)
+        w_e = ca.dot(md.tip_deflection, qf) if nf else sym(0)
+        dw_e = ca.dot(md.tip_slope, qf) if nf else sym(0)
+        deflections.append(w_e)
+        slopes.append(dw_e)
+        r = r + ca.mtimes(W, ca.vertcat(length, w_e))
+        positions.append(r)
+        W_hat = ca.mtimes(W, _elastic_rotation(dw_e)) if nf else W
+        alpha_hat = alpha + dw_e
+    orientations.append(alpha_hat)
+    # payload (Eqs 44, 49): mass at r_{n+1}, inertia turning with alpha-hat_{n+1}
+    inertia.add_scalar(arm.payload.mass, r)
+    inertia.add_scalar(arm.payload.effective_inertia, alpha_hat)
+    U_g = U_g - arm.payload.mass * ca.dot(gravity, r)
+    return ArmExpressions(
+        positions=ca.horzcat(*positions),
+        tip_deflection=ca.vertcat(*deflections),
+        tip_slope=ca.vertcat(*slopes),
+        orientations=ca.vertcat(*orientations),
+        mass_matrix=inertia.M,
+        coriolis=inertia.c,
+        gravity_energy=U_g,
+        elastic_energy=U_el,
+    )

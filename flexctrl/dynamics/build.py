@@ -1,0 +1,99 @@
+"""Build a :class:`~flexctrl.dynamics.model.Model` from an arm description and a fidelity.
+
+>>> from flexctrl.dynamics.build import load_model
+>>> model = load_model("models/subedi3link.toml", fidelity="amm:1")
+>>> model.coordinate_names
+('q1', 'q2', 'q3', 'qf11', 'qf21', 'qf31')
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Literal, Sequence
+
+from flexctrl.dynamics.model import Model
+from flexctrl.errors import FlexctrlError
+from flexctrl.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.arm import ArmSpec, load_arm
+
+
+class ModelFamilyUnavailable(FlexctrlError, NotImplementedError):
+    """The requested model family cannot be built here (yet)."""
+
+
+def build_model(
+    arm: ArmSpec,
+    fidelity: str | Fidelity | None = "amm:2",
+    *,
+    modes: Literal["frozen", "scheduled"] = "frozen",
+    reference_q: Sequence[float] | None = None,
+    damping: Literal["ratio", "paper"] = "ratio",
+) -> Model:
+    """Build the model of ``arm`` at ``fidelity``.
+
+    Parameters
+    ----------
+    arm
+        Validated arm description.
+    fidelity
+        ``"rigid"`` (same as ``"amm:0"``), ``"amm:N"`` (N assumed modes on every
+        link), or None for each link's ``n_modes`` from the file.  ``"fem:N"`` and
+        ``"auto"`` are not built here.
+    modes
+        ``"frozen"`` or ``"scheduled"`` modal parameters
+        (see :mod:`flexctrl.dynamics.amm`).
+    reference_q
+        Joint angles (rad) of the frozen modes and of ``Model.omega_max``;
+        default the arm's ``configuration``.
+    damping
+        ``"ratio"`` (default: d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed).
+
+    Raises
+    ------
+    SpecError
+        For an unknown fidelity or option.
+    ModelFamilyUnavailable
+        For ``fem:N`` and ``auto``.
+    """
+    from flexctrl.dynamics.amm import build_amm
+
+    if fidelity is None:
+        return build_amm(arm, [link.n_modes for link in arm.links], modes=modes, reference_q=reference_q, damping=damping)
+    fid = parse_fidelity(fidelity)
+    if fid.kind == "fem":
+        raise ModelFamilyUnavailable(
+            f"fidelity '{fid}': the finite-element model is built by flexctrl.dynamics.fem, "
+            "which build_model does not dispatch to yet; use 'rigid' or 'amm:N' here"
+        )
+    if fid.kind == "auto":
+        raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model; give 'rigid', 'amm:N' or 'fem:N'")
+    return build_amm(arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid)
+
+
+def load_model(
+    path: str | Path,
+    payload: float | None = None,
+    fidelity: str | Fidelity | None = "amm:2",
+    *,
+    overrides: Iterable[str] = (),
+    modes: Literal["frozen", "scheduled"] = "frozen",
+    reference_q: Sequence[float] | None = None,
+    damping: Literal["ratio", "paper"] = "ratio",
+) -> Model:
+    """Load a model file and build it (see :func:`build_model`).
+
+    Parameters
+    ----------
+    path
+        A ``models/*.toml`` file.
+    payload
+        Payload mass (kg) replacing the file's, or None to keep it.
+    fidelity, modes, reference_q, damping
+        As in :func:`build_model`.
+    overrides
+        ``KEY=VALUE`` strings applied to the file before validation.
+    """
+    arm = load_arm(path, overrides)
+    if payload is not None:
+        arm = arm.with_payload(payload)
+    return build_model(arm, fidelity, modes=modes, reference_q=reference_q, damping=damping)

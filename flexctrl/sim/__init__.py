@@ -1,0 +1,81 @@
+"""Time integration of :class:`~flexctrl.dynamics.model.Model` objects.
+
+Integrators share one template (:class:`~flexctrl.sim.base.Integrator`) and are
+chosen by name or class, like scipy's ``solve_ivp(method=...)``:
+
+``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
+``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`)
+``idas``    SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`)
+``scipy``   ``scipy.integrate.solve_ivp`` (RK45, DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
+
+Every run returns a :class:`~flexctrl.sim.trajectory.Trajectory`.
+
+Examples
+--------
+>>> from flexctrl.sim import simulate
+>>> from flexctrl.sim.toymodel import spring_pendulum
+>>> traj = simulate(spring_pendulum(), [0.3, 0, 0, 0, 0, 0], 0.1, dt=1e-3, compile=False)
+>>> traj.states.shape
+(101, 6)
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from flexctrl.errors import SpecError
+from flexctrl.sim.base import Integrator
+from flexctrl.sim.implicit import CVODES, IDAS
+from flexctrl.sim.rk4 import RK4
+from flexctrl.sim.scipy_adapter import ScipyIntegrator
+from flexctrl.sim.trajectory import Trajectory
+
+#: Integrators by name.
+INTEGRATORS: dict[str, type[Integrator]] = {
+    cls.name: cls for cls in (RK4, CVODES, IDAS, ScipyIntegrator)
+}
+
+
+def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
+    """The integrator class for a name (see :data:`INTEGRATORS`) or an :class:`Integrator` subclass."""
+    if isinstance(method, type) and issubclass(method, Integrator):
+        return method
+    if isinstance(method, str) and method in INTEGRATORS:
+        return INTEGRATORS[method]
+    import difflib
+
+    hint = difflib.get_close_matches(str(method), list(INTEGRATORS), n=1)
+    extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+    raise SpecError(f"integrator {method!r} is not known; allowed: {', '.join(map(repr, INTEGRATORS))} "
+                    f"or an Integrator subclass{extra}", key="integrator")
+
+
+def simulate(model, x0, duration: float, *, dt: float, method: str | type[Integrator] = "rk4", u=None,
+             **options: Any) -> Trajectory:
+    """Integrate ``model`` from ``x0`` for ``duration`` seconds and return the :class:`Trajectory`.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+    x0 : array_like
+        Initial state ``(q, qd)`` (rad, m, rad/s, m/s).
+    duration : float
+        Simulated time (s).
+    dt : float
+        Step / output interval and torque hold period (s).
+    method : str or Integrator subclass
+        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"`` or a class.
+    u : array_like, optional
+        Held joint torques (N m), shape (n_steps, n_u) or (n_u,).
+    **options
+        Passed to the integrator (``u_function``, ``compile``, ``rtol``, ``method`` for scipy
+        is given as ``scipy_method``, ...).
+    """
+    cls = get_integrator(method)
+    if "scipy_method" in options:
+        options["method"] = options.pop("scipy_method")
+    return cls(model, dt, **options).run(x0, duration, u=u)
+
+
+__all__ = ["Integrator", "RK4", "CVODES", "IDAS", "ScipyIntegrator", "Trajectory", "INTEGRATORS",
+           "get_integrator", "simulate"]
