@@ -21,6 +21,10 @@ COMMANDS = (
     "modes",
     "modal_report",
     "identify_hubs",
+    "simulate",
+    "bench",
+    "study",
+    "report",
 )
 
 

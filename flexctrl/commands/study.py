@@ -1,0 +1,52 @@
+"""``flexctrl study STUDY``: run a batch study (grid of runs) into a result folder."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "study",
+        help="run a study file's grid of runs (local process pool or Dask) and write its table and report",
+        description="Validates the study file (every run's settings) before anything runs, then runs every run "
+        "not yet recorded in the output folder, writing one record per run as it finishes, results.csv, "
+        "study.json and report.md. A run that fails is recorded with its error and the study goes on. "
+        "See docs/studies.md for the file format. Exit status: 0 when the study ran to its end "
+        "(whatever the runs' status; --strict: 1 if a run failed), 2 for a broken study file, 130 when interrupted.",
+    )
+    parser.add_argument("study", metavar="STUDY", help="study file, e.g. studies/quickstart.toml")
+    parser.add_argument("--out", metavar="DIR", help="result folder (default: out/<study name>)")
+    parser.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the usable CPUs; 0: run in this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster instead, e.g. tcp://10.0.0.5:8786 (needs flexctrl[dask])")
+    parser.add_argument("--resume", action="store_true", help="continue an interrupted study in DIR: keep every recorded run, ok or failed "
+                        "(without it, runs recorded ok are kept and failed ones rerun)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a study-file key, e.g. seed=2 or grid.payload=[0,1] (repeatable)")
+    parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto", help="progress on stderr (auto: a bar on a terminal, lines otherwise)")
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress and no summary")
+    parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
+    parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from flexctrl.study.runner import run_study
+    from flexctrl.study.spec import load_study
+
+    spec = load_study(args.study, overrides=args.set)
+    out = Path(args.out) if args.out else Path("out") / spec.name
+    result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                       progress="none" if args.quiet else args.progress, report=not args.no_report)
+    c = result.counts
+    if not args.quiet:
+        print(f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "
+              f"in {result.elapsed_s:.1f} s; grid: {c['ok']} ok, {c['failed']} failed, {c['pending']} not run", file=sys.stderr)
+        for note in result.warnings:
+            print(f"{spec.name}: note: {note}", file=sys.stderr)
+        print(result.report or result.table_path)
+    if result.interrupted:
+        return 130
+    return 1 if args.strict and c["failed"] else 0

@@ -1,0 +1,608 @@
+"""Study files (``studies/*.toml``) as a frozen, validated :class:`StudySpec` with its runs.
+
+A study is a grid of runs: the cartesian product of its axes, each run a plain
+dict of settings handed to an *executor* (see :mod:`flexctrl.study.executors`).
+:func:`load_study` validates everything a run needs (files exist and parse, the
+model loads, configurations fit the model, the executor exists and accepts
+every run's settings) and expands the grid, so a broken study is refused before
+any run starts with a :class:`~flexctrl.errors.SpecError` naming the file and
+the key.
+
+File format (paths relative to the study file; angles in degrees; SI units)::
+
+    name = "quickstart"                  # default: the file's stem
+    executor = "closed_loop"             # a name from the executor registry (default)
+    seed = 1                             # study seed; each run's seed derives from it
+    replicates = 1                       # > 1 adds a 'replicate' axis (new seed each)
+    metrics = ["tip_residual_rms"]       # optional: the table's metric columns
+                                         # (then required of every run)
+    # fixed settings (each may instead be an axis in [grid], not both)
+    scene = "scenes/move_joint1_30deg.toml"
+    model = "../models/subedi3link.toml"
+    controller = "../controllers/pd.toml"   # "none": open loop; default none
+    payload = 0.0                        # kg; default: the model file's
+    configuration = [0, 0, 0]            # degrees; default: the model file's
+    fidelity = "amm:2"                   # default: the model file's own modes
+
+    [set]                                # fixed KEY=VALUE overrides of the files
+    "scene.duration" = 3.0               # scene.KEY, controller.KEY or model.KEY
+
+    [grid]                               # axes: every key takes a list of values
+    payload = [0.0, 2.0]
+    configuration = [[0, 0, 0], [0, 90, 0]]
+    q3 = [-90, 0, 90]                    # one joint (degrees), on top of configuration
+    controller = ["../controllers/pd.toml", "../controllers/lqr.toml", "none"]
+    fidelity = ["amm:1", "amm:2"]
+    "scene.noise_std" = [0.0, 1e-4]      # any scene/controller/model key
+
+    [trajectories]
+    keep = true                          # store runs/<id>.npz
+    decimation = 1                       # keep every n-th sample
+
+    [report]
+    metric = "tip_residual_rms"          # default: the first metric
+    lower_is_better = true               # the worst cases are the largest values
+    map_axes = ["q2", "q3"]              # heat-map axes (default q2, q3 if they vary)
+    facet = ["payload", "controller"]    # one map per combination (default: other axes)
+    rank_by = "controller"               # ranking of ... (default controller)
+    group_by = "payload"                 # ... per value of (default payload)
+    worst = 3                            # worst runs shown with trajectories
+    signals = ["w"]                      # trajectories to plot (default: all but t)
+    time = "t"                           # name of the time array
+    timing = ["controller_time_median"]  # computing-time metrics (default: names
+                                         # like controller_time*, solve_time*, ...)
+    plots = ["maps", "ranking", "worst", "timing", "failures"]
+
+Table columns of the grid coordinates: ``payload``, ``q1..qn`` (for a
+``configuration`` axis) or ``q<k>``, ``controller``/``scene``/``model`` (the
+file's stem), ``fidelity``, the override keys as written, ``replicate``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import itertools
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+from flexctrl.errors import SpecError
+from flexctrl.fidelity import parse_fidelity
+from flexctrl.spec.overrides import apply_overrides
+from flexctrl.spec.reader import TableReader, read_toml
+from flexctrl.study.hashing import canonical_json, derive_seed, file_digest, run_id as _run_id
+
+SETTINGS = ("scene", "model", "controller", "payload", "configuration", "fidelity")
+FILE_SETTINGS = ("scene", "model", "controller")
+TARGETS = ("scene", "controller", "model")
+PLOTS = ("maps", "ranking", "worst", "timing", "failures")
+RESERVED_COLUMNS = ("run_id", "seed", "status", "error", "wall_time_s", "peak_memory_mb", "bytes_written", "worker")
+MAX_RUNS = 1_000_000
+NO_CONTROLLER = "none"
+_JOINT = re.compile(r"^q([1-9][0-9]?)$")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a study: its id, its grid coordinates and its settings.
+
+    The settings are kept as canonical JSON so the object is truly immutable;
+    :attr:`settings` returns a fresh dict every time.
+    """
+
+    index: int
+    run_id: str
+    coords: tuple[tuple[str, Any], ...]
+    settings_json: str
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The settings handed to the executor (a fresh copy)."""
+        return json.loads(self.settings_json)
+
+    @property
+    def coordinates(self) -> dict[str, Any]:
+        """Grid coordinates by table column."""
+        return dict(self.coords)
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One grid axis: the key as written and its validated values."""
+
+    key: str
+    values: tuple[Any, ...]
+
+
+@dataclass(frozen=True)
+class ReportSpec:
+    """What the report shows (see the module docstring, ``[report]``)."""
+
+    metric: str | None = None
+    lower_is_better: bool = True
+    map_axes: tuple[str, str] | None = None
+    facet: tuple[str, ...] | None = None
+    rank_by: str | None = None
+    group_by: str | None = None
+    worst: int = 3
+    signals: tuple[str, ...] | None = None
+    time: str = "t"
+    timing: tuple[str, ...] | None = None
+    plots: tuple[str, ...] = PLOTS
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (lists for tuples), for ``study.json``."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ReportSpec":
+        """The inverse of :meth:`to_dict` (unknown keys ignored)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names})
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """A validated study with its expanded runs.
+
+    Attributes
+    ----------
+    name, source, root, sha256
+        Study name, study file, its folder (absolute) and the file's digest.
+    executor : str
+        Registered executor name.
+    seed, replicates : int
+    metrics : tuple of str or None
+        Metric columns asked for (None: whatever the executor returns).
+    keep_trajectories : bool
+    decimation : int
+        Keep every ``decimation``-th trajectory sample.
+    fixed : tuple of (key, value)
+        Fixed settings as written (paths absolute).
+    axes : tuple of Axis
+    columns : tuple of str
+        Coordinate columns of the table, in order.
+    report : ReportSpec
+    runs : tuple of RunSpec
+        In grid order (the first axis varies slowest).
+    """
+
+    name: str
+    source: str
+    root: str
+    sha256: str
+    executor: str
+    seed: int
+    replicates: int
+    metrics: tuple[str, ...] | None
+    keep_trajectories: bool
+    decimation: int
+    fixed: tuple[tuple[str, Any], ...]
+    axes: tuple[Axis, ...]
+    columns: tuple[str, ...]
+    report: ReportSpec
+    runs: tuple[RunSpec, ...] = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The study as plain data (for ``study.json``)."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "sha256": self.sha256,
+            "executor": self.executor,
+            "seed": self.seed,
+            "replicates": self.replicates,
+            "metrics": None if self.metrics is None else list(self.metrics),
+            "trajectories": {"keep": self.keep_trajectories, "decimation": self.decimation},
+            "fixed": dict(self.fixed),
+            "grid": {axis.key: list(axis.values) for axis in self.axes},
+            "columns": list(self.columns),
+            "report": self.report.to_dict(),
+            "n_runs": len(self.runs),
+        }
+
+
+# -- values ----------------------------------------------------------------------------
+
+
+def toml_literal(value: Any) -> str:
+    """``value`` written as a TOML value, so ``parse_value(toml_literal(v)) == v``.
+
+    Examples
+    --------
+    >>> toml_literal([1, 2.5, "a", True])
+    '[1, 2.5, "a", true]'
+    """
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value + 0.0)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_literal(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {toml_literal(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"{value!r} of type {type(value).__name__} has no TOML spelling here")
+
+
+class _Context:
+    """Reading state: the study file, its folder and memoised model loads."""
+
+    def __init__(self, source: str, root: Path):
+        self.source = source
+        self.root = root
+        self._arms: dict[tuple, Any] = {}
+        self._docs: dict[str, None] = {}
+        self._applied: set[tuple] = set()
+
+    def error(self, key: str, message: str) -> SpecError:
+        return SpecError(message, source=self.source, key=key)
+
+    def file(self, key: str, value: Any, role: str) -> str | None:
+        """An existing, parseable TOML file (absolute path), or None for ``"none"`` controllers."""
+        if role == "controller" and value == NO_CONTROLLER:
+            return None
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"value {value!r} is not a file path; allowed: a path to a {role} TOML file relative to the study file"
+                             + (" or 'none'" if role == "controller" else ""))
+        path = (self.root / value).resolve()
+        if not path.is_file():
+            near = ""
+            if path.parent.is_dir():
+                hint = difflib.get_close_matches(path.name, [p.name for p in path.parent.glob("*.toml")], n=1)
+                near = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise self.error(key, f"{role} file {value!r} not found (looked at '{path}'){near}")
+        if str(path) not in self._docs:
+            try:
+                read_toml(path)
+            except SpecError as exc:
+                raise self.error(key, f"{role} file {value!r} is unreadable: {exc}") from None
+            self._docs[str(path)] = None
+        return str(path)
+
+    def apply(self, key: str, path: str, overrides: tuple[str, ...]) -> None:
+        """Check that ``overrides`` apply to the file's document (structure only)."""
+        if (path, overrides) not in self._applied:
+            try:
+                apply_overrides(read_toml(path), overrides, source=path)
+            except SpecError as exc:
+                raise self.error(key, f"cannot be applied: {exc}") from None
+            self._applied.add((path, overrides))
+
+    def arm(self, key: str, model: str, overrides: tuple[str, ...]):
+        from flexctrl.spec.arm import load_arm
+
+        cache_key = (model, overrides)
+        if cache_key not in self._arms:
+            try:
+                self._arms[cache_key] = load_arm(model, overrides=overrides)
+            except SpecError as exc:
+                raise self.error(key, f"model does not load: {exc}") from None
+        return self._arms[cache_key]
+
+
+def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
+    """Validate one value of a named setting (``payload``, ``scene``, ...)."""
+    if name in FILE_SETTINGS:
+        return ctx.file(key, value, name)
+    if name == "payload":
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            raise ctx.error(key, f"value {value!r} is not allowed; allowed: a finite number >= 0 (kg)")
+        return float(value) + 0.0
+    if name == "configuration":
+        if not isinstance(value, list) or not value:
+            raise ctx.error(key, f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]")
+        return [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
+    if name == "fidelity":
+        return str(parse_fidelity(value, source=ctx.source, key=key))
+    if _JOINT.match(name):
+        return _angle(ctx, key, value)
+    try:
+        canonical_json(value)
+    except ValueError:
+        raise ctx.error(key, f"value {value!r} is not plain data; allowed: numbers, strings, booleans, lists, tables") from None
+    return value
+
+
+def _angle(ctx: _Context, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ctx.error(key, f"value {value!r} is not an angle; allowed: a finite number (degrees)")
+    return float(value) + 0.0
+
+
+def _check_override_key(ctx: _Context, key: str, name: str) -> None:
+    target, _, rest = name.partition(".")
+    if target not in TARGETS:
+        hint = difflib.get_close_matches(target, TARGETS, n=1)
+        extra = f" (did you mean '{hint[0]}.{rest}'?)" if hint else ""
+        raise ctx.error(key, f"'{target}' is not a file to override{extra}; allowed: {', '.join(t + '.KEY' for t in TARGETS)}")
+    if not rest or any(not part for part in rest.split(".")):
+        raise ctx.error(key, "override key has an empty part; allowed: scene.KEY, controller.KEY, model.KEY")
+
+
+def _flatten(table: dict, prefix: str = "") -> Iterable[tuple[str, Any]]:
+    for name, value in table.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", value
+
+
+def _unknown_axis(ctx: _Context, key: str, name: str) -> SpecError:
+    known = list(SETTINGS) + ["q1", "q2", "q3"]
+    hint = difflib.get_close_matches(name, known, n=1)
+    extra = f"; did you mean '{hint[0]}'?" if hint else ""
+    return ctx.error(key, f"unknown setting{extra} Allowed: {', '.join(SETTINGS)}, q1..qN (one joint, degrees), scene.KEY, controller.KEY, model.KEY")
+
+
+def _string_list(r: TableReader, name: str, allowed: Sequence[str] | None = None) -> tuple[str, ...]:
+    value = r.raw(name)
+    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+        raise r.error(name, f"value {value!r} is not a list of names")
+    if len(set(value)) != len(value):
+        raise r.error(name, f"value {value!r} names an entry twice")
+    if allowed is not None:
+        for item in value:
+            if item not in allowed:
+                hint = difflib.get_close_matches(item, list(allowed), n=1)
+                extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+                raise r.error(name, f"'{item}' is not allowed{extra}; allowed: {', '.join(allowed) or '(none)'}")
+    return tuple(value)
+
+
+# -- loading ---------------------------------------------------------------------------
+
+
+def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_executor: bool = True) -> StudySpec:
+    """Load, validate and expand a study file.
+
+    Parameters
+    ----------
+    path
+        The ``studies/*.toml`` file.
+    overrides
+        ``KEY=VALUE`` strings applied to the study document first (``--set``),
+        e.g. ``"seed=2"`` or ``"grid.payload=[0, 1]"``.
+    check_executor
+        Also run the executor's ``check`` on every run's settings.
+
+    Returns
+    -------
+    StudySpec
+        With every run expanded, in grid order.
+
+    Raises
+    ------
+    SpecError
+        Naming the file, the key, the value and what is allowed.
+    """
+    from flexctrl.study.executors import executor_names, get_executor
+
+    path = Path(path)
+    source = str(path)
+    document = apply_overrides(read_toml(path), overrides, source=f"{source} (--set)")
+    ctx = _Context(source, path.resolve().parent)
+    r = TableReader(document, source)
+
+    name = r.string("name", path.stem)
+    if not name or "/" in name or "\\" in name or name in (".", ".."):
+        raise r.error("name", f"value {name!r} is not allowed; allowed: a non-empty name without slashes")
+    executor = r.string("executor", "closed_loop", choices=executor_names())
+    seed = r.integer("seed", 0, low=0, high=2**63 - 1)
+    replicates = r.integer("replicates", 1, low=1, high=10_000)
+    metrics = _string_list(r, "metrics") if r.has("metrics") else None
+    if metrics is not None:
+        if not metrics:
+            raise r.error("metrics", "empty list; allowed: metric names, or leave the key out to keep every metric")
+        for metric in metrics:
+            if metric in RESERVED_COLUMNS:
+                raise r.error("metrics", f"'{metric}' is a column of the table already; allowed: other names")
+
+    # fixed settings, as named settings at the top level and KEY=VALUE in [set]
+    fixed: dict[str, Any] = {}
+    origin: dict[str, str] = {}
+    for setting in SETTINGS:
+        if r.has(setting):
+            value = r.raw(setting)
+            if isinstance(value, dict):
+                raise r.error(setting, f"value {value!r} is a table; overrides of the {setting} file go in [set] as \"{setting}.KEY\" = VALUE")
+            fixed[setting] = _setting_value(ctx, setting, setting, value)
+            origin[setting] = setting
+    s = r.table_of("set", {})
+    for name_, value in _flatten(s.table):
+        key = f"set.{name_}"
+        _check_override_key(ctx, key, name_)
+        fixed[name_] = _setting_value(ctx, key, name_, value)
+        origin[name_] = key
+    for raw_key in s.table:
+        s.raw(raw_key)
+    s.finish()
+
+    # axes
+    g = r.table_of("grid", {})
+    axes: list[Axis] = []
+    for name_, values in _flatten(g.table):
+        key = f"grid.{name_}"
+        if name_ not in SETTINGS and not _JOINT.match(name_):
+            if "." not in name_:
+                raise _unknown_axis(ctx, key, name_)
+            _check_override_key(ctx, key, name_)
+        if not isinstance(values, list):
+            raise ctx.error(key, f"value {values!r} is not a list; allowed: a list of values, one per grid point")
+        if not values:
+            raise ctx.error(key, "empty list: an axis needs at least one value (an empty axis makes an empty grid)")
+        if name_ in fixed:
+            raise ctx.error(key, f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two")
+        checked = tuple(_setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values))
+        seen: dict[str, int] = {}
+        for i, v in enumerate(checked):
+            text = canonical_json(v)
+            if text in seen:
+                raise ctx.error(key, f"value {values[i]!r} (entry {i + 1}) repeats entry {seen[text] + 1}; allowed: distinct values")
+            seen[text] = i
+        axes.append(Axis(name_, checked))
+        origin[name_] = key
+    for raw_key in g.table:
+        g.raw(raw_key)
+    g.finish()
+    if "configuration" in origin and origin["configuration"].startswith("grid") and any(_JOINT.match(a.key) for a in axes):
+        raise ctx.error(origin["configuration"], "a configuration axis cannot be combined with single-joint axes (q1..qN); "
+                        "allowed: a fixed configuration with q<k> axes, or whole configurations")
+    for required in ("scene", "model"):
+        if required not in origin:
+            raise r.error(required, f"missing required key: the {required} file, as a fixed setting or a grid axis")
+
+    t = r.table_of("trajectories", {})
+    keep = t.boolean("keep", True)
+    decimation = t.integer("decimation", 1, low=1, high=1_000_000)
+    t.finish()
+
+    report_reader = r.table_of("report", {})
+    r.finish()
+
+    n_runs = math.prod(len(a.values) for a in axes) * replicates
+    if n_runs > MAX_RUNS:
+        raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
+
+    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes)
+    report = _read_report(report_reader, columns, metrics)
+    spec = StudySpec(
+        name=name, source=source, root=str(ctx.root), sha256=file_digest(path), executor=executor, seed=seed,
+        replicates=replicates, metrics=metrics, keep_trajectories=keep, decimation=decimation,
+        fixed=tuple(fixed.items()), axes=tuple(axes), columns=columns, report=report, runs=runs,
+    )
+    if check_executor:
+        check = get_executor(executor, source=source).check
+        if check is not None:
+            for run in runs:
+                try:
+                    check(run.settings)
+                except SpecError as exc:
+                    coords = ", ".join(f"{k} = {v}" for k, v in run.coords) or "the only run"
+                    raise SpecError(f"executor '{executor}' refuses run {run.index + 1} ({coords}): {exc}", source=source) from None
+    return spec
+
+
+def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[str | None, str]:
+    """Display names of files in the table: the stem, or the relative path when stems collide."""
+    paths = {v for a in axes if a.key in FILE_SETTINGS for v in a.values if v is not None}
+    labels: dict[str | None, str] = {None: NO_CONTROLLER}
+    stems = [Path(p).stem for p in paths]
+    for p in paths:
+        stem = Path(p).stem
+        labels[p] = stem if stems.count(stem) == 1 and stem != NO_CONTROLLER else Path(os.path.relpath(p, ctx.root)).as_posix()
+    return labels
+
+
+def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
+            origin: dict[str, str], axes: list[Axis]) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+    labels = _labels(ctx, axes, fixed)
+    all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
+    runs: list[RunSpec] = []
+    columns: dict[str, None] = {}
+    ids: dict[str, int] = {}
+    for index, combo in enumerate(itertools.product(*(a.values for a in all_axes))):
+        values = dict(fixed)
+        coords: list[tuple[str, Any]] = []
+        for axis, value in zip(all_axes, combo):
+            values[axis.key] = value
+            if axis.key in FILE_SETTINGS:
+                coords.append((axis.key, labels[value]))
+            elif axis.key == "configuration":
+                coords += [(f"q{i + 1}", a) for i, a in enumerate(value)]
+            else:
+                coords.append((axis.key, value))
+        overrides = {k: v for k, v in values.items() if "." in k}
+        model_overrides = tuple(sorted(f"{k[len('model.'):]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith("model.")))
+        model_key = origin["model"] if not model_overrides else next(origin[k] for k in overrides if k.startswith("model."))
+        arm = ctx.arm(model_key, values["model"], model_overrides)
+        payload = values.get("payload", arm.payload.mass)
+        config = values.get("configuration")
+        if config is None:
+            config = [math.degrees(a) + 0.0 for a in arm.configuration]
+        elif len(config) != arm.n_links:
+            raise ctx.error(origin["configuration"], f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints")
+        config = list(config)
+        for k, v in values.items():
+            match = _JOINT.match(k)
+            if match:
+                joint = int(match[1])
+                if joint > arm.n_links:
+                    raise ctx.error(origin[k], f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints")
+                config[joint - 1] = v
+        controller = values.get("controller")
+        if controller is None and any(k.startswith("controller.") for k in overrides):
+            key = next(origin[k] for k in overrides if k.startswith("controller."))
+            raise ctx.error(key, "overrides a controller setting, but the run has no controller; allowed: a controller file, fixed or as an axis")
+        for target in ("scene", "controller"):
+            stripped = tuple(f"{k[len(target) + 1:]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith(target + "."))
+            if stripped and values.get(target):
+                ctx.apply(next(origin[k] for k in overrides if k.startswith(target + ".")), values[target], stripped)
+        settings: dict[str, Any] = {
+            "executor": executor,
+            "scene": values["scene"],
+            "model": values["model"],
+            "controller": controller,
+            "payload": float(payload) + 0.0,
+            "q0_deg": config,
+            "fidelity": values.get("fidelity"),
+            "overrides": sorted(f"{k}={toml_literal(v)}" for k, v in overrides.items()),
+            "digests": {k: file_digest(values[k]) for k in FILE_SETTINGS if values.get(k)},
+        }
+        if replicates > 1:
+            settings["replicate"] = values["replicate"]
+        settings["seed"] = derive_seed(seed, _run_id(settings, ctx.root))
+        rid = _run_id(settings, ctx.root)
+        if rid in ids:
+            raise ctx.error("grid", f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points")
+        ids[rid] = index
+        for column, _ in coords:
+            columns.setdefault(column, None)
+        runs.append(RunSpec(index, rid, tuple(coords), canonical_json(settings)))
+    return tuple(runs), tuple(columns)
+
+
+def _read_report(r: TableReader, columns: Sequence[str], metrics: tuple[str, ...] | None) -> ReportSpec:
+    def column(name: str, default: str | None) -> str | None:
+        if not r.has(name):
+            return default if default in columns else None
+        value = r.string(name)
+        if value not in columns:
+            raise r.error(name, f"'{value}' is not a grid column; allowed: {', '.join(columns) or '(the study has no axes)'}")
+        return value
+
+    metric = r.string("metric") if r.has("metric") else None
+    if metric is not None and metrics is not None and metric not in metrics:
+        raise r.error("metric", f"'{metric}' is not one of the study's metrics; allowed: {', '.join(metrics)}")
+    map_axes = None
+    if r.has("map_axes"):
+        map_axes = _string_list(r, "map_axes", columns)
+        if len(map_axes) != 2:
+            raise r.error("map_axes", f"value {list(map_axes)!r} names {len(map_axes)} columns; allowed: exactly 2")
+    spec = ReportSpec(
+        metric=metric,
+        lower_is_better=r.boolean("lower_is_better", True),
+        map_axes=map_axes,  # type: ignore[arg-type]
+        facet=_string_list(r, "facet", columns) if r.has("facet") else None,
+        rank_by=column("rank_by", "controller"),
+        group_by=column("group_by", "payload"),
+        worst=r.integer("worst", 3, low=0, high=50),
+        signals=_string_list(r, "signals") if r.has("signals") else None,
+        time=r.string("time", "t"),
+        timing=_string_list(r, "timing") if r.has("timing") else None,
+        plots=_string_list(r, "plots", PLOTS) if r.has("plots") else PLOTS,
+    )
+    r.finish()
+    return spec
