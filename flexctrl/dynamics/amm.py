@@ -5,7 +5,9 @@ Built symbolically in CasADi SX from the Lagrangian ``L = T - U_g - U_el``
 
 * ``M(q) = d^2 T / d qd^2`` (T is exactly quadratic in qd; M is formed as
   ``sum J^T G J`` over the bodies, see the kinematics module);
-* ``c(q, qd) = (d(M qd)/dq) qd - dT/dq`` (equal to Eq 62's Christoffel form);
+* ``c(q, qd) = (d(M qd)/dq) qd - dT/dq`` (equal to Eq 62's Christoffel form); for
+  frozen modes it is formed body by body as ``sum J^T G (dJ/dt) qd`` (same value,
+  about a sixth of the code; ``coriolis="lagrange"`` selects the generic form);
 * ``g(q) = dU_g/dq`` (Eq 63) and ``K = diag(0, m_l omega^2)`` (Eqs 64-66);
 * ``D = diag(b, d)`` (Eqs 67-68), joint friction ``b`` from the file;
 * ``M qdd + c + g + K q + D qd = B tau``, ``B = [I_n; 0]``, solved for qdd by an
@@ -315,7 +317,8 @@ def build_amm(
         n_joints=n,
         coordinate_names=names,
         functions=functions,
-        omega_max=float(locked.max()) if locked.size else 0.0,
+        # the free-joint spectrum bounds explicit steps (RK4: omega h < 2.785); it is higher than the locked one
+        omega_max=float(max(np.max(free, initial=0.0), np.max(locked, initial=0.0))),
         spec=arm,
         info=info,
     )

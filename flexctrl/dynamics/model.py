@@ -10,8 +10,8 @@ Required functions (``functions[name]``), with their input and output names:
 ``M``         (q) -> (M)                mass matrix, (N, N)
 ``c``         (q, qd) -> (c)            Coriolis and centrifugal vector, (N,)
 ``g``         (q) -> (g)                gravity vector, (N,)
-``K``         () -> (K)                 stiffness, (N, N) (may depend on q for scheduled modes: (q) -> (K))
-``D``         () -> (D)                 damping, (N, N)
+``K``         () -> (K)                 stiffness, (N, N) (scheduled modes: (q) -> (K))
+``D``         () -> (D)                 damping, (N, N) (scheduled modes: (q) -> (D))
 ``f``         (x, u) -> (xdot)          forward dynamics, x = (q, qd), u = joint torques (n,)
 ``energies``  (q, qd) -> (E_kin, E_el, E_grav)   J
 ``tip``       (q, qd) -> (p, v)         last link's tip position and velocity in the world frame (2,)
@@ -46,8 +46,10 @@ class Model:
         ``q1..qn`` then ``qf11, qf12, ...`` (link, mode) or nodal names.
     functions : dict of str to casadi.Function
     omega_max : float
-        Highest undamped natural frequency of the linearised, locked-joint structure
-        at the build configuration (rad/s); used in stability advice.
+        Highest undamped natural frequency of the linearisation at the build
+        configuration (rad/s), free joints or locked, whichever is higher (the free
+        one for arms); it bounds explicit integration steps and is used in
+        stability advice.
     spec : Any
         The description it was built from (plain data).
     info : dict

@@ -236,9 +236,10 @@ class Integrator:
     def jacobian_radius(self, x: np.ndarray, u: np.ndarray | None = None) -> float:
         """Largest eigenvalue magnitude of ``df/dx`` at state ``x`` (rad/s; free joints, current torque).
 
-        ``Model.omega_max`` is computed with the joints locked; with free joints the
-        highest mode can be much faster (about 330 Hz against 189 Hz for the
-        three-link arm with two modes per link), so stability advice uses the larger.
+        ``Model.omega_max`` is the highest frequency of the linearisation at the build
+        configuration (free joints, about 330 Hz for the three-link arm with two
+        modes per link, against 189 Hz with locked joints); the Jacobian at the
+        current state can differ, so stability advice uses the larger.
         """
         if not np.all(np.isfinite(x)):
             return math.nan
@@ -255,10 +256,10 @@ class Integrator:
         w_model = float(self.model.omega_max)
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w_model, *radii])
-        facts = (f"The model's highest natural frequency (joints locked) is omega_max = {w_model:.4g} rad/s "
+        facts = (f"The model's highest natural frequency (linearised, free joints) is omega_max = {w_model:.4g} rad/s "
                  f"({w_model / (2 * math.pi):.4g} Hz), omega_max*dt = {w_model * self.dt:.3g}")
-        if radii and max(radii) > w_model:
-            facts += (f"; with free joints the Jacobian df/dx reaches |lambda| = {max(radii):.4g} rad/s "
+        if radii:
+            facts += (f"; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = {max(radii):.4g} rad/s "
                       f"({max(radii) / (2 * math.pi):.4g} Hz), |lambda|*dt = {max(radii) * self.dt:.3g}")
         facts += "."
         if math.isfinite(self.stability_limit) and w > 0:
