@@ -400,8 +400,10 @@ def test_build_model_interface(model_path):
     assert len(model.info["link_frequencies_rad_s"]) == 3 and model.omega_max > 0
     per_file = load_model(model_path, fidelity=None, overrides=["links[1].n_modes=1"])
     assert per_file.info["n_modes"] == [1, 2, 2]
-    with pytest.raises(ModelFamilyUnavailable, match="flexctrl.dynamics.fem") as err:
-        load_model(model_path, fidelity="fem:4")
+    fem = load_model(model_path, fidelity="fem:2")  # the same file builds as finite elements
+    assert str(fem.fidelity) == "fem:2" and fem.n_u == 3 and fem.coordinate_names[:3] == ("q1", "q2", "q3")
+    with pytest.raises(ModelFamilyUnavailable, match="assumed modes only") as err:
+        load_model(model_path, fidelity="fem:2", modes="scheduled")
     assert isinstance(err.value, FlexctrlError) and isinstance(err.value, NotImplementedError)
     with pytest.raises(SpecError, match="allowed"):
         build_model(rigid.spec, "amm:9")

@@ -61,10 +61,11 @@ def build_model(
         return build_amm(arm, [link.n_modes for link in arm.links], modes=modes, reference_q=reference_q, damping=damping)
     fid = parse_fidelity(fidelity)
     if fid.kind == "fem":
-        raise ModelFamilyUnavailable(
-            f"fidelity '{fid}': the finite-element model is built by flexctrl.dynamics.fem, "
-            "which build_model does not dispatch to yet; use 'rigid' or 'amm:N' here"
-        )
+        from flexctrl.dynamics.fem.arm import build_fem_model
+
+        if modes != "frozen":
+            raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
+        return build_fem_model(arm, fid.count, reference_q=reference_q)
     if fid.kind == "auto":
         raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model; give 'rigid', 'amm:N' or 'fem:N'")
     return build_amm(arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid)

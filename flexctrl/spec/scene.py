@@ -49,6 +49,9 @@ from flexctrl.spec.reader import TableReader, read_toml
 #: ``(document, source, base_dir)`` and return a scene; runners take the scene and keywords.
 SCENE_KINDS: dict[str, tuple[str, str]] = {
     "arm": ("flexctrl.spec.scene:read_arm_scene", "flexctrl.scenes:run_arm_scene"),
+    "closed_loop": ("flexctrl.spec.closed_loop_scene:read_closed_loop_scene", "flexctrl.closedloop:run_closed_loop_scene"),
+    "sliding_beam": ("flexctrl.fem_scenes:read_scene", "flexctrl.fem_scenes:run_scene"),
+    "rp_arm": ("flexctrl.fem_scenes:read_scene", "flexctrl.fem_scenes:run_scene"),
 }
 MODES = ("frozen", "scheduled")
 INPUT_KINDS = ("none", "bangbang")
@@ -190,8 +193,8 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
     r.string("kind", "arm", choices=tuple(SCENE_KINDS))
     model = resolve_model_path(r.string("model"), base_dir, r)
     fidelity = parse_fidelity(r.raw("fidelity", "amm:2"), source=source, key="fidelity")
-    if fidelity.kind not in ("rigid", "amm"):
-        raise r.error("fidelity", f"value '{fidelity}' is not available for arm scenes; allowed: 'rigid' or 'amm:N'")
+    if fidelity.kind not in ("rigid", "amm", "fem"):
+        raise r.error("fidelity", f"value '{fidelity}' is not available for arm scenes; allowed: 'rigid', 'amm:N' or 'fem:N'")
     integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
     gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
 
