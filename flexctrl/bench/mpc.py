@@ -1,0 +1,269 @@
+"""The MPC benchmark: solve times of the linear MPC variants, python-control's MPC and the NMPC.
+
+:func:`mpc_benchmark` returns a plain dict (JSON-serialisable) for the CLI and the report.
+Scenario: the three-link arm (``amm:2``: 18 states, 3 inputs) at the target
+equilibrium ``target_deg``, started ``offset_deg`` away, regulated for ``steps`` samples.
+The linear MPC variants run against their own ZOH model (so every variant sees the
+same states, and the timing is of the solver, not of a plant simulation); the NMPC
+runs against the nonlinear RK4 shooting map.  Times:
+
+``solve_ms``  the QP solver alone (OSQP ``info.run_time``; CasADi ``t_wall_total``/solver);
+``step_ms``   the whole ``controller.step`` (estimation, update, solve, fallback logic).
+
+Wall-clock figures depend on the machine and on what else runs on it; the dict
+records the CPU count and load average.
+
+Example
+-------
+``python -c "from flexctrl.bench.mpc import mpc_benchmark; import json; print(json.dumps(mpc_benchmark(), indent=1))"``
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from typing import Any, Sequence
+
+import numpy as np
+
+COMMAND = ('python -c "from flexctrl.bench.mpc import mpc_benchmark; import json; '
+           'print(json.dumps(mpc_benchmark(), indent=1))"')
+
+
+def _stats(values_s: Sequence[float]) -> dict[str, float]:
+    a = np.asarray(values_s, dtype=float) * 1e3
+    a = a[np.isfinite(a)]
+    if not a.size:
+        return {"median": math.nan, "p95": math.nan, "max": math.nan}
+    return {"median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+
+
+def default_variants() -> dict[str, dict[str, Any]]:
+    """Settings overrides per variant (on top of :class:`~flexctrl.control.settings.MPCSettings`)."""
+    from flexctrl.control.settings import OSQPSettings
+
+    return {
+        "osqp_sparse": {},
+        "osqp_sparse_ruiz": {"osqp": OSQPSettings(scaling=10)},
+        "osqp_sparse_eps1e-4": {"osqp": OSQPSettings(eps_abs=1e-4, eps_rel=1e-4)},
+        "osqp_sparse_cold": {"warm_start": "none"},
+        "osqp_sparse_unscaled": {"scaling": "none", "osqp": OSQPSettings(scaling=10)},
+        "osqp_condensed": {"formulation": "condensed", "osqp": OSQPSettings(scaling=10)},
+        "hpipm_sparse": {"backend": "hpipm"},
+        "daqp_condensed": {"formulation": "condensed", "backend": "daqp"},
+    }
+
+
+def _run_linear(model, op, settings, dx0: np.ndarray, steps: int) -> dict[str, Any]:
+    from flexctrl.control import design
+
+    start = time.perf_counter()
+    ctrl = design(model, op, settings)
+    build = time.perf_counter() - start
+    ctrl.reset()
+    Ad, Bd = ctrl.plant.Ad, ctrl.plant.Bd
+    dx = dx0.copy()
+    solve, iters, dev = [], [], []
+    K = ctrl.K
+    for k in range(steps):
+        u = ctrl.step(k * ctrl.sample_time, op.x + dx)
+        solve.append(ctrl.last.solve_time)
+        iters.append(ctrl.last.iterations)
+        du_lqr = np.clip(op.u - K @ dx, -ctrl.limits, ctrl.limits)
+        dev.append(float(np.max(np.abs(u - du_lqr) / ctrl.problem.Su)))
+        dx = Ad @ dx + Bd @ (u - op.u)
+    summary = ctrl.stats.summary()
+    it = np.asarray(iters, dtype=float)
+    return {
+        "build_s": build,
+        "first_solve_ms": float(solve[0] * 1e3),
+        "solve_ms": _stats(solve[1:]),
+        "step_ms": _stats(ctrl.stats.step_times[1:]),
+        "iterations": {"median": float(np.median(it)), "p95": float(np.percentile(it, 95)), "max": float(it.max())}
+        if np.all(it >= 0) else None,
+        "status": summary["status"],
+        "fallbacks": summary["fallbacks"],
+        "slack_max_m": summary["slack_max"],
+        "final_joint_error_deg": float(np.degrees(np.max(np.abs(dx[:model.n_u])))),
+        "qp_size": {"variables": int(ctrl.qp.H.shape[0]), "rows": int(ctrl.qp.A.shape[0])},
+    }
+
+
+def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[str, Any]:
+    """python-control's ``create_mpc_iosystem`` on the same scaled problem (no soft constraints), a few solves."""
+    import control
+    import control.optimal as opt
+
+    from flexctrl.control import design
+
+    ctrl = design(model, op, dataclasses.replace(settings, soft="none"))
+    pb = ctrl.problem
+    sysd = control.ss(pb.A, pb.B, np.eye(pb.n), 0, dt=ctrl.sample_time)
+    timepts = np.arange(pb.horizon + 1) * ctrl.sample_time
+    cost = opt.quadratic_cost(sysd, pb.Q, pb.R)
+    terminal = opt.quadratic_cost(sysd, pb.P, None)
+    constraints = [opt.input_range_constraint(sysd, pb.v_lo, pb.v_hi)]
+    mpc = opt.create_mpc_iosystem(sysd, timepts, cost, constraints, terminal_cost=terminal)
+    z = dx0 / pb.Sx
+    guess = np.zeros(mpc.nstates)
+    times, moves = [], []
+    for _ in range(solves):
+        start = time.perf_counter()
+        v = np.asarray(mpc.output(0.0, guess, z), dtype=float).ravel()
+        times.append(time.perf_counter() - start)
+        moves.append(v)
+    # the same first move from our OSQP controller (tight tolerance) for the comparison
+    from flexctrl.control.settings import OSQPSettings
+
+    tight = design(model, op, dataclasses.replace(settings, soft="none",
+                                                  osqp=OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000,
+                                                                    polishing=True)))
+    tight.reset()
+    u = tight.step(0.0, op.x + dx0)
+    v_ours = (u - op.u) / pb.Su
+    return {
+        "solve_s": [float(t) for t in times],
+        "median_s": float(np.median(times)),
+        "first_move_difference": float(np.max(np.abs(moves[0] - v_ours))) if moves else math.nan,
+        "method": "control.optimal.create_mpc_iosystem (scipy SLSQP), one output() call per solve",
+    }
+
+
+def _run_nmpc(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float, **overrides) -> dict[str, Any]:
+    from flexctrl.control import design
+    from flexctrl.control.settings import NMPCSettings
+
+    start = time.perf_counter()
+    ctrl = design(model, op, NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides))
+    build = time.perf_counter() - start
+    ctrl.reset()
+    F, pb = ctrl.functions["F"], ctrl.problem
+    x = op.x + dx0
+    for k in range(steps):
+        u = ctrl.step(k * ctrl.sample_time, x)
+        x = op.x + pb.Sx * np.array(F((x - op.x) / pb.Sx, (u - op.u) / pb.Su), dtype=float).ravel()
+    summary = ctrl.stats.summary()
+    return {
+        "build_s": build,
+        "compiled": ctrl.compiled,
+        "substeps": ctrl.substeps,
+        "step_ms": _stats(ctrl.stats.step_times[1:]),
+        "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
+        "qp_ms": _stats(ctrl.timing["qp"][1:]),
+        "status": summary["status"],
+        "fallbacks": summary["fallbacks"],
+        "final_joint_error_deg": float(np.degrees(np.max(np.abs((x - op.x)[:model.n_u])))),
+    }
+
+
+def mpc_benchmark(
+    model_path: str = "models/subedi3link.toml",
+    *,
+    fidelity: str = "amm:2",
+    horizon: int = 20,
+    sample_time: float = 0.01,
+    steps: int = 300,
+    target_deg: Sequence[float] = (80.0, -10.0, -10.0),
+    offset_deg: Sequence[float] = (-6.0, 4.0, -4.0),
+    variants: dict[str, dict[str, Any]] | None = None,
+    python_control_solves: int = 1,
+    nmpc: bool = True,
+    nmpc_steps: int = 100,
+) -> dict[str, Any]:
+    """Run the MPC benchmark (see the module docstring) and return its figures.
+
+    Parameters
+    ----------
+    model_path, fidelity
+        The arm.
+    horizon, sample_time
+        MPC horizon (samples) and sample time (s).
+    steps
+        Closed-loop samples per linear-MPC variant.
+    target_deg, offset_deg
+        Target joint angles and the initial offset from them (degrees).
+    variants
+        Name -> :class:`~flexctrl.control.settings.MPCSettings` overrides
+        (default :func:`default_variants`).
+    python_control_solves
+        Solves of python-control's MPC to time (0 skips it; each takes seconds).
+    nmpc, nmpc_steps
+        Whether to time the NMPC (RTI, frozen and exact sensitivities) and for how many samples.
+
+    Returns
+    -------
+    dict
+        ``problem``, ``environment``, ``variants`` (per variant: ``solve_ms`` and
+        ``step_ms`` as median/p95/max, iterations, status counts, fallbacks),
+        ``python_control`` (seconds per solve and the ratio to ``osqp_sparse``),
+        ``nmpc`` and ``command``.
+    """
+    import casadi
+    import control
+    import osqp
+
+    from flexctrl import linear as L
+    from flexctrl.control.settings import MPCSettings
+    from flexctrl.dynamics.build import load_model
+
+    model = load_model(model_path, fidelity=fidelity)
+    op = L.equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))
+    dx0 = np.zeros(model.n_x)
+    dx0[:model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
+    base = MPCSettings(horizon=horizon, sample_time=sample_time)
+    result: dict[str, Any] = {
+        "problem": {"model": str(model_path), "fidelity": fidelity, "states": model.n_x, "inputs": model.n_u,
+                    "horizon": horizon, "sample_time_s": sample_time, "steps": steps,
+                    "target_deg": list(target_deg), "offset_deg": list(offset_deg),
+                    "soft_constraint": f"{base.soft} <= {base.deflection_limit} m"},
+        "environment": {"cpu_count": os.cpu_count(), "load_average": list(os.getloadavg()),
+                        "osqp": osqp.__version__, "casadi": casadi.__version__, "control": control.__version__},
+        "variants": {},
+        "command": COMMAND,
+    }
+    for name, overrides in (variants if variants is not None else default_variants()).items():
+        try:
+            result["variants"][name] = _run_linear(model, op, dataclasses.replace(base, **overrides), dx0, steps)
+        except Exception as exc:  # a missing plugin must not sink the whole benchmark
+            result["variants"][name] = {"error": f"{type(exc).__name__}: {exc}"}
+    if python_control_solves > 0:
+        pc = _python_control(model, op, base, dx0, python_control_solves)
+        ours = _run_linear(model, op, dataclasses.replace(base, soft="none"), dx0, steps)
+        pc["osqp_sparse_no_soft_solve_ms"] = ours["solve_ms"]
+        pc["ratio_median"] = pc["median_s"] * 1e3 / ours["solve_ms"]["median"]
+        result["python_control"] = pc
+    if nmpc:
+        result["nmpc"] = {
+            "rti_frozen": _run_nmpc(model, op, dx0, nmpc_steps, horizon, sample_time),
+            "rti_exact": _run_nmpc(model, op, dx0, nmpc_steps, horizon, sample_time, sensitivities="exact"),
+        }
+    return result
+
+
+def format_benchmark(result: dict[str, Any]) -> str:
+    """A short text table of :func:`mpc_benchmark`'s figures."""
+    lines = [f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} inputs, "
+             f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} ms; "
+             f"load {result['environment']['load_average'][0]:.2f} on {result['environment']['cpu_count']} CPUs",
+             f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} {'iter med':>9s}  status"]
+    for name, v in result["variants"].items():
+        if "error" in v:
+            lines.append(f"{name:24s} {v['error']}")
+            continue
+        it = v["iterations"]["median"] if v["iterations"] else float("nan")
+        lines.append(f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} {v['solve_ms']['max']:8.3f} "
+                     f"{v['step_ms']['median']:9.3f} {it:9.0f}  {v['status']}")
+    if "python_control" in result:
+        pc = result["python_control"]
+        lines.append(f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x OSQP sparse "
+                     f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)")
+    for name, v in result.get("nmpc", {}).items():
+        lines.append(f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
+                     f"max {v['step_ms']['max']:.2f} (linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
+                     f"QP {v['qp_ms']['median']:.2f}; {v['substeps']} RK4 substeps, compiled {v['compiled']})")
+    return "\n".join(lines)
+
+
+__all__ = ["mpc_benchmark", "default_variants", "format_benchmark", "COMMAND"]

@@ -1,0 +1,83 @@
+"""Controllers for flexible arms, all with one small protocol (:class:`~flexctrl.control.base.Controller`).
+
+``design(model, op, settings)`` builds the controller named by the settings type,
+regulating ``model`` to the target equilibrium ``op``
+(:func:`flexctrl.linear.equilibrium`); settings come from
+:func:`flexctrl.spec.controller.load_controller` or are built in Python.
+
+=========  =================================  ======================================
+kind       settings                           controller
+=========  =================================  ======================================
+pd         :class:`.PDSettings`               :class:`.pd.PDController`
+lqr        :class:`.LQRSettings`              :class:`.lqr.LQRController` (LQG, scheduled)
+mpc        :class:`.MPCSettings`              :class:`.mpc.MPCController` (OSQP, conic)
+nmpc       :class:`.NMPCSettings`             :class:`.nmpc.NMPCController` (RTI, ipopt)
+shaped     :class:`.ShapedSettings`           :class:`.shaping.ShapedController` (ZV/ZVD + PD)
+=========  =================================  ======================================
+
+Closed loop (sampled, zero-order hold)::
+
+    ctrl = design(model, op, settings)
+    ctrl.reset()
+    every ctrl.sample_time:  u = ctrl.step(t, ctrl.sensors.measure(x, u, rng))
+"""
+
+from __future__ import annotations
+
+from flexctrl.control.base import Controller, ControllerStats
+from flexctrl.control.settings import (
+    SETTINGS,
+    EstimatorSettings,
+    LQRSettings,
+    MPCSettings,
+    NMPCSettings,
+    OSQPSettings,
+    PDSettings,
+    ScheduleSettings,
+    SensorSettings,
+    ShapedSettings,
+    Weights,
+)
+
+
+def design(model, op, settings) -> Controller:
+    """Build the controller described by ``settings`` for ``model``, regulating to ``op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+    op : flexctrl.linear.OperatingPoint
+        Target (usually :func:`flexctrl.linear.equilibrium` at the target joint angles).
+    settings
+        One of the settings dataclasses (see the table in the module docstring).
+    """
+    kind = getattr(settings, "kind", None)
+    if kind == "pd":
+        from flexctrl.control.pd import design_pd
+
+        return design_pd(model, op, settings)
+    if kind == "lqr":
+        from flexctrl.control.lqr import design_lqr
+
+        return design_lqr(model, op, settings)
+    if kind == "mpc":
+        from flexctrl.control.mpc import design_mpc
+
+        return design_mpc(model, op, settings)
+    if kind == "nmpc":
+        from flexctrl.control.nmpc import design_nmpc
+
+        return design_nmpc(model, op, settings)
+    if kind == "shaped":
+        from flexctrl.control.shaping import design_shaped
+
+        return design_shaped(model, op, settings)
+    raise TypeError(f"settings of type {type(settings).__name__} name no controller; expected one of "
+                    f"{', '.join(cls.__name__ for cls in SETTINGS.values())}")
+
+
+__all__ = [
+    "design", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
+    "NMPCSettings", "ShapedSettings", "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings",
+    "OSQPSettings",
+]

@@ -1,0 +1,165 @@
+"""The one small protocol every controller follows, and its bookkeeping.
+
+A closed loop needs only this::
+
+    ctrl = design(model, op, settings)          # flexctrl.control.design
+    ctrl.reset()
+    for k in range(n_samples):                  # every ctrl.sample_time seconds
+        y = ctrl.sensors.measure(x, u, rng)     # the measurement vector ctrl expects
+        u = ctrl.step(t, y)                     # joint torques (N m), held until the next sample
+    ctrl.stats.summary()                        # wall time per step, status counts, fallbacks
+
+``step`` is a template method (like scipy's ``OdeSolver.step``): the base class
+checks the measurement, times the call, clips to the torque limits and records;
+subclasses implement ``_step``.  ``u`` passed to ``sensors.measure`` is the torque
+held during the sample that just ended (tip accelerometers feel it).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import ABC, abstractmethod
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from flexctrl.errors import SpecError
+from flexctrl.linear import OperatingPoint, Sensors
+
+
+@dataclass
+class ControllerStats:
+    """What a controller did since its last :meth:`Controller.reset`.
+
+    Attributes
+    ----------
+    step_times : list of float
+        Wall time of every ``step`` call, s.
+    status : collections.Counter
+        Count per status string (``"ok"``, ``"solved"``, ``"fallback_shift"``, ...).
+    fallbacks : list of (float, str, str)
+        ``(t, reason, what was used)`` for every step whose optimiser did not deliver.
+    saturated : int
+        Steps in which at least one torque was clipped to its limit.
+    clipped_max : float
+        Largest amount clipped from a torque, N m (an optimiser that respects the
+        limits leaves only its tolerance here).
+    iterations : list of int
+        Solver iterations per step (optimising controllers).
+    slack_max : float
+        Largest soft-constraint violation seen (m), optimising controllers.
+    """
+
+    step_times: list[float] = field(default_factory=list)
+    status: Counter = field(default_factory=Counter)
+    fallbacks: list[tuple[float, str, str]] = field(default_factory=list)
+    saturated: int = 0
+    clipped_max: float = 0.0
+    iterations: list[int] = field(default_factory=list)
+    slack_max: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        """Step count, median / p95 / max wall time (ms), status counts, fallbacks, saturation."""
+        times = np.asarray(self.step_times) * 1e3
+        pct = (lambda q: float(np.percentile(times, q))) if times.size else (lambda q: math.nan)
+        return {
+            "steps": int(times.size),
+            "median_ms": pct(50),
+            "p95_ms": pct(95),
+            "max_ms": float(times.max()) if times.size else math.nan,
+            "status": dict(self.status),
+            "fallbacks": len(self.fallbacks),
+            "saturated": self.saturated,
+            "clipped_max": self.clipped_max,
+            "median_iterations": float(np.median(self.iterations)) if self.iterations else math.nan,
+            "slack_max": self.slack_max,
+        }
+
+
+class Controller(ABC):
+    """Base class: ``reset()``, ``step(t, measurement) -> torques``, ``sample_time``, ``stats``.
+
+    Parameters
+    ----------
+    settings
+        The controller's settings dataclass.
+    op : OperatingPoint
+        The target equilibrium the controller regulates to.
+    sensors : Sensors
+        The measurement model: ``step`` expects ``sensors.names`` in this order.
+    limits : ndarray
+        Torque limits per joint, N m (``inf`` for none).
+    saturate : bool
+        Clip torques at ``limits``.
+    """
+
+    kind: ClassVar[str] = ""
+
+    def __init__(self, settings, op: OperatingPoint, sensors: Sensors, limits: np.ndarray, *, saturate: bool = True):
+        self.settings = settings
+        self.op = op
+        self.sensors = sensors
+        self.limits = np.asarray(limits, dtype=float)
+        self.saturate = saturate
+        self.n_u = self.limits.size
+        self.stats = ControllerStats()
+        self.u_previous = np.array(op.u, dtype=float)
+
+    @property
+    def sample_time(self) -> float:
+        """Sample period, s: call :meth:`step` this often and hold the torque in between."""
+        return float(self.settings.sample_time)
+
+    @property
+    def measurement_names(self) -> tuple[str, ...]:
+        """Names of the entries of the measurement vector :meth:`step` expects."""
+        return self.sensors.names
+
+    def reset(self) -> None:
+        """Forget everything since the design (estimates, warm starts, statistics)."""
+        self.stats = ControllerStats()
+        self.u_previous = np.array(self.op.u, dtype=float)
+        self._reset()
+
+    def step(self, t: float, measurement) -> np.ndarray:
+        """Joint torques (N m, one per joint) for the measurement taken at time ``t`` (s)."""
+        start = time.perf_counter()
+        y = np.asarray(measurement, dtype=float).ravel()
+        if y.size != self.sensors.n_y:
+            raise SpecError(f"measurement has {y.size} entries; expected {self.sensors.n_y} "
+                            f"({', '.join(self.sensors.names)})", key="measurement")
+        u = np.asarray(self._step(float(t), y), dtype=float).ravel()
+        if self.saturate:
+            clipped = np.clip(u, -self.limits, self.limits)
+            if np.any(clipped != u):
+                self.stats.saturated += 1
+                self.stats.clipped_max = max(self.stats.clipped_max, float(np.max(np.abs(clipped - u))))
+            u = clipped
+        self.u_previous = u
+        self.stats.step_times.append(time.perf_counter() - start)
+        return u.copy()
+
+    def record(self, status: str) -> None:
+        """Count ``status`` for this step."""
+        self.stats.status[status] += 1
+
+    def fallback(self, t: float, reason: str, used: str) -> None:
+        """Record that the optimiser failed (``reason``) and ``used`` was applied instead."""
+        self.stats.fallbacks.append((t, reason, used))
+        self.stats.status[f"fallback_{used}"] += 1
+
+    @abstractmethod
+    def _step(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Torques for measurement ``y`` (before clipping)."""
+
+    def _reset(self) -> None:
+        """Subclass part of :meth:`reset`."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={list(self.sensors.names)})"
+
+
+__all__ = ["Controller", "ControllerStats"]

@@ -1,0 +1,144 @@
+"""State estimation for the state-feedback controllers (LQR, MPC, NMPC).
+
+:class:`FullState` passes a full-state measurement through.  :class:`KalmanEstimator`
+is the steady-state discrete Kalman filter on the ZOH-discretised linearisation at
+the target, in *current-estimate* form (the estimate at ``t_k`` uses the measurement
+taken at ``t_k``, so a controller can act on it in the same sample)::
+
+    predict   dx- = A dx + B du_{k-1}
+    correct   dx  = dx- + M (dy_k - C dx- - D du_{k-1})      M = P C' (C P C' + R)^-1
+
+``P`` is the a-priori covariance from the filter DARE ``P = A P A' - A P C'(C P C' + R)^-1 C P A' + W``;
+``python-control``'s ``dlqe`` returns the predictor gain ``L = A M`` of the same filter.
+``du_{k-1}`` is the torque held during the sample that just ended (it also drives the
+feed-through of tip accelerometers).  Process noise ``W`` comes from generalised-force
+disturbances held over a sample (torques on the joints, forces on the elastic
+coordinates), mapped through the exact ZOH input matrix of ``[0; M(q)^-1]``.
+The first estimate after :meth:`KalmanEstimator.reset` is the least-squares fit of
+the first measurement, ``dx = C^+ (dy - D du)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from flexctrl.linear import OperatingPoint, Sensors
+
+
+class FullState:
+    """The measurement *is* the state."""
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def estimate(self, y: np.ndarray, u_previous: np.ndarray) -> np.ndarray:
+        """The state ``y``."""
+        return y
+
+
+def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
+    """``int_0^dt exp(A s) ds G``: the exact discrete input matrix of a held input."""
+    n, m = G.shape
+    aug = np.zeros((n + m, n + m))
+    aug[:n, :n], aug[:n, n:] = A * dt, G * dt
+    return scipy.linalg.expm(aug)[:n, n:]
+
+
+def process_noise(model, op: OperatingPoint, A: np.ndarray, dt: float, torque_noise: float,
+                  modal_force_noise: float) -> np.ndarray:
+    """Discrete process-noise covariance of held generalised-force disturbances (see module docstring)."""
+    N, n = model.n_q, model.n_u
+    Minv = np.linalg.inv(model.mass_matrix(op.q))
+    G = np.vstack([np.zeros((N, N)), Minv])
+    Gd = zoh_input_matrix(A, G, dt)
+    sigma = np.r_[np.full(n, torque_noise), np.full(N - n, modal_force_noise)]
+    W = Gd @ np.diag(sigma**2) @ Gd.T
+    return 0.5 * (W + W.T)
+
+
+def kalman_gain(Ad: np.ndarray, Cd: np.ndarray, W: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Current-estimate Kalman gain ``M`` and a-priori covariance ``P`` (filter DARE).
+
+    The DARE is solved in balanced coordinates ``x = T x'`` with ``T = diag(sqrt(diag(W)))``
+    (floored): the process noise of a flexible arm spans many orders of magnitude between
+    rigid and elastic states, which defeats the QZ reordering of an unscaled problem.
+    """
+    d = np.sqrt(np.maximum(np.diag(W), 0.0))
+    floor = 1e-6 * float(np.max(d)) if np.max(d) > 0 else 1.0
+    t = np.maximum(d, floor)
+    Ti = 1.0 / t
+    As = Ti[:, None] * Ad * t[None, :]
+    Cs = Cd * t[None, :]
+    Ws = Ti[:, None] * W * Ti[None, :]
+    r = np.sqrt(np.diag(R))
+    Rs = R / r[:, None] / r[None, :]
+    Cs = Cs / r[:, None]
+    Ps = scipy.linalg.solve_discrete_are(As.T, Cs.T, 0.5 * (Ws + Ws.T), 0.5 * (Rs + Rs.T))
+    P = t[:, None] * Ps * t[None, :]
+    P = 0.5 * (P + P.T)
+    S = Cd @ P @ Cd.T + R
+    M = np.linalg.solve(S, Cd @ P).T
+    return M, P
+
+
+class KalmanEstimator:
+    """Steady-state Kalman filter about ``op`` (see module docstring).
+
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : ndarray
+        ZOH-discretised linearisation with the sensors' outputs.
+    op : OperatingPoint
+    sensors : Sensors
+        Gives the noise standard deviations (``R``) and the outputs at ``op``.
+    W : ndarray
+        Process-noise covariance.
+    """
+
+    def __init__(self, Ad, Bd, Cd, Dd, op: OperatingPoint, sensors: Sensors, W: np.ndarray):
+        self.A, self.B, self.C, self.D = (np.asarray(m, dtype=float) for m in (Ad, Bd, Cd, Dd))
+        self.op = op
+        self.y_op = sensors.evaluate(op.x, op.u)
+        var = np.maximum(sensors.noise_std**2, 1e-18 * np.maximum(1.0, np.abs(self.y_op)) ** 2)
+        self.R = np.diag(var)
+        self.W = W
+        self.M, self.P = kalman_gain(self.A, self.C, W, self.R)
+        self._pinv = np.linalg.pinv(self.C)
+        self.dx: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Start again from the next measurement."""
+        self.dx = None
+
+    def estimate(self, y: np.ndarray, u_previous: np.ndarray) -> np.ndarray:
+        """State estimate (absolute) at the time of measurement ``y``."""
+        du = np.asarray(u_previous, dtype=float) - self.op.u
+        dy = y - self.y_op - self.D @ du
+        if self.dx is None:
+            self.dx = self._pinv @ dy
+        else:
+            pred = self.A @ self.dx + self.B @ du
+            self.dx = pred + self.M @ (dy - self.C @ pred)
+        return self.op.x + self.dx
+
+    @property
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of the estimation-error dynamics ``(I - M C) A``."""
+        return np.linalg.eigvals((np.eye(self.A.shape[0]) - self.M @ self.C) @ self.A)
+
+
+def make_observer(model, op: OperatingPoint, sensors: Sensors, Ac: np.ndarray, sysd, estimator_settings):
+    """:class:`FullState` for a full-state sensor, else the :class:`KalmanEstimator` of ``sysd``.
+
+    ``Ac`` is the continuous state matrix of the linearisation (for the process noise),
+    ``sysd`` its ZOH discretisation with the sensors as outputs.
+    """
+    if sensors.full_state:
+        return FullState()
+    W = process_noise(model, op, np.asarray(Ac, dtype=float), float(sysd.dt), estimator_settings.torque_noise,
+                      estimator_settings.modal_force_noise)
+    return KalmanEstimator(sysd.A, sysd.B, sysd.C, sysd.D, op, sensors, W)
+
+
+__all__ = ["FullState", "KalmanEstimator", "kalman_gain", "process_noise", "zoh_input_matrix", "make_observer"]

@@ -1,0 +1,178 @@
+"""Discrete LQR on the flexible linearisation, LQG with a Kalman filter, and gain scheduling.
+
+Design (:func:`design_lqr`): linearise the model at the target equilibrium ``op``
+with the controller's sensors as outputs, discretise by zero-order hold at the
+sample time, weight by Bryson's rule (:func:`weight_matrices`) and solve the DARE
+(``control.dlqr``).  Control law, in deviations from the target::
+
+    u = u_op - K(s) (x_hat - x_op)
+
+with ``x_hat`` the measured state (sensors ``"state"``) or the Kalman estimate
+(:mod:`flexctrl.control.estimator`: LQG).  With a schedule, ``K(s)`` is interpolated
+multilinearly in the scheduling joint angles ``s`` (taken from ``x_hat``) between gains
+designed at the equilibria on a grid (the other joints at the target); the estimator
+and the feed-forward ``u_op`` stay those of the target.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import control
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from flexctrl.control.base import Controller
+from flexctrl.control.estimator import make_observer
+from flexctrl.control.settings import LQRSettings, SensorSettings, Weights
+from flexctrl.errors import SpecError
+from flexctrl.linear import Linearizer, OperatingPoint, Sensors, discretize, equilibrium, torque_limits
+
+
+@dataclass(frozen=True, eq=False)
+class LinearPlant:
+    """The linearisation at ``op`` with the controller's sensors, continuous and ZOH-discretised.
+
+    Attributes
+    ----------
+    sys, sysd : control.StateSpace
+        Continuous and discrete (sample time ``dt``) systems in deviation variables.
+    op : OperatingPoint
+    sensors : Sensors
+    """
+
+    sys: control.StateSpace
+    sysd: control.StateSpace
+    op: OperatingPoint
+    sensors: Sensors
+
+    @property
+    def dt(self) -> float:
+        """Sample time, s."""
+        return float(self.sysd.dt)
+
+    @property
+    def Ad(self) -> np.ndarray:
+        return np.asarray(self.sysd.A, dtype=float)
+
+    @property
+    def Bd(self) -> np.ndarray:
+        return np.asarray(self.sysd.B, dtype=float)
+
+
+def build_sensors(model, settings: SensorSettings, op: OperatingPoint) -> Sensors:
+    """The :class:`~flexctrl.linear.Sensors` described by ``settings``."""
+    try:
+        return Sensors.build(model, settings.outputs, settings.noise(), q_joints=op.joints)
+    except SpecError as exc:
+        raise SpecError(str(exc).split(": ", 1)[-1], key="sensors.outputs") from None
+
+
+def linear_plant(model, op: OperatingPoint, sensors: Sensors, dt: float, linearizer: Linearizer | None = None) -> LinearPlant:
+    """Linearise at ``op`` with ``sensors`` and discretise at ``dt``."""
+    lin = linearizer or Linearizer(model, sensors)
+    sys = lin(op)
+    return LinearPlant(sys, discretize(sys, dt), op, sensors)
+
+
+def weight_matrices(model, weights: Weights, limits: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Bryson's-rule ``Q`` (2N x 2N) and ``R`` (n x n) from acceptable magnitudes.
+
+    Torque magnitudes are ``weights.torque`` times the joint torque limits (1 N m where
+    there is no limit).
+    """
+    n, N = model.n_u, model.n_q
+    limits = torque_limits(model) if limits is None else np.asarray(limits, dtype=float)
+    scale = np.where(np.isfinite(limits), limits, 1.0)
+    xmax = np.r_[np.full(n, weights.joint), np.full(N - n, weights.modal), np.full(n, weights.joint_rate),
+                 np.full(N - n, weights.modal_rate)]
+    return np.diag(1.0 / xmax**2), np.diag(1.0 / (weights.torque * scale) ** 2)
+
+
+def lqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S`` (``control.dlqr``)."""
+    K, S, _E = control.dlqr(Ad, Bd, Q, R)
+    return np.asarray(K, dtype=float), np.asarray(S, dtype=float)
+
+
+class GainSchedule:
+    """Gains on a grid of scheduling joint angles, interpolated multilinearly (clamped at the edges)."""
+
+    def __init__(self, joints: tuple[int, ...], grid: tuple[tuple[float, ...], ...], gains: np.ndarray):
+        self.joints = np.asarray(joints, dtype=int) - 1  # 0-based indices into the state
+        self.grid = tuple(np.asarray(g, dtype=float) for g in grid)
+        self.gains = gains  # grid shape + (n_u, n_x)
+        self._shape = gains.shape[-2:]
+        self._interp = RegularGridInterpolator(self.grid, gains.reshape(gains.shape[:-2] + (-1,)), method="linear")
+        self._low = np.array([g[0] for g in self.grid])
+        self._high = np.array([g[-1] for g in self.grid])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        s = np.clip(x[self.joints], self._low, self._high)
+        return self._interp(s[None, :])[0].reshape(self._shape)
+
+
+class LQRController(Controller):
+    """``u = u_op - K (x_hat - x_op)``; see the module docstring."""
+
+    kind = "lqr"
+
+    def __init__(self, settings: LQRSettings, plant: LinearPlant, limits: np.ndarray, K: np.ndarray, S: np.ndarray,
+                 observer, schedule: GainSchedule | None = None):
+        super().__init__(settings, plant.op, plant.sensors, limits, saturate=settings.saturate)
+        self.plant = plant
+        self.K = K
+        self.S = S
+        self.observer = observer
+        self.schedule = schedule
+
+    def gain(self, x: np.ndarray) -> np.ndarray:
+        """The gain at state ``x`` (scheduled or fixed)."""
+        return self.K if self.schedule is None else self.schedule(x)
+
+    @property
+    def closed_loop_poles(self) -> np.ndarray:
+        """Eigenvalues of ``A_d - B_d K`` at the target."""
+        return np.linalg.eigvals(self.plant.Ad - self.plant.Bd @ self.K)
+
+    def _reset(self) -> None:
+        self.observer.reset()
+
+    def _step(self, t: float, y: np.ndarray) -> np.ndarray:
+        x = self.observer.estimate(y, self.u_previous)
+        self.record("ok")
+        return self.op.u - self.gain(x) @ (x - self.op.x)
+
+
+def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRController:
+    """Build the (scheduled) LQR or LQG controller regulating ``model`` to ``op``."""
+    limits = torque_limits(model)
+    sensors = build_sensors(model, settings.sensors, op)
+    lin = Linearizer(model, sensors)
+    plant = linear_plant(model, op, sensors, settings.sample_time, lin)
+    Q, R = weight_matrices(model, settings.weights, limits)
+    K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
+    observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
+    schedule = None
+    if settings.schedule is not None:
+        sched = settings.schedule
+        if max(sched.joints) > model.n_u:
+            raise SpecError(f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
+                            f"allowed: q1..q{model.n_u}", key="schedule")
+        state_lin = Linearizer(model, ("joints",))
+        gains = np.empty(tuple(len(g) for g in sched.grid) + K.shape)
+        for index in itertools.product(*(range(len(g)) for g in sched.grid)):
+            q = np.array(op.joints, dtype=float)
+            for joint, values, i in zip(sched.joints, sched.grid, index):
+                q[joint - 1] = values[i]
+            op_g = equilibrium(model, q)
+            A, B, _C, _D = state_lin.matrices(op_g)
+            sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), settings.sample_time)
+            gains[index] = lqr_gain(np.asarray(sysd.A), np.asarray(sysd.B), Q, R)[0]
+        schedule = GainSchedule(sched.joints, sched.grid, gains)
+    return LQRController(settings, plant, limits, K, S, observer, schedule)
+
+
+__all__ = ["LQRController", "LinearPlant", "GainSchedule", "design_lqr", "linear_plant", "weight_matrices",
+           "lqr_gain", "build_sensors"]

@@ -1,0 +1,121 @@
+"""Joint PD control with gravity compensation: the baseline.
+
+``tau = tau_g + F(s) [Kp (q_ref(t) - q) + Kd (qd_ref(t) - qd)]`` on the joint coordinates,
+with ``q_ref`` the target joint angles (a subclass may make it a function of time:
+:class:`~flexctrl.control.shaping.ShapedController`) and ``tau_g``
+
+* ``"target"``: the static torque of the target equilibrium ``op.u`` (gravity and
+  the static deflection at the target: exact at rest there),
+* ``"measured"``: the static torque at the measured joint angles, elastic
+  coordinates at the target's static deflection,
+* ``"none"``.
+
+Automatic gains (``kp``/``kd`` empty): ``kp_i = M_ii w^2``, ``kd_i = 2 zeta M_ii w``
+with ``w = 2 pi bandwidth`` and ``M_ii`` the inertia joint ``i`` sees at the target
+with the other coordinates held.
+
+``F(s)`` is a first-order low-pass of corner ``torque_filter`` (Hz; exact
+discretisation, ``f_k = a f_{k-1} + (1 - a) tau_pd,k``, ``a = exp(-2 pi fc dt)``, started
+at zero; 0 switches it off).  It is needed on arms whose hubs are light: the torque
+first accelerates the hub against the bending links (inertia ``J_hub``, e.g.
+7e-5 kg m^2 on joint 3 of the Subedi arm), so the sampled loop sees the gains
+``kd dt / J_hub`` and ``kp dt^2 / J_hub``, far beyond the ZOH stability bound at any
+practical rate.  Continuous PD is stable for any gains (collocated and passive);
+the sampled, unfiltered one is not (spectral radius 14-35 at 1 ms on that arm).
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.control.base import Controller
+from flexctrl.control.settings import PDSettings
+from flexctrl.errors import SpecError
+from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits
+
+
+def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarray, np.ndarray]:
+    """``(kp, kd)`` per joint, explicit from the settings or automatic (see module docstring)."""
+    n = model.n_u
+    if settings.kp:
+        if len(settings.kp) != n:
+            raise SpecError(f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one per joint)",
+                            key="kp")
+        return np.asarray(settings.kp, dtype=float), np.asarray(settings.kd, dtype=float)
+    inertia = np.diag(model.mass_matrix(op.q))[:n]
+    w = 2 * math.pi * settings.bandwidth
+    return inertia * w**2, 2 * settings.damping * inertia * w
+
+
+def static_torque_function(model, q_flex: np.ndarray) -> ca.Function:
+    """``(qr) -> tau``: joint rows of ``g(q) + K q`` with the elastic coordinates fixed at ``q_flex``."""
+    qr = ca.SX.sym("qr", model.n_u)
+    q = ca.vertcat(qr, ca.DM(np.asarray(q_flex, dtype=float)))
+    static = model.functions["g"](q) + ca.mtimes(stiffness_matrix(model, q), q)
+    return ca.Function("static_torque", [qr], [static[: model.n_u]])
+
+
+class PDController(Controller):
+    """PD on the joints with gravity compensation (see the module docstring)."""
+
+    kind = "pd"
+
+    def __init__(self, settings: PDSettings, op: OperatingPoint, sensors: Sensors, limits: np.ndarray,
+                 kp: np.ndarray, kd: np.ndarray, gravity: ca.Function | None):
+        super().__init__(settings, op, sensors, limits, saturate=settings.saturate)
+        self.kp, self.kd = kp, kd
+        self.gravity = gravity
+        self.gravity_mode = settings.gravity
+        fc = settings.torque_filter
+        self.filter_pole = math.exp(-2 * math.pi * fc * settings.sample_time) if fc > 0 else 0.0
+        self._filtered = np.zeros(self.n_u)
+        n = self.n_u
+        names = sensors.names
+        if sensors.full_state:
+            N = op.n_q
+            self._iq, self._iqd = np.arange(n), N + np.arange(n)
+        else:
+            self._iq = np.array([names.index(f"q{i + 1}") for i in range(n)])
+            self._iqd = np.array([names.index(f"dq{i + 1}") for i in range(n)])
+
+    def _reset(self) -> None:
+        self._filtered = np.zeros(self.n_u)
+
+    def reference(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint reference ``(q_ref, qd_ref)`` at time ``t`` (the target here); ``q`` are the measured joints."""
+        return self.op.joints, np.zeros(self.n_u)
+
+    def _step(self, t: float, y: np.ndarray) -> np.ndarray:
+        q, qd = y[self._iq], y[self._iqd]
+        q_ref, qd_ref = self.reference(t, q)
+        if self.gravity_mode == "target":
+            tau_g = self.op.u
+        elif self.gravity_mode == "measured":
+            tau_g = np.array(self.gravity(q), dtype=float).ravel()
+        else:
+            tau_g = 0.0
+        self.record("ok")
+        a = self.filter_pole
+        self._filtered = a * self._filtered + (1.0 - a) * (self.kp * (q_ref - q) + self.kd * (qd_ref - qd))
+        return tau_g + self._filtered
+
+
+def pd_parts(model, op: OperatingPoint, settings: PDSettings):
+    """Sensors, limits, gains and gravity Function shared by PD and the shaped controller."""
+    from flexctrl.control.lqr import build_sensors
+
+    sensors = build_sensors(model, settings.sensors, op)
+    kp, kd = pd_gains(model, op, settings)
+    gravity = static_torque_function(model, op.q[model.n_u:]) if settings.gravity == "measured" else None
+    return sensors, torque_limits(model), kp, kd, gravity
+
+
+def design_pd(model, op: OperatingPoint, settings: PDSettings) -> PDController:
+    """Build the PD controller holding ``model`` at ``op``."""
+    return PDController(settings, op, *pd_parts(model, op, settings))
+
+
+__all__ = ["PDController", "design_pd", "pd_gains", "static_torque_function", "pd_parts"]

@@ -1,0 +1,588 @@
+"""Typed, validated settings of every controller (frozen dataclasses).
+
+Each settings class checks its own fields when built (``__post_init__``) and
+raises :class:`~flexctrl.errors.SpecError` naming the key, the value and what is
+allowed; :func:`flexctrl.spec.controller.load_controller` reads the same classes
+from ``controllers/*.toml`` and adds the file name to the message.
+
+Units: SI.  Angles are radians here and degrees in the TOML files (the loader
+converts).  Weights follow Bryson's rule: each is the *acceptable magnitude* of
+its quantity, ``Q = diag(1 / x_max^2)``, ``R = diag(1 / u_max^2)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Literal, Union, get_args
+
+from flexctrl.errors import SpecError
+from flexctrl.linear import DEFAULT_NOISE, SENSOR_KINDS
+
+ControllerKind = Literal["pd", "lqr", "mpc", "nmpc", "shaped"]
+GravityCompensation = Literal["target", "measured", "none"]
+SoftConstraint = Literal["none", "deflection", "tip"]
+Formulation = Literal["sparse", "condensed"]
+QPBackend = Literal["osqp", "hpipm", "daqp", "qpoases"]
+Scaling = Literal["auto", "bryson", "none"]
+WarmStart = Literal["shift", "previous", "none"]
+Fallback = Literal["shift", "lqr", "hold"]
+NMPCMode = Literal["rti", "full"]
+NLPSolver = Literal["ipopt"]
+RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
+Sensitivities = Literal["frozen", "exact"]
+Shaper = Literal["zv", "zvd", "none"]
+FrequencySource = Literal["closed_loop", "locked"]
+
+
+# --------------------------------------------------------------------------------------
+# validation helpers (used by every settings class)
+# --------------------------------------------------------------------------------------
+def _choice(key: str, value, literal) -> None:
+    allowed = get_args(literal)
+    if value not in allowed:
+        import difflib
+
+        hint = difflib.get_close_matches(str(value), [str(a) for a in allowed], n=1)
+        extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+        raise SpecError(f"value {value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}{extra}", key=key)
+
+
+def _number(key: str, value, *, low: float | None = None, high: float | None = None, low_open: bool = False,
+            unit: str = "") -> None:
+    parts = []
+    if low is not None:
+        parts.append(f"{'>' if low_open else '>='} {low:g}")
+    if high is not None:
+        parts.append(f"<= {high:g}")
+    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SpecError(f"value {value!r} is not a number; allowed: {allowed}", key=key)
+    bad = (not math.isfinite(value) or (low is not None and (value <= low if low_open else value < low))
+           or (high is not None and value > high))
+    if bad:
+        raise SpecError(f"value {value!r} is out of range; allowed: {allowed}", key=key)
+
+
+def _integer(key: str, value, *, low: int | None = None, high: int | None = None) -> None:
+    allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
+    if isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low) or (
+            high is not None and value > high):
+        raise SpecError(f"value {value!r} is not allowed; allowed: {allowed}", key=key)
+
+
+def _numbers(key: str, value, *, low: float | None = None, low_open: bool = False, unit: str = "") -> None:
+    if not isinstance(value, tuple):
+        raise SpecError(f"value {value!r} is not a tuple of numbers", key=key)
+    for i, v in enumerate(value):
+        _number(f"{key}[{i}]", v, low=low, low_open=low_open, unit=unit)
+
+
+def _boolean(key: str, value) -> None:
+    if not isinstance(value, bool):
+        raise SpecError(f"value {value!r} is not a boolean; allowed: true or false", key=key)
+
+
+def _prefixed(prefix: str, error: SpecError) -> SpecError:
+    key = f"{prefix}.{error.key}" if error.key else prefix
+    message = str(error).split(": ", 1)[1] if error.key else str(error)
+    return SpecError(message, source=error.source, key=key)
+
+
+# --------------------------------------------------------------------------------------
+# shared pieces
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SensorSettings:
+    """What the controller measures and the noise standard deviation of each sensor.
+
+    Attributes
+    ----------
+    outputs : tuple of str
+        Sensor kinds (:data:`flexctrl.linear.SENSOR_KINDS`): ``"joints"`` (encoders, rad),
+        ``"joint_rates"`` (rad/s), ``"strain"`` (root curvature of each flexible link, 1/m),
+        ``"tip"`` (m), ``"tip_acc"`` (m/s^2), ``"deflection"`` (link tip deflections, m),
+        ``"state"`` (the whole state: no estimator).
+    joints, joint_rates, strain, tip, tip_acc, deflection : float
+        Noise standard deviations in the unit of the output (>= 0).  The Kalman filter
+        uses them as its measurement noise; a closed loop may use them to add noise.
+    """
+
+    outputs: tuple[str, ...] = ("state",)
+    joints: float = DEFAULT_NOISE["joints"]
+    joint_rates: float = DEFAULT_NOISE["joint_rates"]
+    strain: float = DEFAULT_NOISE["strain"]
+    tip: float = DEFAULT_NOISE["tip"]
+    tip_acc: float = DEFAULT_NOISE["tip_acc"]
+    deflection: float = DEFAULT_NOISE["deflection"]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.outputs, tuple) or not self.outputs:
+            raise SpecError(f"value {self.outputs!r} is not allowed; allowed: a non-empty list of "
+                            f"{', '.join(map(repr, SENSOR_KINDS))}", key="outputs")
+        for i, kind in enumerate(self.outputs):
+            if kind not in SENSOR_KINDS:
+                _choice(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
+        if len(set(self.outputs)) != len(self.outputs):
+            raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
+        if "state" in self.outputs and len(self.outputs) > 1:
+            raise SpecError(f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
+                            key="outputs")
+        for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection"):
+            _number(name, getattr(self, name), low=0.0)
+
+    def noise(self) -> dict[str, float]:
+        """Noise standard deviation per sensor kind."""
+        return {name: getattr(self, name) for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection")}
+
+    @property
+    def full_state(self) -> bool:
+        """Whether the whole state is measured."""
+        return self.outputs == ("state",)
+
+
+@dataclass(frozen=True)
+class Weights:
+    """LQR/MPC weights as acceptable magnitudes (Bryson's rule), in the units of each quantity.
+
+    Attributes
+    ----------
+    joint : float
+        Joint-angle error, rad.
+    modal : float
+        Elastic coordinate, m (modal coordinates are in metres of mass-normalised shapes).
+    joint_rate : float
+        Joint rate, rad/s.
+    modal_rate : float
+        Elastic rate, m/s.
+    torque : float
+        Torque deviation as a fraction of each joint's torque limit (of 1 N m when the
+        model has no limits).
+    """
+
+    joint: float = 0.01
+    modal: float = 0.002
+    joint_rate: float = 0.5
+    modal_rate: float = 0.5
+    torque: float = 0.5
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            _number(f.name, getattr(self, f.name), low=0.0, low_open=True)
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Steady-state discrete Kalman filter on the linearisation at the target.
+
+    Used whenever the sensors do not measure the whole state.
+
+    Attributes
+    ----------
+    torque_noise : float
+        Standard deviation of an unmeasured torque disturbance on each joint, N m
+        (held over a sample).
+    modal_force_noise : float
+        Standard deviation of a generalised-force disturbance on each elastic
+        coordinate, N (model error in the elastic dynamics).
+    """
+
+    kind: Literal["kalman"] = "kalman"
+    torque_noise: float = 2.0
+    modal_force_noise: float = 1.0
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["kalman"])
+        _number("torque_noise", self.torque_noise, low=0.0)
+        _number("modal_force_noise", self.modal_force_noise, low=0.0)
+
+
+@dataclass(frozen=True)
+class ScheduleSettings:
+    """Gain scheduling over configuration: gains designed on a grid and interpolated (multilinear).
+
+    Attributes
+    ----------
+    joints : tuple of int
+        Scheduling joints, 1-based (e.g. ``(2, 3)``).
+    grid : tuple of tuple of float
+        Grid of joint angles (rad, strictly increasing) per scheduling joint.  The other
+        joints stay at the target.  Outside the grid the gains of the nearest edge are used.
+    """
+
+    joints: tuple[int, ...] = ()
+    grid: tuple[tuple[float, ...], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.joints:
+            raise SpecError("no scheduling joints given; allowed: at least one joint q1..qn with its grid", key="joints")
+        if len(self.grid) != len(self.joints):
+            raise SpecError(f"value {self.grid!r} has {len(self.grid)} grids for {len(self.joints)} joints", key="grid")
+        for j, (joint, values) in enumerate(zip(self.joints, self.grid)):
+            _integer(f"joints[{j}]", joint, low=1)
+            _numbers(f"q{joint}", values)
+            if len(values) < 2 or any(b <= a for a, b in zip(values, values[1:])):
+                raise SpecError(f"value {[round(math.degrees(v), 6) for v in values]!r} (deg) is not allowed; "
+                                "allowed: at least 2 strictly increasing angles", key=f"q{joint}")
+
+
+# --------------------------------------------------------------------------------------
+# controllers
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PDSettings:
+    """Joint PD control with gravity compensation.
+
+    ``tau = tau_g + Kp (q_target - q) - Kd qd``.
+
+    Attributes
+    ----------
+    sample_time : float
+        s.
+    kp, kd : tuple of float
+        Gains per joint (N m/rad, N m s/rad); empty: from ``bandwidth`` and ``damping``
+        with the joint inertia ``M_ii`` at the target (``kp = M_ii w^2``, ``kd = 2 zeta M_ii w``).
+    bandwidth : float
+        Hz, for automatic gains.
+    damping : float
+        Damping ratio of the automatic gains.
+    torque_filter : float
+        Corner frequency (Hz) of the first-order low-pass on the PD torque; 0: none
+        (see :mod:`flexctrl.control.pd` for why light hubs need it).
+    gravity : {"target", "measured", "none"}
+        Gravity compensation: the static torque of the target equilibrium (with its
+        static deflection), ``g`` at the measured joint angles (rigid), or none.
+    saturate : bool
+        Clip torques at the joint limits.
+    sensors : SensorSettings
+        Default: joint encoders and joint rates.
+    """
+
+    kind: Literal["pd"] = "pd"
+    sample_time: float = 0.001
+    kp: tuple[float, ...] = ()
+    kd: tuple[float, ...] = ()
+    bandwidth: float = 1.0
+    damping: float = 1.0
+    torque_filter: float = 2.0
+    gravity: GravityCompensation = "target"
+    saturate: bool = True
+    sensors: SensorSettings = field(default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates")))
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["pd"])
+        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        _numbers("kp", self.kp, low=0.0)
+        _numbers("kd", self.kd, low=0.0)
+        if len(self.kp) != len(self.kd):
+            raise SpecError(f"value {list(self.kd)!r} has {len(self.kd)} gains but kp has {len(self.kp)}", key="kd")
+        _number("bandwidth", self.bandwidth, low=0.0, low_open=True, unit="Hz")
+        _number("damping", self.damping, low=0.0, low_open=True)
+        _number("torque_filter", self.torque_filter, low=0.0, unit="Hz")
+        _choice("gravity", self.gravity, GravityCompensation)
+        _boolean("saturate", self.saturate)
+        missing = {"joints", "joint_rates"} - set(self.sensors.outputs)
+        if missing and not self.sensors.full_state:
+            raise SpecError(f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
+                            "(or 'state')", key="sensors.outputs")
+
+
+@dataclass(frozen=True)
+class LQRSettings:
+    """Discrete LQR on the flexible linearisation (LQG with a Kalman filter when the state is not measured).
+
+    Attributes
+    ----------
+    sample_time : float
+        s.
+    weights : Weights
+    sensors : SensorSettings
+        ``("state",)`` for full-state LQR; e.g. ``("joints", "strain")`` for LQG.
+    estimator : EstimatorSettings
+        Used when ``sensors`` do not measure the state.
+    schedule : ScheduleSettings or None
+        Gain scheduling over configuration.
+    saturate : bool
+        Clip torques at the joint limits.
+    """
+
+    kind: Literal["lqr"] = "lqr"
+    sample_time: float = 0.01
+    weights: Weights = field(default_factory=Weights)
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    schedule: ScheduleSettings | None = None
+    saturate: bool = True
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["lqr"])
+        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        _boolean("saturate", self.saturate)
+
+
+@dataclass(frozen=True)
+class OSQPSettings:
+    """Settings passed to OSQP (names as in OSQP 1.x; ``time_limit`` 0 = none).
+
+    ``scaling`` (OSQP's Ruiz equilibration) is off by default: the MPC scales its states
+    itself, and on the three-link arm Ruiz scaling on top raised the cold-start
+    iterations from 70 to 1700 (sparse formulation; see :mod:`flexctrl.bench.mpc`).
+    """
+
+    eps_abs: float = 1e-3
+    eps_rel: float = 1e-3
+    rho: float = 0.1
+    sigma: float = 1e-6
+    alpha: float = 1.6
+    adaptive_rho: bool = True
+    adaptive_rho_interval: int = 0
+    adaptive_rho_tolerance: float = 5.0
+    polishing: bool = False
+    max_iter: int = 1000
+    time_limit: float = 0.0
+    check_termination: int = 5
+    scaling: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("eps_abs", "eps_rel"):
+            _number(name, getattr(self, name), low=0.0)
+        for name in ("rho", "sigma"):
+            _number(name, getattr(self, name), low=0.0, low_open=True)
+        _number("alpha", self.alpha, low=0.0, high=2.0, low_open=True)
+        _boolean("adaptive_rho", self.adaptive_rho)
+        _integer("adaptive_rho_interval", self.adaptive_rho_interval, low=0)
+        _number("adaptive_rho_tolerance", self.adaptive_rho_tolerance, low=1.0)
+        _boolean("polishing", self.polishing)
+        _integer("max_iter", self.max_iter, low=1)
+        _number("time_limit", self.time_limit, low=0.0, unit="s")
+        _integer("check_termination", self.check_termination, low=0)
+        _integer("scaling", self.scaling, low=0)
+
+    def as_dict(self) -> dict:
+        """Keyword arguments for ``osqp.OSQP.setup``."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["time_limit"] = out["time_limit"] or 1e10
+        return out
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Linear MPC on the discretised linearisation at the target, solved as one QP per sample.
+
+    Attributes
+    ----------
+    sample_time : float
+        s.
+    horizon : int
+        Prediction steps N.
+    weights : Weights
+        Stage weights; the terminal weight is the DARE solution (``terminal = "dare"``).
+    terminal : {"dare", "stage"}
+    soft : {"none", "deflection", "tip"}
+        Soft constraint: every link's tip deflection ``|w_i| <= deflection_limit``, or the
+        tip position error ``|p - p_target| <= tip_limit`` per component; with slack.
+    deflection_limit, tip_limit : float
+        m.
+    slack_l1, slack_l2 : float
+        Exact (L1, per m) and quadratic (per m^2) slack penalty, in units of the cost
+        ``1/2 sum (x'Qx + u'Ru)``.
+    formulation : {"sparse", "condensed"}
+        States as variables (sparse) or eliminated (dense QP in the inputs).
+    backend : {"osqp", "hpipm", "daqp", "qpoases"}
+        QP solver: OSQP directly, or a solver shipped with CasADi via ``casadi.conic``.
+    scaling : {"auto", "bryson", "none"}
+        State scaling to O(1): from the LQR response, by the weights, or none
+        (see :mod:`flexctrl.control.mpc`).
+    warm_start : {"shift", "previous", "none"}
+    fallback : {"shift", "lqr", "hold"}
+        When the QP is not solved: the previous plan shifted (then LQR once it runs out),
+        LQR, or hold the previous torque.
+    accept_inaccurate : bool
+        Use an OSQP "solved inaccurate" solution instead of falling back.
+    osqp : OSQPSettings
+    sensors, estimator
+        As for LQR.
+    """
+
+    kind: Literal["mpc"] = "mpc"
+    sample_time: float = 0.01
+    horizon: int = 20
+    weights: Weights = field(default_factory=Weights)
+    terminal: Literal["dare", "stage"] = "dare"
+    soft: SoftConstraint = "deflection"
+    deflection_limit: float = 0.05
+    tip_limit: float = 0.05
+    slack_l1: float = 1.0e5
+    slack_l2: float = 1.0e7
+    formulation: Formulation = "sparse"
+    backend: QPBackend = "osqp"
+    scaling: Scaling = "auto"
+    warm_start: WarmStart = "shift"
+    fallback: Fallback = "shift"
+    accept_inaccurate: bool = True
+    osqp: OSQPSettings = field(default_factory=OSQPSettings)
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["mpc"])
+        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        _integer("horizon", self.horizon, low=1, high=1000)
+        _choice("terminal", self.terminal, Literal["dare", "stage"])
+        _choice("soft", self.soft, SoftConstraint)
+        _number("deflection_limit", self.deflection_limit, low=0.0, unit="m")
+        _number("tip_limit", self.tip_limit, low=0.0, unit="m")
+        _number("slack_l1", self.slack_l1, low=0.0)
+        _number("slack_l2", self.slack_l2, low=0.0, low_open=True)
+        _choice("formulation", self.formulation, Formulation)
+        _choice("backend", self.backend, QPBackend)
+        _choice("scaling", self.scaling, Scaling)
+        _choice("warm_start", self.warm_start, WarmStart)
+        _choice("fallback", self.fallback, Fallback)
+        _boolean("accept_inaccurate", self.accept_inaccurate)
+        if self.backend == "hpipm" and self.formulation != "sparse":
+            raise SpecError(f"value {self.formulation!r} is not allowed with backend 'hpipm'; allowed: 'sparse'",
+                            key="formulation")
+
+
+@dataclass(frozen=True)
+class NMPCSettings:
+    """Nonlinear MPC in CasADi: multiple shooting with RK4 on the full model.
+
+    Attributes
+    ----------
+    sample_time : float
+        s.
+    horizon : int
+        Shooting intervals N.
+    substeps : int
+        RK4 steps per interval; 0 (default): the fewest with ``|lambda|_max h <= 2.5`` for the
+        linearisation at the target (RK4 is stable on the imaginary axis up to 2.83).
+    sensitivities : {"frozen", "exact"}
+        RTI Jacobians of each shooting interval: of RK4 applied to the dynamics linearised
+        at the interval's start (cheap: one Jacobian of ``f`` per interval), or exact
+        derivatives of the nonlinear RK4 map (one Jacobian of ``f`` per RK4 stage).
+        The shooting gaps always use the nonlinear RK4 map.
+    weights : Weights
+        Stage weights; terminal weight from the DARE at the target.
+    mode : {"rti", "full"}
+        Real-time iteration (one SQP step per sample, Gauss-Newton QP) or a full NLP solve.
+    nlp_solver : {"ipopt"}
+        For ``full`` and for the RTI initialisation (FATROP's structure detection rejected
+        this formulation in CasADi 3.8; see the module docs of :mod:`flexctrl.control.nmpc`).
+    qp_solver : {"hpipm", "osqp", "qpoases"}
+        QP of the RTI (through ``casadi.conic``).
+    max_iter : int
+        NLP iterations (full mode).
+    init_iter : int
+        NLP iterations of the RTI initialisation at the first sample (0, default: start
+        from the nonlinear rollout under the LQR law only).
+    soft, deflection_limit, tip_limit, slack_l1, slack_l2
+        As in :class:`MPCSettings`.
+    compile : bool
+        Generate and compile C for the sensitivities (cached on disk).
+    sensors, estimator
+        As for LQR.
+    """
+
+    kind: Literal["nmpc"] = "nmpc"
+    sample_time: float = 0.01
+    horizon: int = 20
+    substeps: int = 0
+    sensitivities: Sensitivities = "frozen"
+    weights: Weights = field(default_factory=Weights)
+    mode: NMPCMode = "rti"
+    nlp_solver: NLPSolver = "ipopt"
+    qp_solver: RTIQPSolver = "hpipm"
+    max_iter: int = 50
+    init_iter: int = 0
+    soft: SoftConstraint = "deflection"
+    deflection_limit: float = 0.05
+    tip_limit: float = 0.05
+    slack_l1: float = 1.0e5
+    slack_l2: float = 1.0e7
+    compile: bool = True
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["nmpc"])
+        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        _integer("horizon", self.horizon, low=1, high=1000)
+        _integer("substeps", self.substeps, low=0, high=200)
+        _choice("sensitivities", self.sensitivities, Sensitivities)
+        _choice("mode", self.mode, NMPCMode)
+        _choice("nlp_solver", self.nlp_solver, NLPSolver)
+        _choice("qp_solver", self.qp_solver, RTIQPSolver)
+        _integer("max_iter", self.max_iter, low=1)
+        _integer("init_iter", self.init_iter, low=0)
+        _choice("soft", self.soft, SoftConstraint)
+        _number("deflection_limit", self.deflection_limit, low=0.0, unit="m")
+        _number("tip_limit", self.tip_limit, low=0.0, unit="m")
+        _number("slack_l1", self.slack_l1, low=0.0)
+        _number("slack_l2", self.slack_l2, low=0.0, low_open=True)
+        _boolean("compile", self.compile)
+
+
+@dataclass(frozen=True)
+class ShapedSettings:
+    """Input shaping (ZV/ZVD) of the joint reference, tracked by PD: the open-loop comparison.
+
+    The reference steps (or ramps over ``move_time``) from the joint angles of the
+    first measurement after :meth:`reset` to the target, convolved with the shaper.
+
+    Attributes
+    ----------
+    shaper : {"zv", "zvd", "none"}
+    modes : int
+        Number of lowest vibration modes shaped (one shaper per mode, convolved).
+    frequency_source : {"closed_loop", "locked"}
+        Frequencies and damping from the linearised arm under the PD loop at the target,
+        or from the locked-joint structure (:func:`flexctrl.linear.locked_frequencies`, undamped).
+    move_time : float
+        Duration of the unshaped ramp, s (0: a step).
+    pd : PDSettings
+        The tracking PD (its ``sample_time`` is the controller's).
+    """
+
+    kind: Literal["shaped"] = "shaped"
+    shaper: Shaper = "zvd"
+    modes: int = 1
+    frequency_source: FrequencySource = "closed_loop"
+    move_time: float = 0.0
+    pd: PDSettings = field(default_factory=PDSettings)
+
+    def __post_init__(self) -> None:
+        _choice("kind", self.kind, Literal["shaped"])
+        _choice("shaper", self.shaper, Shaper)
+        _integer("modes", self.modes, low=1, high=12)
+        _choice("frequency_source", self.frequency_source, FrequencySource)
+        _number("move_time", self.move_time, low=0.0, unit="s")
+
+    @property
+    def sample_time(self) -> float:
+        """s (the PD's)."""
+        return self.pd.sample_time
+
+    @property
+    def sensors(self) -> SensorSettings:
+        """The PD's sensors."""
+        return self.pd.sensors
+
+
+ControllerSettings = Union[PDSettings, LQRSettings, MPCSettings, NMPCSettings, ShapedSettings]
+
+#: Settings class per controller kind.
+SETTINGS: dict[str, type] = {
+    "pd": PDSettings,
+    "lqr": LQRSettings,
+    "mpc": MPCSettings,
+    "nmpc": NMPCSettings,
+    "shaped": ShapedSettings,
+}
+
+__all__ = [
+    "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings", "PDSettings", "LQRSettings",
+    "OSQPSettings", "MPCSettings", "NMPCSettings", "ShapedSettings", "ControllerSettings", "SETTINGS",
+    "ControllerKind",
+]

@@ -1,0 +1,194 @@
+"""Input shaping (ZV, ZVD) of joint references: the classical open-loop way to move without vibration.
+
+A shaper is a train of impulses ``(A_i, t_i)`` with ``sum A_i = 1``; convolving a
+reference with it cancels the residual vibration of a mode of natural frequency
+``f`` (Hz) and damping ratio ``zeta``.  With ``K = exp(-zeta pi / sqrt(1 - zeta^2))``
+and the damped half period ``T/2 = 1 / (2 f sqrt(1 - zeta^2))`` (Singer & Seering 1990)::
+
+    ZV   A = (1, K) / (1 + K)                  t = (0, T/2)
+    ZVD  A = (1, 2K, K^2) / (1 + K)^2          t = (0, T/2, T)
+
+Several modes are handled by convolving their shapers.  :class:`ShapedController`
+tracks the shaped reference with PD; the shaper is designed from the lowest
+vibration modes of the arm at the target, either under the PD loop
+(``frequency_source = "closed_loop"``: the lightly damped complex pairs, damping
+< 0.3, of the linearisation closed with the continuous PD law and its torque filter) or of the locked-joint
+structure (``"locked"``: :func:`flexctrl.linear.locked_frequencies`, undamped).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexctrl.control.pd import PDController, pd_parts
+from flexctrl.control.settings import ShapedSettings
+from flexctrl.errors import SpecError
+from flexctrl.linear import Linearizer, OperatingPoint, locked_frequencies, modal_summary
+
+#: Damping ratio below which a complex pair of the closed loop counts as vibration.
+VIBRATION_DAMPING = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class Shaper:
+    """Impulse amplitudes (sum 1) and times (s, ascending, first 0)."""
+
+    amplitudes: np.ndarray
+    times: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("amplitudes", "times"):
+            value = np.array(getattr(self, name), dtype=float).ravel()
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def duration(self) -> float:
+        """Time of the last impulse, s (the delay the shaper adds)."""
+        return float(self.times[-1]) if self.times.size else 0.0
+
+    def convolve(self, other: "Shaper") -> "Shaper":
+        """The shaper of both (impulse times added, amplitudes multiplied, coincident impulses merged)."""
+        t = (self.times[:, None] + other.times[None, :]).ravel()
+        a = (self.amplitudes[:, None] * other.amplitudes[None, :]).ravel()
+        order = np.argsort(t, kind="stable")
+        t, a = t[order], a[order]
+        keep_t, keep_a = [t[0]], [a[0]]
+        for ti, ai in zip(t[1:], a[1:]):
+            if abs(ti - keep_t[-1]) <= 1e-12 * max(1.0, abs(ti)):
+                keep_a[-1] += ai
+            else:
+                keep_t.append(ti)
+                keep_a.append(ai)
+        return Shaper(np.array(keep_a), np.array(keep_t))
+
+    def apply(self, signal, t: np.ndarray | float) -> np.ndarray:
+        """``sum A_i signal(t - t_i)`` for a callable ``signal`` of time (zero before 0 is the caller's business)."""
+        return sum(a * np.asarray(signal(np.asarray(t) - ti)) for a, ti in zip(self.amplitudes, self.times))
+
+
+def _check(frequency_hz: float, zeta: float) -> tuple[float, float]:
+    if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
+        raise SpecError(f"value {frequency_hz!r} is not allowed; allowed: a frequency > 0 Hz", key="frequency")
+    if not 0 <= zeta < 1:
+        raise SpecError(f"value {zeta!r} is not allowed; allowed: a damping ratio in [0, 1)", key="damping")
+    return float(frequency_hz), float(zeta)
+
+
+def zv(frequency_hz: float, zeta: float = 0.0) -> Shaper:
+    """Zero-vibration shaper for a mode of ``frequency_hz`` (undamped natural, Hz) and damping ``zeta``."""
+    f, z = _check(frequency_hz, zeta)
+    K = math.exp(-z * math.pi / math.sqrt(1 - z * z))
+    half = 0.5 / (f * math.sqrt(1 - z * z))
+    return Shaper(np.array([1.0, K]) / (1 + K), np.array([0.0, half]))
+
+
+def zvd(frequency_hz: float, zeta: float = 0.0) -> Shaper:
+    """Zero-vibration-and-derivative shaper (robust to frequency error)."""
+    f, z = _check(frequency_hz, zeta)
+    K = math.exp(-z * math.pi / math.sqrt(1 - z * z))
+    half = 0.5 / (f * math.sqrt(1 - z * z))
+    return Shaper(np.array([1.0, 2 * K, K * K]) / (1 + K) ** 2, np.array([0.0, half, 2 * half]))
+
+
+SHAPERS = {"zv": zv, "zvd": zvd}
+
+
+def identity_shaper() -> Shaper:
+    """One unit impulse at 0 (no shaping)."""
+    return Shaper(np.array([1.0]), np.array([0.0]))
+
+
+def residual_vibration(shaper: Shaper, frequency_hz: float, zeta: float = 0.0) -> float:
+    """Residual vibration ratio (shaped / unshaped impulse response amplitude) of a mode (analytic)."""
+    w = 2 * math.pi * frequency_hz
+    wd = w * math.sqrt(1 - zeta * zeta)
+    tn = shaper.duration
+    decay = shaper.amplitudes * np.exp(-zeta * w * (tn - shaper.times))
+    return float(math.hypot(np.sum(decay * np.cos(wd * shaper.times)), np.sum(decay * np.sin(wd * shaper.times))))
+
+
+def shaping_modes(model, op: OperatingPoint, settings: ShapedSettings, kp: np.ndarray, kd: np.ndarray) -> list[tuple[float, float]]:
+    """``(frequency_hz, zeta)`` of the modes to shape (see the module docstring)."""
+    if settings.frequency_source == "locked":
+        freqs = locked_frequencies(model, op)
+        if freqs.size < settings.modes:
+            raise SpecError(f"value {settings.modes} is not allowed; the model has {freqs.size} locked modes", key="modes")
+        return [(float(f), 0.0) for f in freqs[: settings.modes]]
+    A, B, _C, _D = Linearizer(model, ("joints",)).matrices(op)
+    n, N = model.n_u, model.n_q
+    gain = np.zeros((n, 2 * N))
+    gain[np.arange(n), np.arange(n)] = kp
+    gain[np.arange(n), N + np.arange(n)] = kd
+    wc = 2 * math.pi * settings.pd.torque_filter
+    if wc > 0:  # the PD torque through its low-pass: states (x, f), f' = wc (-K x - f)
+        Acl = np.block([[A, B], [-wc * gain, -wc * np.eye(n)]])
+    else:
+        Acl = A - B @ gain
+    import control
+
+    summary = modal_summary(control.ss(Acl, np.zeros((Acl.shape[0], 1)), np.zeros((1, Acl.shape[0])), 0))
+    picks = [(float(f), float(z)) for f, z, osc in zip(summary.frequency_hz, summary.damping, summary.oscillatory)
+             if osc and 0 <= z < VIBRATION_DAMPING]
+    if len(picks) < settings.modes:
+        raise SpecError(f"value {settings.modes} is not allowed; the PD loop has {len(picks)} vibration modes "
+                        f"(complex pairs with damping < {VIBRATION_DAMPING})", key="modes")
+    return picks[: settings.modes]
+
+
+def design_shaper(modes: list[tuple[float, float]], kind: str) -> Shaper:
+    """The convolution of one ``kind`` shaper per ``(frequency_hz, zeta)``."""
+    shaper = identity_shaper()
+    if kind == "none":
+        return shaper
+    for f, z in modes:
+        shaper = shaper.convolve(SHAPERS[kind](f, z))
+    return shaper
+
+
+class ShapedController(PDController):
+    """PD tracking the shaped move from the first measured joint angles to the target."""
+
+    kind = "shaped"
+
+    def __init__(self, settings: ShapedSettings, op, sensors, limits, kp, kd, gravity, shaper: Shaper,
+                 modes: list[tuple[float, float]]):
+        super().__init__(settings.pd, op, sensors, limits, kp, kd, gravity)
+        self.settings = settings
+        self.pd_settings = settings.pd
+        self.shaper = shaper
+        self.modes = modes
+        self._start: tuple[float, np.ndarray] | None = None
+
+    def _reset(self) -> None:
+        super()._reset()
+        self._start = None
+
+    def _profile(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        T = self.settings.move_time
+        if T <= 0:
+            return (s >= 0).astype(float), np.zeros_like(s)
+        return np.clip(s / T, 0.0, 1.0), ((s >= 0) & (s < T)) / T
+
+    def reference(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._start is None:
+            self._start = (t, np.array(q, dtype=float))
+        t0, q0 = self._start
+        s = (t - t0) - self.shaper.times
+        pos, vel = self._profile(s)
+        delta = self.op.joints - q0
+        return q0 + float(np.dot(self.shaper.amplitudes, pos)) * delta, float(np.dot(self.shaper.amplitudes, vel)) * delta
+
+
+def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> ShapedController:
+    """Build the shaped-reference PD controller moving ``model`` to ``op``."""
+    sensors, limits, kp, kd, gravity = pd_parts(model, op, settings.pd)
+    modes = [] if settings.shaper == "none" else shaping_modes(model, op, settings, kp, kd)
+    return ShapedController(settings, op, sensors, limits, kp, kd, gravity, design_shaper(modes, settings.shaper), modes)
+
+
+__all__ = ["Shaper", "zv", "zvd", "identity_shaper", "residual_vibration", "design_shaper", "shaping_modes",
+           "ShapedController", "design_shaped"]
