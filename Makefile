@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/flexctrl modal-report models/subedi3link.toml --out out/modal
+	$(BIN)/flexctrl study studies/quickstart.toml --out out/quickstart
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

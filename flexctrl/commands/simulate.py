@@ -26,6 +26,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--fidelity", metavar="F", help=f"override the scene's fidelity: {SPELLINGS}")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override any scene key, e.g. duration=0.5 or initial.qf.qf31=0.05 (repeatable)")
+    parser.add_argument("--controller", metavar="FILE",
+                        help="controller settings (controllers/*.toml) for a closed-loop scene (kind = \"closed_loop\")")
     parser.add_argument("--no-plots", action="store_true", help="write no PNG files")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of a short report")
     return parser
@@ -39,10 +41,29 @@ def run(args: argparse.Namespace) -> int:
     if args.fidelity is not None:
         overrides.append(f"fidelity={json.dumps(args.fidelity)}")
     scene = load_scene(args.scene, overrides)
-    result = run_scene(scene, args.out, plots=False if args.no_plots else None)
+    options = {"plots": False if args.no_plots else None}
+    if args.controller is not None:
+        if scene.kind != "closed_loop":
+            from flexctrl.errors import SpecError
+
+            raise SpecError(f"scene kind '{scene.kind}' runs no controller; allowed: a kind = \"closed_loop\" scene",
+                            source=args.scene, key="--controller")
+        options["controller"] = args.controller
+    result = run_scene(scene, args.out, **options)
     s = result.summary
     if args.json:
-        print(json.dumps(s, indent=2))
+        print(json.dumps(s, indent=2, default=str))
+        return 0
+    if scene.kind == "closed_loop":
+        m = s["metrics"]
+        print(f"{scene.name} with {s['controller']['kind']} ({s['controller']['file']}): tip residual rms {m['tip_residual_rms']:.3e} m, "
+              f"peak {m['tip_residual_peak']:.3e} m, settling {m['settling_time']:.3g} s, peak deflection {m['peak_deflection']:.3e} m, "
+              f"peak torque {', '.join(f'{v:.3g}' for v in m['peak_torque'])} N m, controller median {m['controller_time_median'] * 1e3:.3g} ms, "
+              f"fallbacks {m['fallbacks']}")
+        print(f"  wrote {len(result.files)} files to {args.out}")
+        return 0
+    if "energy" not in s:
+        print(json.dumps(s, indent=2, default=str))
         return 0
     energy = s["energy"]
     freqs = "; ".join(f"{k}: {', '.join(f'{f:.4g}' for f in v) or '-'} Hz" for k, v in s["dominant_frequencies_hz"].items())

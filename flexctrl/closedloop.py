@@ -1,0 +1,310 @@
+"""The sampled-data closed loop: a nonlinear plant integrated finely, a controller at its own rate.
+
+Per controller sample (period ``Ts = controller.sample_time``):
+
+1. the *plant's* sensors measure the plant state (noise from the controller's
+   sensor settings when the scene enables it; a real strain gauge reads the true
+   curvature, so the measurement model is built on the plant, not on the design
+   model);
+2. ``u = controller.step(t, y)`` (clipped to the torque limits by the controller);
+3. the plant advances ``Ts`` with ``u`` held (zero-order hold) by ``Ts/dt`` RK4 steps
+   inside ONE compiled CasADi call that also returns the intermediate states, so
+   the tip vibration is recorded at the plant rate.
+
+Payload mismatch (plant carries one payload, the controller was designed for
+another) and a controller designed on a coarser model than the plant are scene
+settings.  A diverging plant (non-finite state, or a modal or rate coordinate
+beyond physical bounds) stops the run with :class:`~flexctrl.errors.SimulationError`
+naming the time, never a silent NaN.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.errors import FlexctrlError, SimulationError, SolverError, SpecError
+from flexctrl.metrics import closed_loop_metrics
+from flexctrl.sim.compile import compile_function
+from flexctrl.sim.rk4 import rk4_step_function
+from flexctrl.sim.trajectory import Trajectory
+
+#: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or m/s).
+MODAL_BOUND = 10.0
+RATE_BOUND = 1e4
+
+
+def plant_step_function(model, substeps: int) -> ca.Function:
+    """``advance(x, u, h) -> (X)``: ``substeps`` RK4 steps of size ``h`` with ``u`` held; X is (n_x, substeps)."""
+    step = rk4_step_function(model)
+    x = ca.MX.sym("x", model.n_x)
+    u = ca.MX.sym("u", model.n_u)
+    h = ca.MX.sym("h")
+    states = []
+    current = x
+    for k in range(substeps):
+        current = step(current, k * h, u, h)[0]
+        states.append(current)
+    name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", f"advance_{model.name}_{substeps}")).strip("_")
+    return ca.Function(name, [x, u, h], [ca.horzcat(*states)], ["x", "u", "h"], ["X"])
+
+
+def _mapped(model, name: str, count: int, *args):
+    return model.functions[name].map(count)(*args)
+
+
+def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, meta: dict[str, Any]) -> Trajectory:
+    """A :class:`Trajectory` with energies, tip and deflections evaluated by mapped CasADi calls."""
+    count = t.size
+    q, qd = X[:, : model.n_q].T, X[:, model.n_q :].T
+    kin, el, grav = (np.array(v, dtype=float).ravel() for v in _mapped(model, "energies", count, q, qd))
+    tip = np.array(_mapped(model, "tip", count, q, qd)[0], dtype=float).T
+    deflection = np.array(_mapped(model, "deflection", count, q)[0], dtype=float).T
+    energies = {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
+    return Trajectory(time=t, states=X, inputs=U, coordinate_names=model.coordinate_names, energies=energies,
+                      tip=tip, deflections=deflection, meta=meta)
+
+
+@dataclass
+class ClosedLoopResult:
+    """A closed-loop run: the plant trajectory, the metrics and the controller's own report."""
+
+    trajectory: Trajectory
+    metrics: dict[str, Any]
+    controller: dict[str, Any]
+    reference: np.ndarray
+
+
+def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,
+                         sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None) -> tuple[Trajectory, np.ndarray]:
+    """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
+
+    Returns
+    -------
+    trajectory : Trajectory
+        At the plant rate; ``inputs`` are the held torques.
+    sample_times : ndarray
+        Times (s) at which the controller was called.
+    """
+    Ts = controller.sample_time
+    substeps = int(round(Ts / dt))
+    if substeps < 1 or abs(substeps * dt - Ts) > 1e-9 * Ts:
+        raise SpecError(f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: Ts/dt a whole number", key="dt")
+    sensors = sensors or controller.sensors
+    compiled = compile_function(plant_step_function(plant, substeps), enabled=compile)
+    advance = compiled.function
+    n_samples = int(math.ceil(duration / Ts - 1e-9))
+    X = np.empty((n_samples * substeps + 1, plant.n_x))
+    U = np.empty((n_samples * substeps + 1, plant.n_u))
+    X[0] = x = np.asarray(x0, dtype=float)
+    u = np.array(controller.u_previous, dtype=float)
+    n_joints = plant.n_u
+    wall = time.perf_counter()
+    for k in range(n_samples):
+        t = k * Ts
+        u = controller.step(t, sensors.measure(x, u, rng))
+        block = np.asarray(advance(x, u, dt), dtype=float).T
+        rows = slice(k * substeps + 1, (k + 1) * substeps + 1)
+        X[rows] = block
+        U[k * substeps : (k + 1) * substeps] = u
+        x = block[-1]
+        if not np.all(np.isfinite(block)) or np.max(np.abs(block[:, n_joints : plant.n_q]), initial=0.0) > MODAL_BOUND \
+                or np.max(np.abs(block[:, plant.n_q :])) > RATE_BOUND:
+            raise SimulationError(
+                f"closed loop diverged at t = {t + Ts:.4g} s (plant step {dt:g} s, controller sample {Ts:g} s, "
+                f"plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise this plant "
+                f"(or the plant step is too large for RK4: stable below ~{2.785 / max(plant.omega_max, 1e-12):.3g} s "
+                "for the locked-joint modes)")
+    U[-1] = u
+    t = np.arange(X.shape[0]) * dt
+    meta = {"integrator": "rk4", "dt": dt, "sample_time": Ts, "wall_time": time.perf_counter() - wall,
+            "compiled": compiled.compiled}
+    return trajectory_from_states(plant, t, X, U, meta), np.arange(n_samples) * Ts
+
+
+def plant_sensors(plant, design_sensors, q_joints):
+    """The controller's sensor kinds built on the plant model, with the controller's noise levels."""
+    from flexctrl.linear import Sensors
+
+    if "state" in design_sensors.kinds:
+        if plant.n_x != design_sensors.function.size1_in(0):
+            raise SpecError("a full-state controller needs the plant and design models of the same fidelity", key="controller_fidelity")
+        return design_sensors
+    built = Sensors.build(plant, design_sensors.kinds, q_joints=q_joints)
+    if built.names != design_sensors.names:
+        raise SpecError(f"the plant's sensors {list(built.names)} differ from the controller's {list(design_sensors.names)}; "
+                        "strain gauges need links with modes in both models", key="controller_fidelity")
+    return dataclasses.replace(built, noise_std=np.array(design_sensors.noise_std, dtype=float))
+
+
+def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller: str | Path | None = None,
+                          fidelity=None, plots: bool | None = None, overrides=()) -> "SceneResult":
+    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
+
+    Parameters
+    ----------
+    scene : ClosedLoopScene
+    out
+        Folder for ``trajectory.csv``, ``summary.json`` (with a ``metrics`` object) and PNGs.
+    controller
+        Controller file (default: the scene's ``controller``).
+    fidelity
+        Plant fidelity override (``--fidelity``).
+    overrides
+        ``KEY=VALUE`` overrides of the controller file.
+    """
+    from flexctrl.control import design
+    from flexctrl.dynamics.build import build_model
+    from flexctrl.fidelity import parse_fidelity
+    from flexctrl.linear import equilibrium
+    from flexctrl.scenes import SceneResult, initial_state, scene_arm
+    from flexctrl.spec.controller import load_controller
+
+    plant_scene = scene.plant
+    if fidelity is not None:
+        plant_scene = dataclasses.replace(plant_scene, fidelity=parse_fidelity(fidelity, source="--fidelity"))
+    path = controller or scene.controller
+    if path is None:
+        raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source, key="controller")
+    settings = load_controller(path, overrides)
+    arm = scene_arm(plant_scene)
+    if len(scene.target_q) != arm.n_links:
+        raise SpecError(f"has {len(scene.target_q)} values; expected {arm.n_links} (one per joint)", source=scene.source, key="target.q")
+    plant = _cached_model(arm, plant_scene.fidelity, plant_scene.modes, plant_scene.q0)
+    design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
+    design_fidelity = scene.controller_fidelity or plant_scene.fidelity
+    same = design_arm == arm and design_fidelity == plant_scene.fidelity
+    design_model = plant if same else _cached_model(design_arm, design_fidelity, plant_scene.modes, scene.target_q)
+    op = equilibrium(design_model, scene.target_q)
+    try:
+        ctrl = design(design_model, op, settings)
+    except FlexctrlError:
+        raise
+    except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
+        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at the target "
+                          f"{np.degrees(scene.target_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    ctrl.reset()
+    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, scene.target_q)
+    rng = np.random.default_rng(scene.seed) if scene.noise else None
+    x0 = initial_state(plant_scene, plant, arm)
+    trajectory, _ = simulate_closed_loop(plant, ctrl, x0, plant_scene.duration, plant_scene.dt, sensors=sensors, rng=rng,
+                                         compile=plant_scene.solver.get("compile"))
+    target = equilibrium(plant, scene.target_q)
+    tip_target = np.array(plant.functions["tip"](target.q, target.qd)[0], dtype=float).ravel()
+    n = plant.n_u
+    reference = np.tile(np.asarray(scene.target_q), (trajectory.time.size, 1))
+    report = ctrl.stats.summary()
+    metrics = closed_loop_metrics(
+        trajectory.time, trajectory.tip, tip_target, trajectory.deflections, trajectory.inputs,
+        trajectory.states[:, :n], reference, t_arrive=0.0, settle_allowance=scene.settle_allowance, band=scene.band,
+        controller_times=ctrl.stats.step_times, fallbacks=report["fallbacks"],
+        solver_failures=sum(v for k, v in report["status"].items() if not k.startswith(("ok", "solved", "fallback"))),
+    )
+    limits = np.array([j.torque_limit for j in arm.joints])
+    metrics["torque_limit_exceeded"] = bool(np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9)))
+    summary = {
+        "scene": scene.settings(),
+        "controller": {"file": str(path), "kind": settings.kind, "sample_time": ctrl.sample_time, **report},
+        "plant": {"fidelity": str(plant_scene.fidelity), "n_states": plant.n_x, "payload_kg": arm.payload.mass},
+        "design": {"fidelity": str(design_fidelity), "payload_kg": design_arm.payload.mass},
+        "tip_target": tip_target.tolist(),
+        "metrics": metrics,
+        "wall_time_s": trajectory.meta["wall_time"],
+    }
+    files: list[Path] = []
+    if out is not None:
+        paths = trajectory.save(out, summary)
+        files += list(paths.values())
+        Path(out, "summary.json").write_text(json.dumps(_jsonable(summary), indent=2))
+        if plant_scene.plots if plots is None else plots:
+            files += trajectory.plot(out)
+    return SceneResult(scene=scene, trajectory=trajectory, summary=summary, files=files, model=plant)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_model(arm, fidelity, modes, reference_q):
+    """Build a model once per process (study workers run many scenes on the same arm)."""
+    from flexctrl.dynamics.build import build_model
+
+    return build_model(arm, fidelity, modes=modes, reference_q=reference_q)
+
+
+# -- the study executor ----------------------------------------------------------------
+def _scene_overrides(settings: dict) -> list[str]:
+    from flexctrl.study.executors import overrides_for
+
+    extra = [f"model={json.dumps(str(settings['model']))}"]
+    if settings.get("payload") is not None:
+        extra.append(f"payload={float(settings['payload'])!r}")
+    if settings.get("q0_deg") is not None:
+        extra.append("initial.q=[" + ", ".join(repr(float(a)) for a in settings["q0_deg"]) + "]")
+    if settings.get("fidelity") is not None:
+        extra.append(f"fidelity={json.dumps(str(settings['fidelity']))}")
+    if settings.get("seed") is not None:
+        extra.append(f"noise.seed={int(settings['seed'])}")
+    return extra + overrides_for(settings, "scene")
+
+
+def check_settings(settings: dict) -> None:
+    """Validate one study run before any run starts (scene, controller file, model)."""
+    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.scene import load_scene
+    from flexctrl.study.executors import overrides_for
+
+    scene = load_scene(settings["scene"], _scene_overrides(settings))
+    if scene.kind != "closed_loop":
+        raise SpecError(f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = \"closed_loop\"", source=str(settings["scene"]), key="kind")
+    if settings.get("controller"):
+        load_controller(settings["controller"], overrides_for(settings, "controller"))
+
+
+def run_closed_loop(settings: dict):
+    """The study executor: one closed-loop run from a settings dict (see :mod:`flexctrl.study.executors`).
+
+    Metrics are flattened to scalars (``peak_torque_1`` ...); trajectories (``t``, joint
+    angles, tip position, link deflections, torques) are returned at the plant rate and
+    decimated by the study.
+    """
+    from flexctrl.spec.scene import load_scene
+    from flexctrl.study.executors import RunOutput, overrides_for
+
+    scene = load_scene(settings["scene"], _scene_overrides(settings))
+    result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
+                                   overrides=overrides_for(settings, "controller"), plots=False)
+    metrics: dict[str, float] = {}
+    for key, value in result.summary["metrics"].items():
+        if isinstance(value, list):
+            metrics.update({f"{key}_{i + 1}": float(v) for i, v in enumerate(value)})
+        else:
+            metrics[key] = float(value)
+    traj = result.trajectory
+    series = {"t": traj.time, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
+    for i in range(traj.inputs.shape[1]):
+        series[f"q{i + 1}"] = traj.states[:, i]
+        series[f"u{i + 1}"] = traj.inputs[:, i]
+        series[f"w{i + 1}"] = traj.deflections[:, i]
+    return RunOutput(metrics=metrics, trajectories=series)
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else str(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    return value

@@ -1,0 +1,83 @@
+"""The sampled-data loop against independent computations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexctrl.closedloop import simulate_closed_loop
+from flexctrl.control.base import Controller
+from flexctrl.dynamics.build import build_model
+from flexctrl.errors import SimulationError, SpecError
+from flexctrl.linear import Sensors, equilibrium
+from flexctrl.sim import simulate
+from flexctrl.spec.arm import load_arm
+
+
+class _Schedule(Controller):
+    """Applies a pre-set torque sequence (one row per sample) whatever it measures."""
+
+    kind = "schedule"
+
+    def __init__(self, torques, sample_time, sensors, limits, op):
+        class _S:
+            pass
+
+        settings = _S()
+        settings.sample_time = sample_time
+        super().__init__(settings, op, sensors, limits)
+        self.torques = torques
+        self.k = 0
+        self.seen = []
+
+    def _step(self, t, y):
+        self.seen.append((t, y.copy()))
+        u = self.torques[min(self.k, len(self.torques) - 1)]
+        self.k += 1
+        return u
+
+
+@pytest.fixture(scope="module")
+def arm_model(model_path=None):
+    from conftest import MODEL
+
+    arm = load_arm(MODEL, overrides=["gravity=[0.0, 0.0]"])
+    return build_model(arm.with_modes(1), "amm:1")
+
+
+def test_zero_order_hold_equals_open_loop_rk4_with_the_same_held_torques(arm_model):
+    model = arm_model
+    rng = np.random.default_rng(0)
+    Ts, dt, samples = 0.01, 0.001, 30
+    torques = rng.uniform(-5, 5, (samples, model.n_u))
+    op = equilibrium(model, np.zeros(model.n_u))
+    sensors = Sensors.build(model, ("joints",))
+    ctrl = _Schedule(torques, Ts, sensors, np.full(model.n_u, np.inf), op)
+    x0 = np.zeros(model.n_x)
+    traj, times = simulate_closed_loop(model, ctrl, x0, samples * Ts, dt, compile=False)
+    held = np.repeat(torques, int(round(Ts / dt)), axis=0)
+    reference = simulate(model, x0, samples * Ts, dt=dt, method="rk4", u=held, compile=False)
+    assert traj.states[-1] == pytest.approx(reference.states[-1], rel=1e-9, abs=1e-12)
+    assert times == pytest.approx(np.arange(samples) * Ts)
+    # the controller saw the plant's joint angles at each sample instant
+    for k, (t, y) in enumerate(ctrl.seen[1:], start=1):
+        assert y == pytest.approx(traj.states[k * 10, : model.n_u], abs=1e-12)
+
+
+def test_torques_are_clipped_to_the_limits_and_divergence_is_an_error(arm_model):
+    model = arm_model
+    op = equilibrium(model, np.zeros(model.n_u))
+    sensors = Sensors.build(model, ("joints",))
+    ctrl = _Schedule(np.full((5, model.n_u), 1e3), 0.01, sensors, np.array([200.0, 100.0, 50.0]), op)
+    traj, _ = simulate_closed_loop(model, ctrl, np.zeros(model.n_x), 0.05, 0.001, compile=False)
+    assert np.max(np.abs(traj.inputs), axis=0) == pytest.approx([200.0, 100.0, 50.0])
+    crazy = _Schedule(np.full((100, model.n_u), 1e9), 0.01, sensors, np.full(model.n_u, np.inf), op)
+    with pytest.raises(SimulationError, match="diverged at t ="):
+        simulate_closed_loop(model, crazy, np.zeros(model.n_x), 1.0, 0.001, compile=False)
+
+
+def test_plant_step_must_divide_the_sample_time(arm_model):
+    op = equilibrium(arm_model, np.zeros(arm_model.n_u))
+    ctrl = _Schedule(np.zeros((1, arm_model.n_u)), 0.01, Sensors.build(arm_model, ("joints",)), np.full(3, np.inf), op)
+    with pytest.raises(SpecError, match="does not divide"):
+        simulate_closed_loop(arm_model, ctrl, np.zeros(arm_model.n_x), 0.1, 0.003, compile=False)
