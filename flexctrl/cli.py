@@ -21,6 +21,7 @@ COMMANDS = (
     "modes",
     "modal_report",
     "identify_hubs",
+    "linearize",
     "simulate",
     "bench",
     "study",

@@ -1,4 +1,4 @@
-"""``flexctrl bench sim``: measured simulation speed (see :mod:`flexctrl.bench.sim`)."""
+"""``flexctrl bench sim|mpc``: measured simulation speed (:mod:`flexctrl.bench.sim`) and MPC solve times (:mod:`flexctrl.bench.mpc`)."""
 
 from __future__ import annotations
 
@@ -7,16 +7,21 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim",)
+BENCHMARKS = ("sim", "mpc")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp",
+        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp; "
+        "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC",
         description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
         "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
-        "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs.",
+        "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs. "
+        "'mpc': the three-link arm (amm:2, 18 states, 3 inputs), horizon 20 at 10 ms: solve times "
+        "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop samples, "
+        "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same problem "
+        "(--pc-solves solves; each takes seconds).",
     )
     parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -25,11 +30,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--fidelity", default="amm:2", metavar="F", help="model fidelity (default amm:2)")
     parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="simulated seconds per RK4 run (default 10)")
     parser.add_argument("--scipy-span", type=float, default=1.0, metavar="S", help="simulated seconds per scipy run (default 1; scaled)")
+    parser.add_argument("--steps", type=int, default=300, metavar="N", help="mpc: closed-loop samples per variant (default 300)")
+    parser.add_argument("--pc-solves", type=int, default=1, metavar="N", help="mpc: python-control solves to time (0 skips; default 1)")
+    parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
     parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.what == "mpc":
+        return _run_mpc(args)
     from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
@@ -55,4 +65,24 @@ def run(args: argparse.Namespace) -> int:
           f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})")
     print(f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= {result['targets']['realtime_factor_compiled']:g}x "
           f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}")
+    return 0
+
+
+def _run_mpc(args: argparse.Namespace) -> int:
+    from flexctrl.bench.mpc import format_benchmark, mpc_benchmark
+    from flexctrl.bench.sim import DEFAULT_MODEL
+
+    if args.steps < 2 or args.pc_solves < 0:
+        raise SpecError(f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, solves >= 0", key="--steps")
+    result = mpc_benchmark(str(args.model or DEFAULT_MODEL), fidelity=args.fidelity, steps=args.steps,
+                           python_control_solves=args.pc_solves, nmpc=not args.no_nmpc)
+    sparse = result["variants"].get("osqp_sparse", {})
+    result["median_solve_s"] = sparse["solve_ms"]["median"] * 1e-3 if "solve_ms" in sparse else None
+    result["p95_solve_s"] = sparse["solve_ms"]["p95"] * 1e-3 if "solve_ms" in sparse else None
+    result["max_solve_s"] = sparse["solve_ms"]["max"] * 1e-3 if "solve_ms" in sparse else None
+    result["ratio_vs_python_control"] = result.get("python_control", {}).get("ratio_median")
+    if args.json:
+        print(json.dumps(result, indent=2, default=str))
+    else:
+        print(format_benchmark(result))
     return 0
