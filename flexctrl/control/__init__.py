@@ -40,6 +40,19 @@ from flexctrl.control.settings import (
 )
 
 
+def _check_holding_torque(model, op) -> None:
+    import warnings
+
+    import numpy as np
+
+    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
+    if limits.size == np.size(op.u) and np.any(np.abs(op.u) > limits):
+        warnings.warn(
+            f"the target needs holding torques {np.round(op.u, 3).tolist()} N m beyond the torque limits "
+            f"{limits.tolist()} N m: no controller can hold the arm there (check gravity and the target)",
+            RuntimeWarning, stacklevel=3)
+
+
 def design(model, op, settings) -> Controller:
     """Build the controller described by ``settings`` for ``model``, regulating to ``op``.
 
@@ -51,6 +64,7 @@ def design(model, op, settings) -> Controller:
     settings
         One of the settings dataclasses (see the table in the module docstring).
     """
+    _check_holding_torque(model, op)
     kind = getattr(settings, "kind", None)
     if kind == "pd":
         from flexctrl.control.pd import design_pd
