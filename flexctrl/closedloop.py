@@ -223,9 +223,8 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller: s
     }
     files: list[Path] = []
     if out is not None:
-        paths = trajectory.save(out, summary)
+        paths = trajectory.save(out, summary)  # summary.json: the trajectory's figures plus this summary
         files += list(paths.values())
-        Path(out, "summary.json").write_text(json.dumps(_jsonable(summary), indent=2))
         if plant_scene.plots if plots is None else plots:
             files += trajectory.plot(out)
     return SceneResult(scene=scene, trajectory=trajectory, summary=summary, files=files, model=plant)
@@ -294,17 +293,3 @@ def run_closed_loop(settings: dict):
         series[f"u{i + 1}"] = traj.inputs[:, i]
         series[f"w{i + 1}"] = traj.deflections[:, i]
     return RunOutput(metrics=metrics, trajectories=series)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return float(value) if math.isfinite(value) else str(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    return value

@@ -37,8 +37,9 @@ def build_model(
         Validated arm description.
     fidelity
         ``"rigid"`` (same as ``"amm:0"``), ``"amm:N"`` (N assumed modes on every
-        link), or None for each link's ``n_modes`` from the file.  ``"fem:N"`` and
-        ``"auto"`` are not built here.
+        link), ``"fem:N"`` (N finite elements per link,
+        :func:`flexctrl.dynamics.fem.arm.build_fem_model`), or None for each link's
+        ``n_modes`` from the file.  ``"auto"`` is resolved per scene, not here.
     modes
         ``"frozen"`` or ``"scheduled"`` modal parameters
         (see :mod:`flexctrl.dynamics.amm`).
@@ -53,7 +54,7 @@ def build_model(
     SpecError
         For an unknown fidelity or option.
     ModelFamilyUnavailable
-        For ``fem:N`` and ``auto``.
+        For ``auto``, and for ``modes="scheduled"`` with ``fem:N``.
     """
     from flexctrl.dynamics.amm import build_amm
 
