@@ -147,12 +147,14 @@ class Executor:
     run: ExecutorFn
     check: CheckFn | None = None
     summary: str = ""
+    report: Callable[..., list[str]] | None = None
 
 
 _REGISTRY: dict[str, Executor] = {}
 
 
-def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None, summary: str = "") -> None:
+def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None, summary: str = "",
+                      report: Callable[..., list[str]] | None = None) -> None:
     """Register ``fn`` as the executor called ``name``.
 
     Parameters
@@ -168,6 +170,11 @@ def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None
         for settings the executor cannot run.  Memoise expensive parts.
     summary
         One line for ``flexctrl study --help``.
+    report
+        Optional ``report(directory, rows, figures) -> list[str]``: extra
+        Markdown lines for the study's report, drawn from the result files
+        alone (``rows`` are the table's rows as dicts, ``figures`` the folder
+        for PNGs).  It may also write derived tables into ``directory``.
 
     Raises
     ------
@@ -179,7 +186,7 @@ def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None
     existing = _REGISTRY.get(name)
     if existing is not None and existing.run is not fn:
         raise ValueError(f"executor '{name}' is registered already (to {existing.run.__module__}.{existing.run.__qualname__})")
-    _REGISTRY[name] = Executor(name, fn, check, summary)
+    _REGISTRY[name] = Executor(name, fn, check, summary, report)
 
 
 def executor_names() -> tuple[str, ...]:
@@ -405,3 +412,42 @@ def check_selftest(settings: dict) -> None:
 
 
 register_executor("_selftest", run_selftest, check=check_selftest, summary="self-test: a damped oscillator in numpy (no controller code needed)")
+
+
+# -- executors whose code lives in a module of their own ------------------------------
+
+
+def _module_executor(name: str, module: str, summary: str) -> None:
+    """Register ``name`` for ``module``, imported only when a run needs it.
+
+    The module provides ``execute(settings) -> RunOutput`` and optionally
+    ``check_settings(settings)`` and ``report_sections(directory, rows, figures)``
+    (see :func:`register_executor`).  Lazy import keeps ``flexctrl study``
+    start-up fast and lets a worker process find the code by the name alone.
+    """
+
+    def load():
+        return importlib.import_module(module)
+
+    def run(settings: dict) -> RunOutput:
+        return load().execute(settings)
+
+    def check(settings: dict) -> None:
+        fn = getattr(load(), "check_settings", None)
+        if fn is not None:
+            fn(settings)
+
+    def report(directory, rows, figures) -> list[str]:
+        fn = getattr(load(), "report_sections", None)
+        return [] if fn is None else list(fn(directory, rows, figures))
+
+    run.__qualname__ = run.__name__ = f"run_{name}"
+    _REGISTRY[name] = Executor(name, run, check, summary, report)
+
+
+_module_executor("stability_limits", "flexctrl.analysis.stability_study",
+                 "largest stable step of each integrator for each model fidelity, beside theory")
+_module_executor("speed_vs_accuracy", "flexctrl.analysis.accuracy_study",
+                 "tip error against a converged reference and wall time per simulated second")
+_module_executor("baumgarte_sweep", "flexctrl.analysis.baumgarte_study",
+                 "constraint drift and stability of the beam over supports as gamma = beta sweeps")

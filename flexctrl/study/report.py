@@ -156,9 +156,25 @@ def write_report(directory: str | Path, *, metric: str | None = None, map_axes: 
         lines += ["", *sections[name](ctx)]
     if "failures" not in spec.plots:
         lines += ["", *_failures(ctx)]
+    lines += _executor_sections(ctx)
     path = store.dir / "report.md"
     atomic_write(path, ("\n".join(lines) + "\n").encode())
     return path
+
+
+def _executor_sections(ctx: _Context) -> list[str]:
+    """The executor's own report sections (its ``report`` hook), if it has one."""
+    from flexctrl.study.executors import get_executor
+
+    name = ctx.study.get("study", {}).get("executor")
+    try:
+        hook = get_executor(name).report if name else None
+    except SpecError:
+        return []
+    if hook is None:
+        return []
+    extra = hook(ctx.store.dir, ctx.table.rows, ctx.figures)
+    return ["", *extra] if extra else []
 
 
 def _header(ctx: _Context) -> list[str]:
