@@ -380,10 +380,31 @@ def _timing(ctx: _Context) -> list[str]:
         ok = [r for r in ctx.ok_rows() if group is None or r.get(by) == group]
         rows.append((group if group is not None else "all", len(ok), _median([r.get("wall_time_s") for r in ok]),
                      *[_median([r.get(m) for r in ok]) for m in timing]))
-    peak = _median([r.get("peak_memory_mb") for r in ctx.table.rows])
     lines += ["", "Wall time covers the whole run in its worker (build, design, simulation, metrics); "
-              "a worker builds its model once, so its first run is slower." + (f" Median worker peak memory: {_fmt(peak)} MB." if peak else ""), ""]
-    return lines + _md_table(header, rows)
+              "a worker builds its model once, so its first run is slower.", ""]
+    return lines + _md_table(header, rows) + ["", *_resources(ctx)]
+
+
+def _resources(ctx: _Context) -> list[str]:
+    """Throughput per session, memory and disk per run: does the study stay flat as it grows?"""
+    lines = ["### Resources", ""]
+    sessions = [s for s in ctx.study.get("sessions", []) if s.get("elapsed_s")]
+    if sessions:
+        rows = []
+        for number, s in enumerate(sessions, 1):
+            ran = int(s.get("ok", 0)) + int(s.get("failed", 0))
+            rate = 60.0 * ran / s["elapsed_s"] if s["elapsed_s"] > 0 else None
+            rows.append((number, s.get("backend", "?"), ran, s["elapsed_s"], rate, s.get("parent_peak_memory_mb")))
+        lines += _md_table(["session", "backend", "runs", "wall time (s)", "runs per minute", "parent peak memory (MB)"], rows) + [""]
+    memory = [r.get("peak_memory_mb") for r in ctx.table.rows if isinstance(r.get("peak_memory_mb"), (int, float))]
+    disk = [r.get("bytes_written") for r in ctx.table.rows if isinstance(r.get("bytes_written"), (int, float))]
+    if memory:
+        lines.append(f"- worker peak resident memory when a run ended: median {_fmt(_median(memory))} MB, max {_fmt(max(memory))} MB "
+                     "(a worker's high-water mark, so it bounds every run it did)")
+    if disk:
+        lines.append(f"- disk written per run (record and trajectory): median {_fmt(_median(disk) / 1024)} KiB, "
+                     f"max {_fmt(max(disk) / 1024)} KiB, total {_fmt(sum(disk) / 2**20)} MiB over {len(disk)} runs")
+    return lines
 
 
 def _failures(ctx: _Context) -> list[str]:
