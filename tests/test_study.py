@@ -311,3 +311,26 @@ def test_progress_lines_count_runs_and_estimate_the_time_left():
     quiet = io.StringIO()
     Progress(3, mode="none", stream=quiet).update(True)
     assert quiet.getvalue() == ""
+
+
+def test_quoted_dotted_axis_is_replaced_by_a_nested_override(study):
+    path = variant(study, "dotted.toml", {"[grid]\n": '[grid]\n"scene.duration" = [1.0, 2.0]\n'})
+    base = load_study(path)
+    assert {a.key: a.values for a in base.axes}["scene.duration"] == (1.0, 2.0)
+    replaced = load_study(path, ["grid.scene.duration=[3.0]"])
+    assert {a.key: a.values for a in replaced.axes}["scene.duration"] == (3.0,)
+    assert len(replaced.runs) == len(base.runs) // 2
+
+
+def test_same_setting_spelt_quoted_and_nested_is_refused(study):
+    text = study.read_text().replace("[grid]\n", '[grid]\n"scene.duration" = [1.0]\n') + "\n[grid.scene]\nduration = [2.0]\n"
+    path = study.with_name("twice.toml")
+    path.write_text(text)
+    with pytest.raises(SpecError, match="given twice"):
+        load_study(path)
+
+
+def test_executors_without_a_model_need_no_model_key(root):
+    spec = load_study(root / "studies" / "baumgarte_sweep.toml", ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]",
+                                                                 "grid.scene.feedback=['explicit']"])
+    assert len(spec.runs) == 1 and spec.runs[0].settings["model"] is None

@@ -148,6 +148,7 @@ class Executor:
     check: CheckFn | None = None
     summary: str = ""
     report: Callable[..., list[str]] | None = None
+    needs_model: bool = True
 
 
 _REGISTRY: dict[str, Executor] = {}
@@ -417,10 +418,12 @@ register_executor("_selftest", run_selftest, check=check_selftest, summary="self
 # -- executors whose code lives in a module of their own ------------------------------
 
 
-def _module_executor(name: str, module: str, summary: str) -> None:
+def _module_executor(name: str, module: str, summary: str, *, needs_model: bool = True) -> None:
     """Register ``name`` for ``module``, imported only when a run needs it.
 
-    The module provides ``execute(settings) -> RunOutput`` and optionally
+    ``needs_model=False``: study files may leave out ``model`` (the run's
+    ``model`` and ``payload`` are then None unless given).  The module provides
+    ``execute(settings) -> RunOutput`` and optionally
     ``check_settings(settings)`` and ``report_sections(directory, rows, figures)``
     (see :func:`register_executor`).  Lazy import keeps ``flexctrl study``
     start-up fast and lets a worker process find the code by the name alone.
@@ -442,7 +445,7 @@ def _module_executor(name: str, module: str, summary: str) -> None:
         return [] if fn is None else list(fn(directory, rows, figures))
 
     run.__qualname__ = run.__name__ = f"run_{name}"
-    _REGISTRY[name] = Executor(name, run, check, summary, report)
+    _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model)
 
 
 _module_executor("stability_limits", "flexctrl.analysis.stability_study",
@@ -450,4 +453,4 @@ _module_executor("stability_limits", "flexctrl.analysis.stability_study",
 _module_executor("speed_vs_accuracy", "flexctrl.analysis.accuracy_study",
                  "tip error against a converged reference and wall time per simulated second")
 _module_executor("baumgarte_sweep", "flexctrl.analysis.baumgarte_study",
-                 "constraint drift and stability of the beam over supports as gamma = beta sweeps")
+                 "constraint drift and stability of the beam over supports as gamma = beta sweeps", needs_model=False)

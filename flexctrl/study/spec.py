@@ -392,7 +392,7 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
 
     path = Path(path)
     source = str(path)
-    document = apply_overrides(read_toml(path), overrides, source=f"{source} (--set)")
+    document = apply_overrides(_nest_dotted_keys(read_toml(path), source), overrides, source=f"{source} (--set)")
     ctx = _Context(source, path.resolve().parent)
     r = TableReader(document, source)
 
@@ -460,7 +460,8 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     if "configuration" in origin and origin["configuration"].startswith("grid") and any(_JOINT.match(a.key) for a in axes):
         raise ctx.error(origin["configuration"], "a configuration axis cannot be combined with single-joint axes (q1..qN); "
                         "allowed: a fixed configuration with q<k> axes, or whole configurations")
-    for required in ("scene", "model"):
+    needs_model = get_executor(executor, source=source).needs_model
+    for required in ("scene", "model") if needs_model else ("scene",):
         if required not in origin:
             raise r.error(required, f"missing required key: the {required} file, as a fixed setting or a grid axis")
 
@@ -495,6 +496,34 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     return spec
 
 
+def _nest_dotted_keys(document: dict, source: str) -> dict:
+    """``[grid]``/``[set]`` keys written quoted (``"scene.dt" = ...``) as nested tables (``scene.dt``).
+
+    Both spellings are allowed in a study file; nesting them first gives one
+    spelling, so ``--set grid.scene.dt=[...]`` replaces the file's axis instead
+    of adding a second ``scene.dt`` beside it.
+    """
+    for section in ("grid", "set"):
+        table = document.get(section)
+        if not isinstance(table, dict):
+            continue
+        nested: dict[str, Any] = {}
+        for key, value in table.items():
+            parts = key.split(".")
+            node = nested
+            for part in parts[:-1]:
+                child = node.setdefault(part, {})
+                if not isinstance(child, dict):
+                    raise SpecError(f"'{key}' clashes with the key '{part}'; allowed: one spelling per setting", source=source, key=f"{section}.{key}")
+                node = child
+            if parts[-1] in node:
+                raise SpecError(f"'{key}' is given twice (quoted and as a nested table); allowed: one spelling per setting",
+                                source=source, key=f"{section}.{key}")
+            node[parts[-1]] = value
+        document[section] = nested
+    return document
+
+
 def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[str | None, str]:
     """Display names of files in the table: the stem, or the relative path when stems collide."""
     paths = {v for a in axes if a.key in FILE_SETTINGS for v in a.values if v is not None}
@@ -526,22 +555,30 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
                 coords.append((axis.key, value))
         overrides = {k: v for k, v in values.items() if "." in k}
         model_overrides = tuple(sorted(f"{k[len('model.'):]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith("model.")))
-        model_key = origin["model"] if not model_overrides else next(origin[k] for k in overrides if k.startswith("model."))
-        arm = ctx.arm(model_key, values["model"], model_overrides)
-        payload = values.get("payload", arm.payload.mass)
-        config = values.get("configuration")
-        if config is None:
-            config = [math.degrees(a) + 0.0 for a in arm.configuration]
-        elif len(config) != arm.n_links:
-            raise ctx.error(origin["configuration"], f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints")
-        config = list(config)
-        for k, v in values.items():
-            match = _JOINT.match(k)
-            if match:
-                joint = int(match[1])
-                if joint > arm.n_links:
-                    raise ctx.error(origin[k], f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints")
-                config[joint - 1] = v
+        if values.get("model") is None:  # an executor that needs no arm (e.g. the beam over supports)
+            for k in values:
+                if k.startswith("model.") or _JOINT.match(k):
+                    raise ctx.error(origin[k], "needs a model file (joint angles and model overrides refer to an arm); "
+                                    "allowed: add 'model = ...' or drop this key")
+            payload = values.get("payload")
+            config = list(values.get("configuration") or [])
+        else:
+            model_key = origin["model"] if not model_overrides else next(origin[k] for k in overrides if k.startswith("model."))
+            arm = ctx.arm(model_key, values["model"], model_overrides)
+            payload = values.get("payload", arm.payload.mass)
+            config = values.get("configuration")
+            if config is None:
+                config = [math.degrees(a) + 0.0 for a in arm.configuration]
+            elif len(config) != arm.n_links:
+                raise ctx.error(origin["configuration"], f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints")
+            config = list(config)
+            for k, v in values.items():
+                match = _JOINT.match(k)
+                if match:
+                    joint = int(match[1])
+                    if joint > arm.n_links:
+                        raise ctx.error(origin[k], f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints")
+                    config[joint - 1] = v
         controller = values.get("controller")
         if controller is None and any(k.startswith("controller.") for k in overrides):
             key = next(origin[k] for k in overrides if k.startswith("controller."))
@@ -553,9 +590,9 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
         settings: dict[str, Any] = {
             "executor": executor,
             "scene": values["scene"],
-            "model": values["model"],
+            "model": values.get("model"),
             "controller": controller,
-            "payload": float(payload) + 0.0,
+            "payload": None if payload is None else float(payload) + 0.0,
             "q0_deg": config,
             "fidelity": values.get("fidelity"),
             "overrides": sorted(f"{k}={toml_literal(v)}" for k, v in overrides.items()),
