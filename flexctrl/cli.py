@@ -23,6 +23,7 @@ COMMANDS = (
     "identify_hubs",
     "linearize",
     "simulate",
+    "fidelity",
     "bench",
     "study",
     "report",

@@ -58,7 +58,21 @@ class SceneResult:
 
 
 def run_scene(scene, out: str | Path | None = None, **options: Any) -> SceneResult:
-    """Run ``scene`` (any registered kind), writing results to ``out`` when given."""
+    """Run ``scene`` (any registered kind), writing results to ``out`` when given.
+
+    Raises
+    ------
+    SpecError
+        For ``fidelity = "auto"`` on a closed-loop plant: the controller's torques,
+        which set the plant's excitation, are known only by running the loop, so
+        auto is resolved for ``kind = "arm"`` scenes only.
+    """
+    plant = getattr(scene, "plant", None)
+    fidelity = options.get("fidelity")
+    if plant is not None and str(fidelity if fidelity is not None else plant.fidelity) == "auto":
+        raise SpecError("value 'auto' is resolved for kind = \"arm\" scenes only (a closed loop's excitation comes "
+                        "from its controller); allowed: 'rigid', 'amm:N' or 'fem:N' for the plant",
+                        source=scene.source, key="fidelity")
     _reader, runner = SCENE_KINDS[scene.kind]
     return resolve(runner)(scene, out, **options)
 
@@ -107,9 +121,78 @@ def initial_state(scene: ArmScene, model, arm: ArmSpec) -> np.ndarray:
     return x0
 
 
+def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integrator_options: Any):
+    """Simulate an arm scene at its own fidelity, integrator and step, writing nothing.
+
+    Parameters
+    ----------
+    scene
+        A ``kind = "arm"`` scene with a concrete fidelity (not ``auto``).
+    model
+        The built model, when the caller has it (e.g. from a cache); built here otherwise.
+    integrator
+        A set-up :class:`~flexctrl.sim.base.Integrator` for ``model`` at ``scene.dt``, when the caller has one.
+    **integrator_options
+        Passed to the integrator class (e.g. ``compile=False``).
+
+    Returns
+    -------
+    (Trajectory, Model, ArmSpec)
+    """
+    from flexctrl.dynamics.build import build_model
+    from flexctrl.sim import get_integrator
+
+    arm = scene_arm(scene)
+    reference_q = scene.q0 if scene.q0 is not None else None
+    if reference_q is not None and len(reference_q) != arm.n_links:
+        raise SpecError(f"has {len(reference_q)} values; expected {arm.n_links} (one per joint)",
+                        source=scene.source, key="initial.q")
+    if model is None:
+        model = build_model(arm, scene.fidelity, modes=scene.modes, reference_q=reference_q)
+    x0 = initial_state(scene, model, arm)
+    if scene.input.kind != "none" and scene.input.joint > model.n_joints:
+        raise SpecError(f"value {scene.input.joint} is out of range; allowed: 1 to {model.n_joints}",
+                        source=scene.source, key="input.joint")
+    n_steps = max(1, int(math.ceil(scene.duration / scene.dt - 1e-9)))
+    u = scene.input.samples(n_steps, scene.dt, model.n_joints)
+    if integrator is None:
+        cls = get_integrator(scene.integrator)
+        integrator = cls(model, scene.dt, **{**scene.solver, **integrator_options})
+    trajectory = integrator.run(x0, scene.duration, u=u)
+    trajectory.meta["scene"] = scene.name
+    return trajectory, model, arm
+
+
+def resolve_auto(scene: ArmScene, **options: Any) -> tuple[ArmScene, Any]:
+    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step, and the choice.
+
+    Runs :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` with the scene's
+    ``tolerance`` and ``options`` (keywords of ``choose_fidelity``, e.g. ``top``;
+    cached per process).  The returned scene keeps the scene's
+    solver options only when the chosen integrator is the scene's.  Scenes with a
+    concrete fidelity are returned unchanged with None.
+    """
+    if scene.fidelity.kind != "auto":
+        return scene, None
+    from flexctrl.analysis.auto_fidelity import check_tolerance, choose_fidelity
+
+    tol = check_tolerance(scene.tolerance, source=scene.source, key="tolerance")
+    choice = choose_fidelity(scene, tol, **options)
+    solver = dict(scene.solver) if choice.integrator == scene.integrator else {}
+    chosen = dataclasses.replace(scene, fidelity=choice.choice, integrator=choice.integrator, dt=choice.dt, solver=solver)
+    return chosen, choice
+
+
 def run_arm_scene(scene: ArmScene, out: str | Path | None = None, *, plots: bool | None = None,
-                  fidelity=None, **integrator_options: Any) -> SceneResult:
+                  fidelity=None, auto_options: dict[str, Any] | None = None, **integrator_options: Any) -> SceneResult:
     """Build, simulate and (with ``out``) write a ``kind = "arm"`` scene.
+
+    With ``fidelity = "auto"`` (scene or override) the model, integrator and step
+    are chosen by :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` from the
+    scene's ``tolerance``; the choice and its evidence are recorded in the summary
+    under ``"fidelity_choice"``.  The run then uses the chosen step, which may be a
+    whole fraction of the scene's ``dt`` (RK4 stability), so the trajectory can hold
+    more samples than the scene's grid.
 
     Parameters
     ----------
@@ -121,32 +204,28 @@ def run_arm_scene(scene: ArmScene, out: str | Path | None = None, *, plots: bool
         Override the scene's ``outputs.plots``.
     fidelity
         Override the scene's fidelity.
+    auto_options
+        Keywords of :func:`~flexctrl.analysis.auto_fidelity.choose_fidelity` (``top``,
+        ``reference``, ``safety``, ...) for ``fidelity = "auto"``.
     **integrator_options
         Passed to the integrator (e.g. ``compile=False``, ``cache_dir``).
     """
-    from flexctrl.dynamics.build import build_model
     from flexctrl.fidelity import parse_fidelity
-    from flexctrl.sim import get_integrator
 
     if fidelity is not None:
         scene = dataclasses.replace(scene, fidelity=parse_fidelity(fidelity, source="--fidelity"))
-    arm = scene_arm(scene)
-    reference_q = scene.q0 if scene.q0 is not None else None
-    if reference_q is not None and len(reference_q) != arm.n_links:
-        raise SpecError(f"has {len(reference_q)} values; expected {arm.n_links} (one per joint)",
-                        source=scene.source, key="initial.q")
-    model = build_model(arm, scene.fidelity, modes=scene.modes, reference_q=reference_q)
-    x0 = initial_state(scene, model, arm)
-    if scene.input.kind != "none" and scene.input.joint > model.n_joints:
-        raise SpecError(f"value {scene.input.joint} is out of range; allowed: 1 to {model.n_joints}",
-                        source=scene.source, key="input.joint")
-    n_steps = max(1, int(math.ceil(scene.duration / scene.dt - 1e-9)))
-    u = scene.input.samples(n_steps, scene.dt, model.n_joints)
-    cls = get_integrator(scene.integrator)
-    integrator = cls(model, scene.dt, **{**scene.solver, **integrator_options})
-    trajectory = integrator.run(x0, scene.duration, u=u)
-    trajectory.meta["scene"] = scene.name
-    extra = {"scene": scene.settings(), "model_info": _model_facts(model)}
+    requested = scene
+    scene, choice = resolve_auto(scene, **(auto_options or {}))
+    if choice is not None and not integrator_options:
+        from flexctrl.analysis.auto_fidelity import prepared
+
+        model, integrator = prepared(scene)  # built while choosing: reuse them
+        trajectory, model, _arm = simulate_arm_scene(scene, model=model, integrator=integrator)
+    else:
+        trajectory, model, _arm = simulate_arm_scene(scene, **integrator_options)
+    extra: dict[str, Any] = {"scene": requested.settings(), "model_info": _model_facts(model)}
+    if choice is not None:
+        extra["fidelity_choice"] = choice.to_dict()
     summary = trajectory.summary(scene.fft_peaks, scene.fft_span)
     summary.update(jsonable(extra))
     files: list[Path] = []

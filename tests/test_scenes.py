@@ -105,7 +105,7 @@ def test_misspelt_key_gets_a_suggestion(tmp_path):
     ("integrator='rk5'", r"key 'integrator'.*'rk5'.*allowed: 'rk4', 'cvodes', 'idas', 'scipy'.*did you mean 'rk4'"),
     ("modes='moving'", r"key 'modes'.*allowed: 'frozen', 'scheduled'"),
     ("fidelity='amm:9'", r"key 'fidelity'.*'amm:9'"),
-    ("fidelity='auto'", r"key 'fidelity'.*not available for arm scenes"),
+    ("fidelity='auto'", r"key 'tolerance'.*fidelity = 'auto' needs it"),
     ("dt=1.0", r"key 'dt'.*longer than the duration"),
     ("solver.rtol=1e-6", r"key 'solver.rtol'.*does not apply to integrator 'rk4'"),
     ("initial.qf.q31=0.1", r"key 'initial.qf.q31'.*allowed: qf<link><mode>"),

@@ -68,7 +68,10 @@ def build_model(
             raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
         return build_fem_model(arm, fid.count, reference_q=reference_q)
     if fid.kind == "auto":
-        raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model; give 'rigid', 'amm:N' or 'fem:N'")
+        raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
+                                     "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "
+                                     "--tol METRES` or flexctrl.analysis.auto_fidelity.choose_fidelity; here give 'rigid', "
+                                     "'amm:N' or 'fem:N'")
     return build_amm(arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid)
 
 

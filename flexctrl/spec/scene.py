@@ -13,17 +13,20 @@ with :func:`register_scene_kind`.
     description = "..."               # free text
     model = "models/subedi3link.toml" # relative to the scene file, the working dir or the repo
     payload = 2.0                     # kg (default: the model file's)
-    fidelity = "amm:2"                # 'rigid', 'amm:N' (the --fidelity spelling)
+    fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
+    tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
+                                      # (flexctrl.analysis.auto_fidelity chooses the model)
     modes = "frozen"                  # or "scheduled"
     gravity = [0.0, -9.81]            # m/s^2 (default: the model file's)
-    integrator = "rk4"                # rk4 | cvodes | idas | scipy
+    integrator = "rk4"                # rk4 | cvodes | idas | scipy | euler | newmark
     dt = 1e-3                         # s: step, output interval and torque hold
     duration = 5.0                    # s
     [initial]   q (deg, one per joint), qd (deg/s), [initial.qf] qf31 = 0.1 (m) ...
     [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint)
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
-    [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile, chunk (rk4)
+    [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
+                alpha (newmark, 0..0.5, default 0.25), delta (newmark, 0.5..1, default 0.5)
     [outputs]   fft_span (s, default 2), fft_peaks (default 2), plots (default true)
 
 :func:`load_scene` applies ``--set KEY=VALUE`` overrides to the parsed document
@@ -52,18 +55,21 @@ SCENE_KINDS: dict[str, tuple[str, str]] = {
     "closed_loop": ("flexctrl.spec.closed_loop_scene:read_closed_loop_scene", "flexctrl.closedloop:run_closed_loop_scene"),
     "sliding_beam": ("flexctrl.fem_scenes:read_scene", "flexctrl.fem_scenes:run_scene"),
     "rp_arm": ("flexctrl.fem_scenes:read_scene", "flexctrl.fem_scenes:run_scene"),
+    "telescoping": ("flexctrl.fem_scenes:read_scene", "flexctrl.fem_scenes:run_scene"),
 }
 MODES = ("frozen", "scheduled")
 INPUT_KINDS = ("none", "bangbang")
-INTEGRATOR_NAMES = ("rk4", "cvodes", "idas", "scipy")
+INTEGRATOR_NAMES = ("rk4", "cvodes", "idas", "scipy", "euler", "newmark")
 SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 #: Solver keys and the integrators they apply to.
 SOLVER_KEYS = {
     "rtol": ("cvodes", "idas", "scipy"),
     "atol": ("cvodes", "idas", "scipy"),
     "method": ("scipy",),
-    "compile": ("rk4",),
-    "chunk": ("rk4", "cvodes", "idas", "scipy"),
+    "compile": ("rk4", "euler"),
+    "chunk": INTEGRATOR_NAMES,
+    "alpha": ("newmark",),
+    "delta": ("newmark",),
 }
 _QF_NAME = re.compile(r"^qf\d+$")
 _REPO = Path(__file__).resolve().parents[2]
@@ -138,6 +144,7 @@ class ArmScene:
     description: str = ""
     source: str = ""
     kind: str = "arm"
+    tolerance: float | None = None
 
     def settings(self) -> dict[str, Any]:
         """The scene as plain, JSON-ready data (angles in degrees, as in the file)."""
@@ -151,7 +158,7 @@ class ArmScene:
             "input": {"kind": self.input.kind, "joint": self.input.joint, "amplitude": self.input.amplitude,
                       "t_accel": self.input.t_accel, "t_decel": self.input.t_decel, "t_start": self.input.t_start},
             "integrator": self.integrator, "dt": self.dt, "duration": self.duration, "solver": dict(self.solver),
-            "fft_span": self.fft_span, "fft_peaks": self.fft_peaks,
+            "fft_span": self.fft_span, "fft_peaks": self.fft_peaks, "tolerance_m": self.tolerance,
         }
 
 
@@ -193,8 +200,10 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
     r.string("kind", "arm", choices=tuple(SCENE_KINDS))
     model = resolve_model_path(r.string("model"), base_dir, r)
     fidelity = parse_fidelity(r.raw("fidelity", "amm:2"), source=source, key="fidelity")
-    if fidelity.kind not in ("rigid", "amm", "fem"):
-        raise r.error("fidelity", f"value '{fidelity}' is not available for arm scenes; allowed: 'rigid', 'amm:N' or 'fem:N'")
+    tolerance = r.number("tolerance", low=0.0, low_open=True, high=1.0, unit="m") if r.has("tolerance") else None
+    if fidelity.kind == "auto" and tolerance is None:
+        raise r.error("tolerance", "is missing; fidelity = 'auto' needs it; allowed: a number > 0 (m, tip-position "
+                      "tolerance), e.g. tolerance = 1e-3")
     integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
     gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
 
@@ -246,6 +255,10 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
         solver["compile"] = sol.boolean("compile")
     if sol.has("chunk"):
         solver["chunk"] = sol.integer("chunk", low=1, high=1_000_000)
+    if sol.has("alpha"):
+        solver["alpha"] = sol.number("alpha", low=0.0, high=0.5)
+    if sol.has("delta"):
+        solver["delta"] = sol.number("delta", low=0.5, high=1.0)
     sol.finish()
 
     out = r.table_of("outputs", {})
@@ -272,7 +285,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
         dt=dt,
         duration=duration,
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, input=spec, solver=solver,
-        fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source,
+        fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
     )
     r.finish()
     return scene
