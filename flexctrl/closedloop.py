@@ -12,10 +12,32 @@ Per controller sample (period ``Ts = controller.sample_time``):
    the tip vibration is recorded at the plant rate.
 
 Payload mismatch (plant carries one payload, the controller was designed for
-another) and a controller designed on a coarser model than the plant are scene
-settings.  A diverging plant (non-finite state, or a modal or rate coordinate
-beyond physical bounds) stops the run with :class:`~flexctrl.errors.SimulationError`
-naming the time, never a silent NaN.
+another), a controller designed on a coarser model than the plant and one designed
+(linearised) at another configuration than the target are scene settings.  The
+controllers track the scene's reference (:mod:`flexctrl.control.reference`: a step
+or a quintic from the initial joint angles to the target, with its quasi-static
+deflection and feed-forward torque on the design model).
+
+Instability is detected, never a silent NaN: after every controller sample the
+plant state must be finite, its modal coordinates and rates within physical bounds
+(:data:`MODAL_BOUND`, :data:`RATE_BOUND`), every link's tip deflection below the
+scene's ``divergence_deflection`` (a fraction of the link's length: beyond it the
+small-deflection model means nothing) and every joint within ``divergence_angle`` of
+the range of its move.  A run that leaves these bounds stops there:
+:func:`run_closed_loop_scene` raises :class:`~flexctrl.errors.SimulationError` naming
+the time and the bound (``on_divergence="raise"``, ``flexctrl simulate``), or records it
+(``"record"``, the study executor): metrics ``stable = 0`` and ``divergence_time``
+(s), the other metrics over the run up to then (see :func:`run_closed_loop_scene`), so
+a study row stays ``ok`` and a stability map is a map of the ``stable`` column.
+
+A loop can also fail to converge without leaving those bounds: the linear loop is
+unstable but torque saturation holds it in a limit cycle (e.g. an LQR designed for no
+payload carrying 4 kg: all torques at their limits, the tip swinging 0.1-0.6 m for
+the whole run).  So ``stable = 1`` also needs the largest tip error of the last
+:data:`FINAL_WINDOW` s (``final_tip_error``, m) within the scene's ``stable_band``
+(default 10 mm, ten times the settling band).  For state-feedback controllers
+``closed_loop_radius`` is the linear verdict, computed independently of the run
+(:func:`linear_closed_loop_radius`).
 """
 
 from __future__ import annotations
@@ -42,6 +64,36 @@ from flexctrl.sim.trajectory import Trajectory
 #: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or m/s).
 MODAL_BOUND = 10.0
 RATE_BOUND = 1e4
+#: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the scene's ``stable_band``).
+FINAL_WINDOW = 1.0
+
+
+def linear_closed_loop_radius(plant, controller, target_q) -> float | None:
+    """Spectral radius of the *plant's* ZOH linearisation at the target closed with the controller's gain.
+
+    ``max |eig(A_d - B_d K)|`` with ``A_d, B_d`` of the plant (its own payload) at the
+    target equilibrium and ``K`` the controller's state-feedback gain there (LQR, gain-
+    scheduled LQR, the unconstrained MPC): below 1 the target is locally asymptotically
+    stable under the unsaturated law, an independent check of the simulated verdict.
+    ``None`` for controllers without a full-state gain or of another state dimension.
+    """
+    import control
+
+    from flexctrl.linear import Linearizer, discretize, equilibrium
+
+    if not getattr(controller.sensors, "full_state", False) or controller.sensors.n_y != plant.n_x:
+        return None
+    op = equilibrium(plant, np.asarray(target_q, dtype=float))
+    if hasattr(controller, "gain"):
+        K = controller.gain(op.x)
+    elif hasattr(controller, "K"):
+        K = controller.K
+    else:
+        return None
+    A, B, _C, _D = Linearizer(plant, ("joints",)).matrices(op)
+    sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), controller.sample_time)
+    Ad, Bd = np.asarray(sysd.A, dtype=float), np.asarray(sysd.B, dtype=float)
+    return float(np.max(np.abs(np.linalg.eigvals(Ad - Bd @ np.asarray(K, dtype=float)))))
 
 
 def plant_step_function(model, substeps: int) -> ca.Function:
@@ -86,8 +138,19 @@ class ClosedLoopResult:
 
 
 def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,
-                         sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None) -> tuple[Trajectory, np.ndarray]:
+                         sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None,
+                         monitor=None, stop_on_divergence: bool = False) -> tuple[Trajectory, np.ndarray]:
     """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
+
+    Parameters
+    ----------
+    monitor : callable, optional
+        ``monitor(t, x) -> str | None`` called with the plant state at the end of every
+        controller sample; a string (why the run is diverging) stops it like a
+        non-finite state.
+    stop_on_divergence : bool
+        On divergence, return the trajectory up to the last finite state with
+        ``meta["divergence"] = {"time": t (s), "reason": str}`` instead of raising.
 
     Returns
     -------
@@ -95,6 +158,11 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
         At the plant rate; ``inputs`` are the held torques.
     sample_times : ndarray
         Times (s) at which the controller was called.
+
+    Raises
+    ------
+    SimulationError
+        The plant diverged (unless ``stop_on_divergence``).
     """
     Ts = controller.sample_time
     substeps = int(round(Ts / dt))
@@ -110,6 +178,9 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
     u = np.array(controller.u_previous, dtype=float)
     n_joints = plant.n_u
     wall = time.perf_counter()
+    divergence = None
+    end = n_samples * substeps + 1
+    samples_done = n_samples
     for k in range(n_samples):
         t = k * Ts
         u = controller.step(t, sensors.measure(x, u, rng))
@@ -118,18 +189,34 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
         X[rows] = block
         U[k * substeps : (k + 1) * substeps] = u
         x = block[-1]
-        if not np.all(np.isfinite(block)) or np.max(np.abs(block[:, n_joints : plant.n_q]), initial=0.0) > MODAL_BOUND \
-                or np.max(np.abs(block[:, plant.n_q :])) > RATE_BOUND:
-            raise SimulationError(
-                f"closed loop diverged at t = {t + Ts:.4g} s (plant step {dt:g} s, controller sample {Ts:g} s, "
-                f"plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise this plant "
-                f"(or the plant step is too large for RK4: stable below ~{2.785 / max(plant.omega_max, 1e-12):.3g} s "
-                "for the locked-joint modes)")
+        reason = None
+        if not np.all(np.isfinite(block)):
+            reason = "non-finite plant state"
+        elif np.max(np.abs(block[:, n_joints : plant.n_q]), initial=0.0) > MODAL_BOUND:
+            reason = f"a modal coordinate beyond {MODAL_BOUND:g} m"
+        elif np.max(np.abs(block[:, plant.n_q :])) > RATE_BOUND:
+            reason = f"a rate beyond {RATE_BOUND:g}"
+        elif monitor is not None:
+            reason = monitor(t + Ts, x)
+        if reason is not None:
+            message = (f"closed loop diverged at t = {t + Ts:.4g} s ({reason}; plant step {dt:g} s, controller sample "
+                       f"{Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise "
+                       f"this plant (or the plant step is too large for RK4: stable below "
+                       f"~{2.785 / max(plant.omega_max, 1e-12):.3g} s for the locked-joint modes)")
+            if not stop_on_divergence:
+                raise SimulationError(message)
+            finite = np.all(np.isfinite(X[: (k + 1) * substeps + 1]), axis=1)
+            end = int(np.argmin(finite)) if not np.all(finite) else (k + 1) * substeps + 1
+            end = max(end, 2)
+            divergence = {"time": float(t + Ts), "reason": reason, "message": message}
+            samples_done = k + 1
+            break
+    X, U = X[:end], U[:end]
     U[-1] = u
     t = np.arange(X.shape[0]) * dt
     meta = {"integrator": "rk4", "dt": dt, "sample_time": Ts, "wall_time": time.perf_counter() - wall,
-            "compiled": compiled.compiled}
-    return trajectory_from_states(plant, t, X, U, meta), np.arange(n_samples) * Ts
+            "compiled": compiled.compiled, "divergence": divergence}
+    return trajectory_from_states(plant, t, X, U, meta), np.arange(samples_done) * Ts
 
 
 def plant_sensors(plant, design_sensors, q_joints):
@@ -147,8 +234,41 @@ def plant_sensors(plant, design_sensors, q_joints):
     return dataclasses.replace(built, noise_std=np.array(design_sensors.noise_std, dtype=float))
 
 
+def divergence_monitor(plant, arm, scene, fraction: float, margin: float):
+    """``monitor(t, x)`` for :func:`simulate_closed_loop`: link tip deflections and joint excursions.
+
+    A link diverges when its tip deflection exceeds ``fraction`` of its length (m); a
+    joint when it leaves the range of its move widened by ``margin`` (rad) on each side.
+    """
+    n, N = plant.n_u, plant.n_q
+    lengths = np.array([link.length for link in arm.links], dtype=float)
+    limit = fraction * lengths
+    start, target = np.asarray(scene.start_q), np.asarray(scene.target_q)
+    low, high = np.minimum(start, target) - margin, np.maximum(start, target) + margin
+    deflection = plant.functions["deflection"]
+
+    def monitor(t: float, x: np.ndarray) -> str | None:
+        w = np.array(deflection(x[:N])[0], dtype=float).ravel()
+        over = np.flatnonzero(np.abs(w) > limit)
+        if over.size:
+            i = int(over[0])
+            return (f"link {i + 1} tip deflection {w[i]:.3g} m beyond {limit[i]:.3g} m "
+                    f"(divergence_deflection = {fraction:g} of its {lengths[i]:g} m length)")
+        q = x[:n]
+        out = np.flatnonzero((q < low) | (q > high))
+        if out.size:
+            i = int(out[0])
+            return (f"joint {i + 1} at {math.degrees(q[i]):.4g} deg, more than divergence_angle = "
+                    f"{math.degrees(margin):g} deg outside its move [{math.degrees(start[i]):.4g}, "
+                    f"{math.degrees(target[i]):.4g}] deg")
+        return None
+
+    return monitor
+
+
 def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller: str | Path | None = None,
-                          fidelity=None, plots: bool | None = None, overrides=()) -> "SceneResult":
+                          fidelity=None, plots: bool | None = None, overrides=(),
+                          on_divergence: str = "raise") -> "SceneResult":
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -162,14 +282,25 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller: s
         Plant fidelity override (``--fidelity``).
     overrides
         ``KEY=VALUE`` overrides of the controller file.
+    on_divergence : {"raise", "record"}
+        What a diverging run does (see the module docstring): raise
+        :class:`~flexctrl.errors.SimulationError`, or stop and record ``stable = 0``
+        and ``divergence_time`` (s) among the metrics.  For such a run every other
+        metric covers the run up to the divergence; when that comes before the
+        residual-vibration window opens, the window is the last plant sample.  Stable
+        runs report ``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip
+        that never settles into the band reports ``settled = 0`` and ``settling_time`` =
+        the duration (finite: :func:`flexctrl.metrics.settling_time` gives ``inf``).
     """
     from flexctrl.control import design
-    from flexctrl.dynamics.build import build_model
+    from flexctrl.control.reference import ReferenceTrajectory
     from flexctrl.fidelity import parse_fidelity
     from flexctrl.linear import equilibrium
     from flexctrl.scenes import SceneResult, initial_state, scene_arm
     from flexctrl.spec.controller import load_controller
 
+    if on_divergence not in ("raise", "record"):
+        raise SpecError(f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'", key="on_divergence")
     plant_scene = scene.plant
     if fidelity is not None:
         plant_scene = dataclasses.replace(plant_scene, fidelity=parse_fidelity(fidelity, source="--fidelity"))
@@ -183,42 +314,68 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller: s
     plant = _cached_model(arm, plant_scene.fidelity, plant_scene.modes, plant_scene.q0)
     design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
     design_fidelity = scene.controller_fidelity or plant_scene.fidelity
-    same = design_arm == arm and design_fidelity == plant_scene.fidelity
-    design_model = plant if same else _cached_model(design_arm, design_fidelity, plant_scene.modes, scene.target_q)
-    op = equilibrium(design_model, scene.target_q)
+    design_q = tuple(scene.design_configuration)
+    same = design_arm == arm and design_fidelity == plant_scene.fidelity and scene.design_q is None
+    design_model = plant if same else _cached_model(design_arm, design_fidelity, plant_scene.modes, design_q)
+    op = equilibrium(design_model, design_q)
+    where = "the target" if scene.design_q is None else "the design configuration"
     try:
         ctrl = design(design_model, op, settings)
     except FlexctrlError:
         raise
     except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
-        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at the target "
-                          f"{np.degrees(scene.target_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
+                          f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    path_ref = scene.joint_reference()
+    ctrl.set_reference(ReferenceTrajectory(design_model, path_ref, scene.deflection))
     ctrl.reset()
-    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, scene.target_q)
+    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
     rng = np.random.default_rng(scene.seed) if scene.noise else None
     x0 = initial_state(plant_scene, plant, arm)
+    monitor = divergence_monitor(plant, arm, scene, scene.divergence_deflection, scene.divergence_angle)
     trajectory, _ = simulate_closed_loop(plant, ctrl, x0, plant_scene.duration, plant_scene.dt, sensors=sensors, rng=rng,
-                                         compile=plant_scene.solver.get("compile"))
+                                         compile=plant_scene.solver.get("compile"), monitor=monitor,
+                                         stop_on_divergence=on_divergence == "record")
+    divergence = trajectory.meta.get("divergence")
     target = equilibrium(plant, scene.target_q)
     tip_target = np.array(plant.functions["tip"](target.q, target.qd)[0], dtype=float).ravel()
     n = plant.n_u
-    reference = np.tile(np.asarray(scene.target_q), (trajectory.time.size, 1))
+    reference = path_ref.joints(trajectory.time)
     report = ctrl.stats.summary()
+    allowance = scene.settle_allowance
+    if divergence is not None and trajectory.time[-1] < scene.t_arrive + allowance:
+        allowance = float(trajectory.time[-1]) - scene.t_arrive - 1e-9  # the window shrinks to the last sample
     metrics = closed_loop_metrics(
         trajectory.time, trajectory.tip, tip_target, trajectory.deflections, trajectory.inputs,
-        trajectory.states[:, :n], reference, t_arrive=0.0, settle_allowance=scene.settle_allowance, band=scene.band,
+        trajectory.states[:, :n], reference, t_arrive=scene.t_arrive, settle_allowance=allowance, band=scene.band,
         controller_times=ctrl.stats.step_times, fallbacks=report["fallbacks"],
         solver_failures=sum(v for k, v in report["status"].items() if not k.startswith(("ok", "solved", "fallback"))),
     )
+    # a tip that never settles (or a run stopped by a divergence) reports the run's duration and
+    # settled = 0: finite, so a study row of an unstable loop stays ok (inf would mark it failed)
+    metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
+    if not metrics["settled"]:
+        metrics["settling_time"] = float(plant_scene.duration)
+    error = np.linalg.norm(trajectory.tip - tip_target[None, :], axis=1)
+    final = trajectory.time >= trajectory.time[-1] - FINAL_WINDOW
+    metrics["final_tip_error"] = float(np.max(error[final]))
+    metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= scene.stable_band)
+    metrics["divergence_time"] = float(plant_scene.duration) if divergence is None else divergence["time"]
+    radius = linear_closed_loop_radius(plant, ctrl, scene.target_q)
+    if radius is not None:
+        metrics["closed_loop_radius"] = radius
     limits = np.array([j.torque_limit for j in arm.joints])
     metrics["torque_limit_exceeded"] = bool(np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9)))
     summary = {
         "scene": scene.settings(),
         "controller": {"file": str(path), "kind": settings.kind, "sample_time": ctrl.sample_time, **report},
         "plant": {"fidelity": str(plant_scene.fidelity), "n_states": plant.n_x, "payload_kg": arm.payload.mass},
-        "design": {"fidelity": str(design_fidelity), "payload_kg": design_arm.payload.mass},
+        "design": {"fidelity": str(design_fidelity), "payload_kg": design_arm.payload.mass,
+                   "configuration_deg": np.degrees(design_q).tolist()},
+        "reference": path_ref.settings() | {"deflection": scene.deflection},
         "tip_target": tip_target.tolist(),
         "metrics": metrics,
+        "divergence": divergence,
         "wall_time_s": trajectory.meta["wall_time"],
     }
     files: list[Path] = []
@@ -279,7 +436,7 @@ def run_closed_loop(settings: dict):
 
     scene = load_scene(settings["scene"], _scene_overrides(settings))
     result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
-                                   overrides=overrides_for(settings, "controller"), plots=False)
+                                   overrides=overrides_for(settings, "controller"), plots=False, on_divergence="record")
     metrics: dict[str, float] = {}
     for key, value in result.summary["metrics"].items():
         if isinstance(value, list):

@@ -81,3 +81,26 @@ def test_plant_step_must_divide_the_sample_time(arm_model):
     ctrl = _Schedule(np.zeros((1, arm_model.n_u)), 0.01, Sensors.build(arm_model, ("joints",)), np.full(3, np.inf), op)
     with pytest.raises(SpecError, match="does not divide"):
         simulate_closed_loop(arm_model, ctrl, np.zeros(arm_model.n_x), 0.1, 0.003, compile=False)
+
+
+def test_divergence_can_stop_the_run_and_be_recorded(arm_model):
+    """stop_on_divergence: the trajectory up to the detection, no NaN, and the reason in meta."""
+    model = arm_model
+    op = equilibrium(model, np.zeros(model.n_u))
+    sensors = Sensors.build(model, ("joints",))
+    crazy = _Schedule(np.full((100, model.n_u), 1e9), 0.01, sensors, np.full(model.n_u, np.inf), op)
+    traj, times = simulate_closed_loop(model, crazy, np.zeros(model.n_x), 1.0, 0.001, compile=False,
+                                       stop_on_divergence=True)
+    div = traj.meta["divergence"]
+    assert div is not None and 0 < div["time"] < 1.0 and "diverged at t =" in div["message"]
+    assert np.all(np.isfinite(traj.states)) and traj.time[-1] <= div["time"] + 1e-12
+    assert times[-1] < div["time"]
+    # a monitor stops a run that stays finite: here any joint beyond 0.01 rad
+    gentle = _Schedule(np.full((100, model.n_u), 5.0), 0.01, sensors, np.full(model.n_u, np.inf), op)
+    monitor = lambda t, x: "joint beyond 0.01 rad" if np.max(np.abs(x[: model.n_u])) > 0.01 else None  # noqa: E731
+    traj, _ = simulate_closed_loop(model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor,
+                                   stop_on_divergence=True)
+    assert traj.meta["divergence"]["reason"] == "joint beyond 0.01 rad"
+    assert np.max(np.abs(traj.states[-1, : model.n_u])) > 0.01 > np.max(np.abs(traj.states[-12, : model.n_u]))
+    with pytest.raises(SimulationError, match="joint beyond 0.01 rad"):
+        simulate_closed_loop(model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor)

@@ -214,3 +214,39 @@ def test_pd_moves_the_nonlinear_arm_to_the_target(damped3):
         errors.append(np.max(np.abs(x[:3] - op.x[:3])))
     assert errors[-1] < 0.2 * errors[0]
     assert np.all(np.isfinite(x))
+
+
+def test_doubling_dare_agrees_with_scipy_and_refuses_an_uncontrollable_unstable_mode():
+    from flexctrl.control.riccati import solve_dare
+    from flexctrl.errors import SolverError
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        A = rng.normal(size=(6, 6)) / 2
+        B, Q, R = rng.normal(size=(6, 2)), np.eye(6), np.diag([1.0, 3.0])
+        np.testing.assert_allclose(solve_dare(A, B, Q, R), scipy.linalg.solve_discrete_are(A, B, Q, R), rtol=1e-8, atol=1e-10)
+    with pytest.raises(SolverError):
+        solve_dare(np.diag([1.5, 0.5]), np.array([[0.0], [1.0]]), np.eye(2), np.eye(1))
+
+
+@pytest.mark.parametrize("target_deg", [[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
+def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
+    """The move scene's LQG: the filter DARE the Schur method failed on at [30, 0, 0] (free rigid modes at z = 1)."""
+    from flexctrl.closedloop import run_closed_loop_scene
+    from flexctrl.spec.scene import load_scene
+
+    scene = load_scene("studies/scenes/move_joint1_30deg.toml", [f"target.move={target_deg!r}", "duration=5.0"])
+    result = run_closed_loop_scene(scene, None, controller="controllers/lqg.toml", plots=False)
+    m = result.summary["metrics"]
+    assert m["stable"] == 1
+    assert m["settling_time"] < 5.0 and m["tip_residual_peak"] < 1e-2
+    # the estimator converges: its error dynamics are stable
+    # (designed again here to read the poles; the run above used the same design path)
+    from flexctrl.control import design
+    from flexctrl.linear import equilibrium
+    from flexctrl.spec.controller import load_controller
+
+    op = equilibrium(result.model, np.radians(target_deg))
+    ctrl = design(result.model, op, load_controller("controllers/lqg.toml"))
+    assert np.max(np.abs(ctrl.observer.poles)) < 1.0
+    assert np.max(np.abs(ctrl.closed_loop_poles)) < 1.0

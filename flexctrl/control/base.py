@@ -9,6 +9,12 @@ A closed loop needs only this::
         u = ctrl.step(t, y)                     # joint torques (N m), held until the next sample
     ctrl.stats.summary()                        # wall time per step, status counts, fallbacks
 
+A controller regulates to its :attr:`Controller.reference`: by default its operating
+point (:class:`~flexctrl.control.reference.HoldReference`), or a moving reference
+given by :meth:`Controller.set_reference` (a
+:class:`~flexctrl.control.reference.ReferenceTrajectory`: joint path, reference state,
+feed-forward torque), which every controller reads at its sample times.
+
 ``step`` is a template method (like scipy's ``OdeSolver.step``): the base class
 checks the measurement, times the call, clips to the torque limits and records;
 subclasses implement ``_step``.  ``u`` passed to ``sensors.measure`` is the torque
@@ -107,6 +113,29 @@ class Controller(ABC):
         self.n_u = self.limits.size
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
+        from flexctrl.control.reference import HoldReference
+
+        self.reference = HoldReference(op)
+
+    def set_reference(self, reference) -> None:
+        """Track ``reference`` (a :class:`~flexctrl.control.reference.ReferenceTrajectory`) from now on.
+
+        Parameters
+        ----------
+        reference
+            Built on the controller's design model; ``None`` restores regulation to the
+            operating point.  The reference survives :meth:`reset`.
+        """
+        from flexctrl.control.reference import HoldReference
+
+        if reference is not None and len(reference.path.q_target) != self.n_u:
+            raise SpecError(f"the reference has {len(reference.path.q_target)} joint angles; expected {self.n_u}",
+                            key="reference")
+        self.reference = HoldReference(self.op) if reference is None else reference
+        self._reference_changed()
+
+    def _reference_changed(self) -> None:
+        """Subclass hook: the reference was replaced."""
 
     @property
     def sample_time(self) -> float:

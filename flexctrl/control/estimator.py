@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from flexctrl.control.riccati import solve_dare
 from flexctrl.linear import OperatingPoint, Sensors
 
 
@@ -60,23 +61,17 @@ def process_noise(model, op: OperatingPoint, A: np.ndarray, dt: float, torque_no
 def kalman_gain(Ad: np.ndarray, Cd: np.ndarray, W: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Current-estimate Kalman gain ``M`` and a-priori covariance ``P`` (filter DARE).
 
-    The DARE is solved in balanced coordinates ``x = T x'`` with ``T = diag(sqrt(diag(W)))``
-    (floored): the process noise of a flexible arm spans many orders of magnitude between
-    rigid and elastic states, which defeats the QZ reordering of an unscaled problem.
+    The filter DARE is the dual of the control one, ``(A, B, Q, R) -> (A', C', W, R)``,
+    solved by the doubling algorithm of :func:`flexctrl.control.riccati.solve_dare`:
+    the Schur method's eigenvalue reordering is ill-conditioned for flexible arms
+    (it failed at the horizontal move target ``[30, 0, 0]`` deg; see that module).
+
+    Raises
+    ------
+    SolverError
+        No stabilising solution (e.g. a mode on the unit circle that no sensor sees).
     """
-    d = np.sqrt(np.maximum(np.diag(W), 0.0))
-    floor = 1e-6 * float(np.max(d)) if np.max(d) > 0 else 1.0
-    t = np.maximum(d, floor)
-    Ti = 1.0 / t
-    As = Ti[:, None] * Ad * t[None, :]
-    Cs = Cd * t[None, :]
-    Ws = Ti[:, None] * W * Ti[None, :]
-    r = np.sqrt(np.diag(R))
-    Rs = R / r[:, None] / r[None, :]
-    Cs = Cs / r[:, None]
-    Ps = scipy.linalg.solve_discrete_are(As.T, Cs.T, 0.5 * (Ws + Ws.T), 0.5 * (Rs + Rs.T))
-    P = t[:, None] * Ps * t[None, :]
-    P = 0.5 * (P + P.T)
+    P = solve_dare(Ad.T, Cd.T, W, R, what="Kalman filter")
     S = Cd @ P @ Cd.T + R
     M = np.linalg.solve(S, Cd @ P).T
     return M, P

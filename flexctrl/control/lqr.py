@@ -1,17 +1,20 @@
 """Discrete LQR on the flexible linearisation, LQG with a Kalman filter, and gain scheduling.
 
-Design (:func:`design_lqr`): linearise the model at the target equilibrium ``op``
+Design (:func:`design_lqr`): linearise the model at the design equilibrium ``op``
 with the controller's sensors as outputs, discretise by zero-order hold at the
 sample time, weight by Bryson's rule (:func:`weight_matrices`) and solve the DARE
-(``control.dlqr``).  Control law, in deviations from the target::
+(by doubling, :mod:`flexctrl.control.riccati`).  Control law, in deviations from the
+reference (:mod:`flexctrl.control.reference`)::
 
-    u = u_op - K(s) (x_hat - x_op)
+    u = u_ref(t) - K(s) (x_hat - x_ref(t))
 
 with ``x_hat`` the measured state (sensors ``"state"``) or the Kalman estimate
-(:mod:`flexctrl.control.estimator`: LQG).  With a schedule, ``K(s)`` is interpolated
+(:mod:`flexctrl.control.estimator`: LQG), ``x_ref`` the reference state (joint path,
+quasi-static deflection and their rates) and ``u_ref`` its feed-forward torque; with
+no reference set, ``x_ref = x_op`` and ``u_ref = u_op``.  With a schedule, ``K(s)`` is interpolated
 multilinearly in the scheduling joint angles ``s`` (taken from ``x_hat``) between gains
-designed at the equilibria on a grid (the other joints at the target); the estimator
-and the feed-forward ``u_op`` stay those of the target.
+designed at the equilibria on a grid (the other joints at the design point); the
+estimator stays that of the design point and the feed-forward is the reference's.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from scipy.interpolate import RegularGridInterpolator
 
 from flexctrl.control.base import Controller
 from flexctrl.control.estimator import make_observer
+from flexctrl.control.riccati import solve_dare
 from flexctrl.control.settings import LQRSettings, SensorSettings, Weights
 from flexctrl.errors import SpecError
 from flexctrl.linear import Linearizer, OperatingPoint, Sensors, discretize, equilibrium, torque_limits
@@ -91,9 +95,15 @@ def weight_matrices(model, weights: Weights, limits: np.ndarray | None = None) -
 
 
 def lqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S`` (``control.dlqr``)."""
-    K, S, _E = control.dlqr(Ad, Bd, Q, R)
-    return np.asarray(K, dtype=float), np.asarray(S, dtype=float)
+    """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S``.
+
+    The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`, checked
+    against ``scipy.linalg.solve_discrete_are`` in the tests), which needs no eigenvalue
+    reordering and so does not fail on the ill-conditioned pencils of flexible arms.
+    """
+    S = solve_dare(Ad, Bd, Q, R, what="LQR")
+    K = np.linalg.solve(R + Bd.T @ S @ Bd, Bd.T @ S @ Ad)
+    return K, S
 
 
 class GainSchedule:
@@ -114,7 +124,7 @@ class GainSchedule:
 
 
 class LQRController(Controller):
-    """``u = u_op - K (x_hat - x_op)``; see the module docstring."""
+    """``u = u_ref - K (x_hat - x_ref)``; see the module docstring."""
 
     kind = "lqr"
 
@@ -141,8 +151,9 @@ class LQRController(Controller):
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)
+        x_ref, u_ref, _ = self.reference.at(t, self.sample_time)
         self.record("ok")
-        return self.op.u - self.gain(x) @ (x - self.op.x)
+        return u_ref - self.gain(x) @ (x - x_ref)
 
 
 def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRController:

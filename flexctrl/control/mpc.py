@@ -1,11 +1,21 @@
-"""Linear MPC on the discretised linearisation at the target: one QP per sample, built once.
+"""Linear MPC on the discretised linearisation at the design point: one QP per sample, built once.
 
-Problem (deviation variables about the target equilibrium, scaled, see below)::
+Problem (deviations from the reference over the horizon, scaled, see below)::
 
     min  1/2 sum_{k<N} (z_k' Q z_k + v_k' R v_k) + 1/2 z_N' P z_N + sum_k (l1 s_k + 1/2 l2 s_k^2)
     s.t. z_0 = z(t),   z_{k+1} = A z_k + B v_k,
-         u_min - u_op <= v_k <= u_max - u_op                      (hard: torque limits)
-         lo - c_op - s_k <= C z_{k+1} <= hi - c_op + s_k,  s_k >= 0   (soft: deflection or tip error)
+         u_min - u_ref,k <= v_k <= u_max - u_ref,k                      (hard: torque limits)
+         lo - c_op - C r_k+1 - s_k <= C z_{k+1} <= hi - c_op - C r_k+1 + s_k,  s_k >= 0
+                                                                 (soft: deflection or tip error)
+
+with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) - x_op``
+(:mod:`flexctrl.control.reference`: the joint path, its quasi-static deflection and the
+feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The
+prediction ``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the
+Jacobians of the design point along the reference: exact for a reference that is a
+trajectory of the linear model, and without steady-state offset at a target
+equilibrium away from the design point (the target's holding torque is ``u_ref``).
+Only the bounds depend on the reference, so between samples only vectors change.
 
 ``P`` is the DARE solution (``terminal = "dare"``), so without active constraints the
 first move is the LQR move ``-K z(t)``.  The slack makes the QP feasible for any
@@ -218,9 +228,14 @@ class QP:
     shift_a: np.ndarray
     stages: dict  # structure for HPIPM (N, nx, nu, ng) or {}
     n_state: int
+    soft_rows: np.ndarray  # (N, 2 ns): the general rows of the soft constraints of each stage
 
-    def vectors(self, z: np.ndarray):
-        """``(g, lba, uba, lbx, ubx)`` for the current scaled state ``z``."""
+    def vectors(self, z: np.ndarray, dv: np.ndarray | None = None, dc: np.ndarray | None = None):
+        """``(g, lba, uba, lbx, ubx)`` for the current scaled state ``z``.
+
+        ``dv`` (N, m) and ``dc`` (N, ns) shift the input bounds and the soft-row bounds of
+        each stage down (the scaled reference input and soft-row value, see the module docstring).
+        """
         g = self.g0 if self.Gz is None else self.g0 + self.Gz @ z
         if self.Lz is None:
             lba, uba = self.lba0, self.uba0
@@ -228,10 +243,19 @@ class QP:
             shift = self.Lz @ z
             lba, uba = self.lba0 + shift, self.uba0 + shift
         lbx, ubx = self.lbx, self.ubx
-        if self.ix0.size:
+        if self.ix0.size or dv is not None:
             lbx, ubx = lbx.copy(), ubx.copy()
+        if self.ix0.size:
             lbx[self.ix0] = z
             ubx[self.ix0] = z
+        if dv is not None:
+            lbx[self.moves] -= dv
+            ubx[self.moves] -= dv
+        if dc is not None and self.soft_rows.size:
+            shift = np.hstack([dc, dc])
+            lba, uba = lba.copy(), uba.copy()
+            lba[self.soft_rows] -= shift
+            uba[self.soft_rows] -= shift
         return g, lba, uba, lbx, ubx
 
 
@@ -293,9 +317,10 @@ def sparse_qp(pb: ScaledProblem, soft_on_next: bool = False) -> QP:
     shift_w = _shift_blocks(0, blk, N, zN)
     shift_a = _shift_blocks(0, rblk, N, np.zeros(0, int))
     stages = {"N": N, "nx": [n] * (N + 1), "nu": [m + ns] * N + [0], "ng": [2 * ns] * N + [0]}
+    soft = np.array([k * rblk + n + np.arange(2 * ns) for k in range(N)], dtype=int).reshape(N, 2 * ns)
     return QP(sp.csc_matrix(H), g0, sp.csc_matrix(A), lba, uba, lbx, ubx, None, None, zi(0), vi(0),
               np.array([vi(k) for k in range(N)]), np.concatenate([si(k) for k in range(N)]) if ns else np.zeros(0, int),
-              shift_w, shift_a, stages, n)
+              shift_w, shift_a, stages, n, soft)
 
 
 def prediction_matrices(pb: ScaledProblem) -> tuple[np.ndarray, np.ndarray]:
@@ -350,8 +375,10 @@ def condensed_qp(pb: ScaledProblem) -> QP:
     shift_a = np.r_[_shift_blocks(0, ns, N, np.zeros(0, int)), nsl + _shift_blocks(0, ns, N, np.zeros(0, int))].astype(int) \
         if ns else np.zeros(0, int)
     moves = np.arange(nv).reshape(N, m)
+    soft = np.array([np.r_[k * ns + np.arange(ns), nsl + k * ns + np.arange(ns)] for k in range(N)],
+                    dtype=int).reshape(N, 2 * ns)
     return QP(sp.csc_matrix(H), g0, sp.csc_matrix(A), lba0, uba0, lbx, ubx, Gz, Lz, np.zeros(0, int), moves[0], moves,
-              nv + np.arange(nsl), shift_w, shift_a, {}, n)
+              nv + np.arange(nsl), shift_w, shift_a, {}, n, soft)
 
 
 # --------------------------------------------------------------------------------------
@@ -397,8 +424,9 @@ class OSQPBackend:
                           verbose=False, warm_starting=warm_start != "none", **opts)
         self.y = None
 
-    def solve(self, z: np.ndarray, w_prev: np.ndarray | None) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z)
+    def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
+              dc: np.ndarray | None = None) -> Solution:
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc)
         self.solver.update(q=g, l=np.r_[lba, lbx[self.bounded]], u=np.r_[uba, ubx[self.bounded]])
         if self.warm == "shift" and w_prev is not None and self.y is not None:
             self.solver.warm_start(x=w_prev[self.qp.shift_w], y=self.y[self.shift_y])
@@ -431,8 +459,9 @@ class ConicBackend:
         self.H, self.Am = H, A
         self.solver = ca.conic("mpc_qp", name, {"h": H.sparsity(), "a": A.sparsity()}, opts)
 
-    def solve(self, z: np.ndarray, w_prev: np.ndarray | None) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z)
+    def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
+              dc: np.ndarray | None = None) -> Solution:
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc)
         args = {"h": self.H, "g": g, "a": self.Am, "lba": lba, "uba": uba, "lbx": lbx, "ubx": ubx}
         if w_prev is not None:
             args["x0"] = w_prev[self.qp.shift_w]
@@ -463,6 +492,7 @@ class MPCController(Controller):
         self.observer = observer
         self._w: np.ndarray | None = None  # last solution
         self._plan: np.ndarray | None = None  # (N, m) scaled moves of the last solution
+        self._plan_u: np.ndarray | None = None  # (N, m) planned torques, N m
         self._age = 0
         self.last: Solution | None = None
 
@@ -476,54 +506,67 @@ class MPCController(Controller):
         self.observer.reset()
         self._w = None
         self._plan = None
+        self._plan_u = None
         self._age = 0
 
     def plan(self) -> np.ndarray | None:
         """Planned torques (N m) of the last solved QP, shape (N, n_u)."""
-        if self._plan is None:
-            return None
-        return self.op.u + self._plan * self.problem.Su
+        return None if self._plan_u is None else self._plan_u.copy()
 
-    def solve(self, x: np.ndarray) -> Solution:
-        """Solve the QP for state ``x`` (absolute) and return the raw :class:`Solution`.
+    def reference_shifts(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N, m), dc (N, ns))``.
+
+        ``r_k = (x_ref,k - x_op) / S_x``; ``dv``, ``dc`` shift the input and soft-row bounds.
+        """
+        pb = self.problem
+        X, U, _ = self.reference.window(t, self.sample_time, pb.horizon + 1)
+        r = (X - self.op.x) / pb.Sx
+        dv = (U[:-1] - self.op.u) / pb.Su
+        dc = r[1:] @ pb.C.T if pb.ns else np.zeros((pb.horizon, 0))
+        return r, U[:-1], dv, dc
+
+    def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
+        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw :class:`Solution`.
 
         For inspection: the plan and the statistics are not updated (OSQP's internal
         warm start is).
         """
-        z = (x - self.op.x) / self.problem.Sx
+        r, _u, dv, dc = self.reference_shifts(t)
+        z = (x - self.op.x) / self.problem.Sx - r[0]
         warm = self._w if self.settings.warm_start != "none" else None
-        return self.backend.solve(z, warm)
+        return self.backend.solve(z, warm, dv, dc)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)
-        z = (x - self.op.x) / self.problem.Sx
-        sol = self.backend.solve(z, self._w if self.settings.warm_start != "none" else None)
+        r, u_ref, dv, dc = self.reference_shifts(t)
+        z = (x - self.op.x) / self.problem.Sx - r[0]
+        sol = self.backend.solve(z, self._w if self.settings.warm_start != "none" else None, dv, dc)
         self.last = sol
         self.stats.iterations.append(sol.iterations)
         if sol.ok:
             self.record(sol.status or "solved")
             self._w = sol.w
             self._plan = sol.w[self.qp.moves]
+            self._plan_u = u_ref + self._plan * self.problem.Su
             self._age = 0
             if self.qp.slack.size:
                 self.stats.slack_max = max(self.stats.slack_max, float(np.max(sol.w[self.qp.slack])) * self.problem.h)
-            v = self._plan[0]
+            return self._plan_u[0].copy()
+        self._age += 1
+        fb = self.settings.fallback
+        if fb == "shift" and self._plan_u is not None and self._age < self.problem.horizon:
+            u = self._plan_u[self._age].copy()
+            used = "shift"
+        elif fb == "hold":
+            self.fallback(t, sol.status, "hold")
+            return self.u_previous.copy()
         else:
-            self._age += 1
-            fb = self.settings.fallback
-            if fb == "shift" and self._plan is not None and self._age < self.problem.horizon:
-                v = self._plan[self._age]
-                used = "shift"
-            elif fb == "hold":
-                self.fallback(t, sol.status, "hold")
-                return self.u_previous.copy()
-            else:
-                v = -self.problem.K @ z
-                used = "lqr"
-            self.fallback(t, sol.status, used)
-            if self._w is not None:
-                self._w = self._w[self.qp.shift_w]  # keep warm starts moving with time
-        return self.op.u + self.problem.Su * v
+            u = u_ref[0] + self.problem.Su * (-self.problem.K @ z)
+            used = "lqr"
+        self.fallback(t, sol.status, used)
+        if self._w is not None:
+            self._w = self._w[self.qp.shift_w]  # keep warm starts moving with time
+        return u
 
 
 def make_backend(qp: QP, settings: MPCSettings):

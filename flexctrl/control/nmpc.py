@@ -25,6 +25,11 @@ SQP whose fixed points still satisfy the nonlinear shooting equations, since the
 use the nonlinear ``F``.  ``"exact"`` propagates the Jacobian of ``f`` through every RK4
 stage (4 ``substeps`` Jacobians per interval).
 
+A moving reference (:mod:`flexctrl.control.reference`) enters only the linear cost,
+``g = g0 - H w_ref`` with ``w_ref`` the scaled reference states and feed-forward torques
+over the horizon: the stage costs penalise deviations from the reference while the
+shooting constraints stay the nonlinear model (no reference consistency is assumed).
+
 The soft rows use the output map linearised at the target; for the assumed-modes
 models the link tip deflections are linear in the elastic coordinates, so the
 deflection constraint is exact.
@@ -165,6 +170,7 @@ class NMPCController(Controller):
         self._age = 0
         self.last: Solution | None = None
         self.timing: dict[str, list[float]] = {"linearize_qp": [], "qp": [], "total": []}
+        self._reference_now = (np.zeros(problem.n), np.zeros(problem.m))
 
     def _reset(self) -> None:
         self.observer.reset()
@@ -185,11 +191,29 @@ class NMPCController(Controller):
             w[lay.v[k]] = V[:, k]
         return w
 
-    def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int) -> Solution:
+    def cost_vector(self, t: float) -> np.ndarray:
+        """Linear cost ``g = g0 - H w_ref`` of the reference over the horizon from ``t`` (s).
+
+        ``w_ref`` holds the scaled reference states ``(x_ref,k - x_op) / S_x`` and inputs
+        ``(u_ref,k - u_op) / S_u``, so the stage costs penalise deviations from the
+        reference (:mod:`flexctrl.control.reference`); ``g0`` for a reference at ``op``.
+        """
+        lay, pb = self.layout, self.problem
+        X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
+        w_ref = np.zeros(lay.nw)
+        for k in range(lay.N + 1):
+            w_ref[lay.z[k]] = (X[k] - self.op.x) / pb.Sx
+        for k in range(lay.N):
+            w_ref[lay.v[k]] = (U[k] - self.op.u) / pb.Su
+        self._reference_now = (w_ref[lay.z[0]], w_ref[lay.v[0]])
+        return self.functions["g0"] - self.functions["Hnp"] @ w_ref
+
+    def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None) -> Solution:
         solver = self.functions["nlp"]
         lbx, ubx = self.functions["bounds"](z0)
         start = time.perf_counter()
-        out = solver(x0=w0, p=z0, lbx=lbx, ubx=ubx, lbg=self.functions["lbg"], ubg=self.functions["ubg"])
+        g = self.functions["g0"] if g is None else g
+        out = solver(x0=w0, p=np.r_[z0, g], lbx=lbx, ubx=ubx, lbg=self.functions["lbg"], ubg=self.functions["ubg"])
         stats = solver.stats()
         w = np.array(out["x"], dtype=float).ravel()
         ok = bool(stats.get("success", False)) or (stats.get("return_status") == "Maximum_Iterations_Exceeded"
@@ -197,13 +221,14 @@ class NMPCController(Controller):
         return Solution(ok and bool(np.all(np.isfinite(w))), str(stats.get("return_status", "")), w,
                         int(stats.get("iter_count", -1)), time.perf_counter() - start)
 
-    def _rti(self, z0: np.ndarray, w0: np.ndarray) -> Solution:
+    def _rti(self, z0: np.ndarray, w0: np.ndarray, g: np.ndarray | None = None) -> Solution:
         start = time.perf_counter()
         a, lba, uba = self.functions["prepare"](z0, w0)
         lbx, ubx = self.functions["bounds"](z0)
         mid = time.perf_counter()
         qp = self.functions["qp"]
-        out = qp(h=self.functions["H"], g=self.functions["g"], a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=w0)
+        g = self.functions["g0"] if g is None else g
+        out = qp(h=self.functions["H"], g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=w0)
         end = time.perf_counter()
         stats = qp.stats()
         w = np.array(out["x"], dtype=float).ravel()
@@ -213,25 +238,26 @@ class NMPCController(Controller):
         status = "solved" if ok else str(stats.get("unified_return_status", stats.get("return_status", "failed")))
         return Solution(ok, status, w, int(stats.get("iter_count", -1) or -1), end - start)
 
-    def solve(self, x: np.ndarray) -> Solution:
-        """One NMPC solve (RTI step or NLP) for the state ``x`` (absolute), updating the warm start."""
+    def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
+        """One NMPC solve (RTI step or NLP) for the state ``x`` (absolute) at ``t`` (s), updating the warm start."""
         z0 = (x - self.op.x) / self.problem.Sx
+        g = self.cost_vector(t)
         if self._w is None:
             w0 = self.initial_guess(z0)
             if self.settings.mode == "rti" and self.settings.init_iter > 0:
-                init = self._nlp(z0, w0, self.settings.init_iter)
+                init = self._nlp(z0, w0, self.settings.init_iter, g)
                 if np.all(np.isfinite(init.w)):
                     w0 = init.w
         else:
             w0 = self._w[self.layout.shift]
             w0[self.layout.z[0]] = z0
-        return self._nlp(z0, w0, self.settings.max_iter) if self.settings.mode == "full" else self._rti(z0, w0)
+        return self._nlp(z0, w0, self.settings.max_iter, g) if self.settings.mode == "full" else self._rti(z0, w0, g)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
         x = self.observer.estimate(y, self.u_previous)
         z0 = (x - self.op.x) / self.problem.Sx
-        sol = self.solve(x)
+        sol = self.solve(x, t)
         self.last = sol
         self.stats.iterations.append(sol.iterations)
         lay = self.layout
@@ -250,7 +276,8 @@ class NMPCController(Controller):
                 used = "shift"
                 self._w = self._w[lay.shift]  # keep warm starts moving with time
             else:
-                v = np.clip(-self.problem.K @ z0, self.problem.v_lo, self.problem.v_hi)
+                z_ref, v_ref = self._reference_now
+                v = np.clip(v_ref - self.problem.K @ (z0 - z_ref), self.problem.v_lo, self.problem.v_hi)
                 used = "lqr"
                 self._w = None
                 self._plan = None
@@ -349,7 +376,10 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     vr = ca.fmin(ca.fmax(-ca.mtimes(ca.DM(pb.K), zr), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
     step = ca.Function("nmpc_lqr_step", [zr], [Fz(zr, vr), vr])
     rollout = _rollout(step, N, n, m)
-    functions = {"prepare": prepare, "bounds": bounds, "qp": qp, "H": Hs, "g": ca.DM(g), "rollout": rollout,
+    import scipy.sparse as sp
+
+    functions = {"prepare": prepare, "bounds": bounds, "qp": qp, "H": Hs, "g0": g, "Hnp": sp.csr_matrix(H),
+                 "rollout": rollout,
                  "linmap": linmap, "F": Fz}
     # full NLP (also the RTI initialisation)
     if settings.mode == "full" or settings.init_iter > 0:
@@ -372,7 +402,7 @@ def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: 
                    g: np.ndarray) -> dict:
     N, n, ns = lay.N, lay.n, lay.ns
     w = ca.MX.sym("w", lay.nw)
-    p = ca.MX.sym("p", n)
+    p = ca.MX.sym("p", n + lay.nw)  # the initial state, then the linear cost (the reference enters there)
     Z, V, S = lay.split(w)
     Fmap = Fz.map(N)
     ends = Fmap(Z[:, :N], V)
@@ -388,7 +418,7 @@ def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: 
             cons += [CF - S[:, k], CF + S[:, k]]
             lbg += [np.full(ns, -np.inf), pb.c_lo]
             ubg += [pb.c_hi, np.full(ns, np.inf)]
-    cost = 0.5 * ca.bilin(ca.DM(ca.sparsify(ca.DM(H))), w, w) + ca.dot(ca.DM(g), w)
+    cost = 0.5 * ca.bilin(ca.DM(ca.sparsify(ca.DM(H))), w, w) + ca.dot(p[n:], w)
     nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*cons)}
     opts = {"ipopt": {"print_level": 0, "max_iter": settings.max_iter, "hessian_approximation": "limited-memory",
                       "warm_start_init_point": "yes", "tol": 1e-6, "sb": "yes"},

@@ -1,11 +1,15 @@
-"""Joint PD control with gravity compensation: the baseline.
+"""Joint PD control with gravity compensation and feed-forward: the baseline.
 
-``tau = tau_g + F(s) [Kp (q_ref(t) - q) + Kd (qd_ref(t) - qd)]`` on the joint coordinates,
-with ``q_ref`` the target joint angles (a subclass may make it a function of time:
-:class:`~flexctrl.control.shaping.ShapedController`) and ``tau_g``
+``tau = tau_g(t) + tau_ff(t) + F(s) [Kp (q_ref(t) - q) + Kd (qd_ref(t) - qd)]`` on the joint
+coordinates, with ``q_ref``, ``qd_ref`` the joint path of the controller's reference
+(:mod:`flexctrl.control.reference`; the target itself when none is set; a subclass
+may shape it: :class:`~flexctrl.control.shaping.ShapedController`), ``tau_ff`` the
+inertial feed-forward ``u_ref - u_static`` of that reference (the rigid inverse
+dynamics along the path at the static deflection; zero for a step or no reference;
+``feedforward = false`` drops it) and ``tau_g``
 
-* ``"target"``: the static torque of the target equilibrium ``op.u`` (gravity and
-  the static deflection at the target: exact at rest there),
+* ``"target"``: the static torque of the reference equilibrium ``u_static(t)`` (gravity and
+  the static deflection at ``q_ref(t)``: exact at rest there; ``op.u`` with no reference),
 * ``"measured"``: the static torque at the measured joint angles, elastic
   coordinates at the target's static deflection,
 * ``"none"``.
@@ -66,6 +70,7 @@ class PDController(Controller):
     def __init__(self, settings: PDSettings, op: OperatingPoint, sensors: Sensors, limits: np.ndarray,
                  kp: np.ndarray, kd: np.ndarray, gravity: ca.Function | None):
         super().__init__(settings, op, sensors, limits, saturate=settings.saturate)
+        self.pd_settings = settings
         self.kp, self.kd = kp, kd
         self.gravity = gravity
         self.gravity_mode = settings.gravity
@@ -84,23 +89,30 @@ class PDController(Controller):
     def _reset(self) -> None:
         self._filtered = np.zeros(self.n_u)
 
-    def reference(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joint reference ``(q_ref, qd_ref)`` at time ``t`` (the target here); ``q`` are the measured joints."""
-        return self.op.joints, np.zeros(self.n_u)
+    def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(q_ref, qd_ref, u_ref, u_static)`` at time ``t`` (s); ``q`` are the measured joints.
+
+        From the reference's table on the sample grid with the static deflection
+        (``elastic=False``: PD has no use for the elastic reference).
+        """
+        x, u_ref, u_static = self.reference.at(t, self.sample_time, elastic=False)
+        N = x.size // 2
+        return x[: self.n_u], x[N : N + self.n_u], u_ref, u_static
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[self._iq], y[self._iqd]
-        q_ref, qd_ref = self.reference(t, q)
+        q_ref, qd_ref, u_ref, u_static = self.reference_terms(t, q)
         if self.gravity_mode == "target":
-            tau_g = self.op.u
+            tau_g = u_static
         elif self.gravity_mode == "measured":
             tau_g = np.array(self.gravity(q), dtype=float).ravel()
         else:
             tau_g = 0.0
+        tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0
         self.record("ok")
         a = self.filter_pole
         self._filtered = a * self._filtered + (1.0 - a) * (self.kp * (q_ref - q) + self.kd * (qd_ref - qd))
-        return tau_g + self._filtered
+        return tau_g + tau_ff + self._filtered
 
 
 def pd_parts(model, op: OperatingPoint, settings: PDSettings):

@@ -233,7 +233,7 @@ class ScheduleSettings:
 class PDSettings:
     """Joint PD control with gravity compensation.
 
-    ``tau = tau_g + Kp (q_target - q) - Kd qd``.
+    ``tau = tau_g + tau_ff + F(s) [Kp (q_ref - q) + Kd (qd_ref - qd)]`` (see :mod:`flexctrl.control.pd`).
 
     Attributes
     ----------
@@ -254,6 +254,9 @@ class PDSettings:
         static deflection), ``g`` at the measured joint angles (rigid), or none.
     saturate : bool
         Clip torques at the joint limits.
+    feedforward : bool
+        Add the inertial feed-forward torque of a moving reference (the rigid inverse
+        dynamics along the path); no effect for a step or without a reference.
     sensors : SensorSettings
         Default: joint encoders and joint rates.
     """
@@ -267,6 +270,7 @@ class PDSettings:
     torque_filter: float = 2.0
     gravity: GravityCompensation = "target"
     saturate: bool = True
+    feedforward: bool = True
     sensors: SensorSettings = field(default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates")))
 
     def __post_init__(self) -> None:
@@ -281,6 +285,7 @@ class PDSettings:
         _number("torque_filter", self.torque_filter, low=0.0, unit="Hz")
         _choice("gravity", self.gravity, GravityCompensation)
         _boolean("saturate", self.saturate)
+        _boolean("feedforward", self.feedforward)
         missing = {"joints", "joint_rates"} - set(self.sensors.outputs)
         if missing and not self.sensors.full_state:
             raise SpecError(f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "

@@ -150,7 +150,16 @@ def design_shaper(modes: list[tuple[float, float]], kind: str) -> Shaper:
 
 
 class ShapedController(PDController):
-    """PD tracking the shaped move from the first measured joint angles to the target."""
+    """PD tracking the shaped reference.
+
+    With a smooth reference (a quintic, :meth:`set_reference`) the shaper is convolved
+    with the reference's joint path and its feed-forward torques,
+    ``q_s(t) = sum_i A_i q_ref(t - t_i)`` (the torques linearly: exact for the rigid
+    inertial feed-forward when the inertia along the path is constant, as for a move of
+    joint 1 in a horizontal plane).  With a step or no reference it shapes its own
+    profile from the joint angles of the first measurement to the target: a step, or a
+    ramp over ``move_time`` (the classical shaped step).
+    """
 
     kind = "shaped"
 
@@ -173,14 +182,41 @@ class ShapedController(PDController):
             return (s >= 0).astype(float), np.zeros_like(s)
         return np.clip(s / T, 0.0, 1.0), ((s >= 0) & (s < T)) / T
 
-    def reference(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def shapes_reference(self) -> bool:
+        """Whether the controller's reference is a smooth path (shaped as given) rather than a step."""
+        return self.reference.path.profile != "step"
+
+    def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        if self.shapes_reference:
+            times = t - self.shaper.times
+            q_all, qd_all = self.reference.path.derivatives(times, order=1)
+            A = self.shaper.amplitudes
+            u_ref = A @ self._torques(times, 1)
+            u_static = A @ self._torques(times, 2)
+            return A @ q_all, A @ qd_all, u_ref, u_static
         if self._start is None:
             self._start = (t, np.array(q, dtype=float))
         t0, q0 = self._start
         s = (t - t0) - self.shaper.times
         pos, vel = self._profile(s)
-        delta = self.op.joints - q0
-        return q0 + float(np.dot(self.shaper.amplitudes, pos)) * delta, float(np.dot(self.shaper.amplitudes, vel)) * delta
+        target = np.asarray(self.reference.path.q_target)
+        delta = target - q0
+        _x, u_ref, u_static = self.reference.at(t, self.sample_time, elastic=False)
+        return (q0 + float(np.dot(self.shaper.amplitudes, pos)) * delta,
+                float(np.dot(self.shaper.amplitudes, vel)) * delta, u_static, u_static)
+
+    def _torques(self, times: np.ndarray, which: int) -> np.ndarray:
+        """Reference torques (u_ref: 1, u_static: 2) at ``times``, linearly interpolated on the sample grid."""
+        Ts = self.sample_time
+        out = np.empty((times.size, self.n_u))
+        for i, ti in enumerate(times):
+            k = max(ti, 0.0) / Ts
+            k0 = int(math.floor(k))
+            frac = k - k0
+            window = self.reference.window(k0 * Ts, Ts, 2, elastic=False)[which]
+            out[i] = (1 - frac) * window[0] + frac * window[1]
+        return out
 
 
 def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> ShapedController:

@@ -1,0 +1,314 @@
+"""Reference trajectories: a joint path and the state and feed-forward torque that go with it.
+
+:class:`JointReference` is the joint path ``q_ref(t)`` from ``q_start`` to ``q_target``
+(rad), either a step at ``t_start`` or a quintic over ``move_time`` (s)::
+
+    q_ref(t) = q_start + (q_target - q_start) s(tau),   tau = clip((t - t_start) / move_time, 0, 1)
+    s(tau)   = 10 tau^3 - 15 tau^4 + 6 tau^5
+
+the minimum-jerk point-to-point path: zero velocity and acceleration at both ends,
+peak velocity ``1.875 dq / T`` at mid-move, peak acceleration ``5.774 dq / T^2`` at
+``tau = 0.211`` and ``0.789``.
+
+:class:`ReferenceTrajectory` puts the path on a model (the controller's design model)
+and gives, at any time, the reference state ``x_ref = (q_ref, q_f*, qd_ref, qd_f*)`` and
+the feed-forward joint torque ``u_ref``.  The elastic coordinates follow one of
+
+``"quasi_static"`` (default)
+    the deflection the links need to carry the path's accelerations: ``q_f*`` solves
+    the elastic rows of the equations of motion with the elastic accelerations set to
+    zero, ``[M(q*) (qdd_ref, 0) + c(q*, (qd_ref, 0)) + g(q*) + K q*]_f = 0`` (Newton, AD
+    Jacobians), and ``qd_f*`` is its exact time derivative (implicit-function theorem
+    with the path's jerk).  Then ``u_ref = [M(q*) (qdd_ref, 0) + c + g + K q*]_r`` is the
+    torque for which the model, at ``x_ref``, accelerates the joints exactly along the
+    path with no elastic acceleration (damping forces are left out: the elastic rates
+    are small and the joint rows carry no damping).  Why this one: an LQR or MPC
+    regulating to a zero (static) deflection fights the bending every acceleration
+    must cause, which is itself a torque input that excites the modes; measured on the
+    30 degree move, see ``docs/control.md``.
+``"static"``
+    the static equilibrium deflection at ``q_ref(t)`` (gravity only: zero in a
+    horizontal plane); ``u_ref`` is the same rigid feed-forward evaluated there.
+
+``u_static`` is the holding torque at ``q_ref(t)`` (the static equilibrium), for PD's
+gravity compensation.  With a step the reference is the target equilibrium from
+``t_start`` on, so a controller regulating to it behaves exactly as one regulating
+to the target.
+
+Controllers read the reference on their sample grid; :meth:`ReferenceTrajectory.window`
+returns ``count`` samples from ``t`` (MPC horizons) from a table computed once per
+sample time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.errors import SolverError, SpecError
+from flexctrl.linear import OperatingPoint, stiffness_matrix
+
+Profile = Literal["step", "quintic"]
+DeflectionReference = Literal["quasi_static", "static"]
+PROFILES: tuple[str, ...] = get_args(Profile)
+DEFLECTIONS: tuple[str, ...] = get_args(DeflectionReference)
+
+
+@dataclass(frozen=True)
+class JointReference:
+    """A point-to-point joint path (see the module docstring).
+
+    Attributes
+    ----------
+    q_start, q_target : tuple of float
+        Joint angles, rad.
+    profile : {"step", "quintic"}
+    move_time : float
+        Duration of the quintic, s (> 0; ignored by the step).
+    t_start : float
+        Time the move starts, s.
+    """
+
+    q_start: tuple[float, ...]
+    q_target: tuple[float, ...]
+    profile: str = "step"
+    move_time: float = 0.0
+    t_start: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q_start", tuple(float(a) for a in self.q_start))
+        object.__setattr__(self, "q_target", tuple(float(a) for a in self.q_target))
+        if self.profile not in PROFILES:
+            raise SpecError(f"value {self.profile!r} is not allowed; allowed: {', '.join(map(repr, PROFILES))}",
+                            key="profile")
+        if len(self.q_start) != len(self.q_target):
+            raise SpecError(f"q_start has {len(self.q_start)} angles and q_target {len(self.q_target)}; "
+                            "allowed: one per joint in both", key="q_target")
+        if self.profile == "quintic" and not (math.isfinite(self.move_time) and self.move_time > 0):
+            raise SpecError(f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
+                            key="move_time")
+        if not (math.isfinite(self.t_start) and self.t_start >= 0):
+            raise SpecError(f"value {self.t_start!r} is not allowed; allowed: a start time >= 0 s", key="t_start")
+
+    @property
+    def t_arrive(self) -> float:
+        """Time (s) at which the reference reaches the target: the end of the move."""
+        return self.t_start + (self.move_time if self.profile == "quintic" else 0.0)
+
+    def derivatives(self, t, order: int = 2) -> tuple[np.ndarray, ...]:
+        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s): arrays (T, n) (rad, rad/s, ...), up to ``order`` (<= 3)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        q0, q1 = np.asarray(self.q_start), np.asarray(self.q_target)
+        delta = q1 - q0
+        if self.profile == "step":
+            s = (t >= self.t_start).astype(float)
+            out = [q0[None, :] + s[:, None] * delta[None, :]]
+            out += [np.zeros((t.size, delta.size)) for _ in range(order)]
+            return tuple(out)
+        T = self.move_time
+        tau = np.clip((t - self.t_start) / T, 0.0, 1.0)
+        inside = ((t > self.t_start) & (t < self.t_start + T)).astype(float)
+        s = tau**3 * (10 - 15 * tau + 6 * tau**2)
+        ds = inside * 30 * tau**2 * (1 - tau) ** 2 / T
+        dds = inside * 60 * tau * (1 - tau) * (1 - 2 * tau) / T**2
+        ddds = inside * 60 * (1 - 6 * tau + 6 * tau**2) / T**3
+        factors = (s, ds, dds, ddds)[: order + 1]
+        return tuple(q0[None, :] * (k == 0) + f[:, None] * delta[None, :] for k, f in enumerate(factors))
+
+    def joints(self, t) -> np.ndarray:
+        """Joint angles (T, n), rad, at the times ``t`` (s)."""
+        return self.derivatives(t, order=0)[0]
+
+    def settings(self) -> dict:
+        """Plain data (angles in degrees)."""
+        return {"profile": self.profile, "move_time_s": self.move_time, "t_start_s": self.t_start,
+                "q_start_deg": [math.degrees(a) for a in self.q_start],
+                "q_target_deg": [math.degrees(a) for a in self.q_target], "t_arrive_s": self.t_arrive}
+
+
+def _damping_matrix(model, q):
+    fun = model.functions.get("D")
+    if fun is None:
+        return ca.SX.zeros(model.n_q, model.n_q)
+    return fun(q) if fun.n_in() == 1 else fun()["D"]
+
+
+def _path_functions(model) -> dict[str, ca.Function]:
+    """CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``: ``rj -> (r_f, J_qf)``, ``jac -> (J_qr, J_qdr, J_qddr)``,
+    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module docstring)."""
+    n, N = model.n_u, model.n_q
+    qr, qdr, qddr = (ca.SX.sym(name, n) for name in ("qr", "qdr", "qddr"))
+    qf, qdf, qddf = ca.SX.sym("qf", N - n), ca.SX.sym("qdf", N - n), ca.SX.sym("qddf", N - n)
+    q = ca.vertcat(qr, qf)
+    qd = ca.vertcat(qdr, qdf)
+    qdd = ca.vertcat(qddr, qddf)
+    static = model.functions["g"](q) + ca.mtimes(stiffness_matrix(model, q), q)
+    force = (ca.mtimes(model.functions["M"](q), qdd) + model.functions["c"](q, qd) + static
+             + ca.mtimes(_damping_matrix(model, q), qd))
+    r = force[n:]
+    args = [qr, qdr, qddr, qf, qdf, qddf]
+    names = ["qr", "qdr", "qddr", "qf", "qdf", "qddf"]
+    J_qf = ca.jacobian(r, qf)
+    return {
+        "rj": ca.Function("reference_rj", args, [r, J_qf], names, ["r", "J_qf"]),
+        "all": ca.Function("reference_all", args, [r, J_qf, ca.jacobian(r, qr), ca.jacobian(r, qdr),
+                                                   ca.jacobian(r, qddr)],
+                           names, ["r", "J_qf", "J_qr", "J_qdr", "J_qddr"]),
+        "tau": ca.Function("reference_tau", args, [force[:n], static[:n]], names, ["tau", "tau_static"]),
+    }
+
+
+class ReferenceTrajectory:
+    """State and feed-forward of a :class:`JointReference` on ``model`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The controller's design model.
+    path : JointReference
+    deflection : {"quasi_static", "static"}
+    tol : float
+        Newton tolerance on the elastic coordinates (relative to ``1 + |q_f|``).
+    """
+
+    def __init__(self, model, path: JointReference, deflection: str = "quasi_static", *, tol: float = 1e-10,
+                 max_iter: int = 30):
+        if deflection not in DEFLECTIONS:
+            raise SpecError(f"value {deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                            key="deflection")
+        if len(path.q_target) != model.n_u:
+            raise SpecError(f"the reference has {len(path.q_target)} joint angles; expected {model.n_u}", key="target")
+        self.model = model
+        self.path = path
+        self.deflection = deflection
+        self.tol, self.max_iter = tol, max_iter
+        self.n_u, self.n_q = model.n_u, model.n_q
+        self._fun = _path_functions(model)
+        self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    @property
+    def t_arrive(self) -> float:
+        """End of the move, s."""
+        return self.path.t_arrive
+
+    def _elastic(self, derivs, moving: bool, elastic: bool, qddf: np.ndarray, qf: np.ndarray,
+                 qdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q_f, qd_f)`` at the path points ``derivs = (q, qd, qdd, qddd)`` (T, n) for given elastic accelerations."""
+        q, qd, qdd, qddd = derivs
+        T, n = q.shape
+        nf = self.n_q - n
+        if not nf:
+            return qf, qdf
+        rj, full = (self._fun[name].map(T) for name in ("rj", "all"))
+
+        def blocks(value, cols):  # mapped (rows, cols * T) -> (T, rows, cols)
+            return np.array(value, dtype=float).T.reshape(T, cols, -1).transpose(0, 2, 1)
+
+        zero = np.zeros_like(qd)
+        mq, mqdd, mqddd = (qd, qdd, qddd) if moving else (zero, zero, zero)
+        for _ in range(self.max_iter):
+            # one Newton step on q_f and one implicit-function update of qd_f per pass (the elastic
+            # rates enter the Coriolis and damping forces, so q_f and qd_f are a joint fixed point)
+            out = (full if elastic else rj)(q.T, mq.T, mqdd.T, qf.T, qdf.T, qddf.T)
+            J_qf = blocks(out[1], nf)
+            step = np.linalg.solve(J_qf, np.array(out[0], dtype=float).T[:, :, None])[:, :, 0]
+            qf = qf - step
+            change = 0.0
+            if elastic:
+                J_qr, J_qdr, J_qddr = (blocks(v, n) for v in out[2:5])
+                rate = J_qr @ qd[:, :, None] + J_qdr @ mqdd[:, :, None] + J_qddr @ mqddd[:, :, None]
+                qdf_new = -np.linalg.solve(J_qf, rate)[:, :, 0]
+                change = float(np.max(np.abs(qdf_new - qdf))) / (1.0 + float(np.max(np.abs(qdf_new))))
+                qdf = qdf_new
+            if max(float(np.max(np.abs(step))) / (1.0 + float(np.max(np.abs(qf)))), change) <= self.tol:
+                return qf, qdf
+        raise SolverError(f"reference: Newton on the elastic coordinates did not converge in {self.max_iter} "
+                          f"passes (last step {np.max(np.abs(step)):.3g})")
+
+    def evaluate(self, t, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x_ref (T, 2N), u_ref (T, n), u_static (T, n))`` at the times ``t`` (s).
+
+        With ``elastic=False`` the elastic coordinates are the static deflection at
+        ``q_ref`` and their rates zero whatever :attr:`deflection` says (a cheaper rigid
+        feed-forward).
+
+        Raises
+        ------
+        SolverError
+            If Newton on the elastic coordinates does not converge.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        T, n, N = t.size, self.n_u, self.n_q
+        nf = N - n
+        derivs = self.path.derivatives(t, order=3)
+        q, qd, qdd, _qddd = derivs
+        moving = self.deflection == "quasi_static" and elastic
+        qddf = np.zeros((T, nf))
+        qf, qdf = self._elastic(derivs, moving, elastic, qddf, np.zeros((T, nf)), np.zeros((T, nf)))
+        # (a second pass with the elastic accelerations d^2 q_f*/dt^2 in the elastic rows was tried:
+        # on the Subedi arm the first locked mode is only ~4x the path's frequency, the series does
+        # not settle in one step, and the open-loop joint drift grew from 0.5 to 4 degrees)
+        ftau = self._fun["tau"].map(T)
+        out = ftau(q.T, qd.T, qdd.T, qf.T, qdf.T, qddf.T)
+        tau, tau_static = np.array(out[0], dtype=float).T, np.array(out[1], dtype=float).T
+        if moving and nf:  # the holding torque belongs to the static deflection, not the quasi-static one
+            zero = np.zeros((T, nf))
+            qf_static, _ = self._elastic(derivs, False, False, zero, qf, zero)
+            tau_static = np.array(ftau(q.T, 0 * qd.T, 0 * qdd.T, qf_static.T, zero.T, zero.T)[1], dtype=float).T
+        return np.hstack([q, qf, qd, qdf]), tau, tau_static
+
+    def _table(self, Ts: float, elastic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = (float(Ts), elastic)
+        table = self._tables.get(key)
+        if table is None:
+            count = int(math.ceil(self.t_arrive / Ts - 1e-9)) + 2
+            table = self.evaluate(np.arange(count) * Ts, elastic=elastic)
+            self._tables[key] = table
+        return table
+
+    def window(self, t: float, Ts: float, count: int, *, elastic: bool = True
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``count`` samples ``t, t + Ts, ...``: ``(x_ref (count, 2N), u_ref (count, n), u_static (count, n))``.
+
+        On the grid ``k Ts`` the values come from a table computed once (up to the end
+        of the move; constant after it); elsewhere they are evaluated.
+        """
+        k0 = int(round(t / Ts))
+        if k0 < 0 or abs(t - k0 * Ts) > 1e-9 * max(1.0, abs(t)):
+            return self.evaluate(t + Ts * np.arange(count), elastic=elastic)
+        X, U, Us = self._table(Ts, elastic)
+        idx = np.minimum(k0 + np.arange(count), X.shape[0] - 1)
+        return X[idx], U[idx], Us[idx]
+
+    def at(self, t: float, Ts: float, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x_ref, u_ref, u_static)`` at ``t`` (s), from the table of sample time ``Ts`` when ``t`` is on its grid."""
+        X, U, Us = self.window(t, Ts, 1, elastic=elastic)
+        return X[0], U[0], Us[0]
+
+
+class HoldReference:
+    """The constant reference of a controller regulating to its operating point ``op`` (the default)."""
+
+    deflection = "static"
+
+    def __init__(self, op: OperatingPoint):
+        self.op = op
+        self.path = JointReference(tuple(op.joints), tuple(op.joints))
+
+    @property
+    def t_arrive(self) -> float:
+        return 0.0
+
+    def window(self, t: float, Ts: float, count: int, *, elastic: bool = True
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return (np.tile(self.op.x, (count, 1)), np.tile(self.op.u, (count, 1)), np.tile(self.op.u, (count, 1)))
+
+    def at(self, t: float, Ts: float, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.op.x, self.op.u, self.op.u
+
+
+__all__ = ["JointReference", "ReferenceTrajectory", "HoldReference", "PROFILES", "DEFLECTIONS"]

@@ -1,0 +1,114 @@
+"""The discrete algebraic Riccati equation by the structure-preserving doubling algorithm (SDA).
+
+Why not the Schur method (``scipy.linalg.solve_discrete_are``, ``control.dlqe``)
+alone: the Kalman-filter DARE of a flexible arm is a symplectic pencil whose
+eigenvalues spread over many decades (heavily damped local modes of the light hubs
+at ``|z| ~ 0.06``, their reciprocals at ~17, and, in a horizontal plane, three
+Jordan blocks of the free rigid-body double integrators at ``z = 1``) while the
+process noise is rank-deficient.  The QZ *reordering* step is then ill-conditioned
+and fails or succeeds with round-off: on the Subedi arm it failed at the move
+target ``[30, 0, 0]`` deg and, across 30 targets, payloads and gravity settings,
+every one of four diagonal scalings of the same problem failed somewhere (a
+different somewhere each).  The solution itself is well conditioned (relative
+residual 1e-14, estimator spectral radius 0.937).
+
+SDA (Chu, Fan, Lin and Wang, "Structure-preserving algorithms for periodic discrete-time
+algebraic Riccati equations", Int. J. Control 77, 2004; for the time-invariant case
+e.g. Huang, Li and Lin, "Structure-Preserving Doubling Algorithms for Nonlinear
+Matrix Equations", SIAM 2018, ch. 3) needs no eigenvalue reordering.  For
+``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` start from ``A_0 = A``, ``G_0 = B R^-1 B'``,
+``H_0 = Q`` and iterate::
+
+    W     = I + G_k H_k
+    A_k+1 = A_k W^-1 A_k
+    G_k+1 = G_k + A_k W^-1 G_k A_k'
+    H_k+1 = H_k + A_k' H_k W^-1 A_k
+
+``H_k`` converges quadratically to the stabilising solution whenever it exists; the
+error falls like ``rho^(2^k)`` with ``rho`` the closed-loop spectral radius (ten
+iterations at ``rho = 0.94``).  Every solution is checked (finite, symmetric, residual,
+closed loop strictly stable) and a failure is a :class:`~flexctrl.errors.SolverError`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexctrl.errors import SolverError
+
+#: Largest relative DARE residual ``||res||_F / max(1, ||X||_F)`` accepted.
+RESIDUAL_TOL = 1e-8
+
+
+def _doubling(Ak: np.ndarray, Gk: np.ndarray, Hk: np.ndarray, eye: np.ndarray, tol: float, max_iter: int,
+              what: str) -> np.ndarray:
+    """The SDA iteration from ``(A_0, G_0, H_0)``; returns the converged ``H``."""
+    for _ in range(max_iter):
+        W = eye + Gk @ Hk
+        try:
+            V_A = np.linalg.solve(W, Ak)
+            V_G = np.linalg.solve(W, Gk)
+        except np.linalg.LinAlgError as exc:
+            raise SolverError(f"{what}: the doubling iteration met a singular matrix ({exc})") from exc
+        H_next = Hk + V_A.T @ Hk @ Ak
+        G_next = Gk + Ak @ V_G @ Ak.T
+        Ak = Ak @ V_A
+        H_next = 0.5 * (H_next + H_next.T)
+        if not np.all(np.isfinite(H_next)):
+            raise SolverError(f"{what}: the doubling iteration diverged (no stabilising solution: "
+                              "an uncontrollable/unobservable mode on or outside the unit circle?)")
+        change = np.linalg.norm(H_next - Hk, 1)
+        Hk, Gk = H_next, 0.5 * (G_next + G_next.T)
+        if change <= tol * max(1.0, np.linalg.norm(Hk, 1)):
+            return Hk
+    raise SolverError(f"{what}: the doubling iteration did not converge in {max_iter} steps")
+
+
+def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, *, tol: float = 1e-14,
+               max_iter: int = 200, what: str = "DARE") -> np.ndarray:
+    """Stabilising solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA, see module docstring).
+
+    Parameters
+    ----------
+    A : (n, n) ndarray
+    B : (n, m) ndarray
+    Q : (n, n) ndarray
+        Symmetric positive semidefinite.
+    R : (m, m) ndarray
+        Symmetric positive definite.
+    tol : float
+        Stop when the change of ``H_k`` is below ``tol`` relative to its norm.
+    max_iter : int
+        Doubling steps (each squares the closed-loop contraction).
+    what : str
+        Name used in error messages (e.g. "LQR", "Kalman filter").
+
+    Raises
+    ------
+    SolverError
+        No convergence, a non-finite or non-stabilising result, or a residual above
+        :data:`RESIDUAL_TOL`.
+    """
+    A, B, Q, R = (np.asarray(M, dtype=float) for M in (A, B, Q, R))
+    n = A.shape[0]
+    eye = np.eye(n)
+    Ak = A.copy()
+    Gk = B @ np.linalg.solve(0.5 * (R + R.T), B.T)
+    Gk = 0.5 * (Gk + Gk.T)
+    Hk = 0.5 * (Q + Q.T)
+    with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected below, as non-finite H_k
+        Hk = _doubling(Ak, Gk, Hk, eye, tol, max_iter, what)
+    X = Hk
+    S = R + B.T @ X @ B
+    residual = A.T @ X @ A - A.T @ X @ B @ np.linalg.solve(S, B.T @ X @ A) + Q - X
+    rel = float(np.linalg.norm(residual) / max(1.0, np.linalg.norm(X)))
+    if rel > RESIDUAL_TOL:
+        raise SolverError(f"{what}: Riccati residual {rel:.3g} above {RESIDUAL_TOL:g}")
+    K = np.linalg.solve(S, B.T @ X @ A)
+    rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
+    if not rho < 1.0:
+        raise SolverError(f"{what}: the Riccati solution does not stabilise (closed-loop spectral radius {rho:.6g})")
+    return X
+
+
+__all__ = ["solve_dare", "RESIDUAL_TOL"]
