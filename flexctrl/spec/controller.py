@@ -172,6 +172,7 @@ def _pd_values(r: TableReader, d: PDSettings) -> dict[str, Any]:
         "torque_filter": r.nonnegative("torque_filter", d.torque_filter, unit="Hz"),
         "gravity": _literal(r, "gravity", d.gravity, _field_type(PDSettings, "gravity")),
         "saturate": r.boolean("saturate", d.saturate),
+        "feedforward": r.boolean("feedforward", d.feedforward),
         "sensors": _sensors(r, d.sensors),
     }
 
