@@ -223,7 +223,7 @@ def test_work_of_held_torques_balances_energy(tmp_path):
 
 def test_integrator_lookup_and_validation(smooth):
     assert get_integrator("rk4") is RK4 and get_integrator(IDAS) is IDAS
-    assert set(INTEGRATORS) == {"rk4", "cvodes", "idas", "scipy"}
+    assert set(INTEGRATORS) == {"rk4", "cvodes", "idas", "scipy", "euler", "newmark"}
     assert INTEGRATORS["cvodes"] is CVODES and INTEGRATORS["scipy"] is ScipyIntegrator
     with pytest.raises(SpecError, match="did you mean 'rk4'"):
         get_integrator("rk5")

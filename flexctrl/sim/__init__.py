@@ -4,6 +4,8 @@ Integrators share one template (:class:`~flexctrl.sim.base.Integrator`) and are
 chosen by name or class, like scipy's ``solve_ivp(method=...)``:
 
 ``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
+``euler``   fixed-step explicit Euler, compiled like rk4 (:mod:`.euler`; unstable on undamped modes)
+``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop) (:mod:`.newmark_model`)
 ``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`)
 ``idas``    SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`)
 ``scipy``   ``scipy.integrate.solve_ivp`` (RK45, DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
@@ -25,14 +27,16 @@ from typing import Any
 
 from flexctrl.errors import SpecError
 from flexctrl.sim.base import Integrator
+from flexctrl.sim.euler import Euler
 from flexctrl.sim.implicit import CVODES, IDAS
+from flexctrl.sim.newmark_model import Newmark
 from flexctrl.sim.rk4 import RK4
 from flexctrl.sim.scipy_adapter import ScipyIntegrator
 from flexctrl.sim.trajectory import Trajectory
 
 #: Integrators by name.
 INTEGRATORS: dict[str, type[Integrator]] = {
-    cls.name: cls for cls in (RK4, CVODES, IDAS, ScipyIntegrator)
+    cls.name: cls for cls in (RK4, CVODES, IDAS, ScipyIntegrator, Euler, Newmark)
 }
 
 
@@ -64,12 +68,12 @@ def simulate(model, x0, duration: float, *, dt: float, method: str | type[Integr
     dt : float
         Step / output interval and torque hold period (s).
     method : str or Integrator subclass
-        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"`` or a class.
+        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or a class.
     u : array_like, optional
         Held joint torques (N m), shape (n_steps, n_u) or (n_u,).
     **options
-        Passed to the integrator (``u_function``, ``compile``, ``rtol``, ``method`` for scipy
-        is given as ``scipy_method``, ...).
+        Passed to the integrator (``u_function``, ``compile``, ``rtol``, ``alpha`` and ``delta``
+        for newmark, ``method`` for scipy is given as ``scipy_method``, ...).
     """
     cls = get_integrator(method)
     if "scipy_method" in options:
@@ -77,5 +81,5 @@ def simulate(model, x0, duration: float, *, dt: float, method: str | type[Integr
     return cls(model, dt, **options).run(x0, duration, u=u)
 
 
-__all__ = ["Integrator", "RK4", "CVODES", "IDAS", "ScipyIntegrator", "Trajectory", "INTEGRATORS",
+__all__ = ["Integrator", "RK4", "CVODES", "IDAS", "ScipyIntegrator", "Euler", "Newmark", "Trajectory", "INTEGRATORS",
            "get_integrator", "simulate"]
