@@ -141,3 +141,83 @@ def test_rti_on_the_three_link_arm_meets_the_real_time_target():
     assert summary["median_ms"] < 20.0
     assert summary["fallbacks"] == 0
     assert np.max(np.abs(x[:3] - op.x[:3])) < np.radians(3.0) * 0.5
+
+
+def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_model_constants(onelink):
+    """One generated library serves every target, reference and model of the same graph structure.
+
+    (A payload mass of 0 or of a value CasADi keeps as a shared constant, 0.5 here, changes the
+    structure; a stiffer link and another payload inertia do not.)
+    """
+    from flexctrl.control.nmpc import constants_as_parameters
+
+    model, op = onelink
+    fp, const = constants_as_parameters(model.functions["f"])
+    assert const.size > 0
+    x, u = np.linspace(-0.3, 0.4, model.n_x), np.array([1.5])
+    np.testing.assert_allclose(np.array(fp(x, u, const)), np.array(model.functions["f"](x, u)), rtol=1e-13, atol=1e-13)
+    a = design(model, op, NMPCSettings(**SMALL))
+    b = design(model, L.equilibrium(model, [1.1]), NMPCSettings(**SMALL))
+    stiffer = build_amm(arm_from_document({
+        "name": "onelink", "gravity": [0.0, -9.81], "payload": {"mass": 0.5, "inertia": 2e-3},
+        "links": [{"length": 1.0, "mass_per_length": 1.5, "EI": 600.0, "inertia": 1.5 / 12, "n_modes": 1,
+                   "damping_ratio": 0.03}],
+        "joints": [{"hub_mass": 0.0, "hub_inertia": 0.05, "torque_limit": 15.0}]}, "onelink.toml"), 1)
+    c = design(stiffer, L.equilibrium(stiffer, [0.5]), NMPCSettings(**SMALL, substeps=a.substeps))
+    assert not np.allclose(a.functions["params"], b.functions["params"])
+    assert a.functions["linmap"].serialize() == b.functions["linmap"].serialize()
+    assert a.functions["linmap"].serialize() == c.functions["linmap"].serialize()
+
+
+def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start(onelink):
+    model, op = onelink
+    ctrl = design(model, op, NMPCSettings(**SMALL))
+    ctrl.reset()
+    x = op.x.copy()
+    x[0] -= 0.05
+    ctrl.step(0.0, x)
+    plan = ctrl._plan.copy()
+    prepare = ctrl.functions["prepare"]
+
+    def nan_bounds(z0, w):
+        a, lba, uba = prepare(z0, w)
+        lba[3] = np.nan
+        return a, lba, uba
+
+    ctrl.functions["prepare"] = nan_bounds
+    u = ctrl.step(0.02, x)  # would be HPIPM's "Ill-posed problem detected" assertion
+    np.testing.assert_allclose(u, op.u + ctrl.problem.Su * plan[1])
+    t, reason, used = ctrl.stats.fallbacks[-1]
+    assert (t, used) == (0.02, "shift") and "NaN" in reason
+    assert ctrl._w is None  # the next sample starts from a fresh rollout
+    ctrl.functions["prepare"] = prepare
+
+    def raising_qp(**kwargs):
+        raise RuntimeError("Error in Function::call for 'nmpc_qp' [HpipmInterface]: Ill-posed problem detected")
+
+    good = ctrl.functions["qp"]
+    ctrl.functions["qp"] = raising_qp
+    u = ctrl.step(0.04, x)
+    assert np.all(np.isfinite(u))
+    assert "QP solver error" in ctrl.stats.fallbacks[-1][1] and "Ill-posed" in ctrl.stats.fallbacks[-1][1]
+    ctrl.functions["qp"] = good
+    ctrl.step(0.06, x)
+    assert ctrl.stats.status["solved"] == 2
+    assert ctrl.stats.summary()["fallbacks"] == 2
+
+
+def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
+    """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
+    sample diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step NMPC settles."""
+    from flexctrl.closedloop import run_closed_loop_scene
+    from flexctrl.spec.scene import load_scene
+
+    scene = load_scene("studies/scenes/move_joint1_30deg.toml",
+                       ["payload=0.0", "initial.q=[0.0,-150.0,-30.0]", 'target.profile="step"', "duration=4.0"])
+    lqr = run_closed_loop_scene(scene, controller="controllers/lqr.toml", on_divergence="record")
+    assert lqr.summary["metrics"]["settled"] == 1
+    nmpc = run_closed_loop_scene(scene, controller="controllers/nmpc.toml", on_divergence="record")
+    metrics = nmpc.summary["metrics"]
+    assert metrics["stable"] == 1 and metrics["settled"] == 1
+    report = nmpc.summary["controller"]
+    assert report["fallbacks"] == sum(v for k, v in report["status"].items() if k.startswith("fallback_"))

@@ -9,7 +9,7 @@ Shooting map ``F``: ``substeps`` classical RK4 steps of the model's ``f(x, u)``
 over one sample (``f`` is called, not inlined, so generated code holds it once).
 
 Real-time iteration (``mode = "rti"``, default): one Gauss-Newton SQP step per
-sample.  One CasADi Function, ``linearize(Z, V) -> (F, A, B)`` mapped over the N
+sample.  One CasADi Function, ``linearize(Z, V, p) -> (F, A, B)`` mapped over the N
 intervals (``Function.map``, compiled to C when ``compile``), gives the shooting
 ends and their Jacobians along the previous (shifted) trajectory; a second CasADi
 Function assembles the QP (fixed sparsity) and ``casadi.conic`` (HPIPM by default:
@@ -19,11 +19,42 @@ Riccati-structured interior point) solves it::
                                soft rows on C z_{k+1}, torque bounds, z_0 = z(t)
 
 The QP solution is the new trajectory (full step).  With ``sensitivities = "frozen"``
-``A_k, B_k`` are the exact transition matrices of RK4 applied to the dynamics
-linearised at ``(zb_k, vb_k)`` (one Jacobian of ``f`` per interval): an inexact-Jacobian
-SQP whose fixed points still satisfy the nonlinear shooting equations, since the gaps
-use the nonlinear ``F``.  ``"exact"`` propagates the Jacobian of ``f`` through every RK4
+``A_k, B_k`` are the products over the interval's RK4 steps of the exact transition
+matrices of RK4 applied to the dynamics linearised at the start of each step (one
+Jacobian of ``f`` per RK4 step, frozen over its four stages): an inexact-Jacobian SQP
+whose fixed points still satisfy the nonlinear shooting equations, since the gaps use
+the nonlinear ``F``.  ``"exact"`` propagates the Jacobian of ``f`` through every RK4
 stage (4 ``substeps`` Jacobians per interval).
+
+Why one Jacobian per RK4 step and not per sample (the first version): during a
+saturated transient of the three-link arm the state moves within a sample (the
+fastest elastic mode, ~2000 rad/s at no payload, turns about three times per 10 ms),
+and one Jacobian at the interval's start missed that: relative errors of 2-9 % in
+``A_k, B_k`` (2-norm, against the exact derivative) with a spurious unstable
+eigenvalue (spectral radius 1.04 against 1.007).  With the step reference the RTI fed
+on those sensitivities diverged (scaled iterates 60 -> 300 -> 1700, QP failures, NaN
+shooting ends and HPIPM's "Ill-posed problem detected" abort at payload 0,
+q0 = (0, -150, -30) deg; the plant left its bounds at (0, -60, 30) deg) where LQR and
+the linear MPC settle.  More substeps do not help (the error comes from the frozen
+state, not from h); one Jacobian per RK4 step cuts the errors 3-20 fold and the loop
+settles, at about three times the linearisation cost of the per-sample Jacobian and
+about 40 % of the exact sensitivities' (``docs/control.md``).
+
+Generated code and the operating point.  The compiled ``linearize`` takes as its
+parameter ``p`` the operating point ``(x_op, u_op)``, the scales ``(S_x, S_u)`` and every
+numeric constant of the model's ``f`` (:func:`constants_as_parameters`), and the
+reference enters only ``g``, so its code depends only on the structure of the model's
+expression graph, ``dt``, ``substeps``, the horizon and the sensitivities: a study over
+targets, references and frozen-modes configurations of one payload compiles once (the
+frozen modal constants differ per configuration but the graph does not; a payload of
+0 kg, or a value CasADi shares with its own constants, gives another structure).
+
+Failures never raise out of :meth:`NMPCController.step`: QP data with NaN (or a
+non-finite linearisation), an exception of the QP solver (CasADi's checks) and an
+unsuccessful or non-finite QP solution are recorded as fall-backs (the shifted
+previous plan, then the LQR law about the reference) with the reason, and the next
+sample linearises along a fresh rollout from the measured state instead of the
+trajectory that failed.
 
 A moving reference (:mod:`flexctrl.control.reference`) enters only the linear cost,
 ``g = g0 - H w_ref`` with ``w_ref`` the scaled reference states and feed-forward torques
@@ -40,8 +71,9 @@ previous solution; it is an offline reference (tens of seconds per solve on the
 18-state arm with CasADi's virtual machine).  FATROP, which ships with CasADi, was
 tried with the same stage-wise NLP: its structure detection accepted it but the
 solver raised at its first iteration (return flag 11, CasADi 3.8), so only IPOPT is
-offered.  The first sample after :meth:`reset` starts from the nonlinear
-rollout under the (saturated) LQR law, optionally improved by ``init_iter`` IPOPT
+offered.  The first sample after :meth:`reset` (and the one after a failure) starts
+from the nonlinear rollout under the saturated LQR law about the reference,
+``v_k = clip(v_ref,k - K (z_k - z_ref,k))``, optionally improved by ``init_iter`` IPOPT
 iterations.
 """
 
@@ -77,44 +109,111 @@ def _expanded(fun: ca.Function) -> ca.Function:
         return fun
 
 
-def interval_functions(model, dt: float, substeps: int, sensitivities: str) -> tuple[ca.Function, ca.Function]:
-    """``F(x, u) -> x_next`` and ``FJ(x, u) -> (x_next, A, B)`` over one sample, physical units."""
-    nx, nu = model.n_x, model.n_u
-    f = _expanded(model.functions["f"])
-    xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
-    fx = ca.Function("f_jac", [xs, us], [f(xs, us), ca.jacobian(f(xs, us), xs), ca.jacobian(f(xs, us), us)],
-                     ["x", "u"], ["xdot", "A", "B"], {"cse": True})
+def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
+    """``fun`` rebuilt with every numeric constant of its expression graph turned into an input.
+
+    A frozen-modes model bakes its modal constants (which depend on the payload and on
+    the configuration the modes were computed at) into ``f``; code generated from it
+    would differ per configuration.  The rebuilt Function ``fp(*inputs, c)`` computes
+    the same operations in the same order with ``c`` the vector of the graph's constants,
+    so two models whose graphs differ only in constant values share one compiled
+    library.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        An SX Function (MX Functions are expanded first).
+
+    Returns
+    -------
+    fp : casadi.Function
+        ``fun``'s inputs plus ``c`` (last); the same outputs.  ``fun`` itself (and an empty
+        ``c``) when the graph cannot be rebuilt (calls to other Functions, free
+        symbols) or the rebuilt Function does not reproduce ``fun``.
+    c : ndarray
+        The constants, in the order of the graph.
+    """
+    f = _expanded(fun)
+    if not f.is_a("SXFunction") or f.has_free():
+        return fun, np.zeros(0)
+    n_const = sum(1 for k in range(f.n_instructions()) if f.instruction_id(k) == ca.OP_CONST)
+    ins = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
+    c = ca.SX.sym("c", n_const)
+    outs = [[ca.SX(0)] * f.nnz_out(i) for i in range(f.n_out())]
+    work: dict[int, ca.SX] = {}
+    values = []
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        arg, res = f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_INPUT:
+            work[res[0]] = ins[arg[0]].nz[arg[1]]
+        elif op == ca.OP_OUTPUT:
+            outs[res[0]][res[1]] = work[arg[0]]
+        elif op == ca.OP_CONST:
+            work[res[0]] = c[len(values)]
+            values.append(f.instruction_constant(k))
+        elif len(arg) == 1 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
+            work[res[0]] = ca.SX.unary(op, work[arg[0]])
+        elif len(arg) == 2 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
+            work[res[0]] = ca.SX.binary(op, work[arg[0]], work[arg[1]])
+        else:
+            return fun, np.zeros(0)
+    out = [ca.SX(f.sparsity_out(i), ca.vertcat(*outs[i]) if outs[i] else ca.SX(0, 1)) for i in range(f.n_out())]
+    fp = ca.Function(f"{f.name()}_p", [*ins, c], out, [*f.name_in(), "c"], f.name_out())
+    const = np.array(values, dtype=float)
+    # the rebuilt graph must reproduce the original at a generic point
+    rng = np.random.default_rng(0)
+    args = [rng.uniform(-0.5, 0.5, f.sparsity_in(i).shape) for i in range(f.n_in())]
+    for a, b in zip(f(*args) if f.n_out() > 1 else [f(*args)], fp(*args, const) if f.n_out() > 1 else [fp(*args, const)]):
+        a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+        if not np.allclose(a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))):
+            return fun, np.zeros(0)
+    return fp, const
+
+
+def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, sensitivities: str | None,
+                   extra: tuple[ca.MX, ...] = ()) -> tuple[ca.Function, ca.Function | None]:
+    """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see :func:`interval_functions`).
+
+    ``sensitivities=None`` builds ``F`` only (``FJ`` is None).
+    """
     x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
+    names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
     h = dt / substeps
-    xe = x
+    xf = x
     for _ in range(substeps):
-        k1 = f(xe, u)
-        k2 = f(xe + 0.5 * h * k1, u)
-        k3 = f(xe + 0.5 * h * k2, u)
-        k4 = f(xe + h * k3, u)
-        xe = xe + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-    F = ca.Function("F", [x, u], [xe], ["x", "u"], ["x_next"])
+        k1 = f(xf, u, *extra)
+        k2 = f(xf + 0.5 * h * k1, u, *extra)
+        k3 = f(xf + 0.5 * h * k2, u, *extra)
+        k4 = f(xf + h * k3, u, *extra)
+        xf = xf + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    F = ca.Function("F", [x, u, *extra], [xf], names, ["x_next"])
+    if sensitivities is None:
+        return F, None
+    xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+    es = [ca.SX.sym(f"p{i}", e.sparsity()) for i, e in enumerate(extra)]
+    fxu = f(xs, us, *es)
+    fx = ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
     eye = ca.DM.eye(nx)
-    if sensitivities == "frozen":
-        _xd, Jx, Ju = fx(x, u)
-        hA = h * Jx
-        hA2 = ca.mtimes(hA, hA)
-        hA3 = ca.mtimes(hA2, hA)
-        Phi = eye + hA + hA2 / 2 + hA3 / 6 + ca.mtimes(hA3, hA) / 24
-        Gam = h * ca.mtimes(eye + hA / 2 + hA2 / 6 + hA3 / 24, Ju)
-        Ad, Bd = eye, ca.MX.zeros(nx, nu)
-        for _ in range(substeps):
+    xe, Ad, Bd = x, eye, ca.MX.zeros(nx, nu)
+    for _ in range(substeps):
+        if sensitivities == "frozen":
+            # one Jacobian per RK4 step, frozen over its four stages
+            k1, Jx, Ju = fx(xe, u, *extra)
+            k2 = f(xe + 0.5 * h * k1, u, *extra)
+            k3 = f(xe + 0.5 * h * k2, u, *extra)
+            k4 = f(xe + h * k3, u, *extra)
+            hA = h * Jx
+            hA2 = ca.mtimes(hA, hA)
+            hA3 = ca.mtimes(hA2, hA)
+            Phi = eye + hA + hA2 / 2 + hA3 / 6 + ca.mtimes(hA3, hA) / 24
+            Gam = h * ca.mtimes(eye + hA / 2 + hA2 / 6 + hA3 / 24, Ju)
             Ad, Bd = ca.mtimes(Phi, Ad), ca.mtimes(Phi, Bd) + Gam
-    else:
-        xe, Ad, Bd = x, eye, ca.MX.zeros(nx, nu)
-        for _ in range(substeps):
-            k1, J1x, J1u = fx(xe, u)
-            x2 = xe + 0.5 * h * k1
-            k2, J2x, J2u = fx(x2, u)
-            x3 = xe + 0.5 * h * k2
-            k3, J3x, J3u = fx(x3, u)
-            x4 = xe + h * k3
-            k4, J4x, J4u = fx(x4, u)
+        else:
+            k1, J1x, J1u = fx(xe, u, *extra)
+            k2, J2x, J2u = fx(xe + 0.5 * h * k1, u, *extra)
+            k3, J3x, J3u = fx(xe + 0.5 * h * k2, u, *extra)
+            k4, J4x, J4u = fx(xe + h * k3, u, *extra)
             dk1x, dk1u = ca.mtimes(J1x, Ad), ca.mtimes(J1x, Bd) + J1u
             dk2x = ca.mtimes(J2x, Ad + 0.5 * h * dk1x)
             dk2u = ca.mtimes(J2x, Bd + 0.5 * h * dk1u) + J2u
@@ -122,13 +221,22 @@ def interval_functions(model, dt: float, substeps: int, sensitivities: str) -> t
             dk3u = ca.mtimes(J3x, Bd + 0.5 * h * dk2u) + J3u
             dk4x = ca.mtimes(J4x, Ad + h * dk3x)
             dk4u = ca.mtimes(J4x, Bd + h * dk3u) + J4u
-            xe = xe + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
             Ad = Ad + (h / 6.0) * (dk1x + 2 * dk2x + 2 * dk3x + dk4x)
             Bd = Bd + (h / 6.0) * (dk1u + 2 * dk2u + 2 * dk3u + dk4u)
-        FJ = ca.Function("FJ", [x, u], [xe, Ad, Bd], ["x", "u"], ["x_next", "A", "B"])
-        return F, FJ
-    FJ = ca.Function("FJ", [x, u], [F(x, u), Ad, Bd], ["x", "u"], ["x_next", "A", "B"])
+        xe = xe + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    FJ = ca.Function("FJ", [x, u, *extra], [xe, Ad, Bd], names, ["x_next", "A", "B"])
     return F, FJ
+
+
+def interval_functions(model, dt: float, substeps: int, sensitivities: str) -> tuple[ca.Function, ca.Function]:
+    """``F(x, u) -> x_next`` and ``FJ(x, u) -> (x_next, A, B)`` over one sample, physical units.
+
+    ``F``: ``substeps`` classical RK4 steps of the model's ``f``.  ``FJ`` adds the
+    sensitivities ``A = dx_next/dx``, ``B = dx_next/du``: exact (``"exact"``) or, with
+    ``"frozen"``, RK4 applied to the dynamics linearised at the start of every RK4 step.
+    """
+    f = _expanded(model.functions["f"])
+    return _interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities)
 
 
 class _Layout:
@@ -171,6 +279,7 @@ class NMPCController(Controller):
         self.last: Solution | None = None
         self.timing: dict[str, list[float]] = {"linearize_qp": [], "qp": [], "total": []}
         self._reference_now = (np.zeros(problem.n), np.zeros(problem.m))
+        self._w_ref: np.ndarray | None = None
 
     def _reset(self) -> None:
         self.observer.reset()
@@ -180,10 +289,30 @@ class NMPCController(Controller):
         self.timing = {"linearize_qp": [], "qp": [], "total": []}
 
     # -- pieces ------------------------------------------------------------------------
-    def initial_guess(self, z0: np.ndarray) -> np.ndarray:
-        """Nonlinear rollout from ``z0`` under the saturated LQR law, as ``w``."""
-        Z, V = (np.array(a, dtype=float) for a in self.functions["rollout"](z0))
+    def initial_guess(self, z0: np.ndarray, w_ref: np.ndarray | None = None) -> np.ndarray:
+        """Nonlinear rollout from ``z0`` under the saturated LQR law, as ``w``.
+
+        Parameters
+        ----------
+        z0 : ndarray
+            Scaled initial state.
+        w_ref : ndarray, optional
+            Scaled reference over the horizon (as built by :meth:`cost_vector`); the law
+            is then ``v_k = clip(v_ref,k - K (z_k - z_ref,k))``.  Default: regulation to
+            the operating point.
+
+        Returns
+        -------
+        ndarray
+            ``w`` (may hold non-finite values when the rollout diverges; :meth:`_rti`
+            checks).
+        """
         lay = self.layout
+        if w_ref is None:
+            Zr, Vr = np.zeros((lay.n, lay.N)), np.zeros((lay.m, lay.N))
+        else:
+            Zr, Vr = w_ref[lay.z[:-1]].T, w_ref[lay.v].T
+        Z, V = (np.array(a, dtype=float) for a in self.functions["rollout"](z0, Zr, Vr))
         w = np.zeros(lay.nw)
         w[lay.z[0]] = z0
         for k in range(lay.N):
@@ -206,6 +335,7 @@ class NMPCController(Controller):
         for k in range(lay.N):
             w_ref[lay.v[k]] = (U[k] - self.op.u) / pb.Su
         self._reference_now = (w_ref[lay.z[0]], w_ref[lay.v[0]])
+        self._w_ref = w_ref
         return self.functions["g0"] - self.functions["Hnp"] @ w_ref
 
     def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None) -> Solution:
@@ -222,20 +352,43 @@ class NMPCController(Controller):
                         int(stats.get("iter_count", -1)), time.perf_counter() - start)
 
     def _rti(self, z0: np.ndarray, w0: np.ndarray, g: np.ndarray | None = None) -> Solution:
+        """One RTI step: linearise along ``w0``, assemble and solve the QP.
+
+        Never raises for numerical trouble: non-finite QP data (a shooting interval or its
+        sensitivities that overflowed along ``w0``), an exception of the QP solver and an
+        unsuccessful or non-finite solution all return ``ok = False`` with the reason in
+        ``status`` (the caller falls back, see :meth:`_step`).
+        """
         start = time.perf_counter()
         a, lba, uba = self.functions["prepare"](z0, w0)
         lbx, ubx = self.functions["bounds"](z0)
         mid = time.perf_counter()
+        self.timing["linearize_qp"].append(mid - start)
+        problem = qp_data_problem(w0, a, lba, uba)
+        if problem:
+            self.timing["qp"].append(0.0)
+            return Solution(False, f"non-finite QP data ({problem})", np.full_like(w0, np.nan), 0,
+                            time.perf_counter() - start)
         qp = self.functions["qp"]
         g = self.functions["g0"] if g is None else g
-        out = qp(h=self.functions["H"], g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=w0)
+        try:
+            out = qp(h=self.functions["H"], g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=w0)
+        except RuntimeError as exc:  # CasADi's checks (e.g. HPIPM's ill-posed bounds) raise
+            end = time.perf_counter()
+            self.timing["qp"].append(end - mid)
+            text = " ".join(str(exc).split())
+            return Solution(False, f"QP solver error: {text[-300:]}", np.full_like(w0, np.nan), 0, end - start)
         end = time.perf_counter()
         stats = qp.stats()
         w = np.array(out["x"], dtype=float).ravel()
-        self.timing["linearize_qp"].append(mid - start)
         self.timing["qp"].append(end - mid)
         ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
-        status = "solved" if ok else str(stats.get("unified_return_status", stats.get("return_status", "failed")))
+        if ok:
+            status = "solved"
+        elif not np.all(np.isfinite(w)):
+            status = "non-finite QP solution"
+        else:
+            status = str(stats.get("unified_return_status", stats.get("return_status", "failed")))
         return Solution(ok, status, w, int(stats.get("iter_count", -1) or -1), end - start)
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
@@ -243,7 +396,7 @@ class NMPCController(Controller):
         z0 = (x - self.op.x) / self.problem.Sx
         g = self.cost_vector(t)
         if self._w is None:
-            w0 = self.initial_guess(z0)
+            w0 = self.initial_guess(z0, self._w_ref)
             if self.settings.mode == "rti" and self.settings.init_iter > 0:
                 init = self._nlp(z0, w0, self.settings.init_iter, g)
                 if np.all(np.isfinite(init.w)):
@@ -271,10 +424,12 @@ class NMPCController(Controller):
             v = self._plan[0]
         else:
             self._age += 1
+            # the linearisation trajectory led to a failed QP: start the next sample from a
+            # fresh rollout of the nonlinear model from the measured state
+            self._w = None
             if self._plan is not None and self._age < lay.N:
                 v = self._plan[self._age]
                 used = "shift"
-                self._w = self._w[lay.shift]  # keep warm starts moving with time
             else:
                 z_ref, v_ref = self._reference_now
                 v = np.clip(v_ref - self.problem.K @ (z0 - z_ref), self.problem.v_lo, self.problem.v_hi)
@@ -286,33 +441,68 @@ class NMPCController(Controller):
         return self.op.u + self.problem.Su * v
 
 
+def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
+    """What makes the RTI's QP data unusable, or ``""``.
+
+    Infinite bounds are legitimate (one-sided soft rows); NaN anywhere, a non-finite
+    linearisation point or constraint matrix, ``lba = +inf`` or ``uba = -inf`` are not
+    (HPIPM would abort with an assertion).
+    """
+    if not np.all(np.isfinite(w0)):
+        return "non-finite linearisation trajectory"
+    if not np.all(np.isfinite(np.asarray(a.nonzeros() if hasattr(a, "nonzeros") else a, dtype=float))):
+        return "non-finite sensitivities"
+    lo, hi = np.asarray(lba, dtype=float).ravel(), np.asarray(uba, dtype=float).ravel()
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
+        return "NaN in the constraint bounds"
+    if np.any(lo == np.inf) or np.any(hi == -np.inf):
+        return "infinite shooting gap"
+    return ""
+
+
 def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int):
     """The CasADi Functions of the NMPC (see the module docstring)."""
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
-    F, FJ = interval_functions(model, plant.dt, substeps, settings.sensitivities)
-    xop, uop = ca.DM(plant.op.x), ca.DM(plant.op.u)
-    Sx, Su = ca.DM(pb.Sx), ca.DM(pb.Su)
+    F, _ = _interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
+    # The compiled part sees the operating point, the scales and the model's constants
+    # as inputs, so one library serves every operating point, reference and (frozen-modes)
+    # configuration whose model graph has the same structure.
+    fp, const = constants_as_parameters(model.functions["f"])
+    nc = const.size
+    extra = (ca.MX.sym("c", nc),) if nc else ()
+    _, FJp = _interval_core(fp if nc else _expanded(model.functions["f"]), n, m, plant.dt, substeps,
+                            settings.sensitivities, extra)
+    params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
+    p = ca.MX.sym("p", params.size)
+    xop, uop = p[:n], p[n:n + m]
+    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
     # scaled interval map, mapped over the horizon
     z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    xn, Ad, Bd = FJ(xop + Sx * z, uop + Su * v)
+    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *((p[2 * n + 2 * m:],) if nc else ()))
     Fs = (xn - xop) / Sx
-    As = ca.mtimes(ca.diag(1 / Sx), ca.mtimes(Ad, ca.diag(Sx)))
-    Bs = ca.mtimes(ca.diag(1 / Sx), ca.mtimes(Bd, ca.diag(Su)))
-    lin = ca.Function("nmpc_interval", [z, v], [Fs, As, Bs], ["z", "v"], ["F", "A", "B"])
-    linmap = lin.map(N)
+    As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
+    Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
+    lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
+    linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
     compiled = False
+    compile_seconds = 0.0
+    cache_hit = False
     if settings.compile:
         from flexctrl.sim.compile import compile_function
 
         result = compile_function(linmap)
         linmap, compiled = result.function, result.compiled
-    Fz = ca.Function("nmpc_F", [z, v], [(F(xop + Sx * z, uop + Su * v) - xop) / Sx])
+        compile_seconds, cache_hit = result.compile_seconds, result.cache_hit
+    P = ca.DM(params)
+    xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
+    zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
+    Fz = ca.Function("nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d])
     # QP assembly: one Function of (z0, w)
     z0 = ca.MX.sym("z0", n)
     w = ca.MX.sym("w", lay.nw)
     Z, V, _S = lay.split(w)
-    Fk, Ak, Bk = linmap(Z[:, :N], V)
+    Fk, Ak, Bk = linmap(Z[:, :N], V, P)
     C = ca.DM(pb.C)
     rows, lba, uba = [], [], []
     for k in range(N):
@@ -372,15 +562,16 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
         opts.update({"osqp": {"verbose": False, "eps_abs": 1e-5, "eps_rel": 1e-5, "max_iter": 4000, "polishing": True}})
     qp = ca.conic("nmpc_qp", settings.qp_solver, {"h": Hs.sparsity(), "a": a_sp}, opts)
     # rollout under saturated LQR (initial guess)
-    zr = ca.MX.sym("z", n)
-    vr = ca.fmin(ca.fmax(-ca.mtimes(ca.DM(pb.K), zr), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
-    step = ca.Function("nmpc_lqr_step", [zr], [Fz(zr, vr), vr])
+    zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
+    vr = ca.fmin(ca.fmax(vref - ca.mtimes(ca.DM(pb.K), zr - zref), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
+    step = ca.Function("nmpc_lqr_step", [zr, zref, vref], [Fz(zr, vr), vr])
     rollout = _rollout(step, N, n, m)
     import scipy.sparse as sp
 
     functions = {"prepare": prepare, "bounds": bounds, "qp": qp, "H": Hs, "g0": g, "Hnp": sp.csr_matrix(H),
                  "rollout": rollout,
-                 "linmap": linmap, "F": Fz}
+                 "linmap": linmap, "F": Fz, "params": params,
+                 "build": {"compile_seconds": compile_seconds, "cache_hit": cache_hit, "n_constants": nc}}
     # full NLP (also the RTI initialisation)
     if settings.mode == "full" or settings.init_iter > 0:
         functions.update(_nlp_functions(settings, pb, lay, Fz, H, g))
@@ -388,14 +579,16 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
 
 
 def _rollout(step: ca.Function, N: int, n: int, m: int) -> ca.Function:
+    """``rollout(z0, Z_ref, V_ref) -> (Z, V)``: ``N`` closed-loop steps of ``step(z, z_ref, v_ref)``."""
     z0 = ca.MX.sym("z0", n)
+    Zr, Vr = ca.MX.sym("Z_ref", n, N), ca.MX.sym("V_ref", m, N)
     Z, V = [], []
     z = z0
-    for _ in range(N):
-        z, vk = step(z)
+    for k in range(N):
+        z, vk = step(z, Zr[:, k], Vr[:, k])
         Z.append(z)
         V.append(vk)
-    return ca.Function("nmpc_rollout", [z0], [ca.horzcat(*Z), ca.horzcat(*V)])
+    return ca.Function("nmpc_rollout", [z0, Zr, Vr], [ca.horzcat(*Z), ca.horzcat(*V)])
 
 
 def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: ca.Function, H: np.ndarray,
@@ -428,7 +621,12 @@ def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: 
 
 
 def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings) -> NMPCController:
-    """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once)."""
+    """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
+
+    The compiled linearisation is shared (disk cache) by every ``op`` and every model with
+    the same expression-graph structure; ``functions["build"]`` reports the compile time,
+    whether the library came from the cache and how many model constants were lifted.
+    """
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)

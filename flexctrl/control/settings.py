@@ -465,7 +465,8 @@ class NMPCSettings:
         linearisation at the target (RK4 is stable on the imaginary axis up to 2.83).
     sensitivities : {"frozen", "exact"}
         RTI Jacobians of each shooting interval: of RK4 applied to the dynamics linearised
-        at the interval's start (cheap: one Jacobian of ``f`` per interval), or exact
+        at the start of each RK4 step (one Jacobian of ``f`` per RK4 step; one per interval
+        was 2-9 % wrong in saturated transients and drove the RTI unstable), or exact
         derivatives of the nonlinear RK4 map (one Jacobian of ``f`` per RK4 stage).
         The shooting gaps always use the nonlinear RK4 map.
     weights : Weights
