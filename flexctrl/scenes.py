@@ -60,19 +60,10 @@ class SceneResult:
 def run_scene(scene, out: str | Path | None = None, **options: Any) -> SceneResult:
     """Run ``scene`` (any registered kind), writing results to ``out`` when given.
 
-    Raises
-    ------
-    SpecError
-        For ``fidelity = "auto"`` on a closed-loop plant: the controller's torques,
-        which set the plant's excitation, are known only by running the loop, so
-        auto is resolved for ``kind = "arm"`` scenes only.
+    ``fidelity = "auto"`` is resolved by the scene kind's runner: for ``kind = "arm"``
+    by :func:`run_arm_scene`, for ``kind = "closed_loop"`` (the plant's fidelity) by
+    :func:`flexctrl.closedloop.run_closed_loop_scene`.
     """
-    plant = getattr(scene, "plant", None)
-    fidelity = options.get("fidelity")
-    if plant is not None and str(fidelity if fidelity is not None else plant.fidelity) == "auto":
-        raise SpecError("value 'auto' is resolved for kind = \"arm\" scenes only (a closed loop's excitation comes "
-                        "from its controller); allowed: 'rigid', 'amm:N' or 'fem:N' for the plant",
-                        source=scene.source, key="fidelity")
     _reader, runner = SCENE_KINDS[scene.kind]
     return resolve(runner)(scene, out, **options)
 

@@ -76,8 +76,8 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.analysis.tip_error import tip_error
-from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.analysis.tip_error import TipError, tip_error
+from flexctrl.errors import FlexctrlError, SimulationError, SpecError
 from flexctrl.fidelity import Fidelity, parse_fidelity
 
 #: RK4's stability limit on ``omega * dt`` (as :class:`flexctrl.sim.rk4.RK4`) and the margin used.
@@ -113,6 +113,10 @@ class RunRecord:
         Model build plus integrator setup (compilation or cache load) in this process (s).
     time, tip : numpy.ndarray
         Sample times (s) and tip positions (m).
+    diverged_at : float or None
+        Time (s) a closed loop diverged (its tip path stops there), None when it did not.
+    torque : numpy.ndarray or None
+        Joint torques (N m) on ``time`` (closed-loop runs: the controller's), else None.
     """
 
     fidelity: str
@@ -123,12 +127,17 @@ class RunRecord:
     build_time_s: float
     time: np.ndarray = field(repr=False)
     tip: np.ndarray = field(repr=False)
+    diverged_at: float | None = None
+    torque: np.ndarray | None = field(default=None, repr=False)
 
     def facts(self) -> dict[str, Any]:
         """JSON-ready settings and timings."""
-        return {"fidelity": self.fidelity, "integrator": self.integrator, "dt_s": self.dt,
-                "omega_max_rad_s": self.omega_max, "omega_max_dt": self.omega_max * self.dt,
-                "wall_time_s": self.wall_time_s, "build_time_s": self.build_time_s}
+        facts = {"fidelity": self.fidelity, "integrator": self.integrator, "dt_s": self.dt,
+                 "omega_max_rad_s": self.omega_max, "omega_max_dt": self.omega_max * self.dt,
+                 "wall_time_s": self.wall_time_s, "build_time_s": self.build_time_s}
+        if self.diverged_at is not None:
+            facts["diverged_at_s"] = self.diverged_at
+        return facts
 
 
 @dataclass(frozen=True)
@@ -233,7 +242,7 @@ class _Keyed:
 
 def clear_caches() -> None:
     """Forget every cached model, integrator, run and choice of this process."""
-    for fn in (cached_model, _cached_integrator, _run_cached, _choose_cached):
+    for fn in (cached_model, _cached_integrator, _run_cached, _choose_cached, _closed_run_cached, _choose_closed_cached):
         fn.cache_clear()
 
 
@@ -358,7 +367,9 @@ def prepared(scene) -> tuple[Any, Any]:
 
 
 def _distance(a: RunRecord, b: RunRecord):
-    """Tip distance of ``b`` from ``a`` on ``a``'s samples (the finer run goes first)."""
+    """Tip distance of ``b`` from ``a`` on ``a``'s samples (the finer run goes first); infinite if either diverged."""
+    if a.diverged_at is not None or b.diverged_at is not None:
+        return TipError(rms=math.inf, max=math.inf)
     first, second = (a, b) if a.dt <= b.dt else (b, a)
     return tip_error(first.time, first.tip, second.time, second.tip)
 
@@ -464,13 +475,40 @@ def _choose_cached(keyed: _Keyed, tol: float, top: int, reference: str, safety: 
             "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": _rung(start),
             "lowest_rung_for_initial_state": _rung(low)}
 
+    ref_model = _model_for(scene, reference)
+    ref_dt = scene.dt / max(1, math.ceil(scene.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
+    return _walk_and_judge(
+        name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+        run_rung=lambda m: simulate_rung(scene, _rung(m)),
+        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt), reference_dt=ref_dt)
+
+
+def _walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
+                    rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
+                    runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None) -> FidelityChoice:
+    """Method steps 2 and 3, shared by arm and closed-loop scenes.
+
+    Parameters
+    ----------
+    run_rung : callable
+        ``run_rung(m) -> RunRecord``: rung ``m`` (0 = rigid) with its own integrator and step.
+    run_reference : callable
+        ``run_reference(dt) -> RunRecord``: the reference model with RK4 at step ``dt`` (s).
+    reference_dt : float
+        The reference's step (s).
+    runs : dict, optional
+        Rungs already run (by rung number).
+    extra : dict, optional
+        Added to the evidence.
+    """
+    ref_n = parse_fidelity(reference).count
     # (b) the walk, estimates from the (two) rungs above
     distances: dict[int, Any] = {}
-    runs: dict[int, RunRecord] = {}
+    runs = dict(runs or {})
 
     def run(m: int) -> RunRecord:
         if m not in runs:
-            runs[m] = simulate_rung(scene, _rung(m))
+            runs[m] = run_rung(m)
         return runs[m]
 
     def estimate(m: int) -> float:
@@ -488,10 +526,13 @@ def _choose_cached(keyed: _Keyed, tol: float, top: int, reference: str, safety: 
     met = estimate(n) <= tol
 
     # (c) the reference and its convergence
-    ref_model = _model_for(scene, reference)
-    ref_dt = scene.dt / max(1, math.ceil(scene.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
-    ref_run = simulate_rung(scene, reference, "rk4", ref_dt)
-    half = simulate_rung(scene, reference, "rk4", ref_dt / 2)
+    ref_dt = reference_dt
+    ref_run = run_reference(ref_dt)
+    half = run_reference(ref_dt / 2)
+    if ref_run.diverged_at is not None or half.diverged_at is not None:
+        raise SimulationError(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
+                              f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
+                              "choice against")
     below = run(ref_n - 1)
     finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
     step_check = _distance(half, ref_run).max
@@ -523,14 +564,14 @@ def _choose_cached(keyed: _Keyed, tol: float, top: int, reference: str, safety: 
                    "model) <= tolerance; walk from the bandwidth rule's start"),
         "safety": safety, "ladder": [_rung(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
         "reference": {**ref_run.facts(), "convergence": convergence},
-        "candidates": rungs, "scene": scene.name,
+        "candidates": rungs, "scene": name, **(extra or {}),
     }
     if not met:
         best = min(distances, key=lambda m: max(distances[m]))
         best_estimate = safety * max(distances[best])
         evidence["best"] = {"rung": _rung(best), "estimated_error_m": best_estimate}
         raise ToleranceUnreachable(
-            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{scene.name}': the best estimate is "
+            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
             f"{best_estimate:.3g} m ({_rung(best)}, {safety:g} x its largest distance to the rungs above); "
             f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
 
@@ -543,3 +584,239 @@ def _choose_cached(keyed: _Keyed, tol: float, top: int, reference: str, safety: 
         reference_error_rms=err.rms,
         cost_ratio=chosen.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf,
         integrator=chosen.integrator, dt=chosen.dt, evidence=evidence)
+
+
+# -- closed-loop scenes -------------------------------------------------------------------------
+def sampled_bandwidth(torque: np.ndarray, h: float, *, energy_fraction: float = 0.99) -> float | None:
+    """Frequency (Hz) below which ``energy_fraction`` of sampled torques' energy lies.
+
+    Parameters
+    ----------
+    torque : numpy.ndarray
+        Torques (N m), shape (T, n_joints), sampled every ``h`` s; their mean is removed
+        first (a held final torque is no excitation), then they are zero-padded to four
+        times their length.
+    h : float
+        Sample period (s).
+
+    Returns
+    -------
+    float or None
+        None when the torques are constant.
+    """
+    torque = np.asarray(torque, dtype=float)
+    torque = torque - torque.mean(axis=0)
+    if not np.any(torque):
+        return None
+    n = torque.shape[0]
+    n_fft = 1 << int(math.ceil(math.log2(4 * n)))
+    spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)
+    spectrum[1:] *= 2.0
+    cumulative = np.cumsum(spectrum) / spectrum.sum()
+    freqs = np.fft.rfftfreq(n_fft, h)
+    return float(freqs[min(int(np.searchsorted(cumulative, energy_fraction)), freqs.size - 1)])
+
+
+def controller_digest(path: str | Path) -> str:
+    """sha256 of a controller file's bytes (hex)."""
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def closed_loop_key(scene, controller: str | Path | None = None, overrides: tuple[str, ...] = ()) -> str:
+    """A canonical string of everything that changes a closed loop's simulation except the plant fidelity.
+
+    The scene's settings (plant, payload, initial configuration, target, reference,
+    design payload / fidelity / configuration, noise and seed, metrics windows), the
+    model file's modification time, the controller file's path, sha256 and overrides.
+    """
+    settings = scene.settings()
+    for name in ("fidelity", "tolerance_m", "name", "source", "fft_span", "fft_peaks", "controller"):
+        settings.pop(name, None)
+    path = Path(scene.plant.model)
+    settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
+    ctrl = controller or scene.controller
+    settings["controller_file"] = None if ctrl is None else str(Path(ctrl).resolve())
+    settings["controller_sha256"] = None if ctrl is None or not Path(ctrl).is_file() else controller_digest(ctrl)
+    settings["controller_overrides"] = list(overrides)
+    return json.dumps(settings, sort_keys=True, default=str)
+
+
+class _KeyedLoop:
+    """A closed-loop scene with its controller file and overrides, carried through ``lru_cache`` by :func:`closed_loop_key`."""
+
+    def __init__(self, scene, controller, overrides: tuple[str, ...]):
+        self.scene, self.controller, self.overrides = scene, controller, tuple(overrides)
+        self.key = closed_loop_key(scene, controller, self.overrides)
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _KeyedLoop) and other.key == self.key
+
+
+def simulate_closed_rung(keyed: _KeyedLoop, fidelity: str, dt: float | None = None) -> RunRecord:
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4), cached per process.
+
+    The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
+    every rung is compared on the same times without interpolation.
+    """
+    scene = keyed.scene.plant
+    if dt is None:
+        model = _model_for(scene, fidelity)
+        dt = rk4_step(model.omega_max, scene.dt)
+    return _closed_run_cached(keyed, fidelity, float(dt))
+
+
+@functools.lru_cache(maxsize=64)
+def _closed_run_cached(keyed: _KeyedLoop, fidelity: str, dt: float) -> RunRecord:
+    from flexctrl.closedloop import closed_loop_tip_path
+
+    scene = keyed.scene
+    stride = int(round(scene.plant.dt / dt))
+    result = closed_loop_tip_path(scene, fidelity, dt, controller=keyed.controller, overrides=keyed.overrides,
+                                  stride=stride)
+    return RunRecord(fidelity=fidelity, integrator="rk4", dt=dt, omega_max=result["omega_max"],
+                     wall_time_s=result["wall_time_s"], build_time_s=result["build_time_s"], time=result["time"],
+                     tip=result["tip"], diverged_at=result["diverged_at"], torque=result["torque"])
+
+
+def choose_closed_loop_fidelity(
+    scene,
+    tol: float,
+    *,
+    controller: str | Path | None = None,
+    overrides: tuple[str, ...] | list[str] = (),
+    top: int = 4,
+    reference: str | Fidelity | None = None,
+    safety: float = 2.0,
+    energy_fraction: float = 0.99,
+    bandwidth_factor: float = 5.0,
+    reference_omega_dt: float = 0.5,
+) -> FidelityChoice:
+    """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a closed loop's tip within ``tol``.
+
+    As :func:`choose_fidelity`, with every candidate a whole closed-loop run: the
+    controller (the scene's or ``controller`` with ``overrides``) designed on the
+    scene's ``controller_fidelity`` (pinned: the plant's fidelity is what is chosen;
+    :func:`flexctrl.closedloop.pin_design` gives ``amm:2`` when the scene names none),
+    its payload and configuration, the same for every rung; the plant at the rung, RK4
+    at the rung's step (the scene's ``dt`` divided by the smallest whole number that
+    makes ``omega_max * dt <= 0.9 * 2.785``).  Differences from the arm method:
+
+    * The excitation is the controller's torque, known only by running the loop, so
+      the bandwidth rule (method step 1) reads the torques of a first run with the
+      plant at the design model's rung (clipped to the ladder), with their mean
+      removed; the walk then starts where the rule says.
+    * Tip paths are compared on the scene's grid (``dt``), where every rung and the
+      reference have samples (their steps divide it), not at every plant step.
+    * A candidate whose loop diverges has an infinite distance (it cannot be chosen);
+      a diverging reference raises :class:`~flexctrl.errors.SimulationError`.
+
+    Parameters
+    ----------
+    scene : ClosedLoopScene
+        Its plant's fidelity is ignored; ``controller_fidelity`` must be set (see
+        :func:`flexctrl.closedloop.pin_design`).
+    tol : float
+        Tolerance on the largest tip-position distance (m), > 0.
+    controller : str or Path, optional
+        Controller file (default: the scene's ``controller``).
+    overrides : sequence of str
+        ``KEY=VALUE`` overrides of the controller file.
+    top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt
+        As in :func:`choose_fidelity`.
+
+    Returns
+    -------
+    FidelityChoice
+        ``integrator`` is ``"rk4"`` and ``dt`` the plant step (s) to run the choice with.
+
+    Raises
+    ------
+    SpecError
+        Bad tolerance, option, or a scene without controller or ``controller_fidelity``.
+    ToleranceUnreachable
+        When no candidate's estimate meets ``tol``.
+    SimulationError
+        When the reference loop diverges.
+    """
+    tol = check_tolerance(tol, key="tolerance")
+    if getattr(scene, "kind", None) != "closed_loop":
+        raise SpecError(f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported here; allowed: "
+                        "a kind = \"closed_loop\" scene (choose_fidelity takes arm scenes)",
+                        source=getattr(scene, "source", None), key="kind")
+    if scene.controller_fidelity is None or scene.controller_fidelity.kind == "auto":
+        raise SpecError(f"value {str(scene.controller_fidelity) if scene.controller_fidelity else None!r} is not allowed "
+                        "when the plant is chosen; allowed: a concrete design model, e.g. 'amm:2' "
+                        "(flexctrl.closedloop.pin_design sets the default)", source=scene.source, key="controller_fidelity")
+    if scene.plant.integrator != "rk4":
+        raise SpecError(f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed loop; "
+                        "allowed: 'rk4' (the loop integrates the plant with RK4)", source=scene.source, key="integrator")
+    if (controller or scene.controller) is None:
+        raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source,
+                        key="controller")
+    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
+        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
+    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
+    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
+        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
+                        key="reference")
+    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
+                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
+                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
+            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+    keyed = _KeyedLoop(scene, controller, tuple(overrides))
+    return _choose_closed_cached(keyed, tol, top, str(ref), float(safety), float(energy_fraction),
+                                 float(bandwidth_factor), float(reference_omega_dt))
+
+
+@functools.lru_cache(maxsize=64)
+def _choose_closed_cached(keyed: _KeyedLoop, tol: float, top: int, reference: str, safety: float,
+                          energy_fraction: float, bandwidth_factor: float, reference_omega_dt: float) -> FidelityChoice:
+    started = time.perf_counter()
+    scene = keyed.scene
+    plant = scene.plant
+    low = required_modes(plant)
+    if low > top:
+        raise SpecError(f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
+                        f"allowed: top >= {low}", source=scene.source, key="initial.qf")
+    design = scene.controller_fidelity
+    design_rung = 0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
+    first = min(max(low, design_rung), top)
+    runs = {first: simulate_closed_rung(keyed, _rung(first))}
+    ref_model = _model_for(plant, reference)
+    link_hz = [[w / (2 * math.pi) for w in link] for link in ref_model.info.get("link_frequencies_rad_s", [])]
+    record = runs[first]
+    bandwidth = None
+    if record.torque is not None and record.diverged_at is None and record.time.size > 2:
+        bandwidth = sampled_bandwidth(record.torque, float(record.time[1] - record.time[0]),
+                                      energy_fraction=energy_fraction)
+    if bandwidth is None:
+        start, kept = first, None
+    else:
+        limit = bandwidth_factor * bandwidth
+        kept = [sum(1 for f in link if f <= limit) for link in link_hz]
+        start = min(max([low, *kept]), top)
+    rule = {"excitation_bandwidth_hz": bandwidth, "energy_fraction": energy_fraction, "factor": bandwidth_factor,
+            "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
+            "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": _rung(start),
+            "lowest_rung_for_initial_state": _rung(low),
+            "torques_from": f"the closed loop with the plant at {_rung(first)} (the design model's rung)"}
+    ref_dt = plant.dt / max(1, math.ceil(plant.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
+    extra = {"kind": "closed_loop", "controller": str(keyed.controller or scene.controller),
+             "controller_overrides": list(keyed.overrides), "design_fidelity": str(design),
+             "comparison_grid_dt_s": plant.dt}
+    choice = _walk_and_judge(
+        name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+        run_rung=lambda m: simulate_closed_rung(keyed, _rung(m)),
+        run_reference=lambda dt: simulate_closed_rung(keyed, reference, dt), reference_dt=ref_dt, runs=runs,
+        extra=extra)
+    choice.evidence["method"] = ("closed loop (controller designed once on the pinned design model) with the plant at "
+                                 "each rung; lowest rung whose safety * (largest tip distance to the next two rungs, up "
+                                 "to the reference model) <= tolerance; walk from the bandwidth rule's start")
+    choice.evidence["choosing_time_s"] = time.perf_counter() - started
+    return choice

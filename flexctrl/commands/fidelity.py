@@ -1,7 +1,12 @@
 """``flexctrl fidelity SCENE --tol METRES``: the cheapest model that keeps a scene's tip within a tolerance.
 
 Runs :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` on a ``kind = "arm"``
-scene (its own ``fidelity`` is ignored) and prints the choice with its evidence:
+scene, or :func:`~flexctrl.analysis.auto_fidelity.choose_closed_loop_fidelity` on a
+``kind = "closed_loop"`` scene (the plant's fidelity is chosen, the controller
+designed once on ``controller_fidelity``, else on the scene's own plant fidelity,
+``amm:2`` when that is ``auto``; ``--controller``
+overrides the scene's controller file), the scene's own ``fidelity`` ignored, and
+prints the choice with its evidence:
 the modal-bandwidth rule, every rung simulated (step, wall time, distance to the
 next rung, error estimate, error against the reference) and the reference with
 its convergence checks.  ``--json`` prints one JSON object whose first keys are
@@ -17,6 +22,7 @@ achievable estimate; with ``--json`` the evidence is still printed to stdout).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 
@@ -25,11 +31,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "fidelity",
         help="choose the cheapest model (rigid, amm:N) that keeps a scene's tip within a tolerance",
-        description="Simulates an arm scene on the ladder rigid, amm:1, ..., amm:TOP, estimates each rung's tip error "
+        description="Simulates an arm scene (or a closed loop with the plant) on the ladder rigid, amm:1, ..., amm:TOP, estimates each rung's tip error "
         "by its distance to the next rung (times a safety factor), starts the walk where the torque's bandwidth "
         "says, and checks the choice against a converged reference (amm:TOP+1 at a small RK4 step). Units: m, s.",
     )
-    parser.add_argument("scene", metavar="SCENE", help="arm scene file, e.g. studies/scenes/bangbang.toml")
+    parser.add_argument("scene", metavar="SCENE", help="arm or closed-loop scene file, e.g. studies/scenes/bangbang.toml")
+    parser.add_argument("--controller", metavar="FILE",
+                        help="controller file for a closed-loop scene (default: the scene's 'controller')")
     parser.add_argument("--tol", type=float, metavar="METRES",
                         help="tolerance on the largest tip-position error (m); default: the scene's 'tolerance'")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -45,21 +53,39 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from flexctrl.analysis.auto_fidelity import ToleranceUnreachable, check_tolerance, choose_fidelity
     from flexctrl.errors import SpecError
+    from flexctrl.fidelity import parse_fidelity
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
-    if scene.kind != "arm":
-        raise SpecError(f"scene kind '{scene.kind}' is not supported; allowed: a kind = \"arm\" scene",
+    if scene.kind not in ("arm", "closed_loop"):
+        raise SpecError(f"scene kind '{scene.kind}' is not supported; allowed: 'arm', 'closed_loop'",
                         source=args.scene, key="kind")
+    if args.controller is not None and scene.kind != "closed_loop":
+        raise SpecError(f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; allowed: "
+                        "--controller with a closed-loop scene only", source=args.scene, key="--controller")
+    tolerance = scene.tolerance if scene.kind == "arm" else scene.plant.tolerance
     if args.tol is None:
-        if scene.tolerance is None:
+        if tolerance is None:
             raise SpecError("is missing and the scene sets no 'tolerance'; allowed: a number > 0 (m)",
                             source=args.scene, key="--tol")
-        tol = scene.tolerance
+        tol = tolerance
     else:
         tol = check_tolerance(args.tol, source=args.scene, key="--tol")
     try:
-        choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety)
+        if scene.kind == "closed_loop":
+            from flexctrl.analysis.auto_fidelity import choose_closed_loop_fidelity
+            from flexctrl.closedloop import check_auto, pin_design
+
+            design = scene.controller_fidelity
+            if design is None and scene.plant.fidelity.kind != "auto":
+                design = scene.plant.fidelity  # the model the scene's controller is designed on
+            auto = dataclasses.replace(scene, controller_fidelity=design, plant=dataclasses.replace(
+                scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol))
+            check_auto(auto, args.controller)
+            choice = choose_closed_loop_fidelity(pin_design(auto), tol, controller=args.controller, top=args.top,
+                                                 reference=args.reference, safety=args.safety)
+        else:
+            choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety)
     except ToleranceUnreachable as exc:
         if args.json:
             print(json.dumps({"choice": None, "error": str(exc), **exc.evidence}, indent=2, default=_json_default))
