@@ -27,10 +27,9 @@ import os
 from typing import ClassVar, Sequence
 
 import casadi as ca
-import numpy as np
 
 from flexctrl.sim.base import output_function, try_expand
-from flexctrl.sim.compile import DEFAULT_FLAGS, compile_function
+from flexctrl.sim.compile import DEFAULT_FLAGS
 from flexctrl.sim.rk4 import RK4
 
 
@@ -45,17 +44,6 @@ def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Func
     torque = u if u_function is None else u + ca.vec(u_function(t))
     x_next = x + h * f(x, torque)
     return ca.Function("euler_step", [x, t, u, h], [x_next, outputs(x_next)], ["x", "t", "u", "h"], ["x_next", "y_next"])
-
-
-def euler_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
-    """``euler_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
-    acc = step.mapaccum(n_steps)
-    x0 = ca.MX.sym("x0", step.size1_in(0))
-    T = ca.MX.sym("T", 1, n_steps)
-    U = ca.MX.sym("U", step.size1_in(2), n_steps)
-    h = ca.MX.sym("h")
-    X, Y = acc(x0, T, U, ca.repmat(h, 1, n_steps))
-    return ca.Function(f"euler_loop{n_steps}", [x0, T, U, h], [X, Y], ["x0", "T", "U", "h"], ["X", "Y"])
 
 
 class Euler(RK4):
@@ -83,18 +71,9 @@ class Euler(RK4):
         super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor,
                          compile=compile, cache_dir=cache_dir, flags=flags, expand=expand)
 
-    def _setup(self) -> None:
-        loop = euler_loop_function(euler_step_function(self.model, self.u_function), self.chunk)
-        self.compiled = compile_function(loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags)
-        # Bound numpy buffers, as in RK4._setup (CasADi is column-major: an (rows x chunk) matrix is (chunk, rows) in C order).
-        n = self.chunk
-        self._args = [np.zeros(self.model.n_x), np.zeros(n), np.zeros((n, self.model.n_u)), np.array([self.dt])]
-        self._res = [np.zeros((n, self.model.n_x)), np.zeros((n, loop.size1_out(1)))]
-        self._buffer, self._evaluate = self.compiled.function.buffer()
-        for i, a in enumerate(self._args):
-            self._buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self._res):
-            self._buffer.set_res(i, memoryview(r))
+    def step_function(self) -> ca.Function:
+        """The explicit Euler step, chained and compiled by :meth:`RK4._setup`."""
+        return euler_step_function(self.model, self.u_function)
 
     def stability_advice(self, states=()) -> str:
         """Euler-specific advice: no step is stable on an undamped mode (see module docstring)."""

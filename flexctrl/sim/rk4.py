@@ -72,15 +72,20 @@ def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: b
     return step.expand() if expand else step
 
 
-def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
-    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
+def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca.Function:
+    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining any one-step map ``step(x, t, u, h)``."""
     acc = step.mapaccum(n_steps)
     x0 = ca.MX.sym("x0", step.size1_in(0))
     T = ca.MX.sym("T", 1, n_steps)
     U = ca.MX.sym("U", step.size1_in(2), n_steps)
     h = ca.MX.sym("h")
     X, Y = acc(x0, T, U, ca.repmat(h, 1, n_steps))
-    return ca.Function(f"rk4_loop{n_steps}", [x0, T, U, h], [X, Y], ["x0", "T", "U", "h"], ["X", "Y"])
+    return ca.Function(f"{name}{n_steps}", [x0, T, U, h], [X, Y], ["x0", "T", "U", "h"], ["X", "Y"])
+
+
+def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
+    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
+    return loop_function(step, n_steps, "rk4_loop")
 
 
 class RK4(Integrator):
@@ -131,9 +136,12 @@ class RK4(Integrator):
         })
         return out
 
+    def step_function(self) -> ca.Function:
+        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` that :meth:`_setup` chains and compiles."""
+        return rk4_step_function(self.model, self.u_function, expand=self.expand)
+
     def _setup(self) -> None:
-        step = rk4_step_function(self.model, self.u_function, expand=self.expand)
-        loop = rk4_loop_function(step, self.chunk)
+        loop = loop_function(self.step_function(), self.chunk, f"{self.name}_loop")
         self.compiled = compile_function(loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags)
         # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per chunk.
         # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows) array.
