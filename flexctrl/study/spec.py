@@ -508,8 +508,14 @@ def _nest_dotted_keys(document: dict, source: str) -> dict:
         if not isinstance(table, dict):
             continue
         nested: dict[str, Any] = {}
+        leaves = {key for key, value in table.items() if "." not in key and not isinstance(value, dict)}
         for key, value in table.items():
             parts = key.split(".")
+            if len(parts) > 1 and parts[0] in leaves:
+                # a file axis and an override of that file, e.g. grid.scene = [files] with
+                # grid."scene.method" = [...]: TOML cannot nest both, so the override stays quoted
+                nested[key] = value
+                continue
             node = nested
             for part in parts[:-1]:
                 child = node.setdefault(part, {})
