@@ -426,14 +426,38 @@ class LoopSetup:
     build_time_s: float
 
 
+def design_scene_controller(scene, design_model, settings, path: str | Path):
+    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
+
+    Raises
+    ------
+    SolverError
+        When the design fails numerically (named with the controller file and the configuration).
+    """
+    from flexctrl.control import design
+    from flexctrl.control.reference import ReferenceTrajectory
+    from flexctrl.linear import equilibrium
+
+    design_q = tuple(scene.design_configuration)
+    op = equilibrium(design_model, design_q)
+    where = "the target" if scene.design_q is None else "the design configuration"
+    try:
+        ctrl = design(design_model, op, settings)
+    except FlexctrlError:
+        raise
+    except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
+        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
+                          f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+    ctrl.reset()
+    return ctrl
+
+
 def build_loop(scene, controller: str | Path | None = None, overrides=()) -> LoopSetup:
     """Build plant and design models (cached per process), design the controller, set its reference.
 
     ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).
     """
-    from flexctrl.control import design
-    from flexctrl.control.reference import ReferenceTrajectory
-    from flexctrl.linear import equilibrium
     from flexctrl.scenes import initial_state, scene_arm
     from flexctrl.spec.controller import load_controller
 
@@ -452,18 +476,8 @@ def build_loop(scene, controller: str | Path | None = None, overrides=()) -> Loo
     design_q = tuple(scene.design_configuration)
     same = design_arm == arm and str(design_fidelity) == str(plant_scene.fidelity) and scene.design_q is None
     design_model = plant if same else _cached_model(design_arm, design_fidelity, plant_scene.modes, design_q)
-    op = equilibrium(design_model, design_q)
-    where = "the target" if scene.design_q is None else "the design configuration"
-    try:
-        ctrl = design(design_model, op, settings)
-    except FlexctrlError:
-        raise
-    except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
-        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
-                          f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    ctrl = design_scene_controller(scene, design_model, settings, path)
     path_ref = scene.joint_reference()
-    ctrl.set_reference(ReferenceTrajectory(design_model, path_ref, scene.deflection))
-    ctrl.reset()
     sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
     x0 = initial_state(plant_scene, plant, arm)
     monitor = divergence_monitor(plant, arm, scene, scene.divergence_deflection, scene.divergence_angle)

@@ -201,9 +201,7 @@ def _controller(plan_scene: tuple, controller: str | None, controller_digest: st
     """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload (or
     ``design_payload``) at its design configuration, tracking the scene's reference path, as
     :func:`flexctrl.closedloop.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
-    from flexctrl.control import design
-    from flexctrl.control.reference import ReferenceTrajectory
-    from flexctrl.linear import equilibrium
+    from flexctrl.closedloop import design_scene_controller
     from flexctrl.scenes import scene_arm
     from flexctrl.spec.controller import load_controller
 
@@ -218,9 +216,7 @@ def _controller(plan_scene: tuple, controller: str | None, controller_digest: st
     design_q = tuple(scene.design_configuration)
     same = design_arm == arm and str(fidelity) == str(scene.plant.fidelity)
     model = _model(design_arm, str(fidelity), scene.plant.modes, scene.plant.q0 if same else design_q)
-    ctrl = design(model, equilibrium(model, design_q), settings)
-    ctrl.set_reference(ReferenceTrajectory(model, scene.joint_reference(), scene.deflection))
-    ctrl.reset()
+    ctrl = design_scene_controller(scene, model, settings, path)
     if ctrl.sensors.kinds == ("state",):
         raise SpecError(f"controller '{path}' measures the full state, which only a plant of its own design model has; "
                         "allowed here: sensors that every model has, e.g. outputs = [\"joints\", \"deflection\"]",
