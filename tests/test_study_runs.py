@@ -80,6 +80,29 @@ def test_killed_study_loses_no_finished_run_and_resumes_to_the_same_table(study,
     assert [s["resume"] for s in sessions] == [False, True] and sessions[0]["end"] is None
 
 
+def test_sigterm_stops_a_study_like_ctrl_c_and_records_the_session(study, tmp_path, root):
+    slow = study.with_name("slow.toml")
+    slow.write_text(study.read_text().replace("[grid]", '[set]\n"scene.sleep_s" = 0.3\n\n[grid]'))
+    out = tmp_path / "terminated"
+    cmd = [sys.executable, "-m", "flexctrl.cli", "study", str(slow), "--out", str(out), "--workers", "2", "--progress", "none"]
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    try:
+        while len(list((out / "runs").glob("*.json"))) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no run finished within 60 s"
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGTERM)  # the parent only, as `kill PID` or a batch system's time limit
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:  # pragma: no cover
+            proc.kill()
+    assert proc.returncode == 130
+    session = json.loads((out / "study.json").read_text())["sessions"][-1]
+    assert session["interrupted"] is True and session["elapsed_s"] > 0 and session["end"] is not None
+    assert (out / "results.csv").exists()
+
+
 def test_local_pool_and_dask_give_identical_tables(study, tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = load_study(study)
