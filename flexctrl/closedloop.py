@@ -58,6 +58,7 @@ import numpy as np
 from flexctrl.errors import FlexctrlError, SimulationError, SolverError, SpecError
 from flexctrl.metrics import closed_loop_metrics
 from flexctrl.sim.compile import compile_function
+from flexctrl.sim.parametric import constants_as_parameters
 from flexctrl.sim.rk4 import rk4_step_function
 from flexctrl.sim.trajectory import Trajectory
 
@@ -109,22 +110,40 @@ def linear_closed_loop_radius(plant, controller, target_q) -> float | None:
 UNROLL_LIMIT = 32
 
 
-def plant_step_function(model, substeps: int) -> ca.Function:
-    """``advance(x, u, h) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X is (n_x, substeps).
+def plant_step_function(model, substeps: int, f: ca.Function | None = None, n_constants: int = 0) -> ca.Function:
+    """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X is (n_x, substeps).
 
     The steps are unrolled into one expression (compiled whole by :func:`advance_function`
-    up to :data:`UNROLL_LIMIT` steps).
+    up to :data:`UNROLL_LIMIT` steps).  With ``f = fp(x, u, c)`` (the model's ``f`` with
+    its constants as the input ``c`` of length ``n_constants``, from
+    :func:`flexctrl.sim.parametric.constants_as_parameters`) the constants are an input
+    too, and the Function's name depends only on the sizes: every configuration of one
+    model shape then shares one compiled library.
     """
-    step = rk4_step_function(model)
     x = ca.MX.sym("x", model.n_x)
     u = ca.MX.sym("u", model.n_u)
     h = ca.MX.sym("h")
+    if f is None:
+        step = rk4_step_function(model)
+        advance = lambda xs, k: step(xs, k * h, u, h)[0]  # noqa: E731
+        inputs, names, name = [x, u, h], ["x", "u", "h"], f"advance_{model.name}_{substeps}"
+    else:
+        c = ca.MX.sym("c", n_constants)
+
+        def advance(xs, k):
+            k1 = f(xs, u, c)
+            k2 = f(xs + 0.5 * h * k1, u, c)
+            k3 = f(xs + 0.5 * h * k2, u, c)
+            k4 = f(xs + h * k3, u, c)
+            return xs + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+        inputs, names, name = [x, u, h, c], ["x", "u", "h", "c"], f"advance_p_{model.n_x}_{model.n_u}_{n_constants}_{substeps}"
     states = []
     current = x
     for k in range(substeps):
-        current = step(current, k * h, u, h)[0]
+        current = advance(current, k)
         states.append(current)
-    return ca.Function(_name(f"advance_{model.name}_{substeps}"), [x, u, h], [ca.horzcat(*states)], ["x", "u", "h"], ["X"])
+    return ca.Function(_name(name), inputs, [ca.horzcat(*states)], names, ["X"])
 
 
 def _name(text: str) -> str:
@@ -142,8 +161,14 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
     same as six unrolled steps).
     """
     if substeps <= UNROLL_LIMIT:
-        compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
-        return compiled.function, compiled.compiled
+        fp, constants = constants_as_parameters(model.functions["f"])
+        if constants.size == 0:  # f could not be rebuilt: one library per model
+            compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
+            return compiled.function, compiled.compiled
+        compiled = compile_function(plant_step_function(model, substeps, fp, constants.size), enabled=compile)
+        x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
+        X = compiled.function(x, u, h, ca.DM(constants))
+        return ca.Function(_name(f"advance_{model.name}_{substeps}"), [x, u, h], [X], ["x", "u", "h"], ["X"]), compiled.compiled
     step = rk4_step_function(model)
     xs, ts, us, hs = ca.MX.sym("x", model.n_x), ca.MX.sym("t"), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
     single = ca.Function(_name(f"rk4x_{model.name}"), [xs, ts, us, hs], [step(xs, ts, us, hs)[0]],

@@ -104,3 +104,37 @@ def test_divergence_can_stop_the_run_and_be_recorded(arm_model):
     assert np.max(np.abs(traj.states[-1, : model.n_u])) > 0.01 > np.max(np.abs(traj.states[-12, : model.n_u]))
     with pytest.raises(SimulationError, match="joint beyond 0.01 rad"):
         simulate_closed_loop(model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor)
+
+
+def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_exact(root):
+    import casadi as ca
+
+    from flexctrl.closedloop import advance_function, plant_step_function
+    from flexctrl.sim.parametric import constants_as_parameters
+
+    arm = load_arm(root / "models" / "subedi3link.toml").with_payload(2.0)
+    models = [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in ([0, 30, -60], [0, 120, 45])]
+    fps = [constants_as_parameters(m.functions["f"]) for m in models]
+    assert all(c.size > 0 for _, c in fps)
+    # the two configurations differ only in constant values: one generated code serves both
+    texts = []
+    for m, (fp, c) in zip(models, fps):
+        generator = ca.CodeGenerator("advance.c")
+        generator.add(plant_step_function(m, 4, fp, c.size))
+        texts.append(generator.dump())
+    assert texts[0] == texts[1] and not np.allclose(fps[0][1], fps[1][1])
+    embedded_texts = []
+    for m in models:
+        generator = ca.CodeGenerator("advance.c")
+        generator.add(plant_step_function(m, 4))
+        embedded_texts.append(generator.dump())
+    assert embedded_texts[0] != embedded_texts[1]  # without the parameter every configuration compiles anew
+    rng = np.random.default_rng(3)
+    for model in models:
+        x = np.concatenate([np.radians([10, 20, -30]), rng.normal(0, 1e-3, model.n_x - 3)])
+        u = np.array([20.0, -5.0, 3.0])
+        shared, _ = advance_function(model, 4, compile=False)
+        embedded = plant_step_function(model, 4)  # the model's own constants, no parameter
+        a, b = np.array(shared(x, u, 2.5e-4)), np.array(embedded(x, u, 2.5e-4))
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-15)
+        assert not np.allclose(a[:, -1], x)  # the arm moved: the comparison is not trivial

@@ -1,0 +1,85 @@
+"""CasADi Functions whose numeric constants become an input, so one compiled library serves many models.
+
+A frozen-modes model bakes its modal constants (which depend on the payload and on
+the configuration the modes were computed at) into ``f``; C code generated from it
+differs per configuration, so a study over configurations would compile once per run.
+:func:`constants_as_parameters` rebuilds such a Function with its constants as a
+vector input: models whose graphs differ only in constant values then share one
+compiled library (the cache key is a hash of the generated code).  Used by the NMPC
+(:mod:`flexctrl.control.nmpc`) and the closed-loop plant step (:mod:`flexctrl.closedloop`).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+
+def expanded(fun: ca.Function) -> ca.Function:
+    """``fun`` as an SX Function when it can be expanded, else ``fun`` itself."""
+    try:
+        return fun if fun.is_a("SXFunction") else fun.expand()
+    except RuntimeError:
+        return fun
+
+
+def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
+    """``fun`` rebuilt with every numeric constant of its expression graph turned into an input.
+
+    A frozen-modes model bakes its modal constants (which depend on the payload and on
+    the configuration the modes were computed at) into ``f``; code generated from it
+    would differ per configuration.  The rebuilt Function ``fp(*inputs, c)`` computes
+    the same operations in the same order with ``c`` the vector of the graph's constants,
+    so two models whose graphs differ only in constant values share one compiled
+    library.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        An SX Function (MX Functions are expanded first).
+
+    Returns
+    -------
+    fp : casadi.Function
+        ``fun``'s inputs plus ``c`` (last); the same outputs.  ``fun`` itself (and an empty
+        ``c``) when the graph cannot be rebuilt (calls to other Functions, free
+        symbols) or the rebuilt Function does not reproduce ``fun``.
+    c : ndarray
+        The constants, in the order of the graph.
+    """
+    f = expanded(fun)
+    if not f.is_a("SXFunction") or f.has_free():
+        return fun, np.zeros(0)
+    n_const = sum(1 for k in range(f.n_instructions()) if f.instruction_id(k) == ca.OP_CONST)
+    ins = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
+    c = ca.SX.sym("c", n_const)
+    outs = [[ca.SX(0)] * f.nnz_out(i) for i in range(f.n_out())]
+    work: dict[int, ca.SX] = {}
+    values = []
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        arg, res = f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_INPUT:
+            work[res[0]] = ins[arg[0]].nz[arg[1]]
+        elif op == ca.OP_OUTPUT:
+            outs[res[0]][res[1]] = work[arg[0]]
+        elif op == ca.OP_CONST:
+            work[res[0]] = c[len(values)]
+            values.append(f.instruction_constant(k))
+        elif len(arg) == 1 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
+            work[res[0]] = ca.SX.unary(op, work[arg[0]])
+        elif len(arg) == 2 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
+            work[res[0]] = ca.SX.binary(op, work[arg[0]], work[arg[1]])
+        else:
+            return fun, np.zeros(0)
+    out = [ca.SX(f.sparsity_out(i), ca.vertcat(*outs[i]) if outs[i] else ca.SX(0, 1)) for i in range(f.n_out())]
+    fp = ca.Function(f"{f.name()}_p", [*ins, c], out, [*f.name_in(), "c"], f.name_out())
+    const = np.array(values, dtype=float)
+    # the rebuilt graph must reproduce the original at a generic point
+    rng = np.random.default_rng(0)
+    args = [rng.uniform(-0.5, 0.5, f.sparsity_in(i).shape) for i in range(f.n_in())]
+    for a, b in zip(f(*args) if f.n_out() > 1 else [f(*args)], fp(*args, const) if f.n_out() > 1 else [fp(*args, const)]):
+        a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+        if not np.allclose(a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))):
+            return fun, np.zeros(0)
+    return fp, const
