@@ -62,7 +62,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
@@ -276,6 +275,7 @@ class RK4Stepper(Stepper):
     def __init__(self, model, method: Method, dt: float = OUTPUT_DT, *, chunk: int = 10, compile: bool | None = None):
         super().__init__(model, method, dt)
         from flexctrl.sim.compile import compile_function
+        from flexctrl.sim.rk4 import held_sample_loop
 
         start = time.perf_counter()
         if method.step is None:
@@ -287,19 +287,8 @@ class RK4Stepper(Stepper):
                                 "allowed: dt / step a whole number", key="method")
         self.substeps, self.chunk = substeps, chunk
         h = dt / substeps
-        f = model.functions["f"]
-        x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
-        k1 = f(x, u)
-        k2 = f(x + 0.5 * h * k1, u)
-        k3 = f(x + 0.5 * h * k2, u)
-        k4 = f(x + h * k3, u)
-        step = ca.Function("rk4", [x, u], [x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)])
-        xs = ca.MX.sym("x", model.n_x)
-        sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
         name = re.sub(r"[^A-Za-z0-9]+", "_", f"acc_{model.name}_{substeps}x{chunk}").strip("_")
-        loop = sample.mapaccum(chunk)
-        args = loop.mx_in()
-        loop = ca.Function(name, args, loop.call(args))
+        loop = held_sample_loop(model, h, substeps, chunk, name=name)
         compiled = compile_function(loop, enabled=compile)
         self._fun = compiled.function
         self.compiled = compiled.compiled

@@ -375,6 +375,22 @@ def _distance(a: RunRecord, b: RunRecord):
 
 
 # -- the method -------------------------------------------------------------------------------
+def _check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt):
+    """Validate the chooser's options (shared by the arm and closed-loop choosers); returns the reference fidelity."""
+    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
+        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
+    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
+    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
+        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
+                        key="reference")
+    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
+                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
+                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
+            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+    return ref
+
+
 def choose_fidelity(
     scene,
     tol: float,
@@ -424,17 +440,7 @@ def choose_fidelity(
     if getattr(scene, "kind", None) != "arm":
         raise SpecError(f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; allowed: a kind = \"arm\" scene",
                         source=getattr(scene, "source", None), key="kind")
-    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
-        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
-    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
-    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
-        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
-                        key="reference")
-    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
-                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
-                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
-            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+    ref = _check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
     keyed = _Keyed(scene)
     return _choose_cached(keyed, tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
                           float(reference_omega_dt))
@@ -758,17 +764,7 @@ def choose_closed_loop_fidelity(
     if (controller or scene.controller) is None:
         raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source,
                         key="controller")
-    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
-        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
-    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
-    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
-        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
-                        key="reference")
-    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
-                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
-                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
-            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+    ref = _check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
     keyed = _KeyedLoop(scene, controller, tuple(overrides))
     return _choose_closed_cached(keyed, tol, top, str(ref), float(safety), float(energy_fraction),
                                  float(bandwidth_factor), float(reference_omega_dt))

@@ -88,6 +88,26 @@ def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
     return loop_function(step, n_steps, "rk4_loop")
 
 
+def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "held_rk4") -> ca.Function:
+    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h`` (s), torque held.
+
+    The sample-level building block of the FEM timing report and the speed/accuracy
+    study: the output is the state at the end of each of ``chunk`` samples.
+    """
+    f = model.functions["f"]
+    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
+    k1 = f(x, u)
+    k2 = f(x + 0.5 * h * k1, u)
+    k3 = f(x + 0.5 * h * k2, u)
+    k4 = f(x + h * k3, u)
+    step = ca.Function("rk4", [x, u], [x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)])
+    xs = ca.MX.sym("x", model.n_x)
+    sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
+    loop = sample.mapaccum(chunk)
+    args = loop.mx_in()
+    return ca.Function(name, args, loop.call(args))
+
+
 class RK4(Integrator):
     """Fixed-step RK4 over compiled chunks (see module docstring).
 

@@ -94,17 +94,9 @@ def rk4_sampler(model, substeps: int, h: float, chunk: int = 100, *, compile: bo
     Returns a callable and, as attribute ``compile_seconds``, the build time.
     """
     from flexctrl.sim.compile import compile_function
+    from flexctrl.sim.rk4 import held_sample_loop
 
-    f = model.functions["f"]
-    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
-    k1 = f(x, u)
-    k2 = f(x + 0.5 * h * k1, u)
-    k3 = f(x + 0.5 * h * k2, u)
-    k4 = f(x + h * k3, u)
-    step = ca.Function("rk4", [x, u], [x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)])
-    xs = ca.MX.sym("x", model.n_x)
-    sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
-    loop = sample.mapaccum(chunk)
+    loop = held_sample_loop(model, h, substeps, chunk, name=f"mapaccum_sample_{chunk}")
     start = time.perf_counter()
     compiled = compile_function(loop, enabled=compile)
     seconds = time.perf_counter() - start
