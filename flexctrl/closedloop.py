@@ -697,18 +697,10 @@ def _cached_model(arm, fidelity, modes, reference_q):
 
 # -- the study executor ----------------------------------------------------------------
 def _scene_overrides(settings: dict) -> list[str]:
-    from flexctrl.study.executors import overrides_for
+    from flexctrl.study.executors import scene_overrides
 
-    extra = [f"model={json.dumps(str(settings['model']))}"]
-    if settings.get("payload") is not None:
-        extra.append(f"payload={float(settings['payload'])!r}")
-    if settings.get("q0_deg") is not None:
-        extra.append("initial.q=[" + ", ".join(repr(float(a)) for a in settings["q0_deg"]) + "]")
-    if settings.get("fidelity") is not None:
-        extra.append(f"fidelity={json.dumps(str(settings['fidelity']))}")
-    if settings.get("seed") is not None:
-        extra.append(f"noise.seed={int(settings['seed'])}")
-    return extra + overrides_for(settings, "scene")
+    seed = () if settings.get("seed") is None else (f"noise.seed={int(settings['seed'])}",)
+    return scene_overrides(settings, seed)
 
 
 def check_settings(settings: dict) -> None:

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.study.executors import RunOutput, overrides_for, per_worker_cache
+from flexctrl.study.executors import RunOutput, overrides_for, per_worker_cache, scene_overrides
 
 #: Integrators this executor measures (fixed-step methods with a theory).
 METHODS = ("rk4", "euler", "newmark")
@@ -74,17 +74,6 @@ CSV_COLUMNS = ("integrator", "fidelity", "omega_max", "h_measured", "h_theory")
 EXTRA_COLUMNS = ("ratio", "omega_h_measured", "omega_h_theory", "h_unstable", "outcome", "note", "scene", "run_id", "status")
 
 
-def _scene_overrides(settings: dict) -> list[str]:
-    extra = [f"model={json.dumps(str(settings['model']))}"]
-    if settings.get("payload") is not None:
-        extra.append(f"payload={float(settings['payload'])!r}")
-    if settings.get("q0_deg") is not None:
-        extra.append("initial.q=[" + ", ".join(repr(float(a)) for a in settings["q0_deg"]) + "]")
-    if settings.get("fidelity") is not None:
-        extra.append(f"fidelity={json.dumps(str(settings['fidelity']))}")
-    return extra + overrides_for(settings, "scene")
-
-
 def _scene(settings: dict):
     from flexctrl.spec.scene import load_scene
 
@@ -93,7 +82,7 @@ def _scene(settings: dict):
         raise SpecError(f"model overrides {overrides_for(settings, 'model')} are not supported by the stability_limits "
                         "executor; allowed: scene.KEY overrides (payload, damping, gravity, fidelity, integrator)",
                         source=source, key="model")
-    scene = load_scene(settings["scene"], _scene_overrides(settings))
+    scene = load_scene(settings["scene"], scene_overrides(settings))
     if scene.kind != "arm":
         raise SpecError(f"scene kind '{scene.kind}' is not allowed; allowed: kind = \"arm\"", source=source, key="kind")
     if scene.fidelity.kind not in ("rigid", "amm", "fem"):

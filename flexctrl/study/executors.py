@@ -245,6 +245,26 @@ def overrides_for(settings: Mapping[str, Any], target: str) -> list[str]:
     return [item[len(prefix):] for item in settings.get("overrides", ()) if item.startswith(prefix)]
 
 
+def scene_overrides(settings: Mapping[str, Any], extra: tuple[str, ...] = ()) -> list[str]:
+    """The run's model, payload, configuration and fidelity as scene ``KEY=VALUE`` overrides,
+    then ``extra``, then its ``scene.*`` overrides (which win).
+
+    The run's settings take precedence over the same keys in the scene file (the
+    study's grid chose them); ``load_scene(settings["scene"], scene_overrides(settings))``
+    gives the run's scene.
+    """
+    import json
+
+    items = [f"model={json.dumps(str(settings['model']))}"]
+    if settings.get("payload") is not None:
+        items.append(f"payload={float(settings['payload'])!r}")
+    if settings.get("q0_deg") is not None:
+        items.append("initial.q=[" + ", ".join(repr(float(a)) for a in settings["q0_deg"]) + "]")
+    if settings.get("fidelity") is not None:
+        items.append(f"fidelity={json.dumps(str(settings['fidelity']))}")
+    return items + list(extra) + overrides_for(settings, "scene")
+
+
 # -- closed_loop ---------------------------------------------------------------------
 
 
