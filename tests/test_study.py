@@ -322,6 +322,22 @@ def test_quoted_dotted_axis_is_replaced_by_a_nested_override(study):
     assert len(replaced.runs) == len(base.runs) // 2
 
 
+def test_quoted_override_key_reaches_a_quoted_axis_beside_a_file_axis(root):
+    """grid.scene (files) and grid."scene.method" cannot both nest; --set must still reach the latter."""
+    path = root / "studies" / "speed_vs_accuracy.toml"
+    methods = ["amm:2/rk4@0.25ms", "amm:2+sched/rk4@1ms"]
+    spec = load_study(path, ['grid.scene=["scenes/free_vibration.toml"]', f"grid.\"scene.method\"={methods!r}".replace("'", '"')])
+    axes = {a.key: a.values for a in spec.axes}
+    assert axes["scene.method"] == tuple(methods)
+    assert len(spec.runs) == 1 * 2 * 2 * 2  # scene x payload x configuration x method
+
+
+def test_quoted_override_key_names_the_same_setting_as_the_nested_one(study):
+    path = variant(study, "dotted2.toml", {"[grid]\n": '[grid]\n"scene.duration" = [1.0, 2.0]\n'})
+    replaced = load_study(path, ['grid."scene.duration"=[3.0]'])
+    assert {a.key: a.values for a in replaced.axes}["scene.duration"] == (3.0,)
+
+
 def test_same_setting_spelt_quoted_and_nested_is_refused(study):
     text = study.read_text().replace("[grid]\n", '[grid]\n"scene.duration" = [1.0]\n') + "\n[grid.scene]\nduration = [2.0]\n"
     path = study.with_name("twice.toml")

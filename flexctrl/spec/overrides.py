@@ -1,7 +1,8 @@
 """``--set KEY=VALUE`` overrides applied to a parsed TOML document.
 
 Keys are dotted paths; array-of-table entries are addressed 1-based, either as
-``links[2].EI`` or ``links.2.EI``.  Values are parsed as TOML values
+``links[2].EI`` or ``links.2.EI``.  A part written in double quotes is one key even
+if it holds dots, as in TOML: ``grid."scene.method"``.  Values are parsed as TOML values
 (``2``, ``1e-4``, ``true``, ``[0, 90, 0]``, ``"paper"``); anything that is not a
 TOML value is taken as a plain string, so ``boundary_inertia=paper`` works.
 The overridden document then goes through the same validation as the file.
@@ -27,9 +28,29 @@ def parse_value(text: str) -> Any:
         return text
 
 
+def _pieces(key: str) -> list[tuple[str, bool]]:
+    """Split ``key`` on the dots outside double quotes: (piece, was_quoted) pairs."""
+    pieces, current, quoted, inside = [], "", False, False
+    for char in key:
+        if char == '"':
+            inside, quoted = not inside, True
+        elif char == "." and not inside:
+            pieces.append((current, quoted))
+            current, quoted = "", False
+        else:
+            current += char
+    if inside:
+        raise SpecError(f"override key '{key}' has an unclosed quote", source="--set")
+    pieces.append((current, quoted))
+    return pieces
+
+
 def _split_key(key: str) -> list[str | int]:
     parts: list[str | int] = []
-    for piece in key.split("."):
+    for piece, quoted in _pieces(key):
+        if quoted and piece:
+            parts.append(piece)
+            continue
         match = _INDEX.match(piece)
         if match:
             parts += [match["name"], int(match["index"])]

@@ -392,7 +392,8 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
 
     path = Path(path)
     source = str(path)
-    document = apply_overrides(_nest_dotted_keys(read_toml(path), source), overrides, source=f"{source} (--set)")
+    document = _nest_dotted_keys(read_toml(path), source)
+    document = apply_overrides(document, [_spell_like_file(document, o) for o in overrides], source=f"{source} (--set)")
     ctx = _Context(source, path.resolve().parent)
     r = TableReader(document, source)
 
@@ -528,6 +529,24 @@ def _nest_dotted_keys(document: dict, source: str) -> dict:
             node[parts[-1]] = value
         document[section] = nested
     return document
+
+
+def _spell_like_file(document: dict, assignment: str) -> str:
+    """Write a quoted ``--set`` key (``grid."scene.dt"=...``) nested when the file's key is nested.
+
+    A quoted key stays quoted only where :func:`_nest_dotted_keys` kept it quoted
+    (a file axis beside an override of that file); elsewhere both spellings name the
+    same setting.
+    """
+    key, sep, value = assignment.partition("=")
+    if '"' not in key or not sep:
+        return assignment
+    head, _, rest = key.strip().partition(".")
+    table = document.get(head)
+    quoted = rest.strip('"')
+    if head in ("grid", "set") and rest.startswith('"') and isinstance(table, dict) and quoted not in table:
+        return f"{head}.{quoted}={value}"
+    return assignment
 
 
 def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[str | None, str]:
