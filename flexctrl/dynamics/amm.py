@@ -30,20 +30,32 @@ Frozen and scheduled modes
 
     ``modes="scheduled"``: the modal parameters ``p = (omega, phi(L), phi'(L), v, w, z)``
     of each link follow the configuration through the differentiable lookup
-    (:func:`flexctrl.modal.lookup.modal_lookup`) and are put *into the Lagrangian*:
-    ``T = 1/2 qd^T M(q, p(q_r)) qd``, ``U = U_g(q, p(q_r)) + 1/2 sum m_l omega(q_r)^2 q_f^2``,
-    and the equations are derived from that Lagrangian with every q-derivative
-    (including ``dp/dq_r``) taken.  The model is therefore an exact Lagrangian
-    system and conserves ``T + U`` without damping.  What it neglects: the
-    kinetic energy is formed from velocities computed as if the shapes were frozen,
-    i.e. the elastic velocity ``sum phi_j qd_fj`` lacks ``sum (d phi_j/d q_r) qd_r q_fj``.
-    That term is a product of a deflection, a joint rate and the sensitivity of the
-    shapes to the configuration (second order in small quantities); keeping it would
-    need the derivative of whole mode shapes, not just of the tabulated integrals,
-    and would make T depend on d p/d q_r -- the assumed-modes basis would no longer
-    be a fixed Ritz basis at any instant.  Consequences for the interface: ``K`` and
-    ``D`` take ``q``; ``g`` holds every potential force not in ``K q``, i.e.
-    ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
+    (:func:`flexctrl.modal.lookup.modal_lookup`) and are put *into the kinematics*
+    before anything is differentiated: the deflection field is
+    ``w_i(x) = sum_j phi_j(x; q_r) q_fj``, so hubs, payload and outboard frames move
+    with ``d phi_j(L)/dt`` too, and the link's own mass with ``d phi_j(x)/dt``, whose
+    kinetic energy is kept in full through the tables' shape-rate integrals
+    (:mod:`flexctrl.dynamics.amm_kinematics`, "Shapes that move with the
+    configuration").  ``U = U_g(q, p(q_r)) + 1/2 sum m_l omega(q_r)^2 q_f^2`` is exact
+    for mass-orthonormal clamped-mass modes (``int EI phi_j'' phi_k'' = m_l omega_j^2
+    delta_jk``).  The equations come from that Lagrangian with every q-derivative
+    (including ``dp/dq_r``) taken, so the model conserves ``T + U`` without damping.
+    The approximations left are the assumed-modes truncation and the interpolation
+    of the tables.
+
+    An earlier version formed T from velocities with the shapes held still
+    (``phi_j qd_fj`` only).  That drops a term of the *same* order as the one it
+    keeps: ``d/dt (dT/d qd_f)`` then holds ``(dv_j/dt)(n . rdot) + (dw_j/dt) alpha-dot``,
+    a force on the modes that does not vanish at zero deflection.  In the free
+    swing of ``studies/scenes/free_vibration.toml`` it drove link 1's first mode to
+    three times the frozen model's amplitude (0.27 m RMS tip error at 1 ms against the
+    finite-element reference; ``docs/speed_accuracy.md``).  The test
+    ``test_scheduled_inertial_load_equals_frozen_at_rest_deflection`` catches it.  Keeping
+    only the rigid-velocity cross terms of the shape rate is not enough: M then loses
+    definiteness at a few centimetres of deflection.
+
+    Interface: ``K`` and ``D`` take ``q``; ``g`` holds every potential force not in
+    ``K q``, i.e. ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
     ``1/2 q_f^T (dK/dq_r) q_f`` on the joint rows).
 """
 
@@ -57,7 +69,6 @@ import numpy as np
 import scipy.linalg
 
 from flexctrl.dynamics.amm_kinematics import (
-    ArmExpressions,
     LinkModal,
     arm_expressions,
     coordinate_names,
@@ -148,19 +159,8 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
             modal.append(LinkModal.from_modes(None, 0))
             continue
         out = lookups[i](q=q[: arm.n_links])
-        modal.append(LinkModal(*(out[name] for name in ("omega", "tip_deflection", "tip_slope", "v", "w", "z"))))
+        modal.append(LinkModal(*(out[name] for name in ("omega", "tip_deflection", "tip_slope", "v", "w", "z", "y", "s"))))
     return modal
-
-
-def _substitute(arm: ArmSpec, q, n_modes: Sequence[int], modal: Sequence[LinkModal]) -> ArmExpressions:
-    """Expressions built with frozen-shape kinematics, then the modal parameters replaced by ``modal``."""
-    symbols = [LinkModal.symbols(ca.SX, i, nf) for i, nf in enumerate(n_modes)]
-    ex = arm_expressions(arm, symbols, q)
-    p_sym = ca.vertcat(*(s.vector() for s in symbols))
-    p_val = ca.vertcat(*(m.vector() for m in modal))
-    fields = ("positions", "tip_deflection", "tip_slope", "orientations", "mass_matrix", "gravity_energy", "elastic_energy")
-    core = ca.Function("amm_core", [q, p_sym], [getattr(ex, f) for f in fields])
-    return ArmExpressions(*core(q, p_val))
 
 
 def build_amm(
@@ -233,7 +233,7 @@ def build_amm(
     scheduled = modes == "scheduled" and N > n
     if scheduled:
         modal = _scheduled_modal(arm, q, n_modes, lookups)
-        ex = _substitute(arm, q, n_modes, modal)
+        ex = arm_expressions(arm, modal, q, shape_rates=True)
     else:
         modal = frozen_modal
         ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None)

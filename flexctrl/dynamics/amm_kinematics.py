@@ -22,6 +22,26 @@ Link kinetic energy (Eq 43) in closed form
     (``int rho x^2 dx = J_l + m L^2/4`` from the file's centroidal inertia ``J_l``).
     ``M = sum J^T (G kron I_2) J`` with ``J = dP/dq``; hubs (Eq 42) and payload (Eq 44)
     add ``m J_r^T J_r + J (d alpha/dq)^T (d alpha/dq)``.
+
+Shapes that move with the configuration (``shape_rates=True``)
+    When the modal parameters are expressions in ``q`` (scheduled modes), the
+    Jacobians above already see ``d phi_j(L)/dq`` and ``d phi'_j(L)/dq`` (hubs,
+    payload, outboard frames), because the parameters enter *before* ``dP/dq``.
+    The link's own mass also moves at ``n sum_jr psi_jr q_fj qd_r`` with
+    ``psi_jr = d phi_j/d q_r`` and ``n = W e_2``: extra velocity pieces
+    ``E_jr = n q_fj qd_r = (n q_fj e_r^T) qd``.  The link's kinetic energy is then the
+    Gram form over the pieces ``(P, E)`` with the Gram matrix extended by
+    ``int rho psi_jr = dv_j/dq_r`` and ``int rho x psi_jr = dw_j/dq_r`` (derivatives
+    of the tables' v and w, so the terms they cancel cancel exactly),
+    ``y[k, jr] = int rho phi_k psi_jr`` and ``s[jr, kt] = int rho psi_jr psi_kt``
+    (tabulated, :mod:`flexctrl.modal.lookup`).  Without the ``E`` pieces the
+    elastic equations keep ``(dv_j/dt)(n . rdot) + (dw_j/dt)(n . d(W e_1)/dt)``
+    from ``d/dt(dT/d qd_f)``: a force on the modes that does not vanish at zero
+    deflection (the shapes' change pushing on an undeformed link).  Keeping only
+    the cross terms with the rigid velocity (first order in q_f) is not enough
+    either: T is then not a sum of squares, and M loses definiteness at
+    deflections of a few centimetres.  The full Gram form keeps M positive
+    definite (the kinetic energy of a real velocity field).
 """
 
 from __future__ import annotations
@@ -52,6 +72,10 @@ class LinkModal:
     v: object
     w: object
     z: object
+    #: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad), scheduled modes only
+    shape_cross: object = None
+    #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes only
+    shape_gram: object = None
 
     @property
     def n_modes(self) -> int:
@@ -104,8 +128,8 @@ class ArmExpressions:
     orientations : expression (n+1, 1)
         ``alpha_1 .. alpha_n`` (Eq 8) and ``alpha-hat_{n+1}`` (Eq 9), rad.
     mass_matrix : expression (N, N)
-        M(q) with the modal parameters held fixed (their q-dependence, if any, is
-        *not* differentiated here: see :mod:`flexctrl.dynamics.amm`).
+        M(q).  Modal parameters given as expressions in ``q`` are differentiated with
+        the kinematics; with ``shape_rates`` M holds the shapes' motion too (module docstring).
     gravity_energy, elastic_energy : scalar expressions
         U_g (Eqs 47-49) and U_el (Eq 46 with Eq 53), J.
     coriolis : expression (N, 1) or None
@@ -163,8 +187,26 @@ class _Inertia:
         if mass != 0.0:
             self.add(P, mass * ca.DM.eye(P.shape[0]))
 
+    def add_moving_shapes(self, P, gram, md: "LinkModal", qf, frame_y) -> None:
+        """Add the link's Gram form over the pieces ``(P, E)`` (see the module docstring)."""
+        if self.c is not None:
+            raise ValueError("moving shapes need the Lagrange form of the Coriolis vector (qd=None)")
+        N, nf = self.q.shape[0], qf.shape[0]
+        n_rate = md.shape_gram.shape[0] // nf  # joints (columns r n_f + j)
+        rows, cross = [], []
+        dv, dw = ca.jacobian(md.v, self.q), ca.jacobian(md.w, self.q)
+        for r in range(n_rate):
+            unit = ca.DM.zeros(1, N)
+            unit[0, r] = 1.0
+            for j in range(nf):
+                rows.append(ca.mtimes(frame_y * qf[j], unit))
+                cross.append(ca.vertcat(dv[j, r], dw[j, r], md.shape_cross[:, r * nf + j]))
+        jac = ca.vertcat(ca.jacobian(P, self.q), *rows)
+        H = ca.horzcat(*cross)
+        G = ca.blockcat([[gram, H], [H.T, 0.5 * (md.shape_gram + md.shape_gram.T)]])
+        self.M = self.M + ca.mtimes(jac.T, ca.mtimes(ca.kron(G, ca.DM.eye(2)), jac))
 
-def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None) -> ArmExpressions:
+def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, shape_rates: bool = False) -> ArmExpressions:
     """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
 
     Parameters
@@ -178,6 +220,10 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None) -> Arm
     qd
         Their rates; when given, the Coriolis vector is formed body by body from
         the convective accelerations (only valid if ``modal`` holds constants).
+    shape_rates
+        ``modal`` holds expressions in ``q`` (scheduled modes) with ``shape_cross``
+        and ``shape_gram``: the link velocities include the shapes' change with the
+        configuration (module docstring).
     """
     n = arm.n_links
     n_modes = [m.n_modes for m in modal]
@@ -211,7 +257,10 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None) -> Arm
         rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
         moments = sym(ca.horzcat(md.v, md.w))
         gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
-        inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
+        if shape_rates and nf and md.shape_gram is not None and md.shape_gram.shape[0]:
+            inertia.add_moving_shapes(P, gram, md, qf, frame_y)
+        else:
+            inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
         first_moment = m * r + 0.5 * m * length * frame_x
         if nf:
             first_moment = first_moment + frame_y * ca.dot(md.v, qf)

@@ -9,6 +9,16 @@ by CasADi (scheduled-mode dynamics, linearisation).  Angles are wrapped to
 (-pi, pi] before the lookup; the grid overlaps the period by two cells on each
 side so the spline is smooth across the wrap.
 
+Shape rates: for the scheduled model's kinetic energy
+(:mod:`flexctrl.dynamics.amm_kinematics`, "Shapes that move with the
+configuration") each grid point also holds ``y[k, j, r] = int rho phi_k psi_jr dx``
+and ``s[j, r, k, t] = int rho psi_jr psi_kt dx`` with ``psi_jr = d phi_j / d q_r``
+taken by central differences of the normalised shapes (``_SHAPE_STEP`` rad) and the
+integrals by Gauss-Legendre quadrature (``_GAUSS_POINTS`` points; the shapes of the
+lowest six modes are smooth, and 24 points integrate them to round-off).  The
+function outputs them over *all* joints (zero for joints the link does not depend
+on), columns ordered ``r * n_modes + j``.
+
 Mode signs are made continuous over the grid (each mode is aligned with its
 grid neighbour by the sign of the overlap of their shapes), otherwise the
 interpolant would average modes of opposite sign.
@@ -34,7 +44,10 @@ from flexctrl.modal.boundary import scheduling_joints
 from flexctrl.spec.arm import ArmSpec
 
 FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
-_FORMAT_VERSION = 1
+SHAPE_RATE_FIELDS = ("y", "s")
+_FORMAT_VERSION = 2
+_SHAPE_STEP = 1e-4  # rad, central differences of the shapes
+_GAUSS_POINTS = 24
 _SAMPLES = np.linspace(0.0, 1.0, 41)  # fractions of the link length for sign alignment
 
 
@@ -67,7 +80,8 @@ class ModalLookup:
     function : casadi.Function
         Input ``q`` (all n joint angles, rad); outputs ``omega`` (rad/s),
         ``tip_deflection``, ``tip_slope`` (1/m), ``v`` (kg), ``w`` (kg m), each
-        (n_modes, 1), and ``z`` (kg), (n_modes, n_modes).
+        (n_modes, 1), ``z`` (kg), (n_modes, n_modes), ``y`` (kg/rad),
+        (n_modes, n_modes * n_joints), and ``s`` (kg/rad^2), (n_modes * n_joints,) * 2.
     build_time_s : float
         Wall time to compute the table (0 when read from the cache).
     """
@@ -86,34 +100,43 @@ class ModalLookup:
 
     def _make_function(self) -> ca.Function:
         q = ca.SX.sym("q", self.n_joints)
-        outputs = {}
+        nf, n = self.n_modes, self.n_joints
+        names = FIELDS + SHAPE_RATE_FIELDS
+        outputs = {"y": ca.SX.zeros(nf, nf * n), "s": ca.SX.zeros(nf * n, nf * n)}
         if not self.joints:
             for name in FIELDS:
-                outputs[name] = ca.DM(self.values[name])
-        else:
-            grid = [np.radians(self.grid_deg)] * len(self.joints)
-            arrays = [self.values[name].reshape(self.values[name].shape[: len(self.joints)] + (-1,)) for name in FIELDS]
-            stacked = np.concatenate(arrays, axis=-1)  # grid..., m
-            m = stacked.shape[-1]
-            flat = np.moveaxis(stacked, -1, 0).reshape(m, -1, order="F").ravel(order="F")
-            spline = ca.interpolant(f"modal_table_link{self.link + 1}", "bspline", grid, flat)
-            point = ca.vertcat(*[_wrap(q[j]) for j in self.joints])
-            out = spline(point)
-            offset = 0
-            for name in FIELDS:
-                size = int(np.prod(self.values[name].shape[len(self.joints) :]))
-                piece = out[offset : offset + size]
-                offset += size
-                outputs[name] = ca.reshape(piece, self.n_modes, self.n_modes) if name == "z" else piece
-        names = list(FIELDS)
-        return ca.Function(
-            f"modal_link{self.link + 1}", [q], [outputs[n] if isinstance(outputs[n], ca.SX) else ca.SX(outputs[n]) for n in names], ["q"], names
-        )
+                outputs[name] = ca.SX(ca.DM(self.values[name]))
+            return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
+        grid = [np.radians(self.grid_deg)] * len(self.joints)
+        dims = len(self.joints)
+        arrays = [self.values[name].reshape(self.values[name].shape[:dims] + (-1,)) for name in names]
+        stacked = np.concatenate(arrays, axis=-1)  # grid..., m
+        m = stacked.shape[-1]
+        flat = np.moveaxis(stacked, -1, 0).reshape(m, -1, order="F").ravel(order="F")
+        spline = ca.interpolant(f"modal_table_link{self.link + 1}", "bspline", grid, flat)
+        out = spline(ca.vertcat(*[_wrap(q[j]) for j in self.joints]))
+        offset = 0
+        for name in names:
+            shape = self.values[name].shape[dims:]
+            index = offset + np.arange(int(np.prod(shape))).reshape(shape)  # C order, as flattened above
+            offset += index.size
+            if name == "z":
+                outputs[name] = ca.reshape(out[index.ravel()], nf, nf)  # symmetric
+            elif name == "y":  # y[k, j, r_local]
+                for k, j, rl in np.ndindex(*shape):
+                    outputs["y"][k, self.joints[rl] * nf + j] = out[int(index[k, j, rl])]
+            elif name == "s":  # s[j, r_local, k, t_local]
+                for j, rl, k, tl in np.ndindex(*shape):
+                    outputs["s"][self.joints[rl] * nf + j, self.joints[tl] * nf + k] = out[int(index[j, rl, k, tl])]
+            else:
+                outputs[name] = out[index.ravel()]
+        return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
 
     def evaluate(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Interpolated fields at joint angles ``q`` (rad), as numpy arrays."""
         result = self.function(q=np.asarray(q, dtype=float))
-        return {k: np.array(v, dtype=float).squeeze(axis=-1) if k != "z" else np.array(v, dtype=float) for k, v in result.items()}
+        return {k: np.array(v, dtype=float) if k in ("z", "y", "s") else np.array(v, dtype=float).squeeze(axis=-1)
+                for k, v in result.items()}
 
 
 def _key(arm: ArmSpec, link: int, n_modes: int, step_deg: float) -> str:
@@ -141,11 +164,36 @@ def _modal_fields(modes) -> dict[str, np.ndarray]:
     }
 
 
+def _aligned_shapes(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, x: np.ndarray, like: np.ndarray) -> np.ndarray:
+    """Shapes at ``x`` of the modes at ``q``, each signed to overlap positively with ``like``."""
+    shapes = link_modes(arm, q, link, n_modes).shape(x)
+    return shapes * np.where(np.sum(shapes * like, axis=1) < 0.0, -1.0, 1.0)[:, None]
+
+
+def _shape_rate_integrals(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, joints: tuple[int, ...],
+                          shapes: np.ndarray, x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``y[k, j, r]`` and ``s[j, r, k, t]`` at ``q`` (``shapes``: the modes at ``q`` on the nodes ``x``)."""
+    psi = np.zeros((n_modes, len(joints), x.size))
+    for rl, joint in enumerate(joints):
+        step = np.zeros(arm.n_links)
+        step[joint] = _SHAPE_STEP
+        plus = _aligned_shapes(arm, q + step, link, n_modes, x, shapes)
+        minus = _aligned_shapes(arm, q - step, link, n_modes, x, shapes)
+        psi[:, rl, :] = (plus - minus) / (2.0 * _SHAPE_STEP)
+    y = np.einsum("kx,jrx,x->kjr", shapes, psi, weights)
+    s = np.einsum("jrx,ktx,x->jrkt", psi, psi, weights)
+    return y, s
+
+
 def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], grid_deg: np.ndarray) -> dict[str, np.ndarray]:
     shape = (grid_deg.size,) * len(joints)
     table: dict[str, np.ndarray] = {}
     shapes_ref: dict[tuple[int, ...], np.ndarray] = {}
-    x = _SAMPLES * arm.links[link].length
+    length = arm.links[link].length
+    x = _SAMPLES * length
+    nodes, gauss = np.polynomial.legendre.leggauss(_GAUSS_POINTS)
+    x_gauss = 0.5 * length * (nodes + 1.0)
+    weights = 0.5 * length * gauss * arm.links[link].mass_per_length
     for index in np.ndindex(*shape):
         q = np.zeros(arm.n_links)
         for j, i in zip(joints, index):
@@ -164,6 +212,7 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
         else:
             signs = np.where(modes.tip_deflection < 0.0, -1.0, 1.0)
         shapes_ref[index] = shapes * signs[:, None]
+        y, s = _shape_rate_integrals(arm, q, link, n_modes, joints, modes.shape(x_gauss) * signs[:, None], x_gauss, weights)
         fields = _modal_fields(modes)
         fields = {
             "omega": fields["omega"],
@@ -172,6 +221,8 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
             "v": fields["v"] * signs,
             "w": fields["w"] * signs,
             "z": fields["z"] * np.outer(signs, signs),
+            "y": y,
+            "s": s,
         }
         for name, value in fields.items():
             if name not in table:
@@ -205,7 +256,7 @@ def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_de
     path = cache_dir() / "modal" / f"link{link + 1}-{_key(arm, link, n_modes, step_deg)}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
-            values = {name: data[name] for name in FIELDS}
+            values = {name: data[name] for name in FIELDS + (SHAPE_RATE_FIELDS if joints else ())}
         return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, 0.0)
     start = time.perf_counter()
     if joints:
