@@ -148,19 +148,51 @@ def _frozen_modal(arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int]):
 
 
 def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
-    """Modal expressions p(q_r) from the lookup functions (one per link, None for n_f = 0)."""
+    """Modal expressions p(q_r) from the lookup functions (one per link, None for n_f = 0).
+
+    The tables enter as their second-order expansion about a symbolic point ``q0``,
+    ``p(q) = a + B (q - q0) + 1/2 (q - q0)^T C (q - q0)``, with ``a, B, C`` symbols.
+    The equations of motion need at most second derivatives of ``p``, which this
+    expansion gives exactly at ``q = q0``.  Returns the modal parameters and the
+    substitution ``(symbols, values)`` that puts ``q0 = q`` and the spline's value,
+    Jacobian and Hessian in place: one spline evaluation of each order per link,
+    instead of one per place CasADi differentiates a spline call (85 of them in ``f``
+    for three links), which made ``f`` about five times slower.  Derivatives of the
+    substituted expressions (linearisation) go through the spline calls and stay exact.
+    """
     if lookups is None:
         from flexctrl.modal.lookup import modal_lookup
 
         lookups = [modal_lookup(arm, i, nf).function if nf else None for i, nf in enumerate(n_modes)]
+    n = arm.n_links
+    q0 = ca.SX.sym("q_expansion", n)
+    step = q[:n] - q0
+    symbols, values = [q0], [q[:n]]
+    fields = ("omega", "tip_deflection", "tip_slope", "v", "w", "z", "y", "s")
     modal = []
     for i, nf in enumerate(n_modes):
         if nf == 0:
             modal.append(LinkModal.from_modes(None, 0))
             continue
-        out = lookups[i](q=q[: arm.n_links])
-        modal.append(LinkModal(*(out[name] for name in ("omega", "tip_deflection", "tip_slope", "v", "w", "z", "y", "s"))))
-    return modal
+        point = ca.SX.sym("q_table", n)
+        outputs = lookups[i](q=point)
+        shapes = [outputs[name].shape for name in fields]
+        value = ca.vertcat(*(ca.vec(outputs[name]) for name in fields))
+        m = value.shape[0]
+        jac = ca.jacobian(value, point)
+        hess = ca.jacobian(ca.vec(jac), point)  # row i + m k: d^2 value_i / dq_k dq
+        derivatives = ca.Function(f"modal_expansion_link{i + 1}", [point], [value, jac, hess])
+        a, B, C = ca.SX.sym(f"a{i + 1}", m), ca.SX.sym(f"B{i + 1}", m, n), ca.SX.sym(f"C{i + 1}", m * n, n)
+        local = a + ca.mtimes(B, step) + 0.5 * ca.mtimes(ca.reshape(ca.mtimes(C, step), m, n), step)
+        symbols += [a, B, C]
+        values += [ca.densify(v) for v in derivatives(q[:n])]
+        pieces, offset = [], 0
+        for shape in shapes:
+            size = shape[0] * shape[1]
+            pieces.append(ca.reshape(local[offset : offset + size], shape[0], shape[1]))
+            offset += size
+        modal.append(LinkModal(*pieces))
+    return modal, (symbols, values)
 
 
 def build_amm(
@@ -232,7 +264,7 @@ def build_amm(
     frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes)
     scheduled = modes == "scheduled" and N > n
     if scheduled:
-        modal = _scheduled_modal(arm, q, n_modes, lookups)
+        modal, expansion = _scheduled_modal(arm, q, n_modes, lookups)
         ex = arm_expressions(arm, modal, q, shape_rates=True)
     else:
         modal = frozen_modal
@@ -267,19 +299,26 @@ def build_amm(
 
     opts = {"cse": True}
     tip = ex.positions[:, n]
+    expr = {
+        "M": M, "c": c, "g": g, "K": K, "D": D, "xdot": ca.vertcat(qd, qdd), "E_kin": E_kin, "E_el": ex.elastic_energy,
+        "E_grav": ex.gravity_energy, "tip": tip, "tip_v": ca.jtimes(tip, q, qd), "hubs": ex.positions,
+        "w": ex.tip_deflection, "dw": ex.tip_slope,
+    }
+    if scheduled:  # the tables' expansion point is the current configuration (see _scheduled_modal)
+        expr = dict(zip(expr, ca.substitute(list(expr.values()), *expansion)))
     functions = {
-        "M": ca.Function("M", [q], [M], ["q"], ["M"], opts),
-        "c": ca.Function("c", [q, qd], [c], ["q", "qd"], ["c"], opts),
-        "g": ca.Function("g", [q], [g], ["q"], ["g"], opts),
-        "K": ca.Function("K", [q], [K], ["q"], ["K"], opts) if scheduled else ca.Function("K", [], [K], [], ["K"]),
-        "D": ca.Function("D", [q], [D], ["q"], ["D"], opts) if scheduled else ca.Function("D", [], [D], [], ["D"]),
-        "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
+        "M": ca.Function("M", [q], [expr["M"]], ["q"], ["M"], opts),
+        "c": ca.Function("c", [q, qd], [expr["c"]], ["q", "qd"], ["c"], opts),
+        "g": ca.Function("g", [q], [expr["g"]], ["q"], ["g"], opts),
+        "K": ca.Function("K", [q], [expr["K"]], ["q"], ["K"], opts) if scheduled else ca.Function("K", [], [K], [], ["K"]),
+        "D": ca.Function("D", [q], [expr["D"]], ["q"], ["D"], opts) if scheduled else ca.Function("D", [], [D], [], ["D"]),
+        "f": ca.Function("f", [x, u], [expr["xdot"]], ["x", "u"], ["xdot"], opts),
         "energies": ca.Function(
-            "energies", [q, qd], [E_kin, ex.elastic_energy, ex.gravity_energy], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+            "energies", [q, qd], [expr["E_kin"], expr["E_el"], expr["E_grav"]], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
         ),
-        "tip": ca.Function("tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts),
-        "hubs": ca.Function("hubs", [q], [ex.positions], ["q"], ["p"], opts),
-        "deflection": ca.Function("deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts),
+        "tip": ca.Function("tip", [q, qd], [expr["tip"], expr["tip_v"]], ["q", "qd"], ["p", "v"], opts),
+        "hubs": ca.Function("hubs", [q], [expr["hubs"]], ["q"], ["p"], opts),
+        "deflection": ca.Function("deflection", [q], [expr["w"], expr["dw"]], ["q"], ["w", "dw"], opts),
     }
 
     # locked-joint linearisation at the reference configuration (joints clamped, q_f = 0, qd = 0)
