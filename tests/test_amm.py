@@ -367,19 +367,23 @@ class _SignedModes:
         return self.signs.reshape((-1,) + (1,) * np.ndim(x)) * self.modes.shape(x, derivative)
 
 
-def _exact_modes_like_lookup(arm, q_r, n_modes=2):
+def _lookups(arm, n_modes=2):
     from flexctrl.modal.lookup import modal_lookup
 
+    return [modal_lookup(arm, i, n_modes) for i in range(arm.n_links)]
+
+
+def _exact_modes_like_lookup(arm, q_r, lookups):
     out = []
-    for i in range(arm.n_links):
-        exact = link_modes(arm, q_r, i, n_modes)
-        looked = modal_lookup(arm, i, n_modes).evaluate(q_r)
+    for i, lookup in enumerate(lookups):
+        exact = link_modes(arm, q_r, i, lookup.n_modes)
+        looked = lookup.evaluate(q_r)
         out.append(_SignedModes(exact, np.sign(looked["tip_deflection"] * exact.tip_deflection)))
     return out
 
 
-def _sign_matrix(arm, q_r, n_modes=2):
-    signs = np.concatenate([m.signs for m in _exact_modes_like_lookup(arm, q_r, n_modes)])
+def _sign_matrix(arm, q_r, lookups):
+    signs = np.concatenate([m.signs for m in _exact_modes_like_lookup(arm, q_r, lookups)])
     return np.diag(np.concatenate([np.ones(arm.n_links), signs]))
 
 
@@ -389,7 +393,7 @@ def test_scheduled_mass_matrix_equals_frozen_at_zero_deflection(model_path):
     arm = _arm(model_path)
     q_ref = np.radians([20.0, 30.0, -40.0])
     frozen, scheduled = build_amm(arm, 2, reference_q=q_ref), build_amm(arm, 2, modes="scheduled")
-    S = _sign_matrix(arm, q_ref)  # lookup modes may be sign-flipped
+    S = _sign_matrix(arm, q_ref, _lookups(arm))  # lookup modes may be sign-flipped
     q = np.concatenate([q_ref, np.zeros(6)])
     np.testing.assert_allclose(scheduled.mass_matrix(q), S @ frozen.mass_matrix(q) @ S, rtol=1e-7, atol=1e-9)
 
@@ -402,12 +406,12 @@ def test_scheduled_inertial_load_equals_frozen_at_rest_deflection(model_path):
     fails this by a force (dv/dt)(n . rdot) + (dw/dt) alpha-dot on the modes (measured with
     that model: 117 % and 171 % of the largest elastic acceleration at these two poses)."""
     arm = _arm(model_path)
-    scheduled = build_amm(arm, 2, modes="scheduled")
+    scheduled, lookups = build_amm(arm, 2, modes="scheduled"), _lookups(arm)
     rng = np.random.default_rng(21)
     for q_deg in ([20.0, 30.0, -40.0], [-35.0, 77.0, 123.0]):  # on and off the 10-degree grid
         q_r = np.radians(q_deg)
         frozen = build_amm(arm, 2, reference_q=q_r)
-        S = _sign_matrix(arm, q_r)
+        S = _sign_matrix(arm, q_r, lookups)
         q = np.concatenate([q_r, np.zeros(6)])
         qd = np.concatenate([rng.normal(size=3) * 2.0, np.zeros(6)])
         tau = rng.normal(size=3) * 20.0
@@ -422,15 +426,15 @@ def test_scheduled_kinetic_energy_matches_moving_shapes_quadrature(model_path):
     central differences, so the shapes' change is in them).  The part of T that the
     shapes' motion adds must be reproduced, not just the rest."""
     arm = _arm(model_path)
-    scheduled = build_amm(arm, 2, modes="scheduled")
+    scheduled, lookups = build_amm(arm, 2, modes="scheduled"), _lookups(arm)
     rng = np.random.default_rng(22)
     for q_deg in ([20.0, 30.0, -40.0], [-35.0, 77.0, 123.0]):  # on and off the 10-degree grid
         q_r = np.radians(q_deg)
         q = np.concatenate([q_r, 0.05 * rng.normal(size=6)])
         qd = np.concatenate([rng.normal(size=3) * 2.0, rng.normal(size=6) * 0.2])
         T_model = float(scheduled.functions["energies"](q, qd)[0])
-        T_ref = _energies_by_quadrature(arm, lambda q_now: _exact_modes_like_lookup(arm, q_now), q, qd)[0]
-        T_still = _energies_by_quadrature(arm, _exact_modes_like_lookup(arm, q_r), q, qd)[0]  # shapes held still
+        T_ref = _energies_by_quadrature(arm, lambda q_now: _exact_modes_like_lookup(arm, q_now, lookups), q, qd)[0]
+        T_still = _energies_by_quadrature(arm, _exact_modes_like_lookup(arm, q_r, lookups), q, qd)[0]  # shapes held still
         assert abs(T_ref - T_still) > 2e-5 * T_ref  # the shapes' motion is really in the reference
         assert abs(T_model - T_ref) < 0.01 * abs(T_ref - T_still)
         assert np.linalg.eigvalsh(scheduled.mass_matrix(q)).min() > 0.0

@@ -168,16 +168,15 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
     q0 = ca.SX.sym("q_expansion", n)
     step = q[:n] - q0
     symbols, values = [q0], [q[:n]]
-    fields = ("omega", "tip_deflection", "tip_slope", "v", "w", "z", "y", "s")
     modal = []
     for i, nf in enumerate(n_modes):
         if nf == 0:
             modal.append(LinkModal.from_modes(None, 0))
             continue
         point = ca.SX.sym("q_table", n)
-        outputs = lookups[i](q=point)
-        shapes = [outputs[name].shape for name in fields]
-        value = ca.vertcat(*(ca.vec(outputs[name]) for name in fields))
+        outputs = lookups[i](point)  # in LinkModal's field order: FIELDS, then y, s
+        shapes = [out.shape for out in outputs]
+        value = ca.vertcat(*(ca.vec(out) for out in outputs))
         m = value.shape[0]
         jac = ca.jacobian(value, point)
         hess = ca.jacobian(ca.vec(jac), point)  # row i + m k: d^2 value_i / dq_k dq

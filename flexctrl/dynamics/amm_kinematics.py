@@ -2,8 +2,8 @@
 
 Everything here is a CasADi expression in the generalised coordinates
 ``q = (q_r, q_f)`` and in the modal parameters of each link, which are either
-numeric constants (frozen modes) or symbols (scheduled modes; substituted by the
-lookup afterwards, see :mod:`flexctrl.dynamics.amm`).  The code is generic over
+numeric constants (frozen modes) or expressions in ``q`` from the lookup tables
+(scheduled modes, see :mod:`flexctrl.dynamics.amm`).  The code is generic over
 ``casadi.SX`` and ``casadi.MX``.
 
 Kinematics (Eqs 1-9)
@@ -92,17 +92,6 @@ class LinkModal:
             *(ca.DM(np.reshape(np.asarray(getattr(modes, name), dtype=float), (n_modes, n_modes) if name == "z" else (n_modes, 1)))
               for name in MODAL_FIELDS)
         )
-
-    @staticmethod
-    def symbols(sym: type, link: int, n_modes: int) -> "LinkModal":
-        """Free symbols of type ``sym`` (``ca.SX`` or ``ca.MX``) for link ``link`` (0-based)."""
-        return LinkModal(
-            *(sym.sym(f"{name}{link + 1}", n_modes, n_modes if name == "z" else 1) for name in MODAL_FIELDS)
-        )
-
-    def vector(self):
-        """All fields stacked in a column (``z`` column-major)."""
-        return ca.vertcat(*(ca.vec(getattr(self, name)) for name in MODAL_FIELDS))
 
 
 def _rotation(angle):

@@ -28,7 +28,7 @@ def parse_value(text: str) -> Any:
         return text
 
 
-def _pieces(key: str) -> list[tuple[str, bool]]:
+def _pieces(key: str, source: str) -> list[tuple[str, bool]]:
     """Split ``key`` on the dots outside double quotes: (piece, was_quoted) pairs."""
     pieces, current, quoted, inside = [], "", False, False
     for char in key:
@@ -40,14 +40,15 @@ def _pieces(key: str) -> list[tuple[str, bool]]:
         else:
             current += char
     if inside:
-        raise SpecError(f"override key '{key}' has an unclosed quote", source="--set")
+        raise SpecError(f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, e.g. grid.\"scene.dt\"",
+                        source=source)
     pieces.append((current, quoted))
     return pieces
 
 
-def _split_key(key: str) -> list[str | int]:
+def _split_key(key: str, source: str = "--set") -> list[str | int]:
     parts: list[str | int] = []
-    for piece, quoted in _pieces(key):
+    for piece, quoted in _pieces(key, source):
         if quoted and piece:
             parts.append(piece)
             continue
@@ -59,7 +60,7 @@ def _split_key(key: str) -> list[str | int]:
         elif piece:
             parts.append(piece)
         else:
-            raise SpecError(f"override key '{key}' has an empty part", source="--set")
+            raise SpecError(f"override key '{key}' has an empty part", source=source)
     return parts
 
 
@@ -86,7 +87,7 @@ def apply_overrides(document: dict[str, Any], assignments: Iterable[str], source
             raise SpecError(f"'{assignment}' is not of the form KEY=VALUE", source=source)
         key, text = assignment.split("=", 1)
         key = key.strip()
-        parts = _split_key(key)
+        parts = _split_key(key, source)
         node: Any = result
         for depth, part in enumerate(parts[:-1]):
             node = _descend(node, part, key, source, create=not isinstance(parts[depth + 1], int))
