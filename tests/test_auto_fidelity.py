@@ -2,7 +2,7 @@
 
 The choices are checked against a reference that the chooser did not use to make
 them (the reference only judges), the reported reference error is recomputed
-here from independent runs through :func:`flexctrl.scenes.run_arm_scene`, and no
+here from independent runs through :func:`flexctrl.scenes.arm_scene.run_arm_scene`, and no
 expected choice or error is hard-coded: the tests compare a slow light move with
 a fast heavy one and every error with the tolerance given.
 """
@@ -15,24 +15,24 @@ import math
 import numpy as np
 import pytest
 
-from flexctrl.analysis.auto_fidelity import (
-    FidelityChoice,
-    RK4_LIMIT,
-    RK4_MARGIN,
-    choose_fidelity,
-    excitation_bandwidth,
-    rk4_step,
-)
-from flexctrl.analysis.tip_error import tip_error
+from flexctrl.fidelity.ladder import FidelityChoice, excitation_bandwidth
+from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT as RK4_LIMIT
+from flexctrl.sim.rk4 import RK4_MARGIN, rk4_step
+from flexctrl.scenes.auto import choose_fidelity
+from flexctrl.scenes.cache import SceneCache
+from flexctrl.sim.tip_error import tip_error
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
-from flexctrl.fidelity import parse_fidelity
-from flexctrl.scenes import run_arm_scene, run_scene
+from flexctrl.spec.fidelity import parse_fidelity
+from flexctrl.scenes.arm_scene import run_arm_scene
+from flexctrl.scenes import run_scene
 from flexctrl.spec.scene import load_scene
 
 SLOW = "studies/scenes/slow_move_light.toml"
 SLOW_SET = ["duration=1.0"]
 SLOW_OPTIONS = {"top": 2, "reference": "amm:3"}
+#: One cache for the module, as a study worker keeps one.
+CACHE = SceneCache()
 HEAVY = "studies/scenes/bangbang_damped.toml"
 HEAVY_SET = ["duration=0.6", "payload=4.0", "fidelity='auto'", "tolerance=2e-4"]
 
@@ -40,7 +40,7 @@ HEAVY_SET = ["duration=0.6", "payload=4.0", "fidelity='auto'", "tolerance=2e-4"]
 @pytest.fixture(scope="module")
 def slow():
     scene = load_scene(SLOW, SLOW_SET)
-    return scene, choose_fidelity(scene, scene.tolerance, **SLOW_OPTIONS)
+    return scene, choose_fidelity(scene, scene.tolerance, **SLOW_OPTIONS, cache=CACHE)
 
 
 def _check_choice(scene, choice: FidelityChoice, tol: float) -> None:
@@ -81,7 +81,7 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
 def test_fast_heavy_bangbang_needs_more_modes(slow):
     _slow_scene, slow_choice = slow
     scene = load_scene(HEAVY, HEAVY_SET)
-    choice = choose_fidelity(scene, scene.tolerance, top=3)
+    choice = choose_fidelity(scene, scene.tolerance, top=3, cache=CACHE)
     assert choice.choice.modes_per_link > slow_choice.choice.modes_per_link
     _check_choice(scene, choice, scene.tolerance)
     # the chosen rung's estimate meets the tolerance and the one below it does not (lowest rung)
@@ -90,10 +90,11 @@ def test_fast_heavy_bangbang_needs_more_modes(slow):
     assert rows[below]["estimated_error_m"] > scene.tolerance
 
 
-def test_choices_are_cached_per_process(slow):
+def test_choices_are_kept_in_the_callers_cache(slow):
     scene, choice = slow
-    again = choose_fidelity(load_scene(SLOW, SLOW_SET), scene.tolerance, **SLOW_OPTIONS)
+    again = choose_fidelity(load_scene(SLOW, SLOW_SET), scene.tolerance, **SLOW_OPTIONS, cache=CACHE)
     assert again is choice
+    assert choose_fidelity(load_scene(SLOW, SLOW_SET), 2 * scene.tolerance, **SLOW_OPTIONS, cache=CACHE) is not choice
 
 
 def test_cli_json_has_the_four_keys(slow, capsys):
@@ -142,7 +143,7 @@ def test_unreachable_tolerance_exits_3_naming_the_best(slow, capsys):
 
 def test_auto_scene_runs_the_choice_and_records_it(slow, tmp_path):
     scene, choice = slow
-    result = run_scene(scene, tmp_path, plots=False, auto_options=SLOW_OPTIONS)
+    result = run_scene(scene, tmp_path, plots=False, auto_options=SLOW_OPTIONS, cache=CACHE)
     record = result.summary["fidelity_choice"]
     assert record["choice"] == str(choice.choice)  # the cached choice
     assert result.trajectory.meta["fidelity"] == record["choice"]

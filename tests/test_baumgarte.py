@@ -12,7 +12,7 @@ import pytest
 from flexctrl.analysis.baumgarte import (EXPLICIT_LIMIT, constraint_states, defect_gain, error_amplification,
                                          fastest_decay, propagate_errors, run_point, spectral_radius,
                                          stability_limit, steady_drift_response, step_defects)
-from flexctrl.analysis.baumgarte_study import read_sweep_scene
+from flexctrl.study.executors.baumgarte_sweep import read_sweep_scene
 from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SlidingBeamModel
 from flexctrl.errors import SpecError
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexctrl.closedloop import simulate_closed_loop
+from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.control.base import Controller
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SimulationError, SpecError
@@ -109,7 +109,7 @@ def test_divergence_can_stop_the_run_and_be_recorded(arm_model):
 def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_exact(root):
     import casadi as ca
 
-    from flexctrl.closedloop import advance_function, plant_step_function
+    from flexctrl.loop.plant_step import advance_function, plant_step_function
     from flexctrl.sim.parametric import constants_as_parameters
 
     arm = load_arm(root / "models" / "subedi3link.toml").with_payload(2.0)

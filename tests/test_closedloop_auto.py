@@ -2,8 +2,8 @@
 
 The choice is checked against runs the chooser did not make: the reference plant and
 the chosen plant are run directly here (full plant rate, through
-:func:`flexctrl.closedloop.run_closed_loop_scene` with a concrete fidelity) and their
-tip paths compared with :func:`flexctrl.analysis.tip_error.tip_error`.  No choice or
+:func:`flexctrl.scenes.closed_loop.run_closed_loop_scene` with a concrete fidelity) and their
+tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`.  No choice or
 error is hard-coded: the tolerance is the only number the assertions use.
 
 The scene is the quickstart's move (1.5 s quintic, 2 kg, q2, q3 = 90, -90 deg) cut to
@@ -19,10 +19,13 @@ import math
 import numpy as np
 import pytest
 
-from flexctrl.analysis import auto_fidelity
-from flexctrl.analysis.tip_error import tip_error
+from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes.cache import SceneCache
+from flexctrl.sim.tip_error import tip_error
 from flexctrl.cli import main
-from flexctrl.closedloop import AUTO_DESIGN_FIDELITY, check_auto, run_closed_loop_scene, state_projection
+from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY
+from flexctrl.scenes.closed_loop import check_auto, run_closed_loop_scene
+from flexctrl.loop.mismatch import state_projection
 from flexctrl.errors import SpecError
 from flexctrl.spec.scene import load_scene
 
@@ -31,6 +34,8 @@ CONTROLLER = "controllers/lqr.toml"
 SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
 OPTIONS = {"top": 2, "reference": "amm:3"}
+#: One cache for the module: the runs below share models and the choice, as a study worker does.
+CACHE = SceneCache()
 
 
 def _scene(*extra: str):
@@ -39,7 +44,7 @@ def _scene(*extra: str):
 
 @pytest.fixture(scope="module")
 def auto_run():
-    return run_closed_loop_scene(_scene(), controller=CONTROLLER, auto_options=OPTIONS)
+    return run_closed_loop_scene(_scene(), controller=CONTROLLER, auto_options=OPTIONS, cache=CACHE)
 
 
 @pytest.mark.slow  # the module fixture: ~20 s with compiled models on disk, ~30 s without
@@ -78,11 +83,11 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
 
 
 @pytest.mark.slow  # the module fixture: ~20 s with compiled models on disk, ~30 s without
-def test_choice_is_cached_per_process_and_keyed_by_the_controller(auto_run):
-    before = auto_fidelity._choose_closed_cached.cache_info()
-    again = run_closed_loop_scene(_scene(), controller=CONTROLLER, auto_options=OPTIONS)
-    after = auto_fidelity._choose_closed_cached.cache_info()
-    assert after.hits == before.hits + 1 and after.misses == before.misses
+def test_choice_is_kept_in_the_cache_and_keyed_by_the_controller(auto_run):
+    before = CACHE.stats()["closed_choices"]
+    again = run_closed_loop_scene(_scene(), controller=CONTROLLER, auto_options=OPTIONS, cache=CACHE)
+    after = CACHE.stats()["closed_choices"]
+    assert after["hits"] == before["hits"] + 1 and after["misses"] == before["misses"]
     assert again.summary["fidelity_choice"]["choice"] == auto_run.summary["fidelity_choice"]["choice"]
     scene = _scene()
     base = auto_fidelity.closed_loop_key(scene, CONTROLLER, ())
@@ -132,15 +137,14 @@ def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
 
 
 def test_state_projection_matches_modes_by_name_and_the_modes_agree_across_rungs():
-    from flexctrl.analysis.auto_fidelity import cached_model
     from flexctrl.linear import state_names
-    from flexctrl.scenes import scene_arm
+    from flexctrl.scenes.arm import scene_arm
 
     plant_scene = _scene().plant
     arm = scene_arm(plant_scene)
-    two = cached_model(arm, "amm:2", plant_scene.modes, plant_scene.q0)
-    three = cached_model(arm, "amm:3", plant_scene.modes, plant_scene.q0)
-    one = cached_model(arm, "amm:1", plant_scene.modes, plant_scene.q0)
+    two = CACHE.model(arm, "amm:2", plant_scene.modes, plant_scene.q0)
+    three = CACHE.model(arm, "amm:3", plant_scene.modes, plant_scene.q0)
+    one = CACHE.model(arm, "amm:1", plant_scene.modes, plant_scene.q0)
     # the claim the projection rests on: a link's first modes are the same at every rung
     for low, high in zip(two.info["link_frequencies_rad_s"], three.info["link_frequencies_rad_s"]):
         np.testing.assert_allclose(low, high[: len(low)], rtol=1e-9)

@@ -13,14 +13,14 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.estimator import kalman_gain
 from flexctrl.control.nmpc import interval_functions
-from flexctrl.control.settings import (
+from flexctrl.spec.controller_settings import (
     EstimatorSettings,
     LQRSettings,
     PDSettings,
     ScheduleSettings,
     SensorSettings,
 )
-from flexctrl.dynamics.build import load_model
+from flexctrl.scenes.models import load_model
 from flexctrl.errors import SpecError
 
 TARGET = np.radians([80.0, -10.0, -10.0])
@@ -232,7 +232,7 @@ def test_doubling_dare_agrees_with_scipy_and_refuses_an_uncontrollable_unstable_
 @pytest.mark.parametrize("target_deg", [[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
 def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
     """The move scene's LQG: the filter DARE the Schur method failed on at [30, 0, 0] (free rigid modes at z = 1)."""
-    from flexctrl.closedloop import run_closed_loop_scene
+    from flexctrl.scenes.closed_loop import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene("studies/scenes/move_joint1_30deg.toml", [f"target.move={target_deg!r}", "duration=5.0"])

@@ -8,8 +8,8 @@ import pytest
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
-from flexctrl.control.settings import MPCSettings, OSQPSettings
-from flexctrl.dynamics.build import load_model
+from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
+from flexctrl.scenes.models import load_model
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=True)
@@ -198,7 +198,7 @@ def test_benchmark_reports_every_variant():
 
 
 def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
-    from flexctrl.control.settings import SensorSettings
+    from flexctrl.spec.controller_settings import SensorSettings
 
     ctrl = design(arm3, op3, MPCSettings(sensors=SensorSettings(outputs=("joints", "strain"), joints=1e-6,
                                                                 strain=1e-6)))
@@ -220,7 +220,8 @@ def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
 def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(arm3, op3, formulation):
     """Reference in the bounds only: MPC's first move = LQR's u_ref - K (x - x_ref), and the QP pattern is unchanged."""
     from flexctrl.control.lqr import LQRSettings
-    from flexctrl.control.reference import JointReference, ReferenceTrajectory
+    from flexctrl.control.reference import ReferenceTrajectory
+    from flexctrl.spec.reference import JointReference
 
     settings = MPCSettings(horizon=12, soft="deflection", formulation=formulation, osqp=TIGHT)
     ctrl = design(arm3, op3, settings)

@@ -9,7 +9,7 @@ import pytest
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.nmpc import RK4_BOUND, auto_substeps
-from flexctrl.control.settings import NMPCSettings
+from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.spec.arm import arm_from_document
 
@@ -125,7 +125,7 @@ def test_auto_substeps_respect_the_rk4_bound(onelink):
 
 @pytest.mark.slow
 def test_rti_on_the_three_link_arm_meets_the_real_time_target():
-    from flexctrl.dynamics.build import load_model
+    from flexctrl.scenes.models import load_model
 
     model = load_model("models/subedi3link.toml", fidelity="amm:2")
     op = L.equilibrium(model, np.radians([80.0, -10.0, -10.0]))
@@ -209,7 +209,7 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
 def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
     sample diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step NMPC settles."""
-    from flexctrl.closedloop import run_closed_loop_scene
+    from flexctrl.scenes.closed_loop import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene("studies/scenes/move_joint1_30deg.toml",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from flexctrl.control.settings import (
+from flexctrl.spec.controller_settings import (
     LQRSettings,
     MPCSettings,
     NMPCSettings,

@@ -1,4 +1,4 @@
-"""Finite-element scenes (flexctrl.fem_scenes) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
+"""Finite-element scenes (flexctrl.scenes.fem) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from scipy.integrate import cumulative_trapezoid
 from flexctrl.dynamics.fem.rp_arm import RPArmSpec, RPMotion, load_rp_arm, rp_arm_from_document, simulate_rp_arm
 from flexctrl.dynamics.fem.sliding_beam import FAST_PULL, FAST_PUSH, simulate_sliding_beam
 from flexctrl.errors import SpecError
-from flexctrl.fem_scenes import run_fem_scene
-from flexctrl.fidelity import Fidelity
+from flexctrl.scenes.fem import run_fem_scene
+from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml
 
@@ -197,8 +197,9 @@ def test_rp_model_file_is_validated():
 
 
 def test_scene_kind_adapters(tmp_path):
-    """``read_scene``/``run_scene`` have the SCENE_KINDS signatures: validation at load, files at run."""
-    from flexctrl.fem_scenes import read_scene, run_scene
+    """The reader validates at load, the runner writes files at run."""
+    from flexctrl.scenes.fem import run_scene
+    from flexctrl.spec.fem_scene import read_fem_scene as read_scene
 
     doc, src = scene("bk_fast_push", "duration=0.05")
     loaded = read_scene(doc, src, SCENES)

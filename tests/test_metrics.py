@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from flexctrl.metrics import closed_loop_metrics, settling_time
+from flexctrl.loop.metrics import closed_loop_metrics, settling_time
 
 
 def test_decaying_sinusoid_metrics_match_closed_forms():

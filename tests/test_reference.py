@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexctrl.closedloop import run_closed_loop_scene
-from flexctrl.control.reference import JointReference, ReferenceTrajectory
+from flexctrl.scenes.closed_loop import run_closed_loop_scene
+from flexctrl.control.reference import ReferenceTrajectory
+from flexctrl.spec.reference import JointReference
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
 from flexctrl.linear import equilibrium

@@ -12,7 +12,8 @@ import pytest
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
 from flexctrl.scenes import run_scene
-from flexctrl.spec.scene import INTEGRATOR_NAMES, SCENE_KINDS, InputSpec, load_scene
+from flexctrl.spec.arm_scene import INTEGRATOR_NAMES, InputSpec
+from flexctrl.spec.scene import SCENE_READERS as SCENE_KINDS, load_scene
 
 PAPER_SCENES = ("free_vibration", "free_vibration_damped", "bangbang", "bangbang_damped")
 

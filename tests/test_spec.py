@@ -9,7 +9,7 @@ import tomllib
 import pytest
 
 from flexctrl.errors import SpecError
-from flexctrl.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.arm import load_arm
 from flexctrl.spec.overrides import apply_overrides, parse_value
 

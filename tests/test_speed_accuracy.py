@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexctrl.analysis import accuracy_study as study
+from flexctrl.study.executors import speed_vs_accuracy as study
 from flexctrl.analysis.accuracy import (
     Method, compute_reference, make_stepper, pareto_front, parse_method, run_open_loop,
 )
-from flexctrl.analysis.tip_error import tip_error
+from flexctrl.sim.tip_error import tip_error
 from flexctrl.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -151,7 +151,7 @@ def test_open_loop_driver_matches_the_package_integrator():
 
 def test_divergence_is_an_error_not_nan():
     from flexctrl.errors import SimulationError
-    from flexctrl.scenes import scene_arm
+    from flexctrl.scenes.arm import scene_arm
     from flexctrl.dynamics.build import build_model
 
     plan = study.plan_from_settings(_settings("bangbang.toml", "fem:2/rk4@1ms", "scene.horizon=0.3"))

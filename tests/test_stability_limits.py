@@ -289,7 +289,7 @@ def test_probe_refuses_states_it_cannot_probe():
 
 
 def test_study_refuses_adaptive_integrators():
-    from flexctrl.analysis.stability_study import check_settings
+    from flexctrl.study.executors.stability_limits import check_settings
     from flexctrl.study.spec import load_study
 
     settings = load_study(STUDY, ["grid.fidelity=['amm:1']"], check_executor=False).runs[0].settings

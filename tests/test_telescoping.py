@@ -14,7 +14,7 @@ from flexctrl.dynamics.fem.telescoping import (Contact, LinkProps, TelescopingMo
                                                load_telescoping, simulate_telescoping, static_tip_deflection,
                                                telescoping_from_document)
 from flexctrl.errors import SpecError
-from flexctrl.fem_scenes import run_fem_scene
+from flexctrl.scenes.fem import run_fem_scene
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml
 

@@ -174,7 +174,7 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
     SpecError
         Naming the value and what is allowed.
     """
-    from flexctrl.fidelity import parse_fidelity
+    from flexctrl.spec.fidelity import parse_fidelity
 
     allowed = ("allowed: FIDELITY[+sched]/INTEGRATOR[:VARIANT][@VALUE], e.g. 'amm:2/rk4@1ms', 'fem:4/rk4@stable', "
                "'fem:4/newmark@1ms', 'amm:2/cvodes@1e-6', 'amm:2/scipy:DOP853@1e-6'; integrators: " + ", ".join(INTEGRATORS))
@@ -560,7 +560,7 @@ def compute_reference(simulate: Callable[[Method], MethodRun], method: Method, m
     ``meshes`` with the reference's integrator (coarser meshes show the spatial
     convergence; a finer one bounds the reference's own error).
     """
-    from flexctrl.analysis.tip_error import tip_error
+    from flexctrl.sim.tip_error import tip_error
 
     ref = simulate(method)
     checks: dict[str, dict[str, Any]] = {}

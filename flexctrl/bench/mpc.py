@@ -41,8 +41,8 @@ def _stats(values_s: Sequence[float]) -> dict[str, float]:
 
 
 def default_variants() -> dict[str, dict[str, Any]]:
-    """Settings overrides per variant (on top of :class:`~flexctrl.control.settings.MPCSettings`)."""
-    from flexctrl.control.settings import OSQPSettings
+    """Settings overrides per variant (on top of :class:`~flexctrl.spec.controller_settings.MPCSettings`)."""
+    from flexctrl.spec.controller_settings import OSQPSettings
 
     return {
         "osqp_sparse": {},
@@ -115,7 +115,7 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
         times.append(time.perf_counter() - start)
         moves.append(v)
     # the same first move from our OSQP controller (tight tolerance) for the comparison
-    from flexctrl.control.settings import OSQPSettings
+    from flexctrl.spec.controller_settings import OSQPSettings
 
     tight = design(model, op, dataclasses.replace(settings, soft="none",
                                                   osqp=OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000,
@@ -133,7 +133,7 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
 
 def _run_nmpc(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float, **overrides) -> dict[str, Any]:
     from flexctrl.control import design
-    from flexctrl.control.settings import NMPCSettings
+    from flexctrl.spec.controller_settings import NMPCSettings
 
     start = time.perf_counter()
     ctrl = design(model, op, NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides))
@@ -185,7 +185,7 @@ def mpc_benchmark(
     target_deg, offset_deg
         Target joint angles and the initial offset from them (degrees).
     variants
-        Name -> :class:`~flexctrl.control.settings.MPCSettings` overrides
+        Name -> :class:`~flexctrl.spec.controller_settings.MPCSettings` overrides
         (default :func:`default_variants`).
     python_control_solves
         Solves of python-control's MPC to time (0 skips it; each takes seconds).
@@ -205,8 +205,8 @@ def mpc_benchmark(
     import osqp
 
     from flexctrl import linear as L
-    from flexctrl.control.settings import MPCSettings
-    from flexctrl.dynamics.build import load_model
+    from flexctrl.spec.controller_settings import MPCSettings
+    from flexctrl.scenes.models import load_model
 
     model = load_model(model_path, fidelity=fidelity)
     op = L.equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))

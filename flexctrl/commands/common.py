@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from flexctrl.fidelity import SPELLINGS, Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import SPELLINGS, Fidelity, parse_fidelity
 from flexctrl.spec.arm import ArmSpec, load_arm
 
 

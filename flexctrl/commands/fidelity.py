@@ -1,7 +1,7 @@
 """``flexctrl fidelity SCENE --tol METRES``: the cheapest model that keeps a scene's tip within a tolerance.
 
-Runs :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` on a ``kind = "arm"``
-scene, or :func:`~flexctrl.analysis.auto_fidelity.choose_closed_loop_fidelity` on a
+Runs :func:`flexctrl.scenes.auto.choose_fidelity` on a ``kind = "arm"``
+scene, or :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` on a
 ``kind = "closed_loop"`` scene (the plant's fidelity is chosen, the controller
 designed once on ``controller_fidelity``, else on the scene's own plant fidelity,
 ``amm:2`` when that is ``auto``; ``--controller``
@@ -51,9 +51,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexctrl.analysis.auto_fidelity import ToleranceUnreachable, check_tolerance, choose_fidelity
+    from flexctrl.fidelity.ladder import ToleranceUnreachable, check_tolerance
+    from flexctrl.scenes.auto import choose_fidelity
     from flexctrl.errors import SpecError
-    from flexctrl.fidelity import parse_fidelity
+    from flexctrl.spec.fidelity import parse_fidelity
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
@@ -73,8 +74,9 @@ def run(args: argparse.Namespace) -> int:
         tol = check_tolerance(args.tol, source=args.scene, key="--tol")
     try:
         if scene.kind == "closed_loop":
-            from flexctrl.analysis.auto_fidelity import choose_closed_loop_fidelity
-            from flexctrl.closedloop import check_auto, pin_design
+            from flexctrl.scenes.auto import choose_closed_loop_fidelity
+            from flexctrl.scenes.closed_loop import check_auto
+            from flexctrl.scenes.loop_setup import pin_design
 
             design = scene.controller_fidelity
             if design is None and scene.plant.fidelity.kind != "auto":

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from flexctrl.fidelity import SPELLINGS
+from flexctrl.spec.fidelity import SPELLINGS
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

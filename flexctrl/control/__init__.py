@@ -25,7 +25,8 @@ Closed loop (sampled, zero-order hold)::
 from __future__ import annotations
 
 from flexctrl.control.base import Controller, ControllerStats
-from flexctrl.control.settings import (
+from flexctrl.errors import SpecError
+from flexctrl.spec.controller_settings import (
     SETTINGS,
     EstimatorSettings,
     LQRSettings,
@@ -53,41 +54,46 @@ def _check_holding_torque(model, op) -> None:
             RuntimeWarning, stacklevel=3)
 
 
+#: Controller kind -> ``"module:designer"`` (``designer(model, op, settings) -> Controller``).
+DESIGNERS: dict[str, str] = {
+    "pd": "flexctrl.control.pd:design_pd",
+    "lqr": "flexctrl.control.lqr:design_lqr",
+    "mpc": "flexctrl.control.mpc:design_mpc",
+    "nmpc": "flexctrl.control.nmpc:design_nmpc",
+    "shaped": "flexctrl.control.shaping:design_shaped",
+}
+
+
 def design(model, op, settings) -> Controller:
     """Build the controller described by ``settings`` for ``model``, regulating to ``op``.
 
     Parameters
     ----------
     model : flexctrl.dynamics.model.Model
+        The design model; the controller keeps it as ``design_model`` (the closed loop
+        builds the controller's reference on it).
     op : flexctrl.linear.OperatingPoint
         Target (usually :func:`flexctrl.linear.equilibrium` at the target joint angles).
     settings
-        One of the settings dataclasses (see the table in the module docstring).
+        One of the settings dataclasses (see the table in the module docstring), e.g.
+        from :func:`flexctrl.spec.controller.load_controller`.
+
+    Returns
+    -------
+    Controller
+        ``step(t, y) -> u`` (N m) for measurements ordered as ``measurement_names``.
     """
-    _check_holding_torque(model, op)
+    import importlib
+
     kind = getattr(settings, "kind", None)
-    if kind == "pd":
-        from flexctrl.control.pd import design_pd
-
-        return design_pd(model, op, settings)
-    if kind == "lqr":
-        from flexctrl.control.lqr import design_lqr
-
-        return design_lqr(model, op, settings)
-    if kind == "mpc":
-        from flexctrl.control.mpc import design_mpc
-
-        return design_mpc(model, op, settings)
-    if kind == "nmpc":
-        from flexctrl.control.nmpc import design_nmpc
-
-        return design_nmpc(model, op, settings)
-    if kind == "shaped":
-        from flexctrl.control.shaping import design_shaped
-
-        return design_shaped(model, op, settings)
-    raise TypeError(f"settings of type {type(settings).__name__} name no controller; expected one of "
-                    f"{', '.join(cls.__name__ for cls in SETTINGS.values())}")
+    if kind not in DESIGNERS:
+        raise SpecError(f"value of type {type(settings).__name__} names no controller; allowed: one of "
+                        f"{', '.join(cls.__name__ for cls in SETTINGS.values())}", key="settings")
+    _check_holding_torque(model, op)
+    module, _, name = DESIGNERS[kind].partition(":")
+    controller = getattr(importlib.import_module(module), name)(model, op, settings)
+    controller.design_model = model
+    return controller
 
 
 __all__ = [

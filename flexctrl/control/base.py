@@ -111,6 +111,8 @@ class Controller(ABC):
         self.limits = np.asarray(limits, dtype=float)
         self.saturate = saturate
         self.n_u = self.limits.size
+        #: The model the controller was designed on (set by :func:`flexctrl.control.design`).
+        self.design_model = None
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
         from flexctrl.control.reference import HoldReference

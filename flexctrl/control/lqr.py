@@ -29,7 +29,7 @@ from scipy.interpolate import RegularGridInterpolator
 from flexctrl.control.base import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.riccati import solve_dare
-from flexctrl.control.settings import LQRSettings, SensorSettings, Weights
+from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights
 from flexctrl.errors import SpecError
 from flexctrl.linear import Linearizer, OperatingPoint, Sensors, discretize, equilibrium, torque_limits
 

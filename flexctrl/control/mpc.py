@@ -63,7 +63,7 @@ import scipy.sparse as sp
 from flexctrl.control.base import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant, lqr_gain, weight_matrices
-from flexctrl.control.settings import MPCSettings
+from flexctrl.spec.controller_settings import MPCSettings
 from flexctrl.linear import OperatingPoint, torque_limits
 
 OSQP_OK = {1: "solved", 2: "solved_inaccurate"}

@@ -90,7 +90,7 @@ from flexctrl.sim.parametric import constants_as_parameters, expanded as _expand
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc import ScaledProblem, Solution, _shift_blocks, scaled_problem
-from flexctrl.control.settings import NMPCSettings
+from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.linear import OperatingPoint, torque_limits
 
 #: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).

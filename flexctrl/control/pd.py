@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.base import Controller
-from flexctrl.control.settings import PDSettings
+from flexctrl.spec.controller_settings import PDSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits
 

@@ -1,6 +1,6 @@
 """Reference trajectories: a joint path and the state and feed-forward torque that go with it.
 
-:class:`JointReference` is the joint path ``q_ref(t)`` from ``q_start`` to ``q_target``
+:class:`~flexctrl.spec.reference.JointReference` (plain data) is the joint path ``q_ref(t)`` from ``q_start`` to ``q_target``
 (rad), either a step at ``t_start`` or a quintic over ``move_time`` (s)::
 
     q_ref(t) = q_start + (q_target - q_start) s(tau),   tau = clip((t - t_start) / move_time, 0, 1)
@@ -43,91 +43,13 @@ sample time.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Literal, get_args
-
 import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
 
-Profile = Literal["step", "quintic"]
-DeflectionReference = Literal["quasi_static", "static"]
-PROFILES: tuple[str, ...] = get_args(Profile)
-DEFLECTIONS: tuple[str, ...] = get_args(DeflectionReference)
-
-
-@dataclass(frozen=True)
-class JointReference:
-    """A point-to-point joint path (see the module docstring).
-
-    Attributes
-    ----------
-    q_start, q_target : tuple of float
-        Joint angles, rad.
-    profile : {"step", "quintic"}
-    move_time : float
-        Duration of the quintic, s (> 0; ignored by the step).
-    t_start : float
-        Time the move starts, s.
-    """
-
-    q_start: tuple[float, ...]
-    q_target: tuple[float, ...]
-    profile: str = "step"
-    move_time: float = 0.0
-    t_start: float = 0.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "q_start", tuple(float(a) for a in self.q_start))
-        object.__setattr__(self, "q_target", tuple(float(a) for a in self.q_target))
-        if self.profile not in PROFILES:
-            raise SpecError(f"value {self.profile!r} is not allowed; allowed: {', '.join(map(repr, PROFILES))}",
-                            key="profile")
-        if len(self.q_start) != len(self.q_target):
-            raise SpecError(f"q_start has {len(self.q_start)} angles and q_target {len(self.q_target)}; "
-                            "allowed: one per joint in both", key="q_target")
-        if self.profile == "quintic" and not (math.isfinite(self.move_time) and self.move_time > 0):
-            raise SpecError(f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
-                            key="move_time")
-        if not (math.isfinite(self.t_start) and self.t_start >= 0):
-            raise SpecError(f"value {self.t_start!r} is not allowed; allowed: a start time >= 0 s", key="t_start")
-
-    @property
-    def t_arrive(self) -> float:
-        """Time (s) at which the reference reaches the target: the end of the move."""
-        return self.t_start + (self.move_time if self.profile == "quintic" else 0.0)
-
-    def derivatives(self, t, order: int = 2) -> tuple[np.ndarray, ...]:
-        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s): arrays (T, n) (rad, rad/s, ...), up to ``order`` (<= 3)."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        q0, q1 = np.asarray(self.q_start), np.asarray(self.q_target)
-        delta = q1 - q0
-        if self.profile == "step":
-            s = (t >= self.t_start).astype(float)
-            out = [q0[None, :] + s[:, None] * delta[None, :]]
-            out += [np.zeros((t.size, delta.size)) for _ in range(order)]
-            return tuple(out)
-        T = self.move_time
-        tau = np.clip((t - self.t_start) / T, 0.0, 1.0)
-        inside = ((t > self.t_start) & (t < self.t_start + T)).astype(float)
-        s = tau**3 * (10 - 15 * tau + 6 * tau**2)
-        ds = inside * 30 * tau**2 * (1 - tau) ** 2 / T
-        dds = inside * 60 * tau * (1 - tau) * (1 - 2 * tau) / T**2
-        ddds = inside * 60 * (1 - 6 * tau + 6 * tau**2) / T**3
-        factors = (s, ds, dds, ddds)[: order + 1]
-        return tuple(q0[None, :] * (k == 0) + f[:, None] * delta[None, :] for k, f in enumerate(factors))
-
-    def joints(self, t) -> np.ndarray:
-        """Joint angles (T, n), rad, at the times ``t`` (s)."""
-        return self.derivatives(t, order=0)[0]
-
-    def settings(self) -> dict:
-        """Plain data (angles in degrees)."""
-        return {"profile": self.profile, "move_time_s": self.move_time, "t_start_s": self.t_start,
-                "q_start_deg": [math.degrees(a) for a in self.q_start],
-                "q_target_deg": [math.degrees(a) for a in self.q_target], "t_arrive_s": self.t_arrive}
+from flexctrl.spec.reference import DEFLECTIONS, JointReference
 
 
 def _damping_matrix(model, q):
@@ -311,4 +233,4 @@ class HoldReference:
         return self.op.x, self.op.u, self.op.u
 
 
-__all__ = ["JointReference", "ReferenceTrajectory", "HoldReference", "PROFILES", "DEFLECTIONS"]
+__all__ = ["ReferenceTrajectory", "HoldReference"]

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctrl.control.pd import PDController, pd_parts
-from flexctrl.control.settings import ShapedSettings
+from flexctrl.spec.controller_settings import ShapedSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import Linearizer, OperatingPoint, locked_frequencies, modal_summary
 

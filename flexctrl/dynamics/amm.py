@@ -76,7 +76,7 @@ from flexctrl.dynamics.amm_kinematics import (
 )
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import SpecError
-from flexctrl.fidelity import Fidelity
+from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.arm import ArmSpec
 
 MODES = ("frozen", "scheduled")

@@ -1,20 +1,20 @@
 """Build a :class:`~flexctrl.dynamics.model.Model` from an arm description and a fidelity.
 
->>> from flexctrl.dynamics.build import load_model
->>> model = load_model("models/subedi3link.toml", fidelity="amm:1")
+>>> from flexctrl.dynamics.build import build_model
+>>> from flexctrl.spec.arm import load_arm
+>>> model = build_model(load_arm("models/subedi3link.toml"), "amm:1")
 >>> model.coordinate_names
 ('q1', 'q2', 'q3', 'qf11', 'qf21', 'qf31')
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Iterable, Literal, Sequence
+from typing import Literal, Sequence
 
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import FlexctrlError
-from flexctrl.fidelity import Fidelity, parse_fidelity
-from flexctrl.spec.arm import ArmSpec, load_arm
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.arm import ArmSpec
 
 
 class ModelFamilyUnavailable(FlexctrlError, NotImplementedError):
@@ -70,35 +70,6 @@ def build_model(
     if fid.kind == "auto":
         raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
                                      "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "
-                                     "--tol METRES` or flexctrl.analysis.auto_fidelity.choose_fidelity; here give 'rigid', "
+                                     "--tol METRES` or flexctrl.scenes.auto.choose_fidelity; here give 'rigid', "
                                      "'amm:N' or 'fem:N'")
     return build_amm(arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid)
-
-
-def load_model(
-    path: str | Path,
-    payload: float | None = None,
-    fidelity: str | Fidelity | None = "amm:2",
-    *,
-    overrides: Iterable[str] = (),
-    modes: Literal["frozen", "scheduled"] = "frozen",
-    reference_q: Sequence[float] | None = None,
-    damping: Literal["ratio", "paper"] = "ratio",
-) -> Model:
-    """Load a model file and build it (see :func:`build_model`).
-
-    Parameters
-    ----------
-    path
-        A ``models/*.toml`` file.
-    payload
-        Payload mass (kg) replacing the file's, or None to keep it.
-    fidelity, modes, reference_q, damping
-        As in :func:`build_model`.
-    overrides
-        ``KEY=VALUE`` strings applied to the file before validation.
-    """
-    arm = load_arm(path, overrides)
-    if payload is not None:
-        arm = arm.with_payload(payload)
-    return build_model(arm, fidelity, modes=modes, reference_q=reference_q, damping=damping)

@@ -27,7 +27,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from flexctrl.fidelity import Fidelity
+from flexctrl.spec.fidelity import Fidelity
 
 REQUIRED_FUNCTIONS = ("M", "c", "g", "f", "energies", "tip", "hubs", "deflection")
 

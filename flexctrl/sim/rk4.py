@@ -40,6 +40,7 @@ q_f32 = 0.002 m, no damping) at the paper's 1 ms step
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any, ClassVar, Sequence
 
@@ -108,6 +109,25 @@ def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "he
     return ca.Function(name, args, loop.call(args))
 
 
+#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the imaginary-axis
+#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability` computes both from the polynomial).  The one copy.
+RK4_STABILITY_LIMIT = 2.785
+
+#: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.
+RK4_MARGIN = 0.9
+
+
+def rk4_step(omega_max: float, scene_dt: float, margin: float = RK4_MARGIN) -> float:
+    """The scene's step divided by the smallest whole number that makes RK4 stable (s).
+
+    ``omega_max * dt <= margin * RK4_STABILITY_LIMIT``; the scene's step itself when it already is.
+    """
+    if omega_max <= 0:
+        return scene_dt
+    k = max(1, math.ceil(scene_dt * omega_max / (margin * RK4_STABILITY_LIMIT) - 1e-12))
+    return scene_dt / k
+
+
 class RK4(Integrator):
     """Fixed-step RK4 over compiled chunks (see module docstring).
 
@@ -129,7 +149,7 @@ class RK4(Integrator):
     """
 
     name: ClassVar[str] = "rk4"
-    stability_limit: ClassVar[float] = 2.785
+    stability_limit: ClassVar[float] = RK4_STABILITY_LIMIT
 
     def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
                  energy_factor: float = 100.0, compile: bool | None = None,

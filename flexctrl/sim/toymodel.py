@@ -26,7 +26,7 @@ import math
 import casadi as ca
 
 from flexctrl.dynamics.model import Model
-from flexctrl.fidelity import Fidelity
+from flexctrl.spec.fidelity import Fidelity
 
 
 def spring_pendulum(

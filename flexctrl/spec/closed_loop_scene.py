@@ -26,7 +26,7 @@ zero-order hold.  The extra keys::
 Angles are in degrees in the file and radians in the dataclass.  The reference
 (:mod:`flexctrl.control.reference`) goes from the initial joint angles to the target;
 every controller reads it at its sample times.  The residual-vibration window of
-:mod:`flexctrl.metrics` starts ``settle_allowance`` after the reference arrives (at
+:mod:`flexctrl.loop.metrics` starts ``settle_allowance`` after the reference arrives (at
 t = 0 for the step, at ``move_time`` for the quintic).
 """
 
@@ -38,9 +38,34 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexctrl.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
-from flexctrl.spec.scene import ArmScene, read_arm_scene
+from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
+
+@dataclass(frozen=True)
+class MetricSettings:
+    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the file's).
+
+    Attributes
+    ----------
+    settle_allowance : float
+        s after the reference arrives before the residual-vibration window opens.
+    band : float
+        m: the settling band of the tip error.
+    divergence_deflection : float
+        A link tip deflection beyond this fraction of the link's length means divergence.
+    divergence_angle : float
+        rad: so does a joint this far outside the range of its move.
+    stable_band : float
+        m: ``stable = 1`` needs the tip error of the run's last second below it.
+    """
+
+    settle_allowance: float = 2.0
+    band: float = 1e-3
+    divergence_deflection: float = 0.1
+    divergence_angle: float = math.pi / 2
+    stable_band: float = 0.01
+
 
 _EXTRA_KEYS = ("controller", "design_payload", "controller_fidelity", "design_configuration", "target", "noise",
                "metrics")
@@ -88,7 +113,7 @@ class ClosedLoopScene:
 
     def joint_reference(self):
         """The :class:`~flexctrl.control.reference.JointReference` from the initial angles to the target."""
-        from flexctrl.control.reference import JointReference
+        from flexctrl.spec.reference import JointReference
 
         return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
 
@@ -148,7 +173,7 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
         if len(move) != len(start):
             raise target.error("move", f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint")
         target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
-    from flexctrl.control.reference import DEFLECTIONS, PROFILES
+    from flexctrl.spec.reference import DEFLECTIONS, PROFILES
 
     profile = target.string("profile", "step", choices=PROFILES)
     if profile == "quintic":
@@ -170,11 +195,13 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
     noise.finish()
     metrics = r.table_of("metrics", {})
-    settle = metrics.nonnegative("settle_allowance", 2.0, unit="s")
-    band = metrics.positive("band", 1e-3, unit="m")
-    div_deflection = metrics.positive("divergence_deflection", 0.1)
-    div_angle = math.radians(metrics.positive("divergence_angle", 90.0, unit="degrees"))
-    stable_band = metrics.positive("stable_band", 0.01, unit="m")
+    default = MetricSettings()
+    settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
+    band = metrics.positive("band", default.band, unit="m")
+    div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
+    div_angle = math.radians(metrics.positive("divergence_angle", math.degrees(default.divergence_angle),
+                                              unit="degrees"))
+    stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
     metrics.finish()
     r.finish()
     t_arrive = move_time if profile == "quintic" else 0.0

@@ -1,4 +1,4 @@
-"""Controller descriptions (``controllers/*.toml``) read into the typed settings of :mod:`flexctrl.control.settings`.
+"""Controller descriptions (``controllers/*.toml``) read into the typed settings of :mod:`flexctrl.spec.controller_settings`.
 
 Every file has ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"``, optional free-text
 ``name``, ``notes`` and ``source``, the controller's scalar keys and sub-tables
@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 from typing import Any, Callable, Iterable, get_args
 
-from flexctrl.control.settings import (
+from flexctrl.spec.controller_settings import (
     SETTINGS,
     ControllerSettings,
     EstimatorSettings,
@@ -33,7 +33,7 @@ from flexctrl.control.settings import (
     Weights,
 )
 from flexctrl.errors import SpecError
-from flexctrl.linear import SENSOR_KINDS
+from flexctrl.spec.sensors import SENSOR_KINDS
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 

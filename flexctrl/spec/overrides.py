@@ -13,7 +13,7 @@ from __future__ import annotations
 import copy
 import re
 import tomllib
-from typing import Any, Iterable
+from typing import Any, Iterable, Mapping
 
 from flexctrl.errors import SpecError
 
@@ -86,21 +86,45 @@ def apply_overrides(document: dict[str, Any], assignments: Iterable[str], source
         if "=" not in assignment:
             raise SpecError(f"'{assignment}' is not of the form KEY=VALUE", source=source)
         key, text = assignment.split("=", 1)
-        key = key.strip()
-        parts = _split_key(key, source)
-        node: Any = result
-        for depth, part in enumerate(parts[:-1]):
-            node = _descend(node, part, key, source, create=not isinstance(parts[depth + 1], int))
-        last = parts[-1]
-        if isinstance(last, int):
-            if not isinstance(node, list) or not 1 <= last <= len(node):
-                raise SpecError(f"index {last} does not exist (1-based)", source=source, key=key)
-            node[last - 1] = parse_value(text.strip())
-        else:
-            if not isinstance(node, dict):
-                raise SpecError(f"'{last}' is not inside a table", source=source, key=key)
-            node[last] = parse_value(text.strip())
+        _assign(result, key.strip(), parse_value(text.strip()), source)
     return result
+
+
+def apply_values(document: dict[str, Any], values: Mapping[str, Any], source: str = "overrides") -> dict[str, Any]:
+    """Return a copy of ``document`` with ``{KEY: value}`` set, keys spelled as for :func:`apply_overrides`.
+
+    The values are used as given (Python numbers, lists, strings), not parsed, so the
+    document's validation sees exactly what the caller passed: ``{"payload.mass": "0.5"}``
+    is refused by the reader as a string where a number belongs.
+
+    Examples
+    --------
+    >>> apply_values({"links": [{"EI": 1.0}]}, {"links[1].EI": 2.0})
+    {'links': [{'EI': 2.0}]}
+    """
+    result = copy.deepcopy(document)
+    for key, value in values.items():
+        if not isinstance(key, str) or not key.strip():
+            raise SpecError(f"override key {key!r} is not allowed; allowed: a dotted key such as 'links[1].EI'",
+                            source=source)
+        _assign(result, key.strip(), copy.deepcopy(value), source)
+    return result
+
+
+def _assign(result: dict[str, Any], key: str, value: Any, source: str) -> None:
+    parts = _split_key(key, source)
+    node: Any = result
+    for depth, part in enumerate(parts[:-1]):
+        node = _descend(node, part, key, source, create=not isinstance(parts[depth + 1], int))
+    last = parts[-1]
+    if isinstance(last, int):
+        if not isinstance(node, list) or not 1 <= last <= len(node):
+            raise SpecError(f"index {last} does not exist (1-based)", source=source, key=key)
+        node[last - 1] = value
+    else:
+        if not isinstance(node, dict):
+            raise SpecError(f"'{last}' is not inside a table", source=source, key=key)
+        node[last] = value
 
 
 def _descend(node: Any, part: str | int, key: str, source: str, create: bool) -> Any:

@@ -10,7 +10,8 @@ from the files alone (:mod:`flexctrl.study.report`).  What one run does is an
 format and the folder layout are described in ``docs/studies.md``.
 """
 
-from flexctrl.study.executors import RunOutput, executor_names, get_executor, per_worker_cache, register_executor
+from flexctrl.study.outputs import RunOutput, per_worker_cache
+from flexctrl.study.registry import executor_names, get_executor, register_executor
 from flexctrl.study.report import write_report
 from flexctrl.study.runner import StudyResult, execute_run, run_study
 from flexctrl.study.spec import ReportSpec, RunSpec, StudySpec, load_study

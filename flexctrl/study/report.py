@@ -164,7 +164,7 @@ def write_report(directory: str | Path, *, metric: str | None = None, map_axes: 
 
 def _executor_sections(ctx: _Context) -> list[str]:
     """The executor's own report sections (its ``report`` hook), if it has one."""
-    from flexctrl.study.executors import get_executor
+    from flexctrl.study.registry import get_executor
 
     name = ctx.study.get("study", {}).get("executor")
     try:

@@ -104,7 +104,8 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         ``peak_memory_mb`` (of this worker process so far) and ``worker``.
         Never raises for a failure of the run itself.
     """
-    from flexctrl.study.executors import RunOutput, get_executor
+    from flexctrl.study.outputs import RunOutput
+    from flexctrl.study.registry import get_executor
 
     start = time.perf_counter()
     status, error, metrics, arrays = "ok", "", {}, {}

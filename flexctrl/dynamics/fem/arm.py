@@ -59,7 +59,7 @@ from flexctrl.dynamics.fem.arm_kinematics import (MAX_ELEMENTS, FemExpressions, 
                                                   fem_expressions, locked_matrices)
 from flexctrl.dynamics.fem.sparse_ldl import ldl_solve_sparse
 from flexctrl.dynamics.model import Model
-from flexctrl.fidelity import Fidelity
+from flexctrl.spec.fidelity import Fidelity
 from flexctrl.modal.fem_modes import link_frequencies_fem
 from flexctrl.spec.arm import ArmSpec
 

@@ -65,7 +65,7 @@ from flexctrl.analysis.accuracy import (
     pareto_front, run_closed_loop, run_open_loop,
 )
 from flexctrl.errors import SpecError
-from flexctrl.study.executors import RunOutput, freeze, overrides_for, per_worker_cache
+from flexctrl.study.outputs import RunOutput, freeze, overrides_for, per_worker_cache
 
 #: Scene keys read by this executor (removed before the scene file is validated).
 OWN_KEYS = ("method", "reference", "reference_meshes", "repeats", "horizon")
@@ -200,9 +200,9 @@ def _stepper(arm, method: Method, q0: tuple[float, ...]):
 def _controller(plan_scene: tuple, controller: str | None, controller_digest: str | None, overrides: tuple[str, ...]):
     """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload (or
     ``design_payload``) at its design configuration, tracking the scene's reference path, as
-    :func:`flexctrl.closedloop.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
-    from flexctrl.closedloop import design_scene_controller
-    from flexctrl.scenes import scene_arm
+    :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
+    from flexctrl.scenes.loop_setup import design_scene_controller
+    from flexctrl.scenes.arm import scene_arm
     from flexctrl.spec.controller import load_controller
 
     scene = _scene(plan_scene)
@@ -226,8 +226,8 @@ def _controller(plan_scene: tuple, controller: str | None, controller_digest: st
 
 def simulate_method(plan: RunPlan, method: Method) -> tuple[MethodRun, Any]:
     """Run ``method`` on the plan's scene once; returns the run and the model."""
-    from flexctrl.closedloop import plant_sensors
-    from flexctrl.scenes import initial_state, scene_arm
+    from flexctrl.loop.mismatch import plant_sensors
+    from flexctrl.scenes.arm import initial_state, scene_arm
 
     key = _plan_scene(plan)
     scene = _scene(key)
@@ -277,7 +277,7 @@ def check_settings(settings: dict) -> None:
 
 def execute(settings: dict) -> RunOutput:
     """One run (see the module docstring)."""
-    from flexctrl.analysis.tip_error import tip_error
+    from flexctrl.sim.tip_error import tip_error
 
     plan = plan_from_settings(settings)
     ref_plan = dataclasses.replace(plan, method=plan.reference, repeats=1)
@@ -501,9 +501,9 @@ def mesh_convergence(scene: str | Path, meshes: tuple[str, ...] = ("fem:4", "fem
 
     Examples
     --------
-    ``python -c "from flexctrl.analysis.accuracy_study import mesh_convergence as m; print(m('studies/scenes/bangbang.toml'))"``
+    ``python -c "from flexctrl.study.executors.speed_vs_accuracy import mesh_convergence as m; print(m('studies/scenes/bangbang.toml'))"``
     """
-    from flexctrl.analysis.tip_error import tip_error
+    from flexctrl.sim.tip_error import tip_error
 
     root = Path(__file__).resolve().parents[2]
     settings = {"scene": str(Path(scene).resolve()), "model": str(model or root / "models" / "subedi3link.toml"),

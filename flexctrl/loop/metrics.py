@@ -99,3 +99,74 @@ def closed_loop_metrics(
         "fallbacks": int(fallbacks),
         "solver_failures": int(solver_failures),
     }
+
+
+#: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the ``stable_band``).
+FINAL_WINDOW = 1.0
+
+
+def run_metrics(trajectory, *, tip_target, reference_joints: np.ndarray, t_arrive: float, settle_allowance: float,
+                band: float, stable_band: float, duration: float, torque_limits: Sequence[float],
+                controller_stats: dict, step_times: Sequence[float] = (), radius: float | None = None) -> dict:
+    """Every metric of one closed-loop run: :func:`closed_loop_metrics` and the verdicts.
+
+    Added to :func:`closed_loop_metrics`' figures:
+
+    ``settled``
+        1 when the tip stays inside ``band`` to the end of a run that did not diverge;
+        otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
+        row of an unstable loop stays ok; ``inf`` would mark it failed).
+    ``final_tip_error``
+        Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
+    ``stable``
+        1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
+        in a saturated limit cycle does not diverge, but does not converge either).
+    ``divergence_time``
+        When the run diverged (s), else ``duration``.
+    ``closed_loop_radius``
+        The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
+    ``torque_limit_exceeded``
+        Whether any applied torque went beyond its joint's limit.
+
+    For a run stopped by a divergence before the residual window opens, the window
+    shrinks to the last sample.
+
+    Parameters
+    ----------
+    trajectory : flexctrl.sim.trajectory.Trajectory
+        The plant's run; ``meta["divergence"]`` is None or ``{"time": s, ...}``.
+    tip_target : (2,) m
+    reference_joints : (T, n) rad, the joint reference on the trajectory's times
+    t_arrive, settle_allowance, duration : s
+    band, stable_band : m
+    torque_limits : (n,) N m
+    controller_stats : dict
+        ``controller.stats.summary()`` (``fallbacks``, ``status`` counts).
+    step_times : s per controller step
+    radius : float, optional
+    """
+    divergence = trajectory.meta.get("divergence")
+    tip_target = np.asarray(tip_target, dtype=float)
+    n = trajectory.inputs.shape[1]
+    if divergence is not None and trajectory.time[-1] < t_arrive + settle_allowance:
+        settle_allowance = float(trajectory.time[-1]) - t_arrive - 1e-9
+    status = controller_stats.get("status", {})
+    metrics = closed_loop_metrics(
+        trajectory.time, trajectory.tip, tip_target, trajectory.deflections, trajectory.inputs,
+        trajectory.states[:, :n], reference_joints, t_arrive=t_arrive, settle_allowance=settle_allowance, band=band,
+        controller_times=step_times, fallbacks=controller_stats.get("fallbacks", 0),
+        solver_failures=sum(v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))),
+    )
+    metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
+    if not metrics["settled"]:
+        metrics["settling_time"] = float(duration)
+    error = np.linalg.norm(trajectory.tip - tip_target[None, :], axis=1)
+    final = trajectory.time >= trajectory.time[-1] - FINAL_WINDOW
+    metrics["final_tip_error"] = float(np.max(error[final]))
+    metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= stable_band)
+    metrics["divergence_time"] = float(duration) if divergence is None else divergence["time"]
+    if radius is not None:
+        metrics["closed_loop_radius"] = radius
+    limits = np.asarray(torque_limits, dtype=float)
+    metrics["torque_limit_exceeded"] = bool(np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9)))
+    return metrics

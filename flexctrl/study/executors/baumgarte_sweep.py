@@ -5,12 +5,12 @@ with :func:`flexctrl.analysis.baumgarte.run_point` and sets beside it the discre
 :mod:`flexctrl.analysis.baumgarte`.  Grid axes are scene overrides
 (``"scene.baumgarte"``, ``"scene.dt"``, ``"scene.feedback"``).
 
-Scene keys read here on top of the sliding-beam keys of :mod:`flexctrl.fem_scenes`
+Scene keys read here on top of the sliding-beam keys of :mod:`flexctrl.spec.fem_scene`
     ``baumgarte`` (1/s, >= 0)
         Sets ``gamma = beta`` to this value (replacing the file's ``gamma`` and ``beta``).
     ``gamma``, ``beta`` (1/s, >= 0; default 5)
         Used when ``baumgarte`` is absent; 0 switches the term off (the scene reader of
-        :mod:`flexctrl.fem_scenes` requires > 0; this executor allows 0).
+        :mod:`flexctrl.spec.fem_scene` requires > 0; this executor allows 0).
     ``feedback`` (``"explicit"``, default: Eq 54, violations of step i; ``"implicit"``)
     ``reference_dt`` (s, default 5e-5), ``reference_gamma`` (1/s, default 5)
         The converged reference (explicit feedback, gamma = beta = reference_gamma) that
@@ -42,10 +42,10 @@ import numpy as np
 from flexctrl.analysis.baumgarte import (FEEDBACKS, constraint_states, fastest_decay, predicted_regime,
                                          propagate_errors, run_point, spectral_radius, stability_limit,
                                          step_defects)
-from flexctrl.analysis.tip_error import tip_error
+from flexctrl.sim.tip_error import tip_error
 from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, SlidingBeamModel
 from flexctrl.errors import SimulationError, SpecError
-from flexctrl.study.executors import RunOutput, overrides_for, per_worker_cache
+from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache
 
 OWN_KEYS = ("baumgarte", "gamma", "beta", "feedback", "reference_dt", "reference_gamma")
 MAX_REFERENCE_STEPS = 2_000_000
@@ -79,7 +79,7 @@ def read_sweep_scene(path: str, overrides: tuple[str, ...] = (), digest: str | N
     SpecError
         Naming the scene file, the key, the value and what is allowed.
     """
-    from flexctrl.fem_scenes import MAX_STEPS, read_fem_scene
+    from flexctrl.spec.fem_scene import MAX_STEPS, fem_settings as read_fem_scene
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import TableReader, read_toml
 

@@ -1,20 +1,9 @@
-"""Run a scene: description -> model -> simulation -> files.
+"""The pieces every arm scene is run with: the scene's arm, its initial state, one simulation.
 
-:func:`run_scene` dispatches on the scene's ``kind`` through
-:data:`flexctrl.spec.scene.SCENE_KINDS`; :func:`run_arm_scene` handles
-``kind = "arm"``: it loads the arm, applies the scene's payload, gravity and
-damping, builds the model at the scene's fidelity (frozen modes at the initial
-configuration), integrates, and optionally writes ``trajectory.csv``,
-``summary.json`` and the PNG plots.
-
-Examples
---------
->>> from flexctrl.spec.scene import load_scene
->>> from flexctrl.scenes import run_scene
->>> scene = load_scene("studies/scenes/bangbang.toml", ["duration=0.05", "fidelity='amm:1'"])
->>> result = run_scene(scene)
->>> float(result.trajectory.time[-1]), result.trajectory.states.shape
-(0.05, (51, 12))
+:func:`scene_arm` loads the arm and applies the scene's payload, gravity and damping;
+:func:`initial_state` builds ``x0``; :func:`simulate_arm_scene` builds the model at
+the scene's fidelity (frozen modes at the initial configuration) and integrates.
+Running a whole scene with its files is :func:`flexctrl.scenes.arm_scene.run_arm_scene`.
 """
 
 from __future__ import annotations
@@ -29,8 +18,8 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import ArmSpec, load_arm
-from flexctrl.spec.scene import SCENE_KINDS, ArmScene, resolve
-from flexctrl.sim.trajectory import Trajectory, jsonable
+from flexctrl.sim.trajectory import Trajectory
+from flexctrl.spec.arm_scene import ArmScene
 
 
 @dataclass
@@ -55,17 +44,6 @@ class SceneResult:
     summary: dict[str, Any]
     files: list[Path] = field(default_factory=list)
     model: Any = None
-
-
-def run_scene(scene, out: str | Path | None = None, **options: Any) -> SceneResult:
-    """Run ``scene`` (any registered kind), writing results to ``out`` when given.
-
-    ``fidelity = "auto"`` is resolved by the scene kind's runner: for ``kind = "arm"``
-    by :func:`run_arm_scene`, for ``kind = "closed_loop"`` (the plant's fidelity) by
-    :func:`flexctrl.closedloop.run_closed_loop_scene`.
-    """
-    _reader, runner = SCENE_KINDS[scene.kind]
-    return resolve(runner)(scene, out, **options)
 
 
 def scene_arm(scene: ArmScene) -> ArmSpec:
@@ -154,81 +132,7 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     return trajectory, model, arm
 
 
-def resolve_auto(scene: ArmScene, **options: Any) -> tuple[ArmScene, Any]:
-    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step, and the choice.
-
-    Runs :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` with the scene's
-    ``tolerance`` and ``options`` (keywords of ``choose_fidelity``, e.g. ``top``;
-    cached per process).  The returned scene keeps the scene's
-    solver options only when the chosen integrator is the scene's.  Scenes with a
-    concrete fidelity are returned unchanged with None.
-    """
-    if scene.fidelity.kind != "auto":
-        return scene, None
-    from flexctrl.analysis.auto_fidelity import check_tolerance, choose_fidelity
-
-    tol = check_tolerance(scene.tolerance, source=scene.source, key="tolerance")
-    choice = choose_fidelity(scene, tol, **options)
-    solver = dict(scene.solver) if choice.integrator == scene.integrator else {}
-    chosen = dataclasses.replace(scene, fidelity=choice.choice, integrator=choice.integrator, dt=choice.dt, solver=solver)
-    return chosen, choice
-
-
-def run_arm_scene(scene: ArmScene, out: str | Path | None = None, *, plots: bool | None = None,
-                  fidelity=None, auto_options: dict[str, Any] | None = None, **integrator_options: Any) -> SceneResult:
-    """Build, simulate and (with ``out``) write a ``kind = "arm"`` scene.
-
-    With ``fidelity = "auto"`` (scene or override) the model, integrator and step
-    are chosen by :func:`flexctrl.analysis.auto_fidelity.choose_fidelity` from the
-    scene's ``tolerance``; the choice and its evidence are recorded in the summary
-    under ``"fidelity_choice"``.  The run then uses the chosen step, which may be a
-    whole fraction of the scene's ``dt`` (RK4 stability), so the trajectory can hold
-    more samples than the scene's grid.
-
-    Parameters
-    ----------
-    scene
-        From :func:`flexctrl.spec.scene.load_scene`.
-    out
-        Folder for ``trajectory.csv``, ``summary.json`` and PNGs; nothing is written when None.
-    plots
-        Override the scene's ``outputs.plots``.
-    fidelity
-        Override the scene's fidelity.
-    auto_options
-        Keywords of :func:`~flexctrl.analysis.auto_fidelity.choose_fidelity` (``top``,
-        ``reference``, ``safety``, ...) for ``fidelity = "auto"``.
-    **integrator_options
-        Passed to the integrator (e.g. ``compile=False``, ``cache_dir``).
-    """
-    from flexctrl.fidelity import parse_fidelity
-
-    if fidelity is not None:
-        scene = dataclasses.replace(scene, fidelity=parse_fidelity(fidelity, source="--fidelity"))
-    requested = scene
-    scene, choice = resolve_auto(scene, **(auto_options or {}))
-    if choice is not None and not integrator_options:
-        from flexctrl.analysis.auto_fidelity import prepared
-
-        model, integrator = prepared(scene)  # built while choosing: reuse them
-        trajectory, model, _arm = simulate_arm_scene(scene, model=model, integrator=integrator)
-    else:
-        trajectory, model, _arm = simulate_arm_scene(scene, **integrator_options)
-    extra: dict[str, Any] = {"scene": requested.settings(), "model_info": _model_facts(model)}
-    if choice is not None:
-        extra["fidelity_choice"] = choice.to_dict()
-    summary = trajectory.summary(scene.fft_peaks, scene.fft_span)
-    summary.update(jsonable(extra))
-    files: list[Path] = []
-    if out is not None:
-        paths = trajectory.save(out, extra, fft_count=scene.fft_peaks, fft_span=scene.fft_span)
-        files += list(paths.values())
-        if scene.plots if plots is None else plots:
-            files += trajectory.plot(out)
-    return SceneResult(scene=scene, trajectory=trajectory, summary=summary, files=files, model=model)
-
-
-def _model_facts(model) -> dict[str, Any]:
+def model_facts(model) -> dict[str, Any]:
     info = model.info or {}
     facts = {"name": model.name, "coordinates": list(model.coordinate_names), "omega_max_rad_s": float(model.omega_max)}
     for key in ("build_time_s", "modes", "locked_frequencies_rad_s", "link_frequencies_rad_s"):

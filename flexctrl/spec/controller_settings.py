@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, fields
 from typing import Literal, Union, get_args
 
 from flexctrl.errors import SpecError
-from flexctrl.linear import DEFAULT_NOISE, SENSOR_KINDS
+from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
 
 ControllerKind = Literal["pd", "lqr", "mpc", "nmpc", "shaped"]
 GravityCompensation = Literal["target", "measured", "none"]

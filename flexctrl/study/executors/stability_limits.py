@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.study.executors import RunOutput, overrides_for, per_worker_cache, scene_overrides
+from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache, scene_overrides
 
 #: Integrators this executor measures (fixed-step methods with a theory).
 METHODS = ("rk4", "euler", "newmark")
@@ -106,7 +106,7 @@ def _build(model_key: tuple, scene_source: str):
 
     from flexctrl.dynamics.build import build_model
     from flexctrl.linear import equilibrium
-    from flexctrl.scenes import scene_arm
+    from flexctrl.scenes.arm import scene_arm
     from flexctrl.spec.scene import ArmScene
 
     fields = dict(model_key)
@@ -234,7 +234,7 @@ def _note(row: dict) -> str:
 
 def stability_rows(directory: Path, rows: list[dict]) -> tuple[list[str], list[dict[str, Any]]]:
     """The ``stability_limits.csv`` table (columns, rows) from the study table's rows."""
-    from flexctrl.study.spec import SETTINGS
+    from flexctrl.study.plan import SETTINGS
 
     skip = set(CSV_COLUMNS) | set(EXTRA_COLUMNS) | {"scene.integrator", "seed", "error", "wall_time_s", "peak_memory_mb",
                                                    "bytes_written", "worker", "run_id", "status"}

@@ -1,0 +1,399 @@
+"""The cheapest model that meets a scene's tip-accuracy tolerance (issue 7, ``fidelity = "auto"``).
+
+:func:`choose_fidelity` picks, for one ``kind = "arm"`` scene and a tolerance on
+the tip position (m), the lowest rung of the ladder ``rigid -> amm:1 -> amm:2 ->
+...`` whose tip path is estimated to stay within the tolerance, and measures that
+claim against a converged reference.  The method:
+
+1. **Modal-bandwidth rule (starting rung).**  The excitation bandwidth ``B`` is
+   the frequency below which ``energy_fraction`` (default 99 %) of the energy of
+   the scene's joint torques lies (their spectrum over the scene's duration,
+   :func:`excitation_bandwidth`).  Mode ``k`` of link ``i`` (its clamped-mass
+   frequency with the rest of the arm as boundary, ``Model.info
+   ["link_frequencies_rad_s"]``) is kept when it lies below
+   ``bandwidth_factor * B`` (default 5); the starting rung keeps, on every link,
+   as many modes as the most demanding link needs.  Without a torque (free
+   vibration) the rule gives no bound and the walk starts at the lowest rung
+   that holds the scene's initial elastic coordinates (``qf32`` needs ``amm:2``).
+2. **Error estimate by the rungs above ("Richardson-like").**  The estimate of
+   rung ``N`` is ``safety`` (default 2) times the largest tip distance between
+   rung ``N`` and rungs ``N + 1`` and ``N + 2`` (up to the reference model), each
+   run with the integrator and step it would be run with.  The factor 2 covers
+   geometric convergence whose successive differences shrink at least by half
+   (error <= d / (1 - r) <= 2 d for r <= 1/2); the measured ratio of successive
+   differences is recorded so a reader can check that assumption.  Two rungs, not
+   one, because convergence in modes per link is not monotone: on a slow move the
+   first mode per link changes the tip less than the second does, and ``rigid``
+   against ``amm:1`` alone underestimated the error by a factor of 2.4.  From the
+   starting rung the walk goes *up* while the estimate exceeds the tolerance, or
+   *down* while the rung below also meets it; the choice is the lowest rung
+   reached whose estimate meets the tolerance.
+3. **Reference.**  ``amm:R`` (default ``amm:5``, one rung above the top
+   candidate) with RK4 at ``omega_max * dt <= reference_omega_dt`` (default 0.5).
+   Its convergence is shown by two refinements: the same model at half the step
+   (time) and the rung below at its own step (model); both distances are
+   recorded, and a :class:`UserWarning` is issued when either exceeds half the
+   tolerance (the reference would then not be fit to judge the choice).  The
+   chosen rung's tip distance from the reference is ``reference_error``.
+4. **Integrator and step.**  A scene with an implicit integrator (``cvodes``,
+   ``idas``, ``scipy``) keeps it and its step.  With ``rk4``, a rung keeps the
+   scene's step when ``omega_max * dt <= RK4_MARGIN * RK4_STABILITY_LIMIT`` (RK4's stability limit
+   with a 10 % margin); otherwise the step is the scene's divided by the
+   smallest whole number that satisfies it, so outputs and torque switching
+   still fall on the scene's grid.
+
+Every simulation's wall time (``time.perf_counter``, integration only; model
+build and compilation recorded apart) is kept; ``cost_ratio`` is the choice's
+integration wall time over the reference's.
+
+This module is the method alone: it runs candidates through the callables it is
+given (``run_rung``, ``run_reference`` of :func:`walk_and_judge`) and knows no scene
+file, model builder or integrator.  Running scenes for it is
+:mod:`flexctrl.scenes.auto`'s job (models, runs and choices kept in a
+:class:`~flexctrl.scenes.cache.SceneCache` the caller owns).
+
+Examples
+--------
+>>> from flexctrl.spec.scene import load_scene
+>>> from flexctrl.scenes.auto import choose_fidelity
+>>> scene = load_scene("studies/scenes/slow_move_light.toml", ["duration=1.0"])
+>>> choice = choose_fidelity(scene, 1e-3, top=2, reference="amm:3")  # doctest: +SKIP
+>>> str(choice.choice)  # doctest: +SKIP
+'rigid'
+"""
+
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from flexctrl.errors import FlexctrlError, SimulationError, SpecError
+from flexctrl.sim.tip_error import TipError, tip_error
+from flexctrl.spec.fidelity import parse_fidelity
+
+
+
+IMPLICIT = ("cvodes", "idas", "scipy")
+
+
+_QF = re.compile(r"^qf(\d+?)(\d)$")
+
+
+class ToleranceUnreachable(FlexctrlError):
+    """No rung of the ladder meets the tolerance; ``evidence`` holds what was measured."""
+
+    def __init__(self, message: str, evidence: dict[str, Any]):
+        super().__init__(message)
+        self.evidence = evidence
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One simulation made while choosing.
+
+    Attributes
+    ----------
+    fidelity : str
+    integrator : str
+    dt : float
+        Step (s).
+    omega_max : float
+        The model's ``omega_max`` (rad/s).
+    wall_time_s : float
+        Integration wall time (s).
+    build_time_s : float
+        Model build plus integrator setup (compilation or cache load) in this process (s).
+    time, tip : numpy.ndarray
+        Sample times (s) and tip positions (m).
+    diverged_at : float or None
+        Time (s) a closed loop diverged (its tip path stops there), None when it did not.
+    torque : numpy.ndarray or None
+        Joint torques (N m) on ``time`` (closed-loop runs: the controller's), else None.
+    """
+
+    fidelity: str
+    integrator: str
+    dt: float
+    omega_max: float
+    wall_time_s: float
+    build_time_s: float
+    time: np.ndarray = field(repr=False)
+    tip: np.ndarray = field(repr=False)
+    diverged_at: float | None = None
+    torque: np.ndarray | None = field(default=None, repr=False)
+
+    def facts(self) -> dict[str, Any]:
+        """JSON-ready settings and timings."""
+        facts = {"fidelity": self.fidelity, "integrator": self.integrator, "dt_s": self.dt,
+                 "omega_max_rad_s": self.omega_max, "omega_max_dt": self.omega_max * self.dt,
+                 "wall_time_s": self.wall_time_s, "build_time_s": self.build_time_s}
+        if self.diverged_at is not None:
+            facts["diverged_at_s"] = self.diverged_at
+        return facts
+
+
+@dataclass(frozen=True)
+class FidelityChoice:
+    """The outcome of :func:`choose_fidelity`.
+
+    Attributes
+    ----------
+    choice : Fidelity
+        The chosen rung (a ``--fidelity`` spelling through ``str``).
+    tolerance : float
+        Tolerance on the tip position (m).
+    estimated_error : float
+        ``safety`` times the largest tip distance to the next rung (m): the estimate that justified the choice.
+    reference_error : float
+        Largest tip distance of the choice from the reference (m).
+    reference_error_rms : float
+        Its root mean square (m).
+    cost_ratio : float
+        Integration wall time of the choice over that of the reference.
+    integrator : str
+    dt : float
+        Integrator and step (s) the choice is run with.
+    evidence : dict
+        Everything measured: the bandwidth rule, every rung's run and estimate, the
+        reference and its convergence checks (see :meth:`to_dict`).
+    """
+
+    choice: Fidelity
+    tolerance: float
+    estimated_error: float
+    reference_error: float
+    reference_error_rms: float
+    cost_ratio: float
+    integrator: str
+    dt: float
+    evidence: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the four headline keys first, then the evidence."""
+        return {
+            "choice": str(self.choice), "tolerance_m": self.tolerance, "estimated_error": self.estimated_error,
+            "reference_error": self.reference_error, "reference_error_rms": self.reference_error_rms,
+            "cost_ratio": self.cost_ratio, "integrator": self.integrator, "dt_s": self.dt, **self.evidence,
+        }
+
+
+# -- the pieces of the method -----------------------------------------------------------------
+def excitation_bandwidth(scene, n_joints: int, *, energy_fraction: float = 0.99) -> float | None:
+    """Frequency (Hz) below which ``energy_fraction`` of the scene's torque energy lies.
+
+    The torques of ``scene.input`` are sampled at the scene's step (refined to at
+    most 0.1 ms) over the scene's duration, zero-padded to four times that length,
+    and their energy spectrum summed over joints.
+
+    Parameters
+    ----------
+    scene : ArmScene
+    n_joints : int
+    energy_fraction : float
+        In (0, 1).
+
+    Returns
+    -------
+    float or None
+        The bandwidth (Hz), or None when the scene applies no torque.
+    """
+    k = max(1, math.ceil(scene.dt / 1e-4 - 1e-9))
+    h = scene.dt / k
+    n = max(2, int(math.ceil(scene.duration / h - 1e-9)))
+    torque = scene.input.torque((np.arange(n) + 0.5) * h, n_joints)
+    if not np.any(torque):
+        return None
+    n_fft = 1 << int(math.ceil(math.log2(4 * n)))
+    spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)
+    spectrum[1:] *= 2.0  # one-sided
+    cumulative = np.cumsum(spectrum) / spectrum.sum()
+    freqs = np.fft.rfftfreq(n_fft, h)
+    return float(freqs[min(int(np.searchsorted(cumulative, energy_fraction)), freqs.size - 1)])
+
+
+# -- closed-loop scenes -------------------------------------------------------------------------
+def sampled_bandwidth(torque: np.ndarray, h: float, *, energy_fraction: float = 0.99) -> float | None:
+    """Frequency (Hz) below which ``energy_fraction`` of sampled torques' energy lies.
+
+    Parameters
+    ----------
+    torque : numpy.ndarray
+        Torques (N m), shape (T, n_joints), sampled every ``h`` s; their mean is removed
+        first (a held final torque is no excitation), then they are zero-padded to four
+        times their length.
+    h : float
+        Sample period (s).
+
+    Returns
+    -------
+    float or None
+        None when the torques are constant.
+    """
+    torque = np.asarray(torque, dtype=float)
+    torque = torque - torque.mean(axis=0)
+    if not np.any(torque):
+        return None
+    n = torque.shape[0]
+    n_fft = 1 << int(math.ceil(math.log2(4 * n)))
+    spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)
+    spectrum[1:] *= 2.0
+    cumulative = np.cumsum(spectrum) / spectrum.sum()
+    freqs = np.fft.rfftfreq(n_fft, h)
+    return float(freqs[min(int(np.searchsorted(cumulative, energy_fraction)), freqs.size - 1)])
+
+
+def required_modes(scene) -> int:
+    """Fewest modes per link that hold the scene's initial elastic coordinates (``qf<link><mode>``)."""
+    need = 0
+    for name in scene.qf0:
+        match = _QF.match(name)
+        if match:
+            need = max(need, int(match.group(2)))
+    return need
+
+
+def rung_name(n: int) -> str:
+    return "rigid" if n == 0 else f"amm:{n}"
+
+
+def tip_distance(a: RunRecord, b: RunRecord):
+    """Tip distance of ``b`` from ``a`` on ``a``'s samples (the finer run goes first); infinite if either diverged."""
+    if a.diverged_at is not None or b.diverged_at is not None:
+        return TipError(rms=math.inf, max=math.inf)
+    first, second = (a, b) if a.dt <= b.dt else (b, a)
+    return tip_error(first.time, first.tip, second.time, second.tip)
+
+
+# -- the method -------------------------------------------------------------------------------
+def check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt):
+    """Validate the chooser's options (shared by the arm and closed-loop choosers); returns the reference fidelity."""
+    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
+        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
+    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
+    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
+        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
+                        key="reference")
+    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
+                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
+                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
+            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+    return ref
+
+
+def check_tolerance(tol: Any, *, source: str | None = None, key: str = "tolerance") -> float:
+    """``tol`` as a float if it is a finite number > 0 (m), else :class:`SpecError`."""
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or tol <= 0:
+        raise SpecError(f"value {tol!r} is not allowed; allowed: a finite number > 0 (m, tip-position tolerance)",
+                        source=source, key=key)
+    return float(tol)
+
+
+def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
+                    rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
+                    runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None) -> FidelityChoice:
+    """Method steps 2 and 3, shared by arm and closed-loop scenes.
+
+    Parameters
+    ----------
+    run_rung : callable
+        ``run_rung(m) -> RunRecord``: rung ``m`` (0 = rigid) with its own integrator and step.
+    run_reference : callable
+        ``run_reference(dt) -> RunRecord``: the reference model with RK4 at step ``dt`` (s).
+    reference_dt : float
+        The reference's step (s).
+    runs : dict, optional
+        Rungs already run (by rung number).
+    extra : dict, optional
+        Added to the evidence.
+    """
+    ref_n = parse_fidelity(reference).count
+    # (b) the walk, estimates from the (two) rungs above
+    distances: dict[int, Any] = {}
+    runs = dict(runs or {})
+
+    def run(m: int) -> RunRecord:
+        if m not in runs:
+            runs[m] = run_rung(m)
+        return runs[m]
+
+    def estimate(m: int) -> float:
+        if m not in distances:
+            distances[m] = [tip_distance(run(k), run(m)).max for k in range(m + 1, min(m + 2, ref_n) + 1)]
+        return safety * max(distances[m])
+
+    n = start
+    if estimate(n) <= tol:
+        while n - 1 >= low and estimate(n - 1) <= tol:
+            n -= 1
+    else:
+        while n < top and estimate(n) > tol:
+            n += 1
+    met = estimate(n) <= tol
+
+    # (c) the reference and its convergence
+    ref_dt = reference_dt
+    ref_run = run_reference(ref_dt)
+    half = run_reference(ref_dt / 2)
+    if ref_run.diverged_at is not None or half.diverged_at is not None:
+        raise SimulationError(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
+                              f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
+                              "choice against")
+    below = run(ref_n - 1)
+    finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
+    step_check = tip_distance(half, ref_run).max
+    model_check = tip_distance(ref_run, below).max
+    convergence = {"step_halving_m": step_check, "rung_below_m": model_check, "rung_below": rung_name(ref_n - 1),
+                   "half_step_run": half.facts()}
+    if max(step_check, model_check) > 0.5 * tol:
+        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m when its step is "
+                      f"halved and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
+                      f"{tol:.3g} m, so it may not be converged enough to judge the choice", stacklevel=3)
+
+    rungs = []
+    for m in sorted(runs):
+        record = runs[m]
+        err = tip_distance(ref_run, record)
+        item = {**record.facts(), "reference_error_max_m": err.max, "reference_error_rms_m": err.rms,
+                "cost_ratio": record.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf}
+        if m in distances:
+            item["distance_to_next_m"] = distances[m][0]
+            if len(distances[m]) > 1:
+                item["distance_to_second_next_m"] = distances[m][1]
+            item["estimated_error_m"] = safety * max(distances[m])
+            if m + 1 in distances and distances[m][0] > 0:
+                item["ratio_next_distance"] = distances[m + 1][0] / distances[m][0]
+        rungs.append(item)
+
+    evidence = {
+        "method": ("lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference "
+                   "model) <= tolerance; walk from the bandwidth rule's start"),
+        "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
+        "reference": {**ref_run.facts(), "convergence": convergence},
+        "candidates": rungs, "scene": name, **(extra or {}),
+    }
+    if not met:
+        best = min(distances, key=lambda m: max(distances[m]))
+        best_estimate = safety * max(distances[best])
+        evidence["best"] = {"rung": rung_name(best), "estimated_error_m": best_estimate}
+        raise ToleranceUnreachable(
+            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
+            f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
+            f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
+
+    chosen = run(n)
+    err = tip_distance(ref_run, chosen)
+    evidence["cost_ratio_vs_finest"] = chosen.wall_time_s / finest.wall_time_s if finest.wall_time_s > 0 else math.inf
+    evidence["finest"] = rung_name(ref_n)
+    return FidelityChoice(
+        choice=parse_fidelity(rung_name(n)), tolerance=tol, estimated_error=estimate(n), reference_error=err.max,
+        reference_error_rms=err.rms,
+        cost_ratio=chosen.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf,
+        integrator=chosen.integrator, dt=chosen.dt, evidence=evidence)
+

@@ -1,0 +1,143 @@
+"""The closed loop from Python: a designed controller, a move, a plant; one call, one result."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexctrl.errors import SpecError
+from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.mismatch import plant_sensors
+from flexctrl.loop.monitors import divergence_monitor
+from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.sampled import simulate_closed_loop
+from flexctrl.loop.verdict import linear_closed_loop_radius
+from flexctrl.sim.rk4 import rk4_step
+from flexctrl.spec.closed_loop_scene import MetricSettings
+from flexctrl.spec.reference import JointReference, Move
+
+
+def closed_loop(model, controller, reference, duration: float, *, plant=None, dt: float | None = None,
+                noise: int | np.random.Generator | None = None, x0=None, metrics: MetricSettings | None = None,
+                on_divergence: str = "raise", compile: bool | None = None) -> ClosedLoopResult:
+    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` seconds.
+
+    The controller tracks the reference built on ``model`` (its design model: the joint
+    path, the quasi-static deflection the path's accelerations need and the feed-forward
+    torque); every ``controller.sample_time`` it reads the plant's sensors and its torque
+    is held while the plant advances by RK4 steps of ``dt``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model the controller was designed on.
+    controller : flexctrl.control.base.Controller
+        From :func:`flexctrl.design`.  It is reset and given the reference.
+    reference : Move or JointReference
+        The joint path (rad, s).
+    duration : float
+        Simulated time, s.
+    plant : Model, optional
+        The arm that is controlled, e.g. another payload (:func:`flexctrl.load_model`
+        with ``payload=``) or fidelity; default ``model``.
+    dt : float, optional
+        Plant step, s: a whole fraction of the sample time; default the largest one at
+        which RK4 is stable on the plant with a 10 % margin.
+    noise : int or numpy.random.Generator, optional
+        Measurement noise at the levels of the controller's sensor settings, seeded;
+        None (default) measures exactly.
+    x0 : array_like, optional
+        Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the move's start
+        with undeformed links.
+    metrics : MetricSettings, optional
+        How the run is judged (residual window, bands, divergence bounds).
+    on_divergence : {"raise", "record"}
+        A diverging run raises :class:`~flexctrl.errors.SimulationError`, or stops and
+        records ``stable = 0`` with ``divergence_time`` (s).
+    compile : bool, optional
+        Compile the plant's step to C (default: when a compiler is present).
+
+    Returns
+    -------
+    ClosedLoopResult
+        ``metrics`` (``tip_residual_rms`` in m, ``settling_time`` in s, ``stable``, ...),
+        ``trajectory``, ``summary``, ``plot()``, ``save(dir)``, ``to_pandas()``.
+
+    Examples
+    --------
+    >>> import numpy as np, flexctrl as fc
+    >>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    >>> pd = fc.design(model, op, fc.load_controller("controllers/pd.toml"))
+    >>> move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
+    >>> res = fc.closed_loop(model, pd, move, duration=4.0)
+    >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3
+    (True, True)
+    """
+    if on_divergence not in ("raise", "record"):
+        raise SpecError(f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'", key="on_divergence")
+    if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
+        raise SpecError(f"value of type {type(controller).__name__} is not a controller; allowed: a controller from "
+                        "flexctrl.design(model, op, settings)", key="controller")
+    move = _as_move(reference)
+    path = move.joint_reference()
+    if len(path.q_target) != model.n_u:
+        raise SpecError(f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
+                        key="reference")
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
+            or duration <= path.t_arrive:
+        raise SpecError(f"value {duration!r} is not allowed; allowed: a duration (s) longer than the move "
+                        f"({path.t_arrive:g} s)", key="duration")
+    plant = model if plant is None else plant
+    judge = MetricSettings() if metrics is None else metrics
+    from flexctrl.control.reference import ReferenceTrajectory
+
+    controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
+    controller.reset()
+    Ts = controller.sample_time
+    dt = rk4_step(plant.omega_max, Ts) if dt is None else float(dt)
+    sensors = controller.sensors if plant is model else plant_sensors(plant, controller.sensors,
+                                                                       tuple(controller.op.joints))
+    if x0 is None:
+        x0 = np.zeros(plant.n_x)
+        x0[: plant.n_u] = path.q_start
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (plant.n_x,) or not np.all(np.isfinite(x0)):
+        raise SpecError(f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0")
+    rng = noise if isinstance(noise, np.random.Generator) else (None if noise is None else np.random.default_rng(noise))
+    monitor = divergence_monitor(plant, plant.spec, path.q_start, path.q_target, judge.divergence_deflection,
+                                 judge.divergence_angle)
+    trajectory, _ = simulate_closed_loop(plant, controller, x0, float(duration), dt, sensors=sensors, rng=rng,
+                                         compile=compile, monitor=monitor, stop_on_divergence=on_divergence == "record")
+    tip_target = tip_at_rest(plant, path.q_target)
+    report = controller.stats.summary()
+    limits = [getattr(j, "torque_limit", math.inf) for j in plant.spec.joints]
+    values = run_metrics(trajectory, tip_target=tip_target, reference_joints=path.joints(trajectory.time),
+                         t_arrive=path.t_arrive, settle_allowance=judge.settle_allowance, band=judge.band,
+                         stable_band=judge.stable_band, duration=float(duration), torque_limits=limits,
+                         controller_stats=report, step_times=controller.stats.step_times,
+                         radius=linear_closed_loop_radius(plant, controller, path.q_target))
+    summary = {
+        "controller": {"kind": controller.settings.kind, "sample_time": Ts, **report},
+        "plant": {"fidelity": str(plant.fidelity), "n_states": plant.n_x, "payload_kg": plant.spec.payload.mass},
+        "design": {"fidelity": str(model.fidelity), "payload_kg": model.spec.payload.mass,
+                   "configuration_deg": np.degrees(controller.op.joints).tolist()},
+        "reference": path.settings() | {"deflection": move.deflection},
+        "tip_target": tip_target.tolist(),
+        "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
+        "metrics": values,
+        "divergence": trajectory.meta.get("divergence"),
+        "wall_time_s": trajectory.meta["wall_time"],
+    }
+    return ClosedLoopResult(trajectory=trajectory, metrics=values, summary=summary, model=plant,
+                            controller=controller, reference=path)
+
+
+def _as_move(reference) -> Move:
+    if isinstance(reference, Move):
+        return reference
+    if isinstance(reference, JointReference):
+        return Move(reference.q_start, reference.q_target, reference.move_time, reference.profile, reference.t_start)
+    raise SpecError(f"value of type {type(reference).__name__} is not a reference; allowed: flexctrl.Move(start=, "
+                    "target=, time=) (rad, s) or a JointReference", key="reference")

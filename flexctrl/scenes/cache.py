@@ -1,0 +1,103 @@
+"""An explicit cache for scene runs: models, set-up integrators, runs and fidelity choices.
+
+Building a model (symbolic derivation, modes, compilation) costs far more than most
+runs, and a study worker or a fidelity chooser runs many scenes on the same arm.  What
+is kept lives in a :class:`SceneCache` that its owner creates and passes down
+(``run_scene(scene, cache=cache)``): nothing is cached in module globals, two owners
+never share state by accident, and dropping the object frees everything.  A function
+given no cache makes a fresh one for the call, so repeated work *within* that call is
+still shared (the chooser's rungs, the design model reused as the plant).
+
+Arrays handed out from the cache (a run's times and tip path) are read-only, so a
+caller cannot change what the next caller gets.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from typing import Any, Callable, Hashable
+
+
+class SceneCache:
+    """Least-recently-used stores, one per kind of thing kept.
+
+    Parameters
+    ----------
+    maxsize : int
+        Entries kept per kind (models, integrators, runs, choices); the least recently
+        used is dropped beyond it.
+
+    Examples
+    --------
+    >>> cache = SceneCache(maxsize=2)
+    >>> cache.get("runs", "a", lambda: 1), cache.get("runs", "a", lambda: 2)
+    (1, 1)
+    >>> cache.stats()["runs"]
+    {'entries': 1, 'hits': 1, 'misses': 1}
+    """
+
+    def __init__(self, maxsize: int = 64):
+        if isinstance(maxsize, bool) or not isinstance(maxsize, int) or maxsize < 1:
+            raise ValueError(f"maxsize {maxsize!r} is not allowed; allowed: a whole number >= 1")
+        self.maxsize = maxsize
+        self._stores: dict[str, OrderedDict] = {}
+        self._hits: dict[str, int] = {}
+        self._misses: dict[str, int] = {}
+
+    def get(self, kind: str, key: Hashable, build: Callable[[], Any]) -> Any:
+        """The entry ``key`` of ``kind``, built by ``build()`` the first time (an exception is not kept)."""
+        store = self._stores.setdefault(kind, OrderedDict())
+        if key in store:
+            store.move_to_end(key)
+            self._hits[kind] = self._hits.get(kind, 0) + 1
+            return store[key]
+        value = build()
+        self._misses[kind] = self._misses.get(kind, 0) + 1
+        store[key] = value
+        while len(store) > self.maxsize:
+            store.popitem(last=False)
+        return value
+
+    def model(self, arm, fidelity: str, modes: str = "frozen", reference_q: tuple[float, ...] | None = None):
+        """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, built once here."""
+        from flexctrl.dynamics.build import build_model
+
+        reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
+        key = (arm, str(fidelity), modes, reference_q)
+        return self.get("models", key, lambda: build_model(arm, str(fidelity), modes=modes, reference_q=reference_q))
+
+    def integrator(self, arm, fidelity: str, modes: str, reference_q, integrator: str, dt: float,
+                   solver: tuple[tuple[str, Any], ...] = ()):
+        """A set-up integrator on :meth:`model`'s model and its setup time (s)."""
+        from flexctrl.sim import get_integrator
+
+        def build():
+            start = time.perf_counter()
+            model = self.model(arm, fidelity, modes, reference_q)
+            built = get_integrator(integrator)(model, dt, **dict(solver)).setup()
+            return built, time.perf_counter() - start
+
+        key = (arm, str(fidelity), modes, None if reference_q is None else tuple(reference_q), integrator, float(dt),
+               tuple(solver))
+        return self.get("integrators", key, build)
+
+    def clear(self) -> None:
+        """Forget everything."""
+        self._stores.clear()
+        self._hits.clear()
+        self._misses.clear()
+
+    def stats(self) -> dict[str, dict[str, int]]:
+        """Entries, hits and misses per kind."""
+        kinds = sorted(set(self._stores) | set(self._misses))
+        return {k: {"entries": len(self._stores.get(k, ())), "hits": self._hits.get(k, 0),
+                    "misses": self._misses.get(k, 0)} for k in kinds}
+
+
+def read_only(*arrays):
+    """The arrays, made read-only in place (a cached run's arrays are shared by every caller)."""
+    for array in arrays:
+        if array is not None:
+            array.setflags(write=False)
+    return arrays

@@ -1,0 +1,176 @@
+"""Running a closed-loop scene (``kind = "closed_loop"``): the loop, its metrics and its files.
+
+A closed-loop scene (:mod:`flexctrl.spec.closed_loop_scene`) names a plant, a
+controller file and a move.  :func:`run_closed_loop_scene` builds the loop
+(:func:`flexctrl.scenes.loop_setup.build_loop`), runs it
+(:mod:`flexctrl.loop.sampled`), measures it (:func:`flexctrl.loop.metrics.run_metrics`)
+and writes ``trajectory.csv``, ``summary.json`` and the plots.
+
+Payload mismatch (plant carries one payload, the controller was designed for
+another), a controller designed on a coarser model than the plant and one designed
+(linearised) at another configuration than the target are scene settings.
+
+A run that leaves the divergence bounds (:mod:`flexctrl.loop.monitors`) stops there:
+:func:`run_closed_loop_scene` raises :class:`~flexctrl.errors.SimulationError` naming
+the time and the bound (``on_divergence="raise"``, ``flexctrl simulate``), or records it
+(``"record"``, the study executor): metrics ``stable = 0`` and ``divergence_time``
+(s), the other metrics over the run up to then, so a study row stays ``ok`` and a
+stability map is a map of the ``stable`` column.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexctrl.errors import SpecError
+from flexctrl.fidelity.ladder import check_tolerance
+from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.sampled import simulate_closed_loop
+from flexctrl.loop.verdict import linear_closed_loop_radius
+from flexctrl.scenes.auto import check_closed_loop_auto, choose_closed_loop_fidelity
+from flexctrl.scenes.cache import SceneCache
+from flexctrl.scenes.loop_setup import build_loop, pin_design
+
+
+def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any):
+    """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step, and the choice.
+
+    The design model is pinned first (:func:`pin_design`); the choice is
+    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` with the
+    scene's ``tolerance`` (kept in ``cache``).  Other scenes come back unchanged with None.
+    """
+    if scene.plant.fidelity.kind != "auto":
+        return scene, None
+    scene = pin_design(scene)
+    tol = check_tolerance(scene.plant.tolerance, source=scene.source, key="tolerance")
+    choice = choose_closed_loop_fidelity(scene, tol, controller=controller, overrides=tuple(overrides), cache=cache,
+                                         **options)
+    plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=choice.dt)
+    return dataclasses.replace(scene, plant=plant), choice
+
+
+def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=None, fidelity=None,
+                          plots: bool | None = None, overrides=(), on_divergence: str = "raise",
+                          auto_options: dict[str, Any] | None = None,
+                          cache: SceneCache | None = None) -> ClosedLoopResult:
+    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
+
+    Parameters
+    ----------
+    scene : ClosedLoopScene
+    out
+        Folder for ``trajectory.csv``, ``summary.json`` (with a ``metrics`` object) and PNGs.
+    controller
+        Controller file (default: the scene's ``controller``), or a controller designed in
+        Python (:func:`flexctrl.design`; see :func:`flexctrl.scenes.loop_setup.build_loop`).
+    fidelity
+        Plant fidelity override (``--fidelity``); ``"auto"`` chooses it (below).
+    overrides
+        ``KEY=VALUE`` overrides of the controller file.
+    on_divergence : {"raise", "record"}
+        What a diverging run does (see the module docstring): raise
+        :class:`~flexctrl.errors.SimulationError`, or stop and record ``stable = 0``
+        and ``divergence_time`` (s) among the metrics.  For such a run every other
+        metric covers the run up to the divergence; when that comes before the
+        residual-vibration window opens, the window is the last plant sample.  Stable
+        runs report ``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip
+        that never settles into the band reports ``settled = 0`` and ``settling_time`` =
+        the duration (finite: :func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
+    auto_options
+        Keywords of :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity`
+        (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
+    cache : SceneCache, optional
+        Models, fidelity runs and choices to reuse (a fresh one when None).
+
+    Returns
+    -------
+    ClosedLoopResult
+        Its ``summary`` is ``summary.json``'s content; ``files`` what was written.
+
+    Notes
+    -----
+    With ``fidelity = "auto"`` (scene or override) and the scene's ``tolerance`` (m),
+    the controller is designed on ``controller_fidelity`` (default
+    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are chosen by
+    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` (kept in
+    ``cache`` by everything that changes the loop), and the run uses them.  The summary
+    then holds ``"fidelity_choice"`` (the choice and all its evidence) and the metrics
+    ``chosen_modes`` (modes per link of the chosen plant, 0 = rigid), ``chosen_dt``
+    (s), ``estimated_error`` and ``reference_error`` (m), ``choice_cost_ratio`` (the
+    choice's loop wall time over the reference's) and ``choice_time_s`` (time this
+    call spent choosing, s: milliseconds when the choice was cached).
+    """
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    if on_divergence not in ("raise", "record"):
+        raise SpecError(f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'", key="on_divergence")
+    if fidelity is not None:
+        scene = dataclasses.replace(scene, plant=dataclasses.replace(
+            scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity")))
+    cache = SceneCache() if cache is None else cache
+    requested = scene
+    choosing = time.perf_counter()
+    scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
+    choosing = time.perf_counter() - choosing
+    setup = build_loop(scene, controller, overrides, cache)
+    plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
+    rng = np.random.default_rng(scene.seed) if scene.noise else None
+    trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt, sensors=setup.sensors,
+                                         rng=rng, compile=plant_scene.solver.get("compile"), monitor=setup.monitor,
+                                         stop_on_divergence=on_divergence == "record")
+    tip_target = tip_at_rest(plant, scene.target_q)
+    report = ctrl.stats.summary()
+    metrics = run_metrics(
+        trajectory, tip_target=tip_target, reference_joints=setup.reference.joints(trajectory.time),
+        t_arrive=scene.t_arrive, settle_allowance=scene.settle_allowance, band=scene.band,
+        stable_band=scene.stable_band, duration=plant_scene.duration,
+        torque_limits=[j.torque_limit for j in arm.joints], controller_stats=report,
+        step_times=ctrl.stats.step_times, radius=linear_closed_loop_radius(plant, ctrl, scene.target_q))
+    if choice is not None:
+        metrics["chosen_modes"] = float(choice.choice.count or 0)
+        metrics["chosen_dt"] = float(choice.dt)
+        metrics["estimated_error"] = float(choice.estimated_error)
+        metrics["reference_error"] = float(choice.reference_error)
+        metrics["choice_cost_ratio"] = float(choice.cost_ratio)
+        metrics["choice_time_s"] = float(choosing)
+    summary = {
+        "scene": requested.settings(),
+        "controller": {"file": None if setup.path is None else str(setup.path), "kind": setup.settings.kind,
+                       "sample_time": ctrl.sample_time, **report},
+        "plant": {"fidelity": str(plant_scene.fidelity), "n_states": plant.n_x, "payload_kg": arm.payload.mass},
+        "design": {"fidelity": str(setup.design_fidelity), "payload_kg": setup.design_arm.payload.mass,
+                   "configuration_deg": np.degrees(setup.design_q).tolist()},
+        "reference": setup.reference.settings() | {"deflection": scene.deflection},
+        "tip_target": tip_target.tolist(),
+        "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
+        "metrics": metrics,
+        "divergence": trajectory.meta.get("divergence"),
+        "wall_time_s": trajectory.meta["wall_time"],
+    }
+    if choice is not None:
+        summary["fidelity_choice"] = choice.to_dict()
+    result = ClosedLoopResult(trajectory=trajectory, metrics=metrics, summary=summary, model=plant, controller=ctrl,
+                              reference=setup.reference, scene=scene)
+    if out is not None:
+        result.save(out, plots=plant_scene.plots if plots is None else plots)
+    return result
+
+
+def check_auto(scene, controller=None) -> None:
+    """Refuse, before any run, a closed loop that ``fidelity = "auto"`` cannot choose for.
+
+    Raises
+    ------
+    SpecError
+        Naming the scene file and key: the tolerance (required, > 0 m), the plant's
+        integrator (``rk4``), the design model (``controller_fidelity`` not ``auto``)
+        or a missing controller.
+    """
+    check_tolerance(scene.plant.tolerance, source=scene.source, key="tolerance")
+    check_closed_loop_auto(scene, controller)

@@ -1,0 +1,197 @@
+"""Building a closed loop from a scene: plant and design models, the designed controller, its reference.
+
+:func:`build_loop` is the one place a closed-loop scene becomes objects: the plant
+(the scene's arm at the plant's fidelity), the design model (another payload, fidelity
+or configuration when the scene says so), the controller designed on it and set to
+track the scene's joint reference, the plant's sensors with the controller's noise
+(:func:`flexctrl.loop.mismatch.plant_sensors`), the initial state and the divergence
+monitor.  Models come from the caller's :class:`~flexctrl.scenes.cache.SceneCache`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flexctrl.control.reference import ReferenceTrajectory
+from flexctrl.errors import FlexctrlError, SolverError, SpecError
+from flexctrl.loop.mismatch import plant_sensors
+from flexctrl.loop.monitors import divergence_monitor
+from flexctrl.loop.sampled import integrate_closed_loop, mapped
+from flexctrl.scenes.arm import initial_state, scene_arm
+from flexctrl.scenes.cache import SceneCache
+
+
+#: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names no
+#: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
+AUTO_DESIGN_FIDELITY = "amm:2"
+
+
+def pin_design(scene):
+    """The scene with its design model pinned when the plant's fidelity is ``auto``.
+
+    The plant is what auto chooses; the controller must not change with it, so it is
+    designed on ``controller_fidelity``, or :data:`AUTO_DESIGN_FIDELITY` when the scene
+    gives none.  Other scenes are returned unchanged.
+    """
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    if scene.plant.fidelity.kind != "auto" or scene.controller_fidelity is not None:
+        return scene
+    return dataclasses.replace(scene, controller_fidelity=parse_fidelity(AUTO_DESIGN_FIDELITY))
+
+
+@dataclass
+class LoopSetup:
+    """Everything a closed-loop run needs, built by :func:`build_loop` (see :func:`run_closed_loop_scene`)."""
+
+    scene: Any
+    plant_scene: Any
+    arm: Any
+    plant: Any
+    design_arm: Any
+    design_fidelity: Any
+    design_q: tuple[float, ...]
+    design_model: Any
+    controller: Any
+    settings: Any
+    path: Path | None
+    reference: Any
+    sensors: Any
+    x0: np.ndarray
+    monitor: Any
+    build_time_s: float
+
+
+def design_scene_controller(scene, design_model, settings, path: str | Path):
+    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
+
+    Raises
+    ------
+    SolverError
+        When the design fails numerically (named with the controller file and the configuration).
+    """
+    from flexctrl.control import design
+    from flexctrl.linear import equilibrium
+
+    design_q = tuple(scene.design_configuration)
+    op = equilibrium(design_model, design_q)
+    where = "the target" if scene.design_q is None else "the design configuration"
+    try:
+        ctrl = design(design_model, op, settings)
+    except FlexctrlError:
+        raise
+    except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
+        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
+                          f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+    ctrl.reset()
+    return ctrl
+
+
+def is_designed(controller) -> bool:
+    """True for a designed controller object (it has ``step`` and ``sensors``), False for a file path or None."""
+    return hasattr(controller, "step") and hasattr(controller, "sensors")
+
+
+def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None) -> LoopSetup:
+    """Build plant and design models (kept in ``cache``), design the controller, set its reference.
+
+    ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).  ``controller``
+    is a controller file (default: the scene's), or a controller designed in Python
+    (:func:`flexctrl.control.design`): it then keeps its own design model, payload and
+    operating point, so the scene's ``design_payload``, ``controller_fidelity`` and
+    ``design_configuration`` must be absent, and ``overrides`` empty.
+    """
+    from flexctrl.spec.controller import load_controller
+
+    cache = SceneCache() if cache is None else cache
+    start = time.perf_counter()
+    plant_scene = scene.plant
+    designed = is_designed(controller)
+    path = None if designed else (controller or scene.controller)
+    if not designed and path is None:
+        raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source, key="controller")
+    arm = scene_arm(plant_scene)
+    if len(scene.target_q) != arm.n_links:
+        raise SpecError(f"has {len(scene.target_q)} values; expected {arm.n_links} (one per joint)", source=scene.source, key="target.q")
+    plant = cache.model(arm, str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0)
+    if designed:
+        ctrl, settings = controller, controller.settings
+        design_model = _design_model_of(ctrl, scene, overrides)
+        design_arm, design_fidelity = design_model.spec, design_model.fidelity
+        design_q = tuple(float(a) for a in ctrl.op.joints)
+        same = design_model is plant
+        ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+        ctrl.reset()
+    else:
+        settings = load_controller(path, overrides)
+        design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
+        design_fidelity = scene.controller_fidelity or plant_scene.fidelity
+        design_q = tuple(scene.design_configuration)
+        same = design_arm == arm and str(design_fidelity) == str(plant_scene.fidelity) and scene.design_q is None
+        design_model = plant if same else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
+        ctrl = design_scene_controller(scene, design_model, settings, path)
+    path_ref = scene.joint_reference()
+    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
+    x0 = initial_state(plant_scene, plant, arm)
+    monitor = divergence_monitor(plant, arm, scene.start_q, scene.target_q, scene.divergence_deflection,
+                                 scene.divergence_angle)
+    return LoopSetup(scene, plant_scene, arm, plant, design_arm, design_fidelity, design_q, design_model, ctrl, settings,
+                     None if path is None else Path(path), path_ref, sensors, x0, monitor, time.perf_counter() - start)
+
+
+def _design_model_of(ctrl, scene, overrides):
+    """The model a designed controller was designed on; the scene may not ask for another design."""
+    for key, value in (("design_payload", scene.design_payload), ("controller_fidelity", scene.controller_fidelity),
+                       ("design_configuration", scene.design_q)):
+        if value is not None:
+            raise SpecError(f"does not apply to a controller designed in Python (it keeps its own design model); "
+                            "allowed: no such key, or a controller file", source=scene.source, key=key)
+    if overrides:
+        raise SpecError(f"controller overrides {list(overrides)} do not apply to a designed controller; allowed: none",
+                        key="overrides")
+    model = getattr(ctrl, "design_model", None)
+    if model is None:
+        raise SpecError(f"the {type(ctrl).__name__} has no design_model; allowed: a controller from "
+                        "flexctrl.design(model, op, settings), or a controller file", key="controller")
+    return model
+
+
+def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path | None = None, overrides=(),
+                         stride: int = 1, cache: SceneCache | None = None) -> dict[str, Any]:
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
+
+    Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
+    diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``
+    (the design model) is kept, so only the plant changes with ``fidelity``.
+
+    Returns
+    -------
+    dict
+        ``time`` (s), ``tip`` (m, shape (T, 2)) and ``torque`` (N m, (T, n_u)) every
+        ``stride`` plant steps; ``wall_time_s`` (the loop), ``build_time_s`` (models,
+        design, compiling or loading the plant's step),
+        ``omega_max`` (rad/s), ``diverged_at`` (s or None).
+    """
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    fid = parse_fidelity(fidelity, key="fidelity")
+    plant_scene = dataclasses.replace(scene.plant, fidelity=fid, dt=float(dt))
+    setup = build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
+    rng = np.random.default_rng(scene.seed) if scene.noise else None
+    t, X, U, meta, _ = integrate_closed_loop(setup.plant, setup.controller, setup.x0, plant_scene.duration, float(dt),
+                                             sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
+                                             monitor=setup.monitor, stop_on_divergence=True, stride=stride)
+    plant = setup.plant
+    tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
+    divergence = meta.get("divergence")
+    return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time"]),
+            "build_time_s": setup.build_time_s + float(meta["setup_time"]), "omega_max": float(plant.omega_max),
+            "diverged_at": None if divergence is None else float(divergence["time"])}
+

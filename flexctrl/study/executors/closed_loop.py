@@ -1,0 +1,59 @@
+"""The ``closed_loop`` executor: one closed-loop scene run from a study's settings.
+
+The run's model, payload, configuration, fidelity and seed become scene overrides
+(:func:`flexctrl.study.outputs.scene_overrides`); the scene runs with
+``on_divergence = "record"`` so an unstable loop is a row with ``stable = 0``, not a
+failed run.  Models and fidelity choices are kept in the worker's
+:func:`~flexctrl.study.outputs.worker_scene_cache`.
+"""
+
+from __future__ import annotations
+
+from flexctrl.errors import SpecError
+from flexctrl.scenes.closed_loop import check_auto, run_closed_loop_scene
+from flexctrl.spec.controller import load_controller
+from flexctrl.spec.scene import load_scene
+from flexctrl.study.outputs import RunOutput, overrides_for, scene_overrides, worker_scene_cache
+
+
+def _scene_overrides(settings: dict) -> list[str]:
+    seed = () if settings.get("seed") is None else (f"noise.seed={int(settings['seed'])}",)
+    return scene_overrides(settings, seed)
+
+
+def check_settings(settings: dict) -> None:
+    """Validate one study run before any run starts (scene, controller file, model)."""
+    scene = load_scene(settings["scene"], _scene_overrides(settings))
+    if scene.kind != "closed_loop":
+        raise SpecError(f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = \"closed_loop\"",
+                        source=str(settings["scene"]), key="kind")
+    if settings.get("controller"):
+        load_controller(settings["controller"], overrides_for(settings, "controller"))
+    if scene.plant.fidelity.kind == "auto":
+        check_auto(scene, settings.get("controller"))
+
+
+def execute(settings: dict) -> RunOutput:
+    """One closed-loop run from a settings dict (see :mod:`flexctrl.study.registry`).
+
+    Metrics are flattened to scalars (``peak_torque_1`` ...); trajectories (``t``, joint
+    angles, tip position, link deflections, torques) are returned at the plant rate and
+    decimated by the study.
+    """
+    scene = load_scene(settings["scene"], _scene_overrides(settings))
+    result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
+                                   overrides=overrides_for(settings, "controller"), plots=False,
+                                   on_divergence="record", cache=worker_scene_cache())
+    metrics: dict[str, float] = {}
+    for key, value in result.summary["metrics"].items():
+        if isinstance(value, list):
+            metrics.update({f"{key}_{i + 1}": float(v) for i, v in enumerate(value)})
+        else:
+            metrics[key] = float(value)
+    traj = result.trajectory
+    series = {"t": traj.time, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
+    for i in range(traj.inputs.shape[1]):
+        series[f"q{i + 1}"] = traj.states[:, i]
+        series[f"u{i + 1}"] = traj.inputs[:, i]
+        series[f"w{i + 1}"] = traj.deflections[:, i]
+    return RunOutput(metrics=metrics, trajectories=series)
