@@ -57,12 +57,18 @@ def _write(tmp_path, text: str) -> Path:
         ('kind = "mpc"\nhorizn = 20\n', "horizn", ["did you mean 'horizon'"]),
         ('kind = "mpc"\n[osqp]\nmax_iter = -3\n', "osqp.max_iter", ["-3", "from 1"]),
         ('kind = "mpc"\n[osqp]\nrho = "big"\n', "osqp.rho", ["'big'", "not a number"]),
-        ('kind = "lqr"\n[weights]\njoint = -1\n', "weights.joint", ["-1", "> 0", "deg"]),
+        ('kind = "lqr"\n[weights]\njoint_deg = -1\n', "weights.joint_deg", ["-1", "> 0", "deg"]),
+        ('kind = "lqr"\n[weights]\njoint = 0.5\n', "weights.joint", ["renamed 'joint_deg'", "0.5"]),
+        ('kind = "lqr"\n[weights]\njoint_rate = 30\n', "weights.joint_rate", ["renamed 'joint_rate_deg_s'"]),
+        ('kind = "lqr"\n[sensors]\nnoise = { joints = 0.005 }\n', "sensors.noise.joints", ["renamed 'joints_deg'"]),
+        ('kind = "lqr"\n[sensors]\nnoise = { joint_rates = 0.05 }\n', "sensors.noise.joint_rates",
+         ["renamed 'joint_rates_deg_s'"]),
+        ('kind = "lqr"\n[schedule]\nq2 = [0, 10]\n', "schedule.q2", ["renamed 'q2_deg'"]),
         ('kind = "lqr"\n[sensors]\noutputs = ["joints", "strian"]\n', "sensors.outputs[1]", ["'strian'", "did you mean 'strain'"]),
         ('kind = "lqr"\n[sensors]\noutputs = ["state", "joints"]\n', "sensors.outputs", ["'state'", "stands alone"]),
-        ('kind = "lqr"\n[sensors]\nnoise = { joints = -0.1 }\n', "sensors.noise.joints", ["-0.1", ">= 0"]),
-        ('kind = "lqr"\n[schedule]\nq2 = [10, 0]\n', "schedule.q2", ["strictly increasing"]),
-        ('kind = "lqr"\n[schedule]\nx2 = [0, 10]\n', "schedule.x2", ["'q1', 'q2'"]),
+        ('kind = "lqr"\n[sensors]\nnoise = { joints_deg = -0.1 }\n', "sensors.noise.joints_deg", ["-0.1", ">= 0"]),
+        ('kind = "lqr"\n[schedule]\nq2_deg = [10, 0]\n', "schedule.q2_deg", ["strictly increasing"]),
+        ('kind = "lqr"\n[schedule]\nx2 = [0, 10]\n', "schedule.x2", ["'q1_deg', 'q2_deg'"]),
         ('kind = "pd"\nkp = [1, 2]\nkd = [1]\n', "kd", ["1 gains", "kp has 2"]),
         ('kind = "pd"\ngravity = "measure"\n', "gravity", ["'measure'", "did you mean 'measured'"]),
         ('kind = "pd"\n[sensors]\noutputs = ["joints"]\n', "sensors.outputs", ["'joint_rates'"]),
@@ -93,7 +99,7 @@ def test_overrides_apply_before_validation(tmp_path):
 
 
 def test_schedule_reads_degrees_and_sorts_joints(tmp_path):
-    path = _write(tmp_path, 'kind = "lqr"\n[schedule]\nq3 = [-20, 0, 20]\nq2 = [-10, 10]\n')
+    path = _write(tmp_path, 'kind = "lqr"\n[schedule]\nq3_deg = [-20, 0, 20]\nq2_deg = [-10, 10]\n')
     s = load_controller(path)
     assert s.schedule.joints == (2, 3)
     assert s.schedule.grid[1] == pytest.approx(tuple(math.radians(a) for a in (-20, 0, 20)))

@@ -31,6 +31,20 @@ SCENE_RUNNERS: dict[str, str] = {
 def run_scene(scene, out: str | Path | None = None, **options: Any):
     """Run ``scene`` (any kind of :data:`SCENE_RUNNERS`), writing results to ``out`` when given.
 
+    Parameters
+    ----------
+    scene
+        From :func:`flexctrl.load_scene`.
+    out : str or Path, optional
+        Folder for ``trajectory.csv``, ``summary.json`` and the figures; nothing is written when None.
+    **options
+        The kind's runner's keywords: ``controller`` (a file or a controller designed in
+        Python), ``fidelity``, ``plots``, ``cache`` (:class:`~flexctrl.scenes.cache.SceneCache`) ...
+
+    Returns
+    -------
+    SceneResult or ClosedLoopResult or FemSceneResult
+
     ``fidelity = "auto"`` is resolved by the kind's runner: for ``kind = "arm"`` by
     :func:`flexctrl.scenes.arm_scene.run_arm_scene`, for ``kind = "closed_loop"`` (the
     plant's fidelity) by :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene`.

@@ -3,8 +3,12 @@
 Every file has ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"``, optional free-text
 ``name``, ``notes`` and ``source``, the controller's scalar keys and sub-tables
 (``[weights]``, ``[sensors]``, ``[estimator]``, ``[schedule]``, ``[osqp]``, ``[pd]``).
-Angles and angular rates are in **degrees** (deg, deg/s) as everywhere in the files;
-gains are per radian (N m/rad, N m s/rad).  Errors name the file, the dotted key,
+Angles and angular rates are in **degrees** (deg, deg/s) as everywhere in the files,
+and every key that holds one says so in its name (``joint_deg``, ``joint_rate_deg_s``,
+``joints_deg``, ``q2_deg``): the settings classes hold the same quantities in radians
+under the plain names (``Weights.joint``), so no name means two units.  The old
+spellings (``joint``, ``joint_rate``, ``joints``, ``joint_rates``, ``q2``) are refused
+with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the file, the dotted key,
 the value and what is allowed; unknown keys are rejected with a "did you mean".
 
 >>> from flexctrl.spec.controller import load_controller
@@ -60,6 +64,14 @@ def _field_type(cls: type, name: str):
     return typing.get_type_hints(cls)[name]
 
 
+def _refuse_renamed(reader: TableReader, renamed: dict[str, str]) -> None:
+    """Refuse a key of the old spelling, naming the key that replaced it."""
+    for old, new in renamed.items():
+        if reader.has(old):
+            raise reader.error(old, f"was renamed '{new}' (value {reader.table[old]!r}): angles in the files are "
+                                    f"degrees and their keys say so; allowed: {new}")
+
+
 def _free_text(reader: TableReader) -> None:
     for name in ("name", "notes", "source"):
         if reader.has(name):
@@ -88,22 +100,25 @@ def _sensors(reader: TableReader, default: SensorSettings) -> SensorSettings:
         values["outputs"] = tuple(outputs)
     else:
         values["outputs"] = default.outputs
-    units = {"joints": ("deg", _DEG), "joint_rates": ("deg/s", _DEG), "strain": ("1/m", 1.0), "tip": ("m", 1.0),
-             "tip_acc": ("m/s^2", 1.0), "deflection": ("m", 1.0)}
+    units = {"joints": ("joints_deg", "deg", _DEG), "joint_rates": ("joint_rates_deg_s", "deg/s", _DEG),
+             "strain": ("strain", "1/m", 1.0), "tip": ("tip", "m", 1.0), "tip_acc": ("tip_acc", "m/s^2", 1.0),
+             "deflection": ("deflection", "m", 1.0)}
     noise = r.table_of("noise", {})
-    for kind, (unit, factor) in units.items():
-        values[kind] = noise.nonnegative(kind, getattr(default, kind) / factor, unit=unit) * factor
+    _refuse_renamed(noise, {"joints": "joints_deg", "joint_rates": "joint_rates_deg_s"})
+    for kind, (key, unit, factor) in units.items():
+        values[kind] = noise.nonnegative(key, getattr(default, kind) / factor, unit=unit) * factor
     noise.finish()
     return _build(r, SensorSettings, values)
 
 
 def _weights(reader: TableReader) -> Weights:
     r = reader.table_of("weights", {})
+    _refuse_renamed(r, {"joint": "joint_deg", "joint_rate": "joint_rate_deg_s"})
     d = Weights()
     values = {
-        "joint": r.positive("joint", math.degrees(d.joint), unit="deg") * _DEG,
+        "joint": r.positive("joint_deg", math.degrees(d.joint), unit="deg") * _DEG,
         "modal": r.positive("modal", d.modal, unit="m"),
-        "joint_rate": r.positive("joint_rate", math.degrees(d.joint_rate), unit="deg/s") * _DEG,
+        "joint_rate": r.positive("joint_rate_deg_s", math.degrees(d.joint_rate), unit="deg/s") * _DEG,
         "modal_rate": r.positive("modal_rate", d.modal_rate, unit="m/s"),
         "torque": r.positive("torque", d.torque, unit="fraction of the torque limit"),
     }
@@ -131,14 +146,24 @@ def _schedule(reader: TableReader) -> ScheduleSettings | None:
     for key in list(r.table):
         if key in ("name", "notes", "source"):
             continue
-        if not (key.startswith("q") and key[1:].isdigit() and int(key[1:]) >= 1):
+        number = key[1:-4] if key.endswith("_deg") else key[1:]
+        if not (key.startswith("q") and number.isdigit() and int(number) >= 1):
             r.raw(key)
-            raise r.error(key, f"unknown key (value {r.table[key]!r}); allowed: joints 'q1', 'q2', ... each with a "
-                               "list of angles (deg)")
-        joints.append(int(key[1:]))
+            raise r.error(key, f"unknown key (value {r.table[key]!r}); allowed: joints 'q1_deg', 'q2_deg', ... each "
+                               "with a list of angles (deg)")
+        if not key.endswith("_deg"):
+            _refuse_renamed(r, {key: f"{key}_deg"})
+        joints.append(int(number))
         grid.append(tuple(v * _DEG for v in r.numbers(key, unit="deg")))
     order = sorted(range(len(joints)), key=lambda i: joints[i])
-    return _build(r, ScheduleSettings, {"joints": tuple(joints[i] for i in order), "grid": tuple(grid[i] for i in order)})
+    try:
+        return _build(r, ScheduleSettings, {"joints": tuple(joints[i] for i in order),
+                                            "grid": tuple(grid[i] for i in order)})
+    except SpecError as exc:  # the settings name a joint's grid q2 (rad); the file's key is q2_deg
+        name = (exc.key or "").rsplit(".", 1)[-1]
+        if name.startswith("q") and name[1:].isdigit():
+            raise r.error(f"{name}_deg", str(exc).split(": ", 2)[-1]) from None
+        raise
 
 
 def _osqp(reader: TableReader) -> OSQPSettings:
@@ -285,6 +310,18 @@ def controller_from_document(document: dict[str, Any], source: str) -> Controlle
 
 def load_controller(path: str | Path, overrides: Iterable[str] = ()) -> ControllerSettings:
     """Read ``controllers/*.toml`` (with ``KEY=VALUE`` overrides) into its settings dataclass.
+
+    Parameters
+    ----------
+    path : str or Path
+        A controller file; its ``kind`` picks the settings class.
+    overrides : iterable of str
+        ``KEY=VALUE`` strings (``weights.joint_deg=0.1``), applied before validation.
+
+    Returns
+    -------
+    PDSettings, LQRSettings, MPCSettings, NMPCSettings or ShapedSettings
+        Angles converted to radians; give it to :func:`flexctrl.design`.
 
     Raises
     ------

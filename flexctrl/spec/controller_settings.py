@@ -158,6 +158,9 @@ class Weights:
     torque : float
         Torque deviation as a fraction of each joint's torque limit (of 1 N m when the
         model has no limits).
+
+    In controller files the angle weights are ``joint_deg`` (deg) and
+    ``joint_rate_deg_s`` (deg/s): one name, one unit.
     """
 
     joint: float = 0.01

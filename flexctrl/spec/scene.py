@@ -41,6 +41,19 @@ SCENE_READERS: dict[str, str] = {
 def load_scene(path: str | Path, overrides: Iterable[str] = ()):
     """Load, override and validate a scene file; the scene type depends on its ``kind``.
 
+    Parameters
+    ----------
+    path : str or Path
+        A scene file (``studies/scenes/*.toml``).
+    overrides : iterable of str
+        ``KEY=VALUE`` strings (``duration=3.0``, ``target.move=[45, 0, 0]``: degrees as in
+        the file), applied before validation.
+
+    Returns
+    -------
+    ArmScene, ClosedLoopScene or FemScene
+        Plain frozen data, angles in radians; run it with :func:`flexctrl.run_scene`.
+
     Raises
     ------
     SpecError
