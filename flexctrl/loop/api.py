@@ -137,7 +137,7 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
         "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
         "metrics": values,
         "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time"],
+        "wall_time_s": trajectory.meta["wall_time_s"],
     }
     return ClosedLoopResult(trajectory=trajectory, metrics=values, summary=summary, model=plant,
                             controller=controller, reference=path)

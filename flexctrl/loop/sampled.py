@@ -100,8 +100,8 @@ def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt
     X, U : ndarray
         States and held torques (N m) at those times, shapes (T, n_x) and (T, n_u).
     meta : dict
-        ``integrator``, ``dt`` (s), ``sample_time`` (s), ``wall_time`` (s, the loop),
-        ``compiled``, ``divergence``, ``stride``, ``setup_time`` (s, building and
+        ``integrator``, ``dt`` (s), ``sample_time`` (s), ``wall_time_s`` (s, the loop),
+        ``compiled``, ``divergence``, ``stride``, ``setup_time_s`` (s, building and
         compiling or loading the plant's step function).
     sample_times : ndarray
         Times (s) at which the controller was called.
@@ -160,7 +160,7 @@ def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt
     X, U = X[:end], U[:end]
     U[-1] = u
     t = np.arange(X.shape[0]) * (dt * stride)
-    meta = {"integrator": "rk4", "dt": dt, "sample_time": Ts, "wall_time": time.perf_counter() - wall,
-            "compiled": compiled, "divergence": divergence, "stride": stride, "setup_time": setup}
+    meta = {"integrator": "rk4", "dt": dt, "sample_time": Ts, "wall_time_s": time.perf_counter() - wall,
+            "compiled": compiled, "divergence": divergence, "stride": stride, "setup_time_s": setup}
     return t, X, U, meta, np.arange(samples_done) * Ts
 

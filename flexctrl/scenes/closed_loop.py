@@ -151,7 +151,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
         "metrics": metrics,
         "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time"],
+        "wall_time_s": trajectory.meta["wall_time_s"],
     }
     if choice is not None:
         summary["fidelity_choice"] = choice.to_dict()

@@ -191,7 +191,7 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
     plant = setup.plant
     tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
     divergence = meta.get("divergence")
-    return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time"]),
-            "build_time_s": setup.build_time_s + float(meta["setup_time"]), "omega_max": float(plant.omega_max),
+    return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time_s"]),
+            "build_time_s": setup.build_time_s + float(meta["setup_time_s"]), "omega_max": float(plant.omega_max),
             "diverged_at": None if divergence is None else float(divergence["time"])}
 
