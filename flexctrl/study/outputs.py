@@ -73,9 +73,29 @@ def per_worker_cache(maxsize: int = 8) -> Callable:
     """Decorator: remember a build step per worker process (``functools.lru_cache``).
 
     Key it by hashable settings (use :func:`freeze` for lists) and include the
-    files' digests (``settings["digests"]``) so an edited file is rebuilt.
+    files' digests (``settings["digests"]``) so an edited file is rebuilt.  The worker
+    process owns what is kept: numpy arrays in a result (alone or in a tuple) are made
+    read-only, so one run cannot change what the next run of the worker is handed.
     """
-    return functools.lru_cache(maxsize=maxsize)
+
+    def decorate(fn: Callable) -> Callable:
+        @functools.lru_cache(maxsize=maxsize)
+        @functools.wraps(fn)
+        def cached(*args, **kwargs):
+            return _read_only(fn(*args, **kwargs))
+
+        return cached
+
+    return decorate
+
+
+def _read_only(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif isinstance(value, tuple):
+        for item in value:
+            _read_only(item)
+    return value
 
 
 def freeze(value: Any) -> Any:

@@ -65,7 +65,7 @@ from flexctrl.analysis.accuracy import (
     pareto_front, run_closed_loop, run_open_loop,
 )
 from flexctrl.errors import SpecError
-from flexctrl.study.outputs import RunOutput, freeze, overrides_for, per_worker_cache
+from flexctrl.study.outputs import RunOutput, freeze, overrides_for, per_worker_cache, worker_scene_cache
 
 #: Scene keys read by this executor (removed before the scene file is validated).
 OWN_KEYS = ("method", "reference", "reference_meshes", "repeats", "horizon")
@@ -184,11 +184,8 @@ def _plant_scene(scene):
     return scene.plant if scene.kind == "closed_loop" else scene
 
 
-@per_worker_cache(maxsize=24)
 def _model(arm, fidelity: str, modes: str, q0: tuple[float, ...]):
-    from flexctrl.dynamics.build import build_model
-
-    return build_model(arm, fidelity, modes=modes, reference_q=q0)
+    return worker_scene_cache().model(arm, fidelity, modes, q0)
 
 
 @per_worker_cache(maxsize=24)
