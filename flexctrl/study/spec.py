@@ -231,16 +231,37 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     SpecError
         Naming the file, the key, the value and what is allowed.
     """
-    from flexctrl.study.registry import executor_names, get_executor
-
     path = Path(path)
     source = str(path)
     document = _nest_dotted_keys(read_toml(path), source)
     document = apply_overrides(document, [_spell_like_file(document, o) for o in overrides], source=f"{source} (--set)")
-    ctx = _Context(source, path.resolve().parent)
+    return study_from_document(document, source, path.resolve().parent, file_digest(path), path.stem,
+                               check_executor=check_executor)
+
+
+def study_from_document(document: dict[str, Any], source: str, base_dir: Path, sha256: str, default_name: str, *,
+                        check_executor: bool = True) -> StudySpec:
+    """Validate and expand a parsed study document (:func:`load_study` without the file).
+
+    Parameters
+    ----------
+    document
+        The study's tables (quoted dotted keys already nested, overrides applied).
+    source
+        Where it came from, for messages (e.g. ``"studies/tune_lqr.toml [scenarios]"``).
+    base_dir
+        The folder relative paths are resolved against.
+    sha256
+        Digest recorded as the study's ``sha256``.
+    default_name
+        The study's name when the document gives none.
+    """
+    from flexctrl.study.registry import executor_names, get_executor
+
+    ctx = _Context(source, base_dir)
     r = TableReader(document, source)
 
-    name = r.string("name", path.stem)
+    name = r.string("name", default_name)
     if not name or "/" in name or "\\" in name or name in (".", ".."):
         raise r.error("name", f"value {name!r} is not allowed; allowed: a non-empty name without slashes")
     executor = r.string("executor", "closed_loop", choices=executor_names())
@@ -324,7 +345,7 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes)
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
-        name=name, source=source, root=str(ctx.root), sha256=file_digest(path), executor=executor, seed=seed,
+        name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
         replicates=replicates, metrics=metrics, keep_trajectories=keep, decimation=decimation,
         fixed=tuple(fixed.items()), axes=tuple(axes), columns=columns, report=report, runs=runs,
     )
