@@ -27,7 +27,7 @@ from flexctrl.errors import SpecError
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.modal.fem_modes import link_frequencies_fem
 from flexctrl.modal.paper_data import SUBEDI_TABLE3_HZ, SUBEDI_TABLE3_ROUNDING_HZ
-from flexctrl.sim.newmark_dae import DAEProblem, simulate
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.spec.arm import load_arm
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "subedi3link.toml"
@@ -215,7 +215,7 @@ def test_locked_frequencies_converge_from_above_at_fourth_order(arm, payload, q_
 def test_locked_frequencies_agree_with_assumed_modes(arm, q_deg):
     """AMM-4 is a Ritz basis of the same structure (clamped-mass modes of each link, coupled):
     with axially rigid links it must sit just above FEM-16; the file's EA lowers FEM slightly."""
-    from flexctrl.dynamics.fem.report import locked_amm_hz, locked_fem_hz
+    from flexctrl.dynamics.fem.spectrum import locked_amm_hz, locked_fem_hz
 
     a = arm.with_payload(2.0)
     amm4, amm2 = locked_amm_hz(a, 4, q_deg), locked_amm_hz(a, 2, q_deg)

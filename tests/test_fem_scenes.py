@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-from flexctrl.dynamics.fem.rp_arm import RPArmSpec, RPMotion, load_rp_arm, rp_arm_from_document, simulate_rp_arm
+from flexctrl.dynamics.fem.rp_arm import RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.sliding_beam import FAST_PULL, FAST_PUSH, simulate_sliding_beam
 from flexctrl.errors import SpecError
 from flexctrl.scenes.fem import run_fem_scene
+from flexctrl.spec.fem_models import RPArmSpec, load_rp_arm, rp_arm_from_document
 from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml

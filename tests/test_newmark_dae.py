@@ -8,8 +8,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from flexctrl.beam.elements import assemble_beam
-from flexctrl.sim.newmark_dae import (ConstraintViolationError, DAEProblem, NewtonConvergenceError,
-                                      casadi_problem, simulate)
+from flexctrl.dynamics.fem.newmark_dae import (ConstraintViolationError, DAEProblem, NewtonConvergenceError,
+                                               casadi_problem, simulate)
 
 MASS, G, LEN = 1.3, 9.81, 0.8
 TH0 = 1.0

@@ -12,9 +12,10 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import eigh, null_space
 
 from flexctrl.beam.elements import hermite_shape, locate
-from flexctrl.dynamics.fem.rp_arm import (RPArmFullModel, RPArmModel, RPForces, RPMotion, load_rp_arm, simulate_rp_arm,
-                                          simulate_rp_arm_full)
+from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
+from flexctrl.dynamics.fem.rp_arm_full import RPArmFullModel, RPForces, simulate_rp_arm_full
 from flexctrl.errors import SimulationError, SpecError
+from flexctrl.spec.fem_models import load_rp_arm
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = load_rp_arm(ROOT / "models" / "rp_arm.toml")

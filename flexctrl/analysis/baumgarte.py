@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, SlidingBeamModel
 from flexctrl.errors import SimulationError, SolverError
-from flexctrl.sim.newmark_dae import DAEResult, simulate
+from flexctrl.dynamics.fem.newmark_dae import DAEResult, simulate
 
 Array = NDArray[np.float64]
 Feedback = Literal["explicit", "implicit"]

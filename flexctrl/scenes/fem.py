@@ -1,6 +1,9 @@
 """Running the finite-element scenes (``kind = "sliding_beam"``, ``"rp_arm"``, ``"telescoping"``).
 
-The keys are described in :mod:`flexctrl.spec.fem_scene`.
+The scenes are the validated descriptions of :mod:`flexctrl.spec.fem_scene`
+(:class:`~flexctrl.spec.fem_scene.SlidingBeamScene`, :class:`~flexctrl.spec.fem_scene.RPArmScene`,
+:class:`~flexctrl.spec.fem_scene.TelescopingScene`); :func:`run_scene` runs one (the runner of
+:data:`flexctrl.scenes.SCENE_RUNNERS`), :func:`run_fem_scene` reads a document and runs it.
 """
 
 from __future__ import annotations
@@ -14,47 +17,61 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.spec.fem_scene import FemScene, fem_settings
+from flexctrl.spec.fem_scene import FemScene, RPArmScene, SlidingBeamScene, TelescopingScene, read_fem_scene
 from flexctrl.spec.fidelity import Fidelity
 
+#: The keywords :func:`run_scene` takes besides the scene and the output folder.
+RUN_OPTIONS = ("plots", "fidelity")
 
-def _simulate(s: dict[str, Any]):
+
+def _integration(scene: FemScene) -> dict[str, Any]:
+    """The Newmark + Baumgarte keywords every simulate function takes."""
+    return dict(gamma=scene.gamma, beta=scene.beta, alpha=scene.alpha, delta=scene.delta,
+                axial_shortening=scene.axial_shortening, max_violation=scene.max_violation)
+
+
+def _simulate(scene: FemScene):
     """Run the validated scene; returns (result, extra columns, model facts)."""
-    common = dict(gamma=s["gamma"], beta=s["beta"], alpha=s["alpha"], delta=s["delta"],
-                  axial_shortening=s["axial_shortening"], max_violation=s["max_violation"])
-    if s["kind"] == "sliding_beam":
-        from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, simulate_sliding_beam
+    if isinstance(scene, SlidingBeamScene):
+        return _simulate_sliding_beam(scene)
+    if isinstance(scene, TelescopingScene):
+        return _simulate_telescoping(scene)
+    if isinstance(scene, RPArmScene):
+        return _simulate_rp_arm(scene)
+    raise TypeError(f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, RPArmScene, "
+                    "TelescopingScene (from read_fem_scene)")
 
-        case = SlidingBeamCase(s["name"], C1=s["C1"], C2=s["C2"], T=s["T"], tracked_end=s["tracked_end"],
-                               driven_end=s["driven_end"], L=s["L"], rho=s["rho"], EI=s["EI"], D=s["D"],
-                               tip_deflection=s["tip_deflection"])
-        res = simulate_sliding_beam(case, s["n_elements"], dt=s["dt"], duration=s["duration"], **common)
-        return res, {}, {"ndof": int(res.q.shape[1])}
-    from flexctrl.dynamics.fem.rp_arm import (RPForces, RPMotion, load_rp_arm, simulate_rp_arm,
-                                              simulate_rp_arm_full)
 
-    if s["kind"] == "telescoping":
-        return _simulate_telescoping(s, common)
-    spec = load_rp_arm(s["model"])
-    if s["payload"] is not None:
-        spec = dataclasses.replace(spec, payload_mass=s["payload"])
-    if s["gravity"] is not None:
-        spec = dataclasses.replace(spec, gravity=tuple(s["gravity"]))
-    motion = RPMotion(C1=s["C1"], C2=s["C2"], T=s["T"], theta0=math.radians(s["theta0_deg"]),
-                      dtheta=math.radians(s["rotation_deg"]))
-    drive = s["drive"]
-    if drive["coupling"] == "partial":
-        res = simulate_rp_arm(spec, motion, s["n_elements"], dt=s["dt"], duration=s["duration"],
-                              driven_end=s["driven_end"], tracked_end=s["tracked_end"], initial=s["initial"],
-                              tip_deflection=s["tip_deflection"], **common)
+def _simulate_sliding_beam(scene: SlidingBeamScene):
+    from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, simulate_sliding_beam
+
+    case = SlidingBeamCase(scene.name, C1=scene.C1, C2=scene.C2, T=scene.T, tracked_end=scene.tracked_end,
+                           driven_end=scene.driven_end, L=scene.L, rho=scene.rho, EI=scene.EI, D=scene.D,
+                           tip_deflection=scene.tip_deflection)
+    res = simulate_sliding_beam(case, scene.n_elements, dt=scene.dt, duration=scene.duration, **_integration(scene))
+    return res, {}, {"ndof": int(res.q.shape[1])}
+
+
+def _simulate_rp_arm(scene: RPArmScene):
+    from flexctrl.dynamics.fem.moving_frame import RPMotion
+    from flexctrl.dynamics.fem.rp_arm import simulate_rp_arm
+    from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
+
+    spec, drive, common = scene.model_spec, scene.drive, _integration(scene)
+    motion = RPMotion(C1=scene.C1, C2=scene.C2, T=scene.T, theta0=math.radians(scene.theta0_deg),
+                      dtheta=math.radians(scene.rotation_deg))
+    if drive.coupling == "partial":
+        res = simulate_rp_arm(spec, motion, scene.n_elements, dt=scene.dt, duration=scene.duration,
+                              driven_end=scene.driven_end, tracked_end=scene.tracked_end, initial=scene.initial,
+                              tip_deflection=scene.tip_deflection, **common)
     else:
-        if drive["kind"] == "force":
-            motion = RPForces.sine(drive["torque_amplitude"], drive["force_amplitude"], s["T"],
-                                   theta0=math.radians(s["theta0_deg"]), W0=s["C1"])
-        res = simulate_rp_arm_full(spec, motion, s["n_elements"], dt=s["dt"], duration=s["duration"],
-                                   tracked_end=s["tracked_end"], **common)
+        if drive.kind == "force":
+            motion = RPForces.sine(drive.torque_amplitude, drive.force_amplitude, scene.T,
+                                   theta0=math.radians(scene.theta0_deg), W0=scene.C1)
+        res = simulate_rp_arm_full(spec, motion, scene.n_elements, dt=scene.dt, duration=scene.duration,
+                                   tracked_end=scene.tracked_end, **common)
     extra = {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1]}
-    if drive["coupling"] == "full":
+    if drive.coupling == "full":
         extra.update(torque=res.torque, force=res.force)
     facts = {"ndof": int(res.q.shape[1]), "support_inner_m": spec.support_inner, "support_outer_m": spec.support_outer,
              "link": {"length_m": spec.length, "mass_per_length_kg_m": spec.mass_per_length, "EI_N_m2": spec.EI},
@@ -62,19 +79,15 @@ def _simulate(s: dict[str, Any]):
     return res, extra, facts
 
 
-def _simulate_telescoping(s: dict[str, Any], common: dict[str, Any]):
-    from flexctrl.dynamics.fem.rp_arm import RPMotion
-    from flexctrl.dynamics.fem.telescoping import load_telescoping, simulate_telescoping
+def _simulate_telescoping(scene: TelescopingScene):
+    from flexctrl.dynamics.fem.moving_frame import RPMotion
+    from flexctrl.dynamics.fem.telescoping import simulate_telescoping
 
-    spec = load_telescoping(s["model"])
-    if s["payload"] is not None:
-        spec = dataclasses.replace(spec, payload_mass=s["payload"])
-    if s["gravity"] is not None:
-        spec = dataclasses.replace(spec, gravity=tuple(s["gravity"]))
-    motion = RPMotion(C1=s["C1"], C2=s["C2"], T=s["T"], theta0=math.radians(s["theta0_deg"]),
-                      dtheta=math.radians(s["rotation_deg"]))
-    res = simulate_telescoping(spec, motion, s["n_elements"], s["n_elements"], dt=s["dt"], duration=s["duration"],
-                               tracked_end=s["tracked_end"], **common)
+    spec = scene.model_spec
+    motion = RPMotion(C1=scene.C1, C2=scene.C2, T=scene.T, theta0=math.radians(scene.theta0_deg),
+                      dtheta=math.radians(scene.rotation_deg))
+    res = simulate_telescoping(spec, motion, scene.n_elements, scene.n_elements, dt=scene.dt,
+                               duration=scene.duration, tracked_end=scene.tracked_end, **_integration(scene))
     extra = {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1],
              "outer_tip_y": res.outer_tip_y}
     facts = {"ndof": int(res.q.shape[1]), "hub_radius_m": spec.hub_radius,
@@ -84,18 +97,18 @@ def _simulate_telescoping(s: dict[str, Any], common: dict[str, Any]):
     return res, extra, facts
 
 
-def _plot(path: Path, res, s: dict[str, Any], extra: dict[str, np.ndarray]) -> None:
+def _plot(path: Path, res, scene: FemScene, extra: dict[str, np.ndarray]) -> None:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.0, 5.5), layout="constrained")
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
     ax1.plot(res.t, 1e3 * res.tip_y)
-    ax1.set_ylabel(f"tip_y at {s['tracked_end']} (mm)")
-    ax1.set_title(f"{s['name']}: {s['kind']}, {s['n_elements']} elements, dt = {s['dt']:g} s, "
-                  f"axial shortening {'on' if s['axial_shortening'] else 'off'}", fontsize=9)
+    ax1.set_ylabel(f"tip_y at {scene.tracked_end} (mm)")
+    ax1.set_title(f"{scene.name}: {scene.kind}, {scene.n_elements} elements, dt = {scene.dt:g} s, "
+                  f"axial shortening {'on' if scene.axial_shortening else 'off'}", fontsize=9)
     if "outer_tip_y" in extra:
         ax1.plot(res.t, 1e3 * extra["outer_tip_y"], label="outer link mouth")
-        ax1.lines[0].set_label(f"inner link {s['tracked_end']}")
+        ax1.lines[0].set_label(f"inner link {scene.tracked_end}")
         ax1.legend(loc="best", fontsize=8)
     ax1.grid(True, alpha=0.3)
     ax2.plot(res.t, res.W, label="W (m)")
@@ -113,8 +126,52 @@ def _plot(path: Path, res, s: dict[str, Any], extra: dict[str, np.ndarray]) -> N
     fig.savefig(path, dpi=110)
 
 
-def run_fem_scene(document: dict, source: str, out_dir: Path | None, fidelity: Fidelity | None = None) -> dict:
-    """Validate, simulate and (with ``out_dir``) write a finite-element scene.
+def _run(scene: FemScene, out_dir: Path | None) -> dict:
+    """Simulate ``scene`` and (with ``out_dir``) write its files; returns the summary."""
+    start = time.perf_counter()
+    res, extra, facts = _simulate(scene)
+    wall = time.perf_counter() - start
+    simulated = float(res.t[-1] - res.t[0])
+    summary: dict[str, Any] = {
+        "scene": scene.settings(),
+        "source": scene.source,
+        "kind": scene.kind,
+        "integrator": "newmark + baumgarte (flexctrl.sim.newmark_dae)",
+        "n_elements": scene.n_elements,
+        "dt": float(res.dt),
+        "n_steps": int(res.t.size - 1),
+        "duration_s": simulated,
+        "wall_time_s": wall,
+        "integration_wall_time_s": float(res.wall_time),
+        "wall_time_per_simulated_s": wall / simulated if simulated > 0 else math.nan,
+        "peak_abs_tip_y_m": float(np.max(np.abs(res.tip_y))),
+        "final_tip_y_m": float(res.tip_y[-1]),
+        "max_phi_violation_m": float(np.max(res.phi_violation)),
+        "max_phidot_violation_m_s": float(np.max(res.phidot_violation)),
+        "model": facts,
+        "status": "ok",
+        "files": [],
+    }
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        columns = {"t": res.t, "W": res.W, "tip_y": res.tip_y, "phi_max": res.phi_violation,
+                   "phidot_max": res.phidot_violation, **extra}
+        data = np.column_stack(list(columns.values()))
+        csv = out / "trajectory.csv"
+        np.savetxt(csv, data, delimiter=",", header=",".join(columns), comments="", fmt="%.12g")
+        files = [csv]
+        if scene.plots:
+            png = out / "tip.png"
+            _plot(png, res, scene, extra)
+            files.append(png)
+        summary["files"] = [str(p) for p in files] + [str(out / "summary.json")]
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def run_fem_scene(document: dict, source: str, out_dir: Path | None, fidelity: Fidelity | str | None = None) -> dict:
+    """Read, simulate and (with ``out_dir``) write a finite-element scene document.
 
     Parameters
     ----------
@@ -140,52 +197,13 @@ def run_fem_scene(document: dict, source: str, out_dir: Path | None, fidelity: F
     >>> run_fem_scene(doc, "studies/scenes/bk_fast_push.toml", None)["n_steps"]
     50
     """
-    settings = fem_settings(document, source, fidelity)
-    start = time.perf_counter()
-    res, extra, facts = _simulate(settings)
-    wall = time.perf_counter() - start
-    simulated = float(res.t[-1] - res.t[0])
-    summary: dict[str, Any] = {
-        "scene": {k: v for k, v in settings.items()},
-        "source": source,
-        "kind": settings["kind"],
-        "integrator": "newmark + baumgarte (flexctrl.sim.newmark_dae)",
-        "n_elements": settings["n_elements"],
-        "dt": float(res.dt),
-        "n_steps": int(res.t.size - 1),
-        "duration_s": simulated,
-        "wall_time_s": wall,
-        "integration_wall_time_s": float(res.wall_time),
-        "wall_time_per_simulated_s": wall / simulated if simulated > 0 else math.nan,
-        "peak_abs_tip_y_m": float(np.max(np.abs(res.tip_y))),
-        "final_tip_y_m": float(res.tip_y[-1]),
-        "max_phi_violation_m": float(np.max(res.phi_violation)),
-        "max_phidot_violation_m_s": float(np.max(res.phidot_violation)),
-        "model": facts,
-        "status": "ok",
-        "files": [],
-    }
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        columns = {"t": res.t, "W": res.W, "tip_y": res.tip_y, "phi_max": res.phi_violation,
-                   "phidot_max": res.phidot_violation, **extra}
-        data = np.column_stack(list(columns.values()))
-        csv = out / "trajectory.csv"
-        np.savetxt(csv, data, delimiter=",", header=",".join(columns), comments="", fmt="%.12g")
-        files = [csv]
-        if settings["plots"]:
-            png = out / "tip.png"
-            _plot(png, res, settings, extra)
-            files.append(png)
-        summary["files"] = [str(p) for p in files] + [str(out / "summary.json")]
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    return summary
+    return _run(read_fem_scene(document, source).with_fidelity(fidelity), out_dir)
 
 
 @dataclasses.dataclass
 class FemSceneResult:
-    """What :func:`run_scene` produced: the scene, ``summary.json``'s content and the files written."""
+    """What :func:`run_scene` produced: the scene as run (overrides applied), ``summary.json``'s
+    content and the files written."""
 
     scene: FemScene
     summary: dict
@@ -193,11 +211,34 @@ class FemSceneResult:
 
 
 def run_scene(scene: FemScene, out: str | Path | None = None, *, plots: bool | None = None,
-              fidelity: Fidelity | str | None = None, **_ignored: Any) -> FemSceneResult:
-    """Runner with the ``SCENE_KINDS`` signature, e.g.
-    ``flexctrl.scenes.SCENE_RUNNERS``."""
-    document = dict(scene.document)
+              fidelity: Fidelity | str | None = None, **unknown: Any) -> FemSceneResult:
+    """Run a finite-element scene; the runner of :data:`flexctrl.scenes.SCENE_RUNNERS`.
+
+    Parameters
+    ----------
+    scene
+        From :func:`flexctrl.spec.fem_scene.read_fem_scene` (or :func:`flexctrl.spec.scene.load_scene`).
+    out
+        Folder for ``trajectory.csv``, ``summary.json`` and ``tip.png``; None writes nothing.
+    plots
+        Overrides the scene's ``plots`` (None keeps it).
+    fidelity
+        ``"fem:N"`` (or a :class:`~flexctrl.spec.fidelity.Fidelity`) replaces ``n_elements``.
+
+    Raises
+    ------
+    TypeError
+        For any other keyword, naming it and the allowed ones (these scenes take no controller,
+        cache or integrator options).
+    SpecError
+        For a fidelity other than ``fem:N``, naming the key ``fidelity``.
+    """
+    if unknown:
+        raise TypeError(f"run_scene() of a '{scene.kind}' scene got the option(s) "
+                        f"{', '.join(repr(k) for k in sorted(unknown))}; allowed: "
+                        f"{', '.join(repr(k) for k in RUN_OPTIONS)}")
+    scene = scene.with_fidelity(fidelity)
     if plots is not None:
-        document["plots"] = bool(plots)
-    summary = run_fem_scene(document, scene.source, None if out is None else Path(out), fidelity)
+        scene = dataclasses.replace(scene, plots=bool(plots))
+    summary = _run(scene, None if out is None else Path(out))
     return FemSceneResult(scene=scene, summary=summary, files=[Path(p) for p in summary["files"]])

@@ -157,7 +157,7 @@ class Newmark(Integrator):
         self._problem = model_dae_problem(self.model, self._torque, tangent=self.tangent)
 
     def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, None]:
-        from flexctrl.sim.newmark_dae import simulate
+        from flexctrl.dynamics.fem.newmark_dae import simulate
 
         k = U.shape[0]
         n = self.model.n_q

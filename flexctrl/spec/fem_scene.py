@@ -1,8 +1,12 @@
 """Descriptions of the finite-element scenes with moving supports: ``kind = "sliding_beam"``, ``"rp_arm"``, ``"telescoping"``.
 
-``flexctrl simulate SCENE`` hands a scene whose ``kind`` is in :data:`FEM_SCENE_KINDS`
-to :func:`run_fem_scene` (``--set`` overrides are applied to the raw document
-first, so ``--set axial_shortening=false`` is validated like the file).
+:func:`read_fem_scene` (the reader :func:`flexctrl.spec.scene.load_scene` uses for every
+``kind`` in :data:`FEM_SCENE_KINDS`) validates a scene once, into a frozen description:
+:class:`SlidingBeamScene`, :class:`RPArmScene` or :class:`TelescopingScene`, all
+:class:`FemScene`; :meth:`FemScene.settings` gives them back as the plain data
+``summary.json`` records under ``"scene"``.  ``--set`` overrides are applied to the raw
+document first, so ``--set axial_shortening=false`` is validated like the file.  Running
+is :func:`flexctrl.scenes.fem.run_scene`.
 
 Keys (SI units; angles in degrees)::
 
@@ -62,15 +66,11 @@ simulated second, peak ``|tip_y|``, maximal violations) and ``tip.png``.
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
-import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import Any, ClassVar, Literal, Union
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.fem_models import RPArmSpec, TelescopingSpec, load_rp_arm, load_telescoping
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 
@@ -79,11 +79,245 @@ DRIVE_KINDS = ("motion", "force")
 COUPLINGS = ("partial", "full")
 ENDS = ("H", "E")
 MAX_STEPS = 5_000_000
+#: Field metadata marking what :meth:`FemScene.settings` leaves out (the origin, the loaded model).
+_NOT_A_SETTING = {"setting": False}
 
 
-def _common(r: TableReader, kind: str, fidelity: Fidelity | None, force_drive: bool = False) -> dict[str, Any]:
-    s: dict[str, Any] = {"kind": kind, "name": r.string("name", Path(r.source).stem),
-                         "description": r.string("description", "")}
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FemScene:
+    """What every finite-element scene holds, validated (keys in the module docstring; SI units).
+
+    Use the kind's class: :class:`SlidingBeamScene`, :class:`RPArmScene`, :class:`TelescopingScene`.
+
+    Attributes
+    ----------
+    name, description : str
+        Scene name (default: the file's stem) and free text.
+    C1 : float
+        Initial overhang ``W(0)`` beyond the outer support, m (Eq 57).
+    C2 : float
+        Travel, m: ``W(T) = C1 - C2`` (negative: the link extends).
+    T : float
+        Duration of the prescribed motion (or of the force pulses), s.
+    tracked_end : {"H", "E"}
+        End whose transverse displacement is reported as ``tip_y``.
+    driven_end : {"H", "E"}
+        Where the axial drive acts.
+    n_elements : int
+        Equal Hermite elements (per link for ``telescoping``), 1 to 256.
+    dt, duration : float
+        Newmark step and simulated time, s (``dt <= duration``, at most :data:`MAX_STEPS` steps).
+    gamma, beta : float
+        Baumgarte parameters, 1/s (Eq 49).
+    alpha, delta : float
+        Newmark parameters (Eqs 50-51).
+    axial_shortening : bool
+        Geometric stiffness of the rigid-body axial force (Eqs 16-18).
+    max_violation : float
+        Bound on the constraint violation ``|Phi|``, m (exceeding it stops the run).
+    plots : bool
+        Write ``tip.png``.
+    source : str
+        The file (or other origin) the scene was read from.
+    """
+
+    KIND: ClassVar[str] = ""
+
+    name: str
+    description: str = ""
+    C1: float
+    C2: float
+    T: float
+    tracked_end: Literal["H", "E"] = "H"
+    driven_end: Literal["H", "E"]
+    n_elements: int = 4
+    dt: float = 1e-3
+    duration: float
+    gamma: float = 5.0
+    beta: float = 5.0
+    alpha: float = 0.25
+    delta: float = 0.5
+    axial_shortening: bool = True
+    max_violation: float = 1e-3
+    plots: bool = True
+    source: str = dataclasses.field(default="", metadata=_NOT_A_SETTING)
+
+    @property
+    def kind(self) -> str:
+        """The scene's ``kind`` (``"sliding_beam"``, ``"rp_arm"`` or ``"telescoping"``)."""
+        return self.KIND
+
+    def settings(self) -> dict[str, Any]:
+        """The scene as plain, JSON-ready data: ``summary.json``'s ``"scene"`` (``kind`` first, then
+        the keys in the order of the module docstring; angles in degrees, as in the file)."""
+        out: dict[str, Any] = {"kind": self.kind}
+        for f in dataclasses.fields(self):
+            if f.metadata.get("setting", True):
+                out[f.name] = _plain(getattr(self, f.name))
+        return out
+
+    def with_fidelity(self, fidelity: Fidelity | str | None, *, source: str = "--fidelity") -> FemScene:
+        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes nothing.
+
+        Raises
+        ------
+        SpecError
+            For any other fidelity, naming ``source`` and the key ``fidelity``.
+        """
+        if fidelity is None:
+            return self
+        return dataclasses.replace(self, n_elements=_fem_elements(fidelity, self.kind, source))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SlidingBeamScene(FemScene):
+    """A beam sliding over two bilateral supports (``kind = "sliding_beam"``; Buffinton & Kane).
+
+    Attributes
+    ----------
+    L : float
+        Beam length, m.
+    rho : float
+        Mass per unit length, kg/m.
+    EI : float
+        Bending stiffness, N m^2.
+    D : float
+        Support spacing, m.
+    tip_deflection : float
+        Initial static deflection of the tracked end, m.
+    """
+
+    KIND: ClassVar[str] = "sliding_beam"
+
+    driven_end: Literal["H", "E"] = "H"
+    L: float = 1.0
+    rho: float = 1.0
+    EI: float = 1.0
+    D: float = 0.25
+    tip_deflection: float = 0.01
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _ModelFileScene(FemScene):
+    """The keys of the scenes that name a model file (``rp_arm``, ``telescoping``).
+
+    Attributes
+    ----------
+    model : str
+        The model file, resolved to an absolute path.
+    theta0_deg, rotation_deg : float
+        Housing angle at ``t = 0`` and its change over ``T``, degrees.
+    payload : float or None
+        Tip mass replacing the model file's, kg (None: the file's).
+    gravity : tuple of float or None
+        ``(gx, gy)`` replacing the model file's, m/s^2 (None: the file's).
+    """
+
+    driven_end: Literal["H", "E"] = "E"
+    model: str
+    theta0_deg: float = 0.0
+    rotation_deg: float = 0.0
+    payload: float | None = None
+    gravity: tuple[float, float] | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class RPDrive:
+    """The ``[drive]`` table of an ``rp_arm`` scene.
+
+    Attributes
+    ----------
+    kind : {"motion", "force"}
+        ``"motion"``: ``theta(t)``, ``W(t)`` prescribed by Eq 57; ``"force"``: joint torque and
+        axial force prescribed (full coupling).
+    coupling : {"partial", "full"}
+        Eq 42 or Eq 43; a force drive is always ``"full"``.
+    torque_amplitude : float
+        Force drive only: amplitude of ``tau = A sin(2 pi t / T)`` on ``[0, T]``, N m.
+    force_amplitude : float
+        Force drive only: amplitude of the axial force at E, same shape, N.
+    """
+
+    kind: Literal["motion", "force"] = "motion"
+    coupling: Literal["partial", "full"] = "partial"
+    torque_amplitude: float = 0.0
+    force_amplitude: float = 0.0
+
+    def settings(self) -> dict[str, Any]:
+        """Plain data as in ``summary.json`` (the amplitudes only for a force drive)."""
+        out: dict[str, Any] = {"kind": self.kind, "coupling": self.coupling}
+        if self.kind == "force":
+            out.update(torque_amplitude=self.torque_amplitude, force_amplitude=self.force_amplitude)
+        return out
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RPArmScene(_ModelFileScene):
+    """The revolute-prismatic arm (``kind = "rp_arm"``; Pan et al. Figs 1, 4).
+
+    Attributes
+    ----------
+    initial : {"rest", "static_load"}
+        Start undeformed, or from the static deflection under a uniform load scaled to
+        ``tip_deflection``.
+    tip_deflection : float
+        Initial deflection of the tracked end with ``initial = "static_load"``, m.
+    drive : RPDrive
+        Prescribed motion (partial or full coupling) or prescribed torque and force.
+    model_spec : RPArmSpec
+        The model file, read at load time, with ``payload`` and ``gravity`` applied.
+    """
+
+    KIND: ClassVar[str] = "rp_arm"
+
+    initial: Literal["rest", "static_load"] = "rest"
+    tip_deflection: float = 0.01
+    drive: RPDrive = RPDrive()
+    model_spec: RPArmSpec = dataclasses.field(metadata=_NOT_A_SETTING)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TelescopingScene(_ModelFileScene):
+    """Two flexible links sliding on each other (``kind = "telescoping"``; Pan et al. Fig 5).
+
+    ``W`` is the overhang of the inner tip beyond the outer link's mouth, ``n_elements`` applies to
+    each link and ``driven_end`` is ``"E"``.
+
+    Attributes
+    ----------
+    model_spec : TelescopingSpec
+        The model file, read at load time (the contacts checked over the stroke), with
+        ``payload`` and ``gravity`` applied.
+    """
+
+    KIND: ClassVar[str] = "telescoping"
+
+    model_spec: TelescopingSpec = dataclasses.field(metadata=_NOT_A_SETTING)
+
+
+#: Any finite-element scene.
+AnyFemScene = Union[SlidingBeamScene, RPArmScene, TelescopingScene]
+SCENE_CLASSES: dict[str, type[FemScene]] = {c.KIND: c for c in (SlidingBeamScene, RPArmScene, TelescopingScene)}
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, RPDrive):
+        return value.settings()
+    if isinstance(value, tuple):
+        return list(value)
+    return value
+
+
+def _fem_elements(value: Any, kind: str, origin: str) -> int:
+    fid = parse_fidelity(value, source=origin, key="fidelity")
+    if fid.kind != "fem":
+        raise SpecError(f"value '{fid}' does not apply to '{kind}' scenes; allowed: 'fem:N' (N elements)",
+                        source=origin, key="fidelity")
+    return int(fid.count)
+
+
+def _common(r: TableReader, kind: str, force_drive: bool = False) -> dict[str, Any]:
+    s: dict[str, Any] = {"name": r.string("name", Path(r.source).stem), "description": r.string("description", "")}
     s["C1"] = r.number("C1", unit="m")
     s["C2"] = r.number("C2", 0.0, unit="m") if force_drive else r.number("C2", unit="m")
     if force_drive and s["C2"] != 0.0:
@@ -93,15 +327,9 @@ def _common(r: TableReader, kind: str, fidelity: Fidelity | None, force_drive: b
     s["tracked_end"] = r.string("tracked_end", "H", choices=ENDS)
     s["driven_end"] = r.string("driven_end", "H" if kind == "sliding_beam" else "E", choices=ENDS)
     s["n_elements"] = r.integer("n_elements", 4, low=1, high=256)
-    # a `fidelity` key (as `flexctrl simulate --fidelity` writes into the document) or the argument
-    for value, origin in ((r.raw("fidelity", None), r.source), (fidelity, "--fidelity")):
-        if value is None:
-            continue
-        fid = parse_fidelity(value, source=origin, key="fidelity")
-        if fid.kind != "fem":
-            raise SpecError(f"value '{fid}' does not apply to '{kind}' scenes; allowed: 'fem:N' (N elements)",
-                            source=origin, key="fidelity")
-        s["n_elements"] = int(fid.count)
+    fidelity = r.raw("fidelity", None)  # as `flexctrl simulate --fidelity` writes it into the document
+    if fidelity is not None:
+        s["n_elements"] = _fem_elements(fidelity, kind, r.source)
     s["dt"] = r.positive("dt", 1e-3, unit="s")
     s["duration"] = r.positive("duration", max(s["T"], 1.0), unit="s")
     if s["dt"] > s["duration"]:
@@ -120,8 +348,22 @@ def _common(r: TableReader, kind: str, fidelity: Fidelity | None, force_drive: b
     return s
 
 
-def fem_settings(document: dict[str, Any], source: str, fidelity: Fidelity | None = None) -> dict[str, Any]:
-    """Validate a finite-element scene document into plain settings (see module docstring).
+def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None = None) -> AnyFemScene:
+    """Validate a finite-element scene document (see the module docstring) into its description.
+
+    The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of :data:`FEM_SCENE_KINDS`:
+    everything is checked here, once, including the model file and (``telescoping``) the
+    contacts over the stroke, so errors surface when the scene is loaded.
+
+    Parameters
+    ----------
+    document
+        The parsed scene (``--set`` overrides already applied).
+    source
+        Its file name, for error messages; a relative ``model`` is looked up next to it first,
+        then in the working directory and the repository.
+    base_dir
+        Accepted for the common reader signature; not used (the model is found from ``source``).
 
     Raises
     ------
@@ -132,7 +374,7 @@ def fem_settings(document: dict[str, Any], source: str, fidelity: Fidelity | Non
     kind = r.string("kind", choices=FEM_SCENE_KINDS)
     drive = r.table_of("drive", {}) if kind == "rp_arm" else None
     drive_kind = drive.string("kind", "motion", choices=DRIVE_KINDS) if drive else "motion"
-    s = _common(r, kind, fidelity, force_drive=drive_kind == "force")
+    s = _common(r, kind, force_drive=drive_kind == "force")
     if kind == "telescoping" and s["driven_end"] != "E":
         raise r.error("driven_end", f"value {s['driven_end']!r} is not allowed for telescoping scenes; allowed: 'E' "
                                     "(the drive, anchored at the hub, pushes the inner link's root)")
@@ -144,32 +386,34 @@ def fem_settings(document: dict[str, Any], source: str, fidelity: Fidelity | Non
         if not (lo >= 0.0 and hi <= s["L"] - s["D"]):
             raise r.error("C1", f"with C2 = {s['C2']!r} the overhang W runs over [{lo:g}, {hi:g}] m; allowed: "
                                 f"within [0, L - D] = [0, {s['L'] - s['D']:g}] m (both supports on the beam)")
-    else:
-        from flexctrl.spec.arm_scene import resolve_model_path
+        r.finish()
+        return SlidingBeamScene(**s, source=source)
+    from flexctrl.spec.arm_scene import resolve_model_path
 
-        base = Path(source).resolve().parent
-        s["model"] = str(resolve_model_path(r.string("model", f"models/{kind}.toml"), base, r))
-        s["theta0_deg"] = r.number("theta0", 0.0, unit="degrees")
-        s["rotation_deg"] = r.number("rotation", 0.0, unit="degrees")
-        s["payload"] = r.nonnegative("payload", unit="kg") if r.has("payload") else None
-        s["gravity"] = list(r.numbers("gravity", length=2, unit="m/s^2")) if r.has("gravity") else None
-        if kind == "rp_arm":
-            s["initial"] = r.string("initial", "rest", choices=("rest", "static_load"))
-            s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
-            _read_drive(r, drive, drive_kind, s)
-        else:
-            _check_telescoping_stroke(r, s)
+    base = Path(source).resolve().parent
+    s["model"] = str(resolve_model_path(r.string("model", f"models/{kind}.toml"), base, r))
+    s["theta0_deg"] = r.number("theta0", 0.0, unit="degrees")
+    s["rotation_deg"] = r.number("rotation", 0.0, unit="degrees")
+    s["payload"] = r.nonnegative("payload", unit="kg") if r.has("payload") else None
+    s["gravity"] = tuple(r.numbers("gravity", length=2, unit="m/s^2")) if r.has("gravity") else None
+    if kind == "rp_arm":
+        s["initial"] = r.string("initial", "rest", choices=("rest", "static_load"))
+        s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
+        s["drive"] = _read_drive(r, drive, drive_kind, s)
+        r.finish()
+        return RPArmScene(**s, model_spec=_with_overrides(load_rp_arm(s["model"]), s), source=source)
+    spec = _check_telescoping_stroke(r, s)
     r.finish()
-    return s
+    return TelescopingScene(**s, model_spec=_with_overrides(spec, s), source=source)
 
 
-def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]) -> None:
-    s["drive"] = {"kind": kind}
+def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]) -> RPDrive:
     if kind == "motion":
-        s["drive"]["coupling"] = drive.string("coupling", "partial", choices=COUPLINGS)
-        if s["drive"]["coupling"] == "full" and (s["driven_end"] != "E" or s["initial"] != "rest"):
+        coupling = drive.string("coupling", "partial", choices=COUPLINGS)
+        if coupling == "full" and (s["driven_end"] != "E" or s["initial"] != "rest"):
             raise drive.error("coupling", f"value 'full' needs driven_end = 'E' and initial = 'rest' (got "
                                           f"{s['driven_end']!r}, {s['initial']!r}); allowed: 'partial' otherwise")
+        out = RPDrive("motion", coupling)
     else:
         if s["rotation_deg"] != 0.0:
             raise r.error("rotation", f"value {s['rotation_deg']!r} does not apply to a force drive (theta follows "
@@ -179,15 +423,13 @@ def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]
         if s["driven_end"] != "E":
             raise r.error("driven_end", f"value {s['driven_end']!r} is not available with a force drive; allowed: "
                                         "'E' (the carriage)")
-        s["drive"]["coupling"] = "full"
-        s["drive"]["torque_amplitude"] = drive.number("torque_amplitude", 0.0, unit="N m")
-        s["drive"]["force_amplitude"] = drive.number("force_amplitude", 0.0, unit="N")
+        out = RPDrive("force", "full", torque_amplitude=drive.number("torque_amplitude", 0.0, unit="N m"),
+                      force_amplitude=drive.number("force_amplitude", 0.0, unit="N"))
     drive.finish()
+    return out
 
 
-def _check_telescoping_stroke(r: TableReader, s: dict[str, Any]) -> None:
-    from flexctrl.dynamics.fem.telescoping import load_telescoping
-
+def _check_telescoping_stroke(r: TableReader, s: dict[str, Any]) -> TelescopingSpec:
     spec = load_telescoping(s["model"])
     shift = spec.outer.length - spec.inner.length
     try:
@@ -195,22 +437,13 @@ def _check_telescoping_stroke(r: TableReader, s: dict[str, Any]) -> None:
     except SpecError as exc:
         message = str(exc).split("key 'C1': ", 1)[-1]
         raise r.error("C1", f"value {s['C1']!r} with C2 = {s['C2']!r}: {message}") from None
+    return spec
 
 
-@dataclasses.dataclass(frozen=True)
-class FemScene:
-    """A validated finite-element scene for :data:`flexctrl.spec.scene.SCENE_KINDS` (``kind``, ``name``,
-    the raw ``document`` and its ``source``)."""
-
-    kind: str
-    name: str
-    document: dict
-    source: str
-
-
-def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None = None) -> FemScene:
-    """Reader of :data:`flexctrl.spec.scene.SCENE_READERS`: validates now, so errors surface at load time."""
-    settings = fem_settings(document, source)
-    return FemScene(kind=settings["kind"], name=settings["name"], document=document, source=source)
-
-
+def _with_overrides(spec: RPArmSpec | TelescopingSpec, s: dict[str, Any]) -> Any:
+    """The model file's description with the scene's ``payload`` and ``gravity`` (when given)."""
+    if s["payload"] is not None:
+        spec = dataclasses.replace(spec, payload_mass=s["payload"])
+    if s["gravity"] is not None:
+        spec = dataclasses.replace(spec, gravity=tuple(s["gravity"]))
+    return spec

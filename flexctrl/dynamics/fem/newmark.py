@@ -6,13 +6,13 @@ axial elements), so an explicit integrator needs ``dt < 2.8 / omega_max``.  The
 trapezoidal Newmark rule (``alpha = 0.25, delta = 0.5``) is unconditionally stable
 and conserves the energy of linear undamped systems; its step is chosen for
 accuracy of the modes that matter, not for stability.  This module wraps a
-model as a :class:`~flexctrl.sim.newmark_dae.DAEProblem`::
+model as a :class:`~flexctrl.dynamics.fem.newmark_dae.DAEProblem`::
 
     M(q) qdd + Phi_q^T lam = B tau(t) - c(q, qd) - g(q) - K q - D qd
 
 with optional locked joints (``Phi = q_r - q_lock``, the joints clamped by
 multipliers; used for locked-joint free vibration) and integrates it with
-:func:`flexctrl.sim.newmark_dae.simulate`.
+:func:`flexctrl.dynamics.fem.newmark_dae.simulate`.
 
 Newton tangents (all converge to the same step: the residual is exact):
 ``tangent="exact"`` differentiates ``c`` and ``g`` (CasADi AD; costly for large
@@ -29,7 +29,7 @@ from typing import Callable, Literal, Sequence
 import casadi as ca
 import numpy as np
 
-from flexctrl.sim.newmark_dae import DAEProblem, DAEResult, simulate
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, DAEResult, simulate
 
 Torque = Callable[[float], np.ndarray]
 

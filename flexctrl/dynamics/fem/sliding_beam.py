@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from flexctrl.beam.elements import (assemble_beam, assemble_geometric_stiffness,
                                     hermite_shape, locate)
-from flexctrl.sim.newmark_dae import DAEProblem, simulate
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 
 Array = NDArray[np.float64]
 
@@ -238,12 +238,12 @@ def simulate_sliding_beam(case: SlidingBeamCase, n_elements: int = 4, dt: float 
     dt, duration
         Time step and simulated time, s (``duration`` defaults to ``max(T, 1 s)``).
     gamma, beta, alpha, delta
-        Baumgarte and Newmark parameters (see :mod:`flexctrl.sim.newmark_dae`).
+        Baumgarte and Newmark parameters (see :mod:`flexctrl.dynamics.fem.newmark_dae`).
     axial_shortening
         Include the geometric stiffness of the inertial axial force.
     max_violation
         Bound (m) on the position-level constraint violation; exceeding it raises
-        :class:`~flexctrl.sim.newmark_dae.ConstraintViolationError`.
+        :class:`~flexctrl.dynamics.fem.newmark_dae.ConstraintViolationError`.
     """
     model = SlidingBeamModel(case, n_elements, axial_shortening)
     t_end = max(case.T, 1.0) if duration is None else float(duration)

@@ -8,7 +8,7 @@ Geometry
     of H beyond the mouth, so E sits at the tube coordinate ``s(t) = L1 - L2 + W`` (radius
     ``r0 + s``).  Both links have Hermite elements; the outer link's root node is clamped
     (eliminated), the inner link is free except at the contacts.  ``W`` and ``theta`` follow
-    Eq 57's profile (:class:`~flexctrl.dynamics.fem.rp_arm.RPMotion`), prescribed (partial
+    Eq 57's profile (:class:`~flexctrl.dynamics.fem.moving_frame.RPMotion`), prescribed (partial
     coupling, Eq 42).
 
 Contacts (the compatibility conditions of Eqs 26-28)
@@ -27,14 +27,17 @@ Contacts (the compatibility conditions of Eqs 26-28)
 
 Frame, loads, axial force
     Both links are measured in the frame turning with ``theta``; each has the partial-coupling
-    terms of :class:`~flexctrl.dynamics.fem.rp_arm.FrameLink`: ``-theta'^2 M`` softening, loads
+    terms of :class:`~flexctrl.dynamics.fem.moving_frame.FrameLink`: ``-theta'^2 M`` softening, loads
     ``-int rho N^T (theta'' (r + x) + 2 theta' r' - g_perp)``, and (axial shortening, Eqs 16-18)
     ``K_g`` from the rigid-motion axial force.  The axial drive is anchored at the hub and
     pushes the inner link at E, so the inner link carries Eq 18 with the reaction at E, and the
     outer link only its own inertia (reaction at its clamped root).  Axial displacements are
     not modelled (Eq 26's axial component is the prescribed ``s(t)``).
 
-Solution: Newmark + Baumgarte (:func:`flexctrl.sim.newmark_dae.simulate`); the DAE is linear.
+Solution: Newmark + Baumgarte (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`); the DAE is linear.
+
+Description and model file: :class:`~flexctrl.spec.fem_models.TelescopingSpec` (``models/telescoping.toml``,
+read by :func:`~flexctrl.spec.fem_models.load_telescoping`).
 """
 
 from __future__ import annotations
@@ -42,120 +45,17 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Iterable, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from flexctrl.dynamics.fem.rp_arm import FrameLink, RPMotion, _check_elements, point_rows
+from flexctrl.dynamics.fem.moving_frame import FrameLink, RPMotion, check_elements, point_rows
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.errors import SpecError
-from flexctrl.sim.newmark_dae import DAEProblem, simulate
-from flexctrl.spec.overrides import apply_overrides
-from flexctrl.spec.reader import TableReader, read_toml
+from flexctrl.spec.fem_models import TelescopingSpec
 
 Array = NDArray[np.float64]
-SIDES = ("outer", "inner")
-
-
-@dataclass(frozen=True)
-class Contact:
-    """A bearing fixed on link ``on`` (``"outer"`` or ``"inner"``) at material coordinate ``at`` (m),
-    touching the other link; ``slope = True`` also equates the slopes (Eq 28)."""
-
-    on: Literal["outer", "inner"]
-    at: float
-    slope: bool = False
-
-
-@dataclass(frozen=True)
-class LinkProps:
-    """A uniform link: ``length`` (m), ``mass_per_length`` (kg/m), ``EI`` (N m^2)."""
-
-    length: float
-    mass_per_length: float
-    EI: float
-
-
-@dataclass(frozen=True)
-class TelescopingSpec:
-    """A telescoping pair (``models/telescoping.toml``); SI units.
-
-    ``hub_radius``: radius of the outer link's clamped root from joint 1 (m); ``payload_mass``
-    at the inner tip H (kg); ``gravity`` in the plane of motion, world frame (m/s^2).
-    """
-
-    name: str
-    outer: LinkProps
-    inner: LinkProps
-    contacts: tuple[Contact, ...]
-    hub_radius: float = 0.0
-    payload_mass: float = 0.0
-    gravity: tuple[float, float] = (0.0, 0.0)
-    source: str = ""
-    notes: str = ""
-
-    def contact_points(self, s: float) -> tuple[Array, Array]:
-        """Material coordinates ``(x1_k, x2_k)`` (m) of the contacts when E is at tube coordinate ``s``."""
-        x1 = np.array([c.at if c.on == "outer" else c.at + s for c in self.contacts])
-        x2 = np.array([c.at - s if c.on == "outer" else c.at for c in self.contacts])
-        return x1, x2
-
-    def check_stroke(self, s_values: Iterable[float], key: str = "C1") -> None:
-        """Raise :class:`SpecError` unless every contact stays on both links for these ``s`` (m)."""
-        L1, L2 = self.outer.length, self.inner.length
-        for s in s_values:
-            x1, x2 = self.contact_points(s)
-            for k, c in enumerate(self.contacts):
-                if not (0.0 < x1[k] <= L1 + 1e-12 and -1e-12 <= x2[k] <= L2 + 1e-12):
-                    raise SpecError(
-                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact {k + 1} "
-                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; allowed: "
-                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on both links, "
-                        "off the clamped root)", source=self.source or None, key=key)
-
-
-def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
-    """Validate a parsed ``telescoping`` model document (layout: ``models/telescoping.toml``)."""
-    r = TableReader(document, source)
-    r.string("kind", "telescoping", choices=("telescoping",))
-    links = {}
-    for side in SIDES:
-        t = r.table_of(side)
-        links[side] = LinkProps(t.positive("length", unit="m"), t.positive("mass_per_length", unit="kg/m"),
-                                t.positive("EI", unit="N m^2"))
-        t.string("source", "")
-        t.finish()
-    contacts = []
-    for t in r.tables("contacts", min_count=1):
-        on = t.string("on", choices=SIDES)
-        limit = links[on].length
-        contacts.append(Contact(on, t.number("at", low=0.0, high=limit, unit=f"m along the {on} link"),
-                                t.boolean("slope", False)))
-        t.finish()
-    rows = sum(1 + c.slope for c in contacts)
-    if rows < 2:
-        raise r.error("contacts", f"{len(contacts)} contact(s) give {rows} constraint(s); allowed: at least two "
-                                  "contacts, or one with slope = true (Eqs 26-28), to hold the inner link")
-    if len(set(contacts)) != len(contacts):
-        raise r.error("contacts", "two contacts are identical; allowed: distinct contacts")
-    payload = r.table_of("payload", {})
-    m_t = payload.nonnegative("mass", 0.0, unit="kg")
-    payload.string("source", "")
-    payload.finish()
-    gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
-    spec = TelescopingSpec(name=r.string("name", Path(source).stem), outer=links["outer"], inner=links["inner"],
-                           contacts=tuple(contacts), hub_radius=r.nonnegative("hub_radius", 0.0, unit="m"),
-                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), source=source,
-                           notes=r.string("notes", ""))
-    r.finish()
-    return spec
-
-
-def load_telescoping(path: str | Path, overrides: Iterable[str] = ()) -> TelescopingSpec:
-    """Load and validate ``models/telescoping.toml`` (``overrides``: ``KEY=VALUE`` strings)."""
-    document = apply_overrides(read_toml(path), overrides, source=f"{path} (--set)")
-    return telescoping_from_document(document, str(path))
 
 
 class TelescopingModel:
@@ -167,8 +67,8 @@ class TelescopingModel:
 
     def __init__(self, spec: TelescopingSpec, motion: RPMotion, n_outer: int = 8, n_inner: int = 8, *,
                  axial_shortening: bool = True):
-        _check_elements(n_outer, "n_outer")
-        _check_elements(n_inner, "n_inner")
+        check_elements(n_outer, "n_outer")
+        check_elements(n_inner, "n_inner")
         self.spec, self.motion, self.axial_shortening = spec, motion, bool(axial_shortening)
         self.n1, self.n2 = int(n_outer), int(n_inner)
         spec.check_stroke([self.s(0.0), self.s(motion.T)])

@@ -79,7 +79,7 @@ def read_sweep_scene(path: str, overrides: tuple[str, ...] = (), digest: str | N
     SpecError
         Naming the scene file, the key, the value and what is allowed.
     """
-    from flexctrl.spec.fem_scene import MAX_STEPS, fem_settings as read_fem_scene
+    from flexctrl.spec.fem_scene import MAX_STEPS, SlidingBeamScene, read_fem_scene
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import TableReader, read_toml
 
@@ -87,8 +87,8 @@ def read_sweep_scene(path: str, overrides: tuple[str, ...] = (), digest: str | N
     document = apply_overrides(read_toml(path), overrides, source=source)
     own = {k: document.pop(k) for k in OWN_KEYS if k in document}
     s = read_fem_scene(document, source)
-    if s["kind"] != "sliding_beam":
-        raise SpecError(f"value {s['kind']!r} is not allowed for the baumgarte_sweep executor; allowed: 'sliding_beam'",
+    if not isinstance(s, SlidingBeamScene):
+        raise SpecError(f"value {s.kind!r} is not allowed for the baumgarte_sweep executor; allowed: 'sliding_beam'",
                         source=source, key="kind")
     r = TableReader(own, source)
     gamma = r.nonnegative("gamma", 5.0, unit="1/s")
@@ -99,17 +99,16 @@ def read_sweep_scene(path: str, overrides: tuple[str, ...] = (), digest: str | N
     reference_dt = r.positive("reference_dt", 5e-5, unit="s")
     reference_gamma = r.positive("reference_gamma", 5.0, unit="1/s")
     r.finish()
-    if s["duration"] / reference_dt > MAX_REFERENCE_STEPS:
-        raise r.error("reference_dt", f"value {reference_dt!r} needs {s['duration'] / reference_dt:.3g} steps over "
-                                      f"{s['duration']!r} s; allowed: at most {MAX_REFERENCE_STEPS:g} steps")
-    if s["duration"] / s["dt"] > MAX_STEPS:  # read_fem_scene checks this too; kept for clarity
-        raise r.error("dt", f"value {s['dt']!r} gives too many steps")
-    case = SlidingBeamCase(s["name"], C1=s["C1"], C2=s["C2"], T=s["T"], tracked_end=s["tracked_end"],
-                           driven_end=s["driven_end"], L=s["L"], rho=s["rho"], EI=s["EI"], D=s["D"],
-                           tip_deflection=s["tip_deflection"])
-    return SweepScene(case=case, n_elements=s["n_elements"], dt=s["dt"], duration=s["duration"], gamma=gamma,
-                      beta=beta, feedback=feedback, alpha=s["alpha"], delta=s["delta"],
-                      axial_shortening=s["axial_shortening"], max_violation=s["max_violation"],
+    if s.duration / reference_dt > MAX_REFERENCE_STEPS:
+        raise r.error("reference_dt", f"value {reference_dt!r} needs {s.duration / reference_dt:.3g} steps over "
+                                      f"{s.duration!r} s; allowed: at most {MAX_REFERENCE_STEPS:g} steps")
+    if s.duration / s.dt > MAX_STEPS:  # read_fem_scene checks this too; kept for clarity
+        raise r.error("dt", f"value {s.dt!r} gives too many steps")
+    case = SlidingBeamCase(s.name, C1=s.C1, C2=s.C2, T=s.T, tracked_end=s.tracked_end, driven_end=s.driven_end,
+                           L=s.L, rho=s.rho, EI=s.EI, D=s.D, tip_deflection=s.tip_deflection)
+    return SweepScene(case=case, n_elements=s.n_elements, dt=s.dt, duration=s.duration, gamma=gamma,
+                      beta=beta, feedback=feedback, alpha=s.alpha, delta=s.delta,
+                      axial_shortening=s.axial_shortening, max_violation=s.max_violation,
                       reference_dt=reference_dt, reference_gamma=reference_gamma)
 
 

@@ -1,0 +1,160 @@
+"""Pieces shared by the finite-element models with moving supports (Pan, Scott & Ulsoy 1990).
+
+* :class:`FrameLink`: one uniform link of Hermite elements measured in a frame that turns with
+  ``theta`` and slides along its axis, with the time-varying terms of the partially coupled
+  equations (Eq 42: ``-theta'^2 M`` softening, rigid-motion loads, ``K_g`` of Eqs 16-18);
+* :class:`RPMotion`: the smooth rest-to-rest profile of Eq 57 for the overhang ``W(t)`` and the
+  housing angle ``theta(t)``;
+* :func:`point_rows`: the rows giving ``w`` and its derivatives at arbitrary material points,
+  which move from element to element as the supports slide;
+* :func:`check_elements` and :data:`ENDS`, the checks the models share.
+
+Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling), :mod:`flexctrl.dynamics.fem.rp_arm_full`
+(full coupling) and :mod:`flexctrl.dynamics.fem.telescoping`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from flexctrl.beam.elements import assemble_beam, assemble_geometric_stiffness, hermite_shape, locate
+from flexctrl.errors import SpecError
+
+Array = NDArray[np.float64]
+#: The ends of a sliding link: E (material coordinate 0) and H (the tip).
+ENDS = ("E", "H")
+
+
+def check_elements(n_elements: object, key: str = "n_elements") -> None:
+    """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256."""
+    if isinstance(n_elements, bool) or not isinstance(n_elements, (int, np.integer)) or not 1 <= n_elements <= 256:
+        raise SpecError(f"value {n_elements!r} is not allowed; allowed: an integer from 1 to 256", key=key)
+
+
+def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: int = 2) -> Array:
+    """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q`` (``d = 0..max_derivative``) on a uniform mesh
+    of ``n_elements`` Hermite elements over ``length`` (m); each row holds the shape functions of the
+    element containing ``x_k`` (an interior node belongs to the element on its right)."""
+    xs = np.atleast_1d(np.asarray(xs, dtype=float))
+    le = length / n_elements
+    R = np.zeros((max_derivative + 1, xs.size, 2 * (n_elements + 1)))
+    located = [locate(float(x), n_elements, length) for x in xs]
+    zetas = np.array([z for _, z in located])
+    for d in range(max_derivative + 1):
+        H = hermite_shape(zetas, le, d)
+        for k, (j, _) in enumerate(located):
+            R[d, k, 2 * j:2 * j + 4] = H[k]
+    return R
+
+
+def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
+    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T])."""
+    t = np.asarray(t, dtype=float)
+    w = 2 * np.pi / T
+    tc = np.clip(t, 0.0, T)
+    if derivative == 0:
+        return tc / T - np.sin(w * tc) / (2 * np.pi)
+    inside = (t >= 0) & (t <= T)
+    if derivative == 1:
+        return np.where(inside, (1.0 - np.cos(w * t)) / T, 0.0)
+    return np.where(inside, w * np.sin(w * t) / T, 0.0)
+
+
+@dataclass(frozen=True)
+class RPMotion:
+    """Prescribed rigid motion: ``W(t) = C1 - C2 s(t)`` (m), ``theta(t) = theta0 + dtheta s(t)`` (rad).
+
+    ``s`` is Eq 57's profile over ``T`` seconds; ``C2 < 0`` extends the link.
+    """
+
+    C1: float
+    C2: float
+    T: float
+    theta0: float = 0.0
+    dtheta: float = 0.0
+
+    def W(self, t: ArrayLike) -> Array:
+        """Overhang beyond the outer support, m."""
+        return self.C1 - self.C2 * _profile(t, self.T, 0)
+
+    def Wd(self, t: ArrayLike) -> Array:
+        return -self.C2 * _profile(t, self.T, 1)
+
+    def Wdd(self, t: ArrayLike) -> Array:
+        return -self.C2 * _profile(t, self.T, 2)
+
+    def theta(self, t: ArrayLike) -> Array:
+        """Housing angle, rad."""
+        return self.theta0 + self.dtheta * _profile(t, self.T, 0)
+
+    def thetad(self, t: ArrayLike) -> Array:
+        return self.dtheta * _profile(t, self.T, 1)
+
+    def thetadd(self, t: ArrayLike) -> Array:
+        return self.dtheta * _profile(t, self.T, 2)
+
+
+class FrameLink:
+    """One uniform link of Hermite elements in a frame that turns with ``theta`` and whose origin
+    (the link's material point ``x = 0``) sits on the frame's axis at radius ``r_E(t)``.
+
+    Holds the constant matrices (``M`` with the payload on the tip ``w``, ``K``, ``S0 = int rho N``,
+    ``S1 = int rho x N`` and the geometric-stiffness pieces ``G_c, G_1, G_2`` for ``F = 1, x, x^2``)
+    and forms the time-varying terms of the partially coupled equations (Eq 42; derivation in
+    :mod:`flexctrl.dynamics.fem.rp_arm`)::
+
+        M qdd + (K + K_g - theta'^2 M) q = f,
+        f = -int rho N^T (theta'' (r_E + x) + 2 theta' r_E' - g_perp) (+ payload at x = L).
+
+    Shared by :class:`~flexctrl.dynamics.fem.rp_arm.RPArmModel` and
+    :mod:`flexctrl.dynamics.fem.telescoping`.
+    """
+
+    def __init__(self, n_elements: int, length: float, mass_per_length: float, EI: float, payload_mass: float = 0.0):
+        self.n, self.length, self.rho, self.payload_mass = int(n_elements), float(length), float(mass_per_length), \
+            float(payload_mass)
+        mats = assemble_beam(self.n, length, mass_per_length, EI)
+        self.le, self.ndof = mats.element_length, mats.M.shape[0]
+        self.M, self.K = mats.M.copy(), mats.K
+        self.M_link = mats.M  # without the payload
+        self.S0, self.S1 = mats.S0, mats.S1  # int rho N, int rho x N
+        self.tip = 2 * self.n  # dof of w(L)
+        if payload_mass:
+            self.M[self.tip, self.tip] += payload_mass
+        # K_g = c0 G_c + c1 G_1 + c2 G_2 for F = c0 + c1 x + c2 x^2 (exact: F is at most quadratic)
+        self.G_c = assemble_geometric_stiffness(self.n, length, lambda z: np.ones_like(z))
+        self.G_1 = assemble_geometric_stiffness(self.n, length, lambda z: z)
+        self.G_2 = assemble_geometric_stiffness(self.n, length, lambda z: z * z)
+
+    def force_coefficients(self, r: dict[str, float], driven_end: str) -> tuple[float, float, float]:
+        """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N, tension positive).
+
+        ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at E
+        (the reaction of the whole link and payload enters at ``x = 0``): ``F(x) = -int_x^L rho a~ -
+        m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``; ``a~ = r_E'' - theta'^2 (r_E + x) - g_ax``.
+        """
+        rho, L, m_t = self.rho, self.length, self.payload_mass
+        # a~(x) = b0 - w2 x  with b0 = rE'' - th'^2 rE - g_ax, w2 = th'^2
+        b0 = r["rEdd"] - r["thd"] ** 2 * r["rE"] - r["g_ax"]
+        w2 = r["thd"] ** 2
+        if driven_end == "E":  # F = -int_x^L rho a~ - m_t a~(L)
+            c0 = -rho * (b0 * L - 0.5 * w2 * L * L) - m_t * (b0 - w2 * L)
+            return c0, rho * b0, -0.5 * rho * w2
+        return 0.0, rho * b0, -0.5 * rho * w2  # F = int_0^x rho a~
+
+    def terms(self, r: dict[str, float], driven_end: str, axial_shortening: bool) -> tuple[Array, Array]:
+        """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
+        also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2)."""
+        Kt = self.K - r["thd"] ** 2 * self.M
+        if axial_shortening:
+            c0, c1, c2 = self.force_coefficients(r, driven_end)
+            Kt = Kt + c0 * self.G_c + c1 * self.G_1 + c2 * self.G_2
+        a0 = r["thdd"] * r["rE"] + 2.0 * r["thd"] * r["rEd"]  # a_perp(x) = a0 + thdd x
+        f = -(a0 - r["g_perp"]) * self.S0 - r["thdd"] * self.S1
+        if self.payload_mass:
+            f[self.tip] -= self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"])
+        return Kt, f
+
