@@ -1,4 +1,4 @@
-"""Newmark + Baumgarte DAE solver (flexctrl.sim.newmark_dae) against independent references."""
+"""Newmark + Baumgarte DAE solver (flexctrl.dynamics.fem.newmark_dae) against independent references."""
 
 from __future__ import annotations
 

@@ -32,10 +32,10 @@ a user pays per simulated second once the model is built.
 Why not the :class:`~flexctrl.sim.base.Integrator` classes directly?  Their output
 grid is their step, so RK4 on a stiff finite-element model (steps of a few
 microseconds) would keep hundreds of thousands of states; here RK4 substeps inside
-one compiled call per output sample (as :func:`flexctrl.dynamics.fem.report.rk4_sampler`).
+one compiled call per output sample (as :func:`flexctrl.analysis.fem_report.rk4_sampler`).
 CVODES, IDAS and scipy are the package's own integrators (their ``_advance`` hook,
 which already integrates a block of held torques); Newmark is
-:func:`flexctrl.sim.newmark_dae.simulate` on :func:`flexctrl.dynamics.fem.newmark.model_dae_problem`.
+:func:`flexctrl.dynamics.fem.newmark_dae.simulate` on :func:`flexctrl.dynamics.fem.newmark.model_dae_problem`.
 
 The reference
 -------------
@@ -264,7 +264,7 @@ class Stepper:
 def stable_substeps(model, dt: float, safety: float = RK4_SAFETY) -> int:
     """RK4 steps per output sample ``dt`` so that ``omega h <= safety`` (omega: the larger of
     ``Model.omega_max`` and the free-joint spectral radius at the reference configuration)."""
-    from flexctrl.dynamics.fem.report import rk4_step_for
+    from flexctrl.dynamics.fem.spectrum import rk4_step_for
 
     return rk4_step_for(model, dt, safety)
 
@@ -340,7 +340,7 @@ class SundialsStepper(Stepper):
 
 
 class NewmarkStepper(Stepper):
-    """Trapezoidal Newmark (:func:`flexctrl.sim.newmark_dae.simulate`), restarted at every torque change.
+    """Trapezoidal Newmark (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`), restarted at every torque change.
 
     Each call starts from consistent accelerations at its first instant (the torque
     jumps there), which is what a held torque means.
@@ -360,7 +360,7 @@ class NewmarkStepper(Stepper):
         self.setup_s = time.perf_counter() - start
 
     def advance(self, x: np.ndarray, u: np.ndarray, t0: float, n: int) -> np.ndarray:
-        from flexctrl.sim.newmark_dae import simulate
+        from flexctrl.dynamics.fem.newmark_dae import simulate
 
         self._u[:] = u
         n_q = self.model.n_q

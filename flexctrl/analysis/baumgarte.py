@@ -1,7 +1,7 @@
 """Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports sweep (issue 7).
 
 Constraint-error dynamics (see ``docs/baumgarte.md`` for the derivation)
-    :mod:`flexctrl.sim.newmark_dae` imposes Eq 49, ``Phi_q qdd = h - 2 gamma Phidot
+    :mod:`flexctrl.dynamics.fem.newmark_dae` imposes Eq 49, ``Phi_q qdd = h - 2 gamma Phidot
     - beta^2 Phi``, so along the computed motion the violation ``e = Phi`` obeys
     ``e'' = -2 gamma e' - beta^2 e`` at every step, with the feedback evaluated at
     the previous step (``feedback="explicit"``, Eq 54, the paper's choice) or at the
@@ -344,7 +344,7 @@ def run_point(case: SlidingBeamCase, n_elements: int, dt: float, gamma: float, b
     gamma, beta
         Baumgarte parameters, 1/s (>= 0; 0 switches the term off).
     feedback, alpha, delta
-        See :func:`flexctrl.sim.newmark_dae.simulate`.
+        See :func:`flexctrl.dynamics.fem.newmark_dae.simulate`.
     max_violation
         ``max|Phi|`` (m) beyond which the run counts as unstable; it is then re-run up
         to the last bounded step so its histories are kept.

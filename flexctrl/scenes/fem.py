@@ -136,7 +136,7 @@ def _run(scene: FemScene, out_dir: Path | None) -> dict:
         "scene": scene.settings(),
         "source": scene.source,
         "kind": scene.kind,
-        "integrator": "newmark + baumgarte (flexctrl.sim.newmark_dae)",
+        "integrator": "newmark + baumgarte (flexctrl.dynamics.fem.newmark_dae)",
         "n_elements": scene.n_elements,
         "dt": float(res.dt),
         "n_steps": int(res.t.size - 1),

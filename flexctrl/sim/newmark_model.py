@@ -1,9 +1,9 @@
 """Newmark's method for any :class:`~flexctrl.dynamics.model.Model`, behind the common :class:`~flexctrl.sim.base.Integrator`.
 
 This adapter runs :func:`flexctrl.dynamics.fem.newmark.simulate_model_newmark`'s
-machinery (the model as a :class:`~flexctrl.sim.newmark_dae.DAEProblem`, built
+machinery (the model as a :class:`~flexctrl.dynamics.fem.newmark_dae.DAEProblem`, built
 once by :func:`~flexctrl.dynamics.fem.newmark.model_dae_problem`, integrated by
-:func:`flexctrl.sim.newmark_dae.simulate` chunk by chunk) so that it takes a
+:func:`flexctrl.dynamics.fem.newmark_dae.simulate` chunk by chunk) so that it takes a
 state ``x = (q, qd)``, held torques and an optional ``u_function`` like every
 other integrator and returns a :class:`~flexctrl.sim.trajectory.Trajectory`
 with the same divergence checks.  The joints are free (no constraints).
@@ -107,7 +107,7 @@ class Newmark(Integrator):
     newton_tol
         Newton stops when ``max|dq| <= newton_tol (1 + max|q|)``.
     max_iterations
-        Newton iterations per step before :class:`~flexctrl.sim.newmark_dae.NewtonConvergenceError`.
+        Newton iterations per step before :class:`~flexctrl.dynamics.fem.newmark_dae.NewtonConvergenceError`.
     """
 
     name: ClassVar[str] = "newmark"
