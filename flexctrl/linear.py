@@ -32,7 +32,6 @@ Examples
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Literal, Sequence
 
@@ -40,6 +39,8 @@ import casadi as ca
 import control
 import numpy as np
 
+from flexctrl.dynamics.amm import locked_spectrum
+from flexctrl.dynamics.model import jacobian_function
 from flexctrl.errors import SolverError, SpecError
 
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
@@ -367,17 +368,6 @@ class Sensors:
 # --------------------------------------------------------------------------------------
 # linearisation
 # --------------------------------------------------------------------------------------
-def _jacobian_function(model, sensors: Sensors | None) -> ca.Function:
-    x = ca.MX.sym("x", model.n_x)
-    u = ca.MX.sym("u", model.n_u)
-    xdot = model.functions["f"](x, u)
-    outs = [ca.jacobian(xdot, x), ca.jacobian(xdot, u)]
-    if sensors is not None:
-        y = sensors.function(x, u)
-        outs += [ca.jacobian(y, x), ca.jacobian(y, u)]
-    return ca.Function("linearize", [x, u], outs)
-
-
 class Linearizer:
     """Exact Jacobians of ``model`` with ``sensors``, built once and evaluated at any operating point.
 
@@ -388,7 +378,7 @@ class Linearizer:
     def __init__(self, model, outputs: Sequence[str] | Sensors = ("joints",), *, q_joints: Sequence[float] | None = None):
         self.model = model
         self.sensors = outputs if isinstance(outputs, Sensors) else Sensors.build(model, outputs, q_joints=q_joints)
-        self.function = _jacobian_function(model, self.sensors)
+        self.function = jacobian_function(model, inputs=True, outputs=self.sensors.function)
 
     def matrices(self, op: OperatingPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(A, B, C, D)`` at ``op``."""
@@ -492,25 +482,19 @@ def locked_frequencies(model, op: OperatingPoint | None = None, *, include_gravi
     Generalised eigenvalues of ``K_ff`` against ``M_ff`` at the configuration of
     ``op`` (default: zero joint angles and deflections).  ``include_gravity`` adds
     the gravitational stiffness ``d g_f / d q_f`` (the linearisation's elastic block).
+    Both matrices are symmetrised (:func:`flexctrl.dynamics.amm.locked_spectrum` computes the spectrum).
     """
-    import scipy.linalg
-
     n, N = model.n_u, model.n_q
     if N == n:
         return np.zeros(0)
     q0 = np.zeros(N) if op is None else np.asarray(op.q, dtype=float)
-    flex = flexible_index(model)
-    M = model.mass_matrix(q0)[np.ix_(flex, flex)]
-    K = stiffness_matrix(model, q0)[np.ix_(flex, flex)]
+    M = model.mass_matrix(q0)
+    K = stiffness_matrix(model, q0)
     if include_gravity:
         qs = ca.SX.sym("q", N)
         G = np.array(ca.Function("dg", [qs], [ca.jacobian(model.functions["g"](qs), qs)])(q0), dtype=float)
-        K = K + 0.5 * (G + G.T)[np.ix_(flex, flex)]
-    lam = scipy.linalg.eigh(0.5 * (K + K.T), 0.5 * (M + M.T), eigvals_only=True)
-    if np.any(lam < -1e-9 * max(1.0, float(np.max(np.abs(lam))))):
-        warnings.warn(f"locked structure has negative stiffness eigenvalues {lam[lam < 0]}; clipped to 0",
-                      RuntimeWarning, stacklevel=2)
-    return np.sqrt(np.clip(lam, 0.0, None)) / (2 * math.pi)
+        K = K + 0.5 * (G + G.T)
+    return locked_spectrum(0.5 * (M + M.T), 0.5 * (K + K.T), n) / (2 * math.pi)
 
 
 __all__ = [

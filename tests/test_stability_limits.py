@@ -20,15 +20,12 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexctrl.analysis.stability import (
+from flexctrl.analysis.stability.probe import StabilityCriterion, StabilityProbe, largest_stable_step
+from flexctrl.analysis.stability.theory import (
     EXPLICIT_POLYNOMIALS,
-    ISSUE_RK4_LIMIT,
     RK4_IMAGINARY_AXIS_LIMIT,
     RK4_REAL_AXIS_LIMIT,
-    StabilityCriterion,
-    StabilityProbe,
     amplification_factor,
-    largest_stable_step,
     ray_limit,
     theoretical_step_limit,
 )
@@ -36,6 +33,7 @@ from flexctrl.errors import SpecError
 from flexctrl.linear import equilibrium, stiffness_matrix
 from flexctrl.sim import INTEGRATORS, simulate
 from flexctrl.sim.newmark_model import newmark_critical_step
+from flexctrl.sim.rk4 import RK4, RK4_STABILITY_LIMIT
 from flexctrl.sim.toymodel import spring_pendulum
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,9 +110,20 @@ def test_rk4_limits_on_both_axes_by_hand():
     assert RK4_REAL_AXIS_LIMIT == pytest.approx(lo, rel=1e-12)
     assert amplification_factor("rk4", -lo).real == pytest.approx(1.0, abs=1e-9)  # R = +1 there (x^3 - 4x^2 + 12x - 24 = 0)
     assert np.polynomial.polynomial.polyval(lo, [-24, 12, -4, 1]) == pytest.approx(0.0, abs=1e-9)
-    # the issue's 2.785 is the real-axis value, 1.5 % below the imaginary-axis one
-    assert ISSUE_RK4_LIMIT == pytest.approx(RK4_REAL_AXIS_LIMIT, abs=5e-4)
+    # the real-axis limit (the issue's 2.785) is 1.5 % below the imaginary-axis one
     assert 0.015 < 1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT < 0.016
+
+
+def test_the_integrators_rk4_limit_is_the_real_axis_root_and_safe_for_undamped_modes():
+    # RK4_STABILITY_LIMIT, the one constant the integrators use (step choice, advice), against the
+    # root of |R(-x)| = 1 computed from RK4's polynomial (checked by bisection above) ...
+    assert RK4.stability_limit == RK4_STABILITY_LIMIT
+    assert abs(RK4_STABILITY_LIMIT - RK4_REAL_AXIS_LIMIT) <= 5e-4
+    # ... and below the imaginary-axis exit 2 sqrt 2, so it bounds every undamped mode safely
+    imaginary = ray_limit(EXPLICIT_POLYNOMIALS["rk4"], 1j)
+    assert imaginary == pytest.approx(2.0 * math.sqrt(2.0), rel=1e-12)
+    assert RK4_STABILITY_LIMIT < imaginary
+    assert abs(amplification_factor("rk4", 1j * RK4_STABILITY_LIMIT)) <= 1.0
 
 
 @pytest.mark.parametrize("method", ["rk4", "euler"])
@@ -241,7 +250,7 @@ def test_rk4_on_amm1_within_5_percent_of_issue_and_tightly_of_theory(arm_amm1):
     result = largest_stable_step(model, "rk4", op.x, op.u)
     omega = _frequencies(model, op.q).max()
     assert result.omega_max == pytest.approx(omega, rel=1e-7)
-    assert abs(result.h_measured / (ISSUE_RK4_LIMIT / result.omega_max) - 1) < 0.05  # the issue's demand
+    assert abs(result.h_measured / (RK4_STABILITY_LIMIT / result.omega_max) - 1) < 0.05  # the issue's demand
     assert abs(result.h_measured / result.h_theory - 1) < 0.01  # the brief's demand ...
     assert result.h_theory == pytest.approx(RK4_IMAGINARY_AXIS_LIMIT / omega, rel=1e-7)  # undamped: 2 sqrt 2 / omega
     assert result.h_measured <= result.h_theory * (1 + 2e-6) <= result.h_unstable * (1 + 4e-6)  # ... and much tighter
@@ -251,7 +260,7 @@ def test_rk4_on_amm1_within_5_percent_of_issue_and_tightly_of_theory(arm_amm1):
 def test_newmark_stable_at_100x_the_rk4_limit_where_rk4_is_not(arm_amm1):
     model, op = arm_amm1
     newmark = StabilityProbe(model, "newmark", op.x, op.u)
-    h = 100 * ISSUE_RK4_LIMIT / newmark.omega_max
+    h = 100 * RK4_STABILITY_LIMIT / newmark.omega_max
     probe = newmark(h)
     assert probe.stable and probe.growth <= StabilityCriterion().growth
     rk4 = StabilityProbe(model, "rk4", op.x, op.u)
@@ -318,10 +327,10 @@ def test_study_writes_stability_limits_csv(tmp_path):
         assert row["fidelity"] == "amm:1" and row["status"] == "ok"
         assert float(row["omega_max"]) == pytest.approx(float(rows["rk4"]["omega_max"]))
     rk4 = rows["rk4"]
-    assert abs(float(rk4["h_measured"]) * float(rk4["omega_max"]) / ISSUE_RK4_LIMIT - 1) < 0.05
+    assert abs(float(rk4["h_measured"]) * float(rk4["omega_max"]) / RK4_STABILITY_LIMIT - 1) < 0.05
     assert abs(float(rk4["h_measured"]) / float(rk4["h_theory"]) - 1) < 1e-3
     assert rows["newmark"]["h_theory"] == "inf" and rows["newmark"]["outcome"] == "stable_at_cap"
-    assert float(rows["newmark"]["h_measured"]) >= 100 * ISSUE_RK4_LIMIT / float(rows["newmark"]["omega_max"])
+    assert float(rows["newmark"]["h_measured"]) >= 100 * RK4_STABILITY_LIMIT / float(rows["newmark"]["omega_max"])
     assert float(rows["euler"]["h_measured"]) == 0.0 and float(rows["euler"]["h_theory"]) == 0.0
     report = (tmp_path / "report.md").read_text()
     assert "Largest stable step" in report and (tmp_path / "figures" / "stability_limits.png").is_file()

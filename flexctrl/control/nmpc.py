@@ -87,6 +87,7 @@ import numpy as np
 
 from flexctrl.control.base import Controller
 from flexctrl.sim.parametric import constants_as_parameters, expanded as _expanded
+from flexctrl.sim.rk4 import rk4_next
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc import ScaledProblem, Solution, _shift_blocks, scaled_problem
@@ -112,13 +113,10 @@ def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, s
     x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
     names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
     h = dt / substeps
+    rhs = lambda s: f(s, u, *extra)  # noqa: E731
     xf = x
     for _ in range(substeps):
-        k1 = f(xf, u, *extra)
-        k2 = f(xf + 0.5 * h * k1, u, *extra)
-        k3 = f(xf + 0.5 * h * k2, u, *extra)
-        k4 = f(xf + h * k3, u, *extra)
-        xf = xf + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        xf = rk4_next(rhs, xf, h)
     F = ca.Function("F", [x, u, *extra], [xf], names, ["x_next"])
     if sensitivities is None:
         return F, None
@@ -127,35 +125,27 @@ def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, s
     fxu = f(xs, us, *es)
     fx = ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
     eye = ca.DM.eye(nx)
+
+    def with_sensitivities(state):
+        # RK4 on (x, A, B): d/dt (x, A, B) = (f, f_x A, f_x B + f_u)
+        xs, A, B = state
+        k, Jx, Ju = fx(xs, u, *extra)
+        return k, ca.mtimes(Jx, A), ca.mtimes(Jx, B) + Ju
+
     xe, Ad, Bd = x, eye, ca.MX.zeros(nx, nu)
     for _ in range(substeps):
         if sensitivities == "frozen":
             # one Jacobian per RK4 step, frozen over its four stages
             k1, Jx, Ju = fx(xe, u, *extra)
-            k2 = f(xe + 0.5 * h * k1, u, *extra)
-            k3 = f(xe + 0.5 * h * k2, u, *extra)
-            k4 = f(xe + h * k3, u, *extra)
             hA = h * Jx
             hA2 = ca.mtimes(hA, hA)
             hA3 = ca.mtimes(hA2, hA)
             Phi = eye + hA + hA2 / 2 + hA3 / 6 + ca.mtimes(hA3, hA) / 24
             Gam = h * ca.mtimes(eye + hA / 2 + hA2 / 6 + hA3 / 24, Ju)
             Ad, Bd = ca.mtimes(Phi, Ad), ca.mtimes(Phi, Bd) + Gam
+            xe = rk4_next(rhs, xe, h, k1=k1)
         else:
-            k1, J1x, J1u = fx(xe, u, *extra)
-            k2, J2x, J2u = fx(xe + 0.5 * h * k1, u, *extra)
-            k3, J3x, J3u = fx(xe + 0.5 * h * k2, u, *extra)
-            k4, J4x, J4u = fx(xe + h * k3, u, *extra)
-            dk1x, dk1u = ca.mtimes(J1x, Ad), ca.mtimes(J1x, Bd) + J1u
-            dk2x = ca.mtimes(J2x, Ad + 0.5 * h * dk1x)
-            dk2u = ca.mtimes(J2x, Bd + 0.5 * h * dk1u) + J2u
-            dk3x = ca.mtimes(J3x, Ad + 0.5 * h * dk2x)
-            dk3u = ca.mtimes(J3x, Bd + 0.5 * h * dk2u) + J3u
-            dk4x = ca.mtimes(J4x, Ad + h * dk3x)
-            dk4u = ca.mtimes(J4x, Bd + h * dk3u) + J4u
-            Ad = Ad + (h / 6.0) * (dk1x + 2 * dk2x + 2 * dk3x + dk4x)
-            Bd = Bd + (h / 6.0) * (dk1u + 2 * dk2u + 2 * dk3u + dk4u)
-        xe = xe + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            xe, Ad, Bd = rk4_next(with_sensitivities, (xe, Ad, Bd), h)
     FJ = ca.Function("FJ", [x, u, *extra], [xe, Ad, Bd], names, ["x_next", "A", "B"])
     return F, FJ
 

@@ -62,6 +62,7 @@ Frozen and scheduled modes
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Literal, Sequence
 
 import casadi as ca
@@ -128,6 +129,34 @@ def ldl_solve(A, b):
                 s = s - L[k][i] * x[k]
         x[i] = s
     return ca.vertcat(*x)
+
+
+def natural_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Undamped natural frequencies (rad/s, ascending) of ``M qdd + K q = 0``: ``sqrt`` of the eigenvalues of ``K v = lambda M v``.
+
+    ``M`` symmetric positive definite; only the lower triangles are read (``scipy.linalg.eigh``),
+    so pass ``0.5 (A + A^T)`` for a matrix that is symmetric only to rounding when both
+    triangles should count.  Negative eigenvalues are clipped to 0, with a RuntimeWarning
+    when they exceed rounding (``1e-9`` of the largest).
+    """
+    lam = scipy.linalg.eigh(K, M, eigvals_only=True)
+    if np.any(lam < -1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))):
+        warnings.warn(f"the structure has negative stiffness eigenvalues {lam[lam < 0]}; clipped to 0",
+                      RuntimeWarning, stacklevel=3)
+    return np.sqrt(np.clip(lam, 0.0, None))
+
+
+def locked_spectrum(M: np.ndarray, K: np.ndarray, n_joints: int) -> np.ndarray:
+    """Natural frequencies (rad/s, ascending) with the joints clamped: ``K_ff`` against ``M_ff``.
+
+    ``M`` and ``K`` are the whole model's (N x N); the elastic block is the one after the
+    ``n_joints`` joint coordinates.  The one copy of this spectrum: the model's
+    ``info["locked_frequencies_rad_s"]`` and :func:`flexctrl.linear.locked_frequencies`.
+    """
+    if M.shape[0] == n_joints:
+        return np.zeros(0)
+    flex = slice(n_joints, None)
+    return natural_frequencies(K[flex, flex], M[flex, flex])
 
 
 def _check_choice(value: str, allowed: tuple[str, ...], key: str) -> str:
@@ -325,12 +354,11 @@ def build_amm(
     locked, free = np.zeros(0), np.zeros(0)
     if N > n:
         M0 = np.array(functions["M"](q0))
-        K0 = np.array(functions["K"](q0) if scheduled else functions["K"]()["K"])[np.ix_(flex, flex)]
-        M_ff = M0[np.ix_(flex, flex)]
-        locked = np.sqrt(np.clip(scipy.linalg.eigh(K0, M_ff, eigvals_only=True), 0.0, None))
+        K0 = np.array(functions["K"](q0) if scheduled else functions["K"]()["K"])
+        locked = locked_spectrum(M0, K0, n)
         # free joints (no gravity): the elastic coordinates see the Schur complement of M
-        schur = M_ff - M0[n:, :n] @ np.linalg.solve(M0[:n, :n], M0[:n, n:])
-        free = np.sqrt(np.clip(scipy.linalg.eigh(K0, 0.5 * (schur + schur.T), eigvals_only=True), 0.0, None))
+        schur = M0[np.ix_(flex, flex)] - M0[n:, :n] @ np.linalg.solve(M0[:n, :n], M0[:n, n:])
+        free = natural_frequencies(K0[np.ix_(flex, flex)], 0.5 * (schur + schur.T))
     info = {
         "family": "amm",
         "modes": "scheduled" if scheduled else "frozen",

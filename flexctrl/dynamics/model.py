@@ -109,3 +109,44 @@ class Model:
         """Kinetic, elastic and gravitational energy (J) and their total."""
         kin, el, grav = (float(v) for v in self.functions["energies"](q, qd))
         return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
+
+
+def jacobian_function(model, *, value: bool = False, inputs: bool = False,
+                      outputs: ca.Function | None = None) -> ca.Function:
+    """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
+
+    The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`), stability
+    advice (:meth:`flexctrl.sim.base.Integrator.jacobian_radius`) and the stability probe
+    (:mod:`flexctrl.analysis.stability.probe`) all use it.  Expanding it to SX (as the
+    last two do) changes its values in the last digits, so each user keeps its choice.
+
+    Parameters
+    ----------
+    model
+        Anything with ``functions["f"]``, ``n_x`` and ``n_u`` (a :class:`Model`).
+    value
+        Put ``f`` itself first.
+    inputs
+        Add ``B = df/du``.
+    outputs
+        A Function ``y(x, u)`` (sensors): add ``C = dy/dx`` and ``D = dy/du``.
+
+    Returns
+    -------
+    casadi.Function
+        ``(x, u) -> ([f,] A[, B][, C, D])``, in that order.
+    """
+    x = ca.MX.sym("x", model.n_x)
+    u = ca.MX.sym("u", model.n_u)
+    xdot = model.functions["f"](x, u)
+    outs, names = [ca.jacobian(xdot, x)], ["A"]
+    if value:
+        outs, names = [xdot] + outs, ["f"] + names
+    if inputs:
+        outs.append(ca.jacobian(xdot, u))
+        names.append("B")
+    if outputs is not None:
+        y = outputs(x, u)
+        outs += [ca.jacobian(y, x), ca.jacobian(y, u)]
+        names += ["C", "D"]
+    return ca.Function("jacobians", [x, u], outs, ["x", "u"], names)

@@ -9,7 +9,7 @@ import numpy as np
 
 from flexctrl.sim.compile import compile_function
 from flexctrl.sim.parametric import constants_as_parameters
-from flexctrl.sim.rk4 import rk4_step_function
+from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
@@ -38,11 +38,7 @@ def plant_step_function(model, substeps: int, f: ca.Function | None = None, n_co
         c = ca.MX.sym("c", n_constants)
 
         def advance(xs, k):
-            k1 = f(xs, u, c)
-            k2 = f(xs + 0.5 * h * k1, u, c)
-            k3 = f(xs + 0.5 * h * k2, u, c)
-            k4 = f(xs + h * k3, u, c)
-            return xs + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            return rk4_next(lambda s: f(s, u, c), xs, h)
 
         inputs, names, name = [x, u, h, c], ["x", "u", "h", "c"], f"advance_p_{model.n_x}_{model.n_u}_{n_constants}_{substeps}"
     states = []

@@ -35,6 +35,7 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.model import jacobian_function
 from flexctrl.errors import SpecError
 from flexctrl.sim.divergence import DivergenceMonitor
 from flexctrl.sim.trajectory import Trajectory
@@ -244,10 +245,7 @@ class Integrator:
         if not np.all(np.isfinite(x)):
             return math.nan
         if not hasattr(self, "_jac_fn"):
-            f = self.model.functions["f"]
-            xs = ca.MX.sym("x", self.model.n_x)
-            us = ca.MX.sym("u", self.model.n_u)
-            self._jac_fn = try_expand(ca.Function("dfdx", [xs, us], [ca.jacobian(f(xs, us), xs)]))
+            self._jac_fn = try_expand(jacobian_function(self.model))
         u = np.zeros(self.model.n_u) if u is None else u
         return float(np.max(np.abs(np.linalg.eigvals(np.asarray(self._jac_fn(x, u), dtype=float)))))
 

@@ -42,13 +42,64 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, ClassVar, Sequence
+from typing import Any, Callable, ClassVar, Sequence
 
 import casadi as ca
 import numpy as np
 
 from flexctrl.sim.base import Integrator, output_function, try_expand
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
+
+
+def _axpy(x, a, k):
+    """``x + a * k``, entry by entry for tuples (an augmented state)."""
+    if isinstance(x, tuple):
+        return tuple(_axpy(xi, a, ki) for xi, ki in zip(x, k))
+    return x + a * k
+
+
+def _rk4_combine(x, h, k1, k2, k3, k4):
+    """``x + (h / 6) (k1 + 2 k2 + 2 k3 + k4)``, entry by entry for tuples."""
+    if isinstance(x, tuple):
+        return tuple(_rk4_combine(xi, h, a, b, c, d) for xi, a, b, c, d in zip(x, k1, k2, k3, k4))
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def rk4_next(f: Callable, x, h, t=None, *, k1=None):
+    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given) of length ``h``.
+
+    The one place RK4's stages are written; symbolic (CasADi) or numeric.  The
+    expression is, in this order of floating-point operations,
+    ``k2 = f(x + (0.5 h) k1)``, ``k3 = f(x + (0.5 h) k2)``, ``k4 = f(x + h k3)``,
+    ``x + (h / 6) (((k1 + 2 k2) + 2 k3) + k4)``, with the stage times ``t``,
+    ``t + 0.5 h``, ``t + 0.5 h``, ``t + h``.
+
+    Parameters
+    ----------
+    f
+        The right-hand side: a callable of the state (and time), e.g.
+        ``lambda s: fun(s, u, c)`` for a CasADi Function with torques and parameters.
+    x
+        The state, or a tuple of states (an augmented system such as a state with its
+        sensitivities: ``f`` then returns a tuple of the same length).
+    h
+        Step (s): a number or a symbol.
+    t
+        Time at ``x``; None when ``f`` does not take one.
+    k1
+        ``f(x)`` already evaluated (e.g. together with its Jacobian).
+    """
+    if t is None:
+        k1 = f(x) if k1 is None else k1
+        k2 = f(_axpy(x, 0.5 * h, k1))
+        k3 = f(_axpy(x, 0.5 * h, k2))
+        k4 = f(_axpy(x, h, k3))
+    else:
+        k1 = f(x, t) if k1 is None else k1
+        k2 = f(_axpy(x, 0.5 * h, k1), t + 0.5 * h)
+        k3 = f(_axpy(x, 0.5 * h, k2), t + 0.5 * h)
+        k4 = f(_axpy(x, h, k3), t + h)
+    return _rk4_combine(x, h, k1, k2, k3, k4)
 
 
 def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: bool = False) -> ca.Function:
@@ -64,11 +115,7 @@ def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: b
         torque = u if u_function is None else u + ca.vec(u_function(ts))
         return f(xs, torque)
 
-    k1 = rhs(x, t)
-    k2 = rhs(x + 0.5 * h * k1, t + 0.5 * h)
-    k3 = rhs(x + 0.5 * h * k2, t + 0.5 * h)
-    k4 = rhs(x + h * k3, t + h)
-    x_next = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    x_next = rk4_next(rhs, x, h, t)
     step = ca.Function("rk4_step", [x, t, u, h], [x_next, outputs(x_next)], ["x", "t", "u", "h"], ["x_next", "y_next"])
     return step.expand() if expand else step
 
@@ -97,11 +144,7 @@ def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "he
     """
     f = model.functions["f"]
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
-    k1 = f(x, u)
-    k2 = f(x + 0.5 * h * k1, u)
-    k3 = f(x + 0.5 * h * k2, u)
-    k4 = f(x + h * k3, u)
-    step = ca.Function("rk4", [x, u], [x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)])
+    step = ca.Function("rk4", [x, u], [rk4_next(lambda s: f(s, u), x, h)])
     xs = ca.MX.sym("x", model.n_x)
     sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
     loop = sample.mapaccum(chunk)
@@ -110,7 +153,7 @@ def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "he
 
 
 #: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the imaginary-axis
-#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability` computes both from the polynomial).  The one copy.
+#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the polynomial).  The one copy.
 RK4_STABILITY_LIMIT = 2.785
 
 #: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.

@@ -10,7 +10,7 @@ every integrator and the study's table gets an ``scene.integrator`` column.
 The run builds the model, puts it in static equilibrium at the joint angles
 with the holding torques (:func:`flexctrl.linear.equilibrium`: elastic
 coordinates at their static deflection, joints free to move under constant
-torque) and calls :func:`flexctrl.analysis.stability.largest_stable_step`.
+torque) and calls :func:`flexctrl.analysis.stability.probe.largest_stable_step`.
 The scene's initial rates, elastic coordinates, torque input, ``dt`` and
 ``duration`` are not used: a stability probe needs a steady state to perturb
 (the free-vibration scene's arm falls away from its initial state within tens
@@ -66,7 +66,7 @@ from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache, s
 METHODS = ("rk4", "euler", "newmark")
 #: Outcomes by ``outcome_code``.
 OUTCOMES = ("bracketed", "stable_at_cap", "unstable_at_floor")
-#: Why the smallest unstable step failed, by ``failure_code`` (see :class:`flexctrl.analysis.stability.Probe`).
+#: Why the smallest unstable step failed, by ``failure_code`` (see :class:`flexctrl.analysis.stability.probe.Probe`).
 FAILURES = ("growth", "diverged", "solver")
 _FAILURE_TEXT = ("a mode grows", "the run diverges", "the method's solver fails (e.g. Newton)")
 #: The leading columns of ``stability_limits.csv`` (an external check relies on them).
@@ -127,7 +127,7 @@ def _model_key(scene, settings: dict) -> tuple:
 
 def execute(settings: dict) -> RunOutput:
     """Measure one integrator's largest stable step on one model (see the module docstring)."""
-    from flexctrl.analysis.stability import largest_stable_step
+    from flexctrl.analysis.stability.probe import largest_stable_step
 
     scene = _scene(settings)
     model, op, _ = _build(_model_key(scene, settings), str(settings["scene"]))
@@ -270,7 +270,8 @@ def stability_rows(directory: Path, rows: list[dict]) -> tuple[list[str], list[d
 
 def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[str]:
     """Write ``stability_limits.csv`` and ``figures/stability_limits.png``; return the Markdown section."""
-    from flexctrl.analysis.stability import ISSUE_RK4_LIMIT, RK4_IMAGINARY_AXIS_LIMIT, RK4_REAL_AXIS_LIMIT
+    from flexctrl.analysis.stability.theory import RK4_IMAGINARY_AXIS_LIMIT, RK4_REAL_AXIS_LIMIT
+    from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
     from flexctrl.study.store import atomic_write
 
     directory = Path(directory)
@@ -285,11 +286,11 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
              "Each run perturbs the model's static equilibrium (joints held by constant torques) along every "
              "vibration mode by +-1e-9 m/rad (two runs; half their difference is watched) and bisects on the step h of the "
              "real integrator; a probe is unstable when a modal amplitude grows by more than its growth tolerance over its steps, "
-             "or a run fails (see flexctrl/analysis/stability.py and "
+             "or a run fails (see flexctrl/analysis/stability/probe.py and "
              "docs/stability.md). `h_theory` is the largest h with |R(lambda h)| <= 1 for every eigenvalue lambda of "
              "df/dx at that equilibrium; `omega_max` = max |lambda| (rad/s).", "",
              f"RK4: the exact limit on the imaginary axis (undamped modes) is omega h = 2 sqrt 2 = {RK4_IMAGINARY_AXIS_LIMIT:.4f}; "
-             f"the issue's {ISSUE_RK4_LIMIT} is the negative-real-axis limit ({RK4_REAL_AXIS_LIMIT:.4f}), "
+             f"the issue's {RK4_STABILITY_LIMIT} is the negative-real-axis limit ({RK4_REAL_AXIS_LIMIT:.4f}), "
              f"{100 * (1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT):.2f} % lower; below, `h/(2.785/omega)` compares "
              "with the issue's number and `ratio` with the exact theory.", "",
              "Files: `stability_limits.csv` (columns integrator, fidelity, omega_max [rad/s], h_measured [s], h_theory [s; "
@@ -300,7 +301,7 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     for entry in table:
         w = float(entry["omega_max"]) if entry["omega_max"] else None
         h = float(entry["h_measured"]) if entry["h_measured"] else None
-        issue = _text(h * w / ISSUE_RK4_LIMIT, 5) if (w and h) else ""
+        issue = _text(h * w / RK4_STABILITY_LIMIT, 5) if (w and h) else ""
         cells = [entry["integrator"], entry["fidelity"], _text(w, 5), _text(h, 5),
                  entry["h_theory"] if entry["h_theory"] in ("", "inf") else _text(float(entry["h_theory"]), 5),
                  entry["ratio"] and _text(float(entry["ratio"]), 6), issue,
@@ -316,14 +317,15 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
 def _draw(path: Path, table: list[dict]) -> None:
     from matplotlib.figure import Figure
 
-    from flexctrl.analysis.stability import ISSUE_RK4_LIMIT, RK4_IMAGINARY_AXIS_LIMIT
+    from flexctrl.analysis.stability.theory import RK4_IMAGINARY_AXIS_LIMIT
+    from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 
     fig = Figure(figsize=(11.0, 4.8), layout="constrained")
     ax, zoom = fig.subplots(1, 2, width_ratios=(1.4, 1.0))
     omegas = [float(e["omega_max"]) for e in table if e["omega_max"]]
     span = np.geomspace(min(omegas) / 1.5, max(omegas) * 1.5, 50)
     ax.plot(span, RK4_IMAGINARY_AXIS_LIMIT / span, "k-", lw=1, label="RK4 theory, undamped: 2 sqrt 2 / omega")
-    ax.plot(span, ISSUE_RK4_LIMIT / span, "k--", lw=1, label="issue: 2.785 / omega (RK4 real axis)")
+    ax.plot(span, RK4_STABILITY_LIMIT / span, "k--", lw=1, label="issue: 2.785 / omega (RK4 real axis)")
     styles = {"rk4": ("o", "C0"), "euler": ("s", "C3"), "newmark": ("^", "C2")}
     seen: set[str] = set()
     for e in table:
@@ -353,7 +355,7 @@ def _draw(path: Path, table: list[dict]) -> None:
     ax.legend(fontsize=7, loc="best")
     # the same, as omega_max h, for the bracketed rows: the 1.5 % between 2 sqrt 2 and 2.785 becomes visible
     zoom.axhline(RK4_IMAGINARY_AXIS_LIMIT, color="k", lw=1, label="2 sqrt 2 (RK4, imaginary axis)")
-    zoom.axhline(ISSUE_RK4_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)")
+    zoom.axhline(RK4_STABILITY_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)")
     seen = set()
     for e in table:
         if e["status"] != "ok" or e["outcome"] != "bracketed" or not e["omega_h_measured"] or e["integrator"] != "rk4":
