@@ -86,7 +86,8 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.base import Controller
-from flexctrl.sim.parametric import constants_as_parameters, expanded as _expanded
+from flexctrl.sim.base import try_expand as _expanded
+from flexctrl.sim.parametric import constants_as_parameters
 from flexctrl.sim.rk4 import rk4_next
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant

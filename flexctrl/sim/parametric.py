@@ -14,13 +14,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-
-def expanded(fun: ca.Function) -> ca.Function:
-    """``fun`` as an SX Function when it can be expanded, else ``fun`` itself."""
-    try:
-        return fun if fun.is_a("SXFunction") else fun.expand()
-    except RuntimeError:
-        return fun
+from flexctrl.sim.base import try_expand
 
 
 def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
@@ -47,7 +41,7 @@ def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
     c : ndarray
         The constants, in the order of the graph.
     """
-    f = expanded(fun)
+    f = try_expand(fun)
     if not f.is_a("SXFunction") or f.has_free():
         return fun, np.zeros(0)
     n_const = sum(1 for k in range(f.n_instructions()) if f.instruction_id(k) == ca.OP_CONST)
