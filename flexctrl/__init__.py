@@ -61,6 +61,8 @@ _EXPORTS: dict[str, str] = {
     "load_study": "flexctrl.study.spec",
     "run_study": "flexctrl.study.runner",
     "write_report": "flexctrl.study.report",
+    "load_tuning": "flexctrl.spec.tuning",
+    "tune": "flexctrl.tune.tuner",
     # errors
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",

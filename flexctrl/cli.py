@@ -26,6 +26,7 @@ COMMANDS = (
     "fidelity",
     "bench",
     "study",
+    "tune",
     "report",
 )
 

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import signal
+import threading
 
 import numpy as np
 
@@ -32,3 +35,27 @@ def load_arm_from_args(args: argparse.Namespace) -> tuple[ArmSpec, np.ndarray]:
 def fidelity_from_args(args: argparse.Namespace) -> Fidelity | None:
     """The parsed ``--fidelity`` or None."""
     return None if args.fidelity is None else parse_fidelity(args.fidelity, source="--fidelity")
+
+
+@contextlib.contextmanager
+def stop_signals_interrupt():
+    """SIGTERM and SIGINT stop a study or a tuning like Ctrl-C, even when it was started in the background.
+
+    A shell starts background jobs with SIGINT ignored, and SIGTERM (``kill``, a batch
+    system's time limit) would end Python without running ``finally`` blocks; as a
+    KeyboardInterrupt both let the runner write the table and the session's elapsed
+    time.  Finished runs are safe either way (each is written atomically).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import signal
-import threading
-
 import argparse
 import sys
 
@@ -37,12 +33,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from flexctrl.commands.common import stop_signals_interrupt
     from flexctrl.study.runner import run_study
     from flexctrl.study.spec import load_study
 
     spec = load_study(args.study, overrides=args.set)
     out = Path(args.out) if args.out else Path("out") / spec.name
-    with _stop_signals_interrupt():
+    with stop_signals_interrupt():
         result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                            progress="none" if args.quiet else args.progress, report=not args.no_report)
     c = result.counts
@@ -55,27 +52,3 @@ def run(args: argparse.Namespace) -> int:
     if result.interrupted:
         return 130
     return 1 if args.strict and c["failed"] else 0
-
-
-@contextlib.contextmanager
-def _stop_signals_interrupt():
-    """SIGTERM and SIGINT stop a study like Ctrl-C, even when it was started in the background.
-
-    A shell starts background jobs with SIGINT ignored, and SIGTERM (``kill``, a batch
-    system's time limit) would end Python without running ``finally`` blocks; as a
-    KeyboardInterrupt both let the runner write the table and the session's elapsed
-    time.  Finished runs are safe either way (each is written atomically).
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)

@@ -170,3 +170,12 @@ def run_metrics(trajectory, *, tip_target, reference_joints: np.ndarray, t_arriv
     limits = np.asarray(torque_limits, dtype=float)
     metrics["torque_limit_exceeded"] = bool(np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9)))
     return metrics
+
+
+#: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists
+#: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``, ``peak_torque_2`` ...
+METRICS = ("tip_residual_rms", "tip_residual_peak", "settling_time", "peak_deflection", "tracking_error_rms",
+           "controller_time_median", "controller_time_p95", "controller_time_max", "fallbacks", "solver_failures",
+           "settled", "final_tip_error", "stable", "divergence_time", "closed_loop_radius", "torque_limit_exceeded")
+#: Per-joint metrics (lists, one value per joint).
+JOINT_METRICS = ("peak_torque", "rms_torque")

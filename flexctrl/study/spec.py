@@ -233,7 +233,7 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     """
     path = Path(path)
     source = str(path)
-    document = _nest_dotted_keys(read_toml(path), source)
+    document = nest_dotted_keys(read_toml(path), source)
     document = apply_overrides(document, [_spell_like_file(document, o) for o in overrides], source=f"{source} (--set)")
     return study_from_document(document, source, path.resolve().parent, file_digest(path), path.stem,
                                check_executor=check_executor)
@@ -361,7 +361,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     return spec
 
 
-def _nest_dotted_keys(document: dict, source: str) -> dict:
+def nest_dotted_keys(document: dict, source: str) -> dict:
     """``[grid]``/``[set]`` keys written quoted (``"scene.dt" = ...``) as nested tables (``scene.dt``).
 
     Both spellings are allowed in a study file; nesting them first gives one
@@ -398,7 +398,7 @@ def _nest_dotted_keys(document: dict, source: str) -> dict:
 def _spell_like_file(document: dict, assignment: str) -> str:
     """Write a quoted ``--set`` key (``grid."scene.dt"=...``) nested when the file's key is nested.
 
-    A quoted key stays quoted only where :func:`_nest_dotted_keys` kept it quoted
+    A quoted key stays quoted only where :func:`nest_dotted_keys` kept it quoted
     (a file axis beside an override of that file); elsewhere both spellings name the
     same setting.
     """

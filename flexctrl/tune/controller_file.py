@@ -1,0 +1,96 @@
+"""A controller file with new values for some keys, its comments and layout kept.
+
+Each key is a dotted path (``weights.joint_deg``, ``sensors.noise.joints_deg``,
+``horizon``).  The value is replaced where the file writes the key: on its own line
+(``joint_deg = 0.5  # deg``) in its table, or inside an inline table of that table
+(``noise = { joints_deg = 0.005, strain = 1e-4 }``).  A key the file leaves at its
+default is added under its table's header (the table is appended if the file has none).
+The result is read back and compared with the original document with the values set:
+any difference is an error, never a silently wrong file.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Mapping
+
+from flexctrl.errors import SpecError
+from flexctrl.spec.overrides import apply_values
+from flexctrl.study.plan import toml_literal
+
+_HEADER = re.compile(r"^\s*\[([^\[\]]+)\]\s*(#.*)?$")
+_VALUE = r"[-+0-9.eEinfa_]+|true|false|\"[^\"]*\""
+
+
+def with_values(text: str, values: Mapping[str, Any], *, header: str = "", source: str = "controller file") -> str:
+    """``text`` (a TOML controller file) with ``values`` set (key -> value), ``header`` comment lines first.
+
+    Raises
+    ------
+    SpecError
+        When a key cannot be placed (an array of tables, a value spread over lines) or
+        the written file does not read back as intended.
+    """
+    lines = text.splitlines()
+    for key, value in values.items():
+        lines = _set(lines, key, toml_literal(value), source)
+    out = "\n".join(lines) + "\n"
+    if header:
+        out = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines()) + out
+    expected = apply_values(tomllib.loads(text), dict(values), source=source)
+    if tomllib.loads(out) != expected:
+        raise SpecError("the tuned values could not be written into the file as intended (check its layout)",
+                        source=source)
+    return out
+
+
+def write_controller(original: Path, values: Mapping[str, Any], destination: Path, header: str) -> Path:
+    """Write ``original`` with ``values`` set to ``destination`` (see :func:`with_values`)."""
+    text = with_values(Path(original).read_text(), values, header=header, source=str(original))
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    destination.write_text(text)
+    return destination
+
+
+def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
+    parts = key.split(".")
+    table, leaf = ".".join(parts[:-1]), parts[-1]
+    current = ""
+    table_end = None  # index after the last line of `table`
+    header_at = 0 if table == "" else None
+    for i, line in enumerate(lines):
+        match = _HEADER.match(line)
+        if match:
+            if current == table and table_end is None and header_at is not None:
+                table_end = i
+            current = match.group(1).strip()
+            if current == table:
+                header_at = i
+            continue
+        if line.lstrip().startswith("[["):
+            current = "[[array]]"
+            continue
+        if current == table:
+            replaced, count = re.subn(rf"^(\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
+                                      line)
+            if count:
+                lines = list(lines)
+                lines[i] = replaced
+                return lines
+        inline_table, _, inline_leaf = key.rpartition(".")
+        owner, _, name = inline_table.rpartition(".")
+        if owner == current and name and re.match(rf"^\s*{re.escape(name)}\s*=\s*\{{", line):
+            replaced, count = re.subn(rf"([{{,]\s*{re.escape(inline_leaf)}\s*=\s*)({_VALUE})",
+                                      lambda m: m.group(1) + literal, line)
+            if count:
+                lines = list(lines)
+                lines[i] = replaced
+                return lines
+    if header_at is not None:  # the table exists and does not write the key: add it at the table's end
+        end = table_end if table_end is not None else len(lines)
+        while end > header_at + 1 and not lines[end - 1].strip():
+            end -= 1
+        return lines[:end] + [f"{leaf} = {literal}"] + lines[end:]
+    return lines + ["", f"[{table}]", f"{leaf} = {literal}"]
