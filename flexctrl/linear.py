@@ -187,6 +187,23 @@ def equilibrium(
     ``1 + |q_f|``) and takes the joint torques from the joint rows,
     ``tau = [g(q) + K q]_r``.  Velocities are zero.
 
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+    q_joints : sequence of float
+        Joint angles, rad (one per joint).
+    tol : float
+        Newton's relative step tolerance.
+    max_iter : int
+        Newton iterations at most.
+    q_flex0 : sequence of float, optional
+        Start for the elastic coordinates (m); default zero.
+
+    Returns
+    -------
+    OperatingPoint
+        ``x = (q, 0)`` and the holding torques ``u`` (N m).
+
     Raises
     ------
     SolverError
@@ -419,7 +436,22 @@ def _system_name(text: str) -> str:
 
 
 def discretize(sys: control.StateSpace, dt: float, method: str = "zoh") -> control.StateSpace:
-    """Sample ``sys`` with period ``dt`` (s), zero-order hold by default; signal names are kept."""
+    """Sample ``sys`` with period ``dt`` (s), zero-order hold by default; signal names are kept.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        A continuous system (e.g. from :func:`linearize`).
+    dt : float
+        Sample time, s (> 0).
+    method : str
+        ``control.sample_system``'s method (``"zoh"``, ``"tustin"``, ...).
+
+    Returns
+    -------
+    control.StateSpace
+        The discrete system, ``sys.dt == dt``.
+    """
     if not (dt > 0 and math.isfinite(dt)):
         raise SpecError(f"value {dt!r} is not allowed; allowed: a sample time > 0 s", key="sample_time")
     return control.sample_system(sys, dt, method=method, name=_system_name(f"{sys.name} sampled"))
@@ -461,7 +493,22 @@ class ModalSummary:
 
 
 def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
-    """Frequencies (Hz) and damping ratios of the eigenvalues of ``sys`` (continuous or discrete)."""
+    """Frequencies (Hz) and damping ratios of the eigenvalues of ``sys`` (continuous or discrete).
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Continuous, or discrete (its eigenvalues mapped by ``s = ln(z) / dt``).
+    tol : float
+        Relative size below which an imaginary part counts as zero; of each complex pair
+        only the member with a positive imaginary part is kept.
+
+    Returns
+    -------
+    ModalSummary
+        ``eigenvalues`` (1/s), ``frequency_hz`` (Hz) and ``damping`` (ratio; negative for
+        an unstable mode, NaN at zero), sorted by frequency.
+    """
     eig = np.linalg.eigvals(np.asarray(sys.A, dtype=float))
     if control.isdtime(sys, strict=True):
         with np.errstate(divide="ignore"):
@@ -483,6 +530,19 @@ def locked_frequencies(model, op: OperatingPoint | None = None, *, include_gravi
     ``op`` (default: zero joint angles and deflections).  ``include_gravity`` adds
     the gravitational stiffness ``d g_f / d q_f`` (the linearisation's elastic block).
     Both matrices are symmetrised (:func:`flexctrl.dynamics.amm.locked_spectrum` computes the spectrum).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+    op : OperatingPoint, optional
+        Where the mass and stiffness matrices are taken.
+    include_gravity : bool
+        Add the gravitational stiffness of the elastic coordinates.
+
+    Returns
+    -------
+    numpy.ndarray
+        Frequencies, Hz, one per elastic coordinate.
     """
     n, N = model.n_u, model.n_q
     if N == n:
