@@ -186,8 +186,8 @@ def _choose(scene, cache: SceneCache, tol: float, top: int, reference: str, safe
     ref_dt = scene.dt / max(1, math.ceil(scene.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
     return walk_and_judge(
         name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
-        run_rung=lambda m: simulaterung_name(scene, rung_name(m)),
-        run_reference=lambda dt: simulaterung_name(scene, reference, "rk4", dt), reference_dt=ref_dt)
+        run_rung=lambda m: simulate_rung(scene, rung_name(m), cache=cache),
+        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt, cache=cache), reference_dt=ref_dt)
 
 
 def controller_digest(path: str | Path) -> str:

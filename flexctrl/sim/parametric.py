@@ -6,7 +6,7 @@ differs per configuration, so a study over configurations would compile once per
 :func:`constants_as_parameters` rebuilds such a Function with its constants as a
 vector input: models whose graphs differ only in constant values then share one
 compiled library (the cache key is a hash of the generated code).  Used by the NMPC
-(:mod:`flexctrl.control.nmpc`) and the closed-loop plant step (:mod:`flexctrl.closedloop`).
+(:mod:`flexctrl.control.nmpc`) and the closed-loop plant step (:mod:`flexctrl.loop.plant_step`).
 """
 
 from __future__ import annotations

@@ -125,7 +125,7 @@ class Move:
     >>> move = Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     >>> move.t_arrive
     1.5
-    >>> [round(a, 4) for a in move.joint_reference().joints([0.75])[0]]
+    >>> [round(float(a), 4) for a in move.joint_reference().joints([0.75])[0]]
     [0.2618, 0.0, 0.0]
     """
 
