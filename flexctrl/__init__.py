@@ -62,7 +62,7 @@ _EXPORTS: dict[str, str] = {
     "run_study": "flexctrl.study.runner",
     "write_report": "flexctrl.study.report",
     "load_tuning": "flexctrl.spec.tuning",
-    "tune": "flexctrl.tune.tuner",
+    "tune": "flexctrl.tuning.tuner",
     # errors
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",

@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     from flexctrl.commands.common import stop_signals_interrupt
     from flexctrl.spec.tuning import load_tuning
-    from flexctrl.tune.tuner import tune
+    from flexctrl.tuning.tuner import tune
 
     spec = load_tuning(args.tuning, args.set)
     out = Path(args.out) if args.out else Path("out") / spec.name

@@ -37,6 +37,10 @@ class FullState:
         """The state ``y``."""
         return y
 
+    def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(E, F, G)`` of ``x_k = E x_{k-1} + F dy_k + G du_{k-1}``: the measurement itself."""
+        return np.zeros((n_y, n_y)), np.eye(n_y), np.zeros((n_y, n_u))
+
 
 def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
     """``int_0^dt exp(A s) ds G``: the exact discrete input matrix of a held input."""
@@ -116,6 +120,15 @@ class KalmanEstimator:
             pred = self.A @ self.dx + self.B @ du
             self.dx = pred + self.M @ (dy - self.C @ pred)
         return self.op.x + self.dx
+
+    def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(E, F, G)`` of the estimate in deviations, ``dx_k = E dx_{k-1} + F dy_k + G du_{k-1}``.
+
+        From the current-estimate form: ``dx_k = T (A dx_{k-1} + B du_{k-1}) + M (dy_k - D du_{k-1})``
+        with ``T = I - M C``.
+        """
+        T = np.eye(self.A.shape[0]) - self.M @ self.C
+        return T @ self.A, self.M, T @ self.B - self.M @ self.D
 
     @property
     def poles(self) -> np.ndarray:

@@ -141,6 +141,18 @@ class LQRController(Controller):
         """The gain at state ``x`` (scheduled or fixed)."""
         return self.K if self.schedule is None else self.schedule(x)
 
+    def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
+        """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
+
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
+        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the state estimate
+        and ``H = -K`` (the scheduled gain at ``q_joints``).
+        """
+        x = np.array(self.op.x, dtype=float)
+        x[: self.n_u] = np.asarray(q_joints, dtype=float)
+        E, F, G = self.observer.linear_form(self.sensors.n_y, self.n_u)
+        return E, F, G, -self.gain(x), np.zeros((self.n_u, self.sensors.n_y))
+
     @property
     def closed_loop_poles(self) -> np.ndarray:
         """Eigenvalues of ``A_d - B_d K`` at the target."""

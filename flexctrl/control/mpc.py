@@ -502,6 +502,11 @@ class MPCController(Controller):
         pb = self.problem
         return pb.Su[:, None] * pb.K / pb.Sx[None, :]
 
+    def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
+        """The unconstrained law (the LQR move ``-K dx`` on the estimate), as :meth:`LQRController.linear_law`."""
+        E, F, G = self.observer.linear_form(self.sensors.n_y, self.n_u)
+        return E, F, G, -self.K, np.zeros((self.n_u, self.sensors.n_y))
+
     def _reset(self) -> None:
         self.observer.reset()
         self._w = None

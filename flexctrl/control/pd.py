@@ -89,6 +89,27 @@ class PDController(Controller):
     def _reset(self) -> None:
         self._filtered = np.zeros(self.n_u)
 
+    def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
+        """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
+
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
+        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
+        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation
+        adds its Jacobian through ``J``.
+        """
+        n, n_y = self.n_u, self.sensors.n_y
+        Sq, Sqd = np.zeros((n, n_y)), np.zeros((n, n_y))
+        Sq[np.arange(n), self._iq] = 1.0
+        Sqd[np.arange(n), self._iqd] = 1.0
+        a = self.filter_pole
+        F = -(1.0 - a) * (np.diag(self.kp) @ Sq + np.diag(self.kd) @ Sqd)
+        J = np.zeros((n, n_y))
+        if self.gravity_mode == "measured":
+            qr = ca.SX.sym("qr", n)
+            jac = ca.Function("dtau_g", [qr], [ca.jacobian(self.gravity(qr), qr)])
+            J = np.array(jac(np.asarray(q_joints, dtype=float)), dtype=float) @ Sq
+        return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
+
     def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(q_ref, qd_ref, u_ref, u_static)`` at time ``t`` (s); ``q`` are the measured joints.
 

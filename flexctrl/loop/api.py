@@ -126,7 +126,7 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
                          t_arrive=path.t_arrive, settle_allowance=judge.settle_allowance, band=judge.band,
                          stable_band=judge.stable_band, duration=float(duration), torque_limits=limits,
                          controller_stats=report, step_times=controller.stats.step_times,
-                         radius=linear_closed_loop_radius(plant, controller, path.q_target))
+                         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors))
     summary = {
         "controller": {"kind": controller.settings.kind, "sample_time": Ts, **report},
         "plant": {"fidelity": str(plant.fidelity), "n_states": plant.n_x, "payload_kg": plant.spec.payload.mass},

@@ -131,7 +131,8 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         t_arrive=scene.t_arrive, settle_allowance=scene.settle_allowance, band=scene.band,
         stable_band=scene.stable_band, duration=plant_scene.duration,
         torque_limits=[j.torque_limit for j in arm.joints], controller_stats=report,
-        step_times=ctrl.stats.step_times, radius=linear_closed_loop_radius(plant, ctrl, scene.target_q))
+        step_times=ctrl.stats.step_times,
+        radius=linear_closed_loop_radius(plant, ctrl, scene.target_q, setup.sensors))
     if choice is not None:
         metrics["chosen_modes"] = float(choice.choice.count or 0)
         metrics["chosen_dt"] = float(choice.dt)

@@ -36,7 +36,7 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
     population = 8                           # candidates per generation, evaluated in parallel
     seed = 1
 
-The scenario study and the metric names are checked by :mod:`flexctrl.tune` (they need
+The scenario study and the metric names are checked by :mod:`flexctrl.tuning` (they need
 the study and closed-loop layers); everything here is plain data checked on reading, and
 each parameter key is checked against the controller file itself, so a key no
 controller has is refused before any run.

@@ -27,7 +27,7 @@ from flexctrl.spec.controller import load_controller
 from flexctrl.spec.tuning import TuningSpec
 from flexctrl.study.plan import StudySpec
 from flexctrl.study.store import ResultStore
-from flexctrl.tune.scenarios import candidate_overrides, candidate_runs
+from flexctrl.tuning.scenarios import candidate_overrides, candidate_runs
 
 #: Score of an infeasible candidate per violation (far above any metric in SI units).
 PENALTY = 1.0e6
@@ -94,7 +94,7 @@ class Evaluator:
     ----------
     spec : TuningSpec
     study : StudySpec
-        The scenario study (:func:`flexctrl.tune.scenarios.scenario_study`).
+        The scenario study (:func:`flexctrl.tuning.scenarios.scenario_study`).
     store : ResultStore
         Where every run's record is kept (opened by the caller).
     backend

@@ -29,10 +29,10 @@ from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.spec.tuning import TuningSpec, load_tuning
 from flexctrl.study.runner import make_backend
 from flexctrl.study.store import ResultStore, atomic_write
-from flexctrl.tune.controller_file import write_controller
-from flexctrl.tune.evaluate import Evaluation, Evaluator
-from flexctrl.tune.optimizers import BudgetSpent, minimize
-from flexctrl.tune.scenarios import scenario_study
+from flexctrl.tuning.controller_file import write_controller
+from flexctrl.tuning.evaluate import Evaluation, Evaluator
+from flexctrl.tuning.optimizers import BudgetSpent, minimize
+from flexctrl.tuning.scenarios import scenario_study
 
 
 @dataclass
@@ -91,7 +91,7 @@ class TuningResult:
 
 def tune(tuning: str | Path | TuningSpec, out: str | Path, *, overrides: Iterable[str] = (), workers: int | None = None,
          scheduler: str | None = None, client: Any = None, progress: bool = True, stream=None) -> TuningResult:
-    """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tune.tuner` for the files written).
+    """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tuning.tuner` for the files written).
 
     Parameters
     ----------
@@ -161,20 +161,18 @@ def _search(spec: TuningSpec, evaluator: Evaluator, evaluations: list[Evaluation
     budget = spec.optimizer.evaluations
 
     def evaluate(points):
+        points = list(points)
         remaining = budget - (len(evaluations) - 1)
         if remaining <= 0:
             raise BudgetSpent
-        points = list(points)[:remaining]
         batch = [{p.key: p.from_unit(lo + float(z) * (hi - lo)) for p, lo, hi, z in zip(params, lows, highs, point)}
-                 for point in points]
+                 for point in points[:remaining]]
         judged = evaluator.evaluate(batch, len(evaluations))
         evaluations.extend(judged)
         _save_evaluations(out, evaluations)
         _log(stream, progress, spec, evaluations, evaluator, started)
-        scores = [e.score for e in judged]
-        if len(scores) < len(points):
-            raise BudgetSpent
-        return scores
+        # beyond the budget a generation's members are not run: they score worst, and the next call stops
+        return [e.score for e in judged] + [math.inf] * (len(points) - len(judged))
 
     minimize(spec.optimizer.method, evaluate, x0, budget, spec.optimizer.population, spec.optimizer.seed)
 
@@ -204,7 +202,7 @@ def _log(stream, progress: bool, spec: TuningSpec, evaluations: list[Evaluation]
 
 
 def _write(result: TuningResult) -> None:
-    from flexctrl.tune.report import write_report
+    from flexctrl.tuning.report import write_report
 
     out = result.directory
     out.mkdir(parents=True, exist_ok=True)

@@ -68,9 +68,9 @@ def _differential_evolution(evaluate: Evaluate, x0: np.ndarray, budget: int, pop
     from scipy.optimize import differential_evolution
 
     d = x0.size
-    multiplier = max(1, math.ceil(population / d))  # scipy's population is multiplier x d
-    size = multiplier * d
-    generations = max(0, budget // size - 1)
+    multiplier = max(1, math.ceil(population / d))  # scipy's population is multiplier x d, at least 5
+    size = max(5, multiplier * d)
+    generations = max(0, math.ceil(budget / size) - 1)
 
     def batch_map(_function, points):
         return evaluate([np.asarray(p, dtype=float) for p in points])
