@@ -18,6 +18,13 @@ Automatic gains (``kp``/``kd`` empty): ``kp_i = M_ii w^2``, ``kd_i = 2 zeta M_ii
 with ``w = 2 pi bandwidth`` and ``M_ii`` the inertia joint ``i`` sees at the target
 with the other coordinates held.
 
+Active damping from strain gauges (``strain_rate_gain``, optional): joint ``i`` adds
+``-g_i r_i`` with ``r_i`` the rate of its own link's root curvature, differenced over a
+sample and low-passed at ``strain_rate_filter`` (Hz; 0: none), outside ``F(s)``.  The root
+bending moment of link ``i`` acts on hub ``i`` where its motor acts, so the term stays
+close to collocated: it damps the link's vibration without needing its mode shapes,
+which change with the payload and the pose.
+
 ``F(s)`` is a first-order low-pass of corner ``torque_filter`` (Hz; exact
 discretisation, ``f_k = a f_{k-1} + (1 - a) tau_pd,k``, ``a = exp(-2 pi fc dt)``, started
 at zero; 0 switches it off).  It is needed on arms whose hubs are light: the torque
@@ -85,9 +92,38 @@ class PDController(Controller):
         else:
             self._iq = np.array([names.index(f"q{i + 1}") for i in range(n)])
             self._iqd = np.array([names.index(f"dq{i + 1}") for i in range(n)])
+        self.strain_gain = np.zeros(0)
+        gains = getattr(settings, "strain_rate_gain", ())
+        if gains:
+            if len(gains) != n:
+                raise SpecError(f"value {list(gains)!r} has {len(gains)} gains; expected {n} (one per joint)",
+                                key="strain_rate_gain")
+            missing = [f"kappa{i + 1}" for i in range(n) if f"kappa{i + 1}" not in names]
+            if missing:
+                raise SpecError(f"the sensors give no {', '.join(missing)} (links without modes have no strain "
+                                "gauge); allowed: strain_rate_gain only on a flexible model", key="strain_rate_gain")
+            self.strain_gain = np.asarray(gains, dtype=float)
+            self._ik = np.array([names.index(f"kappa{i + 1}") for i in range(n)])
+            corner = settings.strain_rate_filter
+            self.strain_pole = math.exp(-2 * math.pi * corner * settings.sample_time) if corner > 0 else 0.0
+        self._kappa = None
+        self._rate = np.zeros(n)
 
     def _reset(self) -> None:
         self._filtered = np.zeros(self.n_u)
+        self._kappa = None
+        self._rate = np.zeros(self.n_u)
+
+    def _strain_damping(self, y: np.ndarray) -> np.ndarray | float:
+        """``-g r``, with ``r`` the filtered rate of the root curvatures (zero on the first sample)."""
+        if not self.strain_gain.size:
+            return 0.0
+        kappa = y[self._ik]
+        raw = np.zeros(self.n_u) if self._kappa is None else (kappa - self._kappa) / self.sample_time
+        self._kappa = kappa
+        b = self.strain_pole
+        self._rate = b * self._rate + (1.0 - b) * raw
+        return -self.strain_gain * self._rate
 
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
@@ -108,7 +144,17 @@ class PDController(Controller):
             qr = ca.SX.sym("qr", n)
             jac = ca.Function("dtau_g", [qr], [ca.jacobian(self.gravity(qr), qr)])
             J = np.array(jac(np.asarray(q_joints, dtype=float)), dtype=float) @ Sq
-        return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
+        if not self.strain_gain.size:
+            return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
+        # memory (filtered torque, last curvatures, filtered curvature rate):
+        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r + J dy
+        Sk = np.zeros((n, n_y))
+        Sk[np.arange(n), self._ik] = 1.0
+        b, Ts, Z, I = self.strain_pole, self.sample_time, np.zeros((n, n)), np.eye(n)
+        E = np.block([[a * I, Z, Z], [Z, Z, Z], [Z, -(1.0 - b) / Ts * I, b * I]])
+        F3 = np.vstack([F, Sk, (1.0 - b) / Ts * Sk])
+        H = np.hstack([I, Z, -np.diag(self.strain_gain)])
+        return E, F3, np.zeros((3 * n, n)), H, J
 
     def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(q_ref, qd_ref, u_ref, u_static)`` at time ``t`` (s); ``q`` are the measured joints.
@@ -133,7 +179,7 @@ class PDController(Controller):
         self.record("ok")
         a = self.filter_pole
         self._filtered = a * self._filtered + (1.0 - a) * (self.kp * (q_ref - q) + self.kd * (qd_ref - qd))
-        return tau_g + tau_ff + self._filtered
+        return tau_g + tau_ff + self._filtered + self._strain_damping(y)
 
 
 def pd_parts(model, op: OperatingPoint, settings: PDSettings):

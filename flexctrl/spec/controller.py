@@ -198,6 +198,8 @@ def _pd_values(r: TableReader, d: PDSettings) -> dict[str, Any]:
         "gravity": _literal(r, "gravity", d.gravity, _field_type(PDSettings, "gravity")),
         "saturate": r.boolean("saturate", d.saturate),
         "feedforward": r.boolean("feedforward", d.feedforward),
+        "strain_rate_gain": r.numbers("strain_rate_gain", d.strain_rate_gain, unit="N m per 1/(m s)"),
+        "strain_rate_filter": r.nonnegative("strain_rate_filter", d.strain_rate_filter, unit="Hz"),
         "sensors": _sensors(r, d.sensors),
     }
 

@@ -260,6 +260,13 @@ class PDSettings:
     feedforward : bool
         Add the inertial feed-forward torque of a moving reference (the rigid inverse
         dynamics along the path); no effect for a step or without a reference.
+    strain_rate_gain : tuple of float
+        Active damping from the strain gauges, one gain per joint (N m per 1/(m s)): joint
+        ``i`` adds ``-g_i d(kappa_i)/dt``, the rate of its own link's root curvature (the
+        gauge next to its motor, so the loop stays nearly collocated).  Empty: none.
+        Needs ``"strain"`` among the sensors.
+    strain_rate_filter : float
+        Corner frequency (Hz) of the first-order low-pass on the differentiated strain; 0: none.
     sensors : SensorSettings
         Default: joint encoders and joint rates.
     """
@@ -274,6 +281,8 @@ class PDSettings:
     gravity: GravityCompensation = "target"
     saturate: bool = True
     feedforward: bool = True
+    strain_rate_gain: tuple[float, ...] = ()
+    strain_rate_filter: float = 0.0
     sensors: SensorSettings = field(default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates")))
 
     def __post_init__(self) -> None:
@@ -293,6 +302,11 @@ class PDSettings:
         if missing and not self.sensors.full_state:
             raise SpecError(f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
                             "(or 'state')", key="sensors.outputs")
+        _numbers("strain_rate_gain", self.strain_rate_gain)
+        _number("strain_rate_filter", self.strain_rate_filter, low=0.0, unit="Hz")
+        if self.strain_rate_gain and "strain" not in self.sensors.outputs:
+            raise SpecError(f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' among "
+                            f"sensors.outputs (now {list(self.sensors.outputs)!r})", key="strain_rate_gain")
 
 
 @dataclass(frozen=True)

@@ -248,9 +248,16 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
 
 
 def _file_value(document: dict, key: str) -> Any:
+    """The file's value of a dotted key; ``name[i]`` is the i-th (1-based) entry of a list."""
     node: Any = document
     for part in key.split("."):
-        if not isinstance(node, dict) or part not in node:
+        name, _, index = part.partition("[")
+        if not isinstance(node, dict) or name not in node:
             return None
-        node = node[part]
+        node = node[name]
+        if index:
+            i = int(index.rstrip("]")) if index.rstrip("]").isdigit() else 0
+            if not isinstance(node, list) or not 1 <= i <= len(node):
+                return None
+            node = node[i - 1]
     return node

@@ -57,6 +57,9 @@ def write_controller(original: Path, values: Mapping[str, Any], destination: Pat
 def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
     parts = key.split(".")
     table, leaf = ".".join(parts[:-1]), parts[-1]
+    element = re.fullmatch(r"(\w+)\[(\d+)\]", leaf)
+    if element:
+        return _set_element(lines, table, element.group(1), int(element.group(2)), literal, source)
     current = ""
     table_end = None  # index after the last line of `table`
     header_at = 0 if table == "" else None
@@ -94,3 +97,24 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
             end -= 1
         return lines[:end] + [f"{leaf} = {literal}"] + lines[end:]
     return lines + ["", f"[{table}]", f"{leaf} = {literal}"]
+
+
+def _set_element(lines: list[str], table: str, name: str, index: int, literal: str, source: str) -> list[str]:
+    """Entry ``index`` (1-based) of the one-line array ``name = [...]`` in ``table``."""
+    current = ""
+    for i, line in enumerate(lines):
+        match = _HEADER.match(line)
+        if match:
+            current = match.group(1).strip()
+            continue
+        found = re.match(rf"^(\s*{re.escape(name)}\s*=\s*)(\[[^\]]*\])(.*)$", line)
+        if current == table and found:
+            values = tomllib.loads(f"v = {found.group(2)}")["v"]
+            if not 1 <= index <= len(values):
+                break
+            values[index - 1] = tomllib.loads(f"v = {literal}")["v"]
+            out = list(lines)
+            out[i] = found.group(1) + toml_literal(values) + found.group(3)
+            return out
+    raise SpecError(f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array '{name}' with "
+                    f"that entry; allowed: write the array in the file first", source=source)
