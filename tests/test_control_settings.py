@@ -35,12 +35,20 @@ def test_all_six_files_are_shipped():
 
 
 def test_degrees_in_files_become_radians():
-    s = load_controller(ROOT / "controllers" / "lqr.toml")
-    assert s.weights.joint == pytest.approx(math.radians(0.5))
-    assert s.weights.joint_rate == pytest.approx(math.radians(30.0))
-    lqg = load_controller(ROOT / "controllers" / "lqg.toml")
-    assert lqg.sensors.outputs == ("joints", "strain")
-    assert lqg.sensors.joints == pytest.approx(math.radians(0.005))
+    import tomllib
+
+    for name in ("lqr", "lqg", "pd"):
+        path = ROOT / "controllers" / f"{name}.toml"
+        document = tomllib.loads(path.read_text())
+        s = load_controller(path)
+        if "weights" in document:
+            assert s.weights.joint == pytest.approx(math.radians(document["weights"]["joint_deg"]), rel=1e-15)
+            assert s.weights.joint_rate == pytest.approx(math.radians(document["weights"]["joint_rate_deg_s"]),
+                                                         rel=1e-15)
+        noise = document["sensors"]["noise"]
+        assert s.sensors.outputs == tuple(document["sensors"]["outputs"])
+        assert s.sensors.joints == pytest.approx(math.radians(noise["joints_deg"]), rel=1e-15)
+        assert s.sensors.strain == noise.get("strain", s.sensors.strain)  # not an angle: unchanged
 
 
 def _write(tmp_path, text: str) -> Path:

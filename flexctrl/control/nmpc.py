@@ -91,7 +91,8 @@ from flexctrl.sim.parametric import constants_as_parameters
 from flexctrl.sim.rk4 import rk4_next
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
-from flexctrl.control.mpc import ScaledProblem, Solution, _shift_blocks, scaled_problem
+from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
+from flexctrl.control.qp_backends import Solution
 from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.linear import OperatingPoint, torque_limits
 

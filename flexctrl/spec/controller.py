@@ -232,6 +232,13 @@ def _soft_values(r: TableReader, cls: type, d) -> dict[str, Any]:
     }
 
 
+def _whole_numbers(r: TableReader, name: str, default: tuple[int, ...]) -> tuple[int, ...]:
+    values = r.numbers(name, default, low=1.0, unit="samples")
+    if any(v != int(v) for v in values):
+        raise r.error(name, f"value {list(values)!r} is not allowed; allowed: whole numbers >= 1 (samples)")
+    return tuple(int(v) for v in values)
+
+
 def _read_mpc(r: TableReader) -> MPCSettings:
     d = MPCSettings()
     values = {
@@ -247,6 +254,8 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "warm_start": _literal(r, "warm_start", d.warm_start, _field_type(MPCSettings, "warm_start")),
         "fallback": _literal(r, "fallback", d.fallback, _field_type(MPCSettings, "fallback")),
         "accept_inaccurate": r.boolean("accept_inaccurate", d.accept_inaccurate),
+        "blocks": _whole_numbers(r, "blocks", d.blocks),
+        "constraint_stride": r.integer("constraint_stride", d.constraint_stride, low=1, high=1000),
         "osqp": _osqp(r),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Literal, Union, get_args
+from typing import Literal, Union
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.field_checks import boolean_field, choice_field, integer_field, number_field, numbers_field
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
 
 ControllerKind = Literal["pd", "lqr", "mpc", "nmpc", "shaped"]
@@ -33,60 +34,6 @@ RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
 Sensitivities = Literal["frozen", "exact"]
 Shaper = Literal["zv", "zvd", "none"]
 FrequencySource = Literal["closed_loop", "locked"]
-
-
-# --------------------------------------------------------------------------------------
-# validation helpers (used by every settings class)
-# --------------------------------------------------------------------------------------
-def _choice(key: str, value, literal) -> None:
-    allowed = get_args(literal)
-    if value not in allowed:
-        import difflib
-
-        hint = difflib.get_close_matches(str(value), [str(a) for a in allowed], n=1)
-        extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise SpecError(f"value {value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}{extra}", key=key)
-
-
-def _number(key: str, value, *, low: float | None = None, high: float | None = None, low_open: bool = False,
-            unit: str = "") -> None:
-    parts = []
-    if low is not None:
-        parts.append(f"{'>' if low_open else '>='} {low:g}")
-    if high is not None:
-        parts.append(f"<= {high:g}")
-    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SpecError(f"value {value!r} is not a number; allowed: {allowed}", key=key)
-    bad = (not math.isfinite(value) or (low is not None and (value <= low if low_open else value < low))
-           or (high is not None and value > high))
-    if bad:
-        raise SpecError(f"value {value!r} is out of range; allowed: {allowed}", key=key)
-
-
-def _integer(key: str, value, *, low: int | None = None, high: int | None = None) -> None:
-    allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
-    if isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low) or (
-            high is not None and value > high):
-        raise SpecError(f"value {value!r} is not allowed; allowed: {allowed}", key=key)
-
-
-def _numbers(key: str, value, *, low: float | None = None, low_open: bool = False, unit: str = "") -> None:
-    if not isinstance(value, tuple):
-        raise SpecError(f"value {value!r} is not a tuple of numbers", key=key)
-    for i, v in enumerate(value):
-        _number(f"{key}[{i}]", v, low=low, low_open=low_open, unit=unit)
-
-
-def _boolean(key: str, value) -> None:
-    if not isinstance(value, bool):
-        raise SpecError(f"value {value!r} is not a boolean; allowed: true or false", key=key)
-
-
-def _prefixed(prefix: str, error: SpecError) -> SpecError:
-    key = f"{prefix}.{error.key}" if error.key else prefix
-    message = str(error).split(": ", 1)[1] if error.key else str(error)
-    return SpecError(message, source=error.source, key=key)
 
 
 # --------------------------------------------------------------------------------------
@@ -122,14 +69,14 @@ class SensorSettings:
                             f"{', '.join(map(repr, SENSOR_KINDS))}", key="outputs")
         for i, kind in enumerate(self.outputs):
             if kind not in SENSOR_KINDS:
-                _choice(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
+                choice_field(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
         if len(set(self.outputs)) != len(self.outputs):
             raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
         if "state" in self.outputs and len(self.outputs) > 1:
             raise SpecError(f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
                             key="outputs")
         for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection"):
-            _number(name, getattr(self, name), low=0.0)
+            number_field(name, getattr(self, name), low=0.0)
 
     def noise(self) -> dict[str, float]:
         """Noise standard deviation per sensor kind."""
@@ -171,7 +118,7 @@ class Weights:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            _number(f.name, getattr(self, f.name), low=0.0, low_open=True)
+            number_field(f.name, getattr(self, f.name), low=0.0, low_open=True)
 
 
 @dataclass(frozen=True)
@@ -195,9 +142,9 @@ class EstimatorSettings:
     modal_force_noise: float = 1.0
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["kalman"])
-        _number("torque_noise", self.torque_noise, low=0.0)
-        _number("modal_force_noise", self.modal_force_noise, low=0.0)
+        choice_field("kind", self.kind, Literal["kalman"])
+        number_field("torque_noise", self.torque_noise, low=0.0)
+        number_field("modal_force_noise", self.modal_force_noise, low=0.0)
 
 
 @dataclass(frozen=True)
@@ -222,8 +169,8 @@ class ScheduleSettings:
         if len(self.grid) != len(self.joints):
             raise SpecError(f"value {self.grid!r} has {len(self.grid)} grids for {len(self.joints)} joints", key="grid")
         for j, (joint, values) in enumerate(zip(self.joints, self.grid)):
-            _integer(f"joints[{j}]", joint, low=1)
-            _numbers(f"q{joint}", values)
+            integer_field(f"joints[{j}]", joint, low=1)
+            numbers_field(f"q{joint}", values)
             if len(values) < 2 or any(b <= a for a, b in zip(values, values[1:])):
                 raise SpecError(f"value {[round(math.degrees(v), 6) for v in values]!r} (deg) is not allowed; "
                                 "allowed: at least 2 strictly increasing angles", key=f"q{joint}")
@@ -286,24 +233,24 @@ class PDSettings:
     sensors: SensorSettings = field(default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates")))
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["pd"])
-        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
-        _numbers("kp", self.kp, low=0.0)
-        _numbers("kd", self.kd, low=0.0)
+        choice_field("kind", self.kind, Literal["pd"])
+        number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        numbers_field("kp", self.kp, low=0.0)
+        numbers_field("kd", self.kd, low=0.0)
         if len(self.kp) != len(self.kd):
             raise SpecError(f"value {list(self.kd)!r} has {len(self.kd)} gains but kp has {len(self.kp)}", key="kd")
-        _number("bandwidth", self.bandwidth, low=0.0, low_open=True, unit="Hz")
-        _number("damping", self.damping, low=0.0, low_open=True)
-        _number("torque_filter", self.torque_filter, low=0.0, unit="Hz")
-        _choice("gravity", self.gravity, GravityCompensation)
-        _boolean("saturate", self.saturate)
-        _boolean("feedforward", self.feedforward)
+        number_field("bandwidth", self.bandwidth, low=0.0, low_open=True, unit="Hz")
+        number_field("damping", self.damping, low=0.0, low_open=True)
+        number_field("torque_filter", self.torque_filter, low=0.0, unit="Hz")
+        choice_field("gravity", self.gravity, GravityCompensation)
+        boolean_field("saturate", self.saturate)
+        boolean_field("feedforward", self.feedforward)
         missing = {"joints", "joint_rates"} - set(self.sensors.outputs)
         if missing and not self.sensors.full_state:
             raise SpecError(f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
                             "(or 'state')", key="sensors.outputs")
-        _numbers("strain_rate_gain", self.strain_rate_gain)
-        _number("strain_rate_filter", self.strain_rate_filter, low=0.0, unit="Hz")
+        numbers_field("strain_rate_gain", self.strain_rate_gain)
+        number_field("strain_rate_filter", self.strain_rate_filter, low=0.0, unit="Hz")
         if self.strain_rate_gain and "strain" not in self.sensors.outputs:
             raise SpecError(f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' among "
                             f"sensors.outputs (now {list(self.sensors.outputs)!r})", key="strain_rate_gain")
@@ -337,9 +284,9 @@ class LQRSettings:
     saturate: bool = True
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["lqr"])
-        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
-        _boolean("saturate", self.saturate)
+        choice_field("kind", self.kind, Literal["lqr"])
+        number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        boolean_field("saturate", self.saturate)
 
 
 @dataclass(frozen=True)
@@ -367,18 +314,18 @@ class OSQPSettings:
 
     def __post_init__(self) -> None:
         for name in ("eps_abs", "eps_rel"):
-            _number(name, getattr(self, name), low=0.0)
+            number_field(name, getattr(self, name), low=0.0)
         for name in ("rho", "sigma"):
-            _number(name, getattr(self, name), low=0.0, low_open=True)
-        _number("alpha", self.alpha, low=0.0, high=2.0, low_open=True)
-        _boolean("adaptive_rho", self.adaptive_rho)
-        _integer("adaptive_rho_interval", self.adaptive_rho_interval, low=0)
-        _number("adaptive_rho_tolerance", self.adaptive_rho_tolerance, low=1.0)
-        _boolean("polishing", self.polishing)
-        _integer("max_iter", self.max_iter, low=1)
-        _number("time_limit", self.time_limit, low=0.0, unit="s")
-        _integer("check_termination", self.check_termination, low=0)
-        _integer("scaling", self.scaling, low=0)
+            number_field(name, getattr(self, name), low=0.0, low_open=True)
+        number_field("alpha", self.alpha, low=0.0, high=2.0, low_open=True)
+        boolean_field("adaptive_rho", self.adaptive_rho)
+        integer_field("adaptive_rho_interval", self.adaptive_rho_interval, low=0)
+        number_field("adaptive_rho_tolerance", self.adaptive_rho_tolerance, low=1.0)
+        boolean_field("polishing", self.polishing)
+        integer_field("max_iter", self.max_iter, low=1)
+        number_field("time_limit", self.time_limit, low=0.0, unit="s")
+        integer_field("check_termination", self.check_termination, low=0)
+        integer_field("scaling", self.scaling, low=0)
 
     def as_dict(self) -> dict:
         """Keyword arguments for ``osqp.OSQP.setup``."""
@@ -419,6 +366,12 @@ class MPCSettings:
     fallback : {"shift", "lqr", "hold"}
         When the QP is not solved: the previous plan shifted (then LQR once it runs out),
         LQR, or hold the previous torque.
+    blocks : tuple of int
+        Move blocking (condensed only): the horizon's samples in blocks over which the
+        torque is held, e.g. ``[1, 1, 5, 10, ...]`` adding up to ``horizon``; empty: every
+        move free.  A long horizon that covers a whole manoeuvre stays a small QP.
+    constraint_stride : int
+        Soft constraints on every ``constraint_stride``-th predicted state (condensed only).
     accept_inaccurate : bool
         Use an OSQP "solved inaccurate" solution instead of falling back.
     osqp : OSQPSettings
@@ -442,29 +395,45 @@ class MPCSettings:
     warm_start: WarmStart = "shift"
     fallback: Fallback = "shift"
     accept_inaccurate: bool = True
+    blocks: tuple[int, ...] = ()
+    constraint_stride: int = 1
     osqp: OSQPSettings = field(default_factory=OSQPSettings)
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["mpc"])
-        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
-        _integer("horizon", self.horizon, low=1, high=1000)
-        _choice("terminal", self.terminal, Literal["dare", "stage"])
-        _choice("soft", self.soft, SoftConstraint)
-        _number("deflection_limit", self.deflection_limit, low=0.0, unit="m")
-        _number("tip_limit", self.tip_limit, low=0.0, unit="m")
-        _number("slack_l1", self.slack_l1, low=0.0)
-        _number("slack_l2", self.slack_l2, low=0.0, low_open=True)
-        _choice("formulation", self.formulation, Formulation)
-        _choice("backend", self.backend, QPBackend)
-        _choice("scaling", self.scaling, Scaling)
-        _choice("warm_start", self.warm_start, WarmStart)
-        _choice("fallback", self.fallback, Fallback)
-        _boolean("accept_inaccurate", self.accept_inaccurate)
+        choice_field("kind", self.kind, Literal["mpc"])
+        number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        integer_field("horizon", self.horizon, low=1, high=1000)
+        choice_field("terminal", self.terminal, Literal["dare", "stage"])
+        choice_field("soft", self.soft, SoftConstraint)
+        number_field("deflection_limit", self.deflection_limit, low=0.0, unit="m")
+        number_field("tip_limit", self.tip_limit, low=0.0, unit="m")
+        number_field("slack_l1", self.slack_l1, low=0.0)
+        number_field("slack_l2", self.slack_l2, low=0.0, low_open=True)
+        choice_field("formulation", self.formulation, Formulation)
+        choice_field("backend", self.backend, QPBackend)
+        choice_field("scaling", self.scaling, Scaling)
+        choice_field("warm_start", self.warm_start, WarmStart)
+        choice_field("fallback", self.fallback, Fallback)
+        boolean_field("accept_inaccurate", self.accept_inaccurate)
         if self.backend == "hpipm" and self.formulation != "sparse":
             raise SpecError(f"value {self.formulation!r} is not allowed with backend 'hpipm'; allowed: 'sparse'",
                             key="formulation")
+        if not isinstance(self.blocks, tuple) or not all(isinstance(b, int) and not isinstance(b, bool) and b >= 1
+                                                          for b in self.blocks):
+            raise SpecError(f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 (samples "
+                            "per block)", key="blocks")
+        if self.blocks and sum(self.blocks) != self.horizon:
+            raise SpecError(f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks that "
+                            f"add up to the horizon ({self.horizon})", key="blocks")
+        if self.blocks and self.formulation != "condensed":
+            raise SpecError(f"value {self.formulation!r} is not allowed with move blocking; allowed: 'condensed'",
+                            key="formulation")
+        integer_field("constraint_stride", self.constraint_stride, low=1, high=self.horizon)
+        if self.constraint_stride > 1 and self.formulation != "condensed":
+            raise SpecError(f"value {self.formulation!r} is not allowed with constraint_stride > 1; allowed: "
+                            "'condensed'", key="formulation")
 
 
 @dataclass(frozen=True)
@@ -529,22 +498,22 @@ class NMPCSettings:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["nmpc"])
-        _number("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
-        _integer("horizon", self.horizon, low=1, high=1000)
-        _integer("substeps", self.substeps, low=0, high=200)
-        _choice("sensitivities", self.sensitivities, Sensitivities)
-        _choice("mode", self.mode, NMPCMode)
-        _choice("nlp_solver", self.nlp_solver, NLPSolver)
-        _choice("qp_solver", self.qp_solver, RTIQPSolver)
-        _integer("max_iter", self.max_iter, low=1)
-        _integer("init_iter", self.init_iter, low=0)
-        _choice("soft", self.soft, SoftConstraint)
-        _number("deflection_limit", self.deflection_limit, low=0.0, unit="m")
-        _number("tip_limit", self.tip_limit, low=0.0, unit="m")
-        _number("slack_l1", self.slack_l1, low=0.0)
-        _number("slack_l2", self.slack_l2, low=0.0, low_open=True)
-        _boolean("compile", self.compile)
+        choice_field("kind", self.kind, Literal["nmpc"])
+        number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
+        integer_field("horizon", self.horizon, low=1, high=1000)
+        integer_field("substeps", self.substeps, low=0, high=200)
+        choice_field("sensitivities", self.sensitivities, Sensitivities)
+        choice_field("mode", self.mode, NMPCMode)
+        choice_field("nlp_solver", self.nlp_solver, NLPSolver)
+        choice_field("qp_solver", self.qp_solver, RTIQPSolver)
+        integer_field("max_iter", self.max_iter, low=1)
+        integer_field("init_iter", self.init_iter, low=0)
+        choice_field("soft", self.soft, SoftConstraint)
+        number_field("deflection_limit", self.deflection_limit, low=0.0, unit="m")
+        number_field("tip_limit", self.tip_limit, low=0.0, unit="m")
+        number_field("slack_l1", self.slack_l1, low=0.0)
+        number_field("slack_l2", self.slack_l2, low=0.0, low_open=True)
+        boolean_field("compile", self.compile)
 
 
 @dataclass(frozen=True)
@@ -576,11 +545,11 @@ class ShapedSettings:
     pd: PDSettings = field(default_factory=PDSettings)
 
     def __post_init__(self) -> None:
-        _choice("kind", self.kind, Literal["shaped"])
-        _choice("shaper", self.shaper, Shaper)
-        _integer("modes", self.modes, low=1, high=12)
-        _choice("frequency_source", self.frequency_source, FrequencySource)
-        _number("move_time", self.move_time, low=0.0, unit="s")
+        choice_field("kind", self.kind, Literal["shaped"])
+        choice_field("shaper", self.shaper, Shaper)
+        integer_field("modes", self.modes, low=1, high=12)
+        choice_field("frequency_source", self.frequency_source, FrequencySource)
+        number_field("move_time", self.move_time, low=0.0, unit="s")
 
     @property
     def sample_time(self) -> float:

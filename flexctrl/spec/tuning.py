@@ -11,6 +11,8 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
     high = 1.0
     scale = "log"                            # "log" (default; low > 0) or "linear"
     integer = false                          # true: rounded to whole numbers (e.g. horizon)
+    step = 5e-4                              # optional: rounded to a multiple of step (a sample time the
+                                             # scene's plant step divides)
 
     [scenarios]                              # a study in the study file syntax (executor closed_loop):
     scene = "scenes/move_joint1_30deg.toml"  # fixed settings and [scenarios.grid] axes, [scenarios.set] ...
@@ -73,6 +75,8 @@ class ParameterSpec:
         The optimiser searches ``log10(value)`` or the value itself.
     integer : bool
         Round to a whole number before use.
+    step : float or None
+        Round to a multiple of ``step`` before use (e.g. sample times the plant step divides).
     initial : float
         The controller file's own value (the start of the search), clipped to the bounds.
     """
@@ -83,6 +87,7 @@ class ParameterSpec:
     scale: str = "log"
     integer: bool = False
     initial: float | None = None
+    step: float | None = None
 
     def to_unit(self, value: float) -> float:
         """The value in the optimiser's coordinate (log10 or linear)."""
@@ -93,6 +98,8 @@ class ParameterSpec:
         (what a file shows; the runs use exactly the value written), whole for integers."""
         value = 10.0 ** coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)
+        if self.step is not None:
+            value = float(f"{round(value / self.step) * self.step:.12g}")
         return float(round(value)) if self.integer else value
 
 
@@ -143,7 +150,7 @@ class TuningSpec:
         return {
             "name": self.name, "source": self.source, "controller": str(self.controller),
             "parameters": [{"key": p.key, "low": p.low, "high": p.high, "scale": p.scale, "integer": p.integer,
-                            "initial": p.initial} for p in self.parameters],
+                            "step": p.step, "initial": p.initial} for p in self.parameters],
             "objective": {"metric": self.objective.metric, "statistic": self.objective.statistic},
             "constraints": {"stable": self.constraints.stable, "torque_limits": self.constraints.torque_limits,
                             "closed_loop_radius": self.constraints.closed_loop_radius,
@@ -229,6 +236,9 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
     low, high = p.number("low"), p.number("high")
     if not low < high:
         raise p.error("high", f"value {high!r} is not above low = {low!r}; allowed: low < high")
+    step = p.positive("step") if p.has("step") else None
+    if step is not None and (math.ceil(low / step - 1e-9) * step > high + 1e-12 * abs(high)):
+        raise p.error("step", f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller step")
     if scale == "log" and low <= 0:
         raise p.error("low", f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = 'linear'")
     initial = _file_value(controller_document, key)
@@ -244,7 +254,7 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
         raise p.error("key", f"value {key!r} is not a key the controller file '{controller}' accepts: {exc}") from None
     if initial is not None:
         initial = min(max(float(initial), low), high)
-    return ParameterSpec(key, float(low), float(high), scale, integer, initial)
+    return ParameterSpec(key, float(low), float(high), scale, integer, initial, step)
 
 
 def _file_value(document: dict, key: str) -> Any:

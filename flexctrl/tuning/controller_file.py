@@ -34,6 +34,8 @@ def with_values(text: str, values: Mapping[str, Any], *, header: str = "", sourc
         the written file does not read back as intended.
     """
     lines = text.splitlines()
+    while header and lines and lines[0].startswith("# Tuned by "):  # a re-tuned file names its last tuning only
+        lines = lines[1:]
     for key, value in values.items():
         lines = _set(lines, key, toml_literal(value), source)
     out = "\n".join(lines) + "\n"

@@ -11,7 +11,8 @@ import numpy as np
 _LENGTHS = ("tip_residual_rms", "tip_residual_peak", "peak_deflection", "final_tip_error")
 
 
-def _unit(metric: str) -> tuple[str, float]:
+def metric_unit(metric: str) -> tuple[str, float]:
+    """The unit a person reads ``metric`` in, and the factor from SI (m -> mm, s -> ms for solver times)."""
     if metric in _LENGTHS:
         return "mm", 1e3
     if metric.startswith(("settling_time", "divergence_time")):
@@ -41,7 +42,7 @@ def convergence_figure(result, path: Path) -> Path:
     from matplotlib.figure import Figure
 
     spec = result.spec
-    unit, factor = _unit(spec.objective.metric)
+    unit, factor = metric_unit(spec.objective.metric)
     fig = Figure(figsize=(7.0, 4.0), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
@@ -82,7 +83,7 @@ def write_report(result) -> list[Path]:
     spec = result.spec
     out = result.directory
     figure = convergence_figure(result, out / "figures" / "convergence.png")
-    unit, factor = _unit(spec.objective.metric)
+    unit, factor = metric_unit(spec.objective.metric)
     best = result.best
 
     def fmt(value) -> str:

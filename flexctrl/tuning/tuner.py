@@ -202,7 +202,7 @@ def _log(stream, progress: bool, spec: TuningSpec, evaluations: list[Evaluation]
 
 
 def _write(result: TuningResult) -> None:
-    from flexctrl.tuning.report import write_report
+    from flexctrl.tuning.report import metric_unit, write_report
 
     out = result.directory
     out.mkdir(parents=True, exist_ok=True)
@@ -210,9 +210,10 @@ def _write(result: TuningResult) -> None:
     files = [out / "evaluations.jsonl"]
     if result.best is not None:
         spec = result.spec
+        unit, factor = metric_unit(spec.objective.metric)
         header = (f"Tuned by `flexctrl tune {spec.source} --out {out}` from {spec.controller.name}: "
                   f"{spec.objective.statistic} {spec.objective.metric} over {len(result.initial.scenarios)} scenarios "
-                  f"{_fmt(result.initial.objective)} -> {_fmt(result.best.objective)} "
+                  f"{_fmt(factor * result.initial.objective)} -> {_fmt(factor * result.best.objective)} {unit} "
                   f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method}).")
         files.append(write_controller(spec.controller, result.best.values, out / "controller.toml", header))
     atomic_write(out / "tuning.json", (json.dumps(result.summary, indent=2, allow_nan=False) + "\n").encode())
@@ -222,7 +223,7 @@ def _write(result: TuningResult) -> None:
 
 
 def _fmt(value: float) -> str:
-    return "n/a" if not math.isfinite(value) else f"{value:.6g}"
+    return "n/a" if not math.isfinite(value) else f"{value:.4g}"
 
 
 def _finite(value: float) -> float | None:
