@@ -214,7 +214,7 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
 
     scene = load_scene("studies/scenes/move_joint1_30deg.toml",
                        ["payload=0.0", "initial.q=[0.0,-150.0,-30.0]", 'target.profile="step"', "duration=4.0"])
-    lqr = run_closed_loop_scene(scene, controller="controllers/lqr.toml", on_divergence="record")
+    lqr = run_closed_loop_scene(scene, controller="tests/data/controllers/lqr_full_state.toml", on_divergence="record")
     assert lqr.summary["metrics"]["settled"] == 1
     nmpc = run_closed_loop_scene(scene, controller="controllers/nmpc.toml", on_divergence="record")
     metrics = nmpc.summary["metrics"]

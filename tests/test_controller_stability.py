@@ -23,7 +23,7 @@ def _scene(payload: float, q2: float, q3: float):
 
 
 def test_far_from_the_design_point_with_a_heavy_payload_the_lqr_loop_is_unstable():
-    result = run_closed_loop_scene(_scene(4.0, 135.0, 90.0), None, controller="controllers/lqr.toml", plots=False,
+    result = run_closed_loop_scene(_scene(4.0, 135.0, 90.0), None, controller="tests/data/controllers/lqr_full_state.toml", plots=False,
                                    on_divergence="record")
     m = result.summary["metrics"]
     assert m["stable"] == 0
@@ -33,7 +33,7 @@ def test_far_from_the_design_point_with_a_heavy_payload_the_lqr_loop_is_unstable
 
 
 def test_near_the_design_point_the_same_lqr_is_stable():
-    result = run_closed_loop_scene(_scene(2.0, 0.0, -90.0), None, controller="controllers/lqr.toml", plots=False,
+    result = run_closed_loop_scene(_scene(2.0, 0.0, -90.0), None, controller="tests/data/controllers/lqr_full_state.toml", plots=False,
                                    on_divergence="record")
     m = result.summary["metrics"]
     assert m["stable"] == 1 and m["closed_loop_radius"] < 1.0
@@ -47,9 +47,9 @@ def test_a_diverging_run_is_recorded_as_a_finite_ok_row_or_raised_by_simulate(tm
     overrides = DESIGN + ["payload=0.0", "initial.q=[0.0, 90.0, 0.0]", "metrics.divergence_deflection=0.01"]
     scene = load_scene(SCENE, overrides)
     with pytest.raises(SimulationError, match="diverged at t = .*link . tip deflection"):
-        run_closed_loop_scene(scene, None, controller="controllers/lqr.toml", plots=False)
+        run_closed_loop_scene(scene, None, controller="tests/data/controllers/lqr_full_state.toml", plots=False)
     settings = {"executor": "closed_loop", "scene": str(SCENE), "model": "models/subedi3link.toml",
-                "controller": "controllers/lqr.toml", "payload": 0.0, "q0_deg": [0.0, 90.0, 0.0], "fidelity": None,
+                "controller": "tests/data/controllers/lqr_full_state.toml", "payload": 0.0, "q0_deg": [0.0, 90.0, 0.0], "fidelity": None,
                 "overrides": [f"scene.{o}" for o in DESIGN] + ["scene.metrics.divergence_deflection=0.01"],
                 "digests": {}, "seed": 1}
     row = execute_run("closed_loop", settings, {"metrics": ["stable", "divergence_time", "tip_residual_rms"]})
