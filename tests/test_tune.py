@@ -78,10 +78,10 @@ def test_a_killed_tuning_resumes_from_its_records(tmp_path):
 
 
 def test_a_diverging_candidate_is_a_recorded_infeasible_evaluation(tmp_path):
-    # a faster PD than the shipped 1 Hz destabilises the arm's light hubs (flexctrl/control/pd.py): measured,
-    # 3 and 5 Hz diverge on this move
+    # a faster PD than the untuned 1 Hz (2 Hz torque filter) destabilises the arm's light hubs
+    # (flexctrl/control/pd.py): measured, 3 and 5 Hz diverge on this move
     tuning = tmp_path / "pd.toml"
-    tuning.write_text(f'''controller = "{ROOT / 'controllers' / 'pd.toml'}"
+    tuning.write_text(f'''controller = "{ROOT / 'studies' / 'tuning' / 'start' / 'pd.toml'}"
 [[parameters]]
 key = "bandwidth"
 low = 1.0
@@ -144,7 +144,8 @@ def test_the_command_line_exits_2_on_a_bad_file_with_one_line(tmp_path, capsys):
 def test_load_tuning_reads_the_files_initial_values():
     spec = load_tuning(ROOT / "studies" / "tune_lqr.toml")
     initial = {p.key: p.initial for p in spec.parameters}
-    document = tomllib.loads((ROOT / "controllers" / "lqr.toml").read_text())
+    document = tomllib.loads(spec.controller.read_text())
+    assert spec.controller == (ROOT / "studies" / "tuning" / "start" / "lqr.toml").resolve()
     assert initial["weights.joint_deg"] == min(max(document["weights"]["joint_deg"], 0.01), 1.0)
 
 
