@@ -118,3 +118,28 @@ def test_thinned_soft_rows_bound_the_checked_states_by_limit_plus_slack(arm, op)
 def test_bad_blocking_settings_name_the_key(kwargs, key):
     with pytest.raises(SpecError, match=f"key '{key}'"):
         MPCSettings(**kwargs)
+
+
+def test_a_held_block_respects_the_tightest_bound_of_the_stages_it_covers(arm, op):
+    ctrl = design(arm, op, MPCSettings(horizon=6, blocks=(1, 2, 3), soft="none", formulation="condensed"))
+    qp = ctrl.qp
+    dv = np.zeros((6, arm.n_u))
+    dv[:, 0] = [0.0, 0.5, 0.0, 0.0, 0.0, 0.9]
+    _g, _lba, _uba, lbx, ubx = qp.vectors(np.zeros(arm.n_x), dv)
+    blocks = qp.moves[[0, 1, 3], 0]
+    lo, hi = ctrl.problem.v_lo[0], ctrl.problem.v_hi[0]
+    np.testing.assert_allclose(ubx[blocks], [hi - 0.0, hi - 0.5, hi - 0.9])
+    np.testing.assert_allclose(lbx[blocks], [lo - 0.0, lo - 0.0, lo - 0.0])
+
+
+def test_the_blocked_mpcs_linear_law_is_its_own_unconstrained_first_move(arm, op):
+    """With move blocking the first move is not the LQR move; the linear verdict must use the MPC's own."""
+    ctrl = design(arm, op, MPCSettings(horizon=sum(BLOCKS), blocks=BLOCKS, soft="none", formulation="condensed",
+                                       osqp=TIGHT))
+    K = ctrl.unconstrained_gain()
+    assert np.max(np.abs(K - ctrl.K)) > 1e-3 * np.max(np.abs(ctrl.K))
+    dx = np.zeros(arm.n_x)
+    dx[:3] = np.radians([0.05, -0.02, 0.03])
+    ctrl.reset()
+    u = ctrl.step(0.0, op.x + dx)
+    np.testing.assert_allclose(u - op.u, -K @ dx, rtol=1e-5, atol=1e-6 * np.max(np.abs(K @ dx)))

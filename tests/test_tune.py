@@ -158,3 +158,8 @@ def test_written_controller_keeps_comments_and_places_every_kind_of_key():
     assert parsed["weights"]["joint_deg"] == 0.25 and parsed["estimator"]["noise"] == {"torque": 1.0, "modal": 0.5}
     assert parsed["sample_time"] == 0.005 and parsed["weights"]["new_key"] == 3 and parsed["osqp"]["eps_abs"] == 1e-4
     assert "joint_deg = 0.25               # deg" in out and "# inline" in out and out.startswith("# made here\n")
+    # a key the inline table lacks goes inside its braces; a key after an array of tables stays in its table
+    more = with_values('[sensors]\nnoise = { joints_deg = 0.005 }\n[[links]]\nx = 1\n',
+                       {"sensors.noise.strain": 1e-4, "sensors.extra": 2})
+    assert tomllib.loads(more) == {"sensors": {"noise": {"joints_deg": 0.005, "strain": 1e-4}, "extra": 2},
+                                   "links": [{"x": 1}]}

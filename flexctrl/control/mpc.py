@@ -95,9 +95,27 @@ class MPCController(Controller):
         return pb.Su[:, None] * pb.K / pb.Sx[None, :]
 
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
-        """The unconstrained law (the LQR move ``-K dx`` on the estimate), as :meth:`LQRController.linear_law`."""
+        """The unconstrained law on the estimate, as :meth:`LQRController.linear_law`.
+
+        With the DARE terminal cost and free moves it is the LQR move ``-K dx``; with move
+        blocking or a stage terminal cost it is the first move of the unconstrained,
+        condensed QP, ``v_0 = -(H^-1 F z)_0`` (slacks at zero), in physical units.
+        """
         E, F, G = self.observer.linear_form(self.sensors.n_y, self.n_u)
-        return E, F, G, -self.K, np.zeros((self.n_u, self.sensors.n_y))
+        return E, F, G, -self.unconstrained_gain(), np.zeros((self.n_u, self.sensors.n_y))
+
+    def unconstrained_gain(self) -> np.ndarray:
+        """``K`` of the first move ``du = -K dx`` with no constraint active (N m per state unit)."""
+        if self.settings.terminal == "dare" and not self.settings.blocks:
+            return self.K
+        from flexctrl.control.mpc_qp import condensed_qp
+
+        pb = self.problem
+        qp = condensed_qp(pb, self.settings.blocks, 1)
+        nv = qp.moves.max() + 1
+        H = qp.H.toarray()[:nv, :nv]
+        Kz = np.linalg.solve(H, qp.Gz[:nv])[qp.first_move]  # v_0 = -Kz z
+        return pb.Su[:, None] * Kz / pb.Sx[None, :]
 
     def _reset(self) -> None:
         self.observer.reset()

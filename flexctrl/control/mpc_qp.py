@@ -201,8 +201,8 @@ class QP:
             ubx[self.moves] -= dv
         elif dv is not None:  # a held block must respect the bound of every stage it covers
             blocks = self.moves[self.block_starts]
-            lbx[blocks] -= np.maximum.reduceat(dv, self.block_starts, axis=0)
-            ubx[blocks] -= np.minimum.reduceat(dv, self.block_starts, axis=0)
+            lbx[blocks] -= np.minimum.reduceat(dv, self.block_starts, axis=0)  # lo - dv_k for every k: lo - min dv
+            ubx[blocks] -= np.maximum.reduceat(dv, self.block_starts, axis=0)  # hi - dv_k for every k: hi - max dv
         if dc is not None and self.soft_rows.size:
             if self.soft_steps is not None:
                 dc = dc[self.soft_steps]

@@ -98,9 +98,11 @@ class ParameterSpec:
         (what a file shows; the runs use exactly the value written), whole for integers."""
         value = 10.0 ** coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)
-        if self.step is not None:
-            value = float(f"{round(value / self.step) * self.step:.12g}")
-        return float(round(value)) if self.integer else value
+        quantum = 1.0 if self.integer else self.step
+        if quantum is not None:  # the nearest multiple inside the bounds
+            lowest, highest = math.ceil(self.low / quantum - 1e-9), math.floor(self.high / quantum + 1e-9)
+            value = float(f"{min(max(round(value / quantum), lowest), highest) * quantum:.12g}")
+        return value
 
 
 @dataclass(frozen=True)

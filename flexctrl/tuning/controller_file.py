@@ -42,9 +42,15 @@ def with_values(text: str, values: Mapping[str, Any], *, header: str = "", sourc
     if header:
         out = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines()) + out
     expected = apply_values(tomllib.loads(text), dict(values), source=source)
-    if tomllib.loads(out) != expected:
-        raise SpecError("the tuned values could not be written into the file as intended (check its layout)",
-                        source=source)
+    try:
+        written = tomllib.loads(out)
+    except tomllib.TOMLDecodeError as exc:
+        written = exc
+    if written != expected:
+        why = written if isinstance(written, Exception) else "it reads back differently"
+        raise SpecError(f"the tuned values {dict(values)!r} could not be written into the file as intended ({why}); "
+                        "allowed: keys written on their own lines or in one-line inline tables of plain [table] "
+                        "headers", source=source)
     return out
 
 
@@ -67,15 +73,13 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
     header_at = 0 if table == "" else None
     for i, line in enumerate(lines):
         match = _HEADER.match(line)
-        if match:
+        array = line.lstrip().startswith("[[")
+        if match or array:
             if current == table and table_end is None and header_at is not None:
                 table_end = i
-            current = match.group(1).strip()
+            current = "[[array]]" if array else match.group(1).strip()
             if current == table:
                 header_at = i
-            continue
-        if line.lstrip().startswith("[["):
-            current = "[[array]]"
             continue
         if current == table:
             replaced, count = re.subn(rf"^(\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
@@ -92,6 +96,22 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
             if count:
                 lines = list(lines)
                 lines[i] = replaced
+                return lines
+    inline_table, _, inline_leaf = key.rpartition(".")
+    owner, _, name = inline_table.rpartition(".")
+    if name:
+        current = ""
+        for i, line in enumerate(lines):
+            match = _HEADER.match(line)
+            if match or line.lstrip().startswith("[["):
+                current = match.group(1).strip() if match else "[[array]]"
+                continue
+            found = re.match(rf"^(\s*{re.escape(name)}\s*=\s*\{{)([^}}]*)(\}}.*)$", line)
+            if owner == current and found:
+                inside = found.group(2).rstrip()
+                sep = ", " if inside.strip() else " "
+                lines = list(lines)
+                lines[i] = f"{found.group(1)}{inside}{sep}{inline_leaf} = {literal} {found.group(3)}"
                 return lines
     if header_at is not None:  # the table exists and does not write the key: add it at the table's end
         end = table_end if table_end is not None else len(lines)

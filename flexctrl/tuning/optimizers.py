@@ -72,11 +72,13 @@ def _differential_evolution(evaluate: Evaluate, x0: np.ndarray, budget: int, pop
     size = max(5, multiplier * d)
     generations = max(0, math.ceil(budget / size) - 1)
 
+    # atol = -1: scipy's convergence test (std of the scores <= atol + tol |mean|) never fires, so a
+    # population stuck on one penalty plateau keeps searching until the budget is spent
     def batch_map(_function, points):
         return evaluate([np.asarray(p, dtype=float) for p in points])
 
     differential_evolution(lambda x: 0.0, [(0.0, 1.0)] * d, popsize=multiplier, maxiter=generations, seed=seed,
-                           polish=False, tol=0.0, atol=0.0, init="latinhypercube", x0=x0, updating="deferred",
+                           polish=False, tol=0.0, atol=-1.0, init="latinhypercube", x0=x0, updating="deferred",
                            workers=batch_map)
 
 
@@ -90,7 +92,7 @@ def _cma(evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed:
                "maxfevals": budget, "tolx": 1e-6, "tolfun": 0.0, "tolflatfitness": 10 ** 9}
     es = cma.CMAEvolutionStrategy(list(x0), 0.3, options)
     used = 0
-    while not es.stop() and used + es.popsize <= budget:
+    while not es.stop() and used + es.popsize <= budget:  # whole generations only (tell needs them)
         points = es.ask()
         scores = evaluate([np.asarray(p, dtype=float) for p in points])
         used += len(points)

@@ -102,7 +102,8 @@ def write_report(result) -> list[Path]:
     lines += ["Constraints: " + ("; ".join(rules) if rules else "none") + ".", ""]
     lines += ["| key | low | high | scale | as shipped | tuned |", "| --- | --- | --- | --- | --- | --- |"]
     for p in spec.parameters:
-        tuned = "n/a" if best is None else f"{best.values.get(p.key, p.initial):.6g}"
+        value = None if best is None else best.values.get(p.key, p.initial)
+        tuned = "n/a" if best is None else ("default" if value is None else f"{value:.6g}")
         shipped = "default" if p.initial is None else f"{p.initial:.6g}"
         lines.append(f"| `{p.key}` | {p.low:g} | {p.high:g} | {p.scale} | {shipped} | {tuned} |")
     lines += ["", "## Result", ""]

@@ -139,7 +139,7 @@ def tune(tuning: str | Path | TuningSpec, out: str | Path, *, overrides: Iterabl
             backend.close()
         feasible = [e for e in evaluations[1:] if e.feasible]
         best = min(feasible, key=lambda e: e.score) if feasible else None
-        if best is not None and evaluations[0].feasible and evaluations[0].score <= best.score:
+        if evaluations[0].feasible and (best is None or evaluations[0].score <= best.score):
             best = evaluations[0]  # nothing found beats the file as shipped
         result = TuningResult(spec, evaluations[0], best, evaluations, out, time.perf_counter() - started,
                               evaluator.runs_made, evaluator.runs_reused)
@@ -215,7 +215,9 @@ def _write(result: TuningResult) -> None:
                   f"{spec.objective.statistic} {spec.objective.metric} over {len(result.initial.scenarios)} scenarios "
                   f"{_fmt(factor * result.initial.objective)} -> {_fmt(factor * result.best.objective)} {unit} "
                   f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method}).")
-        files.append(write_controller(spec.controller, result.best.values, out / "controller.toml", header))
+        integers = {p.key for p in spec.parameters if p.integer}
+        values = {k: int(v) if k in integers else v for k, v in result.best.values.items()}
+        files.append(write_controller(spec.controller, values, out / "controller.toml", header))
     atomic_write(out / "tuning.json", (json.dumps(result.summary, indent=2, allow_nan=False) + "\n").encode())
     files.append(out / "tuning.json")
     files += write_report(result)
