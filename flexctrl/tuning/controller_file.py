@@ -62,60 +62,61 @@ def write_controller(original: Path, values: Mapping[str, Any], destination: Pat
     return destination
 
 
+def _line_tables(lines: list[str]) -> list[str | None]:
+    """The table each line belongs to (``""`` before the first header, ``"[[array]]"`` inside arrays of
+    tables, None for a header line itself): one scan, shared by every search below."""
+    owners: list[str | None] = []
+    current = ""
+    for line in lines:
+        match = _HEADER.match(line)
+        if match or line.lstrip().startswith("[["):
+            current = match.group(1).strip() if match else "[[array]]"
+            owners.append(None)
+        else:
+            owners.append(current)
+    return owners
+
+
+def _replaced(lines: list[str], i: int, line: str) -> list[str]:
+    out = list(lines)
+    out[i] = line
+    return out
+
+
 def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
     parts = key.split(".")
     table, leaf = ".".join(parts[:-1]), parts[-1]
     element = re.fullmatch(r"(\w+)\[(\d+)\]", leaf)
     if element:
         return _set_element(lines, table, element.group(1), int(element.group(2)), literal, source)
-    current = ""
-    table_end = None  # index after the last line of `table`
-    header_at = 0 if table == "" else None
-    for i, line in enumerate(lines):
-        match = _HEADER.match(line)
-        array = line.lstrip().startswith("[[")
-        if match or array:
-            if current == table and table_end is None and header_at is not None:
-                table_end = i
-            current = "[[array]]" if array else match.group(1).strip()
-            if current == table:
-                header_at = i
-            continue
-        if current == table:
+    owner, _, name = table.rpartition(".")  # the key may sit in the inline table `name` of table `owner`
+    owners = _line_tables(lines)
+    for i, line in enumerate(lines):  # written on its own line in its table
+        if owners[i] == table:
             replaced, count = re.subn(rf"^(\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
                                       line)
             if count:
-                lines = list(lines)
-                lines[i] = replaced
-                return lines
-        inline_table, _, inline_leaf = key.rpartition(".")
-        owner, _, name = inline_table.rpartition(".")
-        if owner == current and name and re.match(rf"^\s*{re.escape(name)}\s*=\s*\{{", line):
-            replaced, count = re.subn(rf"([{{,]\s*{re.escape(inline_leaf)}\s*=\s*)({_VALUE})",
-                                      lambda m: m.group(1) + literal, line)
-            if count:
-                lines = list(lines)
-                lines[i] = replaced
-                return lines
-    inline_table, _, inline_leaf = key.rpartition(".")
-    owner, _, name = inline_table.rpartition(".")
-    if name:
-        current = ""
-        for i, line in enumerate(lines):
-            match = _HEADER.match(line)
-            if match or line.lstrip().startswith("[["):
-                current = match.group(1).strip() if match else "[[array]]"
-                continue
-            found = re.match(rf"^(\s*{re.escape(name)}\s*=\s*\{{)([^}}]*)(\}}.*)$", line)
-            if owner == current and found:
-                inside = found.group(2).rstrip()
-                sep = ", " if inside.strip() else " "
-                lines = list(lines)
-                lines[i] = f"{found.group(1)}{inside}{sep}{inline_leaf} = {literal} {found.group(3)}"
-                return lines
-    if header_at is not None:  # the table exists and does not write the key: add it at the table's end
-        end = table_end if table_end is not None else len(lines)
-        while end > header_at + 1 and not lines[end - 1].strip():
+                return _replaced(lines, i, replaced)
+    inline = [i for i, line in enumerate(lines)
+              if name and owners[i] == owner and re.match(rf"^\s*{re.escape(name)}\s*=\s*\{{", line)]
+    for i in inline:  # written inside a one-line inline table
+        replaced, count = re.subn(rf"([{{,]\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
+                                  lines[i])
+        if count:
+            return _replaced(lines, i, replaced)
+    for i in inline:  # missing from an existing inline table: added inside its braces
+        found = re.match(r"^(.*?=\s*\{)([^}]*)(\}.*)$", lines[i])
+        if found:
+            inside = found.group(2).rstrip()
+            sep = ", " if inside.strip() else " "
+            return _replaced(lines, i, f"{found.group(1)}{inside}{sep}{leaf} = {literal} {found.group(3)}")
+    rows = [i for i, o in enumerate(owners) if o == table]
+    header = [i for i, line in enumerate(lines) if owners[i] is None and (m := _HEADER.match(line))
+              and m.group(1).strip() == table]
+    if table == "" or header:  # the table exists and does not write the key: add it at the table's end
+        end = (rows[-1] + 1) if rows else (header[0] + 1 if header else 0)
+        start = header[0] + 1 if header else 0
+        while end > start and not lines[end - 1].strip():
             end -= 1
         return lines[:end] + [f"{leaf} = {literal}"] + lines[end:]
     return lines + ["", f"[{table}]", f"{leaf} = {literal}"]
@@ -123,20 +124,14 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
 
 def _set_element(lines: list[str], table: str, name: str, index: int, literal: str, source: str) -> list[str]:
     """Entry ``index`` (1-based) of the one-line array ``name = [...]`` in ``table``."""
-    current = ""
+    owners = _line_tables(lines)
     for i, line in enumerate(lines):
-        match = _HEADER.match(line)
-        if match:
-            current = match.group(1).strip()
-            continue
         found = re.match(rf"^(\s*{re.escape(name)}\s*=\s*)(\[[^\]]*\])(.*)$", line)
-        if current == table and found:
+        if owners[i] == table and found:
             values = tomllib.loads(f"v = {found.group(2)}")["v"]
             if not 1 <= index <= len(values):
                 break
             values[index - 1] = tomllib.loads(f"v = {literal}")["v"]
-            out = list(lines)
-            out[i] = found.group(1) + toml_literal(values) + found.group(3)
-            return out
+            return _replaced(lines, i, found.group(1) + toml_literal(values) + found.group(3))
     raise SpecError(f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array '{name}' with "
                     f"that entry; allowed: write the array in the file first", source=source)
