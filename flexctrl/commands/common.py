@@ -59,3 +59,11 @@ def stop_signals_interrupt():
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add --workers and --scheduler: where a study's or a tuning's runs go."""
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="local worker processes (default: the usable CPUs; 0: run in this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on a Dask cluster instead, e.g. tcp://127.0.0.1:8786 (needs flexctrl[dask])")

@@ -7,6 +7,9 @@ import sys
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
+    from flexctrl.commands.common import add_backend_arguments
+
+
     parser = subparsers.add_parser(
         "study",
         help="run a study file's grid of runs (local process pool or Dask) and write its table and report",
@@ -18,8 +21,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.add_argument("study", metavar="STUDY", help="study file, e.g. studies/quickstart.toml")
     parser.add_argument("--out", metavar="DIR", help="result folder (default: out/<study name>)")
-    parser.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the usable CPUs; 0: run in this process)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster instead, e.g. tcp://10.0.0.5:8786 (needs flexctrl[dask])")
+    add_backend_arguments(parser)
     parser.add_argument("--resume", action="store_true", help="continue an interrupted study in DIR: keep every recorded run, ok or failed "
                         "(without it, runs recorded ok are kept and failed ones rerun)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a study-file key, e.g. seed=2 or grid.payload=[0,1] (repeatable)")

@@ -7,6 +7,9 @@ import sys
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
+    from flexctrl.commands.common import add_backend_arguments
+
+
     parser = subparsers.add_parser(
         "tune",
         help="tune a controller file's keys over closed-loop scenarios and write the tuned file and a report",
@@ -19,8 +22,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.add_argument("tuning", metavar="TUNING", help="tuning file, e.g. studies/tune_lqr.toml")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: out/<tuning name>)")
-    parser.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the usable CPUs; 0: in this process)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster instead, e.g. tcp://127.0.0.1:8786")
+    add_backend_arguments(parser)
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a tuning-file key, e.g. optimizer.evaluations=10 (repeatable)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
