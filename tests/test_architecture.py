@@ -38,7 +38,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenes",),
     ("analysis", "bench"),
     ("study",),
-    ("tuning",),
+    ("tuning", "reproduce"),
     ("commands", "cli"),
 )
 RANK = {name: rank for rank, names in enumerate(LAYERS) for name in names}
