@@ -57,6 +57,8 @@ class ControllerStats:
         Solver iterations per step (optimising controllers).
     slack_max : float
         Largest soft-constraint violation seen (m), optimising controllers.
+    notes : dict
+        Controller-specific figures added to the summary (e.g. the MPC's planned arrival).
     """
 
     step_times: list[float] = field(default_factory=list)
@@ -66,6 +68,7 @@ class ControllerStats:
     clipped_max: float = 0.0
     iterations: list[int] = field(default_factory=list)
     slack_max: float = 0.0
+    notes: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """Step count, median / p95 / max wall time (ms), status counts, fallbacks, saturation."""
@@ -82,6 +85,7 @@ class ControllerStats:
             "clipped_max": self.clipped_max,
             "median_iterations": float(np.median(self.iterations)) if self.iterations else math.nan,
             "slack_max": self.slack_max,
+            **self.notes,
         }
 
 

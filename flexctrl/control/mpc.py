@@ -43,6 +43,11 @@ Backends
     ``casadi.conic`` (HPIPM needs the sparse stage-wise form; its soft rows act on
     ``A z_k + B v_k``, which is the same constraint on ``z_{k+1}``).
 
+Minimum-time arrival
+    With ``[arrival] kind = "minimum_time"`` (condensed) the controller plans, at its first
+    sample, the earliest time the arm can be held inside a band and asks every later
+    prediction to be there from then on (:mod:`flexctrl.control.mpc_arrival`).
+
 Fallback
     When the QP is not solved (OSQP ``max_iter``/``time_limit`` reached, infeasible,
     or a conic failure), ``fallback = "shift"`` applies the previous plan shifted by
@@ -58,6 +63,7 @@ import numpy as np
 from flexctrl.control.base import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
+from flexctrl.control.mpc_arrival import shortest_arrival, stage_times
 from flexctrl.control.mpc_qp import QP, ScaledProblem, condensed_qp, scaled_problem, sparse_qp
 from flexctrl.control.qp_backends import Solution, make_backend
 from flexctrl.linear import OperatingPoint, torque_limits
@@ -86,6 +92,7 @@ class MPCController(Controller):
         self._plan: np.ndarray | None = None  # (N, m) scaled moves of the last solution
         self._plan_u: np.ndarray | None = None  # (N, m) planned torques, N m
         self._age = 0
+        self._arrival: float | None = None  # absolute time (s) from which the predictions must be in the band
         self.last: Solution | None = None
 
     @property
@@ -123,6 +130,31 @@ class MPCController(Controller):
         self._plan = None
         self._plan_u = None
         self._age = 0
+        self._arrival = None
+
+    def _reference_changed(self) -> None:
+        self._arrival = None
+
+    def arrival_release(self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray) -> np.ndarray | None:
+        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival rows).
+
+        The first call after a reset or a new reference plans the arrival time
+        (:func:`~flexctrl.control.mpc_arrival.shortest_arrival` plus the margin) and records
+        it in :attr:`stats` (``arrival_time_s``, ``arrival_feasible``, ``arrival_search_ms``).
+        """
+        arrival = self.settings.arrival
+        if not arrival.enabled:
+            return None
+        times = stage_times(self.qp, t, self.sample_time)
+        if self._arrival is None:
+            import time as _time
+
+            start = _time.perf_counter()
+            first = shortest_arrival(self.qp, z, dv, dc)
+            self._arrival = float(times[-1] if first is None else times[first] + arrival.margin)
+            self.stats.notes.update({"arrival_time_s": self._arrival, "arrival_feasible": first is not None,
+                                     "arrival_search_ms": 1e3 * (_time.perf_counter() - start)})
+        return times < self._arrival - 1e-9 * max(1.0, abs(self._arrival))
 
     def plan(self) -> np.ndarray | None:
         """Planned torques (N m) of the last solved QP, shape (N, n_u)."""
@@ -149,13 +181,14 @@ class MPCController(Controller):
         r, _u, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
         warm = self._w if self.settings.warm_start != "none" else None
-        return self.backend.solve(z, warm, dv, dc)
+        return self.backend.solve(z, warm, dv, dc, self.arrival_release(t, z, dv, dc))
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)
         r, u_ref, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
-        sol = self.backend.solve(z, self._w if self.settings.warm_start != "none" else None, dv, dc)
+        release = self.arrival_release(t, z, dv, dc)
+        sol = self.backend.solve(z, self._w if self.settings.warm_start != "none" else None, dv, dc, release)
         self.last = sol
         self.stats.iterations.append(sol.iterations)
         if sol.ok:

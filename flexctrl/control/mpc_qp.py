@@ -39,6 +39,8 @@ class ScaledProblem:
     l1, l2 : float
         Scaled slack penalties.
     horizon : int
+    n_arrival : int
+        The last ``n_arrival`` soft rows are the arrival rows (:func:`arrival_rows`).
     """
 
     A: np.ndarray
@@ -58,6 +60,7 @@ class ScaledProblem:
     l1: float
     l2: float
     horizon: int
+    n_arrival: int = 0
 
     @property
     def n(self) -> int:
@@ -121,6 +124,22 @@ def soft_rows(model, op: OperatingPoint, settings) -> tuple[np.ndarray, np.ndarr
     return rows[keep], value[keep], np.full(int(keep.sum()), limit), scale
 
 
+def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
+    """Physical arrival rows (m) on the state: the tip position error, then each joint's error as tip motion.
+
+    Row ``j`` of the joint part is ``|d tip / d q_j| e_j``: the tip displacement that joint
+    ``j``'s error alone causes at ``op`` (a tip inside the band with the joints off
+    target would be another, redundant configuration of the arm).
+    """
+    N = model.n_q
+    q = ca.SX.sym("q", N)
+    tip = model.functions["tip"](q, ca.SX.zeros(N))[0]
+    jac = np.array(ca.Function("tip_jacobian", [q], [ca.jacobian(tip, q)])(op.q), dtype=float)
+    joints = np.zeros((model.n_u, 2 * N))
+    joints[np.arange(model.n_u), np.arange(model.n_u)] = np.linalg.norm(jac[:, :model.n_u], axis=0)
+    return np.vstack([np.hstack([jac, np.zeros_like(jac)]), joints])
+
+
 def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> ScaledProblem:
     """Weights, terminal cost, scaling and constraints of the MPC at ``plant.op``."""
     Q, R = weight_matrices(model, settings.weights, limits)
@@ -139,9 +158,16 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     v_lo = (-limits - u_op) / scale_u
     v_hi = (limits - u_op) / scale_u
     rows, value, limit, h = soft_rows(model, plant.op, settings)
+    arrival = getattr(settings, "arrival", None)
+    n_arrival = 0
+    if arrival is not None and arrival.enabled:  # the arrival rows after the soft rows, error from the target
+        extra = arrival_rows(model, plant.op)
+        n_arrival = extra.shape[0]
+        rows, value, limit = np.vstack([rows, extra]), np.r_[value, np.zeros(n_arrival)], np.r_[limit, np.full(n_arrival, arrival.band)]
     C = rows * Sx[None, :] / h
     return ScaledProblem(A, B, Qs, Rs, 0.5 * (Ps + Ps.T), Ks, Sx, scale_u, v_lo, v_hi, C, (-limit - value) / h,
-                         (limit - value) / h, h, settings.slack_l1 * h, settings.slack_l2 * h * h, settings.horizon)
+                         (limit - value) / h, h, settings.slack_l1 * h, settings.slack_l2 * h * h, settings.horizon,
+                         n_arrival)
 
 
 # --------------------------------------------------------------------------------------
@@ -177,12 +203,20 @@ class QP:
     soft_rows: np.ndarray  # (S, 2 ns): the general rows of the soft constraints of each constrained stage
     soft_steps: np.ndarray | None = None  # the stages (0-based, of z_1..z_N) with soft rows; None: all
     block_starts: np.ndarray | None = None  # move blocking: first stage of every block; None: no blocking
+    n_arrival: int = 0  # the last n_arrival soft rows of every constrained stage are arrival rows
 
-    def vectors(self, z: np.ndarray, dv: np.ndarray | None = None, dc: np.ndarray | None = None):
+    @property
+    def n_moves(self) -> int:
+        """Number of move variables (the first entries of ``w`` in the condensed form)."""
+        return int(self.moves.max()) + 1
+
+    def vectors(self, z: np.ndarray, dv: np.ndarray | None = None, dc: np.ndarray | None = None,
+                release: np.ndarray | None = None):
         """``(g, lba, uba, lbx, ubx)`` for the current scaled state ``z``.
 
         ``dv`` (N, m) and ``dc`` (N, ns) shift the input bounds and the soft-row bounds of
         each stage down (the scaled reference input and soft-row value, see the module docstring).
+        ``release`` (one bool per constrained stage) lifts the bounds of that stage's arrival rows.
         """
         g = self.g0 if self.Gz is None else self.g0 + self.Gz @ z
         if self.Lz is None:
@@ -210,6 +244,12 @@ class QP:
             lba, uba = lba.copy(), uba.copy()
             lba[self.soft_rows] -= shift
             uba[self.soft_rows] -= shift
+        if release is not None and self.n_arrival and np.any(release):
+            ns, na = self.soft_rows.shape[1] // 2, self.n_arrival
+            lba, uba = lba.copy(), uba.copy()
+            free = self.soft_rows[np.asarray(release, bool)]
+            uba[free[:, ns - na:ns]] = np.inf  # the upper rows of the arrival constraints
+            lba[free[:, 2 * ns - na:]] = -np.inf  # and the lower ones
         return g, lba, uba, lbx, ubx
 
 
@@ -365,11 +405,11 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
     soft = np.array([np.r_[k * ns + np.arange(ns), nsl + k * ns + np.arange(ns)] for k in range(S)],
                     dtype=int).reshape(S, 2 * ns)
     return QP(sp.csc_matrix(H), g0, sp.csc_matrix(A), lba0, uba0, lbx, ubx, Gz, Lz, np.zeros(0, int), moves[0], moves,
-              nv + np.arange(nsl), shift_w, shift_a, {}, n, soft, None if stride == 1 else steps, starts)
+              nv + np.arange(nsl), shift_w, shift_a, {}, n, soft, None if stride == 1 else steps, starts, pb.n_arrival)
 
 
 # --------------------------------------------------------------------------------------
 
 
-__all__ = ["ScaledProblem", "QP", "state_scales", "soft_rows", "scaled_problem", "sparse_qp", "prediction_matrices",
+__all__ = ["ScaledProblem", "QP", "state_scales", "soft_rows", "arrival_rows", "scaled_problem", "sparse_qp", "prediction_matrices",
            "blocking_matrix", "condensed_qp"]

@@ -56,8 +56,8 @@ class OSQPBackend:
         self.y = None
 
     def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
-              dc: np.ndarray | None = None) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc)
+              dc: np.ndarray | None = None, release: np.ndarray | None = None) -> Solution:
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
         self.solver.update(q=g, l=np.r_[lba, lbx[self.bounded]], u=np.r_[uba, ubx[self.bounded]])
         if self.warm == "shift" and w_prev is not None and self.y is not None:
             self.solver.warm_start(x=w_prev[self.qp.shift_w], y=self.y[self.shift_y])
@@ -91,8 +91,8 @@ class ConicBackend:
         self.solver = ca.conic("mpc_qp", name, {"h": H.sparsity(), "a": A.sparsity()}, opts)
 
     def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
-              dc: np.ndarray | None = None) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc)
+              dc: np.ndarray | None = None, release: np.ndarray | None = None) -> Solution:
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
         args = {"h": self.H, "g": g, "a": self.Am, "lba": lba, "uba": uba, "lbx": lbx, "ubx": ubx}
         if w_prev is not None:
             args["x0"] = w_prev[self.qp.shift_w]

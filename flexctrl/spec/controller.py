@@ -37,6 +37,7 @@ from flexctrl.spec.controller_settings import (
     Weights,
 )
 from flexctrl.errors import SpecError
+from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.sensors import SENSOR_KINDS
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
@@ -166,6 +167,17 @@ def _schedule(reader: TableReader) -> ScheduleSettings | None:
         raise
 
 
+def _arrival(reader: TableReader) -> ArrivalSettings:
+    r = reader.table_of("arrival", {})
+    d = ArrivalSettings()
+    values = {
+        "kind": _literal(r, "kind", d.kind, _field_type(ArrivalSettings, "kind")),
+        "band": r.positive("band", d.band, unit="m"),
+        "margin": r.nonnegative("margin", d.margin, unit="s"),
+    }
+    return _build(r, ArrivalSettings, values)
+
+
 def _osqp(reader: TableReader) -> OSQPSettings:
     r = reader.table_of("osqp", {})
     d = OSQPSettings()
@@ -256,6 +268,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "accept_inaccurate": r.boolean("accept_inaccurate", d.accept_inaccurate),
         "blocks": _whole_numbers(r, "blocks", d.blocks),
         "constraint_stride": r.integer("constraint_stride", d.constraint_stride, low=1, high=1000),
+        "arrival": _arrival(r),
         "osqp": _osqp(r),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),

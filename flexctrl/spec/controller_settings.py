@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, fields
 from typing import Literal, Union
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.field_checks import boolean_field, choice_field, integer_field, number_field, numbers_field
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
 
@@ -374,6 +375,8 @@ class MPCSettings:
         Soft constraints on every ``constraint_stride``-th predicted state (condensed only).
     accept_inaccurate : bool
         Use an OSQP "solved inaccurate" solution instead of falling back.
+    arrival : ArrivalSettings
+        Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc_arrival`).
     osqp : OSQPSettings
     sensors, estimator
         As for LQR.
@@ -397,6 +400,7 @@ class MPCSettings:
     accept_inaccurate: bool = True
     blocks: tuple[int, ...] = ()
     constraint_stride: int = 1
+    arrival: ArrivalSettings = field(default_factory=ArrivalSettings)
     osqp: OSQPSettings = field(default_factory=OSQPSettings)
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
@@ -433,6 +437,9 @@ class MPCSettings:
         integer_field("constraint_stride", self.constraint_stride, low=1, high=self.horizon)
         if self.constraint_stride > 1 and self.formulation != "condensed":
             raise SpecError(f"value {self.formulation!r} is not allowed with constraint_stride > 1; allowed: "
+                            "'condensed'", key="formulation")
+        if self.arrival.enabled and self.formulation != "condensed":
+            raise SpecError(f"value {self.formulation!r} is not allowed with a minimum-time arrival; allowed: "
                             "'condensed'", key="formulation")
 
 

@@ -1,0 +1,87 @@
+"""Minimum-time arrival of the linear MPC: the shortest arrival against the bang-bang closed form, and on the arm."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import flexctrl as fc
+from conftest import ROOT
+from flexctrl.control.mpc_arrival import shortest_arrival
+from flexctrl.control.mpc_qp import ScaledProblem, condensed_qp
+from flexctrl.errors import SpecError
+from flexctrl.spec.arrival import ArrivalSettings
+from flexctrl.spec.controller_settings import MPCSettings
+
+
+def double_integrator(inertia: float, torque: float, Ts: float, horizon: int, band: float) -> ScaledProblem:
+    """A rigid joint (kg m^2) under a torque limit (N m), ZOH at Ts, one arrival row on the angle (rad)."""
+    A = np.array([[1.0, Ts], [0.0, 1.0]])
+    B = torque / inertia * np.array([[0.5 * Ts**2], [Ts]])  # scaled input: v = u / torque in [-1, 1]
+    eye = np.eye(2)
+    return ScaledProblem(A=A, B=B, Q=eye, R=np.eye(1), P=eye, K=np.zeros((1, 2)), Sx=np.ones(2), Su=np.ones(1),
+                         v_lo=np.array([-1.0]), v_hi=np.array([1.0]), C=np.array([[1.0, 0.0]]),
+                         c_lo=np.array([-band]), c_hi=np.array([band]), h=1.0, l1=1e3, l2=1e3, horizon=horizon,
+                         n_arrival=1)
+
+
+@pytest.mark.parametrize("angle", [0.2, 0.5, 1.0])
+@pytest.mark.parametrize("stride", [1, 4])
+def test_shortest_arrival_is_the_bang_bang_time(angle, stride):
+    # accelerate at full torque for half the time, brake for the other half: t* = 2 sqrt(angle I / tau)
+    inertia, torque, Ts = 2.0, 1.0, 0.02
+    t_star = 2.0 * math.sqrt(angle * inertia / torque)
+    pb = double_integrator(inertia, torque, Ts, horizon=int(1.5 * t_star / Ts) + 10, band=1e-5)
+    qp = condensed_qp(pb, stride=stride)
+    j = shortest_arrival(qp, np.array([-angle, 0.0]))
+    steps = np.arange(pb.horizon) if qp.soft_steps is None else qp.soft_steps
+    t_arrival = (steps[j] + 1) * Ts
+    assert abs(t_arrival - t_star) <= stride * Ts + 1e-9, (t_arrival, t_star)
+    if j > 0:  # one constrained stage earlier is infeasible (a 10 % weaker torque would be slower)
+        assert (steps[j - 1] + 1) * Ts < t_star + 1e-9
+
+
+def test_too_short_a_horizon_has_no_arrival():
+    pb = double_integrator(2.0, 1.0, 0.02, horizon=50, band=1e-5)  # 1 s for a 2 s move
+    assert shortest_arrival(condensed_qp(pb), np.array([-0.5, 0.0])) is None
+
+
+def test_arrival_needs_the_condensed_form_and_a_positive_band():
+    with pytest.raises(SpecError, match="formulation"):
+        MPCSettings(arrival=ArrivalSettings(kind="minimum_time"), formulation="sparse")
+    with pytest.raises(SpecError, match="band"):
+        ArrivalSettings(kind="minimum_time", band=0.0)
+
+
+def test_unknown_arrival_key_is_refused(tmp_path):
+    text = (ROOT / "studies" / "tuning" / "start" / "mpc_time_optimal.toml").read_text().replace("margin =", "margn =")
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SpecError, match="margn"):
+        fc.load_controller(path)
+
+
+@pytest.fixture(scope="module")
+def fast_runs():
+    fast = fc.load_scene(ROOT / "studies" / "scenes" / "fast_move_30deg.toml")
+    quintic = fc.load_scene(ROOT / "studies" / "scenes" / "move_joint1_30deg.toml")
+    mpc = fc.run_scene(fast, controller=str(ROOT / "controllers" / "mpc_time_optimal.toml"), plots=False)
+    lqr = fc.run_scene(quintic, controller=str(ROOT / "controllers" / "lqr.toml"), plots=False)
+    return mpc, lqr
+
+
+def test_time_optimal_mpc_settles_in_under_0_7_of_the_quintic_lqr(fast_runs):
+    mpc, lqr = fast_runs
+    assert mpc.metrics["settled"] == 1 and lqr.metrics["settled"] == 1
+    assert mpc.metrics["settling_time"] <= 0.7 * lqr.metrics["settling_time"]
+
+
+def test_time_optimal_mpc_keeps_the_torque_limits_and_real_time(fast_runs):
+    mpc, _ = fast_runs
+    limits = np.array([200.0, 100.0, 50.0])  # N m, models/subedi3link.toml
+    torques = mpc.to_pandas()[["u1", "u2", "u3"]].to_numpy()
+    assert np.all(np.abs(torques) <= limits * (1 + 1e-12))
+    summary = mpc.summary["controller"]
+    assert summary["arrival_feasible"] and summary["median_ms"] < 1e3 * 0.01
