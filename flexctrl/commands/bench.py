@@ -1,4 +1,4 @@
-"""``flexctrl bench sim|mpc``: measured simulation speed (:mod:`flexctrl.bench.sim`) and MPC solve times (:mod:`flexctrl.bench.mpc`)."""
+"""``flexctrl bench sim|mpc|loop``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`)."""
 
 from __future__ import annotations
 
