@@ -40,7 +40,7 @@ import control
 import numpy as np
 
 from flexctrl.dynamics.amm import locked_spectrum
-from flexctrl.dynamics.model import jacobian_function
+from flexctrl.dynamics.model import derived, jacobian_function
 from flexctrl.errors import SolverError, SpecError
 
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
@@ -389,13 +389,17 @@ class Linearizer:
     """Exact Jacobians of ``model`` with ``sensors``, built once and evaluated at any operating point.
 
     Use for many linearisations of one model (gain scheduling, frequency maps);
-    :func:`linearize` builds one and calls it once.
+    :func:`linearize` builds one and calls it once.  The Jacobian Function is kept with
+    the model (:func:`flexctrl.dynamics.model.derived`) for each sensor Function, so the
+    designs and linear verdicts of a study worker build it once per model.
     """
 
     def __init__(self, model, outputs: Sequence[str] | Sensors = ("joints",), *, q_joints: Sequence[float] | None = None):
         self.model = model
         self.sensors = outputs if isinstance(outputs, Sensors) else Sensors.build(model, outputs, q_joints=q_joints)
-        self.function = jacobian_function(model, inputs=True, outputs=self.sensors.function)
+        # kept per model and sensor Function (building the AD graph costs more than a linearisation)
+        self.function = derived(model, ("jacobians", self.sensors.function.serialize()),
+                                lambda: jacobian_function(model, inputs=True, outputs=self.sensors.function))
 
     def matrices(self, op: OperatingPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(A, B, C, D)`` at ``op``."""

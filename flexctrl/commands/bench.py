@@ -1,4 +1,4 @@
-"""``flexctrl bench sim|mpc``: measured simulation speed (:mod:`flexctrl.bench.sim`) and MPC solve times (:mod:`flexctrl.bench.mpc`)."""
+"""``flexctrl bench sim|mpc|loop``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`)."""
 
 from __future__ import annotations
 
@@ -7,21 +7,25 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim", "mpc")
+BENCHMARKS = ("sim", "mpc", "loop")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
         help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp; "
-        "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC",
+        "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC; "
+        "'loop' times one whole closed-loop run against the plant's compiled simulation alone",
         description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
         "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
         "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs. "
         "'mpc': the three-link arm (amm:2, 18 states, 3 inputs), horizon 20 at 10 ms: solve times "
         "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop samples, "
         "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same problem "
-        "(--pc-solves solves; each takes seconds).",
+        "(--pc-solves solves; each takes seconds). "
+        "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default "
+        "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
+        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio.",
     )
     parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -33,6 +37,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--steps", type=int, default=300, metavar="N", help="mpc: closed-loop samples per variant (default 300)")
     parser.add_argument("--pc-solves", type=int, default=1, metavar="N", help="mpc: python-control solves to time (0 skips; default 1)")
     parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
+    parser.add_argument("--controller", default=None, metavar="FILE", help="loop: controller file (default controllers/lqr.toml)")
     parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
     return parser
 
@@ -40,6 +45,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     if args.what == "mpc":
         return _run_mpc(args)
+    if args.what == "loop":
+        return _run_loop(args)
     from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
@@ -85,4 +92,14 @@ def _run_mpc(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2, default=str))
     else:
         print(format_benchmark(result))
+    return 0
+
+
+def _run_loop(args: argparse.Namespace) -> int:
+    from flexctrl.bench.loop import DEFAULT_CONTROLLER, bench_loop, format_loop
+
+    if args.repeats < 1:
+        raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
+    result = bench_loop(controller=args.controller or DEFAULT_CONTROLLER, repeats=args.repeats)
+    print(json.dumps(result, indent=2) if args.json else format_loop(result))
     return 0

@@ -36,6 +36,37 @@ from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors
 
 
+@dataclass(frozen=True, eq=False)
+class SampledLaw:
+    """A controller's law as one CasADi map, for running many samples in one call (:mod:`flexctrl.loop.compiled`).
+
+    Per sample ``k``: ``(xi_k, u_k) = function(xi_{k-1}, y_k, u_{k-1}, r_k)`` with ``xi`` the
+    controller's memory, ``y`` the measurement, ``u_{k-1}`` the torque held during the
+    sample that just ended (after clipping) and ``r_k`` the row ``k`` of
+    ``references(times)``; ``u_k`` is before clipping (the loop clips when the controller
+    saturates).  The same arithmetic as the controller's ``_step``.
+
+    Attributes
+    ----------
+    function : casadi.Function
+        ``(xi, y, u_prev, r) -> (xi_next, u)``.
+    memory : ndarray
+        ``xi`` now (after the steps taken so far).
+    references : callable
+        ``references(times) -> (T, n_r)`` array: the reference rows at sample times (s) from now on.
+    restore : callable
+        ``restore(xi)``: put the controller into the state of memory ``xi`` (after a compiled run).
+    status : str
+        What each step records in :attr:`ControllerStats.status`.
+    """
+
+    function: Any
+    memory: np.ndarray
+    references: Any
+    restore: Any
+    status: str = "ok"
+
+
 @dataclass
 class ControllerStats:
     """What a controller did since its last :meth:`Controller.reset`.
@@ -193,8 +224,17 @@ class Controller(ABC):
     def _reset(self) -> None:
         """Subclass part of :meth:`reset`."""
 
+    def sampled_law(self) -> SampledLaw | None:
+        """The law as one CasADi map from the current state (:class:`SampledLaw`), or None when it is not one.
+
+        Called after at least one :meth:`step` (memories such as a Kalman filter's start
+        from the first measurement).  Controllers that solve an optimisation per sample
+        (MPC, NMPC) or interpolate gains (a schedule) give None: the loop steps them in Python.
+        """
+        return None
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={list(self.sensors.names)})"
 
 
-__all__ = ["Controller", "ControllerStats"]
+__all__ = ["Controller", "ControllerStats", "SampledLaw"]

@@ -20,6 +20,7 @@ the first measurement, ``dx = C^+ (dy - D du)``.
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import scipy.linalg
 
@@ -40,6 +41,18 @@ class FullState:
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(E, F, G)`` of ``x_k = E x_{k-1} + F dy_k + G du_{k-1}``: the measurement itself."""
         return np.zeros((n_y, n_y)), np.eye(n_y), np.zeros((n_y, n_u))
+
+    @property
+    def memory(self) -> np.ndarray:
+        """No memory (an empty vector)."""
+        return np.zeros(0)
+
+    def restore(self, memory: np.ndarray) -> None:
+        """Nothing to restore."""
+
+    def symbolic(self, memory, y, u_previous):
+        """``(memory_next, x)``: :meth:`estimate` on CasADi symbols."""
+        return memory, y
 
 
 def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
@@ -120,6 +133,26 @@ class KalmanEstimator:
             pred = self.A @ self.dx + self.B @ du
             self.dx = pred + self.M @ (dy - self.C @ pred)
         return self.op.x + self.dx
+
+    @property
+    def memory(self) -> np.ndarray:
+        """The deviation estimate ``dx`` (after a first measurement)."""
+        if self.dx is None:
+            raise ValueError("the Kalman filter has no estimate yet: give it a first measurement")
+        return np.array(self.dx, dtype=float)
+
+    def restore(self, memory: np.ndarray) -> None:
+        """Continue from the deviation estimate ``memory``."""
+        self.dx = np.array(memory, dtype=float)
+
+    def symbolic(self, memory, y, u_previous):
+        """``(dx_next, x)``: one :meth:`estimate` after the first, on CasADi symbols (the same operations)."""
+        A, B, C, D, M = (ca.DM(m) for m in (self.A, self.B, self.C, self.D, self.M))
+        du = u_previous - ca.DM(self.op.u)
+        dy = y - ca.DM(self.y_op) - ca.mtimes(D, du)
+        pred = ca.mtimes(A, memory) + ca.mtimes(B, du)
+        dx = pred + ca.mtimes(M, dy - ca.mtimes(C, pred))
+        return dx, ca.DM(self.op.x) + dx
 
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(E, F, G)`` of the estimate in deviations, ``dx_k = E dx_{k-1} + F dy_k + G du_{k-1}``.

@@ -22,11 +22,12 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
+import casadi as ca
 import control
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
-from flexctrl.control.base import Controller
+from flexctrl.control.base import Controller, SampledLaw
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.riccati import solve_dare
 from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights
@@ -160,6 +161,28 @@ class LQRController(Controller):
 
     def _reset(self) -> None:
         self.observer.reset()
+
+    def sampled_law(self) -> SampledLaw | None:
+        """The law and its estimator as one CasADi map (None with a gain schedule); see :class:`SampledLaw`.
+
+        Reference rows ``r = (x_ref, u_ref)``; memory the estimator's (the Kalman
+        deviation estimate, nothing for full-state sensors).
+        """
+        if self.schedule is not None:
+            return None
+        memory = self.observer.memory
+        xi, y = ca.MX.sym("xi", memory.size), ca.MX.sym("y", self.sensors.n_y)
+        u_prev, r = ca.MX.sym("u_prev", self.n_u), ca.MX.sym("r", self.op.x.size + self.n_u)
+        xi_next, x = self.observer.symbolic(xi, y, u_prev)
+        x_ref, u_ref = r[: self.op.x.size], r[self.op.x.size :]
+        u = u_ref - ca.mtimes(ca.DM(self.K), x - x_ref)
+        function = ca.Function("lqr_law", [xi, y, u_prev, r], [xi_next, u], ["xi", "y", "u_prev", "r"], ["xi_next", "u"])
+
+        def references(times: np.ndarray) -> np.ndarray:
+            X, U, _ = self.reference.window(float(times[0]), self.sample_time, len(times))
+            return np.hstack([X, U])
+
+        return SampledLaw(function, memory, references, self.observer.restore)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)

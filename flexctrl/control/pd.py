@@ -42,7 +42,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.base import Controller
+from flexctrl.control.base import Controller, SampledLaw
 from flexctrl.spec.controller_settings import PDSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits
@@ -165,6 +165,49 @@ class PDController(Controller):
         x, u_ref, u_static = self.reference.at(t, self.sample_time, elastic=False)
         N = x.size // 2
         return x[: self.n_u], x[N : N + self.n_u], u_ref, u_static
+
+    def reference_table(self, times: np.ndarray) -> np.ndarray:
+        """Rows ``(q_ref, qd_ref, u_ref, u_static)`` of :meth:`reference_terms` at the sample ``times`` (s), from now on."""
+        X, U, Us = self.reference.window(float(times[0]), self.sample_time, len(times), elastic=False)
+        N = X.shape[1] // 2
+        return np.hstack([X[:, : self.n_u], X[:, N : N + self.n_u], U, Us])
+
+    def sampled_law(self) -> SampledLaw:
+        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same order.
+
+        Memory: the filtered PD torque, then (with strain-rate damping) the last root
+        curvatures and their filtered rate.  Reference rows: :meth:`reference_table`.
+        """
+        n = self.n_u
+        strain = bool(self.strain_gain.size)
+        memory = np.concatenate([self._filtered] + ([self._kappa, self._rate] if strain else []))
+        xi, y = ca.MX.sym("xi", memory.size), ca.MX.sym("y", self.sensors.n_y)
+        u_prev, r = ca.MX.sym("u_prev", n), ca.MX.sym("r", 4 * n)
+        q, qd = y[self._iq.tolist()], y[self._iqd.tolist()]
+        q_ref, qd_ref, u_ref, u_static = (r[i * n : (i + 1) * n] for i in range(4))
+        tau_g = {"target": u_static, "measured": self.gravity(q) if self.gravity is not None else 0.0}.get(
+            self.gravity_mode, 0.0)
+        tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0
+        a = self.filter_pole
+        filtered = a * xi[:n] + (1.0 - a) * (ca.DM(self.kp) * (q_ref - q) + ca.DM(self.kd) * (qd_ref - qd))
+        u = tau_g + tau_ff + filtered
+        parts = [filtered]
+        if strain:
+            kappa = y[self._ik.tolist()]
+            b = self.strain_pole
+            rate = b * xi[2 * n :] + (1.0 - b) * ((kappa - xi[n : 2 * n]) / self.sample_time)
+            u = u + (-ca.DM(self.strain_gain)) * rate
+            parts += [kappa, rate]
+        function = ca.Function(f"{self.kind}_law", [xi, y, u_prev, r], [ca.vertcat(*parts), u],
+                               ["xi", "y", "u_prev", "r"], ["xi_next", "u"])
+
+        def restore(values: np.ndarray) -> None:
+            values = np.array(values, dtype=float)
+            self._filtered = values[:n]
+            if strain:
+                self._kappa, self._rate = values[n : 2 * n], values[2 * n :]
+
+        return SampledLaw(function, memory, self.reference_table, restore)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[self._iq], y[self._iqd]

@@ -188,35 +188,40 @@ class ShapedController(PDController):
         return self.reference.path.profile != "step"
 
     def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        if self.shapes_reference:
-            times = t - self.shaper.times
-            q_all, qd_all = self.reference.path.derivatives(times, order=1)
-            A = self.shaper.amplitudes
-            u_ref = A @ self._torques(times, 1)
-            u_static = A @ self._torques(times, 2)
-            return A @ q_all, A @ qd_all, u_ref, u_static
-        if self._start is None:
+        if not self.shapes_reference and self._start is None:
             self._start = (t, np.array(q, dtype=float))
+        row = self.reference_table(np.array([t], dtype=float))[0]
+        n = self.n_u
+        return row[:n], row[n : 2 * n], row[2 * n : 3 * n], row[3 * n :]
+
+    def reference_table(self, times: np.ndarray) -> np.ndarray:
+        """Rows ``(q_s, qd_s, u_ref, u_static)`` of the shaped reference at the sample ``times`` (s).
+
+        A step or no reference is shaped from the joint angles of the first measurement
+        (so this needs a :meth:`step` first).
+        """
+        times = np.asarray(times, dtype=float)
+        A = self.shaper.amplitudes
+        shifted = times[:, None] - self.shaper.times[None, :]
+        if self.shapes_reference:
+            q_all, qd_all = (v.reshape(shifted.shape + (-1,)) for v in
+                             self.reference.path.derivatives(shifted.ravel(), order=1))
+            u_ref, u_static = (np.einsum("m,tmn->tn", A, self._torques(shifted, which)) for which in (1, 2))
+            return np.hstack([np.einsum("m,tmn->tn", A, q_all), np.einsum("m,tmn->tn", A, qd_all), u_ref, u_static])
         t0, q0 = self._start
-        s = (t - t0) - self.shaper.times
-        pos, vel = self._profile(s)
-        target = np.asarray(self.reference.path.q_target)
-        delta = target - q0
-        _x, u_ref, u_static = self.reference.at(t, self.sample_time, elastic=False)
-        return (q0 + float(np.dot(self.shaper.amplitudes, pos)) * delta,
-                float(np.dot(self.shaper.amplitudes, vel)) * delta, u_static, u_static)
+        pos, vel = self._profile((times[:, None] - t0) - self.shaper.times[None, :])
+        delta = np.asarray(self.reference.path.q_target) - q0
+        _x, _u, u_static = self.reference.window(float(times[0]), self.sample_time, times.size, elastic=False)
+        return np.hstack([q0 + (pos @ A)[:, None] * delta, (vel @ A)[:, None] * delta, u_static, u_static])
 
     def _torques(self, times: np.ndarray, which: int) -> np.ndarray:
-        """Reference torques (u_ref: 1, u_static: 2) at ``times``, linearly interpolated on the sample grid."""
+        """Reference torques (u_ref: 1, u_static: 2) at ``times`` (any shape), linearly interpolated on the sample grid."""
         Ts = self.sample_time
-        out = np.empty((times.size, self.n_u))
-        for i, ti in enumerate(times):
-            k = max(ti, 0.0) / Ts
-            k0 = int(math.floor(k))
-            frac = k - k0
-            window = self.reference.window(k0 * Ts, Ts, 2, elastic=False)[which]
-            out[i] = (1 - frac) * window[0] + frac * window[1]
-        return out
+        k = np.maximum(times, 0.0) / Ts
+        k0 = np.floor(k).astype(int)
+        frac = (k - k0)[..., None]
+        table = self.reference.window(0.0, Ts, int(k0.max()) + 2, elastic=False)[which]
+        return (1 - frac) * table[k0] + frac * table[k0 + 1]
 
 
 def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> ShapedController:

@@ -54,6 +54,9 @@ class Model:
         The description it was built from (plain data).
     info : dict
         Build facts (mode frequencies, options, derivation choices).
+    derived : dict
+        Functions derived from this model by the layers above (the closed loop's compiled
+        plant step and output map), kept with it: built once per model, gone with it.
     """
 
     name: str
@@ -64,6 +67,7 @@ class Model:
     omega_max: float
     spec: Any = None
     info: dict = field(default_factory=dict)
+    derived: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         missing = [n for n in REQUIRED_FUNCTIONS if n not in self.functions]
@@ -109,6 +113,16 @@ class Model:
         """Kinetic, elastic and gravitational energy (J) and their total."""
         kin, el, grav = (float(v) for v in self.functions["energies"](q, qd))
         return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
+
+
+def derived(model, key, build):
+    """``build()`` once per model, kept in ``model.derived`` under ``key`` (built anew for a model without that store)."""
+    store = getattr(model, "derived", None)
+    if store is None:
+        return build()
+    if key not in store:
+        store[key] = build()
+    return store[key]
 
 
 def jacobian_function(model, *, value: bool = False, inputs: bool = False,

@@ -29,7 +29,7 @@ ACCURATE_OMEGA_DT = 0.5
 
 def closed_loop(model, controller, reference, duration: float, *, plant=None, dt: float | None = None,
                 noise: int | np.random.Generator | None = None, x0=None, metrics: MetricSettings | None = None,
-                on_divergence: str = "raise", compile: bool | None = None) -> ClosedLoopResult:
+                on_divergence: str = "raise", compile: bool | None = None, loop: str = "auto") -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` seconds.
 
     The controller tracks the reference built on ``model`` (its design model: the joint
@@ -66,6 +66,10 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
         records ``stable = 0`` with ``divergence_time`` (s).
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
+    loop : {"auto", "compiled", "python"}
+        Run the samples in one CasADi call when the controller's law allows it
+        (``"auto"``), or one Python iteration per sample (``"python"``, the slow path);
+        :func:`flexctrl.loop.sampled.simulate_closed_loop`.
 
     Returns
     -------
@@ -118,7 +122,8 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
     monitor = divergence_monitor(plant, plant.spec, path.q_start, path.q_target, judge.divergence_deflection,
                                  judge.divergence_angle)
     trajectory, _ = simulate_closed_loop(plant, controller, x0, float(duration), dt, sensors=sensors, rng=rng,
-                                         compile=compile, monitor=monitor, stop_on_divergence=on_divergence == "record")
+                                         compile=compile, monitor=monitor, stop_on_divergence=on_divergence == "record",
+                                         loop=loop)
     tip_target = tip_at_rest(plant, path.q_target)
     report = controller.stats.summary()
     limits = [getattr(j, "torque_limit", math.inf) for j in plant.spec.joints]

@@ -7,6 +7,7 @@ import re
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.model import derived
 from flexctrl.sim.compile import compile_function
 from flexctrl.sim.parametric import constants_as_parameters
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
@@ -53,6 +54,47 @@ def _name(text: str) -> str:
     return re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")
 
 
+def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
+    """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.base.output_function`, compiled.
+
+    The rows of ``Y`` are the energies, tip and deflections.  Compiled with the model's
+    constants as an input (one library per model shape) and mapped with the constants
+    passed once; kept per model and count.  Its values can differ from the virtual
+    machine's in the last digits (fused multiply-adds);
+    ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
+    """
+    def build():
+        from flexctrl.sim.base import output_function
+
+        fun = output_function(model)
+        fp, constants = constants_as_parameters(fun)
+        X = ca.MX.sym("X", model.n_x, count)
+        if constants.size == 0:
+            return ca.Function("outputs", [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
+        mapped = compile_function(fp, enabled=compile).function.map("outputs_map", "serial", count, [1], [])
+        return ca.Function("outputs", [X], [mapped(X, ca.DM(constants))])
+
+    return derived(model, ("output_map", count, compile), build)
+
+
+def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
+    """``fun(*args)`` through a CasADi FunctionBuffer bound to numpy arrays (no DM conversions).
+
+    CasADi is column-major, so an input or output of shape (rows, cols) is a C-ordered
+    numpy array of shape (cols, rows): pass states as rows, get results as rows.
+    """
+    buffer, trigger = fun.buffer()
+    inputs = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float).reshape(-1), (fun.nnz_in(i),)))
+              for i, a in enumerate(args)]
+    outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
+    for i, a in enumerate(inputs):
+        buffer.set_arg(i, memoryview(a))
+    for i, r in enumerate(outputs):
+        buffer.set_res(i, memoryview(r))
+    trigger()
+    return outputs
+
+
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:
     """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, compiled; and whether it is.
 
@@ -61,8 +103,12 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
     at 38 us under a 10 ms LQR: 260 steps): ONE compiled RK4 step, chained by a CasADi
     ``mapaccum`` loop in the virtual machine, so one library per model serves every
     step count and step size (compiling ``amm:5``'s step takes about 13 s here, the
-    same as six unrolled steps).
+    same as six unrolled steps).  Built once per model and step count (:func:`flexctrl.dynamics.model.derived`).
     """
+    return derived(model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile))
+
+
+def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Function, bool]:
     if substeps <= UNROLL_LIMIT:
         fp, constants = constants_as_parameters(model.functions["f"])
         if constants.size == 0:  # f could not be rebuilt: one library per model

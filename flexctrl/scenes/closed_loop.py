@@ -58,7 +58,7 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
 def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=None, fidelity=None,
                           plots: bool | None = None, overrides=(), on_divergence: str = "raise",
                           auto_options: dict[str, Any] | None = None,
-                          cache: SceneCache | None = None) -> ClosedLoopResult:
+                          cache: SceneCache | None = None, loop: str = "auto") -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -86,7 +86,11 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         Keywords of :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity`
         (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
     cache : SceneCache, optional
-        Models, fidelity runs and choices to reuse (a fresh one when None).
+        Models, designs, verdicts, fidelity runs and choices to reuse (a fresh one when None).
+    loop : {"auto", "compiled", "python"}
+        How the samples run (:func:`flexctrl.loop.sampled.simulate_closed_loop`): in one
+        CasADi call for the controllers that allow it (``"auto"``), or one Python
+        iteration per sample (``"python"``, the slow path, for comparison).
 
     Returns
     -------
@@ -123,7 +127,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     rng = np.random.default_rng(scene.seed) if scene.noise else None
     trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt, sensors=setup.sensors,
                                          rng=rng, compile=plant_scene.solver.get("compile"), monitor=setup.monitor,
-                                         stop_on_divergence=on_divergence == "record")
+                                         stop_on_divergence=on_divergence == "record", loop=loop)
     tip_target = tip_at_rest(plant, scene.target_q)
     report = ctrl.stats.summary()
     metrics = run_metrics(
@@ -132,7 +136,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         stable_band=scene.stable_band, duration=plant_scene.duration,
         torque_limits=[j.torque_limit for j in arm.joints], controller_stats=report,
         step_times=ctrl.stats.step_times,
-        radius=linear_closed_loop_radius(plant, ctrl, scene.target_q, setup.sensors))
+        radius=loop_radius(setup, cache))
     if choice is not None:
         metrics["chosen_modes"] = float(choice.choice.count or 0)
         metrics["chosen_dt"] = float(choice.dt)
@@ -161,6 +165,18 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     if out is not None:
         result.save(out, plots=plant_scene.plots if plots is None else plots)
     return result
+
+
+def loop_radius(setup, cache: SceneCache) -> float | None:
+    """The linear verdict of a set-up loop; kept in ``cache`` ("verdicts") for a controller designed from a file."""
+    def compute():
+        return linear_closed_loop_radius(setup.plant, setup.controller, setup.scene.target_q, setup.sensors)
+
+    if setup.design_key is None:
+        return compute()
+    plant = setup.plant_scene
+    key = (setup.design_key, setup.arm, str(plant.fidelity), plant.modes, plant.q0, tuple(setup.scene.target_q))
+    return cache.get("verdicts", key, compute)
 
 
 def check_auto(scene, controller=None) -> None:

@@ -66,6 +66,8 @@ class LoopSetup:
     x0: np.ndarray
     monitor: Any
     build_time_s: float
+    #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a designed controller).
+    design_key: Any = None
 
 
 def design_scene_controller(scene, design_model, settings, path: str | Path):
@@ -107,11 +109,17 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
     (:func:`flexctrl.control.design`): it then keeps its own design model, payload and
     operating point, so the scene's ``design_payload``, ``controller_fidelity`` and
     ``design_configuration`` must be absent, and ``overrides`` empty.
+
+    A controller designed from a file is kept in ``cache`` ("designs") under everything
+    it depends on (design arm, fidelity, configuration, settings, the scene's joint
+    path and deflection) and reset for each run, so the runs of a worker that differ
+    only in the plant (payload, fidelity, step, noise) design once.
     """
     from flexctrl.spec.controller import load_controller
 
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
+    design_key = None
     plant_scene = scene.plant
     designed = is_designed(controller)
     path = None if designed else (controller or scene.controller)
@@ -136,14 +144,19 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
         design_q = tuple(scene.design_configuration)
         same = design_arm == arm and str(design_fidelity) == str(plant_scene.fidelity) and scene.design_q is None
         design_model = plant if same else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
-        ctrl = design_scene_controller(scene, design_model, settings, path)
+        design_key = (design_arm, str(design_fidelity), plant_scene.modes, plant_scene.q0 if same else design_q,
+                      design_q, settings, scene.joint_reference(), scene.deflection)
+        ctrl = cache.get("designs", design_key,
+                         lambda: design_scene_controller(scene, design_model, settings, path))
+        ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
     path_ref = scene.joint_reference()
     sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
     x0 = initial_state(plant_scene, plant, arm)
     monitor = divergence_monitor(plant, arm, scene.start_q, scene.target_q, scene.divergence_deflection,
                                  scene.divergence_angle)
     return LoopSetup(scene, plant_scene, arm, plant, design_arm, design_fidelity, design_q, design_model, ctrl, settings,
-                     None if path is None else Path(path), path_ref, sensors, x0, monitor, time.perf_counter() - start)
+                     None if path is None else Path(path), path_ref, sensors, x0, monitor, time.perf_counter() - start,
+                     design_key)
 
 
 def _design_model_of(ctrl, scene, overrides):
