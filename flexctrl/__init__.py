@@ -63,6 +63,8 @@ _EXPORTS: dict[str, str] = {
     "write_report": "flexctrl.study.report",
     "load_tuning": "flexctrl.spec.tuning",
     "tune": "flexctrl.tuning.tuner",
+    # the seed papers
+    "reproduce_paper": "flexctrl.reproduce.api",
     # errors
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",

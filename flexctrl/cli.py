@@ -28,6 +28,7 @@ COMMANDS = (
     "study",
     "tune",
     "report",
+    "reproduce",
 )
 
 

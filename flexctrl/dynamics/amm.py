@@ -22,6 +22,8 @@ Modal damping
     1/s instead of kg/s).  ``damping="ratio"`` (default) uses
     ``d = 2 zeta omega m_l``, which makes ``zeta`` the damping ratio of the isolated
     mode as the file's ``damping_ratio`` says; ``damping="paper"`` uses Eq 68 as printed.
+    The default (None) is the arm's ``damping_form`` (model file key ``damping_form``,
+    scene key ``[damping] form``).
 
 Frozen and scheduled modes
     ``modes="frozen"``: the clamped-mass modes of each link are computed once, at
@@ -78,10 +80,10 @@ from flexctrl.dynamics.amm_kinematics import (
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import SpecError
 from flexctrl.spec.fidelity import Fidelity
-from flexctrl.spec.arm import ArmSpec
+from flexctrl.spec.arm import DAMPING_FORMS, ArmSpec
 
 MODES = ("frozen", "scheduled")
-DAMPING = ("ratio", "paper")
+DAMPING = DAMPING_FORMS
 SOLVERS = ("ldl", "qr")
 CORIOLIS = ("bodies", "lagrange")
 
@@ -229,7 +231,7 @@ def build_amm(
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
     reference_q: Sequence[float] | None = None,
-    damping: Literal["ratio", "paper"] = "ratio",
+    damping: Literal["ratio", "paper"] | None = None,
     solver: Literal["ldl", "qr"] = "ldl",
     fidelity: Fidelity | None = None,
     lookups: Sequence[ca.Function | None] | None = None,
@@ -250,7 +252,8 @@ def build_amm(
         Joint angles (rad) of the frozen modes and of ``omega_max``; default the
         arm's ``configuration``.
     damping
-        ``"ratio"`` (d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed, 2 zeta omega).
+        ``"ratio"`` (d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed, 2 zeta omega);
+        None: the arm's ``damping_form``.
     solver
         Symbolic solve of ``M qdd = rhs`` in ``f``: ``"ldl"`` (explicit LDL^T) or
         ``"qr"`` (``casadi.solve``).
@@ -273,6 +276,7 @@ def build_amm(
     """
     start = time.perf_counter()
     _check_choice(modes, MODES, "modes")
+    damping = arm.damping_form if damping is None else damping
     _check_choice(damping, DAMPING, "damping")
     _check_choice(solver, SOLVERS, "solver")
     _check_choice(coriolis, CORIOLIS, "coriolis")

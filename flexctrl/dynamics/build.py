@@ -27,7 +27,7 @@ def build_model(
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
     reference_q: Sequence[float] | None = None,
-    damping: Literal["ratio", "paper"] = "ratio",
+    damping: Literal["ratio", "paper"] | None = None,
 ) -> Model:
     """Build the model of ``arm`` at ``fidelity``.
 
@@ -47,7 +47,8 @@ def build_model(
         Joint angles (rad) of the frozen modes and of ``Model.omega_max``;
         default the arm's ``configuration``.
     damping
-        ``"ratio"`` (default: d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed).
+        ``"ratio"`` (d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed); default
+        (None): the arm's ``damping_form``.
 
     Raises
     ------
@@ -66,6 +67,10 @@ def build_model(
 
         if modes != "frozen":
             raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
+        if (arm.damping_form if damping is None else damping) != "ratio":
+            raise ModelFamilyUnavailable("damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
+                                         "modes only; a finite-element model takes its damping from damping_ratio "
+                                         "(use damping form 'ratio' or an 'amm:N' fidelity)")
         return build_fem_model(arm, fid.count, reference_q=reference_q)
     if fid.kind == "auto":
         raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "

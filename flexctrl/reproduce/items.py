@@ -38,6 +38,10 @@ class Item:
     agrees: bool
     note: str = ""
 
+    def __post_init__(self) -> None:
+        # verdicts computed with numpy arrive as numpy.bool_, which JSON does not take
+        object.__setattr__(self, "agrees", bool(self.agrees))
+
 
 @dataclass
 class Section:
@@ -74,7 +78,8 @@ def _table(items: list[Item]) -> list[str]:
     return lines
 
 
-def write_reproduction(out_dir: Path, title: str, sections: list[Section], preamble: str = "") -> dict:
+def write_reproduction(out_dir: Path, title: str, sections: list[Section], preamble: str = "",
+                       extra: dict | None = None) -> dict:
     """Write ``out_dir/report.md`` and ``out_dir/reproduction.json``; return the JSON document.
 
     Parameters
@@ -87,6 +92,8 @@ def write_reproduction(out_dir: Path, title: str, sections: list[Section], pream
         In the paper's order.
     preamble : str
         Markdown after the heading (what was run, how long it took, reduced or full).
+    extra : dict, optional
+        More top-level keys of ``reproduction.json`` (e.g. ``reduced``, ``seconds``).
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -106,6 +113,6 @@ def write_reproduction(out_dir: Path, title: str, sections: list[Section], pream
         if s.figures:
             lines.append("")
     (out_dir / "report.md").write_text("\n".join(lines))
-    document = {"paper": title, "items": [asdict(it) for it in items]}
+    document = {"paper": title, **(extra or {}), "items": [asdict(it) for it in items]}
     (out_dir / "reproduction.json").write_text(json.dumps(document, indent=1) + "\n")
     return document

@@ -55,6 +55,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         arm = dataclasses.replace(arm, gravity=scene.gravity)
     if scene.zeta is not None:
         arm = dataclasses.replace(arm, links=tuple(dataclasses.replace(l, damping_ratios=(scene.zeta,)) for l in arm.links))
+    if scene.damping_form is not None:
+        arm = dataclasses.replace(arm, damping_form=scene.damping_form)
     if scene.friction is not None:
         friction = scene.friction * arm.n_links if len(scene.friction) == 1 else scene.friction
         if len(friction) != arm.n_links:

@@ -14,7 +14,7 @@ from flexctrl.spec.reader import read_toml
 def load_model(path: str | Path, payload: float | None = None, fidelity: str | None = "amm:2", *,
                overrides: Mapping[str, Any] | Iterable[str] | None = None,
                modes: Literal["frozen", "scheduled"] = "frozen", reference_q: Sequence[float] | None = None,
-               damping: Literal["ratio", "paper"] = "ratio", **keys: Any):
+               damping: Literal["ratio", "paper"] | None = None, **keys: Any):
     """Read a model file, change what the arguments say, validate it and build it at ``fidelity``.
 
     Parameters
@@ -34,7 +34,8 @@ def load_model(path: str | Path, payload: float | None = None, fidelity: str | N
     reference_q : sequence of float, optional
         Joint angles (rad) of the frozen modes; default the file's ``configuration``.
     damping : {"ratio", "paper"}
-        Modal damping ``d = 2 zeta omega m`` or Eq 68 of Subedi et al. as printed.
+        Modal damping ``d = 2 zeta omega m`` or Eq 68 of Subedi et al. as printed; default:
+        the file's ``damping_form`` (``"ratio"`` when it has none).
     **keys
         Top-level keys of the model file (``gravity=[0.0, 0.0]`` in m/s^2,
         ``configuration=[0, 90, 0]`` in degrees as in the file, ...).

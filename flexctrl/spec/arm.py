@@ -12,6 +12,8 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     gravity = [0.0, -9.81]           # m/s^2, world frame
     configuration = [0, 0, 0]        # default joint angles, degrees
     boundary_inertia = "exact"       # or "paper" (see flexctrl.modal.boundary)
+    damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
+                                     # et al.'s Eq 68 as printed, d = 2 zeta omega (see DAMPING_FORMS)
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
     [[links]]  length (m), mass_per_length (kg/m), EI (N m^2), inertia
                (kg m^2 about the link's centre of mass), n_modes (0..6),
@@ -40,6 +42,13 @@ from flexctrl.spec.reader import TableReader, read_toml
 MAX_MODES = 6
 JOINT_TYPES = ("revolute", "prismatic")
 BOUNDARY_INERTIA = ("exact", "paper")
+#: Modal damping forms (``damping_form`` in model files, ``[damping] form`` in scenes,
+#: ``damping=`` in :func:`flexctrl.dynamics.build.build_model`).  ``"ratio"``:
+#: ``d = 2 zeta omega m_l`` (kg/s), so ``zeta`` is the damping ratio of the isolated mode
+#: (modes normalised to the link mass, Eq 40, have modal mass ``m_l``).  ``"paper"``: Subedi
+#: et al. (2021) Eq 68 as printed, ``d = 2 zeta sqrt(k/m_l) = 2 zeta omega`` (unit 1/s where a
+#: modal force needs kg/s; it acts as the damping ratio ``zeta / m_l``).
+DAMPING_FORMS = ("ratio", "paper")
 
 
 @dataclass(frozen=True)
@@ -193,6 +202,8 @@ class ArmSpec:
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
         How the tip inertia J_D of the clamped-mass boundary is formed.
+    damping_form : {"ratio", "paper"}
+        How the modal damping coefficient is formed from ``damping_ratio`` (see ``DAMPING_FORMS``).
     source : str
         The file it was loaded from.
     """
@@ -204,6 +215,7 @@ class ArmSpec:
     gravity: tuple[float, float]
     configuration: tuple[float, ...]
     boundary_inertia: Literal["exact", "paper"] = "exact"
+    damping_form: Literal["ratio", "paper"] = "ratio"
     source: str = ""
     notes: str = ""
 
@@ -301,6 +313,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         gravity=(gravity[0], gravity[1]),
         configuration=tuple(math.radians(a) for a in config_deg),
         boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
+        damping_form=r.string("damping_form", "ratio", choices=DAMPING_FORMS),  # type: ignore[arg-type]
         source=source,
         notes=r.string("notes", ""),
     )

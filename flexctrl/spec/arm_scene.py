@@ -19,7 +19,10 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     dt = 1e-3                         # s: step, output interval and torque hold
     duration = 5.0                    # s
     [initial]   q (deg, one per joint), qd (deg/s), [initial.qf] qf31 = 0.1 (m) ...
-    [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint)
+    [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint),
+                form = "ratio" (d = 2 zeta omega m_l, zeta the modal damping ratio) or "paper"
+                (Subedi et al. Eq 68 as printed, d = 2 zeta omega: 1/s where kg/s is needed,
+                an effective ratio zeta / m_l); default: the model file's damping_form
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
     [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
@@ -38,6 +41,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from flexctrl.spec.arm import DAMPING_FORMS
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 
@@ -109,6 +113,7 @@ class ArmScene:
     qf0: dict[str, float] = field(default_factory=dict)
     zeta: float | None = None
     friction: tuple[float, ...] | None = None
+    damping_form: Literal["ratio", "paper"] | None = None
     input: InputSpec = InputSpec()
     solver: dict[str, Any] = field(default_factory=dict)
     fft_span: float = 2.0
@@ -127,7 +132,7 @@ class ArmScene:
             "gravity": list(self.gravity) if self.gravity else None,
             "q0_deg": [math.degrees(a) for a in self.q0] if self.q0 else None,
             "qd0_deg_s": [math.degrees(a) for a in self.qd0] if self.qd0 else None,
-            "qf0_m": dict(self.qf0), "zeta": self.zeta, "friction": list(self.friction) if self.friction else None,
+            "qf0_m": dict(self.qf0), "zeta": self.zeta, "damping_form": self.damping_form, "friction": list(self.friction) if self.friction else None,
             "input": {"kind": self.input.kind, "joint": self.input.joint, "amplitude": self.input.amplitude,
                       "t_accel": self.input.t_accel, "t_decel": self.input.t_decel, "t_start": self.input.t_start},
             "integrator": self.integrator, "dt": self.dt, "duration": self.duration, "solver": dict(self.solver),
@@ -178,6 +183,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
         raw = dmp.raw("friction")
         friction = dmp.numbers("friction", low=0.0, unit="N m s/rad") if isinstance(raw, list) else (
             dmp.nonnegative("friction", unit="N m s/rad"),)
+    damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
     dmp.finish()
 
     inp = r.table_of("input", {})
@@ -235,7 +241,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
         integrator=integrator,
         dt=dt,
         duration=duration,
-        q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, input=spec, solver=solver,
+        q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
     )
     r.finish()
