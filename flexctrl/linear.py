@@ -42,6 +42,7 @@ import numpy as np
 from flexctrl.dynamics.amm import locked_spectrum
 from flexctrl.dynamics.model import jacobian_function
 from flexctrl.errors import SolverError, SpecError
+from flexctrl.spec.units import warn_if_degrees
 
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
 
@@ -213,6 +214,7 @@ def equilibrium(
     qr = np.asarray(q_joints, dtype=float).ravel()
     if qr.size != n:
         raise SpecError(f"{qr.size} joint angles given; expected {n}", key="q_joints")
+    warn_if_degrees(qr, key="q_joints")
     qf = np.zeros(N - n) if q_flex0 is None else np.asarray(q_flex0, dtype=float).ravel()
     fun = _static_functions(model)
     iterations = 0

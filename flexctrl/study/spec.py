@@ -72,6 +72,7 @@ from flexctrl.errors import SpecError
 from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
+from flexctrl.spec.units import warn_if_radians
 from flexctrl.study.hashing import canonical_json, derive_seed, file_digest, run_id as _run_id
 
 from flexctrl.study.plan import (FILE_SETTINGS, MAX_RUNS, NO_CONTROLLER, PLOTS, RESERVED_COLUMNS, SETTINGS, TARGETS,
@@ -147,7 +148,9 @@ def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
     if name == "configuration":
         if not isinstance(value, list) or not value:
             raise ctx.error(key, f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]")
-        return [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
+        angles = [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
+        warn_if_radians(angles, source=ctx.source, key=key)
+        return angles
     if name == "fidelity":
         return str(parse_fidelity(value, source=ctx.source, key=key))
     if _JOINT.match(name):
@@ -311,6 +314,8 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
         if name_ in fixed:
             raise ctx.error(key, f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two")
         checked = tuple(_setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values))
+        if _JOINT.match(name_):
+            warn_if_radians(checked, source=ctx.source, key=key)
         seen: dict[str, int] = {}
         for i, v in enumerate(checked):
             text = canonical_json(v)
