@@ -20,6 +20,7 @@ from flexctrl.errors import FlexctrlError, SpecError, SpecWarning
 
 # Sub-command modules, in the order ``flexctrl --help`` lists them.
 COMMANDS = (
+    "check",
     "modes",
     "modal_report",
     "identify_hubs",

@@ -160,7 +160,9 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     cf = parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity") if r.has("controller_fidelity") else None
     target = r.table_of("target")
     if target.has("q") == target.has("move"):
-        raise target.error("q", "give exactly one of 'target.q' (absolute) and 'target.move' (relative to initial.q), degrees")
+        given = "both are given" if target.has("q") else "missing required key"
+        raise target.error("q", f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
+                                "to initial.q), degrees")
     if target.has("q"):
         target_q = tuple(math.radians(a) for a in target.degrees("q"))
     else:

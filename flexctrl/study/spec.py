@@ -333,7 +333,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     needs_model = get_executor(executor, source=source).needs_model
     for required in ("scene", "model") if needs_model else ("scene",):
         if required not in origin:
-            raise r.error(required, f"missing required key: the {required} file, as a fixed setting or a grid axis")
+            raise r.error(required, f"missing required key; allowed: the {required} file, as a fixed setting or a grid axis")
 
     t = r.table_of("trajectories", {})
     keep = t.boolean("keep", True)
