@@ -494,6 +494,31 @@ class ModalSummary:
                 for s, f, z in zip(self.eigenvalues, self.frequency_hz, self.damping)]
 
 
+def holding_torque_excess(model, op: OperatingPoint) -> str:
+    """Why the holding torques of ``op`` are beyond the model's joint torque limits, or ``""`` when they are not.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its ``spec.joints`` give the limits (N m); a model without joints has none.
+    op : OperatingPoint
+        A static equilibrium (:func:`equilibrium`): ``u`` holds it (N m).
+
+    Returns
+    -------
+    str
+        One line naming the joint angles (deg), the torques and the limits (N m), or ``""``.
+    """
+    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
+    u = np.asarray(op.u, dtype=float).ravel()
+    if limits.size != u.size or not np.any(np.abs(u) > limits):
+        return ""
+    over = ", ".join(f"joint {i + 1}: |{u[i]:.4g}| > {limits[i]:.4g}" for i in np.flatnonzero(np.abs(u) > limits))
+    q = [round(math.degrees(a), 3) for a in np.asarray(op.x, dtype=float)[: u.size]]
+    return (f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} N m beyond the "
+            f"torque limits {limits.tolist()} N m ({over}): no controller can hold the arm there")
+
+
 def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
     """Frequencies (Hz) and damping ratios of the eigenvalues of ``sys`` (continuous or discrete).
 

@@ -247,3 +247,69 @@ def test_optional_key_misspelt_gets_a_suggestion():
         load_arm(ROOT / "models/subedi3link.toml", ["joints[1].torque_limt=3"])
     with pytest.raises(SpecError, match=r"links\[1\].EAA'.*did you mean 'EA'"):  # an optional key the file lacks
         load_arm(ROOT / "models/subedi3link.toml", ["links[1].EAA=3"])
+
+
+# -- holding torques, poles, per-link modes ---------------------------------------------------------------
+
+
+def test_linearize_text_marks_unstable_poles_and_prints_damping(capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    # an upright rigid arm with free joints is an inverted pendulum chain (unstable real poles); hanging, it is not
+    assert main(["linearize", "models/subedi3link.toml", "--q", "90", "0", "0", "--fidelity", "rigid"]) == 0
+    upright = capsys.readouterr().out
+    assert main(["linearize", "models/subedi3link.toml", "--q", "-90", "0", "0", "--fidelity", "rigid"]) == 0
+    hanging = capsys.readouterr().out
+    assert "zeta" in upright and "UNSTABLE" in upright and "no unstable pole" not in upright
+    assert "UNSTABLE" not in hanging and "no unstable pole" in hanging
+    rows = [line for line in upright.splitlines() if line.strip().endswith(")") and "UNSTABLE" in line]
+    assert rows and all(float(r.split()[1]) < 0 for r in rows)  # a growing pole has a negative damping ratio
+    assert main(["linearize", "models/subedi3link.toml", "--q", "90", "0", "0", "--fidelity", "rigid", "--json"]) == 0
+    data = __import__("json").loads(capsys.readouterr().out)
+    assert sum(data["unstable"]) == upright.count("UNSTABLE")
+    assert all((re > 0) == u for re, u in zip(data["eigenvalues_real_1_s"], data["unstable"]))
+
+
+def test_linearize_warns_on_one_line_when_the_limits_cannot_hold_the_pose(capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert main(["linearize", "models/subedi3link.toml", "--q", "0", "90", "0", "--fidelity", "rigid", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert re.search(r"warning: models/subedi3link.toml: key '--q': .*holding torques \[[0-9.]+, .*beyond the torque "
+                     r"limits \[200.0, 100.0, 50.0\] N m \(joint 1: \|[0-9.]+\| > 200\)", err)
+
+
+def test_design_refuses_a_target_the_limits_cannot_hold(monkeypatch, tmp_path, capsys):
+    monkeypatch.chdir(ROOT)
+    import numpy as np
+
+    import flexctrl as fc
+
+    model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid")
+    op = fc.equilibrium(model, np.radians([0.0, 90.0, 0.0]))
+    with pytest.raises(SpecError, match=r"models/subedi3link.toml.*: key 'target': the static equilibrium at q = "
+                                        r"\[0.0, 90.0, 0.0\] deg needs holding torques .*allowed: a target"):
+        fc.design(model, op, fc.PDSettings())
+    # the closed-loop scene in a vertical plane: exit 2 with that line, before any step is simulated
+    status = main(["simulate", "studies/scenes/move_joint1_30deg.toml", "--out", str(tmp_path / "out"), "--no-plots",
+                   "--set", "gravity=[0.0, -9.81]", "--set", "fidelity=\"rigid\"", "--controller", "controllers/pd.toml"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "holding torques" in err and "joint 1" in err
+    assert not (tmp_path / "out" / "trajectory.csv").exists()
+
+
+def test_per_link_modes_take_a_model_as_well_as_a_description(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    import numpy as np
+
+    import flexctrl as fc
+
+    model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="amm:1")
+    spec = fc.load_arm("models/subedi3link.toml").with_payload(2.0)
+    q = np.radians([0.0, 45.0, 0.0])
+    for link in range(3):
+        assert fc.link_modes(model, q, link, 2).frequency_hz == pytest.approx(fc.link_modes(spec, q, link, 2).frequency_hz,
+                                                                              rel=1e-12)
+    assert [m.frequency_hz[0] for m in fc.arm_modes(model, q, 1)] == pytest.approx(
+        [fc.link_modes(spec, q, i, 1).frequency_hz[0] for i in range(3)], rel=1e-12)
+    with pytest.raises(SpecError, match="allowed: an ArmSpec"):
+        fc.link_modes("models/subedi3link.toml", q, 0)

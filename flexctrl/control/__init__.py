@@ -42,16 +42,13 @@ from flexctrl.spec.controller_settings import (
 
 
 def _check_holding_torque(model, op) -> None:
-    import warnings
+    from flexctrl.linear import holding_torque_excess
 
-    import numpy as np
-
-    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
-    if limits.size == np.size(op.u) and np.any(np.abs(op.u) > limits):
-        warnings.warn(
-            f"the target needs holding torques {np.round(op.u, 3).tolist()} N m beyond the torque limits "
-            f"{limits.tolist()} N m: no controller can hold the arm there (check gravity and the target)",
-            RuntimeWarning, stacklevel=3)
+    excess = holding_torque_excess(model, op)
+    if excess:
+        raise SpecError(f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
+                        "the payload and the target)", source=getattr(model.spec, "source", None) or None,
+                        key="target")
 
 
 #: Controller kind -> ``"module:designer"`` (``designer(model, op, settings) -> Controller``).
