@@ -313,3 +313,39 @@ def test_per_link_modes_take_a_model_as_well_as_a_description(monkeypatch):
         [fc.link_modes(spec, q, i, 1).frequency_hz[0] for i in range(3)], rel=1e-12)
     with pytest.raises(SpecError, match="allowed: an ArmSpec"):
         fc.link_modes("models/subedi3link.toml", q, 0)
+
+
+# -- controller keys from the command line and per controller in a study --------------------------------------
+
+
+def test_simulate_set_reaches_the_controller_file(capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(ROOT)
+    scene = "studies/scenes/move_joint1_30deg.toml"
+    assert main(["simulate", scene, "--out", str(tmp_path), "--set", "controller.sample_tim=0.005"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "controllers/lqr.toml: key 'sample_tim'" in err and "did you mean 'sample_time'" in err
+    assert main(["simulate", "studies/scenes/free_vibration.toml", "--out", str(tmp_path),
+                 "--set", "controller.sample_time=0.005"]) == 2
+    assert "runs no controller" in capsys.readouterr().err
+    status = main(["simulate", scene, "--out", str(tmp_path), "--no-plots", "--json", "--controller",
+                   "controllers/pd.toml", "--set", "duration=3.0", "--set", "controller.sample_time=0.002"])
+    summary = __import__("json").loads(capsys.readouterr().out)
+    assert status == 0
+    assert summary["controller"]["sample_time"] == 0.002 and summary["controller"]["steps"] == 1500  # 3 s / 2 ms
+
+
+def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    from flexctrl.study.spec import load_study
+
+    spec = load_study("studies/quickstart.toml", ["per_controller.mpc.horizon=30"])
+    by_controller = {}
+    for run in spec.runs:
+        by_controller.setdefault(run.coordinates["controller"], set()).update(run.settings["overrides"])
+    assert by_controller["mpc"] == {"controller.horizon=30"}
+    assert all(not v for k, v in by_controller.items() if k != "mpc")
+    with pytest.raises(SpecError, match=r"key 'per_controller.mcp': 'mcp' is not a controller of the study \(did you "
+                                        r"mean 'mpc'\?\); allowed: .*lqr, mpc, pd, robust"):
+        load_study("studies/quickstart.toml", ["per_controller.mcp.horizon=30"])
+    with pytest.raises(SpecError, match=r"refuses run .*controller = pd.*key 'horizon': unknown key"):
+        load_study("studies/quickstart.toml", ["per_controller.pd.horizon=30"])

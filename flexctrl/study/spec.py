@@ -27,6 +27,10 @@ File format (paths relative to the study file; angles in degrees; SI units)::
     [set]                                # fixed KEY=VALUE overrides of the files
     "scene.duration" = 3.0               # scene.KEY, controller.KEY or model.KEY
 
+    [per_controller.mpc]                 # overrides of ONE controller of the study (its file's stem,
+    horizon = 30                         # as in the table's controller column): only the runs with
+    "weights.torque" = 0.2               # controllers/mpc.toml get them (over any [set] value)
+
     [grid]                               # axes: every key takes a list of values
     payload = [0.0, 2.0]
     configuration = [[0, 0, 0], [0, 90, 0]]
@@ -297,6 +301,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     for raw_key in s.table:
         s.raw(raw_key)
     s.finish()
+    per_controller = _per_controller(ctx, r.table_of("per_controller", {}))
 
     # axes
     g = r.table_of("grid", {})
@@ -347,7 +352,8 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     if n_runs > MAX_RUNS:
         raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
 
-    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes)
+    _check_controller_stems(ctx, per_controller, fixed, axes)
+    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, per_controller)
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
         name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
@@ -429,8 +435,36 @@ def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[
     return labels
 
 
+def _per_controller(ctx: _Context, table: TableReader) -> dict[str, dict[str, Any]]:
+    """``[per_controller.STEM]`` tables: ``{stem: {controller key: value}}``, values checked as plain data."""
+    out: dict[str, dict[str, Any]] = {}
+    for stem in list(table.table):
+        sub_table = table.table_of(stem)
+        out[stem] = {}
+        for name, value in _flatten(sub_table.table):
+            key = f"per_controller.{stem}.{name}"
+            out[stem][name] = _setting_value(ctx, key, f"controller.{name}", value)
+        sub_table.accept(*sub_table.table)
+        sub_table.finish()
+    table.finish()
+    return out
+
+
+def _check_controller_stems(ctx: _Context, per_controller: dict, fixed: dict[str, Any], axes: list[Axis]) -> None:
+    """Every ``[per_controller.STEM]`` names a controller file of the study."""
+    files = [fixed.get("controller")] + [v for a in axes if a.key == "controller" for v in a.values]
+    stems = sorted({Path(f).stem for f in files if f})
+    for stem in per_controller:
+        if stem not in stems:
+            hint = difflib.get_close_matches(stem, stems, n=1)
+            extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise ctx.error(f"per_controller.{stem}", f"'{stem}' is not a controller of the study{extra}; allowed: "
+                            f"the stem of a controller file of the study: {', '.join(stems) or '(none)'}")
+
+
 def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
-            origin: dict[str, str], axes: list[Axis]) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+            origin: dict[str, str], axes: list[Axis],
+            per_controller: dict[str, dict[str, Any]] | None = None) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
     labels = _labels(ctx, axes, fixed)
     all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
     runs: list[RunSpec] = []
@@ -447,6 +481,11 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
                 coords += [(f"q{i + 1}", a) for i, a in enumerate(value)]
             else:
                 coords.append((axis.key, value))
+        if values.get("controller"):
+            stem = Path(values["controller"]).stem
+            for name, value in (per_controller or {}).get(stem, {}).items():
+                values[f"controller.{name}"] = value
+                origin.setdefault(f"controller.{name}", f"per_controller.{stem}.{name}")
         overrides = {k: v for k, v in values.items() if "." in k}
         model_overrides = tuple(sorted(f"{k[len('model.'):]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith("model.")))
         if values.get("model") is None:  # an executor that needs no arm (e.g. the beam over supports)
