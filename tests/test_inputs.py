@@ -349,3 +349,54 @@ def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
         load_study("studies/quickstart.toml", ["per_controller.mcp.horizon=30"])
     with pytest.raises(SpecError, match=r"refuses run .*controller = pd.*key 'horizon': unknown key"):
         load_study("studies/quickstart.toml", ["per_controller.pd.horizon=30"])
+
+
+# -- metrics a controller cannot produce ------------------------------------------------------------------------
+
+
+def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    from flexctrl.study.spec import load_study
+
+    spec = load_study("studies/controller_stability.toml", [
+        'grid.controller=["../controllers/pd.toml", "../controllers/lqg.toml", "../controllers/nmpc.toml"]',
+        "grid.payload=[2.0]", "grid.q2=[0]", "grid.q3=[0]"])
+    assert [(spec.runs[i].coordinates["controller"], m) for i, m, _ in spec.unavailable] == [("nmpc", "closed_loop_radius")]
+    assert "no linear law" in spec.unavailable[0][2]
+    assert spec.unavailable_notes() == [f"closed_loop_radius stays empty in 1 of 3 runs: {spec.unavailable[0][2]}"]
+
+
+@pytest.mark.parametrize("declared", [True, False])
+def test_a_metric_a_run_cannot_produce_is_an_empty_cell_with_its_reason(tmp_path, monkeypatch, declared):
+    import csv
+
+    from flexctrl.study.executors import selftest
+    from flexctrl.study.outputs import RunOutput
+    from flexctrl.study.runner import run_study
+    from flexctrl.study.spec import load_study
+
+    real = selftest.execute
+
+    def hides_frequency(settings):  # the stiff controller produces no frequency_hz
+        out = real(settings)
+        if "stiff" in settings["controller"]:
+            return RunOutput({k: v for k, v in out.metrics.items() if k != "frequency_hz"}, out.trajectories)
+        return out
+
+    monkeypatch.setattr(selftest, "execute", hides_frequency)
+    if declared:  # ... and says so (without it, the control: those runs fail)
+        monkeypatch.setattr(selftest, "unavailable_metrics", lambda s: {"frequency_hz": "the stiff one hides it"}
+                            if "stiff" in s["controller"] else {}, raising=False)
+    spec = load_study(ROOT / "tests/data/study_selftest.toml", ["grid.q2=[0]", "grid.q3=[0]"])
+    assert len(spec.unavailable) == (2 if declared else 0)
+    run_study(spec, tmp_path / "out", workers=0, progress="none", report=False)
+    with open(tmp_path / "out" / "results.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    stiff = [r for r in rows if r["controller"] == "stiff"]
+    soft = [r for r in rows if r["controller"] == "soft"]
+    assert len(stiff) == len(soft) == 2 and all(r["status"] == "ok" and float(r["frequency_hz"]) > 0 for r in soft)
+    if declared:
+        assert all(r["status"] == "ok" and r["frequency_hz"] == "" and float(r["tip_peak"]) > 0 for r in stiff)
+        assert all(r["error"] == "no frequency_hz: the stiff one hides it" for r in stiff)
+    else:
+        assert all(r["status"] == "failed" and "no metric 'frequency_hz'" in r["error"] for r in stiff)

@@ -130,7 +130,8 @@ def _study(path, document) -> str:
     from flexctrl.study.spec import load_study
 
     spec = load_study(path)
-    return f"study '{spec.name}', {len(spec.runs)} runs of '{spec.executor}'"
+    notes = "".join(f"; {note}" for note in spec.unavailable_notes())
+    return f"study '{spec.name}', {len(spec.runs)} runs of '{spec.executor}'{notes}"
 
 
 def _tuning(path, document) -> str:

@@ -61,6 +61,24 @@ DESIGNERS: dict[str, str] = {
 }
 
 
+#: Controller kind -> ``"module:Class"`` of the controller its designer returns.
+CONTROLLER_CLASSES: dict[str, str] = {
+    "pd": "flexctrl.control.pd:PDController",
+    "lqr": "flexctrl.control.lqr:LQRController",
+    "mpc": "flexctrl.control.mpc:MPCController",
+    "nmpc": "flexctrl.control.nmpc:NMPCController",
+    "shaped": "flexctrl.control.shaping:ShapedController",
+}
+
+
+def has_linear_law(kind: str) -> bool:
+    """Whether controllers of ``kind`` give a ``linear_law`` (the linear verdict of :mod:`flexctrl.loop.verdict`)."""
+    import importlib
+
+    module, _, name = CONTROLLER_CLASSES[kind].partition(":")
+    return callable(getattr(getattr(importlib.import_module(module), name), "linear_law", None))
+
+
 def design(model, op, settings) -> Controller:
     """Build the controller described by ``settings`` for ``model``, regulating to ``op``.
 
@@ -94,7 +112,7 @@ def design(model, op, settings) -> Controller:
 
 
 __all__ = [
-    "design", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
+    "design", "has_linear_law", "CONTROLLER_CLASSES", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
     "NMPCSettings", "ShapedSettings", "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings",
     "OSQPSettings",
 ]

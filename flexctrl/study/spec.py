@@ -64,6 +64,7 @@ file's stem), ``fidelity``, the override keys as written, ``replicate``.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import itertools
 import math
@@ -369,6 +370,11 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
                 except SpecError as exc:
                     coords = ", ".join(f"{k} = {v}" for k, v in run.coords) or "the only run"
                     raise SpecError(f"executor '{executor}' refuses run {run.index + 1} ({coords}): {exc}", source=source) from None
+    if metrics is not None and check_executor:
+        found = get_executor(executor, source=source)
+        unavailable = tuple((run.index, metric, reason) for run in runs
+                            for metric, reason in found.unavailable_metrics(run.settings).items() if metric in metrics)
+        spec = dataclasses.replace(spec, unavailable=unavailable)
     return spec
 
 
