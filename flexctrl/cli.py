@@ -54,19 +54,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     with warnings.catch_warnings():
-        warnings.showwarning = _one_line_warning(args.command)
+        warnings.formatwarning = _one_line_warning(args.command)  # (recording, e.g. by pytest, still works)
         return _run(args)
 
 
 def _one_line_warning(command: str):
-    """A ``warnings.showwarning`` printing ``flexctrl COMMAND: warning: MESSAGE`` on one line (no source dump)."""
+    """A ``warnings.formatwarning`` giving ``flexctrl COMMAND: warning: MESSAGE`` on one line (no source dump)."""
 
-    def show(message, category, filename, lineno, file=None, line=None):
+    def format_warning(message, category, filename, lineno, line=None) -> str:
         text = str(message).replace("\n", " ")
         kind = "" if issubclass(category, SpecWarning) else f"{category.__name__}: "
-        print(f"flexctrl {command}: warning: {kind}{text}", file=sys.stderr)
+        return f"flexctrl {command}: warning: {kind}{text}\n"
 
-    return show
+    return format_warning
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -23,6 +23,17 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(str(p.relative_to(ROOT)) for d in ("models", "controllers", "studies") for p in (ROOT / d).rglob("*.toml"))
 
 
+def _cli(*argv: str) -> tuple[int, str]:
+    """Exit status and stderr of ``flexctrl ARGV`` run in its own process from the repository root."""
+    import subprocess
+    import sys
+
+    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "flexctrl.cli", *argv], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=600)
+    return done.returncode, done.stderr
+
+
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory) -> Path:
     """A copy of the shipped descriptions (relative paths between them still resolve)."""
@@ -152,11 +163,8 @@ def test_degree_field_that_looks_like_radians_warns_on_one_line(capsys, monkeypa
         warnings.simplefilter("error", SpecWarning)
         load_scene(scene, ["target.move=[5, 0, 0]"])  # a whole number of degrees is a plausible angle
         load_scene(scene, ["target.move=[0, 0, 0]"])
-    # the CLI: one line on stderr, no source-line dump
-    assert main(["check", "--kind", "model", "models/subedi3link.toml"]) == 0
-    capsys.readouterr()
-    status = main(["modes", "models/subedi3link.toml", "--set", "configuration=[0.5, 1.2, 0]", "--json"])
-    err = capsys.readouterr().err
+    # the CLI (a process of its own, as a user runs it): one line on stderr, no source-line dump
+    status, err = _cli("modes", "models/subedi3link.toml", "--set", "configuration=[0.5, 1.2, 0]", "--json")
     assert status == 0
     assert err.count("\n") == 1 and err.startswith("flexctrl modes: warning: models/subedi3link.toml: key "
                                                    "'configuration': value [0.5, 1.2, 0.0] looks like radians")
@@ -271,8 +279,8 @@ def test_linearize_text_marks_unstable_poles_and_prints_damping(capsys, monkeypa
 
 def test_linearize_warns_on_one_line_when_the_limits_cannot_hold_the_pose(capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
-    assert main(["linearize", "models/subedi3link.toml", "--q", "0", "90", "0", "--fidelity", "rigid", "--json"]) == 0
-    err = capsys.readouterr().err
+    status, err = _cli("linearize", "models/subedi3link.toml", "--q", "0", "90", "0", "--fidelity", "rigid", "--json")
+    assert status == 0
     assert err.count("\n") == 1 and "Traceback" not in err
     assert re.search(r"warning: models/subedi3link.toml: key '--q': .*holding torques \[[0-9.]+, .*beyond the torque "
                      r"limits \[200.0, 100.0, 50.0\] N m \(joint 1: \|[0-9.]+\| > 200\)", err)
