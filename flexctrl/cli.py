@@ -53,9 +53,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    with warnings.catch_warnings():
-        warnings.formatwarning = _one_line_warning(args.command)  # (recording, e.g. by pytest, still works)
+    previous = warnings.formatwarning  # (catch_warnings does not restore it)
+    warnings.formatwarning = _one_line_warning(args.command)  # recording, e.g. by pytest.warns, still works
+    try:
         return _run(args)
+    finally:
+        warnings.formatwarning = previous
 
 
 def _one_line_warning(command: str):
