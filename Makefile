@@ -16,7 +16,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/flexctrl study studies/quickstart.toml --out out/quickstart
 
+# Every shipped description is validated (flexctrl check) before the tests run.
+SHIPPED := $(sort $(wildcard models/*.toml controllers/*.toml studies/*.toml studies/*/*.toml studies/*/*/*.toml))
+
 test: $(STAMP)
+	$(BIN)/flexctrl check $(SHIPPED)
 	$(BIN)/python -m pytest
 
 clean:

@@ -33,6 +33,8 @@ _EXPORTS: dict[str, str] = {
     "discretize": "flexctrl.linear",
     "modal_summary": "flexctrl.linear",
     "locked_frequencies": "flexctrl.linear",
+    "arm_modes": "flexctrl.modal.arm_modes",
+    "link_modes": "flexctrl.modal.arm_modes",
     "OperatingPoint": "flexctrl.linear",
     "Sensors": "flexctrl.linear",
     "simulate": "flexctrl.sim",

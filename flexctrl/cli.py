@@ -4,7 +4,8 @@ Each sub-command lives in its own module under :mod:`flexctrl.commands` with two
 functions, ``add_parser(subparsers)`` and ``run(args) -> int``; this module only
 dispatches.  Errors a user can cause (:class:`~flexctrl.errors.SpecError`) are
 printed on one line to stderr with exit status 2; numerical failures with
-status 3.
+status 3.  Warnings (:class:`~flexctrl.errors.SpecWarning` and any other) are printed
+as one line each on stderr, without the source line Python would show.
 """
 
 from __future__ import annotations
@@ -12,12 +13,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 from typing import Sequence
 
-from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.errors import FlexctrlError, SpecError, SpecWarning
 
 # Sub-command modules, in the order ``flexctrl --help`` lists them.
 COMMANDS = (
+    "check",
     "modes",
     "modal_report",
     "identify_hubs",
@@ -51,6 +54,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = warnings.formatwarning  # (catch_warnings does not restore it)
+    warnings.formatwarning = _one_line_warning(args.command)  # recording, e.g. by pytest.warns, still works
+    try:
+        return _run(args)
+    finally:
+        warnings.formatwarning = previous
+
+
+def _one_line_warning(command: str):
+    """A ``warnings.formatwarning`` giving ``flexctrl COMMAND: warning: MESSAGE`` on one line (no source dump)."""
+
+    def format_warning(message, category, filename, lineno, line=None) -> str:
+        text = str(message).replace("\n", " ")
+        kind = "" if issubclass(category, SpecWarning) else f"{category.__name__}: "
+        return f"flexctrl {command}: warning: {kind}{text}\n"
+
+    return format_warning
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         return int(args._run(args) or 0)
     except SpecError as exc:

@@ -42,6 +42,7 @@ import numpy as np
 from flexctrl.dynamics.amm import locked_spectrum
 from flexctrl.dynamics.model import derived, jacobian_function
 from flexctrl.errors import SolverError, SpecError
+from flexctrl.spec.units import warn_if_degrees
 
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
 
@@ -213,6 +214,7 @@ def equilibrium(
     qr = np.asarray(q_joints, dtype=float).ravel()
     if qr.size != n:
         raise SpecError(f"{qr.size} joint angles given; expected {n}", key="q_joints")
+    warn_if_degrees(qr, key="q_joints")
     qf = np.zeros(N - n) if q_flex0 is None else np.asarray(q_flex0, dtype=float).ravel()
     fun = _static_functions(model)
     iterations = 0
@@ -494,6 +496,31 @@ class ModalSummary:
         """One dict per entry: ``frequency_hz``, ``damping``, ``real``, ``imag``."""
         return [{"frequency_hz": float(f), "damping": float(z), "real": float(s.real), "imag": float(s.imag)}
                 for s, f, z in zip(self.eigenvalues, self.frequency_hz, self.damping)]
+
+
+def holding_torque_excess(model, op: OperatingPoint) -> str:
+    """Why the holding torques of ``op`` are beyond the model's joint torque limits, or ``""`` when they are not.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its ``spec.joints`` give the limits (N m); a model without joints has none.
+    op : OperatingPoint
+        A static equilibrium (:func:`equilibrium`): ``u`` holds it (N m).
+
+    Returns
+    -------
+    str
+        One line naming the joint angles (deg), the torques and the limits (N m), or ``""``.
+    """
+    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
+    u = np.asarray(op.u, dtype=float).ravel()
+    if limits.size != u.size or not np.any(np.abs(u) > limits):
+        return ""
+    over = ", ".join(f"joint {i + 1}: |{u[i]:.4g}| > {limits[i]:.4g}" for i in np.flatnonzero(np.abs(u) > limits))
+    q = [round(math.degrees(a), 3) for a in np.asarray(op.x, dtype=float)[: u.size]]
+    return (f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} N m beyond the "
+            f"torque limits {limits.tolist()} N m ({over}): no controller can hold the arm there")
 
 
 def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:

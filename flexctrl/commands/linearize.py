@@ -8,6 +8,9 @@ import math
 
 from flexctrl.commands.common import add_model_arguments
 
+#: A pole with Re s above this fraction of max(1, |s|) (1/s) is marked unstable (the rest is rounding).
+UNSTABLE_TOL = 1e-9
+
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
@@ -15,7 +18,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="linearise at the static equilibrium of a configuration: modal frequencies and damping",
         description="Builds the model (default amm:2), solves the static equilibrium with the joints held at "
         "--q (degrees) against gravity, linearises it (python-control StateSpace, states q then qd) and prints "
-        "its modal frequencies (Hz) and damping ratios. With --locked, frequencies_hz lists the undamped natural "
+        "one line per pole: frequency (Hz), damping ratio, real part and kind, unstable poles marked. With --locked, frequencies_hz lists the undamped natural "
         "frequencies of the flexible structure with the joints clamped, ascending.",
     )
     add_model_arguments(parser, fidelity_default="amm:2")
@@ -27,12 +30,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from flexctrl.commands.common import fidelity_from_args, load_arm_from_args
     from flexctrl.dynamics.build import build_model
-    from flexctrl.linear import equilibrium, linearize, locked_frequencies, modal_summary
+    from flexctrl.errors import warn_spec
+    from flexctrl.linear import equilibrium, holding_torque_excess, linearize, locked_frequencies, modal_summary
 
     arm, q = load_arm_from_args(args)
     fidelity = fidelity_from_args(args)
     model = build_model(arm, str(fidelity), reference_q=q)
     op = equilibrium(model, q)
+    excess = holding_torque_excess(model, op)
+    if excess:
+        warn_spec(f"{excess} (the linearisation below is of an equilibrium the actuators cannot hold)",
+                  source=args.model, key="--q", stacklevel=2)
     result = {
         "model": arm.name,
         "fidelity": str(model.fidelity),
@@ -50,12 +58,35 @@ def run(args: argparse.Namespace) -> int:
         result["locked"] = False
         result["frequencies_hz"] = summary.frequency_hz.tolist()
         result["damping_ratios"] = [None if math.isnan(z) else float(z) for z in summary.damping]
+        result["eigenvalues_real_1_s"] = [float(s.real) for s in summary.eigenvalues]
+        result["unstable"] = [bool(s.real > UNSTABLE_TOL * max(1.0, abs(s))) for s in summary.eigenvalues]
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
     print(f"{arm.name} ({result['fidelity']}), payload {arm.payload.mass:g} kg, q = {[round(a, 3) for a in result['q_deg']]} deg")
     print(f"  equilibrium torques {[round(v, 3) for v in result['equilibrium_torque_Nm']]} N m, "
           f"static link-tip deflections {[f'{v:.3e}' for v in result['static_tip_deflections_m']]} m")
-    label = "locked-joint natural frequencies" if args.locked else "modal frequencies of the linearisation"
-    print(f"  {label} (Hz): " + ", ".join(f"{f:.4g}" for f in result["frequencies_hz"]))
+    if args.locked:
+        print("  locked-joint natural frequencies (Hz): " + ", ".join(f"{f:.4g}" for f in result["frequencies_hz"]))
+        return 0
+    print(_pole_table(summary.eigenvalues))
     return 0
+
+
+def _pole_table(eigenvalues) -> str:
+    """One line per pole of the linearisation (of each complex pair the one with Im s > 0), UNSTABLE marked."""
+    lines = ["  poles of the linearisation (torques held at the equilibrium's; f = |s| / 2 pi, "
+             "zeta = -Re s / |s|; Re s > 0 grows):", f"    {'f (Hz)':>10}  {'zeta':>8}  {'Re s (1/s)':>11}  kind"]
+    unstable = 0
+    for s in eigenvalues:
+        magnitude = abs(s)
+        kind = "oscillatory pair" if s.imag > 0 else ("real" if magnitude > 0 else "rigid (s = 0)")
+        zeta = f"{-s.real / magnitude + 0.0:8.4f}" if magnitude > 0 else f"{'-':>8}"
+        zeta = zeta.replace("-0.0000", " 0.0000")
+        mark = ""
+        if s.real > UNSTABLE_TOL * max(1.0, magnitude):
+            unstable += 1
+            mark = f"  UNSTABLE (grows as exp({s.real:.4g} t), doubling in {math.log(2) / s.real:.3g} s)"
+        lines.append(f"    {magnitude / (2 * math.pi):10.4f}  {zeta}  {s.real:11.4g}  {kind}{mark}")
+    lines.append(f"  {unstable} unstable pole(s)" if unstable else "  no unstable pole")
+    return "\n".join(lines)

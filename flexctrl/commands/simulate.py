@@ -3,6 +3,8 @@
 Writes ``trajectory.csv`` (see :mod:`flexctrl.sim.trajectory` for the columns),
 ``summary.json`` (scene settings, wall time, real-time factor, energy drift,
 dominant FFT frequencies of every link's tip deflection) and PNG plots to DIR.
+``--set KEY=VALUE`` overrides a scene key; ``--set controller.KEY=VALUE`` a key of the
+closed-loop scene's controller file (validated like the file, before anything is built).
 """
 
 from __future__ import annotations
@@ -11,6 +13,9 @@ import argparse
 import json
 
 from flexctrl.spec.fidelity import SPELLINGS
+
+#: ``--set controller.KEY=VALUE`` overrides the controller file (of the scene or --controller), not the scene.
+CONTROLLER_PREFIX = "controller."
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -25,7 +30,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     parser.add_argument("--fidelity", metavar="F", help=f"override the scene's fidelity: {SPELLINGS}")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override any scene key, e.g. duration=0.5 or initial.qf.qf31=0.05 (repeatable)")
+                        help="override any scene key, e.g. duration=0.5 or initial.qf.qf31=0.05, or with "
+                        "controller.KEY a key of the controller file, e.g. controller.sample_time=0.005 (repeatable)")
     parser.add_argument("--controller", metavar="FILE",
                         help="controller settings (controllers/*.toml) for a closed-loop scene (kind = \"closed_loop\")")
     parser.add_argument("--no-plots", action="store_true", help="write no PNG files")
@@ -37,18 +43,29 @@ def run(args: argparse.Namespace) -> int:
     from flexctrl.scenes import run_scene
     from flexctrl.spec.scene import load_scene
 
-    overrides = list(args.set)
+    from flexctrl.errors import SpecError
+
+    overrides = [o for o in args.set if not o.strip().startswith(CONTROLLER_PREFIX)]
+    controller_overrides = [o.strip()[len(CONTROLLER_PREFIX):] for o in args.set if o.strip().startswith(CONTROLLER_PREFIX)]
     if args.fidelity is not None:
         overrides.append(f"fidelity={json.dumps(args.fidelity)}")
     scene = load_scene(args.scene, overrides)
     options = {"plots": False if args.no_plots else None}
+    if scene.kind != "closed_loop" and (args.controller is not None or controller_overrides):
+        key = "--controller" if args.controller is not None else f"--set {CONTROLLER_PREFIX}{controller_overrides[0]}"
+        raise SpecError(f"scene kind '{scene.kind}' runs no controller; allowed: a kind = \"closed_loop\" scene",
+                        source=args.scene, key=key)
     if args.controller is not None:
-        if scene.kind != "closed_loop":
-            from flexctrl.errors import SpecError
-
-            raise SpecError(f"scene kind '{scene.kind}' runs no controller; allowed: a kind = \"closed_loop\" scene",
-                            source=args.scene, key="--controller")
         options["controller"] = args.controller
+    if controller_overrides:
+        from flexctrl.spec.controller import load_controller
+
+        file = args.controller or scene.controller
+        if file is None:
+            raise SpecError("the scene names no controller file to override; allowed: a scene 'controller' key or "
+                            "--controller FILE", source=args.scene, key="--set controller.KEY")
+        load_controller(file, controller_overrides)  # refused here, before the model is built
+        options["overrides"] = controller_overrides
     result = run_scene(scene, args.out, **options)
     s = result.summary
     if args.json:

@@ -40,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
     from flexctrl.study.spec import load_study
 
     spec = load_study(args.study, overrides=args.set)
+    if not args.quiet:
+        for note in spec.unavailable_notes():
+            print(f"{spec.name}: note: {note}", file=sys.stderr)
     out = Path(args.out) if args.out else Path("out") / spec.name
     with stop_signals_interrupt():
         result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,

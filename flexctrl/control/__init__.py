@@ -42,16 +42,13 @@ from flexctrl.spec.controller_settings import (
 
 
 def _check_holding_torque(model, op) -> None:
-    import warnings
+    from flexctrl.linear import holding_torque_excess
 
-    import numpy as np
-
-    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
-    if limits.size == np.size(op.u) and np.any(np.abs(op.u) > limits):
-        warnings.warn(
-            f"the target needs holding torques {np.round(op.u, 3).tolist()} N m beyond the torque limits "
-            f"{limits.tolist()} N m: no controller can hold the arm there (check gravity and the target)",
-            RuntimeWarning, stacklevel=3)
+    excess = holding_torque_excess(model, op)
+    if excess:
+        raise SpecError(f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
+                        "the payload and the target)", source=getattr(model.spec, "source", None) or None,
+                        key="target")
 
 
 #: Controller kind -> ``"module:designer"`` (``designer(model, op, settings) -> Controller``).
@@ -62,6 +59,24 @@ DESIGNERS: dict[str, str] = {
     "nmpc": "flexctrl.control.nmpc:design_nmpc",
     "shaped": "flexctrl.control.shaping:design_shaped",
 }
+
+
+#: Controller kind -> ``"module:Class"`` of the controller its designer returns.
+CONTROLLER_CLASSES: dict[str, str] = {
+    "pd": "flexctrl.control.pd:PDController",
+    "lqr": "flexctrl.control.lqr:LQRController",
+    "mpc": "flexctrl.control.mpc:MPCController",
+    "nmpc": "flexctrl.control.nmpc:NMPCController",
+    "shaped": "flexctrl.control.shaping:ShapedController",
+}
+
+
+def has_linear_law(kind: str) -> bool:
+    """Whether controllers of ``kind`` give a ``linear_law`` (the linear verdict of :mod:`flexctrl.loop.verdict`)."""
+    import importlib
+
+    module, _, name = CONTROLLER_CLASSES[kind].partition(":")
+    return callable(getattr(getattr(importlib.import_module(module), name), "linear_law", None))
 
 
 def design(model, op, settings) -> Controller:
@@ -97,7 +112,7 @@ def design(model, op, settings) -> Controller:
 
 
 __all__ = [
-    "design", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
+    "design", "has_linear_law", "CONTROLLER_CLASSES", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
     "NMPCSettings", "ShapedSettings", "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings",
     "OSQPSettings",
 ]

@@ -9,6 +9,13 @@ library.  Libraries live in ``$FLEXCTRL_CACHE`` or ``./.flexctrl-cache``; they
 are written under a temporary name and renamed into place, so concurrent runs
 sharing a cache never load a half-written file.
 
+A shared library runs with the rights of whoever loads it, so the cache is trusted only
+when it is the user's alone: the folder is created owner-only (mode 0700), and a library
+is loaded only if it is a regular file the user owns that nobody else may write
+(:func:`trusted_file`); any other is rebuilt in its place.  A cache folder that another
+user owns, or that others may write, is not used at all: libraries then go to a private
+temporary folder for this process (with a warning saying why).
+
 When no compiler is found, compilation fails, ``compile=False`` is passed or the
 environment variable ``FLEXCTRL_NO_COMPILE`` is set to anything but ``""``/``"0"``,
 the Function itself is returned and CasADi's virtual machine evaluates it
@@ -33,6 +40,7 @@ import logging
 import os
 import platform
 import shutil
+import stat
 import subprocess
 import tempfile
 import time
@@ -94,6 +102,51 @@ def cache_directory(explicit: str | os.PathLike | None = None) -> Path:
         return Path(explicit)
     env = os.environ.get(ENV_CACHE, "").strip()
     return Path(env) if env else Path.cwd() / ".flexctrl-cache"
+
+
+def trusted_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is the user's alone: owned by the effective user, not writable by group or others.
+
+    A symbolic link is never trusted (its target could change); a folder must be one.
+    """
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    if stat.S_ISLNK(info.st_mode) or not (stat.S_ISREG(info.st_mode) or stat.S_ISDIR(info.st_mode)):
+        return False
+    return info.st_uid == os.geteuid() and not info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def private_directory(directory: Path) -> Path:
+    """``directory``, created owner-only if missing, when it is the user's alone; else a private temporary folder.
+
+    The temporary folder (mode 0700, one per process and untrusted folder) keeps this
+    process's libraries out of reach of the folder's other writers; a warning names the
+    folder and why it was not used.
+    """
+    if not directory.exists():
+        directory.mkdir(parents=True, exist_ok=True, mode=0o700)
+        if os.stat(directory).st_uid == os.geteuid():
+            os.chmod(directory, 0o700)
+    if trusted_file(directory):
+        return directory
+    return _fallback_directory(str(directory))
+
+
+@functools.lru_cache(maxsize=None)
+def _fallback_directory(untrusted: str) -> Path:
+    try:
+        info = os.lstat(untrusted)
+        why = (f"owned by uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}" if not stat.S_ISLNK(info.st_mode)
+               else "a symbolic link")
+    except OSError as exc:
+        why = str(exc)
+    fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
+    warnings.warn(f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries that others "
+                  f"could write are never loaded: compiling into the private folder '{fallback}' for this process "
+                  f"instead (set ${ENV_CACHE} to a folder only you can write)", stacklevel=3)
+    return fallback
 
 
 def find_compiler() -> str | None:
@@ -179,7 +232,7 @@ def compile_function(
     if compiler is None:
         return CompiledFunction(fun, compiled=False, reason="no C compiler found ($CC, gcc, cc)")
     flags = tuple(flags)
-    directory = cache_directory(cache_dir)
+    directory = private_directory(cache_directory(cache_dir))
     attempts = [flags] + ([PORTABLE_FLAGS] if flags != PORTABLE_FLAGS and flags == DEFAULT_FLAGS else [])
     failure = ""
     for attempt in attempts:
@@ -196,7 +249,10 @@ def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tu
     """The cached or freshly compiled library, or the reason it failed."""
     name = fun.name()
     library = directory / f"{name}_{cache_key(fun, flags, compiler)}.so"
-    if library.is_file():
+    if library.is_file() and not trusted_file(library):
+        log.warning("cached library %s is not the user's alone (owner or write permission of others); rebuilding "
+                    "it instead of loading it", library)
+    elif library.is_file():
         try:
             return CompiledFunction(ca.external(name, str(library)), compiled=True, cache_hit=True, path=library, flags=flags)
         except RuntimeError as exc:  # unreadable library: rebuild it
@@ -229,4 +285,5 @@ def _build(fun: ca.Function, library: Path, compiler: str, flags: tuple[str, ...
         )
         if result.returncode != 0:
             raise RuntimeError(result.stderr or result.stdout or f"exit status {result.returncode}")
+        os.chmod(target, 0o700)
         os.replace(target, library)

@@ -20,7 +20,11 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
                damping_ratio (scalar or list per mode), optional EA (N),
                optional [links.section] {width, height, thickness} (m)
     [[joints]] type ("revolute"), hub_mass (kg), hub_inertia (kg m^2),
-               friction (N m s/rad), torque_limit (N m)
+               friction (N m s/rad), torque_limit (N m; required: ``inf`` written out
+               for an actuator without a limit)
+
+A link without ``inertia`` gets the uniform link's ``mass_per_length * length**3 / 12``;
+a given value further than :data:`INERTIA_FACTOR` from it warns.
 
 Every table may carry a free-text ``source`` naming where its numbers come from.
 """
@@ -35,11 +39,14 @@ from typing import Iterable, Literal
 
 import numpy as np
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, warn_spec
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
 MAX_MODES = 6
+#: A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length * length**3 / 12``
+#: warns (a slip of a unit or of the axis: about the link's end it would be 4x).
+INERTIA_FACTOR = 2.0
 JOINT_TYPES = ("revolute", "prismatic")
 BOUNDARY_INERTIA = ("exact", "paper")
 #: Modal damping forms (``damping_form`` in model files, ``[damping] form`` in scenes,
@@ -85,7 +92,8 @@ class LinkSpec:
     EI : float
         Flexural rigidity (N m^2).
     inertia : float
-        Moment of inertia about the link's centre of mass, rigid (kg m^2).
+        Moment of inertia about the link's centre of mass, rigid (kg m^2); in a file,
+        ``mass_per_length * length**3 / 12`` (the uniform link) when absent.
     n_modes : int
         Assumed modes used by default (0..6).
     damping_ratios : tuple of float
@@ -267,7 +275,7 @@ def _read_link(r: TableReader) -> LinkSpec:
         length=r.positive("length", unit="m"),
         mass_per_length=r.positive("mass_per_length", unit="kg/m"),
         EI=r.positive("EI", unit="N m^2"),
-        inertia=r.nonnegative("inertia", unit="kg m^2"),
+        inertia=_link_inertia(r),
         n_modes=r.integer("n_modes", 2, low=0, high=MAX_MODES),
         damping_ratios=ratios,
         EA=r.positive("EA", unit="N") if r.has("EA") else None,
@@ -280,13 +288,41 @@ def _read_link(r: TableReader) -> LinkSpec:
     return link
 
 
+def _link_inertia(r: TableReader) -> float:
+    """The file's ``inertia``, else the uniform link's; a value far from the uniform one warns."""
+    length, rho = r.positive("length", unit="m"), r.positive("mass_per_length", unit="kg/m")
+    uniform = rho * length**3 / 12.0
+    if not r.has("inertia"):
+        return uniform
+    value = r.nonnegative("inertia", unit="kg m^2")
+    if not uniform / INERTIA_FACTOR <= value <= uniform * INERTIA_FACTOR:
+        warn_spec(f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / 12 = "
+                  f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within a factor "
+                  f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
+                  source=r.source, key=r.key("inertia"), stacklevel=4)
+    return value
+
+
+def _torque_limit(r: TableReader) -> float:
+    """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an actuator without a limit."""
+    allowed = "a finite number > 0 (N m), or inf for an actuator without a limit (written out: no default)"
+    value = r.raw("torque_limit", allowed=allowed)
+    if isinstance(value, float) and value == math.inf:
+        return math.inf
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise r.error("torque_limit", f"value {value!r} is not a number; allowed: {allowed}")
+    if not (math.isfinite(value) and value > 0):
+        raise r.error("torque_limit", f"value {value!r} is out of range; allowed: {allowed}")
+    return float(value)
+
+
 def _read_joint(r: TableReader) -> JointSpec:
     joint = JointSpec(
         type=r.string("type", "revolute", choices=JOINT_TYPES),  # type: ignore[arg-type]
         hub_mass=r.nonnegative("hub_mass", unit="kg"),
         hub_inertia=r.nonnegative("hub_inertia", unit="kg m^2"),
         friction=r.nonnegative("friction", 0.0, unit="N m s/rad"),
-        torque_limit=r.number("torque_limit", math.inf, low=0.0, low_open=True, unit="N m") if r.has("torque_limit") else math.inf,
+        torque_limit=_torque_limit(r),
         source=r.string("source", ""),
     )
     r.finish()
@@ -304,7 +340,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
     payload = PayloadSpec(p.nonnegative("mass", 0.0, unit="kg"), p.nonnegative("inertia", 0.0, unit="kg m^2"), p.string("source", ""))
     p.finish()
     gravity = r.numbers("gravity", [0.0, -9.81], length=2, unit="m/s^2")
-    config_deg = r.numbers("configuration", [0.0] * len(links), length=len(links), unit="degrees")
+    config_deg = r.degrees("configuration", [0.0] * len(links), length=len(links))
     arm = ArmSpec(
         name=r.string("name", Path(source).stem),
         links=links,

@@ -150,10 +150,17 @@ def resolve_model_path(name: str, base_dir: Path, r: TableReader) -> Path:
     raise r.error("model", f"file {name!r} not found (looked at {looked})")
 
 
-def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> ArmScene:
-    """Validate a ``kind = "arm"`` scene document (see module docstring)."""
+def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kind: str = "arm",
+                   accept: tuple[str, ...] = ()) -> ArmScene:
+    """Validate a ``kind = "arm"`` scene document (see module docstring).
+
+    ``kind`` and ``accept`` serve scenes built on this one (``kind = "closed_loop"``): the
+    kind their file names, and the keys of their own that another reader validates (so an
+    unknown key is told the keys of the file's own kind).
+    """
     r = TableReader(document, source)
-    r.string("kind", "arm", choices=("arm",))
+    r.string("kind", "arm", choices=(kind,))
+    r.accept(*accept)
     model = resolve_model_path(r.string("model"), base_dir, r)
     fidelity = parse_fidelity(r.raw("fidelity", "amm:2"), source=source, key="fidelity")
     tolerance = r.number("tolerance", low=0.0, low_open=True, high=1.0, unit="m") if r.has("tolerance") else None
@@ -164,7 +171,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path) -> Arm
     gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
 
     ini = r.table_of("initial", {})
-    q0 = tuple(math.radians(a) for a in ini.numbers("q", unit="degrees")) if ini.has("q") else None
+    q0 = tuple(math.radians(a) for a in ini.degrees("q")) if ini.has("q") else None
     qd0 = tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s")) if ini.has("qd") else None
     qf0: dict[str, float] = {}
     if ini.has("qf"):

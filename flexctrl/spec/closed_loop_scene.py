@@ -32,7 +32,6 @@ t = 0 for the step, at ``move_time`` for the quintic).
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -147,10 +146,7 @@ class ClosedLoopScene:
 
 def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path) -> ClosedLoopScene:
     """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
-    plant_doc = {k: copy.deepcopy(v) for k, v in document.items() if k not in _EXTRA_KEYS}
-    plant_doc["kind"] = "arm"
-    plant = read_arm_scene(plant_doc, source, base_dir)
-    plant = ArmScene(**{**plant.__dict__, "kind": "arm"})
+    plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
     r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
     controller = None
     if r.has("controller"):
@@ -164,11 +160,13 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     cf = parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity") if r.has("controller_fidelity") else None
     target = r.table_of("target")
     if target.has("q") == target.has("move"):
-        raise target.error("q", "give exactly one of 'target.q' (absolute) and 'target.move' (relative to initial.q), degrees")
+        given = "both are given" if target.has("q") else "missing required key"
+        raise target.error("q", f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
+                                "to initial.q), degrees")
     if target.has("q"):
-        target_q = tuple(math.radians(a) for a in target.numbers("q", unit="degrees"))
+        target_q = tuple(math.radians(a) for a in target.degrees("q"))
     else:
-        move = target.numbers("move", unit="degrees")
+        move = target.degrees("move")
         start = plant.q0 if plant.q0 is not None else (0.0,) * len(move)
         if len(move) != len(start):
             raise target.error("move", f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint")
@@ -186,7 +184,7 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     target.finish()
     design_q = None
     if r.has("design_configuration"):
-        values = r.numbers("design_configuration", unit="degrees")
+        values = r.degrees("design_configuration")
         if len(values) != len(target_q):
             raise r.error("design_configuration", f"has {len(values)} values for {len(target_q)} joints; "
                                                   "allowed: one angle per joint (degrees)")

@@ -155,7 +155,7 @@ def _schedule(reader: TableReader) -> ScheduleSettings | None:
         if not key.endswith("_deg"):
             _refuse_renamed(r, {key: f"{key}_deg"})
         joints.append(int(number))
-        grid.append(tuple(v * _DEG for v in r.numbers(key, unit="deg")))
+        grid.append(tuple(v * _DEG for v in r.degrees(key)))
     order = sorted(range(len(joints)), key=lambda i: joints[i])
     try:
         return _build(r, ScheduleSettings, {"joints": tuple(joints[i] for i in order),

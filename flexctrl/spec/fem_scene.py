@@ -392,8 +392,8 @@ def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None 
 
     base = Path(source).resolve().parent
     s["model"] = str(resolve_model_path(r.string("model", f"models/{kind}.toml"), base, r))
-    s["theta0_deg"] = r.number("theta0", 0.0, unit="degrees")
-    s["rotation_deg"] = r.number("rotation", 0.0, unit="degrees")
+    s["theta0_deg"] = r.degree("theta0", 0.0)
+    s["rotation_deg"] = r.degree("rotation", 0.0)
     s["payload"] = r.nonnegative("payload", unit="kg") if r.has("payload") else None
     s["gravity"] = tuple(r.numbers("gravity", length=2, unit="m/s^2")) if r.has("gravity") else None
     if kind == "rp_arm":

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.units import warn_if_radians
 
 _MISSING = object()
 
@@ -65,6 +66,7 @@ class TableReader:
         self.source = source
         self.prefix = prefix
         self._seen: set[str] = set()
+        self._known: set[str] = set()  # names asked about (has) but maybe absent: for hints
 
     # -- helpers ---------------------------------------------------------------
     def key(self, name: str) -> str:
@@ -76,17 +78,22 @@ class TableReader:
         return SpecError(message, source=self.source, key=self.key(name))
 
     def has(self, name: str) -> bool:
-        """Whether the table holds ``name``."""
+        """Whether the table holds ``name`` (which becomes a known key of the table's suggestions)."""
+        self._known.add(name)
         return name in self.table
 
-    def raw(self, name: str, default: Any = _MISSING) -> Any:
-        """The unvalidated value of ``name`` (marks it as read)."""
+    def accept(self, *names: str) -> None:
+        """Mark ``names`` as keys of this table that another reader handles (known, never unknown)."""
+        self._seen.update(names)
+
+    def raw(self, name: str, default: Any = _MISSING, *, allowed: str = "") -> Any:
+        """The unvalidated value of ``name`` (marks it as read); ``allowed`` describes it when it is missing."""
         self._seen.add(name)
         if name not in self.table:
             if default is _MISSING:
                 close = difflib.get_close_matches(name, [k for k in self.table if k not in self._seen], n=1)
                 hint = f" (found '{self.key(close[0])}': did you mean '{name}'?)" if close else ""
-                raise self.error(name, f"missing required key{hint}")
+                raise self.error(name, f"missing required key{hint}" + (f"; allowed: {allowed}" if allowed else ""))
             return default
         return self.table[name]
 
@@ -102,7 +109,7 @@ class TableReader:
         unit: str = "",
     ) -> float:
         """A finite float within ``[low, high]`` (``(low, high]`` if ``low_open``)."""
-        value = self.raw(name, default)
+        value = self.raw(name, default, allowed=_describe_bounds(low, high, low_open) + (f" ({unit})" if unit else ""))
         return self.check_number(name, value, low=low, high=high, low_open=low_open, unit=unit)
 
     def check_number(
@@ -139,8 +146,8 @@ class TableReader:
 
     def integer(self, name: str, default: Any = _MISSING, *, low: int | None = None, high: int | None = None) -> int:
         """An integer within ``[low, high]``."""
-        value = self.raw(name, default)
         allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
+        value = self.raw(name, default, allowed=allowed)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"value {value!r} is not an integer; allowed: {allowed}")
         if (low is not None and value < low) or (high is not None and value > high):
@@ -149,16 +156,17 @@ class TableReader:
 
     def boolean(self, name: str, default: Any = _MISSING) -> bool:
         """``true`` or ``false``."""
-        value = self.raw(name, default)
+        value = self.raw(name, default, allowed="true or false")
         if not isinstance(value, bool):
             raise self.error(name, f"value {value!r} is not a boolean; allowed: true or false")
         return value
 
     def string(self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None) -> str:
         """A string, optionally one of ``choices``."""
-        value = self.raw(name, default)
+        allowed = ", ".join(map(repr, choices)) if choices is not None else "a string"
+        value = self.raw(name, default, allowed=allowed)
         if not isinstance(value, str):
-            raise self.error(name, f"value {value!r} is not a string")
+            raise self.error(name, f"value {value!r} is not a string; allowed: {allowed}")
         if choices is not None and value not in choices:
             hint = difflib.get_close_matches(value, list(choices), n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
@@ -177,9 +185,11 @@ class TableReader:
         unit: str = "",
     ) -> tuple[float, ...]:
         """A list of finite numbers, each within bounds, optionally of fixed length."""
-        value = self.raw(name, default)
+        allowed = (f"a list of {length}" if length is not None else "a list of") + " " + \
+            _describe_bounds(low, high, low_open).replace("a finite number", "finite numbers") + (f" ({unit})" if unit else "")
+        value = self.raw(name, default, allowed=allowed)
         if not isinstance(value, (list, tuple)):
-            raise self.error(name, f"value {value!r} is not a list of numbers")
+            raise self.error(name, f"value {value!r} is not a list of numbers; allowed: {allowed}")
         if length is not None and len(value) != length:
             raise self.error(name, f"value {value!r} has {len(value)} entries; allowed: exactly {length}")
         return tuple(
@@ -187,14 +197,28 @@ class TableReader:
             for i, v in enumerate(value)
         )
 
+    def degrees(self, name: str, default: Any = _MISSING, *, length: int | None = None) -> tuple[float, ...]:
+        """Joint angles in degrees (a list); warns when they look like radians (:mod:`flexctrl.spec.units`)."""
+        values = self.numbers(name, default, length=length, unit="degrees")
+        if self.has(name):
+            warn_if_radians(values, source=self.source, key=self.key(name))
+        return values
+
+    def degree(self, name: str, default: Any = _MISSING) -> float:
+        """One angle in degrees; warns when it looks like radians."""
+        value = self.number(name, default, unit="degrees")
+        if self.has(name):
+            warn_if_radians([value], source=self.source, key=self.key(name))
+        return value
+
     def table_of(self, name: str, default: Any = _MISSING) -> "TableReader":
         """The sub-table ``name`` as a reader."""
-        value = self.raw(name, default)
+        value = self.raw(name, default, allowed=f"a table [{self.key(name)}]")
         return TableReader(value, self.source, self.key(name))
 
     def tables(self, name: str, *, min_count: int = 0) -> list["TableReader"]:
         """An array of tables (``[[name]]``) as readers."""
-        value = self.raw(name)
+        value = self.raw(name, allowed=f"one or more [[{self.key(name)}]] tables")
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
             raise self.error(name, f"expected an array of tables ([[{name}]]), got {value!r}")
         if len(value) < min_count:
@@ -206,7 +230,8 @@ class TableReader:
         unknown = [k for k in self.table if k not in self._seen]
         if unknown:
             name = unknown[0]
-            hint = difflib.get_close_matches(name, sorted(self._seen), n=1)
+            names = sorted(self._seen | self._known)
+            hint = difflib.get_close_matches(name, names, n=1)
             extra = f"; did you mean '{hint[0]}'?" if hint else ""
-            known = ", ".join(sorted(self._seen))
-            raise self.error(name, f"unknown key (value {self.table[name]!r}){extra} Known keys here: {known}")
+            known = ", ".join(names)
+            raise self.error(name, f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: {known}")

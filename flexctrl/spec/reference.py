@@ -21,6 +21,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.units import warn_if_degrees
 
 Profile = Literal["step", "quintic"]
 DeflectionReference = Literal["quasi_static", "static"]
@@ -161,4 +162,5 @@ def _angles(values, key: str) -> tuple[float, ...]:
         raise SpecError(f"value {values!r} is not a list of numbers; allowed: joint angles in rad", key=key) from None
     if not all(math.isfinite(a) for a in angles):
         raise SpecError(f"value {list(angles)!r} is not finite; allowed: finite joint angles in rad", key=key)
+    warn_if_degrees(angles, key=key)
     return angles

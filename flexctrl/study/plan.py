@@ -97,6 +97,9 @@ class StudySpec:
     report : ReportSpec
     runs : tuple of RunSpec
         In grid order (the first axis varies slowest).
+    unavailable : tuple of (run index, metric, reason)
+        The study's metrics a run cannot produce (found before any run, by the executor's
+        ``unavailable_metrics``): empty cells with their reason, not failed runs.
     """
 
     name: str
@@ -114,6 +117,7 @@ class StudySpec:
     columns: tuple[str, ...]
     report: ReportSpec
     runs: tuple[RunSpec, ...] = field(repr=False)
+    unavailable: tuple[tuple[int, str, str], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The study as plain data (for ``study.json``)."""
@@ -131,7 +135,15 @@ class StudySpec:
             "columns": list(self.columns),
             "report": self.report.to_dict(),
             "n_runs": len(self.runs),
+            "unavailable": [list(entry) for entry in self.unavailable],
         }
+
+    def unavailable_notes(self) -> list[str]:
+        """One line per metric and reason: how many runs leave that cell empty, and why."""
+        counts: dict[tuple[str, str], int] = {}
+        for _, metric, reason in self.unavailable:
+            counts[(metric, reason)] = counts.get((metric, reason), 0) + 1
+        return [f"{metric} stays empty in {n} of {len(self.runs)} runs: {reason}" for (metric, reason), n in counts.items()]
 
 # -- values ----------------------------------------------------------------------------
 

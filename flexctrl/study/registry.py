@@ -99,6 +99,11 @@ class Executor:
     summary: str = ""
     report: Callable[..., list[str]] | None = None
     needs_model: bool = True
+    unavailable: Callable[[dict], dict[str, str]] | None = None
+
+    def unavailable_metrics(self, settings: dict) -> dict[str, str]:
+        """``{metric: reason}`` of the metrics this run cannot produce, known from its settings alone."""
+        return {} if self.unavailable is None else dict(self.unavailable(settings))
 
 
 _REGISTRY: dict[str, Executor] = {}
@@ -168,8 +173,11 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
     ``needs_model=False``: study files may leave out ``model`` (the run's
     ``model`` and ``payload`` are then None unless given).  The module provides
     ``execute(settings) -> RunOutput`` and optionally
-    ``check_settings(settings)`` and ``report_sections(directory, rows, figures)``
-    (see :func:`register_executor`).  Lazy import keeps ``flexctrl study``
+    ``check_settings(settings)``, ``report_sections(directory, rows, figures)`` (see
+    :func:`register_executor`) and ``unavailable_metrics(settings) -> {metric: reason}``:
+    the metrics a run cannot produce, known from its settings before it runs (e.g. the
+    linear verdict of a controller without a linear law); a study asking for one records
+    an empty cell and the reason instead of failing the run.  Lazy import keeps ``flexctrl study``
     start-up fast and lets a worker process find the code by the name alone.
     """
 
@@ -188,8 +196,12 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
         fn = getattr(load(), "report_sections", None)
         return [] if fn is None else list(fn(directory, rows, figures))
 
+    def unavailable(settings: dict) -> dict[str, str]:
+        fn = getattr(load(), "unavailable_metrics", None)
+        return {} if fn is None else fn(settings)
+
     run.__qualname__ = run.__name__ = f"run_{name}"
-    _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model)
+    _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model, unavailable)
 
 
 

@@ -108,8 +108,9 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
     from flexctrl.study.registry import get_executor
 
     start = time.perf_counter()
-    status, error, metrics, arrays = "ok", "", {}, {}
+    status, error, metrics, arrays, unavailable = "ok", "", {}, {}, {}
     try:
+        unavailable = get_executor(executor).unavailable_metrics(dict(settings))
         output = get_executor(executor).run(dict(settings))
         if not isinstance(output, RunOutput):
             raise TypeError(f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput")
@@ -120,7 +121,9 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         if options.get("keep_trajectories", True):
             step = int(options.get("decimation", 1))
             arrays = {name: np.ascontiguousarray(array[::step]) for name, array in output.trajectories.items()}
-        missing = [m for m in options.get("metrics") or () if m not in metrics]
+        missing = [m for m in options.get("metrics") or () if m not in metrics and m not in unavailable]
+        if unavailable and not missing:
+            error = unavailable_note(unavailable)
         bad = {k: v for k, v in metrics.items() if not math.isfinite(v)}
         if missing:
             status, error = "failed", f"the executor returned no metric {', '.join(map(repr, missing))}; it returned: {', '.join(metrics) or 'none'}"
@@ -132,12 +135,18 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
     return {
         "status": status,
         "error": error,
+        "unavailable": unavailable,
         "metrics": metrics,
         "trajectories": arrays,
         "wall_time_s": time.perf_counter() - start,
         "peak_memory_mb": peak_memory_mb(),
         "worker": _worker_name(),
     }
+
+
+def unavailable_note(unavailable: dict[str, str]) -> str:
+    """The one line an ok run records in its ``error`` cell for the metrics it cannot produce."""
+    return "; ".join(f"no {metric}: {reason}" for metric, reason in unavailable.items())
 
 
 def _failed(error: str) -> dict[str, Any]:

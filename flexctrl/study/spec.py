@@ -27,6 +27,10 @@ File format (paths relative to the study file; angles in degrees; SI units)::
     [set]                                # fixed KEY=VALUE overrides of the files
     "scene.duration" = 3.0               # scene.KEY, controller.KEY or model.KEY
 
+    [per_controller.mpc]                 # overrides of ONE controller of the study (its file's stem,
+    horizon = 30                         # as in the table's controller column): only the runs with
+    "weights.torque" = 0.2               # controllers/mpc.toml get them (over any [set] value)
+
     [grid]                               # axes: every key takes a list of values
     payload = [0.0, 2.0]
     configuration = [[0, 0, 0], [0, 90, 0]]
@@ -60,6 +64,7 @@ file's stem), ``fidelity``, the override keys as written, ``replicate``.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import itertools
 import math
@@ -72,6 +77,7 @@ from flexctrl.errors import SpecError
 from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
+from flexctrl.spec.units import warn_if_radians
 from flexctrl.study.hashing import canonical_json, derive_seed, file_digest, run_id as _run_id
 
 from flexctrl.study.plan import (FILE_SETTINGS, MAX_RUNS, NO_CONTROLLER, PLOTS, RESERVED_COLUMNS, SETTINGS, TARGETS,
@@ -147,7 +153,9 @@ def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
     if name == "configuration":
         if not isinstance(value, list) or not value:
             raise ctx.error(key, f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]")
-        return [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
+        angles = [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
+        warn_if_radians(angles, source=ctx.source, key=key)
+        return angles
     if name == "fidelity":
         return str(parse_fidelity(value, source=ctx.source, key=key))
     if _JOINT.match(name):
@@ -294,6 +302,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     for raw_key in s.table:
         s.raw(raw_key)
     s.finish()
+    per_controller = _per_controller(ctx, r.table_of("per_controller", {}))
 
     # axes
     g = r.table_of("grid", {})
@@ -311,6 +320,8 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
         if name_ in fixed:
             raise ctx.error(key, f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two")
         checked = tuple(_setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values))
+        if _JOINT.match(name_):
+            warn_if_radians(checked, source=ctx.source, key=key)
         seen: dict[str, int] = {}
         for i, v in enumerate(checked):
             text = canonical_json(v)
@@ -328,7 +339,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     needs_model = get_executor(executor, source=source).needs_model
     for required in ("scene", "model") if needs_model else ("scene",):
         if required not in origin:
-            raise r.error(required, f"missing required key: the {required} file, as a fixed setting or a grid axis")
+            raise r.error(required, f"missing required key; allowed: the {required} file, as a fixed setting or a grid axis")
 
     t = r.table_of("trajectories", {})
     keep = t.boolean("keep", True)
@@ -342,7 +353,8 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     if n_runs > MAX_RUNS:
         raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
 
-    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes)
+    _check_controller_stems(ctx, per_controller, fixed, axes)
+    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, per_controller)
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
         name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
@@ -358,6 +370,11 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
                 except SpecError as exc:
                     coords = ", ".join(f"{k} = {v}" for k, v in run.coords) or "the only run"
                     raise SpecError(f"executor '{executor}' refuses run {run.index + 1} ({coords}): {exc}", source=source) from None
+    if metrics is not None and check_executor:
+        found = get_executor(executor, source=source)
+        unavailable = tuple((run.index, metric, reason) for run in runs
+                            for metric, reason in found.unavailable_metrics(run.settings).items() if metric in metrics)
+        spec = dataclasses.replace(spec, unavailable=unavailable)
     return spec
 
 
@@ -424,8 +441,36 @@ def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[
     return labels
 
 
+def _per_controller(ctx: _Context, table: TableReader) -> dict[str, dict[str, Any]]:
+    """``[per_controller.STEM]`` tables: ``{stem: {controller key: value}}``, values checked as plain data."""
+    out: dict[str, dict[str, Any]] = {}
+    for stem in list(table.table):
+        sub_table = table.table_of(stem)
+        out[stem] = {}
+        for name, value in _flatten(sub_table.table):
+            key = f"per_controller.{stem}.{name}"
+            out[stem][name] = _setting_value(ctx, key, f"controller.{name}", value)
+        sub_table.accept(*sub_table.table)
+        sub_table.finish()
+    table.finish()
+    return out
+
+
+def _check_controller_stems(ctx: _Context, per_controller: dict, fixed: dict[str, Any], axes: list[Axis]) -> None:
+    """Every ``[per_controller.STEM]`` names a controller file of the study."""
+    files = [fixed.get("controller")] + [v for a in axes if a.key == "controller" for v in a.values]
+    stems = sorted({Path(f).stem for f in files if f})
+    for stem in per_controller:
+        if stem not in stems:
+            hint = difflib.get_close_matches(stem, stems, n=1)
+            extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise ctx.error(f"per_controller.{stem}", f"'{stem}' is not a controller of the study{extra}; allowed: "
+                            f"the stem of a controller file of the study: {', '.join(stems) or '(none)'}")
+
+
 def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
-            origin: dict[str, str], axes: list[Axis]) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+            origin: dict[str, str], axes: list[Axis],
+            per_controller: dict[str, dict[str, Any]] | None = None) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
     labels = _labels(ctx, axes, fixed)
     all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
     runs: list[RunSpec] = []
@@ -442,6 +487,11 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
                 coords += [(f"q{i + 1}", a) for i, a in enumerate(value)]
             else:
                 coords.append((axis.key, value))
+        if values.get("controller"):
+            stem = Path(values["controller"]).stem
+            for name, value in (per_controller or {}).get(stem, {}).items():
+                values[f"controller.{name}"] = value
+                origin.setdefault(f"controller.{name}", f"per_controller.{stem}.{name}")
         overrides = {k: v for k, v in values.items() if "." in k}
         model_overrides = tuple(sorted(f"{k[len('model.'):]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith("model.")))
         if values.get("model") is None:  # an executor that needs no arm (e.g. the beam over supports)

@@ -33,6 +33,21 @@ def check_settings(settings: dict) -> None:
         check_auto(scene, settings.get("controller"))
 
 
+def unavailable_metrics(settings: dict) -> dict[str, str]:
+    """The metrics this run cannot produce, from its controller's kind: ``closed_loop_radius`` needs a linear law."""
+    from flexctrl.control import has_linear_law
+
+    controller = settings.get("controller") or getattr(load_scene(settings["scene"], _scene_overrides(settings)),
+                                                       "controller", None)
+    if not controller:
+        return {}
+    kind = load_controller(controller, overrides_for(settings, "controller")).kind
+    if has_linear_law(kind):
+        return {}
+    return {"closed_loop_radius": f"a {kind} controller has no linear law, so no linear verdict "
+                                  "(flexctrl.loop.verdict)"}
+
+
 def execute(settings: dict) -> RunOutput:
     """One closed-loop run from a settings dict (see :mod:`flexctrl.study.registry`).
 
