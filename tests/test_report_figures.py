@@ -170,3 +170,17 @@ def test_worst_case_overlays_every_controller_of_its_cell_like_compare(tmp_path,
     rows = {r["controller"]: r["tip_residual_rms"] for r in _table(out)}
     for name, res in results.items():
         assert res.metrics["tip_residual_rms"] == pytest.approx(rows[name], rel=0.05)
+
+
+def test_every_closed_loop_metric_has_a_unit_and_lengths_read_in_mm():
+    from flexctrl.loop.metrics import JOINT_METRICS, METRICS, UNITS
+
+    assert set(UNITS) == set(METRICS) | set(JOINT_METRICS)
+    for name in METRICS:
+        shown = display(name)
+        if UNITS[name] == "m":
+            assert shown.unit == "mm" and shown.scale == 1e3 and shown.label.endswith("(mm)"), name
+        if UNITS[name] == "rad":
+            assert shown.unit == "deg" and shown.scale == pytest.approx(180 / np.pi), name
+    assert display("peak_torque_2").label == "peak torque 2 (N m)"
+    assert display("wall_time_s").label == "wall time (s)"

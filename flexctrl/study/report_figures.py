@@ -60,12 +60,17 @@ def draw_value_maps(path: Path, panels: Sequence[tuple[str, np.ndarray]], xs, ys
     scale from 1.
     """
     from matplotlib import colormaps
-    from matplotlib.colors import LogNorm, Normalize
+    from matplotlib.colors import BoundaryNorm, ListedColormap, LogNorm, Normalize
 
     finite = np.concatenate([g[np.isfinite(g)].ravel() for _, g in panels])
     vmin, vmax = (1.0, max(float(finite.max()), 1.0 + 1e-9)) if ratio else (float(finite.min()), float(finite.max()))
-    norm = LogNorm(vmin, vmax) if wants_log(np.array([vmin, vmax])) else Normalize(vmin, vmax if vmax > vmin else vmin + 1)
-    cmap = colormaps["magma_r" if ratio else "viridis"].with_extremes(bad="0.85")
+    binary = not ratio and bool(np.all(np.isin(finite, (0.0, 1.0))))
+    if binary:  # a 0/1 verdict: two colours, not a continuous scale
+        cmap = ListedColormap(["#c0392b", "#27ae60"]).with_extremes(bad="0.85")
+        norm = BoundaryNorm([-0.5, 0.5, 1.5], 2)
+    else:
+        norm = LogNorm(vmin, vmax) if wants_log(np.array([vmin, vmax])) else Normalize(vmin, vmax if vmax > vmin else vmin + 1)
+        cmap = colormaps["magma_r" if ratio else "viridis"].with_extremes(bad="0.85")
     fig, axes = _panel_grid(len(panels), ncols, (3.6, 3.0))
     image = None
     for ax, (title, grid) in zip(axes, panels):
@@ -75,10 +80,12 @@ def draw_value_maps(path: Path, panels: Sequence[tuple[str, np.ndarray]], xs, ys
         if grid.size <= 64:
             for (i, j), value in np.ndenumerate(grid):
                 if np.isfinite(value):
-                    dark = float(norm(value)) > 0.6 if ratio else float(norm(value)) < 0.6
+                    dark = binary or (float(norm(value)) > 0.6 if ratio else float(norm(value)) < 0.6)
                     ax.text(j, i, ("×" if ratio else "") + _fmt_cell(value), ha="center", va="center", fontsize=7,
                             color="w" if dark else "k")
-    fig.colorbar(image, ax=list(axes), label=colour_label, shrink=0.9)
+    bar = fig.colorbar(image, ax=list(axes), label=colour_label, shrink=0.9)
+    if binary:
+        bar.set_ticks([0, 1])
     fig.savefig(path, dpi=100)
 
 
