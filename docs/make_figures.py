@@ -103,11 +103,13 @@ def modes(args) -> list[Path]:
                 axes[link].plot(x, shape, ls=style, color=f"C{j}",
                                 label=f"mode {j + 1}, {payload:g} kg: {link_modes.frequency_hz[j]:.2f} Hz")
     for link, ax in enumerate(axes):
-        ax.set_title(f"link {link + 1}, straight arm (q = 0 deg); phi normalised to the link mass", fontsize=8)
+        ax.set_title(f"link {link + 1}", fontsize=9)
         ax.set_xlabel("position along the link x (m)")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=6.5)
     axes[0].set_ylabel("mode shape phi (-)")
+    fig.suptitle("clamped-mass mode shapes of the straight arm (q = 0 deg), normalised to the link mass; "
+                 "dashed: no payload, solid: 2 kg", fontsize=9)
     paths = [_save(fig, "mode_shapes.png")]
 
     maps = frequency_maps(arm.with_payload(2.0), 15.0, "exact")
