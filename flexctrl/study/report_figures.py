@@ -66,7 +66,7 @@ def draw_value_maps(path: Path, panels: Sequence[tuple[str, np.ndarray]], xs, ys
     vmin, vmax = (1.0, max(float(finite.max()), 1.0 + 1e-9)) if ratio else (float(finite.min()), float(finite.max()))
     binary = not ratio and bool(np.all(np.isin(finite, (0.0, 1.0))))
     if binary:  # a 0/1 verdict: two colours, not a continuous scale
-        cmap = ListedColormap(["#c0392b", "#27ae60"]).with_extremes(bad="0.85")
+        cmap = ListedColormap(["#d95f02", "#1f78b4"]).with_extremes(bad="0.85")  # orange 0, blue 1: safe for red-green blindness
         norm = BoundaryNorm([-0.5, 0.5, 1.5], 2)
     else:
         norm = LogNorm(vmin, vmax) if wants_log(np.array([vmin, vmax])) else Normalize(vmin, vmax if vmax > vmin else vmin + 1)
