@@ -98,7 +98,7 @@ def draw_best_map(path: Path, panels: Sequence[tuple[str, list[list[Any]]]], can
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch, Rectangle
 
-    colours = [f"C{k % 10}" for k in range(len(candidates))]
+    colours = _colours(len(candidates))
     cmap = ListedColormap(colours).with_extremes(bad="0.85")
     fig, axes = _panel_grid(len(panels), ncols, (3.8, 3.0))
     for ax, (title, cells) in zip(axes, panels):
@@ -143,23 +143,39 @@ def draw_ranking(path: Path, groups: dict[Any, dict[Any, list[float]]], candidat
     every = np.array([v for values in groups.values() for vs in values.values() for v in vs], dtype=float)
     log = wants_log(every)
     rng = np.random.default_rng(0)  # the dots' sideways jitter only
+    colours = _colours(len(candidates))
+    all_centres = []
     for k, candidate in enumerate(candidates):
         centres = np.arange(len(groups)) + (k - (len(candidates) - 1) / 2) * width
+        all_centres.append(centres)
         medians = [float(np.median(groups[g][candidate])) if groups[g].get(candidate) else np.nan for g in groups]
-        ax.bar(centres, medians, width * 0.92, color=f"C{k % 10}", alpha=0.55, label=str(candidate))
+        ax.bar(centres, medians, width * 0.92, color=colours[k], alpha=0.6, label=str(candidate))
         for centre, group in zip(centres, groups):
             values = np.asarray(groups[group].get(candidate, []), dtype=float)
             if values.size:
-                ax.plot(centre + rng.uniform(-0.25, 0.25, values.size) * width, values, ".", color=f"C{k % 10}",
+                ax.plot(centre + rng.uniform(-0.25, 0.25, values.size) * width, values, ".", color=colours[k],
                         ms=3.5, mec="k", mew=0.3)
     if log:
         ax.set_yscale("log")
-    ax.set_xticks(range(len(groups)), [with_unit(group_by, g) if g is not None else "all runs" for g in groups])
+    if len(groups) == 1:  # one group: name every bar under it
+        ax.set_xticks([c[0] for c in all_centres], [str(c) for c in candidates], rotation=30, ha="right", fontsize=8)
+        only = next(iter(groups))
+        ax.set_xlabel(with_unit(group_by, only) if only is not None else "all runs")
+    else:
+        ax.set_xticks(range(len(groups)), [with_unit(group_by, g) if g is not None else "all runs" for g in groups])
     ax.set_ylabel(metric.label + (", log scale" if log else ""))
     ax.set_title("bars: median over the ok runs\ndots: every ok run (the spread over the other grid columns)", fontsize=8)
-    fig.legend(title=rank_by, fontsize=7, title_fontsize=7, loc="outside right upper")
+    if len(groups) > 1:
+        fig.legend(title=rank_by, fontsize=7, title_fontsize=7, loc="outside right upper")
     ax.grid(True, axis="y", which="both", alpha=0.3)
     fig.savefig(path, dpi=100)
+
+
+def _colours(n: int) -> list:
+    """``n`` distinct colours: the default cycle up to 10, tab20 beyond (no colour used twice)."""
+    from matplotlib import colormaps
+
+    return [f"C{k}" for k in range(n)] if n <= 10 else [colormaps["tab20"](k % 20) for k in range(n)]
 
 
 def draw_signals(path: Path, runs: Sequence[tuple[str, dict[str, np.ndarray]]], signals: Sequence[str] | None,
