@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test clean
+.PHONY: demo test figures clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,12 @@ SHIPPED := $(sort $(wildcard models/*.toml controllers/*.toml studies/*.toml stu
 test: $(STAMP)
 	$(BIN)/flexctrl check $(SHIPPED)
 	$(BIN)/python -m pytest
+
+# Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
+# about 15 minutes the first time on 2 busy cores, under a minute after; docs/make_figures.py
+# lists what it runs).
+figures: $(STAMP)
+	$(BIN)/python docs/make_figures.py
 
 clean:
 	rm -rf $(VENV) out .flexctrl-cache

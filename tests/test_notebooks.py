@@ -6,7 +6,10 @@ kernel specs happen to be installed for the user or the system (a ``python3`` sp
 ``~/.local/share/jupyter`` would otherwise win over the venv's own).  Each notebook runs
 with its own folder as the working directory, as in Jupyter; notebooks are read, never
 written.  The kernel inherits the environment, including the session's ``FLEXCTRL_CACHE``
-set in ``conftest.py``.
+set in ``conftest.py``, and ``FLEXCTRL_NOTEBOOK_QUICK=1``: each notebook then runs the same
+steps on a reduced grid (fewer payloads or models, amm:1, shorter runs), which keeps the three
+notebooks to about a minute or two together on two cores.  Without it (Jupyter) they run in full,
+a few minutes of CPU each.
 """
 
 from __future__ import annotations
@@ -54,7 +57,8 @@ def execute_notebook(path: Path) -> tuple[object, float]:
 
 @pytest.mark.skipif(not NOTEBOOKS, reason="no notebooks in studies/notebooks")
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_executes(path: Path) -> None:
+def test_notebook_executes(path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("FLEXCTRL_NOTEBOOK_QUICK", "1")  # inherited by the kernel
     try:
         nb, _elapsed = execute_notebook(path)
     except nbclient.exceptions.CellExecutionError as exc:
@@ -62,6 +66,18 @@ def test_notebook_executes(path: Path) -> None:
     errors = [out for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", [])
               if out.get("output_type") == "error"]
     assert not errors, f"{path.relative_to(ROOT)}: error outputs {[e.get('ename') for e in errors]}"
+
+
+def test_notebooks_use_the_public_api_only() -> None:
+    """``import flexctrl as fc`` and nothing deeper: the notebooks teach the API a user has."""
+    assert len(NOTEBOOKS) >= 3
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        code = "\n".join(cell.source for cell in nb.cells if cell.cell_type == "code")
+        assert "import flexctrl as fc" in code, path.name
+        deep = [line for line in code.splitlines() if "from flexctrl" in line or "import flexctrl." in line]
+        assert not deep, f"{path.name}: deep imports {deep}"
+        assert "FLEXCTRL_NOTEBOOK_QUICK" in code, f"{path.name}: no reduced mode for the tests"
 
 
 def test_notebooks_are_saved_without_outputs() -> None:

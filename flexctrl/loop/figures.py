@@ -1,14 +1,52 @@
-"""Closed-loop runs drawn side by side: tip error, link deflections, torques and joint angles."""
+"""Closed-loop runs drawn side by side: tip error, link deflections, torques and joint angles.
+
+:func:`compare` draws :class:`~flexctrl.loop.result.ClosedLoopResult` objects; the study
+report (``flexctrl report DIR``) draws the stored trajectories of a study's runs with the
+same :func:`draw_runs`, so a worst case of a study and ``fc.compare`` of the same runs
+look alike.
+"""
 
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
 
 import numpy as np
 
-#: Link line styles (the colour is the run's).
+#: Link and joint line styles (the colour is the run's).
 _LINK_STYLES = ("-", "--", ":", "-.")
+
+
+@dataclass
+class RunCurves:
+    """One run's curves in SI units, as :func:`draw_runs` draws them.
+
+    Attributes
+    ----------
+    label : str
+        The legend's name of the run.
+    time : (T,) s
+    tip_error : (T,) m, or None when not known
+    deflections : (T, links) m, link tip deflections
+    torques : (T, joints) N m
+    joints : (T, joints) rad, or None
+    reference : (T, joints) rad, or None
+    torque_limits : sequence of N m (inf: unlimited)
+    window : (start, end) s of the residual-vibration window, or None
+    residual_rms : m, or None
+    """
+
+    label: str
+    time: np.ndarray
+    tip_error: np.ndarray | None
+    deflections: np.ndarray
+    torques: np.ndarray
+    joints: np.ndarray | None = None
+    reference: np.ndarray | None = None
+    torque_limits: Sequence[float] = field(default_factory=tuple)
+    window: tuple[float, float] | None = None
+    residual_rms: float | None = None
 
 
 def compare(results: Mapping[str, object], *, title: str | None = None):
@@ -32,61 +70,92 @@ def compare(results: Mapping[str, object], *, title: str | None = None):
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     if not results:
         raise ValueError("nothing to draw: give at least one result, e.g. {'LQR': result}")
-    fig = Figure(figsize=(8.0, 9.0), layout="constrained")
+    return draw_runs([_curves(label, result) for label, result in results.items()], title=title)
+
+
+def _curves(label: str, result) -> RunCurves:
+    traj = result.trajectory
+    n = traj.inputs.shape[1]
+    spec = getattr(result.model, "spec", None)
+    limits = tuple(getattr(j, "torque_limit", math.inf) for j in getattr(spec, "joints", ()))
+    reference = None if result.reference is None else result.reference.joints(traj.time)
+    return RunCurves(label, traj.time, result.tip_error, traj.deflections, traj.inputs, traj.states[:, :n], reference,
+                     limits, result.residual_window, result.metrics.get("tip_residual_rms"))
+
+
+def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight: str | None = None):
+    """The four-panel figure of :func:`compare` from plain curves (see :class:`RunCurves`).
+
+    ``highlight`` names a run drawn thicker (a study's worst case among its neighbours).
+    The first run's window is shaded and the first run's torque limits are drawn; a panel
+    whose data no run has (tip error, joint angles) is left out.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    if not runs:
+        raise ValueError("nothing to draw: give at least one run")
+    panels = ["tip"] * any(r.tip_error is not None for r in runs) + ["w", "u"] + ["q"] * any(r.joints is not None for r in runs)
+    fig = Figure(figsize=(8.0, 2.25 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
-    ax_tip, ax_w, ax_u, ax_q = fig.subplots(4, 1, sharex=True)
-    first = next(iter(results.values()))
-    start, end = first.residual_window
-    for ax in (ax_tip, ax_w, ax_u, ax_q):
-        ax.axvspan(start, end, color="0.92", zorder=0)
+    axes = dict(zip(panels, np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))))
+    first = runs[0]
+    run_handles, limit_handles = [], []
+    for ax in axes.values():
+        if first.window is not None:
+            ax.axvspan(*first.window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
-    errors = []
-    limits_drawn = False
-    for index, (label, result) in enumerate(results.items()):
-        colour = f"C{index % 10}"
-        traj = result.trajectory
-        t = traj.time
-        error_mm = 1e3 * result.tip_error
-        errors.append(error_mm)
-        rms = result.metrics.get("tip_residual_rms", math.nan)
-        ax_tip.plot(t, error_mm, color=colour, lw=1.0, label=f"{label} (residual RMS {1e3 * rms:.3g} mm)")
-        for link in range(traj.deflections.shape[1]):
-            ax_w.plot(t, 1e3 * traj.deflections[:, link], color=colour, lw=0.9,
-                      ls=_LINK_STYLES[link % len(_LINK_STYLES)], label=f"{label}, link {link + 1}")
-        for joint in range(traj.inputs.shape[1]):
-            ax_u.plot(t, traj.inputs[:, joint], color=colour, lw=0.9, ls=_LINK_STYLES[joint % len(_LINK_STYLES)],
-                      label=f"{label}, joint {joint + 1}")
-            ax_q.plot(t, np.degrees(traj.states[:, joint]), color=colour, lw=0.9,
-                      ls=_LINK_STYLES[joint % len(_LINK_STYLES)], label=f"{label}, joint {joint + 1}")
-        if not limits_drawn and result.model is not None:
-            for joint, spec in enumerate(getattr(result.model.spec, "joints", ())):
-                limit = getattr(spec, "torque_limit", math.inf)
-                if math.isfinite(limit):
-                    for sign in (1, -1):
-                        ax_u.axhline(sign * limit, color="k", ls="--", lw=0.7,
-                                     label=f"limit joint {joint + 1}: {limit:g} N m" if sign > 0 else None)
-            limits_drawn = True
-    if first.reference is not None:
-        t = first.trajectory.time
-        ref = np.degrees(first.reference.joints(t))
-        for joint in range(ref.shape[1]):
-            ax_q.plot(t, ref[:, joint], color="k", ls=":", lw=0.8, label="reference" if joint == 0 else None)
+    for index, run in enumerate(runs):
+        style = {"color": f"C{index % 10}", "lw": 1.8 if run.label == highlight else 0.9,
+                 "zorder": 1.5 if run.label == highlight else 2.0}  # the others stay visible over the worst
+        rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
+        if "tip" in axes and run.tip_error is not None:
+            axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
+        for link in range(run.deflections.shape[1]):
+            axes["w"].plot(run.time, 1e3 * run.deflections[:, link], ls=_LINK_STYLES[link % 4], **style)
+        for joint in range(run.torques.shape[1]):
+            axes["u"].plot(run.time, run.torques[:, joint], ls=_LINK_STYLES[joint % 4], **style)
+            if "q" in axes and run.joints is not None:
+                axes["q"].plot(run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style)
+        run_handles.append(Line2D([], [], label=f"{run.label}{rms}", **style))
+    for joint, limit in enumerate(first.torque_limits):
+        if math.isfinite(limit):
+            for sign in (1, -1):
+                axes["u"].axhline(sign * limit, color="k", ls=_LINK_STYLES[joint % 4], lw=0.6, alpha=0.7)
+            limit_handles.append(Line2D([], [], color="k", ls=_LINK_STYLES[joint % 4], lw=0.6,
+                                        label=f"limit joint {joint + 1}: ±{limit:g} N m"))
+    if "q" in axes and first.reference is not None:
+        for joint in range(first.reference.shape[1]):
+            axes["q"].plot(first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8)
+        axes["q"].legend(handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")], fontsize=7, loc="best")
+    if "tip" in axes:
+        _tip_scale(axes["tip"], [r.tip_error for r in runs if r.tip_error is not None])
+    labels = {"tip": "tip error (mm)", "w": "link tip deflection (mm)", "u": "torque (N m)", "q": "joint angle (deg)"}
+    for key, ax in axes.items():
+        ax.set_ylabel(labels[key])
+    n_styles = max(run.deflections.shape[1] for run in runs)
+    styles = [Line2D([], [], color="0.3", lw=0.9, ls=_LINK_STYLES[k % 4], label=f"link / joint {k + 1}") for k in range(n_styles)]
+    top = list(axes.values())[0]
+    top.legend(handles=run_handles, fontsize=7, loc="best")
+    axes["w"].legend(handles=styles, fontsize=6.5, loc="best", ncol=len(styles))
+    if limit_handles:
+        axes["u"].legend(handles=limit_handles, fontsize=6.5, loc="best", ncol=len(limit_handles))
+    list(axes.values())[-1].set_xlabel("time (s)")
+    shaded = f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s" if first.window else ""
+    list(axes.values())[0].set_title("\n".join(t for t in (title, shaded) if t), fontsize=9)
+    return fig
+
+
+def _tip_scale(ax, errors: list[np.ndarray]) -> None:
+    """A log axis when the tip errors span more than two decades (down to 1e-7 of the peak).
+
+    The move's metre-scale start and the residual window's micrometre ringing both stay
+    in view; only the dips of the zero crossings are cut.
+    """
     positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
     if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
-        ax_tip.set_yscale("log")  # values span decades; the zero crossings' dips say nothing below 1e-5 of the peak
-        ax_tip.set_ylim(bottom=max(float(positive.min()), 1e-5 * float(positive.max())))
-    ax_tip.set_ylabel("tip error (mm)")
-    ax_w.set_ylabel("link tip deflection (mm)")
-    ax_u.set_ylabel("torque (N m)")
-    ax_q.set_ylabel("joint angle (deg)")
-    ax_q.set_xlabel("time (s)")
-    ax_tip.legend(fontsize=7, loc="best")
-    for ax in (ax_w, ax_u, ax_q):
-        ax.legend(fontsize=6, loc="best", ncol=2)
-    ax_tip.set_title(title or f"shaded: residual-vibration window {start:.3g}-{end:.3g} s", fontsize=9)
-    return fig
+        ax.set_yscale("log")
+        ax.set_ylim(bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max())))

@@ -179,3 +179,10 @@ METRICS = ("tip_residual_rms", "tip_residual_peak", "settling_time", "peak_defle
            "settled", "final_tip_error", "stable", "divergence_time", "closed_loop_radius", "torque_limit_exceeded")
 #: Per-joint metrics (lists, one value per joint).
 JOINT_METRICS = ("peak_torque", "rms_torque")
+#: SI unit of every metric of :data:`METRICS` and :data:`JOINT_METRICS` ("" for counts and
+#: 0/1 verdicts, "-" for a pure number); reports convert them for reading (m -> mm, rad -> deg).
+UNITS = {"tip_residual_rms": "m", "tip_residual_peak": "m", "settling_time": "s", "peak_deflection": "m",
+         "tracking_error_rms": "rad", "controller_time_median": "s", "controller_time_p95": "s",
+         "controller_time_max": "s", "fallbacks": "", "solver_failures": "", "settled": "", "final_tip_error": "m",
+         "stable": "", "divergence_time": "s", "closed_loop_radius": "-", "torque_limit_exceeded": "",
+         "peak_torque": "N m", "rms_torque": "N m"}

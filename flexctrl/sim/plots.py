@@ -47,11 +47,11 @@ def plot_trajectory(traj: "Trajectory", directory: Path, prefix: str = "") -> li
     fig, ax = _figure(n_links, 1, height=2.2)
     for i in range(n_links):
         a = ax[i, 0]
-        a.plot(t, traj.deflections[:, i], "k", lw=1.2, label=f"w{i + 1} (tip)")
+        a.plot(t, 1e3 * traj.deflections[:, i], "k", lw=1.2, label=f"w{i + 1} (tip)")
         for j, name in enumerate(traj.coordinate_names):
             if name.startswith(f"qf{i + 1}") and len(name) > 3:
-                a.plot(t, traj.q[:, j], lw=0.8, label=name)
-        a.set(ylabel=f"link {i + 1} (m)")
+                a.plot(t, 1e3 * traj.q[:, j], lw=0.8, label=f"{name} (modal)")
+        a.set(ylabel=f"link {i + 1} (mm)")
         a.legend(loc="upper right", fontsize="small")
         a.grid(True, alpha=0.3)
     ax[-1, 0].set(xlabel="t (s)")
@@ -66,7 +66,7 @@ def plot_trajectory(traj: "Trajectory", directory: Path, prefix: str = "") -> li
     ax[0, 0].legend(loc="best", fontsize="small")
     ax[0, 1].plot(t, traj.tip[:, 0], label="tip_x")
     ax[0, 1].plot(t, traj.tip[:, 1], label="tip_y")
-    ax[0, 1].set(xlabel="t (s)", ylabel="m", title="tip position")
+    ax[0, 1].set(xlabel="t (s)", ylabel="tip position (m)", title="tip position")
     ax[0, 1].legend(loc="best", fontsize="small")
     for a in ax[0]:
         a.grid(True, alpha=0.3)
@@ -74,11 +74,11 @@ def plot_trajectory(traj: "Trajectory", directory: Path, prefix: str = "") -> li
 
     fig, ax = _figure(2, 1, height=2.6)
     ax[0, 0].plot(t, traj.energies["E_el"], label="E_el")
-    ax[0, 0].set(ylabel="J", title=f"{title} energies")
+    ax[0, 0].set(ylabel="elastic energy (J)", title=f"{title} energies")
     ax[0, 0].legend(loc="best", fontsize="small")
     for key in ("E_kin", "E_grav", "E_total"):
         ax[1, 0].plot(t, traj.energies[key], label=key)
-    ax[1, 0].set(xlabel="t (s)", ylabel="J")
+    ax[1, 0].set(xlabel="t (s)", ylabel="energy (J)")
     ax[1, 0].legend(loc="best", fontsize="small")
     for a in ax[:, 0]:
         a.grid(True, alpha=0.3)

@@ -39,7 +39,9 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.study.spec import ReportSpec
+from flexctrl.study.report_figures import draw_best_map, draw_ranking, draw_signals, draw_value_maps, wants_log
 from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
+from flexctrl.study.units import display, with_unit
 
 TIMING = re.compile(r"(controller|solve|solver|step|compute|cpu|qp|nlp)_?time", re.IGNORECASE)
 MAX_PANELS = 12
@@ -211,6 +213,23 @@ def _map_axes(ctx: _Context) -> tuple[str, str] | None:
     return (numeric[0], numeric[1]) if len(numeric) >= 2 else None
 
 
+def _cell_medians(ctx: _Context, members: Sequence[dict], xs, ys, x_axis: str, y_axis: str) -> np.ndarray:
+    """Median metric (table units) per (y, x) cell of ``members``; NaN where no ok run has a value."""
+    grid = np.full((len(ys), len(xs)), np.nan)
+    cells: dict[tuple, list] = {}
+    for r in members:
+        if r.get(x_axis) in xs and r.get(y_axis) in ys:
+            cells.setdefault((ys.index(r[y_axis]), xs.index(r[x_axis])), []).append(r.get(ctx.metric))
+    for (i, j), values in cells.items():
+        m = _median(values)
+        grid[i, j] = np.nan if m is None else m
+    return grid
+
+
+def _facet_title(facets: Sequence[str], combo: Sequence[Any]) -> str:
+    return ", ".join(with_unit(f, v) for f, v in zip(facets, combo)) or "all runs"
+
+
 def _maps(ctx: _Context) -> list[str]:
     lines = ["## Maps"]
     axes = _map_axes(ctx)
@@ -220,68 +239,73 @@ def _maps(ctx: _Context) -> list[str]:
     facets = list(ctx.spec.facet) if ctx.spec.facet else [c for c in ctx.coords if c not in axes and c != "replicate" and len(ctx.distinct(c)) > 1]
     rows = ctx.ok_rows()
     xs, ys = ctx.distinct(x_axis), ctx.distinct(y_axis)
-    combos = list(itertools.product(*(ctx.distinct(f) for f in facets)))
+    shown = display(ctx.metric)
     panels = []
-    for combo in combos:
-        grid = np.full((len(ys), len(xs)), np.nan)
+    for combo in itertools.product(*(ctx.distinct(f) for f in facets)):
         members = [r for r in rows if all(r.get(f) == v for f, v in zip(facets, combo))]
-        cells: dict[tuple, list] = {}
-        for r in members:
-            if r.get(x_axis) in xs and r.get(y_axis) in ys:
-                cells.setdefault((ys.index(r[y_axis]), xs.index(r[x_axis])), []).append(r.get(ctx.metric))
-        for (i, j), values in cells.items():
-            m = _median(values)
-            grid[i, j] = np.nan if m is None else m
-        title = ", ".join(f"{f} = {_fmt(v)}" for f, v in zip(facets, combo)) or "all runs"
-        panels.append((title, grid))
+        panels.append((_facet_title(facets, combo), shown.scale * _cell_medians(ctx, members, xs, ys, x_axis, y_axis)))
     finite = np.concatenate([g[np.isfinite(g)] for _, g in panels]) if panels else np.array([])
     if finite.size == 0:
         return lines + ["", f"No map: no ok run has a finite `{ctx.metric}`."]
-    vmin, vmax = float(finite.min()), float(finite.max())
-    log = vmin > 0 and vmax / vmin > 20
-    lines += ["", f"Median `{ctx.metric}` over (`{x_axis}`, `{y_axis}`), one panel per {' x '.join(f'`{f}`' for f in facets) or 'study'}; "
-              f"one {'logarithmic ' if log else ''}colour scale for all panels ({_fmt(vmin)} to {_fmt(vmax)}), grey: no ok run."]
+    log = wants_log(finite)
+    lines += ["", f"Median {shown.label} over ({display(x_axis).label}, {display(y_axis).label}), one panel per "
+              f"{' x '.join(f'`{f}`' for f in facets) or 'study'}; one {'logarithmic ' if log else ''}colour scale for all "
+              f"panels ({_fmt(float(finite.min()))} to {_fmt(float(finite.max()))}{' ' + shown.unit if shown.unit else ''}), grey: no ok run."]
+    last = len(ctx.distinct(facets[-1])) if facets else 1
     for page in range(0, len(panels), MAX_PANELS):
-        chunk = panels[page:page + MAX_PANELS]
         name = f"map_{_slug(ctx.metric)}" + (f"_{page // MAX_PANELS + 1}" if len(panels) > MAX_PANELS else "") + ".png"
-        last = len(ctx.distinct(facets[-1])) if facets else 1
-        _draw_maps(ctx.figures / name, chunk, xs, ys, x_axis, y_axis, ctx.metric, vmin, vmax, last if 1 < last <= 4 else 3)
+        draw_value_maps(ctx.figures / name, panels[page:page + MAX_PANELS], xs, ys, x_axis, y_axis, shown.label,
+                        last if 1 < last <= 4 else 3)
         lines += ["", f"![map]({ctx.figures.name}/{name})"]
-    return lines
+    return lines + _best_maps(ctx, facets, xs, ys, x_axis, y_axis)
 
 
-def _draw_maps(path: Path, panels, xs, ys, x_axis, y_axis, metric, vmin, vmax, ncols: int) -> None:
-    from matplotlib import colormaps
-    from matplotlib.figure import Figure
-
-    ncols = min(len(panels), ncols)
-    nrows = math.ceil(len(panels) / ncols)
-    fig = Figure(figsize=(4.2 * ncols + 1.0, 3.6 * nrows), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
-    from matplotlib.colors import LogNorm, Normalize
-
-    cmap = colormaps["viridis"].with_extremes(bad="0.85")
-    logarithmic = vmin > 0 and vmax / vmin > 20  # e.g. controllers decades apart: keep each panel's structure visible
-    norm = LogNorm(vmin, vmax) if logarithmic else Normalize(vmin, vmax)
-    image = None
-    for ax, (title, grid) in zip(axes, panels):
-        image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", aspect="auto", cmap=cmap, norm=norm)
-        step_x, step_y = max(1, len(xs) // 10), max(1, len(ys) // 10)
-        ax.set_xticks(range(0, len(xs), step_x), [_fmt(v) for v in xs[::step_x]], fontsize=7)
-        ax.set_yticks(range(0, len(ys), step_y), [_fmt(v) for v in ys[::step_y]], fontsize=7)
-        ax.set_xlabel(x_axis)
-        ax.set_ylabel(y_axis)
-        ax.set_title(title, fontsize=9)
-        if grid.size <= 64:
-            for (i, j), value in np.ndenumerate(grid):
-                if np.isfinite(value):
-                    light = vmax > vmin and float(norm(value)) > 0.6
-                    ax.text(j, i, f"{value:.3g}", ha="center", va="center", fontsize=7, color="k" if light else "w")
-    for ax in axes[len(panels):]:
-        ax.set_visible(False)
-    if image is not None:
-        fig.colorbar(image, ax=list(axes[:len(panels)]), label=metric)
-    fig.savefig(path, dpi=100)
+def _best_maps(ctx: _Context, facets: list[str], xs, ys, x_axis: str, y_axis: str) -> list[str]:
+    """Which ``rank_by`` value is best in each cell, and every value's ratio to that best."""
+    rank_by = ctx.spec.rank_by
+    candidates = ctx.distinct(rank_by) if rank_by in ctx.coords else []
+    if len(candidates) < 2 or rank_by in (x_axis, y_axis):
+        return []
+    others = [f for f in facets if f != rank_by]
+    shown = display(ctx.metric)
+    sign = 1.0 if ctx.spec.lower_is_better else -1.0
+    best_panels, ratio_panels, binary = [], [], True
+    for combo in itertools.product(*(ctx.distinct(f) for f in others)):
+        members = [r for r in ctx.ok_rows() if all(r.get(f) == v for f, v in zip(others, combo))]
+        grids = {c: _cell_medians(ctx, [r for r in members if r.get(rank_by) == c], xs, ys, x_axis, y_axis) for c in candidates}
+        stack = np.stack([grids[c] for c in candidates])
+        binary &= bool(np.all(np.isin(stack[np.isfinite(stack)], (0.0, 1.0))))
+        cells = [[None] * len(xs) for _ in ys]
+        best = np.full((len(ys), len(xs)), np.nan)
+        for i, j in itertools.product(range(len(ys)), range(len(xs))):
+            values = {c: stack[k, i, j] for k, c in enumerate(candidates) if np.isfinite(stack[k, i, j])}
+            if values:
+                best[i, j] = min(values.values(), key=lambda v: sign * v)
+                winners = [c for c, v in values.items() if math.isclose(v, best[i, j], rel_tol=1e-9, abs_tol=1e-300)]
+                cells[i][j] = (winners, shown.scale * best[i, j])
+        title = _facet_title(others, combo)
+        best_panels.append((title, cells))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for c in candidates:
+                ratio = grids[c] / best if sign > 0 else best / grids[c]
+                ratio_panels.append((f"{with_unit(rank_by, c)}" + (f"; {title}" if others else ""), ratio))
+    lines = ["", "### Best per cell", "",
+             f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in each cell "
+             "(its value written below its name; hatched: a tie, every tied name listed)."]
+    name = f"best_{_slug(ctx.metric)}.png"
+    draw_best_map(ctx.figures / name, best_panels, candidates, xs, ys, x_axis, y_axis, shown, min(3, len(best_panels)))
+    lines += ["", f"![best per cell]({ctx.figures.name}/{name})"]
+    ratios = np.concatenate([g[np.isfinite(g)] for _, g in ratio_panels])
+    if binary or ratios.size == 0:
+        return lines + ["", f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says it all."
+                        if binary else "No ratio map: no finite ratio."]
+    name = f"ratio_{_slug(ctx.metric)}.png"
+    draw_value_maps(ctx.figures / name, ratio_panels, xs, ys, x_axis, y_axis,
+                    f"{shown.label} / best of the cell" if sign > 0 else f"best of the cell / {shown.label}",
+                    len(candidates) if len(candidates) <= 6 else 4, ratio=True)
+    return lines + ["", f"Each `{rank_by}`'s median against the cell's best (×1: the best; "
+                    f"{'larger is worse' if sign > 0 else 'a zero value gives no ratio'}).", "",
+                    f"![ratio to the best]({ctx.figures.name}/{name})"]
 
 
 def _ranking(ctx: _Context) -> list[str]:
@@ -292,40 +316,27 @@ def _ranking(ctx: _Context) -> list[str]:
     groups = ctx.distinct(group_by) if group_by in ctx.coords else [None]
     candidates = ctx.distinct(rank_by)
     sign = 1 if ctx.spec.lower_is_better else -1
-    lines += ["", f"Median `{ctx.metric}` of the ok runs per `{rank_by}`" + (f", for each `{group_by}`" if group_by in ctx.coords else "")
-              + f"; best first ({'lowest' if sign > 0 else 'highest'})."]
-    bars: dict[Any, dict[Any, float]] = {}
+    shown = display(ctx.metric)
+    lines += ["", f"Median {shown.label} of the ok runs per `{rank_by}`" + (f", for each `{group_by}`" if group_by in ctx.coords else "")
+              + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other grid columns (poses ...)."]
+    values: dict[Any, dict[Any, list[float]]] = {}
     for group in groups:
         members = [r for r in ctx.table.rows if group is None or r.get(group_by) == group]
         entries = []
+        values[group] = {}
         for candidate in candidates:
             mine = [r for r in members if r.get(rank_by) == candidate]
-            ok = [r.get(ctx.metric) for r in mine if r["status"] == "ok"]
-            entries.append((candidate, _median(ok), len(ok), len(mine) - len(ok)))
+            ok = [shown.value(r.get(ctx.metric)) for r in mine if r["status"] == "ok" and isinstance(r.get(ctx.metric), float)]
+            values[group][candidate] = ok
+            entries.append((candidate, _median(ok), min(ok, default=None), max(ok, default=None), len(ok), len(mine) - len(ok)))
         entries.sort(key=lambda e: (e[1] is None, sign * e[1] if e[1] is not None else 0.0))
-        bars[group] = {c: m for c, m, _, _ in entries if m is not None}
-        lines += ["", f"### {group_by} = {_fmt(group)}" if group is not None else "### all runs", ""]
-        lines += _md_table(["rank", rank_by, f"median {ctx.metric}", "ok runs", "failed runs"],
-                           [(i + 1, c, m, n_ok, n_bad) for i, (c, m, n_ok, n_bad) in enumerate(entries)])
+        u = f" ({shown.unit})" if shown.unit else ""
+        lines += ["", f"### {with_unit(group_by, group)}" if group is not None else "### all runs", ""]
+        lines += _md_table(["rank", rank_by, f"median {shown.label}", f"min{u}", f"max{u}", "ok runs", "failed runs"],
+                           [(i + 1, *entry) for i, entry in enumerate(entries)])
     name = f"ranking_{_slug(ctx.metric)}.png"
-    _draw_ranking(ctx.figures / name, bars, candidates, rank_by, group_by, ctx.metric)
+    draw_ranking(ctx.figures / name, values, candidates, rank_by, group_by, shown)
     return lines + ["", f"![ranking]({ctx.figures.name}/{name})"]
-
-
-def _draw_ranking(path: Path, bars, candidates, rank_by, group_by, metric) -> None:
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(max(5.0, 1.2 * len(bars) * max(1, len(candidates)) * 0.5 + 3), 3.8), layout="constrained")
-    ax = fig.subplots()
-    width = 0.8 / max(1, len(candidates))
-    for k, candidate in enumerate(candidates):
-        heights = [bars[g].get(candidate, np.nan) for g in bars]
-        ax.bar(np.arange(len(bars)) + (k - (len(candidates) - 1) / 2) * width, heights, width, label=str(candidate))
-    ax.set_xticks(range(len(bars)), [f"{group_by} = {_fmt(g)}" if g is not None else "all" for g in bars])
-    ax.set_ylabel(f"median {metric}")
-    ax.legend(title=rank_by, fontsize=8)
-    ax.grid(True, axis="y", alpha=0.3)
-    fig.savefig(path, dpi=100)
 
 
 def _worst(ctx: _Context) -> list[str]:
@@ -337,36 +348,59 @@ def _worst(ctx: _Context) -> list[str]:
     rows = rows[:ctx.spec.worst]
     if not rows:
         return lines + ["", "No ok run yet."]
-    lines += ["", f"The {len(rows)} ok runs with the {'largest' if ctx.spec.lower_is_better else 'smallest'} `{ctx.metric}`.", ""]
-    lines += _md_table(["rank", "run_id", *ctx.coords, ctx.metric], [(i + 1, r["run_id"], *(r.get(c) for c in ctx.coords), r[ctx.metric]) for i, r in enumerate(rows)])
+    shown = display(ctx.metric)
+    rank_by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
+    lines += ["", f"The {len(rows)} ok runs with the {'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
+              + (f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one thicker)." if rank_by else "."), ""]
+    lines += _md_table(["rank", "run_id", *(display(c).label for c in ctx.coords), shown.label],
+                       [(i + 1, r["run_id"], *(r.get(c) for c in ctx.coords), shown.value(r[ctx.metric])) for i, r in enumerate(rows)])
     for i, row in enumerate(rows):
-        arrays = ctx.store.load_trajectories(row["run_id"])
-        if not arrays:
+        cell = [c for c in ctx.coords if c != rank_by]
+        neighbours = [r for r in ctx.table.rows if all(r.get(c) == row.get(c) for c in cell)] if rank_by else [row]
+        neighbours.sort(key=lambda r: r["run_id"] != row["run_id"])
+        stored = [(r, ctx.store.load_trajectories(r["run_id"])) for r in neighbours]
+        stored = [(r, arrays) for r, arrays in stored if arrays]
+        if not stored or stored[0][0]["run_id"] != row["run_id"]:
             lines += ["", f"Run `{row['run_id']}`: no stored trajectories."]
             continue
         name = f"worst_{i + 1}_{row['run_id']}.png"
-        title = f"#{i + 1} {row['run_id']}: " + ", ".join(f"{c} = {_fmt(row.get(c))}" for c in ctx.coords) + f"; {ctx.metric} = {_fmt(row[ctx.metric])}"
-        _draw_trajectories(ctx.figures / name, arrays, ctx.spec.signals, ctx.spec.time, title)
+        label = (lambda r: str(r.get(rank_by))) if rank_by else (lambda r: r["run_id"])
+        title = f"#{i + 1}: " + ", ".join(with_unit(c, row.get(c)) for c in cell) + \
+            f"; worst: {label(row)}, {shown.label} = {_fmt(shown.value(row[ctx.metric]))}"
+        _draw_cell(ctx, ctx.figures / name, stored, label, title, label(row))
         lines += ["", f"![run {row['run_id']}]({ctx.figures.name}/{name})"]
     return lines
 
 
-def _draw_trajectories(path: Path, arrays: dict[str, np.ndarray], signals, time_name: str, title: str) -> None:
-    from matplotlib.figure import Figure
+def _draw_cell(ctx: _Context, path: Path, stored, label, title: str, highlight: str) -> None:
+    """The closed loop's four panels (:func:`flexctrl.loop.figures.draw_runs`) or any executor's signals."""
+    time_name = ctx.spec.time
+    if all(k in stored[0][1] for k in (time_name, "u1", "w1")) and not ctx.spec.signals:
+        from flexctrl.loop.figures import draw_runs
 
-    names = [s for s in (signals or [n for n in arrays if n != time_name]) if s in arrays][:6]
-    time = arrays.get(time_name)
-    fig = Figure(figsize=(8, 1.9 * max(1, len(names)) + 0.6), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(max(1, len(names)), 1, sharex=True, squeeze=False)).ravel()
-    for ax, name in zip(axes, names):
-        y = arrays[name]
-        x = time if time is not None and len(time) == len(y) else np.arange(len(y))
-        ax.plot(x, y, lw=0.9)
-        ax.set_ylabel(name)
-        ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel(f"{time_name} (s)" if time is not None else "sample")
-    fig.suptitle(title, fontsize=9)
-    fig.savefig(path, dpi=100)
+        curves = [_run_curves(ctx, row, arrays, label(row)) for row, arrays in stored]
+        fig = draw_runs(curves, title=title, highlight=highlight)
+        fig.savefig(path, dpi=100)
+    else:
+        draw_signals(path, [(label(row), arrays) for row, arrays in stored], ctx.spec.signals, time_name, title, highlight)
+
+
+def _run_curves(ctx: _Context, row: dict, arrays: dict[str, np.ndarray], label: str):
+    """A closed-loop run's stored trajectories (``t``, ``e``, ``q<k>``, ``u<k>``, ``w<k>``) as curves."""
+    from flexctrl.loop.figures import RunCurves
+
+    def stack(prefix: str) -> np.ndarray:
+        names = [f"{prefix}{k}" for k in range(1, 100) if f"{prefix}{k}" in arrays]
+        return np.column_stack([arrays[n] for n in names]) if names else np.zeros((len(arrays[ctx.spec.time]), 0))
+
+    time = arrays[ctx.spec.time]
+    record = ctx.store.read_record(row["run_id"]) or {}
+    metrics = record.get("metrics", {})
+    limits = [metrics.get(f"torque_limit_{k}", math.inf) for k in range(1, stack("u").shape[1] + 1)]
+    start = metrics.get("window_start")
+    joints = stack("q")
+    return RunCurves(label, time, arrays.get("e"), stack("w"), stack("u"), joints if joints.shape[1] else None, None,
+                     limits, None if start is None else (float(start), float(time[-1])), metrics.get("tip_residual_rms"))
 
 
 def _timing(ctx: _Context) -> list[str]:
@@ -374,12 +408,12 @@ def _timing(ctx: _Context) -> list[str]:
     timing = [m for m in (ctx.spec.timing or [m for m in ctx.metrics if TIMING.search(m)]) if m in ctx.metrics]
     by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
     groups = ctx.distinct(by) if by else [None]
-    header = [by or "runs", "ok runs", "median wall time per run (s)", *[f"median {m}" for m in timing]]
+    header = [by or "runs", "ok runs", "median wall time per run (s)", *[f"median {display(m).label}" for m in timing]]
     rows = []
     for group in groups:
         ok = [r for r in ctx.ok_rows() if group is None or r.get(by) == group]
         rows.append((group if group is not None else "all", len(ok), _median([r.get("wall_time_s") for r in ok]),
-                     *[_median([r.get(m) for r in ok]) for m in timing]))
+                     *[display(m).value(_median([r.get(m) for r in ok])) for m in timing]))
     lines += ["", "Wall time covers the whole run in its worker (build, design, simulation, metrics); "
               "a worker builds its model once, so its first run is slower.", ""]
     return lines + _md_table(header, rows) + ["", *_resources(ctx)]

@@ -9,6 +9,8 @@ failed run.  Models and fidelity choices are kept in the worker's
 
 from __future__ import annotations
 
+import math
+
 from flexctrl.errors import SpecError
 from flexctrl.scenes.closed_loop import check_auto, run_closed_loop_scene
 from flexctrl.spec.controller import load_controller
@@ -51,9 +53,12 @@ def unavailable_metrics(settings: dict) -> dict[str, str]:
 def execute(settings: dict) -> RunOutput:
     """One closed-loop run from a settings dict (see :mod:`flexctrl.study.registry`).
 
-    Metrics are flattened to scalars (``peak_torque_1`` ...); trajectories (``t``, joint
-    angles, tip position, link deflections, torques) are returned at the plant rate and
-    decimated by the study.
+    Metrics are flattened to scalars (``peak_torque_1`` ...), with what the report needs to
+    draw the run: ``window_start`` (s, the residual window's start) and the finite
+    ``torque_limit_<k>`` (N m).  Trajectories (``t`` in s, ``e`` the tip's distance from
+    its target in m, tip position ``tip_x``, ``tip_y`` in m, joint angles ``q<k>`` in rad,
+    torques ``u<k>`` in N m, link tip deflections ``w<k>`` in m) are returned at the plant
+    rate and decimated by the study.
     """
     scene = load_scene(settings["scene"], _scene_overrides(settings))
     result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
@@ -65,8 +70,12 @@ def execute(settings: dict) -> RunOutput:
             metrics.update({f"{key}_{i + 1}": float(v) for i, v in enumerate(value)})
         else:
             metrics[key] = float(value)
+    metrics["window_start"] = result.residual_window[0]
+    for k, joint in enumerate(result.model.spec.joints, 1):
+        if math.isfinite(joint.torque_limit):
+            metrics[f"torque_limit_{k}"] = float(joint.torque_limit)
     traj = result.trajectory
-    series = {"t": traj.time, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
+    series = {"t": traj.time, "e": result.tip_error, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
     for i in range(traj.inputs.shape[1]):
         series[f"q{i + 1}"] = traj.states[:, i]
         series[f"u{i + 1}"] = traj.inputs[:, i]

@@ -401,21 +401,27 @@ def _plot(summary: list[dict[str, Any]], path: Path) -> None:
         for s in block:
             family = s["model"].split(":")[0].split("+")[0]
             integ = s["integrator"].split("@")[0].split(":")[0]
-            ax.scatter(s["wall_per_sim_s"], max(s["tip_error_rms"], 1e-12), c=colours.get(family, "k"), marker=markers.get(integ, "x"),
+            ax.scatter(s["wall_per_sim_s"], 1e3 * max(s["tip_error_rms"], 1e-12), c=colours.get(family, "k"), marker=markers.get(integ, "x"),
                        s=70 if s["pareto"] else 28, edgecolors="k" if s["pareto"] else "none", zorder=3,
                        alpha=1.0 if s["runs_failed"] == 0 else 0.4)
-            ax.annotate(s["method"] + (" (failed runs)" if s["runs_failed"] else ""), (s["wall_per_sim_s"], max(s["tip_error_rms"], 1e-12)),
+            ax.annotate(s["method"] + (" (failed runs)" if s["runs_failed"] else ""), (s["wall_per_sim_s"], 1e3 * max(s["tip_error_rms"], 1e-12)),
                         fontsize=6, xytext=(3, 3), textcoords="offset points")
         front = sorted((s for s in block if s["pareto"]), key=lambda s: s["wall_per_sim_s"])
         if front:
             xs = [s["wall_per_sim_s"] for s in front]
-            ys = [max(s["tip_error_rms"], 1e-12) for s in front]
+            ys = [1e3 * max(s["tip_error_rms"], 1e-12) for s in front]
             ax.step(xs, ys, where="post", color="k", lw=1.0, ls="--", label="Pareto front", zorder=2)
-            ax.legend(fontsize=7, loc="upper right")
+        families = {s["model"].split(":")[0].split("+")[0] for s in block}
+        integrators = {s["integrator"].split("@")[0].split(":")[0] for s in block}
+        for family in sorted(families):
+            ax.scatter([], [], c=colours.get(family, "k"), marker="o", s=28, label=family)
+        for integ in sorted(integrators):
+            ax.scatter([], [], c="0.5", marker=markers.get(integ, "x"), s=28, label=integ)
+        ax.legend(fontsize=7, loc="lower left", ncol=2)  # the fast-and-accurate corner is empty but for the front
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("wall time per simulated second (s/s), median")
-        ax.set_ylabel("tip error RMS (m), median over cases")
+        ax.set_ylabel("tip error RMS (mm), median over cases")
         ax.set_title(scene, fontsize=9)
         ax.grid(True, which="both", alpha=0.25)
     for ax in axes[len(scenes):]:
