@@ -335,6 +335,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     decimation = t.integer("decimation", 1, low=1, high=1_000_000)
     t.finish()
 
+    share = _read_share(r, axes)
     report_reader = r.table_of("report", {})
     r.finish()
 
@@ -342,7 +343,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     if n_runs > MAX_RUNS:
         raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
 
-    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes)
+    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, share)
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
         name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
@@ -424,10 +425,23 @@ def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[
     return labels
 
 
+def _read_share(r: TableReader, axes: Sequence[Axis]) -> tuple[str, ...]:
+    """``[auto] share``: grid axes whose values do not change a fidelity choice (:mod:`flexctrl.study.shared_choice`)."""
+    a = r.table_of("auto", {})
+    share = _string_list(a, "share", [axis.key for axis in axes]) if a.has("share") else ()
+    a.finish()
+    return share
+
+
 def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
-            origin: dict[str, str], axes: list[Axis]) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+            origin: dict[str, str], axes: list[Axis], share: tuple[str, ...] = ()
+            ) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+    from flexctrl.study.shared_choice import choice_settings, representative_combo
+
     labels = _labels(ctx, axes, fixed)
     all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
+    keys, first = [a.key for a in all_axes], {a.key: a.values[0] for a in all_axes}
+    by_combo: dict[str, dict[str, Any]] = {}
     runs: list[RunSpec] = []
     columns: dict[str, None] = {}
     ids: dict[str, int] = {}
@@ -490,6 +504,10 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
         if replicates > 1:
             settings["replicate"] = values["replicate"]
         settings["seed"] = derive_seed(seed, _run_id(settings, ctx.root))
+        if share:
+            by_combo[canonical_json(list(combo))] = choice_settings(settings)
+            rep = representative_combo(combo, keys, share, first)
+            settings["choice_from"] = by_combo[canonical_json(list(rep))]
         rid = _run_id(settings, ctx.root)
         if rid in ids:
             raise ctx.error("grid", f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points")
