@@ -7,24 +7,14 @@ Grid expansion and the choices file are checked here without simulating (the
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
+from test_study import study  # noqa: F401 - the example study copied to tmp_path
 
 from flexctrl.errors import SpecError
 from flexctrl.study import load_study
 from flexctrl.study.shared_choice import CHOICES_FILE, choice_settings, write_choices
-
-DATA = Path(__file__).resolve().parent / "data"
-
-
-@pytest.fixture
-def study(tmp_path, root) -> Path:
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
-    (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
-    return tmp_path / "tests" / "data" / "study_selftest.toml"
 
 
 def with_share(study: Path, share: str) -> Path:
