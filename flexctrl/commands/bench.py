@@ -1,4 +1,4 @@
-"""``flexctrl bench sim|mpc|loop``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`)."""
+"""``flexctrl bench sim|mpc|loop|studies``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`), study files side by side (:mod:`flexctrl.bench.studies`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim", "mpc", "loop")
+BENCHMARKS = ("sim", "mpc", "loop", "studies")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -25,7 +25,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "(--pc-solves solves; each takes seconds). "
         "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default "
         "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
-        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio.",
+        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio. 'studies': --study files (default "
+        "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a fresh process run twice "
+        "(first pass, repeated pass), --repeats rounds; prints the pass times and their ratios to the first study.",
     )
     parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -38,6 +40,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--pc-solves", type=int, default=1, metavar="N", help="mpc: python-control solves to time (0 skips; default 1)")
     parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
     parser.add_argument("--controller", default=None, metavar="FILE", help="loop: controller file (default controllers/lqr.toml)")
+    parser.add_argument("--study", action="append", default=None, metavar="FILE",
+                        help="studies: a study file (repeatable; the first is the baseline)")
+    parser.add_argument("--workers", type=int, default=0, metavar="N", help="studies: workers per pass (default 0: in the process)")
+    parser.add_argument("--keep", default=None, metavar="DIR", help="studies: write the passes' folders here")
     parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
     return parser
 
@@ -47,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_mpc(args)
     if args.what == "loop":
         return _run_loop(args)
+    if args.what == "studies":
+        return _run_studies(args)
     from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
@@ -102,4 +110,15 @@ def _run_loop(args: argparse.Namespace) -> int:
         raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
     result = bench_loop(controller=args.controller or DEFAULT_CONTROLLER, repeats=args.repeats)
     print(json.dumps(result, indent=2) if args.json else format_loop(result))
+    return 0
+
+
+def _run_studies(args: argparse.Namespace) -> int:
+    from flexctrl.bench.studies import DEFAULT_STUDIES, bench_studies, format_studies
+
+    if args.repeats < 1 or args.workers < 0:
+        raise SpecError(f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
+                        key="--repeats")
+    result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep)
+    print(json.dumps(result, indent=2) if args.json else format_studies(result))
     return 0

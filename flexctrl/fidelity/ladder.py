@@ -271,6 +271,23 @@ def tip_distance(a: RunRecord, b: RunRecord):
 
 
 # -- the method -------------------------------------------------------------------------------
+METHOD = ("lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference model) <= "
+          "tolerance; walk from the bandwidth rule's start")
+
+
+def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict[str, float]:
+    """Rung ``m``'s distances to the rungs above and its estimate (empty when it was not estimated)."""
+    if m not in distances:
+        return {}
+    item = {"distance_to_next_m": distances[m][0]}
+    if len(distances[m]) > 1:
+        item["distance_to_second_next_m"] = distances[m][1]
+    item["estimated_error_m"] = safety * max(distances[m])
+    if m + 1 in distances and distances[m][0] > 0:
+        item["ratio_next_distance"] = distances[m + 1][0] / distances[m][0]
+    return item
+
+
 def check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt):
     """Validate the chooser's options (shared by the arm and closed-loop choosers); returns the reference fidelity."""
     if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
@@ -337,6 +354,20 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             n += 1
     met = estimate(n) <= tol
 
+    # nothing meets the tolerance: no reference is needed to judge a choice (it costs the most)
+    if not met:
+        best = min(distances, key=lambda m: max(distances[m]))
+        best_estimate = safety * max(distances[best])
+        evidence = {"method": METHOD, "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
+                    "bandwidth_rule": rule, "candidates": [{**runs[m].facts(), **_estimates(m, distances, safety)}
+                                                           for m in sorted(runs)],
+                    "scene": name, "reference": None, **(extra or {}),
+                    "best": {"rung": rung_name(best), "estimated_error_m": best_estimate}}
+        raise ToleranceUnreachable(
+            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
+            f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
+            f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
+
     # (c) the reference and its convergence
     ref_dt = reference_dt
     ref_run = run_reference(ref_dt)
@@ -362,31 +393,14 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         err = tip_distance(ref_run, record)
         item = {**record.facts(), "reference_error_max_m": err.max, "reference_error_rms_m": err.rms,
                 "cost_ratio": record.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf}
-        if m in distances:
-            item["distance_to_next_m"] = distances[m][0]
-            if len(distances[m]) > 1:
-                item["distance_to_second_next_m"] = distances[m][1]
-            item["estimated_error_m"] = safety * max(distances[m])
-            if m + 1 in distances and distances[m][0] > 0:
-                item["ratio_next_distance"] = distances[m + 1][0] / distances[m][0]
-        rungs.append(item)
+        rungs.append({**item, **_estimates(m, distances, safety)})
 
     evidence = {
-        "method": ("lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference "
-                   "model) <= tolerance; walk from the bandwidth rule's start"),
+        "method": METHOD,
         "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
         "reference": {**ref_run.facts(), "convergence": convergence},
         "candidates": rungs, "scene": name, **(extra or {}),
     }
-    if not met:
-        best = min(distances, key=lambda m: max(distances[m]))
-        best_estimate = safety * max(distances[best])
-        evidence["best"] = {"rung": rung_name(best), "estimated_error_m": best_estimate}
-        raise ToleranceUnreachable(
-            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
-            f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
-            f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
-
     chosen = run(n)
     err = tip_distance(ref_run, chosen)
     evidence["cost_ratio_vs_finest"] = chosen.wall_time_s / finest.wall_time_s if finest.wall_time_s > 0 else math.inf

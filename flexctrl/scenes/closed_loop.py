@@ -55,10 +55,22 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
     return dataclasses.replace(scene, plant=plant), choice
 
 
+def apply_choice(scene, choice, cache: SceneCache):
+    """The auto scene run at a choice made for another run (a study's shared choice): the chosen rung, with
+    the RK4 step the chooser's rule gives this scene's own model at that rung (:func:`~flexctrl.sim.rk4.rk4_step`)."""
+    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.sim.rk4 import rk4_step
+
+    scene = pin_design(scene)
+    model = cache.model(scene_arm(scene.plant), str(choice.choice), scene.plant.modes, scene.plant.q0)
+    plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=rk4_step(model.omega_max, scene.plant.dt))
+    return dataclasses.replace(scene, plant=plant)
+
+
 def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=None, fidelity=None,
                           plots: bool | None = None, overrides=(), on_divergence: str = "raise",
                           auto_options: dict[str, Any] | None = None,
-                          cache: SceneCache | None = None, loop: str = "auto") -> ClosedLoopResult:
+                          cache: SceneCache | None = None, loop: str = "auto", choice=None) -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -91,6 +103,10 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         How the samples run (:func:`flexctrl.loop.sampled.simulate_closed_loop`): in one
         CasADi call for the controllers that allow it (``"auto"``), or one Python
         iteration per sample (``"python"``, the slow path, for comparison).
+    choice : FidelityChoice, optional
+        For a plant with ``fidelity = "auto"``: a choice made for another run (a study's
+        shared choice, :mod:`flexctrl.study.shared_choice`) used instead of choosing
+        (:func:`apply_choice`); ``choice_time_s`` is then 0.
 
     Returns
     -------
@@ -120,7 +136,10 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     cache = SceneCache() if cache is None else cache
     requested = scene
     choosing = time.perf_counter()
-    scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
+    if choice is not None and scene.plant.fidelity.kind == "auto":
+        scene = apply_choice(scene, choice, cache)
+    else:
+        scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
     choosing = time.perf_counter() - choosing
     setup = build_loop(scene, controller, overrides, cache)
     plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
@@ -139,7 +158,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         radius=loop_radius(setup, cache))
     if choice is not None:
         metrics["chosen_modes"] = float(choice.choice.count or 0)
-        metrics["chosen_dt"] = float(choice.dt)
+        metrics["chosen_dt"] = float(plant_scene.dt)
         metrics["estimated_error"] = float(choice.estimated_error)
         metrics["reference_error"] = float(choice.reference_error)
         metrics["choice_cost_ratio"] = float(choice.cost_ratio)

@@ -505,6 +505,10 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
         finally:
             bar.close()
             _, counts = store.write_table(columns=spec.columns, metrics=spec.metrics)
+            if any("choice_from" in run.settings for run in spec.runs[:1]):
+                from flexctrl.study.shared_choice import write_choices
+
+                write_choices(store.dir, spec.runs, {run.run_id: store.read_record(run.run_id) for run in spec.runs})
             session.update({"end": now_iso(), "interrupted": interrupted, "backend": backend.description,
                             "elapsed_s": round(time.monotonic() - start, 3), "parent_peak_memory_mb": peak_memory_mb()})
             document["end"] = session["end"]

@@ -346,6 +346,9 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
     decimation = t.integer("decimation", 1, low=1, high=1_000_000)
     t.finish()
 
+    auto = r.table_of("auto", {})  # grid axes whose values do not change a fidelity choice (study.shared_choice)
+    share = _string_list(auto, "share", [axis.key for axis in axes]) if auto.has("share") else ()
+    auto.finish()
     report_reader = r.table_of("report", {})
     r.finish()
 
@@ -354,7 +357,7 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
         raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
 
     _check_controller_stems(ctx, per_controller, fixed, axes)
-    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, per_controller)
+    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, per_controller, share)
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
         name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
@@ -469,10 +472,14 @@ def _check_controller_stems(ctx: _Context, per_controller: dict, fixed: dict[str
 
 
 def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
-            origin: dict[str, str], axes: list[Axis],
-            per_controller: dict[str, dict[str, Any]] | None = None) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+            origin: dict[str, str], axes: list[Axis], per_controller: dict[str, dict[str, Any]] | None = None,
+            share: tuple[str, ...] = ()) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+    from flexctrl.study.shared_choice import choice_settings, representative_combo
+
     labels = _labels(ctx, axes, fixed)
     all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
+    keys, first = [a.key for a in all_axes], {a.key: a.values[0] for a in all_axes}
+    by_combo: dict[str, dict[str, Any]] = {}
     runs: list[RunSpec] = []
     columns: dict[str, None] = {}
     ids: dict[str, int] = {}
@@ -540,6 +547,10 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
         if replicates > 1:
             settings["replicate"] = values["replicate"]
         settings["seed"] = derive_seed(seed, _run_id(settings, ctx.root))
+        if share:
+            by_combo[canonical_json(list(combo))] = choice_settings(settings)
+            rep = representative_combo(combo, keys, share, first)
+            settings["choice_from"] = by_combo[canonical_json(list(rep))]
         rid = _run_id(settings, ctx.root)
         if rid in ids:
             raise ctx.error("grid", f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points")

@@ -9,13 +9,16 @@ failed run.  Models and fidelity choices are kept in the worker's
 
 from __future__ import annotations
 
+import json
 import math
+import time
 
-from flexctrl.errors import SpecError
-from flexctrl.scenes.closed_loop import check_auto, run_closed_loop_scene
+from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.scenes.closed_loop import check_auto, resolve_auto, run_closed_loop_scene
 from flexctrl.spec.controller import load_controller
 from flexctrl.spec.scene import load_scene
 from flexctrl.study.outputs import RunOutput, overrides_for, scene_overrides, worker_scene_cache
+from flexctrl.study.shared_choice import choice_settings
 
 
 def _scene_overrides(settings: dict) -> list[str]:
@@ -61,9 +64,14 @@ def execute(settings: dict) -> RunOutput:
     rate and decimated by the study.
     """
     scene = load_scene(settings["scene"], _scene_overrides(settings))
+    cache = worker_scene_cache()
+    shared, choosing = None, time.perf_counter()
+    if settings.get("choice_from") is not None and scene.plant.fidelity.kind == "auto":
+        shared = shared_choice(settings["choice_from"], cache)
+    choosing = time.perf_counter() - choosing
     result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
                                    overrides=overrides_for(settings, "controller"), plots=False,
-                                   on_divergence="record", cache=worker_scene_cache())
+                                   on_divergence="record", cache=cache, choice=shared)
     metrics: dict[str, float] = {}
     for key, value in result.summary["metrics"].items():
         if isinstance(value, list):
@@ -74,6 +82,9 @@ def execute(settings: dict) -> RunOutput:
     for k, joint in enumerate(result.model.spec.joints, 1):
         if math.isfinite(joint.torque_limit):
             metrics[f"torque_limit_{k}"] = float(joint.torque_limit)
+    if shared is not None:
+        metrics["choice_time_s"] = choosing
+        metrics["choice_shared"] = float(settings["choice_from"] != choice_settings(settings))
     traj = result.trajectory
     series = {"t": traj.time, "e": result.tip_error, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
     for i in range(traj.inputs.shape[1]):
@@ -81,3 +92,23 @@ def execute(settings: dict) -> RunOutput:
         series[f"u{i + 1}"] = traj.inputs[:, i]
         series[f"w{i + 1}"] = traj.deflections[:, i]
     return RunOutput(metrics=metrics, trajectories=series)
+
+
+def shared_choice(representative: dict, cache):
+    """The fidelity choice of a group's representative run (its settings), made once per worker and kept.
+
+    A choice that fails (e.g. :class:`~flexctrl.fidelity.ladder.ToleranceUnreachable`) is
+    kept too and raised again for every member, so the group is judged once.
+    """
+    def build():
+        scene = load_scene(representative["scene"], _scene_overrides(representative))
+        try:
+            return resolve_auto(scene, representative.get("controller"), overrides_for(representative, "controller"),
+                                cache)[1]
+        except FlexctrlError as exc:
+            return exc
+
+    value = cache.get("shared_choices", json.dumps(representative, sort_keys=True), build)
+    if isinstance(value, Exception):
+        raise value
+    return value
