@@ -70,6 +70,7 @@ import numpy as np
 import scipy.linalg
 
 from flexctrl.dynamics.amm_kinematics import (
+    TIP_ROTATIONS,
     LinkModal,
     arm_expressions,
     coordinate_names,
@@ -234,6 +235,8 @@ def build_amm(
     fidelity: Fidelity | None = None,
     lookups: Sequence[ca.Function | None] | None = None,
     coriolis: Literal["bodies", "lagrange"] = "bodies",
+    axial_shortening: bool | None = None,
+    tip_rotation: Literal["linearised", "exact"] | None = None,
 ) -> Model:
     """Build the assumed-modes model of ``arm``.
 
@@ -260,6 +263,14 @@ def build_amm(
         How ``c`` is formed for frozen modes: ``"bodies"`` (``sum J^T G Jdot qd`` over
         the bodies, smaller code) or ``"lagrange"`` (``d(M qd)/dq qd - dT/dq``, the
         form always used for scheduled modes).  Both are exact.
+    axial_shortening
+        Second-order (foreshortening) kinematics: a bent link's points move towards its
+        root by ``1/2 int_0^x w'^2`` (``docs/amm.md`` section 10).  Default: the arm's
+        ``axial_shortening`` (model file or scene key).
+    tip_rotation
+        ``"linearised"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
+        the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
+        kinematics are consistent only then), ``"linearised"`` without.
     lookups
         For ``"scheduled"``: one CasADi Function per link with the signature of
         :attr:`flexctrl.modal.lookup.ModalLookup.function` (None for links without
@@ -276,6 +287,8 @@ def build_amm(
     _check_choice(damping, DAMPING, "damping")
     _check_choice(solver, SOLVERS, "solver")
     _check_choice(coriolis, CORIOLIS, "coriolis")
+    shortening = bool(arm.axial_shortening if axial_shortening is None else axial_shortening)
+    rotation = _check_choice(tip_rotation or ("exact" if shortening else "linearised"), TIP_ROTATIONS, "tip_rotation")
     n = arm.n_links
     n_modes = [int(n_modes)] * n if np.isscalar(n_modes) else [int(k) for k in n_modes]
     if len(n_modes) != n or any(not 0 <= k <= 6 for k in n_modes):
@@ -293,10 +306,11 @@ def build_amm(
     scheduled = modes == "scheduled" and N > n
     if scheduled:
         modal, expansion = _scheduled_modal(arm, q, n_modes, lookups)
-        ex = arm_expressions(arm, modal, q, shape_rates=True)
+        ex = arm_expressions(arm, modal, q, shape_rates=True, axial_shortening=shortening, tip_rotation=rotation)
     else:
         modal = frozen_modal
-        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None)
+        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None, axial_shortening=shortening,
+                             tip_rotation=rotation)
 
     # stiffness and damping (Eqs 65-68)
     stiffness, damp = [ca.SX(0)] * n, [ca.SX(arm.joints[i].friction) for i in range(n)]
@@ -372,13 +386,16 @@ def build_amm(
         "damping": damping,
         "solver": solver,
         "coriolis": "lagrange" if scheduled else coriolis,
-        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)",
+        "axial_shortening": shortening,
+        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)" if rotation == "linearised"
+        else "exact rotation by the tip slope w'_ie",
         "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
         "input_matrix": "tau acts on q1..qn",
         "build_time_s": time.perf_counter() - start,
     }
     return Model(
-        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}",
+        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}"
+             f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,
         coordinate_names=names,

@@ -66,7 +66,7 @@ def build_model(
 
         if modes != "frozen":
             raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
-        return build_fem_model(arm, fid.count, reference_q=reference_q)
+        return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=arm.axial_shortening)
     if fid.kind == "auto":
         raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
                                      "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "

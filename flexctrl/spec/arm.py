@@ -12,6 +12,7 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     gravity = [0.0, -9.81]           # m/s^2, world frame
     configuration = [0, 0, 0]        # default joint angles, degrees
     boundary_inertia = "exact"       # or "paper" (see flexctrl.modal.boundary)
+    axial_shortening = true          # a bent link's foreshortening (docs/amm.md section 10)
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
     [[links]]  length (m), mass_per_length (kg/m), EI (N m^2), inertia
                (kg m^2 about the link's centre of mass), n_modes (0..6),
@@ -193,6 +194,9 @@ class ArmSpec:
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
         How the tip inertia J_D of the clamped-mass boundary is formed.
+    axial_shortening : bool
+        Whether the models carry a bent link's axial shortening (assumed modes: second-order
+        kinematics, ``docs/amm.md`` section 10; finite elements: membrane strain).
     source : str
         The file it was loaded from.
     """
@@ -206,6 +210,7 @@ class ArmSpec:
     boundary_inertia: Literal["exact", "paper"] = "exact"
     source: str = ""
     notes: str = ""
+    axial_shortening: bool = True
 
     @property
     def n_links(self) -> int:
@@ -301,6 +306,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         gravity=(gravity[0], gravity[1]),
         configuration=tuple(math.radians(a) for a in config_deg),
         boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
+        axial_shortening=r.boolean("axial_shortening", True),
         source=source,
         notes=r.string("notes", ""),
     )
