@@ -96,13 +96,19 @@ def _bent_start(scene, model, arm) -> np.ndarray:
     return x0
 
 
-def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable") -> dict[str, Any]:
-    """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build + compile)."""
+def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", hub_inertia: float | None = None) -> dict[str, Any]:
+    """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build + compile).
+
+    ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least this
+    (a diagnosis of how the light hub 3 limits the convergence; ``docs/amm.md`` section 11).
+    """
     from flexctrl.dynamics.build import build_model
     from flexctrl.scenes.arm import scene_arm
 
     scene = _scene(case, shortening)
     method = parse_method(f"{fidelity}/rk4@{step}")
+    if case == "fast_move" and hub_inertia is not None:
+        raise ValueError("hub_inertia applies to the open-loop cases only")
     if case == "fast_move":
         from flexctrl.dynamics.fem.spectrum import rk4_step_for
         from flexctrl.scenes.loop_setup import closed_loop_tip_path
@@ -122,6 +128,9 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable") -
         return {"time": out["time"], "tip": out["tip"][:, :2], "wall_s": out["wall_time_s"],
                 "setup_s": time.perf_counter() - start - out["wall_time_s"], "step_s": h}
     arm = scene_arm(scene)
+    if hub_inertia is not None:
+        arm = dataclasses.replace(arm, joints=tuple(dataclasses.replace(j, hub_inertia=max(j.hub_inertia, hub_inertia))
+                                                    for j in arm.joints))
     start = time.perf_counter()
     model = build_model(arm, fidelity, reference_q=scene.q0)
     stepper = make_stepper(model, method, OUTPUT_DT)
@@ -131,18 +140,23 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable") -
     run = run_open_loop(stepper, x0, scene.input.samples(n, OUTPUT_DT, model.n_u))
     if not np.all(np.isfinite(run.tip)):
         raise RuntimeError(f"{case} {fidelity} produced a non-finite tip")
-    return {"time": run.time, "tip": run.tip, "wall_s": run.wall_s, "setup_s": setup, "step_s": stepper.step_s}
+    return {"time": run.time, "tip": run.tip, "wall_s": run.wall_s, "setup_s": setup, "step_s": stepper.step_s,
+            "build_s": float(model.info["build_time_s"]), "f_instructions": int(model.functions["f"].n_instructions()),
+            "us_per_step": 1e6 * run.wall_s / (n * stepper.substeps) if hasattr(stepper, "substeps") else math.nan}
 
 
-def reference(case: str, fidelity: str = "fem:16", directory: Path | str = "out/amm_convergence") -> Reference:
+def reference(case: str, fidelity: str = "fem:16", directory: Path | str = "out/amm_convergence",
+              hub_inertia: float | None = None) -> Reference:
     """The cached reference tip path of ``case`` (finite elements with axial shortening, RK4 at the stable step)."""
     name, duration = CASES[case]
     digest = {k: (_SCENES / f).read_text() for k, f in (("scene", name), ("model", "../../models/subedi3link.toml"))}
     key = {"case": case, "fidelity": fidelity, "duration": duration, "files": digest,
            "controller": (_SCENES.parents[1] / CONTROLLER).read_text() if case == "fast_move" else None}
+    if hub_inertia is not None:
+        key["hub_inertia"] = hub_inertia
 
     def build() -> Reference:
-        run = simulate(case, fidelity, True)
+        run = simulate(case, fidelity, True, hub_inertia=hub_inertia)
         return Reference(run["time"], run["tip"], f"{fidelity}/rk4@stable", {}, run["wall_s"])
 
     ref, _path, _hit = cached_reference(key, build, Path(directory))
@@ -159,34 +173,43 @@ def window_errors(ref: Reference, run: dict[str, Any], windows: Sequence[float])
 
 
 def convergence(case: str, modes: Sequence[int] = (1, 2, 3, 4), reference_fidelity: str = "fem:16",
-                directory: Path | str = "out/amm_convergence", steps: dict[int, str] | None = None) -> dict[str, Any]:
+                directory: Path | str = "out/amm_convergence", steps: dict[int, str] | None = None,
+                hub_inertia: float | None = None) -> dict[str, Any]:
     """Tip errors of ``amm:N`` for N in ``modes``, with and without axial shortening, against the reference.
 
     ``steps`` maps N to the RK4 step (default ``0.1ms``, ``0.05ms`` for N >= 4).
     """
-    ref = reference(case, reference_fidelity, directory)
+    ref = reference(case, reference_fidelity, directory, hub_inertia)
     steps = steps or {}
     rows = []
     for shortening in (False, True):
         for N in modes:
             step = steps.get(N, "0.05ms" if N >= 4 else "0.1ms")
-            run = simulate(case, f"amm:{N}", shortening, step)
+            run = simulate(case, f"amm:{N}", shortening, step, hub_inertia)
             rows.append({"fidelity": f"amm:{N}", "axial_shortening": shortening, "step": step,
                          **window_errors(ref, run, WINDOWS[case]), "wall_per_sim_s": run["wall_s"] / ref.time[-1],
-                         "setup_s": run["setup_s"]})
-    return {"case": case, "reference": ref.method, "windows_s": list(WINDOWS[case]), "rows": rows}
+                         **{k: run[k] for k in ("setup_s", "build_s", "f_instructions", "us_per_step") if k in run}})
+    return {"case": case, "reference": ref.method, "windows_s": list(WINDOWS[case]), "rows": rows, "hub_inertia": hub_inertia}
 
 
 def markdown(result: dict[str, Any]) -> str:
     """The table of ``docs/amm.md`` for one :func:`convergence` result (mm)."""
     windows = result["windows_s"]
     head = "| axial shortening | " + " | ".join(r["fidelity"] for r in result["rows"] if not r["axial_shortening"]) + " |"
-    lines = [f"{result['case']} against {result['reference']}: RMS tip error (mm)", "", head,
+    hub = "" if result.get("hub_inertia") is None else f", hub inertia >= {result['hub_inertia']:g} kg m^2"
+    lines = [f"{result['case']} against {result['reference']}{hub}: RMS tip error (mm)", "", head,
              "|" + "---|" * (1 + len([r for r in result["rows"] if not r["axial_shortening"]]))]
     for T in windows:
         for flag in (False, True):
             vals = [r[f"rms_{T:g}s"] * 1e3 for r in result["rows"] if r["axial_shortening"] is flag]
             lines.append(f"| {'on' if flag else 'off'}, 0-{T:g} s | " + " | ".join(f"{v:.3f}" for v in vals) + " |")
+    if "us_per_step" in result["rows"][0]:
+        lines += ["", "cost: compiled RK4 step (us) / model build (s) / instructions in f", "", head,
+                  lines[3]]
+        for flag in (False, True):
+            cells = [f"{r['us_per_step']:.2f} / {r['build_s']:.2f} / {r['f_instructions'] / 1e3:.1f}k"
+                     for r in result["rows"] if r["axial_shortening"] is flag]
+            lines.append(f"| {'on' if flag else 'off'} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -197,21 +220,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--modes", nargs="+", type=int, default=[1, 2, 3, 4])
     parser.add_argument("--reference", default="fem:16", help="finite-element reference fidelity (default fem:16)")
     parser.add_argument("--reference-only", action="store_true", help="compute (or load) the references and stop")
+    parser.add_argument("--hub-inertia", type=float, default=None,
+                        help="raise every hub's rotor inertia to at least this (kg m^2; open-loop cases; a diagnosis)")
+    parser.add_argument("--tag", default="", help="suffix of the output files (convergence<TAG>.json/.md)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = []
     for case in args.cases:
         if args.reference_only:
-            ref = reference(case, args.reference, out)
+            ref = reference(case, args.reference, out, args.hub_inertia)
             print(f"{case}: reference {ref.method}, {ref.time.size} samples, {ref.wall_s:.1f} s", flush=True)
             continue
-        result = convergence(case, args.modes, args.reference, out)
+        result = convergence(case, args.modes, args.reference, out, hub_inertia=args.hub_inertia)
         results.append(result)
         print(markdown(result), "\n", flush=True)
     if results:
-        (out / "convergence.json").write_text(json.dumps(results, indent=1))
-        (out / "convergence.md").write_text("\n\n".join(markdown(r) for r in results) + "\n")
+        (out / f"convergence{args.tag}.json").write_text(json.dumps(results, indent=1))
+        (out / f"convergence{args.tag}.md").write_text("\n\n".join(markdown(r) for r in results) + "\n")
     return 0
 
 

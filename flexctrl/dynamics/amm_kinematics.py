@@ -14,6 +14,13 @@ Kinematics (Eqs 1-9)
     consistent with the small-deflection assumption.  ``p_i(x) = r_i + W_i (x, w_i(x))``,
     ``r_{i+1} = r_i + W_i (L_i, w_ie)`` (Eqs 3-4), ``r_1 = 0``.
 
+Axial shortening (``axial_shortening=True``; ``docs/amm.md`` section 10)
+    A bent link's points also move towards its root by ``s(x) = 1/2 int_0^x w'^2 =
+    sum_p N_p(x) q_j q_k`` (mode pairs ``p = (j <= k)``, :mod:`flexctrl.modal.shortening`):
+    ``p_i(x) = r_i + W_i (x - s(x), w_i(x))``, extra Gram pieces ``W_i e_1 q_j q_k`` with the
+    integrals ``sh_*`` of :class:`LinkModal`, and the next frame turned by the exact rotation
+    ``R(w'_ie)`` (``tip_rotation="exact"``; Eq 7's stretch is of the same order as ``s``).
+
 Link kinetic energy (Eq 43) in closed form
     ``p_i(x) = sum_a N_a(x) P_a(q)`` with ``N = (1, x, phi_1, ..., phi_nf)`` and
     ``P = (r_i, W_i e_1, W_i e_2 q_f1, ..., W_i e_2 q_fnf)``, so

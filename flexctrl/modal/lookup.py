@@ -147,7 +147,7 @@ class ModalLookup:
     def evaluate(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Interpolated fields at joint angles ``q`` (rad), as numpy arrays."""
         result = self.function(q=np.asarray(q, dtype=float))
-        return {k: np.array(v, dtype=float) if k in ("z", "y", "s") else np.array(v, dtype=float).squeeze(axis=-1)
+        return {k: np.array(v, dtype=float) if k in ("z", "y", "s", "sh_y", "sh_z", "sh_psi") else np.array(v, dtype=float).squeeze(axis=-1)
                 for k, v in result.items()}
 
 
