@@ -19,7 +19,7 @@ world frame compared on the output grid):
 The reference (``fem:16`` by default, RK4 at its stable step) is cached on disk under the
 output folder, keyed by everything that determines it (:func:`flexctrl.analysis.accuracy.cached_reference`).
 
-Run from a clone (writes ``convergence.json``, ``convergence.md`` and ``tip_error_<case>.png``)::
+Run from a clone (writes ``convergence.json`` and ``convergence.md``)::
 
     python -m flexctrl.analysis.amm_convergence --out out/amm_convergence
 """
