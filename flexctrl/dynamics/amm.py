@@ -72,6 +72,7 @@ import numpy as np
 import scipy.linalg
 
 from flexctrl.dynamics.amm_kinematics import (
+    TIP_ROTATIONS,
     LinkModal,
     arm_expressions,
     coordinate_names,
@@ -225,6 +226,15 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
     return modal, (symbols, values)
 
 
+#: The assumed-modes default of ``axial_shortening`` when neither the call, the scene nor the
+#: model file sets it: off.  The effect is correct physics and converges over 0.5 s
+#: (docs/amm.md section 12), but every shipped controller, tuning and study figure was measured
+#: without it; the bang-bang error over 2 s still plateaus (hub 3's light rotor), amm:1 is worse
+#: with it over 2 s, and the compiled step costs 1.3-3 times as much.  Turn it on per model file
+#: or scene (``axial_shortening = true``) until the studies are re-measured on it.
+AMM_AXIAL_SHORTENING = False
+
+
 def build_amm(
     arm: ArmSpec,
     n_modes: int | Sequence[int],
@@ -236,6 +246,8 @@ def build_amm(
     fidelity: Fidelity | None = None,
     lookups: Sequence[ca.Function | None] | None = None,
     coriolis: Literal["bodies", "lagrange"] = "bodies",
+    axial_shortening: bool | None = None,
+    tip_rotation: Literal["linearised", "exact"] | None = None,
 ) -> Model:
     """Build the assumed-modes model of ``arm``.
 
@@ -263,6 +275,14 @@ def build_amm(
         How ``c`` is formed for frozen modes: ``"bodies"`` (``sum J^T G Jdot qd`` over
         the bodies, smaller code) or ``"lagrange"`` (``d(M qd)/dq qd - dT/dq``, the
         form always used for scheduled modes).  Both are exact.
+    axial_shortening
+        Second-order (foreshortening) kinematics: a bent link's points move towards its
+        root by ``1/2 int_0^x w'^2`` (``docs/amm.md`` section 10).  Default: the arm's
+        ``axial_shortening`` (model file or scene key), else :data:`AMM_AXIAL_SHORTENING`.
+    tip_rotation
+        ``"linearised"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
+        the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
+        kinematics are consistent only then), ``"linearised"`` without.
     lookups
         For ``"scheduled"``: one CasADi Function per link with the signature of
         :attr:`flexctrl.modal.lookup.ModalLookup.function` (None for links without
@@ -280,6 +300,10 @@ def build_amm(
     _check_choice(damping, DAMPING, "damping")
     _check_choice(solver, SOLVERS, "solver")
     _check_choice(coriolis, CORIOLIS, "coriolis")
+    if axial_shortening is None:
+        axial_shortening = AMM_AXIAL_SHORTENING if arm.axial_shortening is None else arm.axial_shortening
+    shortening = bool(axial_shortening)
+    rotation = _check_choice(tip_rotation or ("exact" if shortening else "linearised"), TIP_ROTATIONS, "tip_rotation")
     n = arm.n_links
     n_modes = [int(n_modes)] * n if np.isscalar(n_modes) else [int(k) for k in n_modes]
     if len(n_modes) != n or any(not 0 <= k <= 6 for k in n_modes):
@@ -297,10 +321,11 @@ def build_amm(
     scheduled = modes == "scheduled" and N > n
     if scheduled:
         modal, expansion = _scheduled_modal(arm, q, n_modes, lookups)
-        ex = arm_expressions(arm, modal, q, shape_rates=True)
+        ex = arm_expressions(arm, modal, q, shape_rates=True, axial_shortening=shortening, tip_rotation=rotation)
     else:
         modal = frozen_modal
-        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None)
+        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None, axial_shortening=shortening,
+                             tip_rotation=rotation)
 
     # stiffness and damping (Eqs 65-68)
     stiffness, damp = [ca.SX(0)] * n, [ca.SX(arm.joints[i].friction) for i in range(n)]
@@ -376,13 +401,16 @@ def build_amm(
         "damping": damping,
         "solver": solver,
         "coriolis": "lagrange" if scheduled else coriolis,
-        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)",
+        "axial_shortening": shortening,
+        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)" if rotation == "linearised"
+        else "exact rotation by the tip slope w'_ie",
         "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
         "input_matrix": "tau acts on q1..qn",
         "build_time_s": time.perf_counter() - start,
     }
     return Model(
-        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}",
+        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}"
+             f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,
         coordinate_names=names,

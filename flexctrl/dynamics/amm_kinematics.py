@@ -14,6 +14,13 @@ Kinematics (Eqs 1-9)
     consistent with the small-deflection assumption.  ``p_i(x) = r_i + W_i (x, w_i(x))``,
     ``r_{i+1} = r_i + W_i (L_i, w_ie)`` (Eqs 3-4), ``r_1 = 0``.
 
+Axial shortening (``axial_shortening=True``; ``docs/amm.md`` section 10)
+    A bent link's points also move towards its root by ``s(x) = 1/2 int_0^x w'^2 =
+    sum_p N_p(x) q_j q_k`` (mode pairs ``p = (j <= k)``, :mod:`flexctrl.modal.shortening`):
+    ``p_i(x) = r_i + W_i (x - s(x), w_i(x))``, extra Gram pieces ``W_i e_1 q_j q_k`` with the
+    integrals ``sh_*`` of :class:`LinkModal`, and the next frame turned by the exact rotation
+    ``R(w'_ie)`` (``tip_rotation="exact"``; Eq 7's stretch is of the same order as ``s``).
+
 Link kinetic energy (Eq 43) in closed form
     ``p_i(x) = sum_a N_a(x) P_a(q)`` with ``N = (1, x, phi_1, ..., phi_nf)`` and
     ``P = (r_i, W_i e_1, W_i e_2 q_f1, ..., W_i e_2 q_fnf)``, so
@@ -52,6 +59,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from flexctrl.modal.shortening import mode_pairs
 from flexctrl.spec.arm import ArmSpec
 
 #: Modal fields per link, in packing order; ``z`` is (n_f, n_f), the others (n_f, 1).
@@ -76,22 +84,44 @@ class LinkModal:
     shape_cross: object = None
     #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes only
     shape_gram: object = None
+    #: axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1), 1/m
+    sh_tip: object = None
+    #: ``int rho N_p`` (P, 1), kg/m
+    sh_v: object = None
+    #: ``int rho x N_p`` (P, 1), kg
+    sh_w: object = None
+    #: ``int rho phi_l N_p`` (n_f, P), kg/m
+    sh_y: object = None
+    #: ``int rho N_p N_p'`` (P, P), kg/m^2
+    sh_z: object = None
+    #: ``int rho dphi_j/dq_r N_p`` (n_f n, P), kg/(m rad), scheduled modes only
+    sh_psi: object = None
 
     @property
     def n_modes(self) -> int:
         """Number of modes n_f."""
         return int(self.omega.shape[0]) if self.omega.numel() else 0
 
+    @property
+    def has_shortening(self) -> bool:
+        """Whether the axial-shortening integrals are present."""
+        return self.sh_v is not None and self.n_modes > 0
+
     @staticmethod
     def from_modes(modes, n_modes: int) -> "LinkModal":
-        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None if n_f = 0)."""
+        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None if n_f = 0),
+        with the axial-shortening integrals of :func:`flexctrl.modal.shortening.link_shortening`."""
+        from flexctrl.modal.shortening import link_shortening
+
         if n_modes == 0:
             empty = ca.DM.zeros(0, 1)
             return LinkModal(empty, empty, empty, empty, empty, ca.DM.zeros(0, 0))
-        return LinkModal(
-            *(ca.DM(np.reshape(np.asarray(getattr(modes, name), dtype=float), (n_modes, n_modes) if name == "z" else (n_modes, 1)))
-              for name in MODAL_FIELDS)
-        )
+        fields = {name: ca.DM(np.reshape(np.asarray(getattr(modes, name), dtype=float), (n_modes, n_modes) if name == "z" else (n_modes, 1)))
+                  for name in MODAL_FIELDS}
+        short = link_shortening(modes)
+        for name, value in short.items():
+            fields[name] = ca.DM(value.reshape(-1, 1) if value.ndim == 1 else value)
+        return LinkModal(**fields)
 
 
 def _rotation(angle):
@@ -102,6 +132,10 @@ def _rotation(angle):
 def _elastic_rotation(slope):
     """Eq 7: the linearised rotation by the tip slope, ``[[1, -w'], [w', 1]]``."""
     return ca.vertcat(ca.horzcat(1, -slope), ca.horzcat(slope, 1))
+
+
+#: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by ``w'``.
+TIP_ROTATIONS = ("linearised", "exact")
 
 
 @dataclass(frozen=True)
@@ -189,13 +223,17 @@ class _Inertia:
             unit[0, r] = 1.0
             for j in range(nf):
                 rows.append(ca.mtimes(frame_y * qf[j], unit))
-                cross.append(ca.vertcat(dv[j, r], dw[j, r], md.shape_cross[:, r * nf + j]))
+                parts = [dv[j, r], dw[j, r], md.shape_cross[:, r * nf + j]]
+                if gram.shape[0] > 2 + nf:  # axial-shortening pieces follow the modes
+                    parts.append(md.sh_psi[r * nf + j, :].T)
+                cross.append(ca.vertcat(*parts))
         jac = ca.vertcat(ca.jacobian(P, self.q), *rows)
         H = ca.horzcat(*cross)
         G = ca.blockcat([[gram, H], [H.T, 0.5 * (md.shape_gram + md.shape_gram.T)]])
         self.M = self.M + ca.mtimes(jac.T, ca.mtimes(ca.kron(G, ca.DM.eye(2)), jac))
 
-def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, shape_rates: bool = False) -> ArmExpressions:
+def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, shape_rates: bool = False,
+                    axial_shortening: bool = False, tip_rotation: str = "linearised") -> ArmExpressions:
     """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
 
     Parameters
@@ -213,6 +251,11 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         ``modal`` holds expressions in ``q`` (scheduled modes) with ``shape_cross``
         and ``shape_gram``: the link velocities include the shapes' change with the
         configuration (module docstring).
+    axial_shortening
+        Points of a bent link move towards its root by ``s(x) = 1/2 int_0^x w'^2``
+        (``modal`` must carry the ``sh_*`` integrals; module docstring).
+    tip_rotation
+        ``"linearised"`` (Eq 7) or ``"exact"`` (the next frame turned by ``w'_ie``).
     """
     n = arm.n_links
     n_modes = [m.n_modes for m in modal]
@@ -242,10 +285,18 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         m, length = link.mass, link.length
         frame_x, frame_y = ca.mtimes(W, e1), ca.mtimes(W, e2)
         pieces = [r, frame_x] + [frame_y * qf[j] for j in range(nf)]
-        P = ca.vertcat(*pieces)
         rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
         moments = sym(ca.horzcat(md.v, md.w))
         gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
+        shortening = axial_shortening and nf > 0
+        if shortening:  # s(x) = sum_p N_p(x) q_j q_k along -W e_1: pieces W e_1 sigma_p
+            if not md.has_shortening:
+                raise ValueError("axial_shortening needs the modes' shortening integrals (LinkModal.sh_*)")
+            sigma = [qf[j] * qf[k] for j, k in mode_pairs(nf)]
+            pieces += [frame_x * s_p for s_p in sigma]
+            edge = sym(ca.vertcat(md.sh_v.T, md.sh_w.T, md.sh_y))
+            gram = ca.blockcat([[gram, edge], [edge.T, sym(0.5 * (md.sh_z + md.sh_z.T))]])
+        P = ca.vertcat(*pieces)
         if shape_rates and nf and md.shape_gram is not None and md.shape_gram.shape[0]:
             inertia.add_moving_shapes(P, gram, md, qf, frame_y)
         else:
@@ -253,6 +304,8 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         first_moment = m * r + 0.5 * m * length * frame_x
         if nf:
             first_moment = first_moment + frame_y * ca.dot(md.v, qf)
+        if shortening:
+            first_moment = first_moment + frame_x * ca.dot(md.sh_v, ca.vertcat(*sigma))
         U_g = U_g - ca.dot(gravity, first_moment)
         if nf:
             U_el = U_el + 0.5 * link.mass * ca.sumsqr(md.omega * qf)  # Eqs 46, 53
@@ -262,8 +315,11 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         deflections.append(w_e)
         slopes.append(dw_e)
         r = r + ca.mtimes(W, ca.vertcat(length, w_e))
+        if shortening:
+            r = r + frame_x * ca.dot(md.sh_tip, ca.vertcat(*sigma))
         positions.append(r)
-        W_hat = ca.mtimes(W, _elastic_rotation(dw_e)) if nf else W
+        turn = _rotation(dw_e) if tip_rotation == "exact" else _elastic_rotation(dw_e)
+        W_hat = ca.mtimes(W, turn) if nf else W
         alpha_hat = alpha + dw_e
     orientations.append(alpha_hat)
     # payload (Eqs 44, 49): mass at r_{n+1}, inertia turning with alpha-hat_{n+1}

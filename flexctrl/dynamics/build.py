@@ -71,7 +71,8 @@ def build_model(
             raise ModelFamilyUnavailable("damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
                                          "modes only; a finite-element model takes its damping from damping_ratio "
                                          "(use damping form 'ratio' or an 'amm:N' fidelity)")
-        return build_fem_model(arm, fid.count, reference_q=reference_q)
+        shortening = True if arm.axial_shortening is None else arm.axial_shortening  # membrane strain, validated
+        return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=shortening)
     if fid.kind == "auto":
         raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
                                      "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "

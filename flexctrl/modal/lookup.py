@@ -41,13 +41,16 @@ import numpy as np
 
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.modal.boundary import scheduling_joints
+from flexctrl.modal.shortening import GAUSS_POINTS, SHORTENING_FIELDS, axial_shapes, gauss_nodes, shortening_integrals
 from flexctrl.spec.arm import ArmSpec
 
 FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
 SHAPE_RATE_FIELDS = ("y", "s")
-_FORMAT_VERSION = 2
+#: Axial shortening (:mod:`flexctrl.modal.shortening`), and its cross integral with the shape rates.
+SHORT_FIELDS = SHORTENING_FIELDS + ("sh_psi",)
+_FORMAT_VERSION = 3
 _SHAPE_STEP = 1e-4  # rad, central differences of the shapes
-_GAUSS_POINTS = 24
+_GAUSS_POINTS = GAUSS_POINTS
 _SAMPLES = np.linspace(0.0, 1.0, 41)  # fractions of the link length for sign alignment
 
 
@@ -81,7 +84,10 @@ class ModalLookup:
         Input ``q`` (all n joint angles, rad); outputs ``omega`` (rad/s),
         ``tip_deflection``, ``tip_slope`` (1/m), ``v`` (kg), ``w`` (kg m), each
         (n_modes, 1), ``z`` (kg), (n_modes, n_modes), ``y`` (kg/rad),
-        (n_modes, n_modes * n_joints), and ``s`` (kg/rad^2), (n_modes * n_joints,) * 2.
+        (n_modes, n_modes * n_joints), ``s`` (kg/rad^2), (n_modes * n_joints,) * 2, then the
+        axial-shortening integrals ``sh_tip, sh_v, sh_w`` (P, 1), ``sh_y`` (n_modes, P),
+        ``sh_z`` (P, P) and ``sh_psi[r n_modes + j, p] = int rho dphi_j/dq_r N_p`` (n_modes n_joints, P),
+        ``P = n_modes (n_modes + 1) / 2`` (:mod:`flexctrl.modal.shortening`).
     build_time_s : float
         Wall time to compute the table (0 when read from the cache).
     """
@@ -101,10 +107,11 @@ class ModalLookup:
     def _make_function(self) -> ca.Function:
         q = ca.SX.sym("q", self.n_joints)
         nf, n = self.n_modes, self.n_joints
-        names = FIELDS + SHAPE_RATE_FIELDS
-        outputs = {"y": ca.SX.zeros(nf, nf * n), "s": ca.SX.zeros(nf * n, nf * n)}
+        names = FIELDS + SHAPE_RATE_FIELDS + SHORT_FIELDS
+        P = nf * (nf + 1) // 2
+        outputs = {"y": ca.SX.zeros(nf, nf * n), "s": ca.SX.zeros(nf * n, nf * n), "sh_psi": ca.SX.zeros(nf * n, P)}
         if not self.joints:
-            for name in FIELDS:
+            for name in FIELDS + SHORTENING_FIELDS:
                 outputs[name] = ca.SX(ca.DM(self.values[name]))
             return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
         grid = [np.radians(self.grid_deg)] * len(self.joints)
@@ -128,6 +135,11 @@ class ModalLookup:
             elif name == "s":  # s[j, r_local, k, t_local]
                 for j, rl, k, tl in np.ndindex(*shape):
                     outputs["s"][self.joints[rl] * nf + j, self.joints[tl] * nf + k] = out[int(index[j, rl, k, tl])]
+            elif name == "sh_psi":  # sh_psi[j, r_local, p]
+                for j, rl, p in np.ndindex(*shape):
+                    outputs["sh_psi"][self.joints[rl] * nf + j, p] = out[int(index[j, rl, p])]
+            elif len(shape) == 2:  # C order (rows, cols)
+                outputs[name] = ca.reshape(out[index.ravel()], shape[1], shape[0]).T
             else:
                 outputs[name] = out[index.ravel()]
         return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
@@ -135,7 +147,7 @@ class ModalLookup:
     def evaluate(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Interpolated fields at joint angles ``q`` (rad), as numpy arrays."""
         result = self.function(q=np.asarray(q, dtype=float))
-        return {k: np.array(v, dtype=float) if k in ("z", "y", "s") else np.array(v, dtype=float).squeeze(axis=-1)
+        return {k: np.array(v, dtype=float) if k in ("z", "y", "s", "sh_y", "sh_z", "sh_psi") else np.array(v, dtype=float).squeeze(axis=-1)
                 for k, v in result.items()}
 
 
@@ -171,8 +183,8 @@ def _aligned_shapes(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, x: np.
 
 
 def _shape_rate_integrals(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, joints: tuple[int, ...],
-                          shapes: np.ndarray, x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``y[k, j, r]`` and ``s[j, r, k, t]`` at ``q`` (``shapes``: the modes at ``q`` on the nodes ``x``)."""
+                          shapes: np.ndarray, x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``y[k, j, r]``, ``s[j, r, k, t]`` and the shape rates ``psi[j, r, x]`` at ``q`` (``shapes``: the modes at ``q`` on the nodes ``x``)."""
     psi = np.zeros((n_modes, len(joints), x.size))
     for rl, joint in enumerate(joints):
         step = np.zeros(arm.n_links)
@@ -182,7 +194,19 @@ def _shape_rate_integrals(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, 
         psi[:, rl, :] = (plus - minus) / (2.0 * _SHAPE_STEP)
     y = np.einsum("kx,jrx,x->kjr", shapes, psi, weights)
     s = np.einsum("jrx,ktx,x->jrkt", psi, psi, weights)
-    return y, s
+    return y, s, psi
+
+
+def _shortening_fields(modes, signs: np.ndarray, psi: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The axial-shortening integrals of the signed modes; ``sh_psi`` from the shape rates on the Gauss nodes."""
+    nf = modes.n_modes
+    shape = lambda x, d: modes.shape(x, d) * signs[:, None]  # noqa: E731
+    out = shortening_integrals(shape, modes.length, modes.rho, nf)
+    if psi is not None:
+        x, weights = gauss_nodes(modes.length, modes.rho, _GAUSS_POINTS)
+        N = axial_shapes(lambda xs: shape(xs, 1), x, nf)
+        out["sh_psi"] = np.einsum("jrx,px,x->jrp", psi, N, weights)
+    return out
 
 
 def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], grid_deg: np.ndarray) -> dict[str, np.ndarray]:
@@ -191,9 +215,7 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
     shapes_ref: dict[tuple[int, ...], np.ndarray] = {}
     length = arm.links[link].length
     x = _SAMPLES * length
-    nodes, gauss = np.polynomial.legendre.leggauss(_GAUSS_POINTS)
-    x_gauss = 0.5 * length * (nodes + 1.0)
-    weights = 0.5 * length * gauss * arm.links[link].mass_per_length
+    x_gauss, weights = gauss_nodes(length, arm.links[link].mass_per_length, _GAUSS_POINTS)
     for index in np.ndindex(*shape):
         q = np.zeros(arm.n_links)
         for j, i in zip(joints, index):
@@ -212,7 +234,7 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
         else:
             signs = np.where(modes.tip_deflection < 0.0, -1.0, 1.0)
         shapes_ref[index] = shapes * signs[:, None]
-        y, s = _shape_rate_integrals(arm, q, link, n_modes, joints, modes.shape(x_gauss) * signs[:, None], x_gauss, weights)
+        y, s, psi = _shape_rate_integrals(arm, q, link, n_modes, joints, modes.shape(x_gauss) * signs[:, None], x_gauss, weights)
         fields = _modal_fields(modes)
         fields = {
             "omega": fields["omega"],
@@ -223,6 +245,7 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
             "z": fields["z"] * np.outer(signs, signs),
             "y": y,
             "s": s,
+            **_shortening_fields(modes, signs, psi),
         }
         for name, value in fields.items():
             if name not in table:
@@ -256,13 +279,15 @@ def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_de
     path = cache_dir() / "modal" / f"link{link + 1}-{_key(arm, link, n_modes, step_deg)}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
-            values = {name: data[name] for name in FIELDS + (SHAPE_RATE_FIELDS if joints else ())}
+            values = {name: data[name] for name in FIELDS + SHORTENING_FIELDS + (SHAPE_RATE_FIELDS + ("sh_psi",) if joints else ())}
         return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, 0.0)
     start = time.perf_counter()
     if joints:
         values = _tabulate(arm, link, n_modes, joints, grid_deg)
     else:
-        values = {k: np.asarray(v) for k, v in _modal_fields(link_modes(arm, np.zeros(arm.n_links), link, n_modes)).items()}
+        modes = link_modes(arm, np.zeros(arm.n_links), link, n_modes)
+        values = {k: np.asarray(v) for k, v in _modal_fields(modes).items()}
+        values.update(_shortening_fields(modes, np.ones(n_modes), None))
     elapsed = time.perf_counter() - start
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -53,6 +53,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         arm = arm.with_payload(scene.payload)
     if scene.gravity is not None:
         arm = dataclasses.replace(arm, gravity=scene.gravity)
+    if scene.axial_shortening is not None:
+        arm = dataclasses.replace(arm, axial_shortening=scene.axial_shortening)
     if scene.zeta is not None:
         arm = dataclasses.replace(arm, links=tuple(dataclasses.replace(l, damping_ratios=(scene.zeta,)) for l in arm.links))
     if scene.damping_form is not None:

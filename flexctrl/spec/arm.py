@@ -14,6 +14,8 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     boundary_inertia = "exact"       # or "paper" (see flexctrl.modal.boundary)
     damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
                                      # et al.'s Eq 68 as printed, d = 2 zeta omega (see DAMPING_FORMS)
+    axial_shortening = true          # a bent link's foreshortening; default: on for finite elements,
+                                     # off for assumed modes (docs/amm.md section 10)
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
     [[links]]  length (m), mass_per_length (kg/m), EI (N m^2), inertia
                (kg m^2 about the link's centre of mass), n_modes (0..6),
@@ -212,6 +214,11 @@ class ArmSpec:
         How the tip inertia J_D of the clamped-mass boundary is formed.
     damping_form : {"ratio", "paper"}
         How the modal damping coefficient is formed from ``damping_ratio`` (see ``DAMPING_FORMS``).
+    axial_shortening : bool or None
+        Whether the models carry a bent link's axial shortening (assumed modes: second-order
+        kinematics, ``docs/amm.md`` section 10; finite elements: membrane strain).  None (not
+        in the file): each family's default, on for finite elements, off for assumed modes
+        (:data:`flexctrl.dynamics.amm.AMM_AXIAL_SHORTENING`).
     source : str
         The file it was loaded from.
     """
@@ -226,6 +233,7 @@ class ArmSpec:
     damping_form: Literal["ratio", "paper"] = "ratio"
     source: str = ""
     notes: str = ""
+    axial_shortening: bool | None = None
 
     @property
     def n_links(self) -> int:
@@ -350,6 +358,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         configuration=tuple(math.radians(a) for a in config_deg),
         boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
         damping_form=r.string("damping_form", "ratio", choices=DAMPING_FORMS),  # type: ignore[arg-type]
+        axial_shortening=r.boolean("axial_shortening", True) if r.has("axial_shortening") else None,
         source=source,
         notes=r.string("notes", ""),
     )

@@ -14,6 +14,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
                                       # (flexctrl.scenes.auto chooses the model)
     modes = "frozen"                  # or "scheduled"
+    axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
     gravity = [0.0, -9.81]            # m/s^2 (default: the model file's)
     integrator = "rk4"                # rk4 | cvodes | idas | scipy | euler | newmark
     dt = 1e-3                         # s: step, output interval and torque hold
@@ -123,12 +124,14 @@ class ArmScene:
     source: str = ""
     kind: str = "arm"
     tolerance: float | None = None
+    axial_shortening: bool | None = None
 
     def settings(self) -> dict[str, Any]:
         """The scene as plain, JSON-ready data (angles in degrees, as in the file)."""
         return {
             "kind": self.kind, "name": self.name, "source": self.source, "model": str(self.model),
-            "fidelity": str(self.fidelity), "modes": self.modes, "payload_kg": self.payload,
+            "fidelity": str(self.fidelity), "modes": self.modes, "axial_shortening": self.axial_shortening,
+            "payload_kg": self.payload,
             "gravity": list(self.gravity) if self.gravity else None,
             "q0_deg": [math.degrees(a) for a in self.q0] if self.q0 else None,
             "qd0_deg_s": [math.degrees(a) for a in self.qd0] if self.qd0 else None,
@@ -250,6 +253,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         duration=duration,
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
+        axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
     )
     r.finish()
     return scene
