@@ -131,31 +131,74 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
-def _run_nmpc(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float, **overrides) -> dict[str, Any]:
-    from flexctrl.control import design
-    from flexctrl.spec.controller_settings import NMPCSettings
+def default_nmpc_variants() -> dict[str, dict[str, Any]]:
+    """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`), stepped interleaved.
 
-    start = time.perf_counter()
-    ctrl = design(model, op, NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides))
-    build = time.perf_counter() - start
-    ctrl.reset()
-    F, pb = ctrl.functions["F"], ctrl.problem
-    x = op.x + dx0
-    for k in range(steps):
-        u = ctrl.step(k * ctrl.sample_time, x)
-        x = op.x + pb.Sx * np.array(F((x - op.x) / pb.Sx, (u - op.u) / pb.Su), dtype=float).ravel()
-    summary = ctrl.stats.summary()
+    ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``: HPIPM warm-started
+    from the shifted previous solution); ``rti_frozen_cold`` the previous path (HPIPM's
+    default start); ``rti_exact`` that with exact sensitivities; ``rti_frozen_first_modes``
+    predicts with the first mode of every link only (12 states, 2 RK4 substeps instead of
+    9; fast, but with the shipped weights it destabilises the full arm: ``docs/control.md``).
+    """
     return {
-        "build_s": build,
-        "compiled": ctrl.compiled,
-        "substeps": ctrl.substeps,
-        "step_ms": _stats(ctrl.stats.step_times[1:]),
-        "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
-        "qp_ms": _stats(ctrl.timing["qp"][1:]),
-        "status": summary["status"],
-        "fallbacks": summary["fallbacks"],
-        "final_joint_error_deg": float(np.degrees(np.max(np.abs((x - op.x)[:model.n_u])))),
+        "rti_frozen": {"qp_warm_start": True},
+        "rti_frozen_cold": {},
+        "rti_exact": {"sensitivities": "exact"},
+        "rti_frozen_first_modes": {"prediction_modes": 1, "qp_warm_start": True},
     }
+
+
+def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float,
+               variants: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Every NMPC variant against its own copy of the nonlinear plant, one sample of each in turn.
+
+    Interleaving puts the variants under the same load (the machine may be shared), so
+    their ratios are meaningful even when the absolute times are not.  The plant is the
+    design model's RK4 map with the substeps its own fastest mode needs (whatever model
+    a variant predicts with).
+    """
+    from flexctrl.control import design
+    from flexctrl.control.lqr import build_sensors, linear_plant
+    from flexctrl.control.nmpc import auto_substeps, interval_functions
+    from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
+
+    plant_substeps = auto_substeps(linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time))
+    F, _ = interval_functions(model, sample_time, plant_substeps, None)
+    controllers, builds = {}, {}
+    for name, overrides in variants.items():
+        start = time.perf_counter()
+        controllers[name] = design(model, op, NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides))
+        builds[name] = time.perf_counter() - start
+        controllers[name].reset()
+    states = {name: op.x + dx0 for name in variants}
+    cpu: dict[str, list[float]] = {name: [] for name in variants}
+    for k in range(steps):
+        for name, ctrl in controllers.items():
+            start = time.thread_time()
+            u = ctrl.step(k * ctrl.sample_time, states[name])
+            cpu[name].append(time.thread_time() - start)
+            states[name] = np.array(F(states[name], u), dtype=float).ravel()
+    result: dict[str, Any] = {}
+    for name, ctrl in controllers.items():
+        summary = ctrl.stats.summary()
+        it = np.asarray(ctrl.stats.iterations[1:], dtype=float)
+        result[name] = {
+            "settings": variants[name],
+            "build_s": builds[name],
+            "compiled": ctrl.compiled,
+            "prediction_states": int(ctrl.problem.n),
+            "substeps": ctrl.substeps,
+            "step_ms": _stats(ctrl.stats.step_times[1:]),
+            "step_cpu_ms": _stats(cpu[name][1:]),
+            "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
+            "qp_ms": _stats(ctrl.timing["qp"][1:]),
+            "qp_iterations_median": float(np.median(it)) if it.size else math.nan,
+            "status": summary["status"],
+            "fallbacks": summary["fallbacks"],
+            "final_joint_error_deg": float(np.degrees(np.max(np.abs((states[name] - op.x)[:model.n_u])))),
+        }
+    result["plant_substeps"] = plant_substeps
+    return result
 
 
 def mpc_benchmark(
@@ -171,6 +214,7 @@ def mpc_benchmark(
     python_control_solves: int = 1,
     nmpc: bool = True,
     nmpc_steps: int = 100,
+    nmpc_variants: dict[str, dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Run the MPC benchmark (see the module docstring) and return its figures.
 
@@ -190,7 +234,10 @@ def mpc_benchmark(
     python_control_solves
         Solves of python-control's MPC to time (0 skips it; each takes seconds).
     nmpc, nmpc_steps
-        Whether to time the NMPC (RTI, frozen and exact sensitivities) and for how many samples.
+        Whether to time the NMPC and for how many samples.
+    nmpc_variants
+        Name -> :class:`~flexctrl.spec.controller_settings.NMPCSettings` overrides, stepped
+        interleaved (default :func:`default_nmpc_variants`).
 
     Returns
     -------
@@ -235,10 +282,14 @@ def mpc_benchmark(
         pc["ratio_median"] = pc["median_s"] * 1e3 / ours["solve_ms"]["median"]
         result["python_control"] = pc
     if nmpc:
-        result["nmpc"] = {
-            "rti_frozen": _run_nmpc(model, op, dx0, nmpc_steps, horizon, sample_time),
-            "rti_exact": _run_nmpc(model, op, dx0, nmpc_steps, horizon, sample_time, sensitivities="exact"),
-        }
+        runs = _run_nmpcs(model, op, dx0, nmpc_steps, horizon, sample_time,
+                          nmpc_variants if nmpc_variants is not None else default_nmpc_variants())
+        result["nmpc_plant_substeps"] = runs.pop("plant_substeps")
+        result["nmpc"] = runs
+        if "rti_frozen" in runs and "rti_frozen_cold" in runs:
+            fast, full = runs["rti_frozen"], runs["rti_frozen_cold"]
+            result["nmpc_speedup"] = {"step_median": full["step_ms"]["median"] / fast["step_ms"]["median"],
+                                      "step_cpu_median": full["step_cpu_ms"]["median"] / fast["step_cpu_ms"]["median"]}
     return result
 
 
@@ -261,9 +312,15 @@ def format_benchmark(result: dict[str, Any]) -> str:
                      f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)")
     for name, v in result.get("nmpc", {}).items():
         lines.append(f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
-                     f"max {v['step_ms']['max']:.2f} (linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
-                     f"QP {v['qp_ms']['median']:.2f}; {v['substeps']} RK4 substeps, compiled {v['compiled']})")
+                     f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
+                     f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
+                     f"QP {v['qp_ms']['median']:.2f}, {v['qp_iterations_median']:.0f} iterations; "
+                     f"{v['prediction_states']} states, {v['substeps']} RK4 substeps, compiled {v['compiled']})")
+    if "nmpc_speedup" in result:
+        sp = result["nmpc_speedup"]
+        lines.append(f"NMPC rti_frozen against rti_frozen_cold (interleaved): {sp['step_median']:.2f}x "
+                     f"faster by the median step, {sp['step_cpu_median']:.2f}x by CPU time")
     return "\n".join(lines)
 
 
-__all__ = ["mpc_benchmark", "default_variants", "format_benchmark", "COMMAND"]
+__all__ = ["mpc_benchmark", "default_variants", "default_nmpc_variants", "format_benchmark", "COMMAND"]

@@ -292,6 +292,8 @@ def _read_nmpc(r: TableReader) -> NMPCSettings:
         "init_iter": r.integer("init_iter", d.init_iter, low=0),
         **_soft_values(r, NMPCSettings, d),
         "compile": r.boolean("compile", d.compile),
+        "prediction_modes": r.integer("prediction_modes", d.prediction_modes, low=0, high=6),
+        "qp_warm_start": r.boolean("qp_warm_start", d.qp_warm_start),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
     }

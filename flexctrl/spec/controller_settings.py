@@ -480,6 +480,15 @@ class NMPCSettings:
         As in :class:`MPCSettings`.
     compile : bool
         Generate and compile C for the sensitivities (cached on disk).
+    prediction_modes : int
+        Elastic modes per link of the model the NMPC predicts with: the lowest ones of the
+        design model, a Galerkin truncation (:mod:`flexctrl.control.nmpc_model`); 0
+        (default): all of them.  Fewer modes need fewer RK4 substeps (the fastest mode
+        bounds the step); the estimator keeps the design model.
+    qp_warm_start : bool
+        HPIPM only: start its interior point from the shifted previous solution
+        (HPIPM's ``warm_start = 1``) instead of its default start (about half the
+        iterations on the three-link arm).  The other QP solvers are always given it.
     sensors, estimator
         As for LQR.
     """
@@ -501,6 +510,8 @@ class NMPCSettings:
     slack_l1: float = 1.0e5
     slack_l2: float = 1.0e7
     compile: bool = True
+    prediction_modes: int = 0
+    qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
 
@@ -521,6 +532,8 @@ class NMPCSettings:
         number_field("slack_l1", self.slack_l1, low=0.0)
         number_field("slack_l2", self.slack_l2, low=0.0, low_open=True)
         boolean_field("compile", self.compile)
+        integer_field("prediction_modes", self.prediction_modes, low=0, high=6)
+        boolean_field("qp_warm_start", self.qp_warm_start)
 
 
 @dataclass(frozen=True)
