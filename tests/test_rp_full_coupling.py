@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 from scipy.linalg import eigh, null_space
 
 from flexctrl.beam.elements import hermite_shape, locate
@@ -16,6 +15,7 @@ from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.rp_arm_full import RPArmFullModel, RPForces, simulate_rp_arm_full
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import load_rp_arm
+from rigid_rp import rigid_rp as _rigid_rp
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = load_rp_arm(ROOT / "models" / "rp_arm.toml")
@@ -60,27 +60,6 @@ def test_recorded_torque_and_force_reproduce_the_motion(motion_run):
     assert np.abs(half.theta - MOTION.theta(half.t)).max() < 3 * tracking
     assert np.abs(half.W - MOTION.W(half.t)).max() < 3 * tracking
     assert np.abs(half.tip_y[::2] - ref.tip_y).max() < 1e-3 * np.abs(ref.tip_y).max()
-
-
-def _rigid_rp(spec, forces, t_eval):
-    """Rigid R-P arm, written out by hand: T = 1/2 J(r_E) theta'^2 + 1/2 m W'^2, V from gravity."""
-    L, rho, mt, mc, Jh = spec.length, spec.mass_per_length, spec.payload_mass, spec.carriage_mass, spec.hub_inertia
-    gx, gy = spec.gravity
-    mtot = mc + rho * L + mt
-
-    def rhs(t, y):
-        th, W, thd, Wd = y
-        rE = spec.support_outer - L + W
-        J = Jh + mc * rE**2 + rho * (L * rE**2 + L**2 * rE + L**3 / 3) + mt * (rE + L) ** 2
-        dJ = 2 * mc * rE + rho * (2 * L * rE + L**2) + 2 * mt * (rE + L)
-        first = mc * rE + rho * (L * rE + L * L / 2) + mt * (rE + L)
-        g_ax, g_perp = gx * math.cos(th) + gy * math.sin(th), -gx * math.sin(th) + gy * math.cos(th)
-        return [thd, Wd, (forces.torque(t) + g_perp * first - dJ * Wd * thd) / J,
-                (forces.force(t) + mtot * g_ax + 0.5 * dJ * thd**2) / mtot]
-
-    sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), [forces.theta0, forces.W0, 0.0, 0.0], t_eval=t_eval,
-                    method="DOP853", rtol=1e-11, atol=1e-12)
-    return sol.y[0], sol.y[1]
 
 
 def test_rigid_limit_follows_the_rigid_rp_equations():

@@ -7,6 +7,8 @@
   housing angle ``theta(t)``;
 * :func:`point_rows`: the rows giving ``w`` and its derivatives at arbitrary material points,
   which move from element to element as the supports slide;
+* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at material
+  points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus mouth bearing);
 * :func:`check_elements` and :data:`ENDS`, the checks the models share.
 
 Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling), :mod:`flexctrl.dynamics.fem.rp_arm_full`
@@ -48,6 +50,53 @@ def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: in
         for k, (j, _) in enumerate(located):
             R[d, k, 2 * j:2 * j + 4] = H[k]
     return R
+
+
+@dataclass(frozen=True)
+class PointRows:
+    """Constraint rows ``w^(o_k)(x_k) = 0`` at material points ``x_k = c_k + v_k W`` of one link.
+
+    ``orders`` ``o_k`` (0: displacement, 1: slope), ``offsets`` ``c_k`` (m) and ``rates``
+    ``v_k = dx_k/dW`` (0 for a point fixed on the link, -1 for a support fixed in the housing).
+    """
+
+    orders: tuple[int, ...]
+    offsets: tuple[float, ...]
+    rates: tuple[float, ...]
+
+    @property
+    def count(self) -> int:
+        return len(self.orders)
+
+    def points(self, W: float) -> Array:
+        """Material coordinates ``x_k`` (m) at overhang ``W`` (m)."""
+        return np.asarray(self.offsets) + np.asarray(self.rates) * W
+
+    def at(self, W: float, n_elements: int, length: float) -> Array:
+        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``'s function,
+        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative)."""
+        P = point_rows(self.points(W), n_elements, length, 3)
+        R = np.zeros((4, self.count, P.shape[2]))
+        for d in range(4):
+            for k, o in enumerate(self.orders):
+                if o + d <= 3:
+                    R[d, k] = P[o + d, k]
+        return R
+
+
+def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
+    """The rows of an R-P arm's prismatic joint on a link of ``length`` (m), supports ``D`` (m) apart.
+
+    ``"supports"``: ``w = 0`` at the two supports, material points ``L - D - W`` and ``L - W``
+    (Eqs 24-25 at each).  ``"clamped"`` (Pan's Fig 4): ``w(0) = w'(0) = 0`` at E in the carriage
+    (Eqs 22-23, fixed on the link) and ``w = 0`` at the mouth bearing D', material point ``L - W``
+    (Eq 24).
+    """
+    if joint == "supports":
+        return PointRows((0, 0), (length - D, length), (-1.0, -1.0))
+    if joint == "clamped":
+        return PointRows((0, 1, 0), (0.0, 0.0, length), (0.0, 0.0, -1.0))
+    raise SpecError(f"value {joint!r} is not allowed; allowed: 'supports', 'clamped'", key="joint")
 
 
 def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
