@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+
+import numpy as np
 
 from scipy.integrate import solve_ivp
 
@@ -26,3 +29,23 @@ def rigid_rp(spec, forces, t_eval):
     sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), [forces.theta0, forces.W0, 0.0, 0.0], t_eval=t_eval,
                     method="DOP853", rtol=1e-11, atol=1e-12)
     return sol.y[0], sol.y[1]
+
+
+def check_rigid_limit(spec, W0: float) -> None:
+    """Prescribed torque and force (2 N m, 2 N sines over 1 s, gravity 1 m/s^2, payload 0.3 kg): with
+    EI x 1e4 theta and W follow :func:`rigid_rp` to the Newmark error, which halving dt cuts by ~4;
+    with the file's EI the flexible arm is measurably different (the check can fail)."""
+    from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
+
+    spec = dataclasses.replace(spec, gravity=(0.0, -1.0), payload_mass=0.3)
+    forces = RPForces.sine(2.0, 2.0, 1.0, theta0=0.3, W0=W0)
+    errors = {}
+    for scale, dt in ((1e4, 1e-3), (1e4, 5e-4), (1.0, 1e-3)):
+        res = simulate_rp_arm_full(dataclasses.replace(spec, EI=spec.EI * scale), forces, 4, dt=dt, duration=1.0)
+        th, W = rigid_rp(spec, forces, res.t)
+        assert np.ptp(th) > 0.1 and np.ptp(W) > 0.05  # a real motion
+        assert res.phi_violation.max() < 1e-6
+        errors[scale, dt] = max(np.abs(res.theta - th).max(), np.abs(res.W - W).max())
+    assert errors[1e4, 1e-3] < 1e-5  # rad and m, against 0.2 rad and 0.11 m of motion
+    assert errors[1e4, 1e-3] / errors[1e4, 5e-4] > 3.0  # what remains is O(dt^2) time discretisation
+    assert errors[1.0, 1e-3] > 30 * errors[1e4, 1e-3]  # flexibility shows at the file's EI
