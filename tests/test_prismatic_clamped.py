@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rigid_rp import check_rigid_limit
+from full_coupling_checks import check_rigid_limit
 
 from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.rp_arm_full import simulate_rp_arm_full

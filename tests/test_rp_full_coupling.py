@@ -15,7 +15,7 @@ from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.rp_arm_full import RPArmFullModel, RPForces, simulate_rp_arm_full
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import load_rp_arm
-from rigid_rp import check_rigid_limit
+from full_coupling_checks import check_constraint_derivatives, check_rigid_limit
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = load_rp_arm(ROOT / "models" / "rp_arm.toml")
@@ -152,30 +152,9 @@ def test_free_motion_conserves_angular_momentum_and_energy():
 def test_constraint_derivatives_match_finite_differences():
     """h (Eq 47), h_z, h_zd and Phi_z of the W-dependent support rows against central differences."""
     model = RPArmFullModel(SPEC, RPForces.sine(1.0, 1.0, 1.0, W0=0.33), 4)
+    check_constraint_derivatives(model, W=0.33, seed=1)
+    z = np.r_[np.zeros(model.ne), 0.4, 0.33]
     prob = model.problem()
-    rng = np.random.default_rng(1)
-    z = np.r_[1e-3 * rng.standard_normal(model.ne), 0.4, 0.33]
-    zd = np.r_[1e-2 * rng.standard_normal(model.ne), 0.8, 0.3]
-    zdd = np.r_[rng.standard_normal(model.ne), 0.5, -0.7]
-    eps = 1e-4
-
-    def path(s):
-        return z + s * zd + 0.5 * s * s * zdd
-
-    second = (prob.phi(path(eps), 0) - 2 * prob.phi(path(0), 0) + prob.phi(path(-eps), 0)) / eps**2
-    np.testing.assert_allclose(prob.phi_q(z, 0) @ zdd - prob.h(z, zd, 0), second, rtol=1e-5, atol=1e-6)
-    for k in range(model.nz):
-        e = np.zeros(model.nz)
-        e[k] = 1e-6
-        np.testing.assert_allclose((prob.phi(z + e, 0) - prob.phi(z - e, 0)) / 2e-6, prob.phi_q(z, 0)[:, k],
-                                   rtol=1e-6, atol=1e-8)
-        np.testing.assert_allclose((prob.h(z + e, zd, 0) - prob.h(z - e, zd, 0)) / 2e-6, prob.h_q(z, zd, 0)[:, k],
-                                   rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose((prob.h(z, zd + e, 0) - prob.h(z, zd - e, 0)) / 2e-6, prob.h_qd(z, zd, 0)[:, k],
-                                   rtol=1e-5, atol=1e-6)
-    M = prob.mass(z, 0)
-    np.testing.assert_allclose(M, M.T, atol=1e-14)
-    assert np.linalg.eigvalsh(M).min() > 0
     j, _ = locate(SPEC.length - 0.33, 4, SPEC.length)
     assert np.flatnonzero(prob.phi_q(z, 0)[1, :model.ne]).min() == 2 * j  # the row sits in the support's element
 

@@ -112,18 +112,7 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
         raise housing.error("support_outer", f"support spacing {r2 - r1:g} m leaves no stroke on a {length:g} m link; "
                                              f"allowed: spacing < {length} m")
     housing.finish()
-    base = r.table_of("base", {})
-    hub_inertia = base.nonnegative("hub_inertia", 0.0, unit="kg m^2")
-    base.string("source", "")
-    base.finish()
-    carriage = r.table_of("carriage", {})
-    carriage_mass = carriage.nonnegative("mass", 0.0, unit="kg")
-    carriage.string("source", "")
-    carriage.finish()
-    payload = r.table_of("payload", {})
-    m_t = payload.nonnegative("mass", 0.0, unit="kg")
-    payload.string("source", "")
-    payload.finish()
+    hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
     spec = RPArmSpec(name=r.string("name", Path(source).stem), length=length, mass_per_length=rho, EI=EI,
                      support_inner=r1, support_outer=r2, payload_mass=m_t, gravity=(gravity[0], gravity[1]),
@@ -131,6 +120,17 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
                      source=source, notes=r.string("notes", ""))
     r.finish()
     return spec
+
+
+def _drive_masses(r: TableReader) -> tuple[float, float, float]:
+    """The optional ``[base] hub_inertia`` (kg m^2), ``[carriage] mass`` and ``[payload] mass`` (kg)."""
+    values = []
+    for table, key, unit in (("base", "hub_inertia", "kg m^2"), ("carriage", "mass", "kg"), ("payload", "mass", "kg")):
+        t = r.table_of(table, {})
+        values.append(t.nonnegative(key, 0.0, unit=unit))
+        t.string("source", "")
+        t.finish()
+    return values[0], values[1], values[2]
 
 
 def load_rp_arm(path: str | Path, overrides: Iterable[str] = ()) -> RPArmSpec:
@@ -186,6 +186,10 @@ class TelescopingSpec:
         Point mass at the inner tip H, kg.
     gravity : tuple of float
         Gravity ``(gx, gy)`` in the plane of motion, world frame, m/s^2.
+    hub_inertia : float
+        Hub and rotor inertia about joint 1, kg m^2 (full coupling; ``[base]``).
+    carriage_mass : float
+        Mass of the axial drive at the inner root E, kg (full coupling; ``[carriage]``).
     source, notes : str
         The file read and its free text.
     """
@@ -197,6 +201,8 @@ class TelescopingSpec:
     hub_radius: float = 0.0
     payload_mass: float = 0.0
     gravity: tuple[float, float] = (0.0, 0.0)
+    hub_inertia: float = 0.0
+    carriage_mass: float = 0.0
     source: str = ""
     notes: str = ""
 
@@ -250,15 +256,12 @@ def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
                                   "contacts, or one with slope = true (Eqs 26-28), to hold the inner link")
     if len(set(contacts)) != len(contacts):
         raise r.error("contacts", "two contacts are identical; allowed: distinct contacts")
-    payload = r.table_of("payload", {})
-    m_t = payload.nonnegative("mass", 0.0, unit="kg")
-    payload.string("source", "")
-    payload.finish()
+    hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
     spec = TelescopingSpec(name=r.string("name", Path(source).stem), outer=links["outer"], inner=links["inner"],
                            contacts=tuple(contacts), hub_radius=r.nonnegative("hub_radius", 0.0, unit="m"),
-                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), source=source,
-                           notes=r.string("notes", ""))
+                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), hub_inertia=hub_inertia,
+                           carriage_mass=carriage_mass, source=source, notes=r.string("notes", ""))
     r.finish()
     return spec
 

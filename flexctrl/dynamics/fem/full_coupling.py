@@ -119,6 +119,36 @@ def payload_energies(link: FrameLink, mass: float, q: Any, qd: Any, rE: Any, rEd
     return T, V
 
 
+@dataclass(frozen=True)
+class FullCouplingResult:
+    """What the fully coupled simulations return.
+
+    ``t`` (s); ``theta`` (rad), ``thetad`` (rad/s), ``W`` (m), ``Wd`` (m/s): the nominal joint
+    coordinates, now unknowns; ``torque`` (N m) and ``force`` (N): applied (force drive) or needed
+    (motion drive, minus the joint multipliers); ``q``, ``qd`` nodal values and rates; ``lam`` the
+    contact forces (N; N m for slope rows); ``tip_y`` transverse displacement of the tracked end in
+    the link frame (m); contact violations (m, m/s); ``newton_iterations`` per step; ``wall_time`` (s).
+    """
+
+    model: "SlidingFullModel"
+    dt: float
+    t: Array
+    theta: Array
+    thetad: Array
+    W: Array
+    Wd: Array
+    torque: Array
+    force: Array
+    q: Array
+    qd: Array
+    lam: Array
+    tip_y: Array
+    phi_violation: Array
+    phidot_violation: Array
+    newton_iterations: NDArray[np.int_]
+    wall_time: float
+
+
 class SlidingFullModel:
     """Base of the fully coupled models: coordinates ``z = (q, theta, W)``, ``ne`` nodal values first.
 

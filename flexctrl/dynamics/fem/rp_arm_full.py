@@ -42,7 +42,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.dynamics.fem.full_coupling import RPForces, SlidingFullModel, link_energies, payload_energies
+from flexctrl.dynamics.fem.full_coupling import (FullCouplingResult, RPForces, SlidingFullModel, link_energies,
+                                                 payload_energies)
 from flexctrl.dynamics.fem.moving_frame import ENDS, FrameLink, RPMotion, check_elements, prismatic_rows
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import RPArmSpec
@@ -114,36 +115,13 @@ class RPArmFullModel(SlidingFullModel):
 
 
 @dataclass(frozen=True)
-class RPArmFullResult:
-    """Response of :func:`simulate_rp_arm_full`.
+class RPArmFullResult(FullCouplingResult):
+    """Response of :func:`simulate_rp_arm_full`: the fields of
+    :class:`~flexctrl.dynamics.fem.full_coupling.FullCouplingResult` (``lam``: the support, or clamp
+    and mouth, forces) and ``tip_world``, the position of H (m, shape (T, 2), axial shortening not
+    included)."""
 
-    ``t`` (s); ``theta`` (rad), ``thetad`` (rad/s), ``W`` (m), ``Wd`` (m/s): the nominal joint
-    coordinates, now unknowns; ``torque`` (N m) and ``force`` (N): applied (force drive) or needed
-    (motion drive, minus the joint multipliers); ``q``, ``qd`` nodal values and rates; ``lam`` the
-    support (or clamp and mouth) forces (N, N m); ``tip_y`` transverse displacement of the tracked
-    end in the link frame (m); ``tip_world`` position of H (m, axial shortening not included);
-    violations of the support constraints (m, m/s); ``newton_iterations`` per step;
-    ``wall_time`` (s); ``model``.
-    """
-
-    model: RPArmFullModel
-    dt: float
-    t: Array
-    theta: Array
-    thetad: Array
-    W: Array
-    Wd: Array
-    torque: Array
-    force: Array
-    q: Array
-    qd: Array
-    lam: Array
-    tip_y: Array
     tip_world: Array
-    phi_violation: Array
-    phidot_violation: Array
-    newton_iterations: NDArray[np.int_]
-    wall_time: float
 
 
 def simulate_rp_arm_full(spec: RPArmSpec, drive: "RPForces | RPMotion", n_elements: int = 8, dt: float = 1e-3,

@@ -1,4 +1,5 @@
-"""The rigid R-P arm written out by hand, the reference of the rigid-limit tests of the full-coupling models."""
+"""Checks shared by the tests of the full-coupling models: the rigid R-P arm written out by hand (the
+reference of the rigid limit) and the constraint derivatives against central differences."""
 
 from __future__ import annotations
 
@@ -6,7 +7,6 @@ import dataclasses
 import math
 
 import numpy as np
-
 from scipy.integrate import solve_ivp
 
 
@@ -49,3 +49,32 @@ def check_rigid_limit(spec, W0: float) -> None:
     assert errors[1e4, 1e-3] < 1e-5  # rad and m, against 0.2 rad and 0.11 m of motion
     assert errors[1e4, 1e-3] / errors[1e4, 5e-4] > 3.0  # what remains is O(dt^2) time discretisation
     assert errors[1.0, 1e-3] > 30 * errors[1e4, 1e-3]  # flexibility shows at the file's EI
+
+
+def check_constraint_derivatives(model, W: float, seed: int) -> None:
+    """Phi_z, h (Eq 47), h_z and h_zd of the W-dependent rows against central differences at a random
+    state with overhang ``W`` (m); ``M`` symmetric positive definite there."""
+    prob = model.problem()
+    rng = np.random.default_rng(seed)
+    z = np.r_[1e-3 * rng.standard_normal(model.ne), 0.4, W]
+    zd = np.r_[1e-2 * rng.standard_normal(model.ne), 0.8, 0.3]
+    zdd = np.r_[rng.standard_normal(model.ne), 0.5, -0.7]
+    eps = 1e-4
+
+    def path(s):
+        return z + s * zd + 0.5 * s * s * zdd
+
+    second = (prob.phi(path(eps), 0) - 2 * prob.phi(path(0), 0) + prob.phi(path(-eps), 0)) / eps**2
+    np.testing.assert_allclose(prob.phi_q(z, 0) @ zdd - prob.h(z, zd, 0), second, rtol=1e-5, atol=1e-6)
+    for k in range(model.nz):
+        e = np.zeros(model.nz)
+        e[k] = 1e-6
+        np.testing.assert_allclose((prob.phi(z + e, 0) - prob.phi(z - e, 0)) / 2e-6, prob.phi_q(z, 0)[:, k],
+                                   rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose((prob.h(z + e, zd, 0) - prob.h(z - e, zd, 0)) / 2e-6, prob.h_q(z, zd, 0)[:, k],
+                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose((prob.h(z, zd + e, 0) - prob.h(z, zd - e, 0)) / 2e-6, prob.h_qd(z, zd, 0)[:, k],
+                                   rtol=1e-5, atol=1e-6)
+    M = prob.mass(z, 0)
+    np.testing.assert_allclose(M, M.T, atol=1e-14)
+    assert np.linalg.eigvalsh(M).min() > 0
