@@ -99,17 +99,32 @@ def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
     raise SpecError(f"value {joint!r} is not allowed; allowed: 'supports', 'clamped'", key="joint")
 
 
+def is_symbolic(value: object) -> bool:
+    """True for a CasADi expression (``SX``/``MX``), e.g. a symbolic time."""
+    return type(value).__module__.startswith("casadi")
+
+
 def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
-    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T])."""
-    t = np.asarray(t, dtype=float)
+    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T]).
+
+    ``t`` may be a CasADi expression (a symbolic time; :mod:`flexctrl.dynamics.fem.idas_dae`)."""
+    if is_symbolic(t):
+        import casadi as ca
+
+        sin, cos, clip = ca.sin, ca.cos, lambda x: ca.fmin(ca.fmax(x, 0.0), T)
+        where = ca.if_else
+        inside = ca.logic_and(t >= 0, t <= T)
+    else:
+        t = np.asarray(t, dtype=float)
+        sin, cos, clip, where = np.sin, np.cos, lambda x: np.clip(x, 0.0, T), np.where
+        inside = (t >= 0) & (t <= T)
     w = 2 * np.pi / T
-    tc = np.clip(t, 0.0, T)
     if derivative == 0:
-        return tc / T - np.sin(w * tc) / (2 * np.pi)
-    inside = (t >= 0) & (t <= T)
+        tc = clip(t)
+        return tc / T - sin(w * tc) / (2 * np.pi)
     if derivative == 1:
-        return np.where(inside, (1.0 - np.cos(w * t)) / T, 0.0)
-    return np.where(inside, w * np.sin(w * t) / T, 0.0)
+        return where(inside, (1.0 - cos(w * t)) / T, 0.0)
+    return where(inside, w * sin(w * t) / T, 0.0)
 
 
 @dataclass(frozen=True)
@@ -196,14 +211,21 @@ class FrameLink:
 
     def terms(self, r: dict[str, float], driven_end: str, axial_shortening: bool) -> tuple[Array, Array]:
         """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
-        also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2)."""
-        Kt = self.K - r["thd"] ** 2 * self.M
+        also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2).  Numbers give numpy arrays; CasADi
+        expressions (a symbolic rigid motion) give CasADi matrices."""
+        mats = (self.K, self.M, self.G_c, self.G_1, self.G_2, self.S0, self.S1, np.eye(self.ndof)[self.tip])
+        if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in r.values()):
+            import casadi as ca
+
+            mats = tuple(ca.DM(m) for m in mats)
+        K, M, G_c, G_1, G_2, S0, S1, e_tip = mats
+        Kt = K - r["thd"] ** 2 * M
         if axial_shortening:
             c0, c1, c2 = self.force_coefficients(r, driven_end)
-            Kt = Kt + c0 * self.G_c + c1 * self.G_1 + c2 * self.G_2
+            Kt = Kt + c0 * G_c + c1 * G_1 + c2 * G_2
         a0 = r["thdd"] * r["rE"] + 2.0 * r["thd"] * r["rEd"]  # a_perp(x) = a0 + thdd x
-        f = -(a0 - r["g_perp"]) * self.S0 - r["thdd"] * self.S1
+        f = -(a0 - r["g_perp"]) * S0 - r["thdd"] * S1
         if self.payload_mass:
-            f[self.tip] -= self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"])
+            f = f - self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"]) * e_tip
         return Kt, f
 

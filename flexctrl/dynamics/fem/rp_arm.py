@@ -64,7 +64,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.dynamics.fem.moving_frame import ENDS, FrameLink, RPMotion, check_elements, prismatic_rows
+from flexctrl.dynamics.fem.moving_frame import (ENDS, FrameLink, RPMotion, check_elements, is_symbolic,
+                                               prismatic_rows)
 from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import RPArmSpec
@@ -100,13 +101,20 @@ class RPArmModel:
 
     # -- rigid motion -------------------------------------------------------------------
     def rigid(self, t: float) -> dict[str, float]:
-        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame."""
+        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame
+        (CasADi expressions for a symbolic ``t``)."""
         m, s = self.motion, self.spec
-        th = float(m.theta(t))
-        c, sn = math.cos(th), math.sin(th)
+        if is_symbolic(t):
+            import casadi as ca
+
+            val, cos, sin = (lambda v: v), ca.cos, ca.sin
+        else:
+            val, cos, sin = float, math.cos, math.sin
+        th = val(m.theta(t))
+        c, sn = cos(th), sin(th)
         gx, gy = s.gravity
-        return {"rE": s.support_outer - s.length + float(m.W(t)), "rEd": float(m.Wd(t)), "rEdd": float(m.Wdd(t)),
-                "th": th, "thd": float(m.thetad(t)), "thdd": float(m.thetadd(t)),
+        return {"rE": s.support_outer - s.length + val(m.W(t)), "rEd": val(m.Wd(t)), "rEdd": val(m.Wdd(t)),
+                "th": th, "thd": val(m.thetad(t)), "thdd": val(m.thetadd(t)),
                 "g_ax": gx * c + gy * sn, "g_perp": -gx * sn + gy * c}
 
     def axial_force(self, t: float, x: ArrayLike) -> Array:
