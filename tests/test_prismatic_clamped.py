@@ -92,3 +92,19 @@ def test_clamped_joint_is_driven_at_E_and_read_from_the_file(tmp_path):
     with pytest.raises(SpecError, match="joint.*did you mean 'clamped'"):
         load_rp_arm(bad)
     assert SPEC.joint == "clamped" and load_rp_arm(ROOT / "models" / "rp_arm.toml").joint == "supports"
+
+
+def test_scene_with_the_clamped_joint(tmp_path):
+    """``studies/scenes/rp_clamped_extend.toml`` runs through the scene runner (partial and full
+    coupling); ``driven_end = "H"`` with the clamped model is a load-time error naming the key."""
+    from flexctrl.scenes.fem import run_fem_scene
+    from flexctrl.spec.overrides import apply_overrides
+    from flexctrl.spec.reader import read_toml
+
+    path = ROOT / "studies" / "scenes" / "rp_clamped_extend.toml"
+    for extra in ([], ["drive.coupling='full'"]):
+        doc = apply_overrides(read_toml(path), ["duration=0.2", "n_elements=4", *extra])
+        summary = run_fem_scene(doc, str(path), tmp_path / str(len(extra)), None)
+        assert summary["model"]["ndof"] >= 10 and summary["max_phi_violation_m"] < 1e-6
+    with pytest.raises(SpecError, match="driven_end.*clamped"):
+        run_fem_scene(apply_overrides(read_toml(path), ["driven_end='H'"]), str(path), None, None)
