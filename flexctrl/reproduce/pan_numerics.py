@@ -32,42 +32,42 @@ REDUCED = ({"dts": [2e-3, 1e-3], "rtols": [1e-3, 1e-5], "rtols_order2": [1e-3, 1
 
 
 def baumgarte_section() -> Section:
+    ref = simulate_sliding_beam(FAST_PUSH, 4, dt=1e-4)
     stab = simulate_sliding_beam(FAST_PUSH, 4, dt=1e-3)
     free = simulate_sliding_beam(FAST_PUSH, 4, dt=1e-3, gamma=0.0, beta=0.0)
-    tip_change = float(np.abs(stab.tip_y - free.tip_y).max())
+    err = {k: float(np.abs(r.tip_y - ref.tip_y[::10]).max()) for k, r in (("stab", stab), ("free", free))}
     items = [Item("Sec. 4, Eq 49: gamma = beta = 5", "found satisfactory for all results",
                   f"fast push, 4 elements, dt = 1 ms: max |Phi| {stab.phi_violation.max():.1e} m against "
-                  f"{free.phi_violation.max():.1e} m without the terms; the tip moves by {1e6 * tip_change:.0f} um",
-                  stab.phi_violation.max() < free.phi_violation.max() and tip_change < 1e-3 * 0.01,
-                  "satisfactory read as: less drift, tip unchanged within 0.1 % of the 10 mm; gamma h = 0.005 is "
+                  f"{free.phi_violation.max():.1e} m without the terms; tip error against dt = 0.1 ms "
+                  f"{1e6 * err['stab']:.0f} um against {1e6 * err['free']:.0f} um",
+                  stab.phi_violation.max() < free.phi_violation.max() and err["stab"] <= err["free"],
+                  "satisfactory read as: less drift and a tip no worse than without the terms; gamma h = 0.005 is "
                   "far inside the explicit-feedback stability limit gamma h < 3 - sqrt(5) (docs/baumgarte.md)")]
-    try:
-        printed = simulate_sliding_beam(SLOW_PUSH, 4, dt=1e-3, duration=3.5, max_violation=1e-4)
-        outcome, grew = f"max |Phi| {printed.phi_violation.max():.1e} m over 3.5 s", False
-    except ConstraintViolationError as exc:
-        outcome, grew = f"the violation grows without bound ({str(exc).split(':')[0]})", True
-    eq49 = simulate_sliding_beam(SLOW_PUSH, 4, dt=1e-3, duration=3.5)
-    if not grew:
-        printed_form = _printed(SLOW_PUSH)
-        outcome = f"max |Phi| {printed_form:.1e} m against {eq49.phi_violation.max():.1e} m with Eq 49's sign"
-        grew = printed_form > 10 * eq49.phi_violation.max()
+    eq49, printed = _violation(SLOW_PUSH, "eq49"), _violation(SLOW_PUSH, "eq54_printed")
     items.append(Item("Sec. 4, Eq 54 as printed (+ beta^2 Phi)", "the Baumgarte feedback of Eq 49 in the Newmark "
-                      "step", f"slow push, 3.5 s: {outcome}", False,
-                      "Eq 54's sign makes Phi'' + 2 gamma Phi' - beta^2 Phi = 0 (root +2.07 1/s at 5/5): read as a "
-                      "misprint, Eq 49's sign is used everywhere" + (" (the printed form measurably grows)" if grew
-                                                                    else "")))
+                      "step", f"slow push, then held still, 12 s: Eq 49's sign keeps max |Phi| at {eq49}; the "
+                      f"printed sign: {printed}", False,
+                      "Eq 54's sign makes Phi'' + 2 gamma Phi' - beta^2 Phi = 0 (root +2.07 1/s at 5/5): once the beam "
+                      "stops (constant rows) any violation grows by that rate. Read as a misprint; Eq 49's sign is "
+                      "used everywhere"))
     return Section("Sec. 4: Baumgarte stabilisation (Eqs 49, 54)", "No figure: the constants and signs of the "
                    "procedure the figures rely on.", items)
 
 
-def _printed(case) -> float:
+def _violation(case, form: str, duration: float = 12.0) -> str:
+    """The largest violation (m) of ``case`` over ``duration`` (s) with Baumgarte's ``form``, or where it
+    passed 1e-4 m."""
     from flexctrl.dynamics.fem.newmark_dae import simulate
     from flexctrl.dynamics.fem.sliding_beam import SlidingBeamModel
 
     model = SlidingBeamModel(case, 4)
     q0 = model.initial_shape()
-    res = simulate(model.problem(), q0, np.zeros_like(q0), 3.5, 1e-3, baumgarte_form="eq54_printed")
-    return float(res.phi_violation.max())
+    try:
+        res = simulate(model.problem(), q0, np.zeros_like(q0), duration, 1e-3, baumgarte_form=form,
+                       max_violation=1e-4)
+    except ConstraintViolationError as exc:
+        return f"grows past 1e-4 m ({str(exc).split('(')[1].split(',')[0]})"
+    return f"{float(res.phi_violation.max()):.1e} m"
 
 
 def _short(case: eff.Case, duration: float) -> eff.Case:
@@ -130,7 +130,7 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
             "BDF orders 3-5 are not A-stable: the undamped element modes of the R-P arm's stiff link (about "
             "1e4 rad/s at 8 elements) sit on the imaginary axis, so order 5 holds the step near 1e-6 s whatever "
             "the tolerance, while the trapezoidal Newmark rule is A-stable and its step follows accuracy only. "
-            "This is the likely mechanism behind the paper's claim. Limiting IDAS to order 2 removes it.\n\n"
+            "This is a likely mechanism behind the paper's claim. Limiting IDAS to order 2 removes it.\n\n"
             + "\n".join(lines))
     return Section("Sec. 4: Newmark + Baumgarte against a Gear-type code (IDAS)", text, items, ["efficiency.png"])
 
