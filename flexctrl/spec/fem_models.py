@@ -22,6 +22,9 @@ from flexctrl.spec.reader import TableReader, read_toml
 Array = NDArray[np.float64]
 #: The two links of a telescoping pair, in the order of the model file.
 SIDES = ("outer", "inner")
+#: The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or the
+#: link clamped at its inner end E in the carriage and held by one bearing at the housing mouth (Fig 4).
+JOINTS = ("supports", "clamped")
 
 
 # -- the revolute-prismatic arm ---------------------------------------------------------------------
@@ -41,6 +44,12 @@ class RPArmSpec:
         Bending stiffness of the link, N m^2.
     support_inner, support_outer : float
         Radii of the two bilateral supports from the base axis, m (``support_inner < support_outer``).
+        With ``joint = "clamped"`` ``support_outer`` is the mouth bearing D' and ``support_inner``
+        the outboard end of the carriage's travel (E stays inboard of it).
+    joint : {"supports", "clamped"}
+        ``"supports"``: the link slides through two bilateral supports (Eqs 24-25 twice), driven at
+        an end.  ``"clamped"``: Pan's Fig 4, the link clamped at its inner end E in the carriage
+        (Eqs 22-23: ``w(0) = w'(0) = 0``) and held transversely at the mouth D' (Eq 24).
     payload_mass : float
         Point mass at the tip H, kg.
     gravity : tuple of float
@@ -66,6 +75,7 @@ class RPArmSpec:
     gravity: tuple[float, float] = (0.0, 0.0)
     hub_inertia: float = 0.0
     carriage_mass: float = 0.0
+    joint: Literal["supports", "clamped"] = "supports"
     source: str = ""
     notes: str = ""
 
@@ -95,31 +105,32 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
     r1 = housing.nonnegative("support_inner", unit="m")
     r2 = housing.positive("support_outer", unit="m")
     housing.string("source", "")
+    joint = housing.string("joint", "supports", choices=JOINTS)
     if not r2 > r1:
         raise housing.error("support_outer", f"value {r2!r} is not beyond support_inner = {r1!r}; allowed: > {r1} m")
     if r2 - r1 >= length:
         raise housing.error("support_outer", f"support spacing {r2 - r1:g} m leaves no stroke on a {length:g} m link; "
                                              f"allowed: spacing < {length} m")
     housing.finish()
-    base = r.table_of("base", {})
-    hub_inertia = base.nonnegative("hub_inertia", 0.0, unit="kg m^2")
-    base.string("source", "")
-    base.finish()
-    carriage = r.table_of("carriage", {})
-    carriage_mass = carriage.nonnegative("mass", 0.0, unit="kg")
-    carriage.string("source", "")
-    carriage.finish()
-    payload = r.table_of("payload", {})
-    m_t = payload.nonnegative("mass", 0.0, unit="kg")
-    payload.string("source", "")
-    payload.finish()
+    hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
     spec = RPArmSpec(name=r.string("name", Path(source).stem), length=length, mass_per_length=rho, EI=EI,
                      support_inner=r1, support_outer=r2, payload_mass=m_t, gravity=(gravity[0], gravity[1]),
-                     hub_inertia=hub_inertia, carriage_mass=carriage_mass, source=source,
-                     notes=r.string("notes", ""))
+                     hub_inertia=hub_inertia, carriage_mass=carriage_mass, joint=joint,
+                     source=source, notes=r.string("notes", ""))
     r.finish()
     return spec
+
+
+def _drive_masses(r: TableReader) -> tuple[float, float, float]:
+    """The optional ``[base] hub_inertia`` (kg m^2), ``[carriage] mass`` and ``[payload] mass`` (kg)."""
+    values = []
+    for table, key, unit in (("base", "hub_inertia", "kg m^2"), ("carriage", "mass", "kg"), ("payload", "mass", "kg")):
+        t = r.table_of(table, {})
+        values.append(t.nonnegative(key, 0.0, unit=unit))
+        t.string("source", "")
+        t.finish()
+    return values[0], values[1], values[2]
 
 
 def load_rp_arm(path: str | Path, overrides: Iterable[str] = ()) -> RPArmSpec:
@@ -175,6 +186,10 @@ class TelescopingSpec:
         Point mass at the inner tip H, kg.
     gravity : tuple of float
         Gravity ``(gx, gy)`` in the plane of motion, world frame, m/s^2.
+    hub_inertia : float
+        Hub and rotor inertia about joint 1, kg m^2 (full coupling; ``[base]``).
+    carriage_mass : float
+        Mass of the axial drive at the inner root E, kg (full coupling; ``[carriage]``).
     source, notes : str
         The file read and its free text.
     """
@@ -186,6 +201,8 @@ class TelescopingSpec:
     hub_radius: float = 0.0
     payload_mass: float = 0.0
     gravity: tuple[float, float] = (0.0, 0.0)
+    hub_inertia: float = 0.0
+    carriage_mass: float = 0.0
     source: str = ""
     notes: str = ""
 
@@ -239,15 +256,12 @@ def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
                                   "contacts, or one with slope = true (Eqs 26-28), to hold the inner link")
     if len(set(contacts)) != len(contacts):
         raise r.error("contacts", "two contacts are identical; allowed: distinct contacts")
-    payload = r.table_of("payload", {})
-    m_t = payload.nonnegative("mass", 0.0, unit="kg")
-    payload.string("source", "")
-    payload.finish()
+    hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
     spec = TelescopingSpec(name=r.string("name", Path(source).stem), outer=links["outer"], inner=links["inner"],
                            contacts=tuple(contacts), hub_radius=r.nonnegative("hub_radius", 0.0, unit="m"),
-                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), source=source,
-                           notes=r.string("notes", ""))
+                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), hub_inertia=hub_inertia,
+                           carriage_mass=carriage_mass, source=source, notes=r.string("notes", ""))
     r.finish()
     return spec
 

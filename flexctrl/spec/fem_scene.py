@@ -400,8 +400,12 @@ def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None 
         s["initial"] = r.string("initial", "rest", choices=("rest", "static_load"))
         s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
         s["drive"] = _read_drive(r, drive, drive_kind, s)
+        spec = load_rp_arm(s["model"])
+        if spec.joint == "clamped" and s["driven_end"] != "E":
+            raise r.error("driven_end", f"value {s['driven_end']!r} is not allowed with the model's joint = 'clamped' "
+                                        f"({s['model']}); allowed: 'E' (the link is clamped in the carriage)")
         r.finish()
-        return RPArmScene(**s, model_spec=_with_overrides(load_rp_arm(s["model"]), s), source=source)
+        return RPArmScene(**s, model_spec=_with_overrides(spec, s), source=source)
     spec = _check_telescoping_stroke(r, s)
     r.finish()
     return TelescopingScene(**s, model_spec=_with_overrides(spec, s), source=source)

@@ -7,6 +7,8 @@
   housing angle ``theta(t)``;
 * :func:`point_rows`: the rows giving ``w`` and its derivatives at arbitrary material points,
   which move from element to element as the supports slide;
+* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at material
+  points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus mouth bearing);
 * :func:`check_elements` and :data:`ENDS`, the checks the models share.
 
 Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling), :mod:`flexctrl.dynamics.fem.rp_arm_full`
@@ -50,17 +52,79 @@ def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: in
     return R
 
 
+@dataclass(frozen=True)
+class PointRows:
+    """Constraint rows ``w^(o_k)(x_k) = 0`` at material points ``x_k = c_k + v_k W`` of one link.
+
+    ``orders`` ``o_k`` (0: displacement, 1: slope), ``offsets`` ``c_k`` (m) and ``rates``
+    ``v_k = dx_k/dW`` (0 for a point fixed on the link, -1 for a support fixed in the housing).
+    """
+
+    orders: tuple[int, ...]
+    offsets: tuple[float, ...]
+    rates: tuple[float, ...]
+
+    @property
+    def count(self) -> int:
+        return len(self.orders)
+
+    def points(self, W: float) -> Array:
+        """Material coordinates ``x_k`` (m) at overhang ``W`` (m)."""
+        return np.asarray(self.offsets) + np.asarray(self.rates) * W
+
+    def at(self, W: float, n_elements: int, length: float) -> Array:
+        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``'s function,
+        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative)."""
+        P = point_rows(self.points(W), n_elements, length, 3)
+        R = np.zeros((4, self.count, P.shape[2]))
+        for d in range(4):
+            for k, o in enumerate(self.orders):
+                if o + d <= 3:
+                    R[d, k] = P[o + d, k]
+        return R
+
+
+def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
+    """The rows of an R-P arm's prismatic joint on a link of ``length`` (m), supports ``D`` (m) apart.
+
+    ``"supports"``: ``w = 0`` at the two supports, material points ``L - D - W`` and ``L - W``
+    (Eqs 24-25 at each).  ``"clamped"`` (Pan's Fig 4): ``w(0) = w'(0) = 0`` at E in the carriage
+    (Eqs 22-23, fixed on the link) and ``w = 0`` at the mouth bearing D', material point ``L - W``
+    (Eq 24).
+    """
+    if joint == "supports":
+        return PointRows((0, 0), (length - D, length), (-1.0, -1.0))
+    if joint == "clamped":
+        return PointRows((0, 1, 0), (0.0, 0.0, length), (0.0, 0.0, -1.0))
+    raise SpecError(f"value {joint!r} is not allowed; allowed: 'supports', 'clamped'", key="joint")
+
+
+def is_symbolic(value: object) -> bool:
+    """True for a CasADi expression (``SX``/``MX``), e.g. a symbolic time."""
+    return type(value).__module__.startswith("casadi")
+
+
 def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
-    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T])."""
-    t = np.asarray(t, dtype=float)
+    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T]).
+
+    ``t`` may be a CasADi expression (a symbolic time; :mod:`flexctrl.dynamics.fem.idas_dae`)."""
+    if is_symbolic(t):
+        import casadi as ca
+
+        sin, cos, clip = ca.sin, ca.cos, lambda x: ca.fmin(ca.fmax(x, 0.0), T)
+        where = ca.if_else
+        inside = ca.logic_and(t >= 0, t <= T)
+    else:
+        t = np.asarray(t, dtype=float)
+        sin, cos, clip, where = np.sin, np.cos, lambda x: np.clip(x, 0.0, T), np.where
+        inside = (t >= 0) & (t <= T)
     w = 2 * np.pi / T
-    tc = np.clip(t, 0.0, T)
     if derivative == 0:
-        return tc / T - np.sin(w * tc) / (2 * np.pi)
-    inside = (t >= 0) & (t <= T)
+        tc = clip(t)
+        return tc / T - sin(w * tc) / (2 * np.pi)
     if derivative == 1:
-        return np.where(inside, (1.0 - np.cos(w * t)) / T, 0.0)
-    return np.where(inside, w * np.sin(w * t) / T, 0.0)
+        return where(inside, (1.0 - cos(w * t)) / T, 0.0)
+    return where(inside, w * sin(w * t) / T, 0.0)
 
 
 @dataclass(frozen=True)
@@ -147,14 +211,21 @@ class FrameLink:
 
     def terms(self, r: dict[str, float], driven_end: str, axial_shortening: bool) -> tuple[Array, Array]:
         """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
-        also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2)."""
-        Kt = self.K - r["thd"] ** 2 * self.M
+        also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2).  Numbers give numpy arrays; CasADi
+        expressions (a symbolic rigid motion) give CasADi matrices."""
+        mats = (self.K, self.M, self.G_c, self.G_1, self.G_2, self.S0, self.S1, np.eye(self.ndof)[self.tip])
+        if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in r.values()):
+            import casadi as ca
+
+            mats = tuple(ca.DM(m) for m in mats)
+        K, M, G_c, G_1, G_2, S0, S1, e_tip = mats
+        Kt = K - r["thd"] ** 2 * M
         if axial_shortening:
             c0, c1, c2 = self.force_coefficients(r, driven_end)
-            Kt = Kt + c0 * self.G_c + c1 * self.G_1 + c2 * self.G_2
+            Kt = Kt + c0 * G_c + c1 * G_1 + c2 * G_2
         a0 = r["thdd"] * r["rE"] + 2.0 * r["thd"] * r["rEd"]  # a_perp(x) = a0 + thdd x
-        f = -(a0 - r["g_perp"]) * self.S0 - r["thdd"] * self.S1
+        f = -(a0 - r["g_perp"]) * S0 - r["thdd"] * S1
         if self.payload_mass:
-            f[self.tip] -= self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"])
+            f = f - self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"]) * e_tip
         return Kt, f
 

@@ -11,6 +11,14 @@ Geometry
     :mod:`flexctrl.dynamics.fem.sliding_beam`, which this model reduces to for
     ``theta = const`` (a test).  ``0 <= W <= L - D`` keeps both supports on the link.
 
+Pan's Fig 4 joint (``[housing] joint = "clamped"``, ``models/rp_arm_clamped.toml``)
+    The link is clamped at its inner end E in the carriage (Eqs 22-23: ``w(0) = w'(0) = 0``, as
+    constraint rows with multipliers like the paper) and held transversely by one bearing at the
+    housing mouth D' (radius ``support_outer``, material point ``L - W``, Eq 24).  Statically it
+    is a beam clamped at E and propped at D' with the overhang ``c = W`` beyond it: under a tip
+    force ``P`` the tip deflects ``P c^3 / (3 EI)`` (a cantilever of the current free length) plus
+    ``w'(D') c = P c^2 a / (4 EI)`` from the clamped-propped span ``a = L - W`` (test).  Driven at E.
+
 Prescribed motion (partial coupling, Eq 42)
     ``theta(t)`` and ``W(t)`` follow the smooth rest-to-rest profile of Eq 57:
     ``W = C1 - C2/T (t - T/(2 pi) sin(2 pi t/T))`` and
@@ -56,8 +64,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.beam.elements import hermite_shape, locate
-from flexctrl.dynamics.fem.moving_frame import ENDS, FrameLink, RPMotion, check_elements
+from flexctrl.dynamics.fem.moving_frame import (ENDS, FrameLink, RPMotion, check_elements, is_symbolic,
+                                               prismatic_rows)
 from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import RPArmSpec
@@ -74,6 +82,9 @@ class RPArmModel:
         if driven_end not in ENDS:
             raise SpecError(f"value {driven_end!r} is not allowed; allowed: 'E', 'H'", key="driven_end")
         check_elements(n_elements)
+        if spec.joint == "clamped" and driven_end != "E":
+            raise SpecError(f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the link "
+                            "is clamped in the carriage that drives it)", key="driven_end")
         self.spec, self.motion, self.n = spec, motion, int(n_elements)
         self.axial_shortening, self.driven_end = bool(axial_shortening), driven_end
         s, L = spec, spec.length
@@ -85,17 +96,25 @@ class RPArmModel:
         self.le, self.ndof, self.M, self.K = link.le, link.ndof, link.M, link.K
         self.S0, self.S1, self.tip = link.S0, link.S1, link.tip
         self.G_c, self.G_1, self.G_2 = link.G_c, link.G_1, link.G_2
+        self.rows = prismatic_rows(s.joint, L, s.D)
         self._cache_t: float | None = None
 
     # -- rigid motion -------------------------------------------------------------------
     def rigid(self, t: float) -> dict[str, float]:
-        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame."""
+        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame
+        (CasADi expressions for a symbolic ``t``)."""
         m, s = self.motion, self.spec
-        th = float(m.theta(t))
-        c, sn = math.cos(th), math.sin(th)
+        if is_symbolic(t):
+            import casadi as ca
+
+            val, cos, sin = (lambda v: v), ca.cos, ca.sin
+        else:
+            val, cos, sin = float, math.cos, math.sin
+        th = val(m.theta(t))
+        c, sn = cos(th), sin(th)
         gx, gy = s.gravity
-        return {"rE": s.support_outer - s.length + float(m.W(t)), "rEd": float(m.Wd(t)), "rEdd": float(m.Wdd(t)),
-                "th": th, "thd": float(m.thetad(t)), "thdd": float(m.thetadd(t)),
+        return {"rE": s.support_outer - s.length + val(m.W(t)), "rEd": val(m.Wd(t)), "rEdd": val(m.Wdd(t)),
+                "th": th, "thd": val(m.thetad(t)), "thdd": val(m.thetadd(t)),
                 "g_ax": gx * c + gy * sn, "g_perp": -gx * sn + gy * c}
 
     def axial_force(self, t: float, x: ArrayLike) -> Array:
@@ -108,25 +127,35 @@ class RPArmModel:
         return self.link.force_coefficients(self.rigid(t), self.driven_end)
 
     def support_positions(self, t: float) -> tuple[Array, Array, Array]:
-        """Material positions of the supports (m) and their first/second time derivatives."""
-        m, s = self.motion, self.spec
-        W, Wd, Wdd = float(m.W(t)), float(m.Wd(t)), float(m.Wdd(t))
-        return (np.array([s.length - s.D - W, s.length - W]), np.array([-Wd, -Wd]), np.array([-Wdd, -Wdd]))
+        """Material positions of the constraint points (m) and their first/second time derivatives
+        (the two supports; with ``joint = "clamped"`` E twice, for ``w`` and ``w'``, then the mouth)."""
+        m = self.motion
+        v = np.asarray(self.rows.rates)
+        return self.rows.points(float(m.W(t))), v * float(m.Wd(t)), v * float(m.Wdd(t))
 
     def _rows(self, t: float):
         if self._cache_t != t:
-            xs, xsd, xsdd = self.support_positions(t)
-            R = np.zeros((3, 2, self.ndof))
-            located = [locate(float(x), self.n, self.spec.length) for x in xs]
-            zetas = np.array([z for _, z in located])
-            for d in range(3):
-                H = hermite_shape(zetas, self.le, d)
-                for k, (j, _) in enumerate(located):
-                    R[d, k, 2 * j:2 * j + 4] = H[k]
+            _, xsd, xsdd = self.support_positions(t)
+            R = self.rows.at(float(self.motion.W(t)), self.n, self.spec.length)
             Kt, f = self.link.terms(self.rigid(t), self.driven_end, self.axial_shortening)
             self._cache = (R[0], R[1], R[2], xsd, xsdd, Kt, f)
             self._cache_t = t
         return self._cache
+
+    def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
+        """Static deflection under a transverse force ``tip_force`` (N) at H with the constraints of
+        time ``t`` and no frame loads: ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``; returns ``(q, lam)``."""
+        f = np.zeros(self.ndof)
+        f[self.tip] = tip_force
+        return self._constrained_static(f, t)
+
+    def _constrained_static(self, f: Array, t: float) -> tuple[Array, Array]:
+        A = self._rows(t)[0]
+        n, m = self.ndof, A.shape[0]
+        S = np.zeros((n + m, n + m))
+        S[:n, :n], S[:n, n:], S[n:, :n] = self.K, A.T, A
+        sol = np.linalg.solve(S, np.concatenate([f, np.zeros(m)]))
+        return sol[:n], sol[n:]
 
     def stiffness(self, t: float) -> Array:
         """``K + K_g(t) - theta'^2 M`` (without ``K_g`` when axial shortening is off)."""
@@ -149,7 +178,7 @@ class RPArmModel:
             return -2.0 * xsd[:, None] * R1
 
         return DAEProblem(
-            n_q=self.ndof, n_c=2, mass=lambda q, t: self.M,
+            n_q=self.ndof, n_c=self.rows.count, mass=lambda q, t: self.M,
             force=lambda q, qd, t: self.load(t) - self.stiffness(t) @ q,
             phi=lambda q, t: self._rows(t)[0] @ q,
             phi_q=lambda q, t: self._rows(t)[0],
@@ -166,11 +195,7 @@ class RPArmModel:
             return np.zeros(self.ndof)
         if kind != "static_load":
             raise SpecError(f"value {kind!r} is not allowed; allowed: {', '.join(map(repr, INITIAL))}", key="initial")
-        A = self._rows(0.0)[0]
-        n = self.ndof
-        S = np.zeros((n + 2, n + 2))
-        S[:n, :n], S[:n, n:], S[n:, :n] = self.K, A.T, A
-        q = np.linalg.solve(S, np.concatenate([self.S0 / self.spec.mass_per_length, np.zeros(2)]))[:n]
+        q = self._constrained_static(self.S0 / self.spec.mass_per_length, 0.0)[0]
         dof = 0 if tracked_end == "E" else self.tip
         return q * (tip_deflection / q[dof])
 
