@@ -10,6 +10,7 @@ import numpy as np
 from flexctrl.dynamics.model import derived
 from flexctrl.sim.compile import compile_function
 from flexctrl.sim.parametric import constants_as_parameters
+from flexctrl.sim.base import try_expand
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 
@@ -58,8 +59,9 @@ def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
     """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.base.output_function`, compiled.
 
     The rows of ``Y`` are the energies, tip and deflections.  Compiled with the model's
-    constants as an input (one library per model shape) and mapped with the constants
-    passed once; kept per model and count.  Its values can differ from the virtual
+    constants as an input, one per use of a constant (one library per model shape, whatever
+    the configuration: :func:`flexctrl.sim.parametric.constants_as_parameters`), and mapped
+    with the model's constants; kept per model and count.  Its values can differ from the virtual
     machine's in the last digits (fused multiply-adds);
     ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
     """
@@ -67,12 +69,16 @@ def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
         from flexctrl.sim.base import output_function
 
         fun = output_function(model)
-        fp, constants = constants_as_parameters(fun)
+        fp, constants = constants_as_parameters(fun, per_use=True)
         X = ca.MX.sym("X", model.n_x, count)
         if constants.size == 0:
             return ca.Function("outputs", [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
-        mapped = compile_function(fp, enabled=compile).function.map("outputs_map", "serial", count, [1], [])
-        return ca.Function("outputs", [X], [mapped(X, ca.DM(constants))])
+        # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a reduced
+        # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
+        # evaluates 5x slower, for the same values bit for bit
+        x = ca.MX.sym("x", model.n_x)
+        single = ca.Function("outputs_c", [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
+        return ca.Function("outputs", [X], [single.map(count, "serial")(X)])
 
     return derived(model, ("output_map", count, compile), build)
 
@@ -109,24 +115,33 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
 
 
 def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Function, bool]:
+    fp, constants = constants_as_parameters(model.functions["f"])
+    x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
     if substeps <= UNROLL_LIMIT:
-        fp, constants = constants_as_parameters(model.functions["f"])
         if constants.size == 0:  # f could not be rebuilt: one library per model
             compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
             return compiled.function, compiled.compiled
         compiled = compile_function(plant_step_function(model, substeps, fp, constants.size), enabled=compile)
-        x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
         X = compiled.function(x, u, h, ca.DM(constants))
-        return ca.Function(_name(f"advance_{model.name}_{substeps}"), [x, u, h], [X], ["x", "u", "h"], ["X"]), compiled.compiled
-    step = rk4_step_function(model)
-    xs, ts, us, hs = ca.MX.sym("x", model.n_x), ca.MX.sym("t"), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
-    single = ca.Function(_name(f"rk4x_{model.name}"), [xs, ts, us, hs], [step(xs, ts, us, hs)[0]],
-                         ["x", "t", "u", "h"], ["x_next"])
-    compiled = compile_function(single, enabled=compile)
-    loop = compiled.function.mapaccum(substeps)
-    x = ca.MX.sym("x", model.n_x)
-    u = ca.MX.sym("u", model.n_u)
-    h = ca.MX.sym("h")
-    X = loop(x, h * ca.DM(np.arange(substeps, dtype=float)).T, ca.repmat(u, 1, substeps), ca.repmat(h, 1, substeps))
+    else:
+        compiled = compile_function(_single_step(model, fp, constants.size), enabled=compile)
+        # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
+        c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
+        X = compiled.function.mapaccum(substeps)(x, ca.repmat(u, 1, substeps), ca.repmat(h, 1, substeps), *([c] if constants.size else []))
     return ca.Function(_name(f"advance_{model.name}_{substeps}"), [x, u, h], [X], ["x", "u", "h"], ["X"]), compiled.compiled
 
+
+def _single_step(model, fp: ca.Function, n_constants: int) -> ca.Function:
+    """``rk4(x, u, h[, c]) -> x_next``: one RK4 step; with ``c`` (``n_constants > 0``) named by the sizes alone.
+
+    With the constants as the input ``c`` the generated code is the same for every
+    configuration of one model shape, so one library serves them all.
+    """
+    x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
+    if n_constants == 0:
+        f = try_expand(model.functions["f"])
+        return ca.Function(_name(f"rk4x_{model.name}"), [x, u, h], [rk4_next(lambda s: f(s, u), x, h)],
+                           ["x", "u", "h"], ["x_next"])
+    c = ca.MX.sym("c", n_constants)
+    return ca.Function(f"rk4x_p_{model.n_x}_{model.n_u}_{n_constants}", [x, u, h, c],
+                       [rk4_next(lambda s: fp(s, u, c), x, h)], ["x", "u", "h", "c"], ["x_next"])

@@ -17,7 +17,7 @@ import numpy as np
 from flexctrl.sim.base import try_expand
 
 
-def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
+def constants_as_parameters(fun: ca.Function, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
     """``fun`` rebuilt with every numeric constant of its expression graph turned into an input.
 
     A frozen-modes model bakes its modal constants (which depend on the payload and on
@@ -31,6 +31,12 @@ def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
     ----------
     fun : casadi.Function
         An SX Function (MX Functions are expanded first).
+    per_use : bool
+        One entry of ``c`` per USE of a constant (each operand and output that is a
+        constant) instead of one per constant node.  A graph built with common
+        subexpression elimination merges constants whose values happen to coincide
+        (at the straight arm, say), so its node count, and the code generated from it,
+        depend on the values; per use the structure depends on the operations alone.
 
     Returns
     -------
@@ -44,28 +50,41 @@ def constants_as_parameters(fun: ca.Function) -> tuple[ca.Function, np.ndarray]:
     f = try_expand(fun)
     if not f.is_a("SXFunction") or f.has_free():
         return fun, np.zeros(0)
-    n_const = sum(1 for k in range(f.n_instructions()) if f.instruction_id(k) == ca.OP_CONST)
+    ops = [f.instruction_id(k) for k in range(f.n_instructions())]
+    n_const = (sum(len(f.instruction_input(k)) for k, op in enumerate(ops) if op not in (ca.OP_INPUT, ca.OP_CONST))
+               if per_use else ops.count(ca.OP_CONST))
     ins = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
     c = ca.SX.sym("c", n_const)
     outs = [[ca.SX(0)] * f.nnz_out(i) for i in range(f.n_out())]
     work: dict[int, ca.SX] = {}
+    constant: dict[int, float] = {}  # per use: work slots holding a constant, turned into an entry of c when read
     values = []
-    for k in range(f.n_instructions()):
-        op = f.instruction_id(k)
+
+    def read(slot):
+        if slot not in constant:
+            return work[slot]
+        values.append(constant[slot])
+        return c[len(values) - 1]
+
+    for k, op in enumerate(ops):
         arg, res = f.instruction_input(k), f.instruction_output(k)
         if op == ca.OP_INPUT:
             work[res[0]] = ins[arg[0]].nz[arg[1]]
+            constant.pop(res[0], None)
         elif op == ca.OP_OUTPUT:
-            outs[res[0]][res[1]] = work[arg[0]]
+            outs[res[0]][res[1]] = read(arg[0])
+        elif op == ca.OP_CONST and per_use:
+            constant[res[0]] = f.instruction_constant(k)
         elif op == ca.OP_CONST:
             work[res[0]] = c[len(values)]
             values.append(f.instruction_constant(k))
-        elif len(arg) == 1 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
-            work[res[0]] = ca.SX.unary(op, work[arg[0]])
-        elif len(arg) == 2 and op not in (ca.OP_CALL, ca.OP_PARAMETER):
-            work[res[0]] = ca.SX.binary(op, work[arg[0]], work[arg[1]])
+        elif len(arg) in (1, 2) and op not in (ca.OP_CALL, ca.OP_PARAMETER):
+            operands = [read(a) for a in arg]
+            work[res[0]] = ca.SX.unary(op, *operands) if len(arg) == 1 else ca.SX.binary(op, *operands)
+            constant.pop(res[0], None)
         else:
             return fun, np.zeros(0)
+    c = c[: len(values)]
     out = [ca.SX(f.sparsity_out(i), ca.vertcat(*outs[i]) if outs[i] else ca.SX(0, 1)) for i in range(f.n_out())]
     fp = ca.Function(f"{f.name()}_p", [*ins, c], out, [*f.name_in(), "c"], f.name_out())
     const = np.array(values, dtype=float)
