@@ -96,7 +96,8 @@ def _bent_start(scene, model, arm) -> np.ndarray:
     return x0
 
 
-def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", hub_inertia: float | None = None) -> dict[str, Any]:
+def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", hub_inertia: float | None = None,
+             static_correction: bool = False) -> dict[str, Any]:
     """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build + compile).
 
     ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least this
@@ -132,7 +133,12 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", h
         arm = dataclasses.replace(arm, joints=tuple(dataclasses.replace(j, hub_inertia=max(j.hub_inertia, hub_inertia))
                                                     for j in arm.joints))
     start = time.perf_counter()
-    model = build_model(arm, fidelity, reference_q=scene.q0)
+    if static_correction and fidelity.startswith("amm:"):
+        from flexctrl.dynamics.amm import build_amm
+
+        model = build_amm(arm, int(fidelity[4:]), reference_q=scene.q0, static_correction=True)
+    else:
+        model = build_model(arm, fidelity, reference_q=scene.q0)
     stepper = make_stepper(model, method, OUTPUT_DT)
     setup = time.perf_counter() - start
     x0 = _bent_start(scene, model, arm)
@@ -174,7 +180,7 @@ def window_errors(ref: Reference, run: dict[str, Any], windows: Sequence[float])
 
 def convergence(case: str, modes: Sequence[int] = (1, 2, 3, 4), reference_fidelity: str = "fem:16",
                 directory: Path | str = "out/amm_convergence", steps: dict[int, str] | None = None,
-                hub_inertia: float | None = None) -> dict[str, Any]:
+                hub_inertia: float | None = None, static_correction: bool = False) -> dict[str, Any]:
     """Tip errors of ``amm:N`` for N in ``modes``, with and without axial shortening, against the reference.
 
     ``steps`` maps N to the RK4 step (default ``0.1ms``, ``0.05ms`` for N >= 4).
@@ -185,7 +191,7 @@ def convergence(case: str, modes: Sequence[int] = (1, 2, 3, 4), reference_fideli
     for shortening in (False, True):
         for N in modes:
             step = steps.get(N, "0.05ms" if N >= 4 else "0.1ms")
-            run = simulate(case, f"amm:{N}", shortening, step, hub_inertia)
+            run = simulate(case, f"amm:{N}", shortening, step, hub_inertia, static_correction)
             rows.append({"fidelity": f"amm:{N}", "axial_shortening": shortening, "step": step,
                          **window_errors(ref, run, WINDOWS[case]), "wall_per_sim_s": run["wall_s"] / ref.time[-1],
                          **{k: run[k] for k in ("setup_s", "build_s", "f_instructions", "us_per_step") if k in run}})
@@ -222,6 +228,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--reference-only", action="store_true", help="compute (or load) the references and stop")
     parser.add_argument("--hub-inertia", type=float, default=None,
                         help="raise every hub's rotor inertia to at least this (kg m^2; open-loop cases; a diagnosis)")
+    parser.add_argument("--static-correction", action="store_true",
+                        help="assumed modes with the tip-moment correction shapes (docs/amm.md section 13)")
     parser.add_argument("--tag", default="", help="suffix of the output files (convergence<TAG>.json/.md)")
     args = parser.parse_args(argv)
     out = Path(args.out)
@@ -232,7 +240,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             ref = reference(case, args.reference, out, args.hub_inertia)
             print(f"{case}: reference {ref.method}, {ref.time.size} samples, {ref.wall_s:.1f} s", flush=True)
             continue
-        result = convergence(case, args.modes, args.reference, out, hub_inertia=args.hub_inertia)
+        result = convergence(case, args.modes, args.reference, out, hub_inertia=args.hub_inertia,
+                             static_correction=args.static_correction)
         results.append(result)
         print(markdown(result), "\n", flush=True)
     if results:

@@ -168,13 +168,17 @@ def _check_choice(value: str, allowed: tuple[str, ...], key: str) -> str:
     return value
 
 
-def _frozen_modal(arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int]):
+def _frozen_modal(arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int], correct: Sequence[bool] = ()):
+    """Frozen modal constants per link; links flagged in ``correct`` get the tip-moment correction shape last."""
     from flexctrl.modal.arm_modes import link_modes
+    from flexctrl.modal.static_correction import CorrectedModes
 
     modal, freqs = [], []
     for i, nf in enumerate(n_modes):
         modes = link_modes(arm, q_ref, i, nf) if nf else None
-        modal.append(LinkModal.from_modes(modes, nf))
+        if nf and i < len(correct) and correct[i]:
+            modes = CorrectedModes(modes)
+        modal.append(LinkModal.from_modes(modes, modes.n_modes if nf else 0))
         freqs.append([float(x) for x in np.asarray(modes.omega)] if nf else [])
     return modal, freqs
 
@@ -234,6 +238,9 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
 #: or scene (``axial_shortening = true``) until the studies are re-measured on it.
 AMM_AXIAL_SHORTENING = False
 
+#: The default of ``static_correction``: off (``docs/amm.md`` section 13).
+AMM_STATIC_CORRECTION = False
+
 
 def build_amm(
     arm: ArmSpec,
@@ -248,6 +255,7 @@ def build_amm(
     coriolis: Literal["bodies", "lagrange"] = "bodies",
     axial_shortening: bool | None = None,
     tip_rotation: Literal["linearised", "exact"] | None = None,
+    static_correction: bool | None = None,
 ) -> Model:
     """Build the assumed-modes model of ``arm``.
 
@@ -311,13 +319,19 @@ def build_amm(
     q_ref = arm.configuration_or_default(reference_q)
     if fidelity is None:
         fidelity = Fidelity("amm", n_modes[0]) if len(set(n_modes)) == 1 else Fidelity("amm")
+    correction = AMM_STATIC_CORRECTION if static_correction is None else bool(static_correction)
+    corrected = [correction and i < n - 1 and nf > 0 for i, nf in enumerate(n_modes)]
+    if any(corrected) and modes == "scheduled":
+        raise SpecError("value True is not allowed with modes='scheduled'; allowed: static_correction with frozen modes",
+                        key="static_correction")
+    frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes, corrected)
+    n_modes = [md.n_modes for md in frozen_modal]
     names = coordinate_names(n, n_modes)
     N = len(names)
     offsets = flexible_offsets(n, n_modes)
     flex = np.arange(n, N)
 
     q, qd, u = ca.SX.sym("q", N), ca.SX.sym("qd", N), ca.SX.sym("u", n)
-    frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes)
     scheduled = modes == "scheduled" and N > n
     if scheduled:
         modal, expansion = _scheduled_modal(arm, q, n_modes, lookups)
@@ -402,6 +416,7 @@ def build_amm(
         "solver": solver,
         "coriolis": "lagrange" if scheduled else coriolis,
         "axial_shortening": shortening,
+        "static_correction": [bool(c) for c in corrected],
         "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)" if rotation == "linearised"
         else "exact rotation by the tip slope w'_ie",
         "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
@@ -409,7 +424,7 @@ def build_amm(
         "build_time_s": time.perf_counter() - start,
     }
     return Model(
-        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}"
+        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}{' static-correction' if any(corrected) else ''}"
              f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,
