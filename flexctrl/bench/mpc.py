@@ -136,12 +136,15 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
 
     ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``: HPIPM warm-started
     from the shifted previous solution); ``rti_frozen_cold`` the previous path (HPIPM's
-    default start); ``rti_exact`` that with exact sensitivities; ``rti_frozen_first_modes``
-    predicts with the first mode of every link only (12 states, 2 RK4 substeps instead of
+    default start); ``rti_frozen_factored`` the shipped one with the Jacobian of ``f`` through
+    one factorisation of the mass matrix (the key ``jacobian`` is an argument of
+    :func:`~flexctrl.control.nmpc.design_nmpc`, not a setting); ``rti_exact`` the cold one with
+    exact sensitivities; ``rti_frozen_first_modes`` predicts with the first mode of every link only (12 states, 2 RK4 substeps instead of
     9; fast, but with the shipped weights it destabilises the full arm: ``docs/control.md``).
     """
     return {
         "rti_frozen": {"qp_warm_start": True},
+        "rti_frozen_factored": {"qp_warm_start": True, "jacobian": "factored"},
         "rti_frozen_cold": {},
         "rti_exact": {"sensitivities": "exact"},
         "rti_frozen_first_modes": {"prediction_modes": 1, "qp_warm_start": True},
@@ -159,7 +162,7 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
     """
     from flexctrl.control import design
     from flexctrl.control.lqr import build_sensors, linear_plant
-    from flexctrl.control.nmpc import auto_substeps, interval_functions
+    from flexctrl.control.nmpc import auto_substeps, design_nmpc, interval_functions
     from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
     plant_substeps = auto_substeps(linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time))
@@ -167,7 +170,10 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
     controllers, builds = {}, {}
     for name, overrides in variants.items():
         start = time.perf_counter()
-        controllers[name] = design(model, op, NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides))
+        settings = NMPCSettings(horizon=horizon, sample_time=sample_time,
+                                **{k: v for k, v in overrides.items() if k != "jacobian"})
+        controllers[name] = (design_nmpc(model, op, settings, jacobian=overrides["jacobian"]) if "jacobian" in overrides
+                             else design(model, op, settings))
         builds[name] = time.perf_counter() - start
         controllers[name].reset()
     states = {name: op.x + dx0 for name in variants}

@@ -94,6 +94,7 @@ from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
 from flexctrl.control.nmpc_model import Prediction, prediction_model
+from flexctrl.control.nmpc_jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
 
@@ -108,10 +109,11 @@ def auto_substeps(plant: LinearPlant) -> int:
 
 
 def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, sensitivities: str | None,
-                   extra: tuple[ca.MX, ...] = ()) -> tuple[ca.Function, ca.Function | None]:
+                   extra: tuple[ca.MX, ...] = (), f_jac: ca.Function | None = None) -> tuple[ca.Function, ca.Function | None]:
     """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see :func:`interval_functions`).
 
-    ``sensitivities=None`` builds ``F`` only (``FJ`` is None).
+    ``sensitivities=None`` builds ``F`` only (``FJ`` is None).  ``f_jac(x, u, *extra) ->
+    (f, f_x, f_u)``: default CasADi's Jacobian of ``f``.
     """
     x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
     names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
@@ -126,7 +128,7 @@ def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, s
     xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
     es = [ca.SX.sym(f"p{i}", e.sparsity()) for i, e in enumerate(extra)]
     fxu = f(xs, us, *es)
-    fx = ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
+    fx = f_jac or ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
     eye = ca.DM.eye(nx)
 
     def with_sensitivities(state):
@@ -392,19 +394,22 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
     return ""
 
 
-def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int):
-    """The CasADi Functions of the NMPC (see the module docstring)."""
+def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int,
+           jacobian: str = "symbolic"):
+    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`)."""
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
     F, _ = _interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
     # The compiled part sees the operating point, the scales and the model's constants
     # as inputs, so one library serves every operating point, reference and (frozen-modes)
     # configuration whose model graph has the same structure.
-    fp, const = constants_as_parameters(model.functions["f"])
+    if jacobian == "factored":
+        fp, f_jac, const = factored_dynamics(model)
+    else:
+        (fp, const), f_jac = constants_as_parameters(model.functions["f"]), None
     nc = const.size
     extra = (ca.MX.sym("c", nc),) if nc else ()
-    _, FJp = _interval_core(fp if nc else _expanded(model.functions["f"]), n, m, plant.dt, substeps,
-                            settings.sensitivities, extra)
+    _, FJp = _interval_core(fp if nc else _expanded(fp), n, m, plant.dt, substeps, settings.sensitivities, extra, f_jac)
     params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
     p = ca.MX.sym("p", params.size)
     xop, uop = p[:n], p[n:n + m]
@@ -553,13 +558,19 @@ def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: 
     return {"nlp": solver, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg)}
 
 
-def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings) -> NMPCController:
+def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic") -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
+
+    ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
+    (``"symbolic"``) or through one factorisation of the mass matrix (``"factored"``,
+    :mod:`flexctrl.control.nmpc_jacobian`: equal to rounding, not faster; ``docs/control.md``).
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
     whether the library came from the cache and how many model constants were lifted.
     """
+    if jacobian not in ("symbolic", "factored"):
+        raise ValueError(f"jacobian {jacobian!r} is not allowed; allowed: 'symbolic', 'factored'")
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)
@@ -572,7 +583,7 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings) -> NMPCContro
         pm, pplant = model, plant
     problem = scaled_problem(pm, pplant, settings, limits)
     substeps = settings.substeps or auto_substeps(pplant)
-    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps)
+    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
                           prediction, pplant)
