@@ -86,3 +86,16 @@ def test_time_optimal_mpc_keeps_the_torque_limits_and_plans_a_feasible_arrival(f
     summary = mpc.summary["controller"]  # (solve times are benchmark figures: docs/control.md)
     assert summary["arrival_feasible"]
     assert mpc.metrics["settling_time"] + 0.1 >= summary["arrival_time_s"]  # inside the band once planned
+
+
+def test_release_lifts_only_the_arrival_rows_of_the_released_stages():
+    pb = double_integrator(2.0, 1.0, 0.02, horizon=12, band=1e-3)
+    qp = condensed_qp(pb, stride=3)  # constrained stages 2, 5, 8, 11 (0-based)
+    release = np.array([True, True, False, False])
+    _g, lba, uba, _lbx, _ubx = qp.vectors(np.array([-0.1, 0.0]), release=release)
+    _g, lba0, uba0, _lbx, _ubx = qp.vectors(np.array([-0.1, 0.0]))
+    upper, lower = qp.soft_rows[:, 0], qp.soft_rows[:, 1]  # one (arrival) row per stage: upper, lower
+    assert np.all(np.isinf(uba[upper[release]])) and np.all(np.isinf(lba[lower[release]]))
+    np.testing.assert_array_equal(uba[upper[~release]], uba0[upper[~release]])
+    np.testing.assert_array_equal(lba[lower[~release]], lba0[lower[~release]])
+    assert np.all(np.isfinite(uba0[upper])) and np.all(np.isfinite(lba0[lower]))
