@@ -58,6 +58,8 @@ Fallback
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from flexctrl.control.base import Controller
@@ -115,8 +117,6 @@ class MPCController(Controller):
         """``K`` of the first move ``du = -K dx`` with no constraint active (N m per state unit)."""
         if self.settings.terminal == "dare" and not self.settings.blocks:
             return self.K
-        from flexctrl.control.mpc_qp import condensed_qp
-
         pb = self.problem
         qp = condensed_qp(pb, self.settings.blocks, 1)
         nv = qp.moves.max() + 1
@@ -147,13 +147,11 @@ class MPCController(Controller):
             return None
         times = stage_times(self.qp, t, self.sample_time)
         if self._arrival is None:
-            import time as _time
-
-            start = _time.perf_counter()
+            start = time.perf_counter()
             first = shortest_arrival(self.qp, z, dv, dc)
             self._arrival = float(times[-1] if first is None else times[first] + arrival.margin)
             self.stats.notes.update({"arrival_time_s": self._arrival, "arrival_feasible": first is not None,
-                                     "arrival_search_ms": 1e3 * (_time.perf_counter() - start)})
+                                     "arrival_search_ms": 1e3 * (time.perf_counter() - start)})
         return times < self._arrival - 1e-9 * max(1.0, abs(self._arrival))
 
     def plan(self) -> np.ndarray | None:
