@@ -21,7 +21,9 @@ Modal damping
     coefficient gives a damping ratio of ``zeta / m_l`` (and the wrong unit,
     1/s instead of kg/s).  ``damping="ratio"`` (default) uses
     ``d = 2 zeta omega m_l``, which makes ``zeta`` the damping ratio of the isolated
-    mode as the file's ``damping_ratio`` says; ``damping="paper"`` uses Eq 68 as printed.
+    mode as the file's ``damping_ratio`` says; ``damping="paper"`` uses Eq 68 as printed;
+    ``damping="stiffness"`` the finite elements' stiffness-proportional rule
+    ``(2 zeta_1 / omega_1) m_l omega_j^2`` (mode j's ratio ``zeta_1 omega_j / omega_1``).
     The default (None) is the arm's ``damping_form`` (model file key ``damping_form``,
     scene key ``[damping] form``).
 
@@ -238,6 +240,9 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
 #: or scene (``axial_shortening = true``) until the studies are re-measured on it.
 AMM_AXIAL_SHORTENING = False
 
+#: The default of ``axial_stretch``: off (``docs/amm.md`` section 14).
+AMM_AXIAL_STRETCH = False
+
 #: The default of ``static_correction``: off (``docs/amm.md`` section 13).
 AMM_STATIC_CORRECTION = False
 
@@ -248,7 +253,7 @@ def build_amm(
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
     reference_q: Sequence[float] | None = None,
-    damping: Literal["ratio", "paper"] | None = None,
+    damping: Literal["ratio", "paper", "stiffness"] | None = None,
     solver: Literal["ldl", "qr"] = "ldl",
     fidelity: Fidelity | None = None,
     lookups: Sequence[ca.Function | None] | None = None,
@@ -256,6 +261,7 @@ def build_amm(
     axial_shortening: bool | None = None,
     tip_rotation: Literal["linearised", "exact"] | None = None,
     static_correction: bool | None = None,
+    axial_stretch: bool | None = None,
 ) -> Model:
     """Build the assumed-modes model of ``arm``.
 
@@ -291,6 +297,12 @@ def build_amm(
         ``"linearised"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
         the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
         kinematics are consistent only then), ``"linearised"`` without.
+    axial_stretch
+        Axially compliant links: one elongation ``e_i`` (m) per link appended to ``q``
+        (names ``e1..en``), a uniform strain ``e_i / L_i`` with strain energy
+        ``1/2 (EA_i / L_i) e_i^2`` and the finite elements' damping rule
+        ``(2 zeta_i / omega_1i) EA_i / L_i`` (``docs/amm.md`` section 14).  Frozen modes
+        only.  Default: the arm's ``axial_stretch``, else :data:`AMM_AXIAL_STRETCH`.
     lookups
         For ``"scheduled"``: one CasADi Function per link with the signature of
         :attr:`flexctrl.modal.lookup.ModalLookup.function` (None for links without
@@ -326,7 +338,13 @@ def build_amm(
                         key="static_correction")
     frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes, corrected)
     n_modes = [md.n_modes for md in frozen_modal]
-    names = coordinate_names(n, n_modes)
+    if axial_stretch is None:
+        axial_stretch = AMM_AXIAL_STRETCH if arm.axial_stretch is None else arm.axial_stretch
+    stretch = bool(axial_stretch)
+    if stretch and modes == "scheduled":
+        raise SpecError("value True is not allowed with modes='scheduled'; allowed: axial_stretch with frozen modes",
+                        key="axial_stretch")
+    names = coordinate_names(n, n_modes) + (tuple(f"e{i + 1}" for i in range(n)) if stretch else ())
     N = len(names)
     offsets = flexible_offsets(n, n_modes)
     flex = np.arange(n, N)
@@ -339,7 +357,7 @@ def build_amm(
     else:
         modal = frozen_modal
         ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None, axial_shortening=shortening,
-                             tip_rotation=rotation)
+                             tip_rotation=rotation, axial_stretch=stretch)
 
     # stiffness and damping (Eqs 65-68)
     stiffness, damp = [ca.SX(0)] * n, [ca.SX(arm.joints[i].friction) for i in range(n)]
@@ -347,8 +365,19 @@ def build_amm(
         for j in range(n_modes[i]):
             omega = md.omega[j]
             stiffness.append(link.mass * omega**2)
-            scale = link.mass if damping == "ratio" else 1.0
-            damp.append(2.0 * link.damping_ratio(j) * omega * scale)
+            if damping == "stiffness":  # the finite elements' (2 zeta / omega_1) K on the modal stiffness
+                damp.append(2.0 * link.damping_ratio(0) / float(md.omega[0]) * link.mass * omega**2)
+            else:
+                scale = link.mass if damping == "ratio" else 1.0
+                damp.append(2.0 * link.damping_ratio(j) * omega * scale)
+    E_el = ex.elastic_energy
+    if stretch:  # elongations e_i: strain energy 1/2 (EA / L) e^2, damped as the finite elements' links
+        for i, (link, md) in enumerate(zip(arm.links, modal)):
+            k_axial = link.axial_stiffness() / link.length
+            stiffness.append(ca.SX(k_axial))
+            E_el = E_el + 0.5 * k_axial * q[N - n + i] ** 2
+            # stiffness-proportional, (2 zeta / omega_1) k with omega_1 the link's first clamped-mass mode
+            damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial if md.n_modes else 0.0))
     K = ca.diag(ca.vertcat(*stiffness))
     D = ca.diag(ca.vertcat(*damp))
 
@@ -371,7 +400,7 @@ def build_amm(
     opts = {"cse": True}
     tip = ex.positions[:, n]
     expr = {
-        "M": M, "c": c, "g": g, "K": K, "D": D, "xdot": ca.vertcat(qd, qdd), "E_kin": E_kin, "E_el": ex.elastic_energy,
+        "M": M, "c": c, "g": g, "K": K, "D": D, "xdot": ca.vertcat(qd, qdd), "E_kin": E_kin, "E_el": E_el,
         "E_grav": ex.gravity_energy, "tip": tip, "tip_v": ca.jtimes(tip, q, qd), "hubs": ex.positions,
         "w": ex.tip_deflection, "dw": ex.tip_slope,
     }
@@ -416,6 +445,7 @@ def build_amm(
         "solver": solver,
         "coriolis": "lagrange" if scheduled else coriolis,
         "axial_shortening": shortening,
+        "axial_stretch": stretch,
         "static_correction": [bool(c) for c in corrected],
         "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)" if rotation == "linearised"
         else "exact rotation by the tip slope w'_ie",
@@ -424,7 +454,7 @@ def build_amm(
         "build_time_s": time.perf_counter() - start,
     }
     return Model(
-        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}{' static-correction' if any(corrected) else ''}"
+        name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}{' static-correction' if any(corrected) else ''}{' axial-stretch' if stretch else ''}"
              f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,

@@ -233,7 +233,8 @@ class _Inertia:
         self.M = self.M + ca.mtimes(jac.T, ca.mtimes(ca.kron(G, ca.DM.eye(2)), jac))
 
 def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, shape_rates: bool = False,
-                    axial_shortening: bool = False, tip_rotation: str = "linearised") -> ArmExpressions:
+                    axial_shortening: bool = False, tip_rotation: str = "linearised",
+                    axial_stretch: bool = False) -> ArmExpressions:
     """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
 
     Parameters
@@ -256,6 +257,10 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         (``modal`` must carry the ``sh_*`` integrals; module docstring).
     tip_rotation
         ``"linearised"`` (Eq 7) or ``"exact"`` (the next frame turned by ``w'_ie``).
+    axial_stretch
+        Axially compliant links: ``q`` ends with one elongation ``e_i`` (m) per link, a
+        uniform strain ``e_i / L_i`` along the link (``docs/amm.md`` section 14); the strain
+        energy ``1/2 (EA_i / L_i) e_i^2`` is in :func:`flexctrl.dynamics.amm.build_amm`'s ``K``.
     """
     n = arm.n_links
     n_modes = [m.n_modes for m in modal]
@@ -284,7 +289,9 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         # link i (Eq 43, 48): generalised positions P_a and their Gram matrix
         m, length = link.mass, link.length
         frame_x, frame_y = ca.mtimes(W, e1), ca.mtimes(W, e2)
-        pieces = [r, frame_x] + [frame_y * qf[j] for j in range(nf)]
+        # uniform strain: the point at x sits at x (1 + e / L) along the link
+        stretch = 1 + q[q.shape[0] - n + i] / length if axial_stretch else 1
+        pieces = [r, frame_x * stretch] + [frame_y * qf[j] for j in range(nf)]
         rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
         moments = sym(ca.horzcat(md.v, md.w))
         gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
@@ -301,7 +308,7 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
             inertia.add_moving_shapes(P, gram, md, qf, frame_y)
         else:
             inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
-        first_moment = m * r + 0.5 * m * length * frame_x
+        first_moment = m * r + 0.5 * m * length * frame_x * stretch
         if nf:
             first_moment = first_moment + frame_y * ca.dot(md.v, qf)
         if shortening:
@@ -314,7 +321,7 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         dw_e = ca.dot(md.tip_slope, qf) if nf else sym(0)
         deflections.append(w_e)
         slopes.append(dw_e)
-        r = r + ca.mtimes(W, ca.vertcat(length, w_e))
+        r = r + ca.mtimes(W, ca.vertcat(length * stretch, w_e))
         if shortening:
             r = r + frame_x * ca.dot(md.sh_tip, ca.vertcat(*sigma))
         positions.append(r)

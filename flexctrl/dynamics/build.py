@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Literal, Sequence
 
 from flexctrl.dynamics.model import Model
-from flexctrl.errors import FlexctrlError
+from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.arm import ArmSpec
 
@@ -27,7 +27,7 @@ def build_model(
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
     reference_q: Sequence[float] | None = None,
-    damping: Literal["ratio", "paper"] | None = None,
+    damping: Literal["ratio", "paper", "stiffness"] | None = None,
 ) -> Model:
     """Build the model of ``arm`` at ``fidelity``.
 
@@ -47,7 +47,8 @@ def build_model(
         Joint angles (rad) of the frozen modes and of ``Model.omega_max``;
         default the arm's ``configuration``.
     damping
-        ``"ratio"`` (d = 2 zeta omega m_l) or ``"paper"`` (Eq 68 as printed); default
+        ``"ratio"`` (d = 2 zeta omega m_l), ``"paper"`` (Eq 68 as printed) or ``"stiffness"``
+        (the finite elements' ``(2 zeta / omega_1) K``, which is all they have); default
         (None): the arm's ``damping_form``.
 
     Raises
@@ -67,10 +68,14 @@ def build_model(
 
         if modes != "frozen":
             raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
-        if (arm.damping_form if damping is None else damping) != "ratio":
+        if (arm.damping_form if damping is None else damping) == "paper":
             raise ModelFamilyUnavailable("damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
                                          "modes only; a finite-element model takes its damping from damping_ratio "
-                                         "(use damping form 'ratio' or an 'amm:N' fidelity)")
+                                         "stiffness-proportionally, (2 zeta / omega_1) K (use damping form 'ratio' or "
+                                         "'stiffness', or an 'amm:N' fidelity)")
+        if arm.axial_stretch is False:
+            raise SpecError("axial_stretch = false is not allowed with a finite-element fidelity: its links are always "
+                            "axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity", key="axial_stretch")
         shortening = True if arm.axial_shortening is None else arm.axial_shortening  # membrane strain, validated
         return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=shortening)
     if fid.kind == "auto":

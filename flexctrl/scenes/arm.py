@@ -55,6 +55,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         arm = dataclasses.replace(arm, gravity=scene.gravity)
     if scene.axial_shortening is not None:
         arm = dataclasses.replace(arm, axial_shortening=scene.axial_shortening)
+    if scene.axial_stretch is not None:
+        arm = dataclasses.replace(arm, axial_stretch=scene.axial_stretch)
     if scene.zeta is not None:
         arm = dataclasses.replace(arm, links=tuple(dataclasses.replace(l, damping_ratios=(scene.zeta,)) for l in arm.links))
     if scene.damping_form is not None:

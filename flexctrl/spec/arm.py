@@ -13,9 +13,12 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     configuration = [0, 0, 0]        # default joint angles, degrees
     boundary_inertia = "exact"       # or "paper" (see flexctrl.modal.boundary)
     damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
-                                     # et al.'s Eq 68 as printed, d = 2 zeta omega (see DAMPING_FORMS)
+                                     # et al.'s Eq 68 as printed, d = 2 zeta omega, or "stiffness":
+                                     # the finite elements' (2 zeta / omega_1) K (see DAMPING_FORMS)
     axial_shortening = true          # a bent link's foreshortening; default: on for finite elements,
                                      # off for assumed modes (docs/amm.md section 10)
+    axial_stretch = true             # axially compliant assumed-modes links (EA; docs/amm.md
+                                     # section 14); default off; finite elements always are
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
     [[links]]  length (m), mass_per_length (kg/m), EI (N m^2), inertia
                (kg m^2 about the link's centre of mass), n_modes (0..6),
@@ -56,8 +59,12 @@ BOUNDARY_INERTIA = ("exact", "paper")
 #: ``d = 2 zeta omega m_l`` (kg/s), so ``zeta`` is the damping ratio of the isolated mode
 #: (modes normalised to the link mass, Eq 40, have modal mass ``m_l``).  ``"paper"``: Subedi
 #: et al. (2021) Eq 68 as printed, ``d = 2 zeta sqrt(k/m_l) = 2 zeta omega`` (unit 1/s where a
-#: modal force needs kg/s; it acts as the damping ratio ``zeta / m_l``).
-DAMPING_FORMS = ("ratio", "paper")
+#: modal force needs kg/s; it acts as the damping ratio ``zeta / m_l``).  ``"stiffness"``: the
+#: finite elements' stiffness-proportional rule ``D_i = (2 zeta_i / omega_1i) K_i`` per link
+#: (``zeta_i`` the link's first ratio, ``omega_1i`` its first clamped-mass frequency), i.e. mode j
+#: of link i has the ratio ``zeta_i omega_j / omega_1i``: with it both families damp alike
+#: (``docs/amm.md`` section 14).
+DAMPING_FORMS = ("ratio", "paper", "stiffness")
 
 
 @dataclass(frozen=True)
@@ -212,13 +219,18 @@ class ArmSpec:
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
         How the tip inertia J_D of the clamped-mass boundary is formed.
-    damping_form : {"ratio", "paper"}
+    damping_form : {"ratio", "paper", "stiffness"}
         How the modal damping coefficient is formed from ``damping_ratio`` (see ``DAMPING_FORMS``).
     axial_shortening : bool or None
         Whether the models carry a bent link's axial shortening (assumed modes: second-order
         kinematics, ``docs/amm.md`` section 10; finite elements: membrane strain).  None (not
         in the file): each family's default, on for finite elements, off for assumed modes
         (:data:`flexctrl.dynamics.amm.AMM_AXIAL_SHORTENING`).
+    axial_stretch : bool or None
+        Whether assumed-modes links are axially compliant (one elongation coordinate per link,
+        strain energy from ``EA``; ``docs/amm.md`` section 14).  None: off
+        (:data:`flexctrl.dynamics.amm.AMM_AXIAL_STRETCH`).  Finite-element links always are;
+        ``False`` with a finite-element fidelity is refused when the model is built.
     source : str
         The file it was loaded from.
     """
@@ -230,10 +242,11 @@ class ArmSpec:
     gravity: tuple[float, float]
     configuration: tuple[float, ...]
     boundary_inertia: Literal["exact", "paper"] = "exact"
-    damping_form: Literal["ratio", "paper"] = "ratio"
+    damping_form: Literal["ratio", "paper", "stiffness"] = "ratio"
     source: str = ""
     notes: str = ""
     axial_shortening: bool | None = None
+    axial_stretch: bool | None = None
 
     @property
     def n_links(self) -> int:
@@ -359,6 +372,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
         damping_form=r.string("damping_form", "ratio", choices=DAMPING_FORMS),  # type: ignore[arg-type]
         axial_shortening=r.boolean("axial_shortening", True) if r.has("axial_shortening") else None,
+        axial_stretch=r.boolean("axial_stretch", True) if r.has("axial_stretch") else None,
         source=source,
         notes=r.string("notes", ""),
     )

@@ -15,6 +15,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
                                       # (flexctrl.scenes.auto chooses the model)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
+    axial_stretch = true              # axially compliant assumed-modes links (default: the model file's)
     gravity = [0.0, -9.81]            # m/s^2 (default: the model file's)
     integrator = "rk4"                # rk4 | cvodes | idas | scipy | euler | newmark
     dt = 1e-3                         # s: step, output interval and torque hold
@@ -23,7 +24,8 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint),
                 form = "ratio" (d = 2 zeta omega m_l, zeta the modal damping ratio) or "paper"
                 (Subedi et al. Eq 68 as printed, d = 2 zeta omega: 1/s where kg/s is needed,
-                an effective ratio zeta / m_l); default: the model file's damping_form
+                an effective ratio zeta / m_l) or "stiffness" (the finite elements' (2 zeta / omega_1) K:
+                mode j has the ratio zeta omega_j / omega_1); default: the model file's damping_form
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
     [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
@@ -114,7 +116,7 @@ class ArmScene:
     qf0: dict[str, float] = field(default_factory=dict)
     zeta: float | None = None
     friction: tuple[float, ...] | None = None
-    damping_form: Literal["ratio", "paper"] | None = None
+    damping_form: Literal["ratio", "paper", "stiffness"] | None = None
     input: InputSpec = InputSpec()
     solver: dict[str, Any] = field(default_factory=dict)
     fft_span: float = 2.0
@@ -125,13 +127,14 @@ class ArmScene:
     kind: str = "arm"
     tolerance: float | None = None
     axial_shortening: bool | None = None
+    axial_stretch: bool | None = None
 
     def settings(self) -> dict[str, Any]:
         """The scene as plain, JSON-ready data (angles in degrees, as in the file)."""
         return {
             "kind": self.kind, "name": self.name, "source": self.source, "model": str(self.model),
             "fidelity": str(self.fidelity), "modes": self.modes, "axial_shortening": self.axial_shortening,
-            "payload_kg": self.payload,
+            "axial_stretch": self.axial_stretch, "payload_kg": self.payload,
             "gravity": list(self.gravity) if self.gravity else None,
             "q0_deg": [math.degrees(a) for a in self.q0] if self.q0 else None,
             "qd0_deg_s": [math.degrees(a) for a in self.qd0] if self.qd0 else None,
@@ -254,6 +257,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
         axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
+        axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
     )
     r.finish()
     return scene
