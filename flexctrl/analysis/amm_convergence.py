@@ -13,8 +13,10 @@ world frame compared on the output grid):
     axial dofs relaxed, ``amm:1`` its projection ``q_f31 = 0.1``.
 ``fast_move``
     ``fast_move_30deg.toml`` (30 deg at joint 1 as a step, 2 kg) closed by ``controllers/lqr.toml``
-    designed once on ``amm:2`` (``controller_fidelity``) and measuring joints and link-tip
-    deflections (sensors every plant has), first 2 s; only the plant changes.
+    designed once on ``amm:2`` (the model's defaults) and measuring joints and link-tip
+    deflections (sensors every plant has), first 2 s; only the plant changes.  Every plant is
+    damped by the finite elements' rule (``damping_form = "stiffness"``, zeta = 0.005 on each
+    link's first mode): their stiffness-proportional damping is all they have.
 
 The reference (``fem:16`` by default, RK4 at its stable step) is cached on disk under the
 output folder, keyed by everything that determines it (:func:`flexctrl.analysis.accuracy.cached_reference`).
@@ -50,7 +52,12 @@ DESIGN_FIDELITY = "amm:2"
 OUTPUT_DT = 1e-3  # s, open loop; the closed loop samples every plant step of 0.5 ms multiples
 
 
-def _scene(case: str, shortening: bool):
+#: The model variants compared (``docs/amm.md`` sections 11 and 14): the label, ``axial_shortening``
+#: and ``axial_stretch`` of the assumed-modes plant.
+VARIANTS = (("off", False, False), ("shortening", True, False), ("shortening + stretch", True, True))
+
+
+def _scene(case: str, shortening: bool, stretch: bool = False):
     from flexctrl.spec.scene import load_scene
 
     name, duration = CASES[case]
@@ -58,9 +65,27 @@ def _scene(case: str, shortening: bool):
     if case == "fast_move":
         from flexctrl.spec.fidelity import parse_fidelity
 
-        plant = dataclasses.replace(scene.plant, duration=duration, axial_shortening=shortening)
+        # the finite elements' damping rule for every plant (docs/amm.md section 14): with modal ratios
+        # the assumed modes' second modes are 6-13 times less damped than the finite elements'
+        plant = dataclasses.replace(scene.plant, duration=duration, axial_shortening=shortening, axial_stretch=stretch or None,
+                                    damping_form="stiffness")
         return dataclasses.replace(scene, plant=plant, controller_fidelity=parse_fidelity(DESIGN_FIDELITY))
-    return dataclasses.replace(scene, duration=duration, axial_shortening=shortening)
+    return dataclasses.replace(scene, duration=duration, axial_shortening=shortening, axial_stretch=stretch or None)
+
+
+def _design(scene):
+    """The fast move's controller, designed once on ``DESIGN_FIDELITY`` with the assumed-modes defaults.
+
+    Every plant then closes the loop with the same controller (the design does not follow the
+    plant's ``axial_shortening``/``axial_stretch``), so only the plant changes.
+    """
+    from flexctrl.scenes.loop_setup import build_loop
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    plant = dataclasses.replace(scene.plant, fidelity=parse_fidelity(DESIGN_FIDELITY), axial_shortening=None,
+                                axial_stretch=None, damping_form=None)
+    setup = build_loop(dataclasses.replace(scene, plant=plant), str(_SCENES.parents[1] / CONTROLLER), CONTROLLER_OVERRIDES)
+    return setup.controller
 
 
 def _bent_start(scene, model, arm) -> np.ndarray:
@@ -97,7 +122,7 @@ def _bent_start(scene, model, arm) -> np.ndarray:
 
 
 def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", hub_inertia: float | None = None,
-             static_correction: bool = False) -> dict[str, Any]:
+             static_correction: bool = False, stretch: bool = False) -> dict[str, Any]:
     """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build + compile).
 
     ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least this
@@ -106,7 +131,7 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", h
     from flexctrl.dynamics.build import build_model
     from flexctrl.scenes.arm import scene_arm
 
-    scene = _scene(case, shortening)
+    scene = _scene(case, shortening, stretch and fidelity.startswith("amm:"))
     method = parse_method(f"{fidelity}/rk4@{step}")
     if case == "fast_move" and hub_inertia is not None:
         raise ValueError("hub_inertia applies to the open-loop cases only")
@@ -122,8 +147,12 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", h
         else:
             h = method.step
         stride = max(1, int(round(sample / h)))
-        out = closed_loop_tip_path(scene, fidelity, h, controller=str(_SCENES.parents[1] / CONTROLLER),
-                                   overrides=CONTROLLER_OVERRIDES, stride=stride)
+        # the Python loop for the finite elements: the compiled one holds every RK4 substep of the run
+        # (tens of thousands per sample at their damped stable step) in memory at once
+        controller = _design(scene)
+        out = closed_loop_tip_path(dataclasses.replace(scene, controller_fidelity=None), fidelity, h, controller=controller,
+                                   stride=stride,
+                                   loop="python" if fidelity.startswith("fem:") else "auto")
         if out["diverged_at"] is not None:
             raise RuntimeError(f"{case} {fidelity} diverged at {out['diverged_at']} s")
         return {"time": out["time"], "tip": out["tip"][:, :2], "wall_s": out["wall_time_s"],
@@ -136,7 +165,8 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", h
     if static_correction and fidelity.startswith("amm:"):
         from flexctrl.dynamics.amm import build_amm
 
-        model = build_amm(arm, int(fidelity[4:]), reference_q=scene.q0, static_correction=True)
+        model = build_amm(arm, int(fidelity[4:]), reference_q=scene.q0, static_correction=True,
+                          axial_stretch=stretch)
     else:
         model = build_model(arm, fidelity, reference_q=scene.q0)
     stepper = make_stepper(model, method, OUTPUT_DT)
@@ -188,11 +218,12 @@ def convergence(case: str, modes: Sequence[int] = (1, 2, 3, 4), reference_fideli
     ref = reference(case, reference_fidelity, directory, hub_inertia)
     steps = steps or {}
     rows = []
-    for shortening in (False, True):
+    for label, shortening, stretch in VARIANTS:
         for N in modes:
             step = steps.get(N, "0.05ms" if N >= 4 else "0.1ms")
-            run = simulate(case, f"amm:{N}", shortening, step, hub_inertia, static_correction)
-            rows.append({"fidelity": f"amm:{N}", "axial_shortening": shortening, "step": step,
+            run = simulate(case, f"amm:{N}", shortening, step, hub_inertia, static_correction, stretch)
+            rows.append({"fidelity": f"amm:{N}", "variant": label, "axial_shortening": shortening,
+                         "axial_stretch": stretch, "step": step,
                          **window_errors(ref, run, WINDOWS[case]), "wall_per_sim_s": run["wall_s"] / ref.time[-1],
                          **{k: run[k] for k in ("setup_s", "build_s", "f_instructions", "us_per_step") if k in run}})
     return {"case": case, "reference": ref.method, "windows_s": list(WINDOWS[case]), "rows": rows, "hub_inertia": hub_inertia}
@@ -201,21 +232,24 @@ def convergence(case: str, modes: Sequence[int] = (1, 2, 3, 4), reference_fideli
 def markdown(result: dict[str, Any]) -> str:
     """The table of ``docs/amm.md`` for one :func:`convergence` result (mm)."""
     windows = result["windows_s"]
-    head = "| axial shortening | " + " | ".join(r["fidelity"] for r in result["rows"] if not r["axial_shortening"]) + " |"
+    variants = list(dict.fromkeys(r.get("variant", "on" if r["axial_shortening"] else "off") for r in result["rows"]))
+    by_variant = {v: [r for r in result["rows"] if r.get("variant", "on" if r["axial_shortening"] else "off") == v]
+                  for v in variants}
+    first = by_variant[variants[0]]
+    head = "| model, window | " + " | ".join(r["fidelity"] for r in first) + " |"
     hub = "" if result.get("hub_inertia") is None else f", hub inertia >= {result['hub_inertia']:g} kg m^2"
-    lines = [f"{result['case']} against {result['reference']}{hub}: RMS tip error (mm)", "", head,
-             "|" + "---|" * (1 + len([r for r in result["rows"] if not r["axial_shortening"]]))]
+    rule = "|" + "---|" * (1 + len(first))
+    lines = [f"{result['case']} against {result['reference']}{hub}: RMS tip error (mm)", "", head, rule]
     for T in windows:
-        for flag in (False, True):
-            vals = [r[f"rms_{T:g}s"] * 1e3 for r in result["rows"] if r["axial_shortening"] is flag]
-            lines.append(f"| {'on' if flag else 'off'}, 0-{T:g} s | " + " | ".join(f"{v:.3f}" for v in vals) + " |")
+        for v in variants:
+            vals = [r[f"rms_{T:g}s"] * 1e3 for r in by_variant[v]]
+            lines.append(f"| {v}, 0-{T:g} s | " + " | ".join(f"{x:.3f}" for x in vals) + " |")
     if "us_per_step" in result["rows"][0]:
-        lines += ["", "cost: compiled RK4 step (us) / model build (s) / instructions in f", "", head,
-                  lines[3]]
-        for flag in (False, True):
-            cells = [f"{r['us_per_step']:.2f} / {r['build_s']:.2f} / {r['f_instructions'] / 1e3:.1f}k"
-                     for r in result["rows"] if r["axial_shortening"] is flag]
-            lines.append(f"| {'on' if flag else 'off'} | " + " | ".join(cells) + " |")
+        lines += ["", "cost: compiled RK4 step (us) / model build (s) / instructions in f", "",
+                  head.replace("model, window", "model"), rule]
+        for v in variants:
+            cells = [f"{r['us_per_step']:.2f} / {r['build_s']:.2f} / {r['f_instructions'] / 1e3:.1f}k" for r in by_variant[v]]
+            lines.append(f"| {v} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -177,12 +177,14 @@ def _design_model_of(ctrl, scene, overrides):
 
 
 def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path | None = None, overrides=(),
-                         stride: int = 1, cache: SceneCache | None = None) -> dict[str, Any]:
+                         stride: int = 1, cache: SceneCache | None = None, loop: str = "auto") -> dict[str, Any]:
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
 
     Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
     diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``
-    (the design model) is kept, so only the plant changes with ``fidelity``.
+    (the design model) is kept, so only the plant changes with ``fidelity``.  ``loop``: as in
+    :func:`~flexctrl.loop.sampled.integrate_closed_loop` (``"python"`` holds one sample's
+    substeps in memory, the compiled loop the whole run's).
 
     Returns
     -------
@@ -200,7 +202,7 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
     rng = np.random.default_rng(scene.seed) if scene.noise else None
     t, X, U, meta, _ = integrate_closed_loop(setup.plant, setup.controller, setup.x0, plant_scene.duration, float(dt),
                                              sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
-                                             monitor=setup.monitor, stop_on_divergence=True, stride=stride)
+                                             monitor=setup.monitor, stop_on_divergence=True, stride=stride, loop=loop)
     plant = setup.plant
     tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
     divergence = meta.get("divergence")
