@@ -31,6 +31,8 @@ WarmStart = Literal["shift", "previous", "none"]
 Fallback = Literal["shift", "lqr", "hold"]
 NMPCMode = Literal["rti", "full"]
 NLPSolver = Literal["ipopt"]
+PredictionMap = Literal["modal", "select"]
+PredictionBasis = Literal["assumed", "coupled"]
 RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
 Sensitivities = Literal["frozen", "exact"]
 Shaper = Literal["zv", "zvd", "none"]
@@ -485,6 +487,22 @@ class NMPCSettings:
         design model, a Galerkin truncation (:mod:`flexctrl.control.nmpc_model`); 0
         (default): all of them.  Fewer modes need fewer RK4 substeps (the fastest mode
         bounds the step); the estimator keeps the design model.
+    prediction_basis : {"assumed", "coupled"}
+        The reduced model's coordinates: the first ``prediction_modes`` assumed modes per
+        link (``"assumed"``) or the joints and as many directions spanning the elastic
+        parts of the design model's slowest coupled modes at the target (``"coupled"``,
+        default; :func:`flexctrl.control.nmpc_model.coupled_basis`).
+    prediction_map : {"modal", "select"}
+        How a reduced prediction model (``prediction_modes > 0``) sees the design model's
+        state: ``"modal"`` (default) removes the dropped (fast) modes of the linearisation
+        at the target before selecting the kept coordinates, so the fast modes are not fed
+        back (:func:`flexctrl.control.nmpc_model.modal_map`); ``"select"`` takes the kept
+        coordinates as they are (their fast-mode content destabilises the tuned loop,
+        ``docs/control.md``).
+    jacobian_every : int
+        ``sensitivities = "frozen"`` only: one Jacobian of ``f`` per this many RK4 steps
+        (1, default: every step), frozen over them (the transition of the frozen
+        linearisation over the steps is exact).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``) instead of its default start (about half the
@@ -511,6 +529,9 @@ class NMPCSettings:
     slack_l2: float = 1.0e7
     compile: bool = True
     prediction_modes: int = 0
+    prediction_basis: PredictionBasis = "coupled"
+    prediction_map: PredictionMap = "modal"
+    jacobian_every: int = 1
     qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
@@ -533,6 +554,9 @@ class NMPCSettings:
         number_field("slack_l2", self.slack_l2, low=0.0, low_open=True)
         boolean_field("compile", self.compile)
         integer_field("prediction_modes", self.prediction_modes, low=0, high=6)
+        choice_field("prediction_basis", self.prediction_basis, PredictionBasis)
+        choice_field("prediction_map", self.prediction_map, PredictionMap)
+        integer_field("jacobian_every", self.jacobian_every, low=1, high=200)
         boolean_field("qp_warm_start", self.qp_warm_start)
 
 
