@@ -21,14 +21,18 @@ Mapping the estimate.  The kept assumed-mode coordinates of the design model are
 its slow modes: the mass matrix couples them to the dropped ones, so ``x[keep]``
 carries the fast (second) modes, and feeding them back through gains designed on the
 slow model is observation spillover.  With the tuned weights of ``controllers/nmpc.toml``
-that made the sampled loop unstable on ``move_joint1_30deg`` (state feedback about the
-target: spectral radius 1.025, 3.2 with the Kalman filter).  :func:`modal_map` removes
+that made the sampled loop unstable on ``move_joint1_30deg`` (spectral radius 1.025 about
+the target, with full state and with the Kalman filter alike).  :func:`modal_map` removes
 them first: with ``Phi`` the design model's modes at the target (``K_lin Phi = M Phi
 Omega^2``, M-orthonormal) and ``Phi_s`` the slowest ones, as many as the coordinates
-kept, the prediction sees ``q_r = S Phi_s Phi_s' M q`` (``S`` the selection; the same
+kept, the prediction sees ``q_r = P' Phi_s Phi_s' M q`` (``q = P q_r`` its basis: a selection, or
+:func:`coupled_basis`; the same
 map for ``qd``): the fast modes are in its null space, so in modal coordinates the
 linear loop is block triangular (fast modes open-loop, lightly damped and stable; slow
-modes under the reduced design's feedback; 0.979 on the same case).  Joint
+modes under the reduced design's feedback; 0.978 on the same case).  The map alone is
+not enough: the first assumed mode per link puts the lowest elastic mode at 343 rad/s
+against the design model's 268, and that NMPC still oscillates; the coupled basis
+(:func:`coupled_basis`) keeps the slow frequencies and with the map the loop settles.  Joint
 displacements map to themselves where they are rigid-body modes.  The map is affine
 about the equilibria, ``x_r = x_op,r + T (x - x_op)``, and the torque is passed on as
 a deviation, ``u = u_op + (u_r - u_op,r)``, so the design model's equilibrium is the
