@@ -152,3 +152,16 @@ def test_reduced_prediction_settings_are_checked():
         controller_from_document({"kind": "nmpc", "jacobian_every": 0}, "nmpc_bad.toml")
     settings = controller_from_document({"kind": "nmpc", "prediction_modes": 1, "jacobian_every": 3}, "nmpc.toml")
     assert (settings.prediction_basis, settings.prediction_map, settings.jacobian_every) == ("coupled", "modal", 3)
+
+
+def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_prediction():
+    # the coupled basis's values coincide with other constants at some configurations; lifted per use,
+    # the generated code (its cache key) is the same at the straight and the folded arm
+    from flexctrl.sim.compile import cache_key
+
+    keys = set()
+    for q in ("[0.0,0.0,0.0]", "[0.0,90.0,-90.0]"):
+        setup = build_loop(load_scene(SCENE, [f"initial.q={q}"]), "controllers/nmpc.toml", ["compile=false"],
+                           SceneCache())
+        keys.add(cache_key(setup.controller.functions["linmap"], [], "cc"))
+    assert len(keys) == 1

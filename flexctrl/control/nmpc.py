@@ -333,8 +333,12 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
 
 
 def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int,
-           jacobian: str = "symbolic"):
-    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`)."""
+           jacobian: str = "symbolic", per_use: bool = False):
+    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
+
+    ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
+    constants coincide by value at some configurations (the reduced prediction's basis).
+    """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
     F, _ = interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
@@ -344,7 +348,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     if jacobian == "factored":
         fp, f_jac, const = factored_dynamics(model)
     else:
-        (fp, const), f_jac = constants_as_parameters(model.functions["f"]), None
+        (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
     nc = const.size
     extra = (ca.MX.sym("c", nc),) if nc else ()
     _, FJp = interval_core(fp if nc else _expanded(fp), n, m, plant.dt, substeps, settings.sensitivities, extra, f_jac,
@@ -525,7 +529,9 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
         pm, pplant = model, plant
     problem = scaled_problem(pm, pplant, settings, limits)
     substeps = settings.substeps or auto_substeps(pplant)
-    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian)
+    # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
+    # compiled library serves every configuration of a payload (as for the design model)
+    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
                           prediction, pplant)
