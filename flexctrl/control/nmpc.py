@@ -1,4 +1,9 @@
-"""Nonlinear MPC in CasADi on the full model: multiple shooting with RK4, real-time iteration or full NLP.
+"""Nonlinear MPC in CasADi: multiple shooting with RK4, real-time iteration or full NLP.
+
+The model predicted with is the design model or a reduction of it
+(``prediction_modes``; :mod:`flexctrl.control.nmpc_model`: the joints and the slowest
+coupled modes at the target, the estimate mapped with its fast modes removed); the
+shooting interval and its sensitivities are :mod:`flexctrl.control.nmpc_interval`.
 
 Variables are the scaled deviations of :mod:`flexctrl.control.mpc` (same scales,
 weights, DARE terminal cost, torque bounds and soft constraints), stage-wise::
