@@ -74,7 +74,8 @@ def test_prediction_settings_are_checked():
 def test_reduced_warm_started_nmpc_regulates_the_full_arm_like_the_cold_one(arms):
     two, _ = arms
     op = L.equilibrium(two, np.radians([80.0, -10.0, -10.0]))
-    common = dict(horizon=20, sample_time=0.01, compile=False, prediction_modes=1)
+    common = dict(horizon=20, sample_time=0.01, compile=False, prediction_modes=1, prediction_basis="assumed",
+                  prediction_map="select")
     cold = design(two, op, NMPCSettings(**common))
     warm = design(two, op, NMPCSettings(**common, qp_warm_start=True))
     assert cold.substeps == warm.substeps == 2 and cold.problem.n == 12  # the first modes need 2 RK4 steps

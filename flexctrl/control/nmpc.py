@@ -1,4 +1,9 @@
-"""Nonlinear MPC in CasADi on the full model: multiple shooting with RK4, real-time iteration or full NLP.
+"""Nonlinear MPC in CasADi: multiple shooting with RK4, real-time iteration or full NLP.
+
+The model predicted with is the design model or a reduction of it
+(``prediction_modes``; :mod:`flexctrl.control.nmpc_model`: the joints and the slowest
+coupled modes at the target, the estimate mapped with its fast modes removed); the
+shooting interval and its sensitivities are :mod:`flexctrl.control.nmpc_interval`.
 
 Variables are the scaled deviations of :mod:`flexctrl.control.mpc` (same scales,
 weights, DARE terminal cost, torque bounds and soft constraints), stage-wise::
@@ -79,7 +84,6 @@ iterations.
 
 from __future__ import annotations
 
-import math
 import time
 
 import casadi as ca
@@ -88,83 +92,15 @@ import numpy as np
 from flexctrl.control.base import Controller
 from flexctrl.sim.base import try_expand as _expanded
 from flexctrl.sim.parametric import constants_as_parameters
-from flexctrl.sim.rk4 import rk4_next
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
+from flexctrl.control.nmpc_interval import RK4_BOUND, auto_substeps, interval_core, interval_functions
 from flexctrl.control.nmpc_model import Prediction, prediction_model
 from flexctrl.control.nmpc_jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
-
-#: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).
-RK4_BOUND = 2.5
-
-
-def auto_substeps(plant: LinearPlant) -> int:
-    """Fewest RK4 steps per sample with ``|lambda|_max h <= RK4_BOUND`` for the linearisation at the target."""
-    lam = float(np.max(np.abs(np.linalg.eigvals(np.asarray(plant.sys.A, dtype=float)))))
-    return max(1, int(math.ceil(lam * plant.dt / RK4_BOUND)))
-
-
-def _interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, sensitivities: str | None,
-                   extra: tuple[ca.MX, ...] = (), f_jac: ca.Function | None = None) -> tuple[ca.Function, ca.Function | None]:
-    """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see :func:`interval_functions`).
-
-    ``sensitivities=None`` builds ``F`` only (``FJ`` is None).  ``f_jac(x, u, *extra) ->
-    (f, f_x, f_u)``: default CasADi's Jacobian of ``f``.
-    """
-    x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
-    names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
-    h = dt / substeps
-    rhs = lambda s: f(s, u, *extra)  # noqa: E731
-    xf = x
-    for _ in range(substeps):
-        xf = rk4_next(rhs, xf, h)
-    F = ca.Function("F", [x, u, *extra], [xf], names, ["x_next"])
-    if sensitivities is None:
-        return F, None
-    xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
-    es = [ca.SX.sym(f"p{i}", e.sparsity()) for i, e in enumerate(extra)]
-    fxu = f(xs, us, *es)
-    fx = f_jac or ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
-    eye = ca.DM.eye(nx)
-
-    def with_sensitivities(state):
-        # RK4 on (x, A, B): d/dt (x, A, B) = (f, f_x A, f_x B + f_u)
-        xs, A, B = state
-        k, Jx, Ju = fx(xs, u, *extra)
-        return k, ca.mtimes(Jx, A), ca.mtimes(Jx, B) + Ju
-
-    xe, Ad, Bd = x, eye, ca.MX.zeros(nx, nu)
-    for _ in range(substeps):
-        if sensitivities == "frozen":
-            # one Jacobian per RK4 step, frozen over its four stages
-            k1, Jx, Ju = fx(xe, u, *extra)
-            hA = h * Jx
-            hA2 = ca.mtimes(hA, hA)
-            hA3 = ca.mtimes(hA2, hA)
-            Phi = eye + hA + hA2 / 2 + hA3 / 6 + ca.mtimes(hA3, hA) / 24
-            Gam = h * ca.mtimes(eye + hA / 2 + hA2 / 6 + hA3 / 24, Ju)
-            Ad, Bd = ca.mtimes(Phi, Ad), ca.mtimes(Phi, Bd) + Gam
-            xe = rk4_next(rhs, xe, h, k1=k1)
-        else:
-            xe, Ad, Bd = rk4_next(with_sensitivities, (xe, Ad, Bd), h)
-    FJ = ca.Function("FJ", [x, u, *extra], [xe, Ad, Bd], names, ["x_next", "A", "B"])
-    return F, FJ
-
-
-def interval_functions(model, dt: float, substeps: int, sensitivities: str) -> tuple[ca.Function, ca.Function]:
-    """``F(x, u) -> x_next`` and ``FJ(x, u) -> (x_next, A, B)`` over one sample, physical units.
-
-    ``F``: ``substeps`` classical RK4 steps of the model's ``f``.  ``FJ`` adds the
-    sensitivities ``A = dx_next/dx``, ``B = dx_next/du``: exact (``"exact"``) or, with
-    ``"frozen"``, RK4 applied to the dynamics linearised at the start of every RK4 step.
-    """
-    f = _expanded(model.functions["f"])
-    return _interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities)
-
 
 class _Layout:
     """Index bookkeeping of ``w = [z_0, v_0, s_0, ..., z_N]``."""
@@ -201,6 +137,8 @@ class NMPCController(Controller):
         self.keep = self.prediction.keep
         #: the prediction model's operating point (the design one unless the model is truncated)
         self.pred_op = self.prediction_plant.op
+        #: the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with a modal map)
+        self.u_out = self.pred_op.u if self.prediction.state_map is None else plant.op.u
         self.problem = problem
         self.observer = observer
         self.functions = functions
@@ -223,6 +161,11 @@ class NMPCController(Controller):
         self.timing = {"linearize_qp": [], "qp": [], "total": []}
 
     # -- pieces ------------------------------------------------------------------------
+    def to_prediction(self, x: np.ndarray) -> np.ndarray:
+        """The prediction model's state for the design model's state ``x`` (``nmpc_model``'s module docstring)."""
+        T = self.prediction.state_map
+        return x[self.keep] if T is None else self.pred_op.x + T @ (x - self.op.x)
+
     def initial_guess(self, z0: np.ndarray, w_ref: np.ndarray | None = None) -> np.ndarray:
         """Nonlinear rollout from ``z0`` under the saturated LQR law, as ``w``.
 
@@ -265,9 +208,9 @@ class NMPCController(Controller):
         X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
         w_ref = np.zeros(lay.nw)
         for k in range(lay.N + 1):
-            w_ref[lay.z[k]] = (X[k][self.keep] - self.pred_op.x) / pb.Sx
+            w_ref[lay.z[k]] = (self.to_prediction(X[k]) - self.pred_op.x) / pb.Sx
         for k in range(lay.N):
-            w_ref[lay.v[k]] = (U[k] - self.pred_op.u) / pb.Su
+            w_ref[lay.v[k]] = (U[k] - self.u_out) / pb.Su
         self._reference_now = (w_ref[lay.z[0]], w_ref[lay.v[0]])
         self._w_ref = w_ref
         return self.functions["g0"] - self.functions["Hnp"] @ w_ref
@@ -327,7 +270,7 @@ class NMPCController(Controller):
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
         """One NMPC solve (RTI step or NLP) for the design state ``x`` (absolute) at ``t`` (s), updating the warm start."""
-        z0 = (x[self.keep] - self.pred_op.x) / self.problem.Sx
+        z0 = (self.to_prediction(x) - self.pred_op.x) / self.problem.Sx
         g = self.cost_vector(t)
         if self._w is None:
             w0 = self.initial_guess(z0, self._w_ref)
@@ -343,7 +286,7 @@ class NMPCController(Controller):
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
         x = self.observer.estimate(y, self.u_previous)
-        z0 = (x[self.keep] - self.pred_op.x) / self.problem.Sx
+        z0 = (self.to_prediction(x) - self.pred_op.x) / self.problem.Sx
         sol = self.solve(x, t)
         self.last = sol
         self.stats.iterations.append(sol.iterations)
@@ -372,7 +315,7 @@ class NMPCController(Controller):
                 self._plan = None
             self.fallback(t, sol.status, used)
         self.timing["total"].append(time.perf_counter() - start)
-        return self.pred_op.u + self.problem.Su * v
+        return self.u_out + self.problem.Su * v
 
 
 def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
@@ -395,21 +338,26 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
 
 
 def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int,
-           jacobian: str = "symbolic"):
-    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`)."""
+           jacobian: str = "symbolic", per_use: bool = False):
+    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
+
+    ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
+    constants coincide by value at some configurations (the reduced prediction's basis).
+    """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
-    F, _ = _interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
+    F, _ = interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
     # The compiled part sees the operating point, the scales and the model's constants
     # as inputs, so one library serves every operating point, reference and (frozen-modes)
     # configuration whose model graph has the same structure.
     if jacobian == "factored":
         fp, f_jac, const = factored_dynamics(model)
     else:
-        (fp, const), f_jac = constants_as_parameters(model.functions["f"]), None
+        (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
     nc = const.size
     extra = (ca.MX.sym("c", nc),) if nc else ()
-    _, FJp = _interval_core(fp if nc else _expanded(fp), n, m, plant.dt, substeps, settings.sensitivities, extra, f_jac)
+    _, FJp = interval_core(fp if nc else _expanded(fp), n, m, plant.dt, substeps, settings.sensitivities, extra, f_jac,
+                            settings.jacobian_every)
     params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
     p = ca.MX.sym("p", params.size)
     xop, uop = p[:n], p[n:n + m]
@@ -574,7 +522,10 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)
-    prediction = prediction_model(model, settings.prediction_modes)
+    prediction = prediction_model(model, settings.prediction_modes, basis=settings.prediction_basis,
+                                  mapping=settings.prediction_map,
+                                  mass=np.asarray(model.functions["M"](op.x[:model.n_q]), dtype=float),
+                                  a_lin=np.asarray(plant.sys.A, dtype=float))
     if prediction.reduced:  # its own equilibrium at the target joints, all of its state measured
         pm = prediction.model
         pop = equilibrium(pm, op.joints)
@@ -583,7 +534,9 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
         pm, pplant = model, plant
     problem = scaled_problem(pm, pplant, settings, limits)
     substeps = settings.substeps or auto_substeps(pplant)
-    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian)
+    # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
+    # compiled library serves every configuration of a payload (as for the design model)
+    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
                           prediction, pplant)

@@ -17,9 +17,28 @@ system: its kinetic and potential energies are the design model's restricted to
 ``q = P q_r``).  For assumed modes whose shapes do not depend on their number (the
 link's own eigenfunctions) this is the ``amm:k`` model of the same arm.
 
-The controller maps the estimated state to the prediction's coordinates by the same
-selection, ``x_r = x[keep]`` (:attr:`Prediction.keep`), and regulates about the
-prediction model's own equilibrium at the target joint angles.
+Mapping the estimate.  The kept assumed-mode coordinates of the design model are not
+its slow modes: the mass matrix couples them to the dropped ones, so ``x[keep]``
+carries the fast (second) modes, and feeding them back through gains designed on the
+slow model is observation spillover.  With the tuned weights of ``controllers/nmpc.toml``
+that made the sampled loop unstable on ``move_joint1_30deg`` (spectral radius 1.025 about
+the target, with full state and with the Kalman filter alike).  :func:`modal_map` removes
+them first: with ``Phi`` the design model's modes at the target (``K_lin Phi = M Phi
+Omega^2``, M-orthonormal) and ``Phi_s`` the slowest ones, as many as the coordinates
+kept, the prediction sees ``q_r = P' Phi_s Phi_s' M q`` (``q = P q_r`` its basis: a selection, or
+:func:`coupled_basis`; the same
+map for ``qd``): the fast modes are in its null space, so in modal coordinates the
+linear loop is block triangular (fast modes open-loop, lightly damped and stable; slow
+modes under the reduced design's feedback; 0.978 on the same case).  The map alone is
+not enough: the first assumed mode per link puts the lowest elastic mode at 343 rad/s
+against the design model's 268, and that NMPC still oscillates; the coupled basis
+(:func:`coupled_basis`) keeps the slow frequencies and with the map the loop settles.  Joint
+displacements map to themselves where they are rigid-body modes.  The map is affine
+about the equilibria, ``x_r = x_op,r + T (x - x_op)``, and the torque is passed on as
+a deviation, ``u = u_op + (u_r - u_op,r)``, so the design model's equilibrium is the
+loop's.  ``prediction_map = "select"`` keeps ``x_r = x[keep]``
+(:attr:`Prediction.keep`).  The controller regulates about the prediction model's own
+equilibrium at the target joint angles.
 """
 
 from __future__ import annotations
@@ -49,6 +68,8 @@ class Prediction:
     model: object
     keep: np.ndarray
     reduced: bool
+    #: ``T`` of ``x_r = x_op,r + T (x - x_op)`` (:func:`modal_map`); None: ``x_r = x[keep]``
+    state_map: np.ndarray | None = None
 
 
 def _kept_coordinates(model, modes: int) -> np.ndarray:
@@ -135,14 +156,108 @@ def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: 
     return Model(name, fidelity, model.n_joints, tuple(names), functions, model.omega_max, spec=model.spec, info=info)
 
 
-def prediction_model(model, modes: int) -> Prediction:
-    """The NMPC's :class:`Prediction` for ``prediction_modes = modes`` (0: the design model itself)."""
+def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic: int) -> np.ndarray:
+    """``q = P q_r``: the joints, and the elastic parts of the design model's slowest modes at the target.
+
+    ``P = blockdiag(I, E)`` with ``E`` (orthonormal columns, ``n_elastic`` of them) the
+    dominant directions of the elastic components of the ``n_joints + n_elastic``
+    slowest modes of ``K_lin Phi = M Phi Omega^2`` (``mass``, ``a_lin`` as in
+    :func:`modal_map`).  Where the rigid-body modes carry no elastic motion (no gravity
+    stiffness, as in the horizontal plane) the span of ``P`` holds those modes exactly,
+    so the Galerkin projection keeps their frequencies at the target (the first
+    assumed mode per link does not: 343 against 268 rad/s for the lowest on
+    ``move_joint1_30deg``).
+    """
+    import scipy.linalg as sl
+
+    N = mass.shape[0]
+    M = 0.5 * (mass + mass.T)
+    K = M @ -a_lin[N:, :N]
+    _, Phi = sl.eigh(0.5 * (K + K.T), M)
+    U, _, _ = np.linalg.svd(Phi[n_joints:, : n_joints + n_elastic], full_matrices=False)
+    return sl.block_diag(np.eye(n_joints), U[:, :n_elastic])
+
+
+def prediction_model(model, modes: int, *, basis: str = "assumed", mapping: str = "select",
+                     mass: np.ndarray | None = None, a_lin: np.ndarray | None = None) -> Prediction:
+    """The NMPC's :class:`Prediction` for ``prediction_modes = modes`` (0: the design model itself).
+
+    ``basis``: ``"assumed"`` (the first ``modes`` assumed modes per link,
+    :func:`truncated_model`) or ``"coupled"`` (:func:`coupled_basis`, as many
+    coordinates); ``mapping``: ``"select"`` or ``"modal"`` (:func:`modal_map`).  The
+    coupled basis and the modal map need the design model's mass matrix ``mass`` and
+    continuous linearisation ``a_lin`` at the target.
+    """
     if modes <= 0 or model.n_q == model.n_u:
         return Prediction(model, np.arange(model.n_x), False)
     reduced, keep_q = truncated_model(model, modes)
     if reduced.n_q == model.n_q:
         return Prediction(model, np.arange(model.n_x), False)
-    return Prediction(reduced, np.r_[keep_q, model.n_q + keep_q], True)
+    keep = np.r_[keep_q, model.n_q + keep_q]
+    if basis == "assumed" and mapping == "select":
+        return Prediction(reduced, keep, True)
+    if mass is None or a_lin is None:
+        raise ValueError(f"prediction basis {basis!r} with mapping {mapping!r} needs the mass matrix and the linearisation")
+    if basis == "coupled":
+        P = coupled_basis(mass, a_lin, model.n_u, keep_q.size - model.n_u)
+        names = tuple(model.coordinate_names[:model.n_u]) + tuple(f"eta{j + 1}" for j in range(P.shape[1] - model.n_u))
+        info = dict(model.info, truncated_from=str(model.fidelity), basis="coupled")
+        reduced = projected_model(model, P, names, f"{model.name} (slowest {P.shape[1] - model.n_u} coupled modes)",
+                                  reduced.fidelity, info)
+    elif basis == "assumed":
+        P = np.zeros((model.n_q, keep_q.size))
+        P[keep_q, np.arange(keep_q.size)] = 1.0
+    else:
+        raise ValueError(f"prediction basis {basis!r} is not allowed; allowed: 'assumed', 'coupled'")
+    if mapping == "modal":
+        T = modal_map(mass, a_lin, P)
+    elif mapping == "select":
+        T = np.kron(np.eye(2), np.linalg.pinv(P))
+    else:
+        raise ValueError(f"prediction mapping {mapping!r} is not allowed; allowed: 'modal', 'select'")
+    return Prediction(reduced, keep, True, T)
 
 
-__all__ = ["Prediction", "prediction_model", "truncated_model"]
+def modal_map(mass: np.ndarray, a_lin: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """``T`` of ``x_r = T x``: the reduced coordinates of the slow-mode part of the design state.
+
+    Parameters
+    ----------
+    mass : ndarray
+        The design model's mass matrix at the target (N x N).
+    a_lin : ndarray
+        The continuous linearisation ``A`` at the target equilibrium (2N x 2N), whose
+        lower-left block is ``-M^-1 K_lin`` (stiffness and gravity).
+    basis : ndarray
+        ``P`` of the prediction's coordinates, ``q = P q_r`` (N x N_r, orthonormal
+        columns: a selection of coordinates, or :func:`coupled_basis`).
+
+    Returns
+    -------
+    ndarray
+        ``blockdiag(P' P_s, P' P_s)`` with ``P_s = Phi_s Phi_s' M`` the M-orthogonal
+        projector onto the ``N_r`` slowest modes: zero on the dropped modes (see the
+        module docstring).
+
+    Raises
+    ------
+    ValueError
+        When the slow modes do not span the reduced coordinates (``P' Phi_s`` singular).
+    """
+    import scipy.linalg as sl
+
+    N = mass.shape[0]
+    M = 0.5 * (mass + mass.T)
+    K = M @ -a_lin[N:, :N]
+    _, Phi = sl.eigh(0.5 * (K + K.T), M)
+    Ps = Phi[:, : basis.shape[1]]
+    SPhi = basis.T @ Ps
+    cond = np.linalg.cond(SPhi)
+    if not np.isfinite(cond) or cond > 1e8:
+        raise ValueError(f"the {basis.shape[1]} slowest modes do not span the prediction's coordinates "
+                         f"(condition number {cond:.3g}); use prediction_map = \"select\"")
+    Tq = SPhi @ Ps.T @ M
+    return sl.block_diag(Tq, Tq)
+
+
+__all__ = ["Prediction", "prediction_model", "truncated_model", "modal_map", "coupled_basis"]

@@ -19,133 +19,11 @@ from typing import Literal, Union
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.field_checks import boolean_field, choice_field, integer_field, number_field, numbers_field
-from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
-
-ControllerKind = Literal["pd", "lqr", "mpc", "nmpc", "shaped"]
-GravityCompensation = Literal["target", "measured", "none"]
-SoftConstraint = Literal["none", "deflection", "tip"]
-Formulation = Literal["sparse", "condensed"]
-QPBackend = Literal["osqp", "hpipm", "daqp", "qpoases"]
-Scaling = Literal["auto", "bryson", "none"]
-WarmStart = Literal["shift", "previous", "none"]
-Fallback = Literal["shift", "lqr", "hold"]
-NMPCMode = Literal["rti", "full"]
-NLPSolver = Literal["ipopt"]
-RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
-Sensitivities = Literal["frozen", "exact"]
-Shaper = Literal["zv", "zvd", "none"]
-FrequencySource = Literal["closed_loop", "locked"]
-
-
-# --------------------------------------------------------------------------------------
-# shared pieces
-# --------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SensorSettings:
-    """What the controller measures and the noise standard deviation of each sensor.
-
-    Attributes
-    ----------
-    outputs : tuple of str
-        Sensor kinds (:data:`flexctrl.linear.SENSOR_KINDS`): ``"joints"`` (encoders, rad),
-        ``"joint_rates"`` (rad/s), ``"strain"`` (root curvature of each flexible link, 1/m),
-        ``"tip"`` (m), ``"tip_acc"`` (m/s^2), ``"deflection"`` (link tip deflections, m),
-        ``"state"`` (the whole state: no estimator).
-    joints, joint_rates, strain, tip, tip_acc, deflection : float
-        Noise standard deviations in the unit of the output (>= 0).  The Kalman filter
-        uses them as its measurement noise; a closed loop may use them to add noise.
-    """
-
-    outputs: tuple[str, ...] = ("state",)
-    joints: float = DEFAULT_NOISE["joints"]
-    joint_rates: float = DEFAULT_NOISE["joint_rates"]
-    strain: float = DEFAULT_NOISE["strain"]
-    tip: float = DEFAULT_NOISE["tip"]
-    tip_acc: float = DEFAULT_NOISE["tip_acc"]
-    deflection: float = DEFAULT_NOISE["deflection"]
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.outputs, tuple) or not self.outputs:
-            raise SpecError(f"value {self.outputs!r} is not allowed; allowed: a non-empty list of "
-                            f"{', '.join(map(repr, SENSOR_KINDS))}", key="outputs")
-        for i, kind in enumerate(self.outputs):
-            if kind not in SENSOR_KINDS:
-                choice_field(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
-        if len(set(self.outputs)) != len(self.outputs):
-            raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
-        if "state" in self.outputs and len(self.outputs) > 1:
-            raise SpecError(f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
-                            key="outputs")
-        for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection"):
-            number_field(name, getattr(self, name), low=0.0)
-
-    def noise(self) -> dict[str, float]:
-        """Noise standard deviation per sensor kind."""
-        return {name: getattr(self, name) for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection")}
-
-    @property
-    def full_state(self) -> bool:
-        """Whether the whole state is measured."""
-        return self.outputs == ("state",)
-
-
-@dataclass(frozen=True)
-class Weights:
-    """LQR/MPC weights as acceptable magnitudes (Bryson's rule), in the units of each quantity.
-
-    Attributes
-    ----------
-    joint : float
-        Joint-angle error, rad.
-    modal : float
-        Elastic coordinate, m (modal coordinates are in metres of mass-normalised shapes).
-    joint_rate : float
-        Joint rate, rad/s.
-    modal_rate : float
-        Elastic rate, m/s.
-    torque : float
-        Torque deviation as a fraction of each joint's torque limit (of 1 N m when the
-        model has no limits).
-
-    In controller files the angle weights are ``joint_deg`` (deg) and
-    ``joint_rate_deg_s`` (deg/s): one name, one unit.
-    """
-
-    joint: float = 0.01
-    modal: float = 0.002
-    joint_rate: float = 0.5
-    modal_rate: float = 0.5
-    torque: float = 0.5
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            number_field(f.name, getattr(self, f.name), low=0.0, low_open=True)
-
-
-@dataclass(frozen=True)
-class EstimatorSettings:
-    """Steady-state discrete Kalman filter on the linearisation at the target.
-
-    Used whenever the sensors do not measure the whole state.
-
-    Attributes
-    ----------
-    torque_noise : float
-        Standard deviation of an unmeasured torque disturbance on each joint, N m
-        (held over a sample).
-    modal_force_noise : float
-        Standard deviation of a generalised-force disturbance on each elastic
-        coordinate, N (model error in the elastic dynamics).
-    """
-
-    kind: Literal["kalman"] = "kalman"
-    torque_noise: float = 2.0
-    modal_force_noise: float = 1.0
-
-    def __post_init__(self) -> None:
-        choice_field("kind", self.kind, Literal["kalman"])
-        number_field("torque_noise", self.torque_noise, low=0.0)
-        number_field("modal_force_noise", self.modal_force_noise, low=0.0)
+from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
+    ControllerKind, GravityCompensation, SoftConstraint, Formulation, QPBackend, Scaling, WarmStart,
+    Fallback, NMPCMode, NLPSolver, PredictionMap, PredictionBasis, RTIQPSolver, Sensitivities, Shaper,
+    FrequencySource, SensorSettings, Weights, EstimatorSettings,
+)
 
 
 @dataclass(frozen=True)
@@ -485,6 +363,22 @@ class NMPCSettings:
         design model, a Galerkin truncation (:mod:`flexctrl.control.nmpc_model`); 0
         (default): all of them.  Fewer modes need fewer RK4 substeps (the fastest mode
         bounds the step); the estimator keeps the design model.
+    prediction_basis : {"assumed", "coupled"}
+        The reduced model's coordinates: the first ``prediction_modes`` assumed modes per
+        link (``"assumed"``) or the joints and as many directions spanning the elastic
+        parts of the design model's slowest coupled modes at the target (``"coupled"``,
+        default; :func:`flexctrl.control.nmpc_model.coupled_basis`).
+    prediction_map : {"modal", "select"}
+        How a reduced prediction model (``prediction_modes > 0``) sees the design model's
+        state: ``"modal"`` (default) removes the dropped (fast) modes of the linearisation
+        at the target before selecting the kept coordinates, so the fast modes are not fed
+        back (:func:`flexctrl.control.nmpc_model.modal_map`); ``"select"`` takes the kept
+        coordinates as they are (their fast-mode content destabilises the tuned loop,
+        ``docs/control.md``).
+    jacobian_every : int
+        ``sensitivities = "frozen"`` only: one Jacobian of ``f`` per this many RK4 steps
+        (1, default: every step), frozen over them (the transition of the frozen
+        linearisation over the steps is exact).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``) instead of its default start (about half the
@@ -511,6 +405,9 @@ class NMPCSettings:
     slack_l2: float = 1.0e7
     compile: bool = True
     prediction_modes: int = 0
+    prediction_basis: PredictionBasis = "coupled"
+    prediction_map: PredictionMap = "modal"
+    jacobian_every: int = 1
     qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
@@ -533,6 +430,9 @@ class NMPCSettings:
         number_field("slack_l2", self.slack_l2, low=0.0, low_open=True)
         boolean_field("compile", self.compile)
         integer_field("prediction_modes", self.prediction_modes, low=0, high=6)
+        choice_field("prediction_basis", self.prediction_basis, PredictionBasis)
+        choice_field("prediction_map", self.prediction_map, PredictionMap)
+        integer_field("jacobian_every", self.jacobian_every, low=1, high=200)
         boolean_field("qp_warm_start", self.qp_warm_start)
 
 

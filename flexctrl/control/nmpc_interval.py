@@ -1,0 +1,122 @@
+"""The NMPC's shooting interval: RK4 over one sample and its sensitivities.
+
+``F(x, u)``: ``substeps`` classical RK4 steps of the model's ``f(x, u)`` over one sample
+(``f`` is called, not inlined, so generated code holds it once).  ``FJ(x, u)`` adds
+``A = dx_next/dx`` and ``B = dx_next/du``:
+
+``"exact"``   the Jacobian of ``f`` propagated through every RK4 stage (4 ``substeps``
+              Jacobians per interval): the derivative of the nonlinear RK4 map.
+``"frozen"``  the products over the interval's RK4 steps of the exact transition
+              matrices of RK4 applied to the dynamics linearised at the start of a
+              step, ``Phi = I + hJ + (hJ)^2/2 + (hJ)^3/6 + (hJ)^4/24`` and
+              ``Gam = h (I + hJ/2 + (hJ)^2/6 + (hJ)^3/24) J_u``.  With
+              ``jacobian_every = k`` one Jacobian serves ``k`` consecutive steps (the
+              transition of the frozen linearisation over them is ``Phi^k``, and
+              ``(I + Phi + ... + Phi^(k-1)) Gam``); ``k = 1`` (one Jacobian per step) is
+              the shipped setting.
+
+Either way the shooting end ``x_next`` is the nonlinear RK4 map, so an RTI on inexact
+sensitivities still has the fixed points of the nonlinear shooting equations.  Why one
+Jacobian per step and not per sample: ``docs/control.md`` ("sensitivities per RK4 step").
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.sim.base import try_expand as _expanded
+from flexctrl.sim.rk4 import rk4_next
+
+#: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).
+RK4_BOUND = 2.5
+
+
+def auto_substeps(plant) -> int:
+    """Fewest RK4 steps per sample with ``|lambda|_max h <= RK4_BOUND`` for the linearisation at the target."""
+    lam = float(np.max(np.abs(np.linalg.eigvals(np.asarray(plant.sys.A, dtype=float)))))
+    return max(1, int(math.ceil(lam * plant.dt / RK4_BOUND)))
+
+
+def _frozen_transition(Jx, Ju, h: float, steps: int, eye):
+    """``(Phi^steps, (I + Phi + ... + Phi^(steps-1)) Gam)`` of RK4 on ``xdot = Jx x + Ju u`` with step ``h``."""
+    hA = h * Jx
+    hA2 = ca.mtimes(hA, hA)
+    hA3 = ca.mtimes(hA2, hA)
+    Phi = eye + hA + hA2 / 2 + hA3 / 6 + ca.mtimes(hA3, hA) / 24
+    Gam = h * ca.mtimes(eye + hA / 2 + hA2 / 6 + hA3 / 24, Ju)
+    Phi_k, Gam_k = Phi, Gam
+    for _ in range(steps - 1):
+        Phi_k, Gam_k = ca.mtimes(Phi, Phi_k), ca.mtimes(Phi, Gam_k) + Gam
+    return Phi_k, Gam_k
+
+
+def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, sensitivities: str | None,
+                  extra: tuple[ca.MX, ...] = (), f_jac: ca.Function | None = None,
+                  jacobian_every: int = 1) -> tuple[ca.Function, ca.Function | None]:
+    """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see the module docstring).
+
+    ``sensitivities=None`` builds ``F`` only (``FJ`` is None).  ``f_jac(x, u, *extra) ->
+    (f, f_x, f_u)``: default CasADi's Jacobian of ``f``.  ``jacobian_every``: RK4 steps
+    per Jacobian of ``f`` (``"frozen"`` only).
+    """
+    if jacobian_every < 1:
+        raise ValueError(f"jacobian_every = {jacobian_every} is not allowed; allowed: an integer >= 1")
+    x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
+    names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
+    h = dt / substeps
+    rhs = lambda s: f(s, u, *extra)  # noqa: E731
+    xf = x
+    for _ in range(substeps):
+        xf = rk4_next(rhs, xf, h)
+    F = ca.Function("F", [x, u, *extra], [xf], names, ["x_next"])
+    if sensitivities is None:
+        return F, None
+    xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+    es = [ca.SX.sym(f"p{i}", e.sparsity()) for i, e in enumerate(extra)]
+    fxu = f(xs, us, *es)
+    fx = f_jac or ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
+    eye = ca.DM.eye(nx)
+
+    def with_sensitivities(state):
+        # RK4 on (x, A, B): d/dt (x, A, B) = (f, f_x A, f_x B + f_u)
+        xs, A, B = state
+        k, Jx, Ju = fx(xs, u, *extra)
+        return k, ca.mtimes(Jx, A), ca.mtimes(Jx, B) + Ju
+
+    xe, Ad, Bd = x, eye, ca.MX.zeros(nx, nu)
+    if sensitivities == "frozen":
+        done = 0
+        while done < substeps:
+            # one Jacobian at the start of a group of RK4 steps, frozen over the group
+            steps = min(jacobian_every, substeps - done)
+            k1, Jx, Ju = fx(xe, u, *extra)
+            Phi, Gam = _frozen_transition(Jx, Ju, h, steps, eye)
+            Ad, Bd = ca.mtimes(Phi, Ad), ca.mtimes(Phi, Bd) + Gam
+            xe = rk4_next(rhs, xe, h, k1=k1)
+            for _ in range(steps - 1):
+                xe = rk4_next(rhs, xe, h)
+            done += steps
+    else:
+        for _ in range(substeps):
+            xe, Ad, Bd = rk4_next(with_sensitivities, (xe, Ad, Bd), h)
+    FJ = ca.Function("FJ", [x, u, *extra], [xe, Ad, Bd], names, ["x_next", "A", "B"])
+    return F, FJ
+
+
+def interval_functions(model, dt: float, substeps: int, sensitivities: str | None,
+                       jacobian_every: int = 1) -> tuple[ca.Function, ca.Function | None]:
+    """``F(x, u) -> x_next`` and ``FJ(x, u) -> (x_next, A, B)`` over one sample, physical units.
+
+    ``F``: ``substeps`` classical RK4 steps of the model's ``f``.  ``FJ`` adds the
+    sensitivities ``A = dx_next/dx``, ``B = dx_next/du``: exact (``"exact"``) or, with
+    ``"frozen"``, RK4 applied to the dynamics linearised at the start of every
+    ``jacobian_every``-th RK4 step (see the module docstring).
+    """
+    f = _expanded(model.functions["f"])
+    return interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities, jacobian_every=jacobian_every)
+
+
+__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND"]
