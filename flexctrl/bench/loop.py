@@ -13,9 +13,15 @@ Both loop paths are measured in the same process, interleaved (``repeats`` round
 python, compiled and plant-only), so the machine's load moves them together: the
 ``python`` block is the slow path (one Python iteration per sample), ``compiled`` the
 one-call path (:mod:`flexctrl.loop.compiled`).  ``cold_design`` repeats the compiled run
-with a fresh design (a new configuration in a sweep): build and design are then paid.
-Medians of the rounds; the metrics of the two paths are compared
-(``max_metric_relative_difference``).
+with a fresh design on the kept model (design, reference table and verdict paid);
+``fresh_configuration`` with everything fresh but the compiled libraries on disk (a new
+configuration in a sweep: the model built, its constants lifted, Jacobians and
+reference Functions built).  Each of the two also runs with the reference table's
+Newton iteration in CasADi's virtual machine (``reference_vm``, the slow path:
+``reference_compile=False`` of :func:`~flexctrl.scenes.closed_loop.run_closed_loop_scene`)
+beside the compiled one, in the same round.  Medians of the rounds; the metrics of the
+two loop paths are compared (``max_metric_relative_difference``), and those of the two
+reference paths (``reference_metric_differences``).
 """
 
 from __future__ import annotations
@@ -85,7 +91,10 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
     integrator = RK4(plant, dt, compile=scene.plant.solver.get("compile")).setup()
     torques = trajectory.inputs[:-1]  # the loop runs whole samples: 942 x 17 steps = 8.007 s for the LQR
     x0, span = trajectory.states[0], torques.shape[0] * dt
-    walls: dict[str, list[float]] = {"python": [], "compiled": [], "plant_only": [], "cold_design": []}
+    walls: dict[str, list[float]] = {"python": [], "compiled": [], "plant_only": [], "cold_design": [],
+                                     "cold_design_reference_vm": [], "fresh_configuration": [],
+                                     "fresh_configuration_reference_vm": []}
+    fresh_runs = {}
     for _ in range(repeats):
         for loop in ("python", "compiled"):
             start = time.perf_counter()
@@ -94,11 +103,17 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
         start = time.perf_counter()
         integrator.run(x0, span, u=torques)
         walls["plant_only"].append(time.perf_counter() - start)
-        fresh = SceneCache()
-        fresh._stores["models"] = cache._stores["models"]  # models built; design, reference and verdict anew
-        start = time.perf_counter()
-        run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled")
-        walls["cold_design"].append(time.perf_counter() - start)
+        for name, reference_compile in (("", None), ("_reference_vm", False)):
+            fresh = SceneCache()
+            fresh._stores["models"] = cache._stores["models"]  # models built; design, reference and verdict anew
+            start = time.perf_counter()
+            run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled",
+                                  reference_compile=reference_compile)
+            walls["cold_design" + name].append(time.perf_counter() - start)
+            start = time.perf_counter()
+            fresh_runs[name] = run_closed_loop_scene(scene, cache=SceneCache(), on_divergence="record",
+                                                     loop="compiled", reference_compile=reference_compile)
+            walls["fresh_configuration" + name].append(time.perf_counter() - start)
     med = {k: statistics.median(v) for k, v in walls.items()}
     run_wall, plant_only = med["compiled"], med["plant_only"]
     return {
@@ -110,7 +125,15 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
         "ratio": run_wall / plant_only,
         "python": {"run_wall_s": med["python"], "ratio": med["python"] / plant_only},
         "cold_design": {"run_wall_s": med["cold_design"], "ratio": med["cold_design"] / plant_only,
+                        "reference_vm_run_wall_s": med["cold_design_reference_vm"],
                         "note": "models built, but design, reference table and linear verdict computed afresh"},
+        "fresh_configuration": {
+            "run_wall_s": med["fresh_configuration"], "ratio": med["fresh_configuration"] / plant_only,
+            "reference_vm_run_wall_s": med["fresh_configuration_reference_vm"],
+            "speedup_vs_reference_vm": med["fresh_configuration_reference_vm"] / med["fresh_configuration"],
+            "note": "a fresh cache: model built and everything derived from it anew; compiled libraries from disk"},
+        "reference_metric_differences": metric_differences(fresh_runs["_reference_vm"].metrics,
+                                                           fresh_runs[""].metrics),
         "speedup_vs_python": med["python"] / run_wall,
         "max_metric_relative_difference": metric_difference(results["python"].metrics, results["compiled"].metrics),
         "metric_differences": metric_differences(results["python"].metrics, results["compiled"].metrics),
@@ -135,6 +158,13 @@ def format_loop(result: dict[str, Any]) -> str:
         f"(target <= {result['target_ratio']:g}: {'met' if result['met'] else 'NOT met'})",
         f"  run, python loop            {result['python']['run_wall_s'] * 1e3:8.1f} ms   ratio {result['python']['ratio']:.2f}",
         f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms   ratio "
-        f"{result['cold_design']['ratio']:.2f}",
+        f"{result['cold_design']['ratio']:.2f}   (reference in the VM: "
+        f"{result['cold_design']['reference_vm_run_wall_s'] * 1e3:.1f} ms)",
+        f"  run, compiled, fresh config {result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
+        f"{result['fresh_configuration']['ratio']:.2f}   (reference in the VM: "
+        f"{result['fresh_configuration']['reference_vm_run_wall_s'] * 1e3:.1f} ms, "
+        f"{result['fresh_configuration']['speedup_vs_reference_vm']:.2f}x)",
+        f"  compiled / VM reference metrics: largest relative difference "
+        f"{max(result['reference_metric_differences'].values(), default=0.0):.2g}",
         f"  compiled / python metrics: largest relative difference {result['max_metric_relative_difference']:.2g}",
     ])

@@ -1,4 +1,4 @@
-"""``flexctrl bench sim|mpc|loop|studies``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`), study files side by side (:mod:`flexctrl.bench.studies`)."""
+"""``flexctrl bench sim|mpc|loop|studies|runs``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`), study files side by side (:mod:`flexctrl.bench.studies`), one study's runs under two source trees (:mod:`flexctrl.bench.runs`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim", "mpc", "loop", "studies")
+BENCHMARKS = ("sim", "mpc", "loop", "studies", "runs")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -27,7 +27,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
         "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio. 'studies': --study files (default "
         "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a fresh process run twice "
-        "(first pass, repeated pass), --repeats rounds; prints the pass times and their ratios to the first study.",
+        "(first pass, repeated pass), --repeats rounds; prints the pass times and their ratios to the first study. "
+        "'runs': the runs of one --study under two --tree source checkouts (one worker process each), alternated run "
+        "by run; prints each tree's summed per-run wall time by --by and the ratio.",
     )
     parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -44,6 +46,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         help="studies: a study file (repeatable; the first is the baseline)")
     parser.add_argument("--workers", type=int, default=0, metavar="N", help="studies: workers per pass (default 0: in the process)")
     parser.add_argument("--keep", default=None, metavar="DIR", help="studies: write the passes' folders here")
+    parser.add_argument("--tree", action="append", default=None, metavar="DIR",
+                        help="runs: a source checkout (twice: the old one first, then the new one)")
+    parser.add_argument("--by", default="controller", metavar="COLUMN", help="runs: group wall times by this column")
+    parser.add_argument("--exclude", action="append", default=[], metavar="KEY=VALUE",
+                        help="runs: leave out the runs with this coordinate (repeatable), e.g. controller=nmpc")
     parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
     return parser
 
@@ -55,6 +62,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_loop(args)
     if args.what == "studies":
         return _run_studies(args)
+    if args.what == "runs":
+        return _run_runs(args)
     from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
@@ -121,4 +130,25 @@ def _run_studies(args: argparse.Namespace) -> int:
                         key="--repeats")
     result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep)
     print(json.dumps(result, indent=2) if args.json else format_studies(result))
+    return 0
+
+
+def _run_runs(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from flexctrl.bench.runs import bench_runs, format_runs
+
+    if not args.study or len(args.study) != 1 or not args.tree or len(args.tree) != 2:
+        raise SpecError(f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two --tree DIR",
+                        key="--tree")
+    for tree in args.tree:
+        if not (Path(tree) / "flexctrl" / "__init__.py").is_file():
+            raise SpecError(f"value {tree!r} is not a flexctrl checkout; allowed: a folder holding flexctrl/__init__.py",
+                            key="--tree")
+    for item in args.exclude:
+        if "=" not in item:
+            raise SpecError(f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of its values)",
+                            key="--exclude")
+    result = bench_runs(args.study[0], args.tree, by=args.by, exclude=args.exclude)
+    print(json.dumps(result, indent=2) if args.json else format_runs(result))
     return 0

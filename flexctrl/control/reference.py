@@ -46,8 +46,11 @@ import math
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.model import derived
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
+from flexctrl.sim.compile import QUICK_FLAGS, compile_function
+from flexctrl.sim.parametric import parametric
 
 from flexctrl.spec.reference import DEFLECTIONS, JointReference
 
@@ -59,29 +62,69 @@ def _damping_matrix(model, q):
     return fun(q) if fun.n_in() == 1 else fun()["D"]
 
 
-def _path_functions(model) -> dict[str, ca.Function]:
-    """CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``: ``rj -> (r_f, J_qf)``, ``jac -> (J_qr, J_qdr, J_qddr)``,
-    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module docstring)."""
+def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function]:
+    """CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``: ``rj -> (r_f, J_qf)``,
+    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module docstring).
+
+    Built once per model and ``compile`` (kept with the model,
+    :func:`~flexctrl.dynamics.model.derived`).  ``compile=False``: SX Functions evaluated
+    in CasADi's virtual machine.  Otherwise (``None``: unless switched off, as
+    :func:`flexctrl.sim.compile.compile_function`) the generalised forces are rebuilt with
+    their numeric constants as an input, one per use
+    (:func:`flexctrl.sim.parametric.constants_as_parameters`), differentiated with the
+    constants symbolic and compiled as ONE Function of all seven outputs, named by the
+    sizes alone: every configuration and payload of one model shape shares one library,
+    and a new configuration pays the lift and the Jacobians (about 0.2 s for ``amm:2``
+    of the three-link arm), not a compiler run.  The three Functions bind the model's
+    constants to it.  When the constants cannot be lifted or nothing compiles, the
+    virtual machine's Functions are returned.  Compiled values differ from the
+    virtual machine's in the last digits (fused multiply-adds, no constant folding).
+    """
+    return derived(model, ("reference_functions", compile), lambda: _path_functions(model, compile))
+
+
+def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
     n, N = model.n_u, model.n_q
     qr, qdr, qddr = (ca.SX.sym(name, n) for name in ("qr", "qdr", "qddr"))
     qf, qdf, qddf = ca.SX.sym("qf", N - n), ca.SX.sym("qdf", N - n), ca.SX.sym("qddf", N - n)
+    args = [qr, qdr, qddr, qf, qdf, qddf]
+    names = ["qr", "qdr", "qddr", "qf", "qdf", "qddf"]
     q = ca.vertcat(qr, qf)
     qd = ca.vertcat(qdr, qdf)
     qdd = ca.vertcat(qddr, qddf)
     static = model.functions["g"](q) + ca.mtimes(stiffness_matrix(model, q), q)
     force = (ca.mtimes(model.functions["M"](q), qdd) + model.functions["c"](q, qd) + static
              + ca.mtimes(_damping_matrix(model, q), qd))
+    if compile is False:
+        return _functions(args, names, _outputs(force, static, qr, qdr, qddr, qf, n))
+    forces = ca.Function("reference_forces", args, [force, static], names, ["force", "static"])
+    fp, constants = parametric(model, "reference_forces", lambda: forces, per_use=True)
+    if constants.size == 0:
+        return path_functions(model, False)
+    c = ca.SX.sym("c", constants.size)
+    force, static = fp(*args, c)
+    outs = _outputs(force, static, qr, qdr, qddr, qf, n)
+    one = ca.Function(f"reference_p_{n}_{N}_{constants.size}", [*args, c], outs, [*names, "c"],
+                      ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"])
+    compiled = compile_function(one, enabled=compile, flags=QUICK_FLAGS)
+    if not compiled.compiled:
+        return path_functions(model, False)
+    mx = [ca.MX.sym(name, a.sparsity()) for name, a in zip(names, args)]
+    return _functions(mx, names, compiled.function.call([*mx, ca.DM(constants)]))
+
+
+def _outputs(force, static, qr, qdr, qddr, qf, n: int) -> list:
+    """``[r_f, J_qf, J_qr, J_qdr, J_qddr, tau, tau_static]`` of the generalised forces (module docstring)."""
     r = force[n:]
-    args = [qr, qdr, qddr, qf, qdf, qddf]
-    names = ["qr", "qdr", "qddr", "qf", "qdf", "qddf"]
-    J_qf = ca.jacobian(r, qf)
-    return {
-        "rj": ca.Function("reference_rj", args, [r, J_qf], names, ["r", "J_qf"]),
-        "all": ca.Function("reference_all", args, [r, J_qf, ca.jacobian(r, qr), ca.jacobian(r, qdr),
-                                                   ca.jacobian(r, qddr)],
-                           names, ["r", "J_qf", "J_qr", "J_qdr", "J_qddr"]),
-        "tau": ca.Function("reference_tau", args, [force[:n], static[:n]], names, ["tau", "tau_static"]),
-    }
+    return [r, ca.jacobian(r, qf), ca.jacobian(r, qr), ca.jacobian(r, qdr), ca.jacobian(r, qddr), force[:n],
+            static[:n]]
+
+
+def _functions(args, names, outs) -> dict[str, ca.Function]:
+    """``rj``, ``all`` and ``tau`` (:func:`path_functions`) of the outputs of :func:`_outputs` at ``args``."""
+    return {"rj": ca.Function("reference_rj", args, outs[:2], names, ["r", "J_qf"]),
+            "all": ca.Function("reference_all", args, outs[:5], names, ["r", "J_qf", "J_qr", "J_qdr", "J_qddr"]),
+            "tau": ca.Function("reference_tau", args, outs[5:], names, ["tau", "tau_static"])}
 
 
 class ReferenceTrajectory:
@@ -95,10 +138,16 @@ class ReferenceTrajectory:
     deflection : {"quasi_static", "static"}
     tol : float
         Newton tolerance on the elastic coordinates (relative to ``1 + |q_f|``).
+    compile : bool or None
+        How the equations of motion are evaluated in the Newton iteration and the
+        feed-forward (:func:`path_functions`): ``False`` (default) CasADi's virtual
+        machine; ``None`` a compiled library unless compilation is switched off
+        (``FLEXCTRL_NO_COMPILE``), ``True`` compiled.  Compiled tables differ from the
+        virtual machine's in the last digits.
     """
 
     def __init__(self, model, path: JointReference, deflection: str = "quasi_static", *, tol: float = 1e-10,
-                 max_iter: int = 30):
+                 max_iter: int = 30, compile: bool | None = False):
         if deflection not in DEFLECTIONS:
             raise SpecError(f"value {deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
                             key="deflection")
@@ -109,13 +158,17 @@ class ReferenceTrajectory:
         self.deflection = deflection
         self.tol, self.max_iter = tol, max_iter
         self.n_u, self.n_q = model.n_u, model.n_q
-        self._fun = _path_functions(model)
+        self.compile = compile
         self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @property
     def t_arrive(self) -> float:
         """End of the move, s."""
         return self.path.t_arrive
+
+    @property
+    def _fun(self) -> dict[str, ca.Function]:
+        return path_functions(self.model, self.compile)
 
     def _elastic(self, derivs, moving: bool, elastic: bool, qddf: np.ndarray, qf: np.ndarray,
                  qdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ import numpy as np
 
 from flexctrl.dynamics.model import derived
 from flexctrl.sim.compile import compile_function
-from flexctrl.sim.parametric import constants_as_parameters
+from flexctrl.sim.parametric import parametric
 from flexctrl.sim.base import try_expand
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
@@ -69,7 +69,7 @@ def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
         from flexctrl.sim.base import output_function
 
         fun = output_function(model)
-        fp, constants = constants_as_parameters(fun, per_use=True)
+        fp, constants = parametric(model, "outputs", lambda: fun, per_use=True)
         X = ca.MX.sym("X", model.n_x, count)
         if constants.size == 0:
             return ca.Function("outputs", [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
@@ -115,7 +115,7 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
 
 
 def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Function, bool]:
-    fp, constants = constants_as_parameters(model.functions["f"])
+    fp, constants = parametric(model, "f", lambda: model.functions["f"])
     x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
     if substeps <= UNROLL_LIMIT:
         if constants.size == 0:  # f could not be rebuilt: one library per model

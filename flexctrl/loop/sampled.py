@@ -15,8 +15,9 @@ That is the ``loop = "python"`` path: one Python iteration per sample.  A contro
 law is a CasADi map (:meth:`~flexctrl.control.base.Controller.sampled_law`: LQR, LQG, PD,
 shaped) runs, after its first sample, every remaining sample in ONE CasADi call
 (``loop = "compiled"``, :mod:`flexctrl.loop.compiled`; ``"auto"``, the default, uses it
-when the controller offers it), with the energies, tip and deflections from a compiled
-output map.  Both paths do the same arithmetic in the plant and the controller; the
+when the controller offers it); the energies, tip and deflections come from a compiled
+output map on every path but ``loop = "python"`` (the virtual machine's mapped calls, the
+slow path throughout).  Both paths do the same arithmetic in the plant and the controller; the
 compiled output map and the controller's matrix products can differ in the last digits
 (tests/test_loop_compiled.py holds them within 1e-9 relative).
 
@@ -88,7 +89,9 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
         On divergence, return the trajectory up to the last finite state with
         ``meta["divergence"] = {"time": t (s), "reason": str}`` instead of raising.
     loop : {"auto", "compiled", "python"}
-        How the samples are run (:data:`LOOPS`, module docstring).
+        How the samples are run (:data:`LOOPS`, module docstring).  The energies, tip and
+        deflections come from the compiled output map except with ``"python"`` (the slow
+        path throughout: mapped calls in CasADi's virtual machine).
 
     Returns
     -------
@@ -105,7 +108,7 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
     t, X, U, meta, samples = integrate_closed_loop(plant, controller, x0, duration, dt, sensors=sensors, rng=rng,
                                                    compile=compile, monitor=monitor,
                                                    stop_on_divergence=stop_on_divergence, loop=loop)
-    return trajectory_from_states(plant, t, X, U, meta, compiled=meta["loop"] == "compiled", compile=compile), samples
+    return trajectory_from_states(plant, t, X, U, meta, compiled=loop != "python", compile=compile), samples
 
 
 def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,

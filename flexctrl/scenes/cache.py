@@ -1,4 +1,4 @@
-"""An explicit cache for scene runs: models, set-up integrators, runs and fidelity choices.
+"""An explicit cache for scene runs: models, reference tables, set-up integrators, runs and fidelity choices.
 
 Building a model (symbolic derivation, modes, compilation) costs far more than most
 runs, and a study worker or a fidelity chooser runs many scenes on the same arm.  What
@@ -66,6 +66,21 @@ class SceneCache:
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
         key = (arm, str(fidelity), modes, reference_q)
         return self.get("models", key, lambda: build_model(arm, str(fidelity), modes=modes, reference_q=reference_q))
+
+    def reference(self, arm, fidelity: str, modes: str, reference_q, path, deflection: str,
+                  compile: bool | None = False):
+        """A :class:`~flexctrl.control.reference.ReferenceTrajectory` of ``path`` on :meth:`model`'s model, built once.
+
+        Keyed on the model's description, the joint path and the deflection (plain data), so
+        the controllers designed on one model for one move share its tables (one per sample
+        time): a table is a pure function of those and the sample time.
+        """
+        from flexctrl.control.reference import ReferenceTrajectory
+
+        reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
+        key = (arm, str(fidelity), modes, reference_q, path, deflection, compile)
+        return self.get("references", key, lambda: ReferenceTrajectory(self.model(arm, fidelity, modes, reference_q),
+                                                                      path, deflection, compile=compile))
 
     def integrator(self, arm, fidelity: str, modes: str, reference_q, integrator: str, dt: float,
                    solver: tuple[tuple[str, Any], ...] = ()):

@@ -70,7 +70,8 @@ def apply_choice(scene, choice, cache: SceneCache):
 def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=None, fidelity=None,
                           plots: bool | None = None, overrides=(), on_divergence: str = "raise",
                           auto_options: dict[str, Any] | None = None,
-                          cache: SceneCache | None = None, loop: str = "auto", choice=None) -> ClosedLoopResult:
+                          cache: SceneCache | None = None, loop: str = "auto", choice=None,
+                          reference_compile: bool | None = None) -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -107,6 +108,11 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         For a plant with ``fidelity = "auto"``: a choice made for another run (a study's
         shared choice, :mod:`flexctrl.study.shared_choice`) used instead of choosing
         (:func:`apply_choice`); ``choice_time_s`` is then 0.
+    reference_compile : bool, optional
+        How the reference table's Newton iteration is evaluated
+        (:func:`~flexctrl.scenes.loop_setup.build_loop`): ``False`` in CasADi's virtual
+        machine (the slow path, for comparison), ``True`` compiled; None follows the
+        plant's ``solver.compile``.
 
     Returns
     -------
@@ -141,7 +147,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     else:
         scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
     choosing = time.perf_counter() - choosing
-    setup = build_loop(scene, controller, overrides, cache)
+    setup = build_loop(scene, controller, overrides, cache, reference_compile=reference_compile)
     plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
     rng = np.random.default_rng(scene.seed) if scene.noise else None
     trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt, sensors=setup.sensors,

@@ -70,8 +70,11 @@ class LoopSetup:
     design_key: Any = None
 
 
-def design_scene_controller(scene, design_model, settings, path: str | Path):
+def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
     """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
+
+    ``reference``: the :class:`~flexctrl.control.reference.ReferenceTrajectory` of the scene's path on
+    ``design_model`` when the caller keeps one (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
 
     Raises
     ------
@@ -91,7 +94,9 @@ def design_scene_controller(scene, design_model, settings, path: str | Path):
     except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
         raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
                           f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
-    ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+    if reference is None:
+        reference = ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection)
+    ctrl.set_reference(reference)
     ctrl.reset()
     return ctrl
 
@@ -101,7 +106,8 @@ def is_designed(controller) -> bool:
     return hasattr(controller, "step") and hasattr(controller, "sensors")
 
 
-def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None) -> LoopSetup:
+def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None, *,
+               reference_compile: bool | None = None) -> LoopSetup:
     """Build plant and design models (kept in ``cache``), design the controller, set its reference.
 
     ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).  ``controller``
@@ -113,7 +119,13 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
     A controller designed from a file is kept in ``cache`` ("designs") under everything
     it depends on (design arm, fidelity, configuration, settings, the scene's joint
     path and deflection) and reset for each run, so the runs of a worker that differ
-    only in the plant (payload, fidelity, step, noise) design once.
+    only in the plant (payload, fidelity, step, noise) design once.  Its reference
+    trajectory is kept in ``cache`` ("references") under the design model's description,
+    the path and the deflection, so every controller designed on one model for one move
+    shares its tables.  ``reference_compile`` is the reference's ``compile``
+    (:class:`~flexctrl.control.reference.ReferenceTrajectory`: ``False`` CasADi's virtual
+    machine, the slow path; ``True`` compiled); None (default) follows the plant's
+    ``solver.compile`` (compiled unless switched off).
     """
     from flexctrl.spec.controller import load_controller
 
@@ -139,15 +151,18 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
         ctrl.reset()
     else:
         settings = load_controller(path, overrides)
+        if reference_compile is None:
+            reference_compile = plant_scene.solver.get("compile")
         design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
         design_fidelity = scene.controller_fidelity or plant_scene.fidelity
         design_q = tuple(scene.design_configuration)
         same = design_arm == arm and str(design_fidelity) == str(plant_scene.fidelity) and scene.design_q is None
         design_model = plant if same else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
-        design_key = (design_arm, str(design_fidelity), plant_scene.modes, plant_scene.q0 if same else design_q,
-                      design_q, settings, scene.joint_reference(), scene.deflection)
-        ctrl = cache.get("designs", design_key,
-                         lambda: design_scene_controller(scene, design_model, settings, path))
+        model_key = (design_arm, str(design_fidelity), plant_scene.modes, plant_scene.q0 if same else design_q)
+        design_key = (*model_key, design_q, settings, scene.joint_reference(), scene.deflection, reference_compile)
+        ctrl = cache.get("designs", design_key, lambda: design_scene_controller(
+            scene, design_model, settings, path,
+            cache.reference(*model_key, scene.joint_reference(), scene.deflection, reference_compile)))
         ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
     path_ref = scene.joint_reference()
     sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)

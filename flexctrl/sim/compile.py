@@ -57,6 +57,11 @@ ENV_NO_COMPILE = "FLEXCTRL_NO_COMPILE"
 ENV_CACHE = "FLEXCTRL_CACHE"
 DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-march=native")
 PORTABLE_FLAGS: tuple[str, ...] = ("-O2",)
+#: For large Functions evaluated in bulk rather than per step (the reference tables' Newton): half the
+#: compile time of ``-O2`` for the same evaluation speed (measured on the three-link arm's ``amm:2``: 21 s
+#: against 39 s to compile, 0.28 s against 0.26 s per table at load 7).
+QUICK_FLAGS: tuple[str, ...] = ("-O1", "-march=native")
+NATIVE = ("-march=native", "-mcpu=native", "-mtune=native")
 COMPILE_TIMEOUT_S = 900.0
 
 
@@ -192,7 +197,7 @@ def cache_key(fun: ca.Function, flags: Sequence[str], compiler: str) -> str:
     With ``-march=native`` among the flags the host's CPU identity is hashed too.
     """
     digest = hashlib.sha256()
-    host = host_identity() if any(f.startswith(("-march=native", "-mcpu=native", "-mtune=native")) for f in flags) else ""
+    host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
     for part in (fun.serialize(), " ".join(flags), compiler_identity(compiler), ca.__version__, host):
         digest.update(part.encode())
         digest.update(b"\0")
@@ -233,7 +238,8 @@ def compile_function(
         return CompiledFunction(fun, compiled=False, reason="no C compiler found ($CC, gcc, cc)")
     flags = tuple(flags)
     directory = private_directory(cache_directory(cache_dir))
-    attempts = [flags] + ([PORTABLE_FLAGS] if flags != PORTABLE_FLAGS and flags == DEFAULT_FLAGS else [])
+    portable = tuple(f for f in flags if f not in NATIVE)  # a compiler without -march=native gets a second try
+    attempts = [flags] + ([portable] if portable != flags else [])
     failure = ""
     for attempt in attempts:
         result = _compile_or_load(fun, directory, compiler, attempt)

@@ -14,7 +14,18 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.model import derived
 from flexctrl.sim.base import try_expand
+
+
+def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
+    """:func:`constants_as_parameters` of ``fun()`` (a Function of ``model`` called ``name``), once per model.
+
+    Kept with the model (:func:`~flexctrl.dynamics.model.derived`): every plant step count,
+    output-map length and reference table of one model lifts its constants once (the lift
+    walks the whole expression graph in Python).
+    """
+    return derived(model, ("parametric", name, per_use), lambda: constants_as_parameters(fun(), per_use=per_use))
 
 
 def constants_as_parameters(fun: ca.Function, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
