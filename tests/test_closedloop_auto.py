@@ -38,7 +38,7 @@ SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
 #: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step 2).
 SAFETY = 2.0
-OPTIONS = {"top": 2, "reference": "amm:3"}
+OPTIONS = {"top": 2, "reference": "amm:3", "walk": "ladder"}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
 #: One cache for the module: the runs below share models and the choice, as a study worker does.
 CACHE = SceneCache()
 
