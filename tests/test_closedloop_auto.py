@@ -165,7 +165,7 @@ def test_auto_refusals_name_key_value_and_allowed():
 def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
     sets = [item for s in [*SHORT, f"tolerance={TOL!r}"] for item in ("--set", s)]
     code = main(["fidelity", SCENE, "--controller", CONTROLLER, "--top", "2", "--reference", "amm:3", "--json",
-                 "--set", f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'", *sets])
+                 "--set", f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'", "--set", "fidelity_walk='ladder'", *sets])
     assert code == 0
     data = json.loads(capsys.readouterr().out)
     assert list(data)[:1] == ["choice"]

@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
                 scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol))
             check_auto(auto, args.controller)
             choice = choose_closed_loop_fidelity(pin_design(auto), tol, controller=args.controller, top=args.top,
-                                                 reference=args.reference, safety=args.safety)
+                                                 reference=args.reference, safety=args.safety,
+                                                 walk=auto.plant.fidelity_walk)
         else:
             choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety)
     except ToleranceUnreachable as exc:
