@@ -276,7 +276,7 @@ METHOD = ("lowest rung whose safety * (largest tip distance to the next two rung
 
 
 #: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds ``LINEAR_FACTOR``
-#: times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear estimate 0.42-1.1,
+#: times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear estimate 0.43-1.17,
 #: docs/auto_fidelity.md; tests/test_fidelity_estimate.py checks a small case).
 LINEAR_FACTOR = 3.0
 #: The walks of the closed-loop chooser: ``estimate`` (linear estimate first, then nonlinear certification) and
