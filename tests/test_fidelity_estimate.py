@@ -119,3 +119,28 @@ def test_unreachability_is_predicted_where_the_ladder_walk_finds_it():
     assert all(r.get("estimated_error_m", np.inf) > LINEAR_FACTOR * 1e-3 for r in evidence["linear_estimate"]["rungs"]
                if "estimated_error_m" in r)
     assert ladder.value.evidence["best"]["estimated_error_m"] > 1e-3
+
+
+@pytest.mark.slow  # the small case with the MPC: its choice (linear and nonlinear runs) and two runs
+def test_the_run_at_the_choice_reuses_the_choices_own_run_and_equals_a_fresh_run():
+    from flexctrl.scenes.closed_loop import run_closed_loop_scene
+
+    sets = [*SHORT, "controller_fidelity='amm:2'", "tolerance=1e-2"]  # m: what the MPC's small case can meet
+    scene = load_scene(SCENE, sets)
+    cache = SceneCache()
+    first = run_closed_loop_scene(scene, controller="controllers/mpc.toml", auto_options=OPTIONS, cache=cache,
+                                  plots=False)
+    assert "reused" in first.trajectory.meta  # the certifying run of the chosen rung, not run again
+    again = run_closed_loop_scene(scene, controller="controllers/mpc.toml", auto_options=OPTIONS, cache=cache,
+                                  plots=False)
+    assert "reused" not in again.trajectory.meta  # taken once: the next run of the scene runs
+    chosen = first.summary["fidelity_choice"]
+    fixed = load_scene(SCENE, [*sets[:2], f"fidelity='{chosen['choice']}'", f"dt={chosen['dt_s']!r}",
+                               "controller_fidelity='amm:2'"])
+    fresh = run_closed_loop_scene(fixed, controller="controllers/mpc.toml", cache=SceneCache(), plots=False)
+    timing = {k for k in first.metrics if k.startswith("controller_time") or k.startswith("choice")}
+    for run in (again, fresh):  # to the last digit: the same run, whatever ran before it in the process
+        np.testing.assert_array_equal(run.trajectory.states, first.trajectory.states)
+        np.testing.assert_array_equal(run.trajectory.inputs, first.trajectory.inputs)
+        assert {k: v for k, v in run.metrics.items() if k not in timing} == \
+               {k: v for k, v in first.metrics.items() if k not in timing and k in run.metrics}

@@ -221,23 +221,38 @@ def simulate_closed_rung(scene, fidelity: str, dt: float | None = None, *, contr
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4).
 
     The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
-    every rung is compared on the same times without interpolation.
+    every rung is compared on the same times without interpolation.  A run at the rung's
+    own step (``dt`` None) also leaves the whole run in ``cache`` (:data:`WHOLE_RUNS`,
+    :func:`whole_run_key`) for the run of the scene at the chosen rung to reuse.
     """
     cache = SceneCache() if cache is None else cache
+    own = dt is None
     if dt is None:
         dt = rk4_step(model_for(scene.plant, fidelity, cache).omega_max, scene.plant.dt)
     dt = float(dt)
+    key = whole_run_key(scene, fidelity, dt, controller, overrides)
 
     def run() -> RunRecord:
         stride = int(round(scene.plant.dt / dt))
         result = closed_loop_tip_path(scene, fidelity, dt, controller=controller, overrides=overrides, stride=stride,
-                                      cache=cache)
+                                      cache=cache, keep=own)
+        if own:
+            cache.keep(WHOLE_RUNS, key, result["run"], limit=WHOLE_RUNS_KEPT)
         times, tip, torque = read_only(result["time"], result["tip"], result["torque"])
         return RunRecord(fidelity=fidelity, integrator="rk4", dt=dt, omega_max=result["omega_max"],
                          wall_time_s=result["wall_time_s"], build_time_s=result["build_time_s"], time=times,
                          tip=tip, diverged_at=result["diverged_at"], torque=torque)
 
-    return cache.get("closed_runs", (closed_loop_key(scene, controller, tuple(overrides)), fidelity, dt), run)
+    return cache.get("closed_runs", key, run)
+
+
+#: The cache's kind for whole closed-loop runs at a rung's own step, kept for one reuse; at most this many.
+WHOLE_RUNS, WHOLE_RUNS_KEPT = "whole_closed_runs", 8
+
+
+def whole_run_key(scene, fidelity: str, dt: float, controller=None, overrides: tuple[str, ...] = ()) -> tuple:
+    """The key of :data:`WHOLE_RUNS`: the chooser's scene (design pinned), the rung and its RK4 step (s)."""
+    return (closed_loop_key(scene, controller, tuple(overrides)), str(fidelity), float(dt))
 
 
 def check_closed_loop_auto(scene, controller=None) -> None:
@@ -410,13 +425,18 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
     extra = {"kind": "closed_loop", "controller": str(controller or scene.controller),
              "controller_overrides": list(overrides), "design_fidelity": str(design),
              "comparison_grid_dt_s": plant.dt}
-    choice = walk_and_judge(
-        name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
-        run_rung=lambda m: rung(m),
-        run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller, overrides=overrides,
-                                                cache=cache),
-        reference_dt=ref_dt, runs=runs,
-        extra={**extra, "walk": walk}, linear=linear, factor=LINEAR_FACTOR)
+    chosen = None
+    try:
+        choice = walk_and_judge(
+            name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+            run_rung=lambda m: rung(m),
+            run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller,
+                                                          overrides=overrides, cache=cache),
+            reference_dt=ref_dt, runs=runs,
+            extra={**extra, "walk": walk}, linear=linear, factor=LINEAR_FACTOR)
+        chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
+    finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
+        cache.drop(WHOLE_RUNS, keep=chosen)
     choice.evidence["method"] = ("closed loop (controller designed once on the pinned design model) with the plant at "
                                  "each rung; " + choice.evidence["method"])
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
