@@ -60,7 +60,7 @@ class SceneCache:
         return value
 
     def keep(self, kind: str, key: Hashable, value: Any, limit: int = 1) -> None:
-        """Keep ``value`` under ``key`` for one :meth:`take`, with at most ``limit`` entries of ``kind`` (oldest dropped).
+        """Keep ``value`` under ``key`` for one :meth:`take`, at most ``limit`` entries of ``kind`` (oldest dropped).
 
         For large things worth reusing once, such as a whole run the next call will ask for.
 
