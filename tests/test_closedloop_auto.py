@@ -38,7 +38,7 @@ SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
 #: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step 2).
 SAFETY = 2.0
-OPTIONS = {"top": 2, "reference": "amm:3"}
+OPTIONS = {"top": 2, "reference": "amm:3", "walk": "ladder"}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
 #: One cache for the module: the runs below share models and the choice, as a study worker does.
 CACHE = SceneCache()
 
@@ -165,7 +165,7 @@ def test_auto_refusals_name_key_value_and_allowed():
 def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
     sets = [item for s in [*SHORT, f"tolerance={TOL!r}"] for item in ("--set", s)]
     code = main(["fidelity", SCENE, "--controller", CONTROLLER, "--top", "2", "--reference", "amm:3", "--json",
-                 "--set", f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'", *sets])
+                 "--set", f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'", "--set", "fidelity_walk='ladder'", *sets])
     assert code == 0
     data = json.loads(capsys.readouterr().out)
     assert list(data)[:1] == ["choice"]

@@ -184,6 +184,20 @@ def test_sparsity_never_changes_between_steps(arm3, op3):
     assert ctrl.stats.summary()["median_iterations"] < 100  # warm starts keep OSQP short
 
 
+@pytest.mark.parametrize("formulation, backend", [("sparse", "osqp"), ("condensed", "qpoases")])
+def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formulation, backend):
+    # A study reuses a design across runs and resets it: the solver's own state (OSQP's last iterates and
+    # adapted rho, qpOASES's working set) must not carry one run into the next.
+    ctrl = design(arm3, op3, MPCSettings(formulation=formulation, backend=backend))
+    dx0 = np.r_[np.radians([-8.0, 3.0, 2.0]), np.zeros(15)]
+    runs = []
+    for _ in range(2):
+        ctrl.reset()
+        runs.append(_linear_closed_loop(ctrl, dx0, 60)[0])
+    assert np.any(np.abs(runs[0] - op3.u) > 1.0)  # the move is large enough to exercise the solver
+    np.testing.assert_array_equal(runs[1], runs[0])
+
+
 def test_benchmark_reports_every_variant():
     from flexctrl.bench.mpc import default_variants, format_benchmark, mpc_benchmark
 

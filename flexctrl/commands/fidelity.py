@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
                 scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol))
             check_auto(auto, args.controller)
             choice = choose_closed_loop_fidelity(pin_design(auto), tol, controller=args.controller, top=args.top,
-                                                 reference=args.reference, safety=args.safety)
+                                                 reference=args.reference, safety=args.safety,
+                                                 walk=auto.plant.fidelity_walk)
         else:
             choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety)
     except ToleranceUnreachable as exc:
@@ -111,8 +112,10 @@ def format_table(data: dict) -> str:
         (f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} Hz; modes below "
          f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}")
         if bw is not None else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
-        (f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): "
-         f"halving its step moves the tip {conv['step_halving_m']:.2e} m; {conv['rung_below']} differs by "
+        (f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): " +
+         (f"halving its step moves the tip {conv['step_halving_m']:.2e} m; " if "step_halving_m" in conv else
+          f"its step error (linear estimate) {conv['step_error_linear_m']:.2e} m; ") +
+         f"{conv['rung_below']} differs by "
          f"{conv['rung_below_m']:.2e} m; integration {ref['wall_time_s']:.3g} s"),
         "",
         f"{'rung':>7} {'dt (s)':>9} {'wall (s)':>9} {'to next (m)':>12} {'estimate (m)':>12} {'vs ref (m)':>11} {'cost':>8}",

@@ -126,6 +126,7 @@ class MPCController(Controller):
 
     def _reset(self) -> None:
         self.observer.reset()
+        self.backend.reset()
         self._w = None
         self._plan = None
         self._plan_u = None

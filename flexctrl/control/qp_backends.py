@@ -48,11 +48,23 @@ class OSQPBackend:
         self.shift_y = np.r_[qp.shift_a, self.n_rows + np.where(box_shift >= 0, box_shift, np.arange(bounded.size))].astype(int)
         self.accept = {1} | ({2} if accept_inaccurate else set())
         self.warm = warm_start
-        opts = settings.as_dict()
-        self.solver = osqp.OSQP()
         g, lba, uba, lbx, ubx = qp.vectors(np.zeros(qp.n_state))
-        self.solver.setup(sp.triu(qp.H, format="csc"), g, self.A, np.r_[lba, lbx[bounded]], np.r_[uba, ubx[bounded]],
-                          verbose=False, warm_starting=warm_start != "none", **opts)
+        self._setup = ((sp.triu(qp.H, format="csc"), g, self.A, np.r_[lba, lbx[bounded]], np.r_[uba, ubx[bounded]]),
+                       dict(verbose=False, warm_starting=warm_start != "none", **settings.as_dict()))
+        self.reset()
+
+    def reset(self) -> None:
+        """A new OSQP workspace as designed: no iterate to warm-start from, ``rho`` as set.
+
+        OSQP keeps its last primal and dual iterates (its internal warm start) and the
+        ``rho`` its adaptation reached in the workspace, so without this a run would
+        depend on the runs solved before it with the same controller.
+        """
+        import osqp
+
+        args, opts = self._setup
+        self.solver = osqp.OSQP()
+        self.solver.setup(*args, **opts)
         self.y = None
 
     def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
@@ -85,10 +97,14 @@ class ConicBackend:
         elif name == "osqp":
             opts.setdefault("osqp", {"verbose": False})
         opts.setdefault("error_on_fail", False)
-        H = ca.DM(qp.H)
-        A = ca.DM(qp.A) if qp.A.shape[0] else ca.DM(0, qp.H.shape[0])
-        self.H, self.Am = H, A
-        self.solver = ca.conic("mpc_qp", name, {"h": H.sparsity(), "a": A.sparsity()}, opts)
+        self.H = ca.DM(qp.H)
+        self.Am = ca.DM(qp.A) if qp.A.shape[0] else ca.DM(0, qp.H.shape[0])
+        self.options = opts
+        self.reset()
+
+    def reset(self) -> None:
+        """A new solver instance: qpOASES, for one, hot-starts from the working set of its last call."""
+        self.solver = ca.conic("mpc_qp", self.name, {"h": self.H.sparsity(), "a": self.Am.sparsity()}, self.options)
 
     def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
               dc: np.ndarray | None = None, release: np.ndarray | None = None) -> Solution:

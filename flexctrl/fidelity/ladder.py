@@ -275,6 +275,75 @@ METHOD = ("lowest rung whose safety * (largest tip distance to the next two rung
           "tolerance; walk from the bandwidth rule's start")
 
 
+#: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds ``LINEAR_FACTOR``
+#: times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear estimate 0.43-1.17,
+#: docs/auto_fidelity.md; tests/test_fidelity_estimate.py checks a small case).
+LINEAR_FACTOR = 3.0
+#: The walks of the closed-loop chooser: ``estimate`` (linear estimate first, then nonlinear certification) and
+#: ``ladder`` (the nonlinear walk from the bandwidth rule's start, with the reference at a small step).
+WALKS = ("estimate", "ladder")
+METHOD_ESTIMATE = ("linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 step), then "
+                   "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * (largest "
+                   "tip distance to the next two rungs, up to the reference model) <= tolerance, walking up")
+
+
+def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int, safety: float,
+                     factor: float = LINEAR_FACTOR) -> tuple[int | None, dict[str, Any]]:
+    """The lowest rung whose linear estimate is within ``factor`` of the tolerance, and the evidence.
+
+    The linear estimate of rung ``m`` is the walk's formula (``safety`` times the largest
+    tip distance to rungs ``m + 1`` and ``m + 2``, up to ``ref_n``) on the linear runs
+    ``linear_rung(m)``.  Rungs are estimated from the top down while their estimate is
+    at most ``factor * tol``; the lowest of that unbroken run of rungs is the candidate.
+    When ``top`` is excluded, the rungs below are estimated until one is not (the
+    candidate is then the lowest of its unbroken run), or None when every rung is
+    excluded (unreachable, as predicted, without a nonlinear run).
+    A rung that cannot be built (``FlexctrlError``, e.g. strain gauges on ``rigid``) is excluded.
+    """
+    runs: dict[int, RunRecord | str] = {}
+
+    def run(m: int):
+        if m not in runs:
+            try:
+                runs[m] = linear_rung(m)
+            except FlexctrlError as exc:
+                runs[m] = str(exc)
+        return runs[m]
+
+    estimates: dict[int, float] = {}
+
+    def estimate(m: int) -> float:
+        if m not in estimates:
+            pair = [run(k) for k in range(m + 1, min(m + 2, ref_n) + 1)]
+            here = run(m)
+            if isinstance(here, str) or any(isinstance(p, str) for p in pair):
+                estimates[m] = math.inf
+            else:
+                estimates[m] = safety * max(tip_distance(p, here).max for p in pair)
+        return estimates[m]
+
+    n = None
+    for m in range(top, low - 1, -1):
+        if estimate(m) <= factor * tol:
+            n = m
+        elif n is not None:
+            break
+    rungs = []
+    for m in sorted(runs):
+        item = {"fidelity": rung_name(m)}
+        if isinstance(runs[m], str):
+            item["unavailable"] = runs[m]
+        else:
+            item.update(runs[m].facts())
+        if m in estimates:
+            item["estimated_error_m"] = estimates[m]
+        rungs.append(item)
+    evidence = {"factor": factor, "threshold_m": factor * tol, "candidate": None if n is None else rung_name(n),
+                "rungs": rungs, "wall_time_s": sum(r.wall_time_s + r.build_time_s for r in runs.values()
+                                                   if not isinstance(r, str))}
+    return n, evidence
+
+
 def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict[str, float]:
     """Rung ``m``'s distances to the rungs above and its estimate (empty when it was not estimated)."""
     if m not in distances:
@@ -314,8 +383,15 @@ def check_tolerance(tol: Any, *, source: str | None = None, key: str = "toleranc
 
 def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
                     rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
-                    runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None) -> FidelityChoice:
+                    runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None,
+                    linear=None, factor: float = LINEAR_FACTOR) -> FidelityChoice:
     """Method steps 2 and 3, shared by arm and closed-loop scenes.
+
+    With ``linear`` (the estimate-first walk, :func:`linear_candidate`), the walk starts
+    at the lowest rung the linear estimate cannot exclude, or stops before any
+    nonlinear run when it excludes every rung, and the reference is the reference model
+    at its own step (``run_rung(R)``, a run the certification usually needs anyway)
+    instead of ``run_reference`` at ``reference_dt`` and half of it.
 
     Parameters
     ----------
@@ -329,6 +405,13 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         Rungs already run (by rung number).
     extra : dict, optional
         Added to the evidence.
+    linear : tuple, optional
+        ``(linear_rung, linear_exact)``: ``linear_rung(m) -> RunRecord`` the linear
+        estimate of rung ``m`` at its own step (raising :class:`FlexctrlError` when the
+        rung cannot be built), ``linear_exact() -> RunRecord`` the reference model's
+        without integrator error.  None: the ladder walk from ``start``.
+    factor : float
+        Bound assumed on the linear estimate's error, either way (``LINEAR_FACTOR``).
     """
     ref_n = parse_fidelity(reference).count
     # (b) the walk, estimates from the (two) rungs above
@@ -345,11 +428,31 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             distances[m] = [tip_distance(run(k), run(m)).max for k in range(m + 1, min(m + 2, ref_n) + 1)]
         return safety * max(distances[m])
 
-    n = start
-    if estimate(n) <= tol:
-        while n - 1 >= low and estimate(n - 1) <= tol:
-            n -= 1
+    linear_evidence = None
+    if linear is None:
+        n = start
+        if estimate(n) <= tol:
+            while n - 1 >= low and estimate(n - 1) <= tol:
+                n -= 1
+        else:
+            while n < top and estimate(n) > tol:
+                n += 1
     else:
+        n, linear_evidence = linear_candidate(linear[0], tol=tol, low=low, top=top, ref_n=ref_n, safety=safety,
+                                              factor=factor)
+        extra = {**(extra or {}), "linear_estimate": linear_evidence}
+        if n is None:
+            best = min(linear_evidence["rungs"], key=lambda item: item.get("estimated_error_m", math.inf))
+            raise ToleranceUnreachable(
+                f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}', predicted by the linear "
+                f"estimate: its best is {best.get('estimated_error_m', math.inf):.3g} m ({best['fidelity']}), above "
+                f"{factor:g} x the tolerance (the bound assumed on its error), so no nonlinear run was made; allowed: a "
+                f"tolerance >= {best.get('estimated_error_m', math.inf) / factor:.3g} m, a higher top rung, or "
+                "fidelity_walk = 'ladder'",
+                {"method": METHOD_ESTIMATE, "safety": safety, "scene": name, "reference": None, "candidates": [],
+                 "bandwidth_rule": rule, **extra, "predicted": True,
+                 "best": {"rung": best["fidelity"], "estimated_error_m": best.get("estimated_error_m"),
+                          "from": "linear estimate"}})
         while n < top and estimate(n) > tol:
             n += 1
     met = estimate(n) <= tol
@@ -358,7 +461,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     if not met:
         best = min(distances, key=lambda m: max(distances[m]))
         best_estimate = safety * max(distances[best])
-        evidence = {"method": METHOD, "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
+        evidence = {"method": METHOD if linear is None else METHOD_ESTIMATE, "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
                     "bandwidth_rule": rule, "candidates": [{**runs[m].facts(), **_estimates(m, distances, safety)}
                                                            for m in sorted(runs)],
                     "scene": name, "reference": None, **(extra or {}),
@@ -369,22 +472,33 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
 
     # (c) the reference and its convergence
-    ref_dt = reference_dt
-    ref_run = run_reference(ref_dt)
-    half = run_reference(ref_dt / 2)
+    finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
+    if linear is None:
+        ref_dt = reference_dt
+        ref_run = run_reference(ref_dt)
+        half = run_reference(ref_dt / 2)
+    else:  # the estimate-first walk: the reference model at its own step, its step error estimated linearly
+        ref_dt, ref_run, half = finest.dt, finest, finest
     if ref_run.diverged_at is not None or half.diverged_at is not None:
         raise SimulationError(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
                               f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
                               "choice against")
     below = run(ref_n - 1)
-    finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
-    step_check = tip_distance(half, ref_run).max
     model_check = tip_distance(ref_run, below).max
-    convergence = {"step_halving_m": step_check, "rung_below_m": model_check, "rung_below": rung_name(ref_n - 1),
-                   "half_step_run": half.facts()}
+    if linear is None:
+        step_check = tip_distance(half, ref_run).max
+        convergence = {"step_halving_m": step_check, "half_step_run": half.facts()}
+    else:
+        exact = linear[1]()
+        step_check = tip_distance(exact, linear[0](ref_n)).max
+        convergence = {"step_error_linear_m": step_check,
+                       "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
+                                     "the same loop without integrator error (zero-order hold)"}
+        linear_evidence["reference_exact"] = exact.facts()
+    convergence.update({"rung_below_m": model_check, "rung_below": rung_name(ref_n - 1)})
     if max(step_check, model_check) > 0.5 * tol:
-        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m when its step is "
-                      f"halved and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
+        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m with "
+                      f"{'half its step' if linear is None else 'no integrator error (linear estimate)'} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
                       f"{tol:.3g} m, so it may not be converged enough to judge the choice", stacklevel=3)
 
     rungs = []
@@ -396,9 +510,11 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         rungs.append({**item, **_estimates(m, distances, safety)})
 
     evidence = {
-        "method": METHOD,
+        "method": METHOD if linear is None else METHOD_ESTIMATE,
         "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
-        "reference": {**ref_run.facts(), "convergence": convergence},
+        "reference": {**ref_run.facts(), "convergence": convergence,
+                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if linear is None else
+                               "the reference model at its own RK4 step (fidelity_walk = 'estimate')")},
         "candidates": rungs, "scene": name, **(extra or {}),
     }
     chosen = run(n)

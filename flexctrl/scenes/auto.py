@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from flexctrl.errors import SpecError
-from flexctrl.fidelity.ladder import (IMPLICIT, FidelityChoice, RunRecord, check_ladder, check_tolerance,
-                                      excitation_bandwidth, required_modes, rung_name, sampled_bandwidth,
-                                      walk_and_judge)
+from flexctrl.fidelity.ladder import (IMPLICIT, LINEAR_FACTOR, WALKS, FidelityChoice, RunRecord, check_ladder,
+                                      check_tolerance, excitation_bandwidth, required_modes, rung_name,
+                                      sampled_bandwidth, walk_and_judge)
 from flexctrl.scenes.arm import scene_arm, simulate_arm_scene
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, closed_loop_tip_path
@@ -36,7 +36,7 @@ from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 def scene_key(scene) -> str:
     """A canonical string of everything in an arm scene that changes its simulation (not its fidelity)."""
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "name", "source", "fft_span", "fft_peaks"):
+    for name in ("fidelity", "tolerance_m", "fidelity_walk", "name", "source", "fft_span", "fft_peaks"):
         settings.pop(name, None)
     path = Path(scene.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
@@ -205,7 +205,7 @@ def closed_loop_key(scene, controller: str | Path | None = None, overrides: tupl
     model file's modification time, the controller file's path, sha256 and overrides.
     """
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "name", "source", "fft_span", "fft_peaks", "controller"):
+    for name in ("fidelity", "tolerance_m", "fidelity_walk", "name", "source", "fft_span", "fft_peaks", "controller"):
         settings.pop(name, None)
     path = Path(scene.plant.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
@@ -221,23 +221,38 @@ def simulate_closed_rung(scene, fidelity: str, dt: float | None = None, *, contr
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4).
 
     The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
-    every rung is compared on the same times without interpolation.
+    every rung is compared on the same times without interpolation.  A run at the rung's
+    own step (``dt`` None) also leaves the whole run in ``cache`` (:data:`WHOLE_RUNS`,
+    :func:`whole_run_key`) for the run of the scene at the chosen rung to reuse.
     """
     cache = SceneCache() if cache is None else cache
+    own = dt is None
     if dt is None:
         dt = rk4_step(model_for(scene.plant, fidelity, cache).omega_max, scene.plant.dt)
     dt = float(dt)
+    key = whole_run_key(scene, fidelity, dt, controller, overrides)
 
     def run() -> RunRecord:
         stride = int(round(scene.plant.dt / dt))
         result = closed_loop_tip_path(scene, fidelity, dt, controller=controller, overrides=overrides, stride=stride,
-                                      cache=cache)
+                                      cache=cache, keep=own)
+        if own:
+            cache.keep(WHOLE_RUNS, key, result["run"], limit=WHOLE_RUNS_KEPT)
         times, tip, torque = read_only(result["time"], result["tip"], result["torque"])
         return RunRecord(fidelity=fidelity, integrator="rk4", dt=dt, omega_max=result["omega_max"],
                          wall_time_s=result["wall_time_s"], build_time_s=result["build_time_s"], time=times,
                          tip=tip, diverged_at=result["diverged_at"], torque=torque)
 
-    return cache.get("closed_runs", (closed_loop_key(scene, controller, tuple(overrides)), fidelity, dt), run)
+    return cache.get("closed_runs", key, run)
+
+
+#: The cache's kind for whole closed-loop runs at a rung's own step, kept for one reuse; at most this many.
+WHOLE_RUNS, WHOLE_RUNS_KEPT = "whole_closed_runs", 8
+
+
+def whole_run_key(scene, fidelity: str, dt: float, controller=None, overrides: tuple[str, ...] = ()) -> tuple:
+    """The key of :data:`WHOLE_RUNS`: the chooser's scene (design pinned), the rung and its RK4 step (s)."""
+    return (closed_loop_key(scene, controller, tuple(overrides)), str(fidelity), float(dt))
 
 
 def check_closed_loop_auto(scene, controller=None) -> None:
@@ -274,6 +289,7 @@ def choose_closed_loop_fidelity(
     bandwidth_factor: float = 5.0,
     reference_omega_dt: float = 0.5,
     cache: SceneCache | None = None,
+    walk: str = "estimate",
 ) -> FidelityChoice:
     """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a closed loop's tip within ``tol``.
 
@@ -309,6 +325,15 @@ def choose_closed_loop_fidelity(
         As in :func:`choose_fidelity`.
     cache : SceneCache, optional
         Where models, runs and the choice are kept (a fresh one when None).
+    walk : {"estimate", "ladder"}
+        ``estimate`` (default): every rung's loop first on its linearised plant
+        (:mod:`flexctrl.scenes.auto_linear`, milliseconds to a second each); the lowest rung
+        whose linear estimate is within :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the
+        tolerance is certified by the nonlinear runs of the estimate's formula, walking up
+        while it fails; no rung within the factor is a predicted :class:`ToleranceUnreachable`
+        without nonlinear runs; the reference is the reference model at its own step (its step
+        error estimated linearly).  ``ladder``: the nonlinear walk from the bandwidth rule's
+        start, the reference at ``reference_omega_dt`` and half its step (issue 7's method).
 
     Returns
     -------
@@ -334,18 +359,21 @@ def choose_closed_loop_fidelity(
                         f"{AUTO_DESIGN_FIDELITY!r} (flexctrl.scenes.loop_setup.pin_design sets the default)",
                         source=scene.source, key="controller_fidelity")
     check_closed_loop_auto(scene, controller)
+    if walk not in WALKS:
+        raise SpecError(f"value {walk!r} is not allowed; allowed: {', '.join(map(repr, WALKS))}", source=scene.source,
+                        key="fidelity_walk")
     ref = check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
     cache = SceneCache() if cache is None else cache
     overrides = tuple(overrides)
     options = (tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
-               float(reference_omega_dt))
+               float(reference_omega_dt), walk)
     key = (closed_loop_key(scene, controller, overrides), options)
     return cache.get("closed_choices", key, lambda: _choose_closed(scene, controller, overrides, cache, *options))
 
 
 def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCache, tol: float, top: int,
                    reference: str, safety: float, energy_fraction: float, bandwidth_factor: float,
-                   reference_omega_dt: float) -> FidelityChoice:
+                   reference_omega_dt: float, walk: str) -> FidelityChoice:
     started = time.perf_counter()
     plant = scene.plant
     low = required_modes(plant)
@@ -359,10 +387,24 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
 
     design_rung = 0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
     first = min(max(low, design_rung), top)
-    runs = {first: rung(first)}
+    linear = None
+    if walk == "estimate":  # the linear runs give the torques: no nonlinear run before the candidate is known
+        from flexctrl.scenes.auto_linear import linear_closed_rung
+
+        def linear_rung(m: int) -> RunRecord:
+            h = rk4_step(model_for(plant, rung_name(m), cache).omega_max, plant.dt)
+            return cache.get("linear_runs", (closed_loop_key(scene, controller, overrides), rung_name(m), h),
+                             lambda: linear_closed_rung(scene, rung_name(m), h, controller=controller,
+                                                        overrides=overrides, cache=cache))
+
+        linear = (linear_rung, lambda: linear_closed_rung(scene, reference, None, controller=controller,
+                                                          overrides=overrides, cache=cache))
+        runs, record = {}, linear_rung(first)
+    else:
+        runs = {first: rung(first)}
+        record = runs[first]
     ref_model = model_for(plant, reference, cache)
     link_hz = [[w / (2 * math.pi) for w in link] for link in ref_model.info.get("link_frequencies_rad_s", [])]
-    record = runs[first]
     bandwidth = None
     if record.torque is not None and record.diverged_at is None and record.time.size > 2:
         bandwidth = sampled_bandwidth(record.torque, float(record.time[1] - record.time[0]),
@@ -377,21 +419,26 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
             "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
             "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": rung_name(start),
             "lowest_rung_for_initial_state": rung_name(low),
-            "torques_from": f"the closed loop with the plant at {rung_name(first)} (the design model's rung)"}
+            "torques_from": f"the closed loop with the plant at {rung_name(first)} (the design model's rung"
+                            f"{', linearised' if linear is not None else ''})"}
     ref_dt = plant.dt / max(1, math.ceil(plant.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
     extra = {"kind": "closed_loop", "controller": str(controller or scene.controller),
              "controller_overrides": list(overrides), "design_fidelity": str(design),
              "comparison_grid_dt_s": plant.dt}
-    choice = walk_and_judge(
-        name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
-        run_rung=lambda m: rung(m),
-        run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller, overrides=overrides,
-                                                cache=cache),
-        reference_dt=ref_dt, runs=runs,
-        extra=extra)
+    chosen = None
+    try:
+        choice = walk_and_judge(
+            name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+            run_rung=lambda m: rung(m),
+            run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller,
+                                                          overrides=overrides, cache=cache),
+            reference_dt=ref_dt, runs=runs,
+            extra={**extra, "walk": walk}, linear=linear, factor=LINEAR_FACTOR)
+        chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
+    finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
+        cache.drop(WHOLE_RUNS, keep=chosen)
     choice.evidence["method"] = ("closed loop (controller designed once on the pinned design model) with the plant at "
-                                 "each rung; lowest rung whose safety * (largest tip distance to the next two rungs, up "
-                                 "to the reference model) <= tolerance; walk from the bandwidth rule's start")
+                                 "each rung; " + choice.evidence["method"])
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
     return choice
 

@@ -59,6 +59,35 @@ class SceneCache:
             store.popitem(last=False)
         return value
 
+    def keep(self, kind: str, key: Hashable, value: Any, limit: int = 1) -> None:
+        """Keep ``value`` under ``key`` for one :meth:`take`, at most ``limit`` entries of ``kind`` (oldest dropped).
+
+        For large things worth reusing once, such as a whole run the next call will ask for.
+
+        >>> cache = SceneCache()
+        >>> cache.keep("whole", "a", 1); cache.keep("whole", "b", 2)
+        >>> cache.take("whole", "a"), cache.take("whole", "b"), cache.take("whole", "b")
+        (None, 2, None)
+        """
+        store = self._stores.setdefault(kind, OrderedDict())
+        store[key] = value
+        store.move_to_end(key)
+        while len(store) > limit:
+            store.popitem(last=False)
+
+    def take(self, kind: str, key: Hashable) -> Any:
+        """The value :meth:`keep` left under ``key`` (removed), or None."""
+        value = self._stores.get(kind, {}).pop(key, None)
+        counts = self._hits if value is not None else self._misses
+        counts[kind] = counts.get(kind, 0) + 1
+        return value
+
+    def drop(self, kind: str, keep: Hashable | None = None) -> None:
+        """Forget every entry of ``kind`` but ``keep``."""
+        store = self._stores.get(kind, {})
+        for key in [k for k in store if k != keep]:
+            del store[key]
+
     def model(self, arm, fidelity: str, modes: str = "frozen", reference_q: tuple[float, ...] | None = None):
         """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, built once here."""
         from flexctrl.dynamics.build import build_model

@@ -20,6 +20,7 @@ stability map is a map of the ``stable`` column.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from pathlib import Path
@@ -31,9 +32,9 @@ from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import check_tolerance
 from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
-from flexctrl.loop.sampled import simulate_closed_loop
+from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
-from flexctrl.scenes.auto import check_closed_loop_auto, choose_closed_loop_fidelity
+from flexctrl.scenes.auto import WHOLE_RUNS, check_closed_loop_auto, choose_closed_loop_fidelity, whole_run_key
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop, pin_design
 
@@ -49,6 +50,7 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
         return scene, None
     scene = pin_design(scene)
     tol = check_tolerance(scene.plant.tolerance, source=scene.source, key="tolerance")
+    options.setdefault("walk", scene.plant.fidelity_walk)
     choice = choose_closed_loop_fidelity(scene, tol, controller=controller, overrides=tuple(overrides), cache=cache,
                                          **options)
     plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=choice.dt)
@@ -149,10 +151,19 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     choosing = time.perf_counter() - choosing
     setup = build_loop(scene, controller, overrides, cache, reference_compile=reference_compile)
     plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
-    rng = np.random.default_rng(scene.seed) if scene.noise else None
-    trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt, sensors=setup.sensors,
-                                         rng=rng, compile=plant_scene.solver.get("compile"), monitor=setup.monitor,
-                                         stop_on_divergence=on_divergence == "record", loop=loop)
+    whole = None if choice is None or loop != "auto" else cache.take(WHOLE_RUNS, whole_run_key(
+        pin_design(requested), str(plant_scene.fidelity), plant_scene.dt, controller, tuple(overrides)))
+    if whole is not None:  # the choice's own run of this scene at this rung and step (auto's "whole runs")
+        ctrl.stats = copy.deepcopy(whole["stats"])
+        meta = {**whole["meta"], "reused": "the fidelity choice's run of this scene at the chosen rung and step"}
+        trajectory = trajectory_from_states(plant, whole["t"], whole["X"].copy(), whole["U"].copy(), meta,
+                                            compiled=meta["loop"] == "compiled", compile=plant_scene.solver.get("compile"))
+    else:
+        rng = np.random.default_rng(scene.seed) if scene.noise else None
+        trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt,
+                                             sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
+                                             monitor=setup.monitor, stop_on_divergence=on_divergence == "record",
+                                             loop=loop)
     tip_target = tip_at_rest(plant, scene.target_q)
     report = ctrl.stats.summary()
     metrics = run_metrics(

@@ -10,6 +10,7 @@ monitor.  Models come from the caller's :class:`~flexctrl.scenes.cache.SceneCach
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from dataclasses import dataclass
@@ -192,7 +193,8 @@ def _design_model_of(ctrl, scene, overrides):
 
 
 def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path | None = None, overrides=(),
-                         stride: int = 1, cache: SceneCache | None = None, loop: str = "auto") -> dict[str, Any]:
+                         stride: int = 1, cache: SceneCache | None = None, keep: bool = False,
+                         loop: str = "auto") -> dict[str, Any]:
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
 
     Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
@@ -207,7 +209,10 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
         ``time`` (s), ``tip`` (m, shape (T, 2)) and ``torque`` (N m, (T, n_u)) every
         ``stride`` plant steps; ``wall_time_s`` (the loop), ``build_time_s`` (models,
         design, compiling or loading the plant's step),
-        ``omega_max`` (rad/s), ``diverged_at`` (s or None).
+        ``omega_max`` (rad/s), ``diverged_at`` (s or None); with ``keep``, also ``run``: the
+        whole run at the plant rate (``t``, ``X``, ``U``, ``meta`` of
+        :func:`~flexctrl.loop.sampled.integrate_closed_loop` and the controller's ``stats``),
+        integrated with stride 1 and subsampled, which keeps every other value the same.
     """
     from flexctrl.spec.fidelity import parse_fidelity
 
@@ -217,11 +222,16 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
     rng = np.random.default_rng(scene.seed) if scene.noise else None
     t, X, U, meta, _ = integrate_closed_loop(setup.plant, setup.controller, setup.x0, plant_scene.duration, float(dt),
                                              sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
-                                             monitor=setup.monitor, stop_on_divergence=True, stride=stride, loop=loop)
+                                             monitor=setup.monitor, stop_on_divergence=True,
+                                             stride=1 if keep else stride, loop=loop)
+    whole = {"t": t, "X": X, "U": U, "meta": meta, "stats": copy.deepcopy(setup.controller.stats)} if keep else None
+    if keep:
+        X, U = X[::stride], U[::stride]
+        t = np.arange(X.shape[0]) * (float(dt) * stride)
     plant = setup.plant
     tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
     divergence = meta.get("divergence")
     return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time_s"]),
             "build_time_s": setup.build_time_s + float(meta["setup_time_s"]), "omega_max": float(plant.omega_max),
-            "diverged_at": None if divergence is None else float(divergence["time"])}
+            "diverged_at": None if divergence is None else float(divergence["time"]), **({"run": whole} if keep else {})}
 

@@ -12,6 +12,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     payload = 2.0                     # kg (default: the model file's)
     fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
+    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate" (linear first) or "ladder"
                                       # (flexctrl.scenes.auto chooses the model)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
@@ -126,6 +127,8 @@ class ArmScene:
     source: str = ""
     kind: str = "arm"
     tolerance: float | None = None
+    #: How ``fidelity = "auto"`` walks the ladder for a closed loop: ``estimate`` (linear estimate first) or ``ladder``.
+    fidelity_walk: str = "estimate"
     axial_shortening: bool | None = None
     axial_stretch: bool | None = None
 
@@ -143,6 +146,7 @@ class ArmScene:
                       "t_accel": self.input.t_accel, "t_decel": self.input.t_decel, "t_start": self.input.t_start},
             "integrator": self.integrator, "dt": self.dt, "duration": self.duration, "solver": dict(self.solver),
             "fft_span": self.fft_span, "fft_peaks": self.fft_peaks, "tolerance_m": self.tolerance,
+            "fidelity_walk": self.fidelity_walk,
         }
 
 
@@ -256,6 +260,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         duration=duration,
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
+        fidelity_walk=r.string("fidelity_walk", "estimate", choices=("estimate", "ladder")),
         axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
     )
