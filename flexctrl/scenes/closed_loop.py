@@ -157,7 +157,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         ctrl.stats = copy.deepcopy(whole["stats"])
         meta = {**whole["meta"], "reused": "the fidelity choice's run of this scene at the chosen rung and step"}
         trajectory = trajectory_from_states(plant, whole["t"], whole["X"].copy(), whole["U"].copy(), meta,
-                                            compiled=meta["loop"] == "compiled", compile=plant_scene.solver.get("compile"))
+                                            compiled=loop != "python", compile=plant_scene.solver.get("compile"))
     else:
         rng = np.random.default_rng(scene.seed) if scene.noise else None
         trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt,
