@@ -389,6 +389,8 @@ def _fmt(value: Any) -> str:
 def _plot(summary: list[dict[str, Any]], path: Path) -> None:
     from matplotlib.figure import Figure
 
+    from flexctrl.analysis.pareto_compare import error_cost_axes
+
     scenes = list(dict.fromkeys(s["scene"] for s in summary))
     ncols = min(2, len(scenes))
     nrows = math.ceil(len(scenes) / ncols)
@@ -418,12 +420,7 @@ def _plot(summary: list[dict[str, Any]], path: Path) -> None:
         for integ in sorted(integrators):
             ax.scatter([], [], c="0.5", marker=markers.get(integ, "x"), s=28, label=integ)
         ax.legend(fontsize=7, loc="lower left", ncol=2)  # the fast-and-accurate corner is empty but for the front
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("wall time per simulated second (s/s), median")
-        ax.set_ylabel("tip error RMS (mm), median over cases")
-        ax.set_title(scene, fontsize=9)
-        ax.grid(True, which="both", alpha=0.25)
+        error_cost_axes(ax, scene)
     for ax in axes[len(scenes):]:
         ax.set_visible(False)
     fig.suptitle("speed against accuracy (colour: model family; marker: integrator; large = Pareto-optimal)", fontsize=9)
