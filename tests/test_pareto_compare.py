@@ -111,3 +111,12 @@ def test_a_bad_shortening_value_names_the_key():
     settings = dict(settings, overrides=[*settings["overrides"], 'scene.axial_shortening="yes"'])
     with pytest.raises(SpecError, match=r"axial_shortening.*'yes'.*true or false"):
         study.check_settings(settings)
+
+
+def test_a_controller_sample_time_off_the_comparison_grid_is_refused_before_the_study_runs():
+    settings = _run_settings("speed_vs_accuracy.toml", "amm:2/rk4@1ms", "move_joint1_30deg.toml")
+    study.check_settings(settings)  # the shipped study pins 10 ms
+    bad = dict(settings, overrides=[o for o in settings["overrides"] if not o.startswith("controller.sample_time")]
+               + ["controller.sample_time=0.0075"])
+    with pytest.raises(SpecError, match=r"lqg.toml.*sample_time.*0.0075.*whole number of the 0.001 s"):
+        study.check_settings(bad)

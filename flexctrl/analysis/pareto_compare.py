@@ -118,7 +118,7 @@ def error_cost_axes(ax, title: str) -> None:
 
 
 def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, str] = ("old", "new"),
-         title: str = "") -> Path:
+         title: str = "", dpi: int = 90) -> Path:
     """Per scene, median tip error RMS (mm) against median cost (s/s), old hollow, new filled, an arrow where it moved."""
     from matplotlib.figure import Figure
 
@@ -161,7 +161,7 @@ def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, st
 
     FigureCanvasAgg(fig)
     path = Path(path)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=dpi)
     return path
 
 

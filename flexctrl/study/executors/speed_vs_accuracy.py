@@ -269,7 +269,11 @@ def check_settings(settings: dict) -> None:
         if path is None:
             raise SpecError("closed-loop scene without a controller; allowed: the study's 'controller' or the scene key",
                             source=scene.source, key="controller")
-        load_controller(path, plan.controller_overrides)
+        ctrl = load_controller(path, plan.controller_overrides)
+        per = float(ctrl.sample_time) / OUTPUT_DT
+        if abs(per - round(per)) > 1e-9 * per or round(per) < 1:
+            raise SpecError(f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the {OUTPUT_DT:g} s comparison "
+                            "samples, e.g. \"controller.sample_time\" = 0.01 in the study's [set]", source=str(path), key="sample_time")
 
 
 def execute(settings: dict) -> RunOutput:
