@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from flexctrl.analysis.pareto_compare import compare, main, markdown, plot, read_pareto
+from flexctrl.analysis.pareto_compare import compare, main, markdown, merge, plot, read_pareto
 from flexctrl.errors import SpecError
 from flexctrl.study.executors import speed_vs_accuracy as study
 
@@ -59,12 +59,22 @@ def test_markdown_gives_both_sides_in_mm_and_a_left_front(pair):
     assert "s per sim. s, on / off" in text and "#### bb" in text
 
 
+def test_merge_replaces_a_rerun_scene_and_drops_the_over_all_rows(tmp_path):
+    full = read_pareto(_write(tmp_path / "full", [("bb", "rigid/rk4@1ms", 4, 0, 0.01, 2e-3, True),
+                                                  ("cl", "rigid/rk4@1ms", 0, 4, math.nan, math.nan, False),
+                                                  ("all scenes", "rigid/rk4@1ms", 4, 4, 0.01, 2e-3, False)]))
+    rerun = read_pareto(_write(tmp_path / "cl", [("cl", "rigid/rk4@1ms", 4, 0, 0.02, 0.3, True)]))
+    rows = merge(full, rerun)
+    assert [(r["scene"], r["runs_ok"]) for r in rows] == [("bb", 4), ("cl", 4)]
+    assert merge(full) == full
+
+
 def test_plot_and_command_line(pair, tmp_path, capsys):
     path = plot(compare(read_pareto(pair[0]), read_pareto(pair[1])), tmp_path / "c.png", ("off", "on"))
     assert path.stat().st_size > 10_000
-    assert main([str(pair[0]), str(pair[1]), "--labels", "off", "on"]) == 0
+    assert main(["--old", str(pair[0]), "--new", str(pair[1]), "--labels", "off", "on"]) == 0
     assert "| `amm:2/rk4@1ms` |" in capsys.readouterr().out
-    assert main([str(pair[0]), str(tmp_path / "missing")]) == 2
+    assert main(["--old", str(pair[0]), "--new", str(tmp_path / "missing")]) == 2
     assert "no pareto.csv" in capsys.readouterr().err
 
 

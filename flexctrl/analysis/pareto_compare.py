@@ -12,8 +12,10 @@ assumed-modes models' axial shortening on (``docs/speed_accuracy.md``), and give
 * :func:`plot`: per scene error against cost on log axes, each method old (hollow) and
   new (filled), joined by an arrow where it moved.
 
-Run ``python -m flexctrl.analysis.pareto_compare OLD_DIR NEW_DIR [--labels off on]
-[--figure PATH]``: prints the tables (and draws the figure).
+Run ``python -m flexctrl.analysis.pareto_compare --old DIR [DIR ...] --new DIR [DIR ...]
+[--labels off on] [--figure PATH]``: prints the tables (and draws the figure).  Several
+folders on one side are merged by :func:`merge` (a later folder's scene replaces an
+earlier one's, e.g. a scene rerun on its own).
 """
 
 from __future__ import annotations
@@ -25,9 +27,11 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-__all__ = ["compare", "error_cost_axes", "main", "markdown", "plot", "read_pareto"]
+__all__ = ["compare", "error_cost_axes", "main", "markdown", "merge", "plot", "read_pareto"]
 
 #: Numeric columns of ``pareto.csv`` compared side by side.
+#: The scene label of the study report's over-all-scenes group.
+ALL_SCENES = "all scenes"
 NUMBERS = ("wall_per_sim_s", "tip_error_rms", "tip_error_rms_worst", "tip_error_max_worst", "runs_ok", "runs_failed")
 
 
@@ -52,6 +56,19 @@ def read_pareto(path: str | Path) -> list[dict[str, Any]]:
                 row[c] = float(r[c]) if r.get(c) not in (None, "") else math.nan
             rows.append(row)
     return rows
+
+
+def merge(*tables: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One table from several ``read_pareto`` tables: a scene of a later table replaces that scene's rows before it.
+
+    With more than one table the over-all-scenes rows are dropped: they summarise one
+    folder's runs and would mix with the replaced scenes.
+    """
+    rows: list[dict[str, Any]] = []
+    for table in tables:
+        scenes = {r["scene"] for r in table}
+        rows = [r for r in rows if r["scene"] not in scenes] + list(table)
+    return [r for r in rows if r["scene"] != ALL_SCENES] if len(tables) > 1 else rows
 
 
 def compare(old: Sequence[dict[str, Any]], new: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -167,13 +184,13 @@ def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, st
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("old", help="result folder (or pareto.csv) of the first study")
-    parser.add_argument("new", help="result folder (or pareto.csv) of the second study")
+    parser.add_argument("--old", nargs="+", required=True, metavar="DIR", help="result folders (or pareto.csv) of the first side")
+    parser.add_argument("--new", nargs="+", required=True, metavar="DIR", help="result folders (or pareto.csv) of the second side")
     parser.add_argument("--labels", nargs=2, default=("old", "new"), metavar=("OLD", "NEW"))
     parser.add_argument("--figure", help="also draw error against cost to this PNG")
     args = parser.parse_args(argv)
     try:
-        rows = compare(read_pareto(args.old), read_pareto(args.new))
+        rows = compare(merge(*map(read_pareto, args.old)), merge(*map(read_pareto, args.new)))
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
