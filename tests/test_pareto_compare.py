@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from flexctrl.analysis.pareto_compare import compare, main, markdown, merge, plot, read_pareto
+from flexctrl.analysis.pareto_compare import case_table, compare, main, markdown, merge, plot, read_pareto
 from flexctrl.errors import SpecError
 from flexctrl.study.executors import speed_vs_accuracy as study
 
@@ -67,6 +67,20 @@ def test_merge_replaces_a_rerun_scene_and_drops_the_over_all_rows(tmp_path):
     rows = merge(full, rerun)
     assert [(r["scene"], r["runs_ok"]) for r in rows] == [("bb", 4), ("cl", 4)]
     assert merge(full) == full
+
+
+def test_case_table_shows_each_payload_on_both_sides(tmp_path):
+    for side, values in (("off", (1e-3, 2e-3)), ("on", (3e-3, 0.5e-3))):
+        (tmp_path / side).mkdir()
+        with open(tmp_path / side / "results.csv", "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["scene", "payload", "q1", "q2", "q3", "scene.method", "status", "tip_error_rms"])
+            w.writerow(["bb", 0.0, 0, 0, 0, "amm:2/rk4@1ms", "ok", values[0]])
+            w.writerow(["bb", 2.0, 0, 90, -45, "amm:2/rk4@1ms", "ok", values[1]])
+            w.writerow(["bb", 2.0, 0, 90, -45, "amm:3/rk4@1ms", "failed", ""])
+    text = case_table([tmp_path / "off"], [tmp_path / "on"], "bb", ["amm:2/rk4@1ms", "amm:3/rk4@1ms"], ("off", "on"))
+    assert "| 0 | 0, 0, 0 | 1 / 3 | - / - |" in text
+    assert "| 2 | 0, 90, -45 | 2 / 0.5 | failed / failed |" in text
 
 
 def test_plot_and_command_line(pair, tmp_path, capsys):

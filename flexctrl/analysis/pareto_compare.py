@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-__all__ = ["compare", "error_cost_axes", "main", "markdown", "merge", "plot", "read_pareto"]
+__all__ = ["case_table", "compare", "error_cost_axes", "main", "markdown", "merge", "plot", "read_pareto"]
 
 #: Numeric columns of ``pareto.csv`` compared side by side.
 #: The scene label of the study report's over-all-scenes group.
@@ -124,6 +124,34 @@ def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "
     return "\n".join(lines)
 
 
+def case_table(old: Sequence[str | Path], new: Sequence[str | Path], scene: str, methods: Sequence[str],
+               labels: tuple[str, str] = ("old", "new")) -> str:
+    """Per case (payload, configuration) of ``scene``, each method's tip RMS (mm) on both sides, from ``results.csv``.
+
+    The medians of :func:`markdown` can hide a split (e.g. one payload better, the other
+    worse); this shows it.  ``old``/``new`` are result folders (later ones win, as in :func:`merge`).
+    """
+    def runs(folders):
+        out: dict[tuple, str] = {}
+        for folder in folders:
+            with open(Path(folder) / "results.csv", newline="") as fh:
+                for r in csv.DictReader(fh):
+                    if r.get("scene") == scene:
+                        value = f"{1e3 * float(r['tip_error_rms']):.3g}" if r.get("status") == "ok" else r.get("status", "-")
+                        out[(r["payload"], r.get("q1"), r.get("q2"), r.get("q3"), r["scene.method"])] = value
+        return out
+
+    a, b = runs(old), runs(new)
+    cases = list(dict.fromkeys(k[:4] for k in [*a, *b]))
+    head = "| payload (kg) | q1, q2, q3 (deg) | " + " | ".join(f"`{m}` {labels[0]} / {labels[1]}" for m in methods) + " |"
+    lines = [head, "| --- | --- |" + " --- |" * len(methods)]
+    for case in cases:
+        cells = [f"{a.get((*case, m), '-')} / {b.get((*case, m), '-')}" for m in methods]
+        angles = ", ".join(f"{float(q):g}" for q in case[1:] if q not in (None, ""))
+        lines.append(f"| {float(case[0]):g} | {angles} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def error_cost_axes(ax, title: str) -> None:
     """Log axes of tip error RMS (mm) against integration wall time per simulated second (s/s): every Pareto chart's."""
     ax.set_xscale("log")
@@ -188,7 +216,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--new", nargs="+", required=True, metavar="DIR", help="result folders (or pareto.csv) of the second side")
     parser.add_argument("--labels", nargs=2, default=("old", "new"), metavar=("OLD", "NEW"))
     parser.add_argument("--figure", help="also draw error against cost to this PNG")
+    parser.add_argument("--cases", nargs="+", metavar=("SCENE", "METHOD"),
+                        help="instead: per case tip RMS (mm) of these methods in SCENE, from results.csv")
     args = parser.parse_args(argv)
+    if args.cases:
+        print(case_table(args.old, args.new, args.cases[0], args.cases[1:], tuple(args.labels)))
+        return 0
     try:
         rows = compare(merge(*map(read_pareto, args.old)), merge(*map(read_pareto, args.new)))
     except FileNotFoundError as exc:
