@@ -99,8 +99,8 @@ def pareto_shortening(args) -> Path:
     on = _study("speed_vs_accuracy_shortening", "studies/speed_vs_accuracy_shortening.toml", PARETO_CASE, args, workers=1)
     return plot(compare(read_pareto(off), read_pareto(on)), FIGURES / "pareto_shortening.png",
                 ("axial shortening off", "on"),
-                title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and on (filled); "
-                      "the finite elements have it in both", dpi=DPI)
+                title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and on (filled)\n"
+                      "(the finite elements have it in both; arrows: where a method moved)", dpi=DPI)
 
 
 def modes(args) -> list[Path]:
