@@ -269,7 +269,11 @@ def check_settings(settings: dict) -> None:
         if path is None:
             raise SpecError("closed-loop scene without a controller; allowed: the study's 'controller' or the scene key",
                             source=scene.source, key="controller")
-        load_controller(path, plan.controller_overrides)
+        ctrl = load_controller(path, plan.controller_overrides)
+        per = float(ctrl.sample_time) / OUTPUT_DT
+        if abs(per - round(per)) > 1e-9 * per or round(per) < 1:
+            raise SpecError(f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the {OUTPUT_DT:g} s comparison "
+                            "samples, e.g. \"controller.sample_time\" = 0.01 in the study's [set]", source=str(path), key="sample_time")
 
 
 def execute(settings: dict) -> RunOutput:
@@ -389,6 +393,8 @@ def _fmt(value: Any) -> str:
 def _plot(summary: list[dict[str, Any]], path: Path) -> None:
     from matplotlib.figure import Figure
 
+    from flexctrl.analysis.pareto_compare import error_cost_axes
+
     scenes = list(dict.fromkeys(s["scene"] for s in summary))
     ncols = min(2, len(scenes))
     nrows = math.ceil(len(scenes) / ncols)
@@ -418,12 +424,7 @@ def _plot(summary: list[dict[str, Any]], path: Path) -> None:
         for integ in sorted(integrators):
             ax.scatter([], [], c="0.5", marker=markers.get(integ, "x"), s=28, label=integ)
         ax.legend(fontsize=7, loc="lower left", ncol=2)  # the fast-and-accurate corner is empty but for the front
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("wall time per simulated second (s/s), median")
-        ax.set_ylabel("tip error RMS (mm), median over cases")
-        ax.set_title(scene, fontsize=9)
-        ax.grid(True, which="both", alpha=0.25)
+        error_cost_axes(ax, scene)
     for ax in axes[len(scenes):]:
         ax.set_visible(False)
     fig.suptitle("speed against accuracy (colour: model family; marker: integrator; large = Pareto-optimal)", fontsize=9)
