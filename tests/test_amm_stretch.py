@@ -162,3 +162,14 @@ def test_stiffness_damping_form_damps_like_the_finite_elements(arm):
     assert np.allclose(w_st, w_fem, rtol=2e-3)
     assert np.allclose(z_st, z_fem, rtol=2e-2), (z_st, z_fem)
     assert np.all(z_fem[3:] > 2 * z_ratio[3:])  # the modal ratios would be far off
+
+
+def test_links_without_modes_stay_rigid(arm):
+    """``rigid`` (amm:0) is unchanged by the switch, and only links with elastic modes get an elongation."""
+    loaded = arm.with_payload(2.0)
+    rigid_on, rigid_off = (build_amm(loaded, 0, axial_stretch=flag) for flag in (True, False))
+    assert rigid_on.coordinate_names == rigid_off.coordinate_names == ("q1", "q2", "q3")
+    q = np.array([0.3, -0.5, 0.8])
+    assert np.array_equal(np.asarray(rigid_on.functions["M"](q)), np.asarray(rigid_off.functions["M"](q)))
+    mixed = build_amm(loaded, [2, 0, 1], axial_stretch=True)
+    assert mixed.coordinate_names[-2:] == ("e1", "e3") and mixed.n_q == 3 + 3 + 2

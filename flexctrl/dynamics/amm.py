@@ -79,6 +79,7 @@ from flexctrl.dynamics.amm_kinematics import (
     arm_expressions,
     coordinate_names,
     flexible_offsets,
+    stretched_links,
 )
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import SpecError
@@ -298,8 +299,9 @@ def build_amm(
         the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
         kinematics are consistent only then), ``"linearised"`` without.
     axial_stretch
-        Axially compliant links: one elongation ``e_i`` (m) per link appended to ``q``
-        (names ``e1..en``), a uniform strain ``e_i / L_i`` with strain energy
+        Axially compliant links: one elongation ``e_i`` (m) per link with elastic modes
+        appended to ``q`` (names ``e1..en``; a link without modes, hence ``rigid``, stays
+        rigid), a uniform strain ``e_i / L_i`` with strain energy
         ``1/2 (EA_i / L_i) e_i^2`` and the finite elements' damping rule
         ``(2 zeta_i / omega_1i) EA_i / L_i`` (``docs/amm.md`` section 14).  Frozen modes
         only.  Default: the arm's ``axial_stretch``, else :data:`AMM_AXIAL_STRETCH`.
@@ -344,7 +346,8 @@ def build_amm(
     if stretch and modes == "scheduled":
         raise SpecError("value True is not allowed with modes='scheduled'; allowed: axial_stretch with frozen modes",
                         key="axial_stretch")
-    names = coordinate_names(n, n_modes) + (tuple(f"e{i + 1}" for i in range(n)) if stretch else ())
+    stretched = stretched_links(n_modes) if stretch else []
+    names = coordinate_names(n, n_modes) + tuple(f"e{i + 1}" for i in stretched)
     N = len(names)
     offsets = flexible_offsets(n, n_modes)
     flex = np.arange(n, N)
@@ -372,12 +375,13 @@ def build_amm(
                 damp.append(2.0 * link.damping_ratio(j) * omega * scale)
     E_el = ex.elastic_energy
     if stretch:  # elongations e_i: strain energy 1/2 (EA / L) e^2, damped as the finite elements' links
-        for i, (link, md) in enumerate(zip(arm.links, modal)):
+        for k, i in enumerate(stretched):
+            link, md = arm.links[i], modal[i]
             k_axial = link.axial_stiffness() / link.length
             stiffness.append(ca.SX(k_axial))
-            E_el = E_el + 0.5 * k_axial * q[N - n + i] ** 2
+            E_el = E_el + 0.5 * k_axial * q[N - len(stretched) + k] ** 2
             # stiffness-proportional, (2 zeta / omega_1) k with omega_1 the link's first clamped-mass mode
-            damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial if md.n_modes else 0.0))
+            damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial))
     K = ca.diag(ca.vertcat(*stiffness))
     D = ca.diag(ca.vertcat(*damp))
 

@@ -178,6 +178,11 @@ def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
     return offsets
 
 
+def stretched_links(n_modes: Sequence[int]) -> list[int]:
+    """The links that ``axial_stretch`` makes axially compliant: those with elastic modes."""
+    return [i for i, nf in enumerate(n_modes) if nf > 0]
+
+
 def coordinate_names(n_links: int, n_modes: Sequence[int]) -> tuple[str, ...]:
     """``q1..qn`` then ``qf11, qf12, ...`` (link, mode)."""
     names = [f"q{i + 1}" for i in range(n_links)]
@@ -258,13 +263,16 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
     tip_rotation
         ``"linearised"`` (Eq 7) or ``"exact"`` (the next frame turned by ``w'_ie``).
     axial_stretch
-        Axially compliant links: ``q`` ends with one elongation ``e_i`` (m) per link, a
+        Axially compliant links: ``q`` ends with one elongation ``e_i`` (m) per link with
+        elastic modes (:func:`stretched_links`; a link without modes stays rigid), a
         uniform strain ``e_i / L_i`` along the link (``docs/amm.md`` section 14); the strain
         energy ``1/2 (EA_i / L_i) e_i^2`` is in :func:`flexctrl.dynamics.amm.build_amm`'s ``K``.
     """
     n = arm.n_links
     n_modes = [m.n_modes for m in modal]
     offsets = flexible_offsets(n, n_modes)
+    stretched = stretched_links(n_modes) if axial_stretch else []
+    stretch_index = {i: q.shape[0] - len(stretched) + k for k, i in enumerate(stretched)}
     gravity = ca.DM(np.asarray(arm.gravity, dtype=float).reshape(2, 1))
     sym = type(q)
     zero_dm = ca.DM.zeros(2, 1)
@@ -289,8 +297,8 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         # link i (Eq 43, 48): generalised positions P_a and their Gram matrix
         m, length = link.mass, link.length
         frame_x, frame_y = ca.mtimes(W, e1), ca.mtimes(W, e2)
-        # uniform strain: the point at x sits at x (1 + e / L) along the link
-        stretch = 1 + q[q.shape[0] - n + i] / length if axial_stretch else 1
+        # uniform strain: the point at x sits at x (1 + e / L) along the link (flexible links only)
+        stretch = 1 + q[stretch_index[i]] / length if i in stretch_index else 1
         pieces = [r, frame_x * stretch] + [frame_y * qf[j] for j in range(nf)]
         rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
         moments = sym(ca.horzcat(md.v, md.w))
