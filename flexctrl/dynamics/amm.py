@@ -375,11 +375,11 @@ def build_amm(
                 damp.append(2.0 * link.damping_ratio(j) * omega * scale)
     E_el = ex.elastic_energy
     if stretch:  # elongations e_i: strain energy 1/2 (EA / L) e^2, damped as the finite elements' links
-        for k, i in enumerate(stretched):
+        for i in stretched:
             link, md = arm.links[i], modal[i]
             k_axial = link.axial_stiffness() / link.length
             stiffness.append(ca.SX(k_axial))
-            E_el = E_el + 0.5 * k_axial * q[N - len(stretched) + k] ** 2
+            E_el = E_el + 0.5 * k_axial * q[names.index(f"e{i + 1}")] ** 2
             # stiffness-proportional, (2 zeta / omega_1) k with omega_1 the link's first clamped-mass mode
             damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial))
     K = ca.diag(ca.vertcat(*stiffness))
