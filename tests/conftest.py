@@ -18,3 +18,14 @@ def model_path() -> Path:
 @pytest.fixture
 def root() -> Path:
     return ROOT
+
+
+@pytest.fixture
+def selftest_study(tmp_path) -> Path:
+    """``tests/data/study_selftest.toml`` and its files copied to ``tmp_path`` (isolated from edits of models/)."""
+    import shutil
+
+    shutil.copytree(ROOT / "tests" / "data", tmp_path / "tests" / "data")
+    (tmp_path / "models").mkdir()
+    shutil.copy(MODEL, tmp_path / "models")
+    return tmp_path / "tests" / "data" / "study_selftest.toml"

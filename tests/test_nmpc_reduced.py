@@ -165,3 +165,32 @@ def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_pr
                            SceneCache())
         keys.add(cache_key(setup.controller.functions["linmap"], [], "cc"))
     assert len(keys) == 1
+
+
+def test_a_configuration_of_the_same_structure_reuses_the_linearisation_and_gets_the_same_numbers():
+    # the horizon linearisation is memoised by the content of the lifted f and the recipe: a second
+    # configuration reuses it; built afresh (memo emptied) it gives the same shooting ends and Jacobians
+    from flexctrl.control import nmpc_interval
+
+    def setup(q):
+        return build_loop(load_scene(SCENE, [f"initial.q={q}"]), "controllers/nmpc.toml", ["compile=false"],
+                          SceneCache()).controller
+
+    setup("[0.0,0.0,0.0]")
+    reused = setup("[0.0,90.0,-90.0]")
+    assert reused.functions["build"]["reused"] is True
+    nmpc_interval._BUILT.clear()
+    fresh = setup("[0.0,90.0,-90.0]")
+    assert fresh.functions["build"]["reused"] is False
+    lay, rng = fresh.layout, np.random.default_rng(3)
+    Z, V = 0.1 * rng.standard_normal((lay.n, lay.N)), 0.1 * rng.standard_normal((lay.m, lay.N))
+    p = fresh.functions["params"]
+    np.testing.assert_array_equal(reused.functions["params"], p)
+    for a, b in zip(reused.functions["linmap"](Z, V, p), fresh.functions["linmap"](Z, V, p)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    x = fresh.op.x.copy()
+    x[0] += np.radians(2.0)  # off the target: the first sample's RTI does work
+    y = fresh.sensors.measure(x, fresh.op.u)
+    u = fresh.step(0.0, y)
+    assert np.max(np.abs(u - fresh.op.u)) > 1.0  # N m: a real correction, not the holding torque
+    np.testing.assert_array_equal(reused.step(0.0, y), u)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -20,17 +19,13 @@ from flexctrl.study import load_study, run_study
 from flexctrl.study.runner import DaskBackend
 from flexctrl.study.store import Table
 
-DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
 
 
 @pytest.fixture
-def study(tmp_path, root) -> Path:
+def study(selftest_study) -> Path:
     """The example study and its files copied to tmp_path (isolated from edits of models/)."""
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
-    (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
-    return tmp_path / "tests" / "data" / "study_selftest.toml"
+    return selftest_study
 
 
 def stable(table: Table) -> list[dict]:

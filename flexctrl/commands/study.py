@@ -27,6 +27,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a study-file key, e.g. seed=2 or grid.payload=[0,1] (repeatable)")
     parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto", help="progress on stderr (auto: a bar on a terminal, lines otherwise)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress and no summary")
+    parser.add_argument("--no-affinity", action="store_true",
+                        help="local pool: give each run to whichever worker is free, instead of keeping the runs that "
+                             "share a model on one worker (the slow path, for measuring side by side)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
     return parser
@@ -46,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / spec.name
     with stop_signals_interrupt():
         result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                           progress="none" if args.quiet else args.progress, report=not args.no_report)
+                           progress="none" if args.quiet else args.progress, report=not args.no_report,
+                           affinity=not args.no_affinity)
     c = result.counts
     if not args.quiet:
         print(f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "

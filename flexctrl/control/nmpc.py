@@ -96,7 +96,8 @@ from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
-from flexctrl.control.nmpc_interval import RK4_BOUND, auto_substeps, interval_core, interval_functions
+from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, content_key, interval_core, interval_functions,
+                                            memoised)
 from flexctrl.control.nmpc_model import Prediction, prediction_model
 from flexctrl.control.nmpc_jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
@@ -152,6 +153,8 @@ class NMPCController(Controller):
         self.timing: dict[str, list[float]] = {"linearize_qp": [], "qp": [], "total": []}
         self._reference_now = (np.zeros(problem.n), np.zeros(problem.m))
         self._w_ref: np.ndarray | None = None
+        #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
+        self._cost_window: tuple | None = None
 
     def _reset(self) -> None:
         self.observer.reset()
@@ -206,14 +209,19 @@ class NMPCController(Controller):
         """
         lay, pb = self.layout, self.problem
         X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
-        w_ref = np.zeros(lay.nw)
-        for k in range(lay.N + 1):
-            w_ref[lay.z[k]] = (self.to_prediction(X[k]) - self.pred_op.x) / pb.Sx
-        for k in range(lay.N):
-            w_ref[lay.v[k]] = (U[k] - self.u_out) / pb.Su
+        window = (X.tobytes(), U.tobytes())
+        if self._cost_window is not None and self._cost_window[0] == window:  # e.g. the reference has arrived
+            w_ref, g = self._cost_window[1]
+        else:
+            # row by row, as the state is mapped in the loop (one matrix product would round differently)
+            w_ref = np.zeros(lay.nw)
+            w_ref[lay.z.ravel()] = ((np.array([self.to_prediction(x) for x in X]) - self.pred_op.x) / pb.Sx).ravel()
+            w_ref[lay.v.ravel()] = ((U[:lay.N] - self.u_out) / pb.Su).ravel()
+            g = self.functions["g0"] - self.functions["Hnp"] @ w_ref
+            self._cost_window = (window, (w_ref, g))
         self._reference_now = (w_ref[lay.z[0]], w_ref[lay.v[0]])
         self._w_ref = w_ref
-        return self.functions["g0"] - self.functions["Hnp"] @ w_ref
+        return g.copy()
 
     def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None) -> Solution:
         solver = self.functions["nlp"]
@@ -355,32 +363,17 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     else:
         (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
     nc = const.size
-    extra = (ca.MX.sym("c", nc),) if nc else ()
-    _, FJp = interval_core(fp if nc else _expanded(fp), n, m, plant.dt, substeps, settings.sensitivities, extra, f_jac,
-                            settings.jacobian_every)
     params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
-    p = ca.MX.sym("p", params.size)
-    xop, uop = p[:n], p[n:n + m]
-    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
-    # scaled interval map, mapped over the horizon
-    z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *((p[2 * n + 2 * m:],) if nc else ()))
-    Fs = (xn - xop) / Sx
-    As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
-    Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
-    lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
-    linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
     P = ca.DM(params)
     xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
     zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
     Fz = ca.Function("nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d])
-    compiled, compile_seconds, cache_hit = False, 0.0, False
-    if settings.compile:
-        from flexctrl.sim.compile import compile_function
-
-        result = compile_function(linmap)
-        linmap, compiled = result.function, result.compiled
-        compile_seconds, cache_hit = result.compile_seconds, result.cache_hit
+    # The linearisation depends on the lifted f, its Jacobian, the sizes and the recipe alone:
+    # built (and compiled) once per worker for every configuration of one model structure.
+    key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
+                      substeps, settings.sensitivities, settings.jacobian_every, settings.compile)
+    linmap, compiled, compile_seconds, cache_hit, reused = memoised(
+        key, lambda: _horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings))
     # QP assembly in the virtual machine around the compiled linearisation, one Function of (z0, w).
     # (Generating it into the same C function was measured at 9 % less time for this call on
     # the three-link arm, for a second compilation per model structure: not done.)
@@ -431,11 +424,40 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     functions = {"prepare": prepare, "bounds": bounds, "qp": qp, "H": Hs, "g0": g, "Hnp": sp.csr_matrix(H),
                  "rollout": rollout,
                  "linmap": linmap, "F": Fz, "params": params,
-                 "build": {"compile_seconds": compile_seconds, "cache_hit": cache_hit, "n_constants": nc}}
+                 "build": {"compile_seconds": compile_seconds, "cache_hit": cache_hit, "n_constants": nc,
+                           "reused": reused}}
     # full NLP (also the RTI initialisation)
     if settings.mode == "full" or settings.init_iter > 0:
         functions.update(_nlp_functions(settings, pb, lay, Fz, H, g))
     return functions, lay, compiled
+
+
+def _horizon_linearisation(fp, f_jac, nc: int, n: int, m: int, N: int, dt: float, substeps: int,
+                           settings: NMPCSettings) -> tuple:
+    """``(linmap, compiled, compile_seconds, cache_hit)``: the scaled shooting intervals over the horizon.
+
+    ``linmap(Z, V, p) -> (F, A, B)`` with ``p = (x_op, u_op, S_x, S_u, c)``; compiled to C when
+    ``settings.compile`` (the library from the disk cache when its code was built before).
+    """
+    extra = (ca.MX.sym("c", nc),) if nc else ()
+    _, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
+                            settings.jacobian_every)
+    p = ca.MX.sym("p", 2 * n + 2 * m + nc)
+    xop, uop = p[:n], p[n:n + m]
+    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
+    z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
+    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *((p[2 * n + 2 * m:],) if nc else ()))
+    Fs = (xn - xop) / Sx
+    As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
+    Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
+    lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
+    linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
+    if not settings.compile:
+        return linmap, False, 0.0, False
+    from flexctrl.sim.compile import compile_function
+
+    result = compile_function(linmap)
+    return result.function, result.compiled, result.compile_seconds, result.cache_hit
 
 
 def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:

@@ -19,7 +19,11 @@ local pool (default)
     than that whatever the grid's size.  If a worker process dies (killed, out
     of memory, a crash in compiled code), the runs that were in flight are
     rerun one at a time in a fresh pool: the run that kills its worker again is
-    recorded as failed, the others complete.
+    recorded as failed, the others complete.  By default every worker is a
+    pool of one process and the runs that share a model (all settings but the
+    controller's) go to the same worker (:mod:`flexctrl.study.affinity`), so a
+    configuration's model is built once; ``affinity=False`` (``--no-affinity``)
+    is the plain pool, kept for measuring side by side.
 Dask (``scheduler="tcp://host:8786"`` or ``client=...``)
     ``dask.distributed`` (an optional dependency, imported only here), at most
     ``2 x threads`` runs in flight.  Workers need flexctrl installed and the
@@ -184,9 +188,12 @@ def default_workers() -> int:
 class LocalPoolBackend:
     """A process pool on this machine (see the module docstring)."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, affinity: bool = True):
         self.workers = workers
-        self.description = f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
+        #: runs that share a model go to the same worker (:mod:`flexctrl.study.affinity`); False: any free worker
+        self.affinity = affinity and workers > 1
+        self.description = (f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
+                            + (", runs grouped by model per worker" if self.affinity else ""))
 
     def start(self) -> None:
         """The pool starts with the first run."""
@@ -195,16 +202,21 @@ class LocalPoolBackend:
         """The pool closes with the last run."""
 
     def run(self, runs: Iterable[RunSpec], executor: str, options: dict) -> Iterator[tuple[RunSpec, dict]]:
-        from concurrent.futures.process import BrokenProcessPool
+        from flexctrl.study.affinity import affinity_key, outcome, run_pinned
 
         methods = multiprocessing.get_all_start_methods()
         context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+        if self.affinity:
+            yield from run_pinned(runs, self.workers,
+                                  lambda pool, run: pool.submit(execute_run, executor, run.settings, options),
+                                  lambda: cf.ProcessPoolExecutor(1, mp_context=context),
+                                  lambda run: affinity_key(run.settings), _failed, describe_exception)
+            return
         pending = deque(runs)
         suspects: deque[RunSpec] = deque()
         inflight: dict[cf.Future, tuple[RunSpec, bool]] = {}
         window = 2 * self.workers
         pool = None
-        died = "its worker process died (killed, out of memory, or a crash in compiled code)"
         try:
             while pending or suspects or inflight:
                 if pool is None:
@@ -221,28 +233,19 @@ class LocalPoolBackend:
                 broken = False
                 for future in done:
                     run, isolated = inflight.pop(future)
-                    try:
-                        result = future.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        if isolated:
-                            yield run, _failed(f"{died} while running this run alone")
-                        else:
-                            suspects.append(run)
-                        continue
-                    except Exception as exc:  # noqa: BLE001 - e.g. a result that does not pickle
-                        result = _failed(describe_exception(exc))
-                    yield run, result
-                if broken:
-                    for future, (run, isolated) in list(inflight.items()):
-                        try:
-                            result = future.result()
-                        except BrokenProcessPool:
-                            suspects.append(run)
-                            continue
-                        except Exception as exc:  # noqa: BLE001
-                            result = _failed(describe_exception(exc))
+                    result, died = outcome(future, isolated, _failed, describe_exception)
+                    broken = broken or died
+                    if result is None:
+                        suspects.append(run)
+                    else:
                         yield run, result
+                if broken:
+                    for future, (run, _) in list(inflight.items()):
+                        result, _ = outcome(future, False, _failed, describe_exception)
+                        if result is None:
+                            suspects.append(run)
+                        else:
+                            yield run, result
                     inflight.clear()
                     pool.shutdown(wait=True, cancel_futures=True)
                     pool = None
@@ -409,8 +412,11 @@ class StudyResult:
         return self.table().to_pandas()
 
 
-def make_backend(workers: int | None = None, scheduler: str | None = None, client: Any = None):
-    """The backend for the given options (see the module docstring); call its ``start()`` and ``close()``."""
+def make_backend(workers: int | None = None, scheduler: str | None = None, client: Any = None, affinity: bool = True):
+    """The backend for the given options (see the module docstring); call its ``start()`` and ``close()``.
+
+    ``affinity``: the local pool sends the runs that share a model to one worker (:mod:`flexctrl.study.affinity`).
+    """
     if scheduler is not None or client is not None:
         if workers is not None:
             raise SpecError("--workers sizes the local pool; with --scheduler the cluster's workers run the study", key="--workers")
@@ -419,12 +425,12 @@ def make_backend(workers: int | None = None, scheduler: str | None = None, clien
         raise SpecError(f"value {workers} is not allowed; allowed: 0 (in this process) or more workers", key="--workers")
     if workers == 0:
         return InProcessBackend()
-    return LocalPoolBackend(workers if workers is not None else default_workers())
+    return LocalPoolBackend(workers if workers is not None else default_workers(), affinity)
 
 
 def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = None, scheduler: str | None = None,
               client: Any = None, resume: bool = False, progress: str = "auto", stream=None,
-              report: bool = True) -> StudyResult:
+              report: bool = True, affinity: bool = True) -> StudyResult:
     """Run every run of ``spec`` not yet recorded in ``out``; write the table and the report.
 
     Parameters
@@ -447,6 +453,9 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
         Where the progress goes (default stderr).
     report
         Write ``report.md`` and the figures at the end.
+    affinity
+        Local pool: the runs that share a model go to the same worker
+        (:mod:`flexctrl.study.affinity`); False: each run to whichever worker is free.
 
     Raises
     ------
@@ -465,7 +474,7 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
                         f"not '{spec.name}'; choose another --out", key="--out")
     options = {"metrics": None if spec.metrics is None else list(spec.metrics),
                "keep_trajectories": spec.keep_trajectories, "decimation": spec.decimation}
-    backend = make_backend(workers, scheduler, client)
+    backend = make_backend(workers, scheduler, client, affinity)
     backend.start()
     try:
         return _run(spec, store, previous, backend, options, resume, progress, stream, report, start)
@@ -483,7 +492,7 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
         skip = {run.run_id for run in spec.runs if recorded.get(run.run_id) in keep}
         todo = [run for run in spec.runs if run.run_id not in skip]
         if isinstance(backend, LocalPoolBackend) and backend.workers > max(1, len(todo)):
-            backend = LocalPoolBackend(max(1, len(todo)))  # no idle processes for a short resume
+            backend = LocalPoolBackend(max(1, len(todo)), backend.affinity)  # no idle processes for a short resume
         store.write_plan(spec.runs)
         document = previous or {"format": STUDY_FORMAT, "start": now_iso(), "sessions": []}
         session: dict[str, Any] = {"start": now_iso(), "end": None, "backend": backend.description, "resume": resume,
