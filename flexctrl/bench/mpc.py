@@ -160,13 +160,20 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
 
 
 def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float,
-               variants: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """Every NMPC variant against its own copy of the nonlinear plant, one sample of each in turn.
+               variants: dict[str, dict[str, Any]], block_rounds: int = 3) -> dict[str, Any]:
+    """Every NMPC variant against its own copy of the nonlinear plant, twice: per sample and in blocks.
 
-    Interleaving puts the variants under the same load (the machine may be shared), so
-    their ratios are meaningful even when the absolute times are not.  The plant is the
-    design model's RK4 map with the substeps its own fastest mode needs (whatever model
-    a variant predicts with).
+    ``"sample"``: one sample of each variant in turn.  Interleaving puts the variants under
+    the same load (the machine may be shared), so their ratios are meaningful even when the
+    absolute times are not; but every call then finds the caches full of the other
+    variants' code and data (seven compiled linearisations of 0.1-1 MB each).
+    ``"block"``: the same runs again from the start (each controller reset), in
+    ``block_rounds`` rounds of ``steps / block_rounds`` consecutive samples per variant, the
+    order of the variants rotated every round: what a controller that runs alone sees (as in
+    a study), with the load still shared at the scale of a block.  Each variant has its own
+    plant, so the order changes no number but the times.  The plant is the design model's
+    RK4 map with the substeps its own fastest mode needs (whatever model a variant
+    predicts with).
     """
     from flexctrl.control import design
     from flexctrl.control.lqr import build_sensors, linear_plant
@@ -183,36 +190,50 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
         controllers[name] = (design_nmpc(model, op, settings, jacobian=overrides["jacobian"]) if "jacobian" in overrides
                              else design(model, op, settings))
         builds[name] = time.perf_counter() - start
-        controllers[name].reset()
-    states = {name: op.x + dx0 for name in variants}
-    cpu: dict[str, list[float]] = {name: [] for name in variants}
-    for k in range(steps):
-        for name, ctrl in controllers.items():
-            start = time.thread_time()
-            u = ctrl.step(k * ctrl.sample_time, states[name])
-            cpu[name].append(time.thread_time() - start)
-            states[name] = np.array(F(states[name], u), dtype=float).ravel()
-    result: dict[str, Any] = {}
-    for name, ctrl in controllers.items():
-        summary = ctrl.stats.summary()
-        it = np.asarray(ctrl.stats.iterations[1:], dtype=float)
-        result[name] = {
-            "settings": variants[name],
-            "build_s": builds[name],
-            "compiled": ctrl.compiled,
-            "prediction_states": int(ctrl.problem.n),
-            "substeps": ctrl.substeps,
-            "step_ms": _stats(ctrl.stats.step_times[1:]),
-            "step_cpu_ms": _stats(cpu[name][1:]),
-            "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
-            "qp_ms": _stats(ctrl.timing["qp"][1:]),
-            "qp_iterations_median": float(np.median(it)) if it.size else math.nan,
-            "status": summary["status"],
-            "fallbacks": summary["fallbacks"],
-            "final_joint_error_deg": float(np.degrees(np.max(np.abs((states[name] - op.x)[:model.n_u])))),
-        }
-    result["plant_substeps"] = plant_substeps
-    return result
+
+    def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:
+        for ctrl in controllers.values():
+            ctrl.reset()
+        states = {name: op.x + dx0 for name in variants}
+        cpu: dict[str, list[float]] = {name: [] for name in variants}
+        for name, samples in schedule:
+            ctrl = controllers[name]
+            for k in samples:
+                start = time.thread_time()
+                u = ctrl.step(k * ctrl.sample_time, states[name])
+                cpu[name].append(time.thread_time() - start)
+                states[name] = np.array(F(states[name], u), dtype=float).ravel()
+        return {name: _nmpc_summary(ctrl, variants[name], builds[name], cpu[name], states[name], op, model.n_u)
+                for name, ctrl in controllers.items()}
+
+    names = list(variants)
+    per_sample = [(name, range(k, k + 1)) for k in range(steps) for name in names]
+    size = -(-steps // block_rounds)
+    blocks = [(names[(i + r) % len(names)], range(r * size, min(steps, (r + 1) * size)))
+              for r in range(block_rounds) for i in range(len(names))]
+    return {"sample": run(per_sample), "block": run(blocks), "plant_substeps": plant_substeps,
+            "block_rounds": block_rounds}
+
+
+def _nmpc_summary(ctrl, settings: dict, build_s: float, cpu: list[float], state: np.ndarray, op, n_u: int) -> dict:
+    """The figures of one NMPC variant's run (the first sample, which starts from a rollout, left out)."""
+    summary = ctrl.stats.summary()
+    it = np.asarray(ctrl.stats.iterations[1:], dtype=float)
+    return {
+        "settings": settings,
+        "build_s": build_s,
+        "compiled": ctrl.compiled,
+        "prediction_states": int(ctrl.problem.n),
+        "substeps": ctrl.substeps,
+        "step_ms": _stats(ctrl.stats.step_times[1:]),
+        "step_cpu_ms": _stats(cpu[1:]),
+        "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
+        "qp_ms": _stats(ctrl.timing["qp"][1:]),
+        "qp_iterations_median": float(np.median(it)) if it.size else math.nan,
+        "status": summary["status"],
+        "fallbacks": summary["fallbacks"],
+        "final_joint_error_deg": float(np.degrees(np.max(np.abs((state - op.x)[:n_u])))),
+    }
 
 
 def mpc_benchmark(
@@ -259,7 +280,8 @@ def mpc_benchmark(
         ``problem``, ``environment``, ``variants`` (per variant: ``solve_ms`` and
         ``step_ms`` as median/p95/max, iterations, status counts, fallbacks),
         ``python_control`` (seconds per solve and the ratio to ``osqp_sparse``),
-        ``nmpc`` and ``command``.
+        ``nmpc`` (the variants stepped one sample each in turn), ``nmpc_blocks`` (the same
+        runs in blocks of consecutive samples, see :func:`_run_nmpcs`) and ``command``.
     """
     import casadi
     import control
@@ -298,10 +320,12 @@ def mpc_benchmark(
     if nmpc:
         runs = _run_nmpcs(model, op, dx0, nmpc_steps, horizon, sample_time,
                           nmpc_variants if nmpc_variants is not None else default_nmpc_variants())
-        result["nmpc_plant_substeps"] = runs.pop("plant_substeps")
-        result["nmpc"] = runs
-        if "rti_frozen" in runs and "rti_frozen_full" in runs:
-            fast, full = runs["rti_frozen"], runs["rti_frozen_full"]
+        result["nmpc_plant_substeps"] = runs["plant_substeps"]
+        result["nmpc"] = runs["sample"]
+        result["nmpc_blocks"] = runs["block"]
+        result["nmpc_block_rounds"] = runs["block_rounds"]
+        if "rti_frozen" in runs["sample"] and "rti_frozen_full" in runs["sample"]:
+            fast, full = runs["sample"]["rti_frozen"], runs["sample"]["rti_frozen_full"]
             result["nmpc_speedup"] = {"against": "rti_frozen_full",
                                       "step_median": full["step_ms"]["median"] / fast["step_ms"]["median"],
                                       "step_cpu_median": full["step_cpu_ms"]["median"] / fast["step_cpu_ms"]["median"]}
@@ -326,6 +350,11 @@ def format_benchmark(result: dict[str, Any]) -> str:
         lines.append(f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x OSQP sparse "
                      f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)")
     for name, v in result.get("nmpc", {}).items():
+        block = result.get("nmpc_blocks", {}).get(name)
+        if block:
+            lines.append(f"NMPC {name} in blocks of consecutive samples: step median {block['step_ms']['median']:.2f} ms, "
+                         f"p95 {block['step_ms']['p95']:.2f} (linearise+assemble "
+                         f"{block['linearize_and_assemble_ms']['median']:.2f}, QP {block['qp_ms']['median']:.2f})")
         lines.append(f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
                      f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
                      f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
