@@ -112,3 +112,24 @@ def test_design_is_kept_and_reset(cache):
     run_closed_loop_scene(scene, cache=cache, on_divergence="record")
     again = run_closed_loop_scene(scene, cache=cache, on_divergence="record").metrics
     assert max(metric_differences(fresh, again).values()) == 0.0
+
+
+@pytest.mark.parametrize("controller", ["controllers/lqg.toml", "controllers/pd.toml"])
+def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache, monkeypatch):
+    # the loop is chained in calls of CHUNK samples (building one mapaccum over the whole run costs time
+    # in proportion to its length); 7 leaves a remainder, so both the full and the last, shorter chunk run
+    import flexctrl.loop.compiled as compiled
+
+    scene = short_scene(noise=True)
+    runs = {}
+    for chunk in (None, 7):
+        monkeypatch.setattr(compiled.run_compiled, "__defaults__", (chunk,))
+        runs[chunk] = both(scene, controller, cache)["compiled"]
+    (a, sa, stats_a, ua), (b, sb, stats_b, ub) = runs[None], runs[7]
+    np.testing.assert_array_equal(sa, sb)
+    assert a.states.shape[0] > 7 * 15
+    np.testing.assert_array_equal(a.states, b.states)
+    np.testing.assert_array_equal(a.inputs, b.inputs)
+    np.testing.assert_array_equal(ua, ub)
+    kept = lambda stats: {k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"}  # noqa: E731
+    assert kept(stats_a) == kept(stats_b) and kept(stats_a)["steps"] == len(sa)

@@ -246,7 +246,8 @@ class NMPCController(Controller):
         """
         start = time.perf_counter()
         a, lba, uba = self.functions["prepare"](z0, w0)
-        lbx, ubx = self.functions["bounds"](z0)
+        lbx, ubx = self.functions["lbx0"].copy(), self.functions["ubx0"].copy()  # nmpc_bounds(z0), in numpy
+        lbx[self.layout.z[0]] = ubx[self.layout.z[0]] = z0
         mid = time.perf_counter()
         self.timing["linearize_qp"].append(mid - start)
         problem = qp_data_problem(w0, a, lba, uba)
@@ -326,6 +327,11 @@ class NMPCController(Controller):
         return self.u_out + self.problem.Su * v
 
 
+def _values(v) -> np.ndarray:
+    """The entries of a vector (a DM's stored entries: one list, cheaper than its numpy conversion)."""
+    return np.array(v.nonzeros(), dtype=float) if isinstance(v, ca.DM) else np.asarray(v, dtype=float).ravel()
+
+
 def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
     """What makes the RTI's QP data unusable, or ``""``.
 
@@ -337,7 +343,7 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
         return "non-finite linearisation trajectory"
     if not (a.is_regular() if isinstance(a, ca.DM) else np.all(np.isfinite(np.asarray(a, dtype=float)))):
         return "non-finite sensitivities"
-    lo, hi = np.asarray(lba, dtype=float).ravel(), np.asarray(uba, dtype=float).ravel()
+    lo, hi = _values(lba), _values(uba)
     if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
         return "NaN in the constraint bounds"
     if np.any(lo == np.inf) or np.any(hi == -np.inf):
@@ -421,7 +427,8 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     rollout = _rollout(step, N, n, m)
     import scipy.sparse as sp
 
-    functions = {"prepare": prepare, "bounds": bounds, "qp": qp, "H": Hs, "g0": g, "Hnp": sp.csr_matrix(H),
+    functions = {"prepare": prepare, "bounds": bounds, "lbx0": lbx0, "ubx0": ubx0, "qp": qp, "H": Hs, "g0": g,
+                 "Hnp": sp.csr_matrix(H),
                  "rollout": rollout,
                  "linmap": linmap, "F": Fz, "params": params,
                  "build": {"compile_seconds": compile_seconds, "cache_hit": cache_hit, "n_constants": nc,
