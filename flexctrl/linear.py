@@ -378,7 +378,10 @@ class Sensors:
 
     def measure(self, x, u, rng: np.random.Generator | None = None) -> np.ndarray:
         """Outputs at ``(x, u)`` plus Gaussian noise of :attr:`noise_std` (none when ``rng`` is None)."""
-        y = self.evaluate(x, u)
+        return self.with_noise(self.evaluate(x, u), rng)
+
+    def with_noise(self, y: np.ndarray, rng: np.random.Generator | None) -> np.ndarray:
+        """Noise-free outputs ``y`` plus one draw of Gaussian noise of :attr:`noise_std` (none when ``rng`` is None)."""
         if rng is not None:
             y = y + self.noise_std * rng.standard_normal(y.size)
         return y

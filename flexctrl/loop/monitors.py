@@ -36,7 +36,10 @@ class LoopMonitor:
         return np.any(np.abs(w) > self.limit, axis=1) | np.any((q < self.low) | (q > self.high), axis=1)
 
     def __call__(self, t: float, x: np.ndarray) -> str | None:
-        w = np.array(self.deflection(x[: self.N])[0], dtype=float).ravel()
+        return self.verdict(np.array(self.deflection(x[: self.N])[0], dtype=float).ravel(), x)
+
+    def verdict(self, w: np.ndarray, x: np.ndarray) -> str | None:
+        """What :meth:`__call__` says of state ``x`` whose link tip deflections (m) are ``w``."""
         over = np.flatnonzero(np.abs(w) > self.limit)
         if over.size:
             i = int(over[0])
