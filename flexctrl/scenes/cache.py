@@ -27,6 +27,8 @@ class SceneCache:
     maxsize : int
         Entries kept per kind (models, integrators, runs, choices); the least recently
         used is dropped beyond it.
+    limits : dict, optional
+        Another number for some kinds, e.g. ``{"models": 8}``.
 
     Examples
     --------
@@ -35,12 +37,19 @@ class SceneCache:
     (1, 1)
     >>> cache.stats()["runs"]
     {'entries': 1, 'hits': 1, 'misses': 1}
+    >>> small = SceneCache(maxsize=2, limits={"models": 1})
+    >>> [small.get(kind, k, lambda: k) for kind in ("models", "runs") for k in "abc"] and None
+    >>> {kind: v["entries"] for kind, v in small.stats().items()}
+    {'models': 1, 'runs': 2}
     """
 
-    def __init__(self, maxsize: int = 64):
-        if isinstance(maxsize, bool) or not isinstance(maxsize, int) or maxsize < 1:
-            raise ValueError(f"maxsize {maxsize!r} is not allowed; allowed: a whole number >= 1")
+    def __init__(self, maxsize: int = 64, limits: dict[str, int] | None = None):
+        for name, size in {"maxsize": maxsize, **(limits or {})}.items():
+            if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+                raise ValueError(f"{name} {size!r} is not allowed; allowed: a whole number >= 1")
         self.maxsize = maxsize
+        #: entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the most memory)
+        self.limits = dict(limits or {})
         self._stores: dict[str, OrderedDict] = {}
         self._hits: dict[str, int] = {}
         self._misses: dict[str, int] = {}
@@ -55,7 +64,7 @@ class SceneCache:
         value = build()
         self._misses[kind] = self._misses.get(kind, 0) + 1
         store[key] = value
-        while len(store) > self.maxsize:
+        while len(store) > self.limits.get(kind, self.maxsize):
             store.popitem(last=False)
         return value
 

@@ -151,4 +151,12 @@ def worker_scene_cache():
     """
     from flexctrl.scenes.cache import SceneCache
 
-    return SceneCache(maxsize=32)
+    return SceneCache(maxsize=32, limits=WORKER_CACHE_LIMITS)
+
+
+#: Entries a worker keeps of the kinds that hold a model (with everything derived from it: about 19 MB per
+#: configuration of amm:2 with the seven controllers of the sweep).  At 32, as for the other kinds, a worker of
+#: the 4032-run sweep grew to 1040 MB; with these it stays at about 400 MB from the 12th configuration on (one
+#: process, seven controllers per configuration, 36 configurations).  8 models cover an automatic-fidelity walk
+#: (rigid, amm:1..5 and the design model); a configuration's runs are consecutive in a worker (affinity).
+WORKER_CACHE_LIMITS = {"models": 8, "references": 8, "integrators": 8, "designs": 16, "verdicts": 16}
