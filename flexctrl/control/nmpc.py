@@ -376,10 +376,14 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     Fz = ca.Function("nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d])
     # The linearisation depends on the lifted f, its Jacobian, the sizes and the recipe alone:
     # built (and compiled) once per worker for every configuration of one model structure.
-    key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
-                      substeps, settings.sensitivities, settings.jacobian_every, settings.compile)
-    linmap, compiled, compile_seconds, cache_hit, reused = memoised(
-        key, lambda: _horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings))
+    build = lambda: _horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings)  # noqa: E731
+    try:
+        key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
+                          substeps, settings.sensitivities, settings.jacobian_every, settings.compile)
+    except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
+        key = None
+    linmap, compiled, compile_seconds, cache_hit, reused = (memoised(key, build) if key is not None
+                                                            else (*build(), False))
     # QP assembly in the virtual machine around the compiled linearisation, one Function of (z0, w).
     # (Generating it into the same C function was measured at 9 % less time for this call on
     # the three-link arm, for a second compilation per model structure: not done.)
