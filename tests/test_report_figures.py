@@ -82,6 +82,24 @@ def test_maps_best_and_ratio_maps_carry_units_and_one_panel_per_cell_group(selft
         assert header in text, header
 
 
+def test_a_large_grid_is_drawn_without_text_in_its_cells_and_the_report_says_where_the_values_are(
+        tmp_path, root, captured):
+    # 9 x 8 = 72 cells a panel: beyond TEXT_CELLS (64) names and values would overlap their neighbours
+    shutil.copytree(DATA, tmp_path / "tests" / "data")
+    (tmp_path / "models").mkdir()
+    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
+    out = tmp_path / "out"
+    grid = ["grid.payload=[2.0]", "grid.q2=[-120, -90, -60, -30, 0, 30, 60, 90, 120]",
+            "grid.q3=[-105, -75, -45, -15, 15, 45, 75, 105]"]
+    run_study(load_study(tmp_path / "tests" / "data" / "study_selftest.toml", overrides=grid), out, workers=0,
+              progress="none", report=False)
+    text = write_report(out).read_text()
+    best = _panels(captured["best_tip_residual_rms.png"])
+    assert len(best) == 1 and len(best[0].texts) == 0 and len(best[0].images) == 1
+    assert all(len(ax.texts) == 0 for ax in _panels(captured["map_tip_residual_rms.png"]))
+    assert "9 x 8 cells leave no room for names and values" in text
+
+
 def test_ranking_uses_a_log_axis_across_decades_and_shows_every_run(selftest_out, captured):
     write_report(selftest_out)
     (ax,) = _panels(captured["ranking_tip_residual_rms.png"])

@@ -39,7 +39,8 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.study.spec import ReportSpec
-from flexctrl.study.report_figures import draw_best_map, draw_ranking, draw_signals, draw_value_maps, wants_log
+from flexctrl.study.report_figures import (TEXT_CELLS, draw_best_map, draw_ranking, draw_signals, draw_value_maps,
+                                           wants_log)
 from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
 from flexctrl.study.units import display, with_unit
 
@@ -289,9 +290,12 @@ def _best_maps(ctx: _Context, facets: list[str], xs, ys, x_axis: str, y_axis: st
             for c in candidates:
                 ratio = grids[c] / best if sign > 0 else best / grids[c]
                 ratio_panels.append((f"{with_unit(rank_by, c)}" + (f"; {title}" if others else ""), ratio))
+    written = len(xs) * len(ys) <= TEXT_CELLS
     lines = ["", "### Best per cell", "",
              f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in each cell "
-             "(its value written below its name; hatched: a tie, every tied name listed)."]
+             + ("(its value written below its name; hatched: a tie, every tied name listed)." if written else
+                f"(colour: the best, named in the legend; hatched: a tie; {len(xs)} x {len(ys)} cells leave no room "
+                "for names and values, which the ranking above and the ratio maps below give).")]
     name = f"best_{_slug(ctx.metric)}.png"
     draw_best_map(ctx.figures / name, best_panels, candidates, xs, ys, x_axis, y_axis, shown, min(3, len(best_panels)))
     lines += ["", f"![best per cell]({ctx.figures.name}/{name})"]

@@ -20,6 +20,11 @@ from flexctrl.study.units import Shown, display
 LOG_SPAN = 20.0
 
 
+#: Cells per panel up to which a map writes its values (names, for the best map) into the cells; a 12 x 12 grid
+#: of the sweep at 100 dpi leaves about 20 pixels per cell, where the text of neighbours overlaps.
+TEXT_CELLS = 64
+
+
 def _fmt_cell(value: float) -> str:
     return f"{value:.3g}"
 
@@ -77,7 +82,7 @@ def draw_value_maps(path: Path, panels: Sequence[tuple[str, np.ndarray]], xs, ys
         image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", aspect="auto", cmap=cmap, norm=norm)
         _ticks(ax, xs, ys, display(x_axis), display(y_axis))
         ax.set_title(title, fontsize=8)
-        if grid.size <= 64:
+        if grid.size <= TEXT_CELLS:
             for (i, j), value in np.ndenumerate(grid):
                 if np.isfinite(value):
                     dark = binary or (float(norm(value)) > 0.6 if ratio else float(norm(value)) < 0.6)
@@ -94,6 +99,7 @@ def draw_best_map(path: Path, panels: Sequence[tuple[str, list[list[Any]]]], can
     """Per cell, the best candidate's colour with its name and value; ties hatched with every name.
 
     ``panels``: (title, cells) with ``cells[i][j]`` None (no ok run) or (winners, shown value).
+    Grids of more than :data:`TEXT_CELLS` cells get the colours and hatching alone.
     """
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch, Rectangle
@@ -112,6 +118,8 @@ def draw_best_map(path: Path, panels: Sequence[tuple[str, list[list[Any]]]], can
                     index[i, j] = candidates.index(winners[0])
                 else:
                     ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="0.97", edgecolor="0.6", hatch="//", lw=0))
+                if len(xs) * len(ys) > TEXT_CELLS:
+                    continue
                 names = "\n".join(map(str, winners)) if len(winners) <= 3 else f"{len(winners)} tied:\n" + "\n".join(
                     map(str, winners[:2])) + "\n..."
                 ax.text(j, i, f"{names}\n{_fmt_cell(value)}", ha="center", va="center", fontsize=6.5,
@@ -123,7 +131,8 @@ def draw_best_map(path: Path, panels: Sequence[tuple[str, list[list[Any]]]], can
         ax.set_ylim(-0.5, len(ys) - 0.5)
         ax.set_title(title, fontsize=8)
     handles = [Patch(color=c, label=str(name)) for c, name in zip(colours, candidates)]
-    handles.append(Patch(facecolor="0.97", edgecolor="0.6", hatch="//", label="tie (names listed)"))
+    tie = "tie (names listed)" if len(xs) * len(ys) <= TEXT_CELLS else "tie"
+    handles.append(Patch(facecolor="0.97", edgecolor="0.6", hatch="//", label=tie))
     fig.legend(handles=handles, loc="outside right center", fontsize=7, title=f"best by\n{metric.label}", title_fontsize=7)
     fig.savefig(path, dpi=100)
 
