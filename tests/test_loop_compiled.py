@@ -133,3 +133,14 @@ def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache,
     np.testing.assert_array_equal(ua, ub)
     kept = lambda stats: {k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"}  # noqa: E731
     assert kept(stats_a) == kept(stats_b) and kept(stats_a)["steps"] == len(sa)
+
+
+def test_the_deflection_monitor_stops_both_loops_alike(cache):
+    # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on link 1) trip it,
+    # so the Python loop's per-sample monitor call (bound to arrays for the run) and the compiled loop's
+    # batched flags must stop at the same sample for the same reason
+    scene = dataclasses.replace(short_scene(), divergence_deflection=0.002)
+    runs = both(scene, "controllers/lqr.toml", cache)
+    (tp, sp, _, _), (tc, sc, _, _) = runs["python"], runs["compiled"]
+    assert tp.meta["divergence"] is not None and "tip deflection" in tp.meta["divergence"]["reason"]
+    assert tp.meta["divergence"] == tc.meta["divergence"] and sp.size == sc.size

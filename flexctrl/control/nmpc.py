@@ -91,13 +91,13 @@ import numpy as np
 
 from flexctrl.control.base import Controller
 from flexctrl.sim.base import try_expand as _expanded
+from flexctrl.sim.compile import content_key
 from flexctrl.sim.parametric import constants_as_parameters
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
-from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, content_key, interval_core, interval_functions,
-                                            memoised)
+from flexctrl.control.nmpc_interval import RK4_BOUND, auto_substeps, interval_core, interval_functions, memoised
 from flexctrl.control.nmpc_model import Prediction, prediction_model
 from flexctrl.control.nmpc_jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
@@ -223,9 +223,15 @@ class NMPCController(Controller):
         self._w_ref = w_ref
         return g.copy()
 
+    def _bounds(self, z0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``w``: the torque bounds, slacks >= 0 and ``z_0`` fixed to the scaled state ``z0``."""
+        lbx, ubx = self.functions["lbx0"].copy(), self.functions["ubx0"].copy()
+        lbx[self.layout.z[0]] = ubx[self.layout.z[0]] = z0
+        return lbx, ubx
+
     def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None) -> Solution:
         solver = self.functions["nlp"]
-        lbx, ubx = self.functions["bounds"](z0)
+        lbx, ubx = self._bounds(z0)
         start = time.perf_counter()
         g = self.functions["g0"] if g is None else g
         out = solver(x0=w0, p=np.r_[z0, g], lbx=lbx, ubx=ubx, lbg=self.functions["lbg"], ubg=self.functions["ubg"])
@@ -246,8 +252,7 @@ class NMPCController(Controller):
         """
         start = time.perf_counter()
         a, lba, uba = self.functions["prepare"](z0, w0)
-        lbx, ubx = self.functions["lbx0"].copy(), self.functions["ubx0"].copy()  # nmpc_bounds(z0), in numpy
-        lbx[self.layout.z[0]] = ubx[self.layout.z[0]] = z0
+        lbx, ubx = self._bounds(z0)
         mid = time.perf_counter()
         self.timing["linearize_qp"].append(mid - start)
         problem = qp_data_problem(w0, a, lba, uba)
@@ -396,12 +401,6 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
         lbx0[lay.v[k]], ubx0[lay.v[k]] = pb.v_lo, pb.v_hi
         if ns:
             lbx0[lay.s[k]] = 0.0
-    zz = ca.MX.sym("z0", n)
-    lbx_e = ca.MX(ca.DM(lbx0))
-    ubx_e = ca.MX(ca.DM(ubx0))
-    lbx_e[lay.z[0].tolist()] = zz
-    ubx_e[lay.z[0].tolist()] = zz
-    bounds = ca.Function("nmpc_bounds", [zz], [lbx_e, ubx_e])
     H = np.zeros((lay.nw, lay.nw))
     g = np.zeros(lay.nw)
     for k in range(N):
@@ -431,7 +430,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     rollout = _rollout(step, N, n, m)
     import scipy.sparse as sp
 
-    functions = {"prepare": prepare, "bounds": bounds, "lbx0": lbx0, "ubx0": ubx0, "qp": qp, "H": Hs, "g0": g,
+    functions = {"prepare": prepare, "lbx0": lbx0, "ubx0": ubx0, "qp": qp, "H": Hs, "g0": g,
                  "Hnp": sp.csr_matrix(H),
                  "rollout": rollout,
                  "linmap": linmap, "F": Fz, "params": params,

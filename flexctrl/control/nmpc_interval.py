@@ -22,10 +22,9 @@ Jacobian per step and not per sample: ``docs/control.md`` ("sensitivities per RK
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections import OrderedDict
-from typing import Any, Callable
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -122,18 +121,9 @@ def interval_functions(model, dt: float, substeps: int, sensitivities: str | Non
     return interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities, jacobian_every=jacobian_every)
 
 
-#: Horizon linearisations built in this process, by :func:`content_key` (least recently used beyond ``MEMO_SIZE``).
+#: Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least recently used beyond ``MEMO_SIZE``).
 _BUILT: OrderedDict[str, tuple] = OrderedDict()
 MEMO_SIZE = 8
-
-
-def content_key(*parts: Any) -> str:
-    """SHA-256 of ``parts`` (strings as they are, everything else by ``repr``), separated."""
-    digest = hashlib.sha256()
-    for part in parts:
-        digest.update((part if isinstance(part, str) else repr(part)).encode())
-        digest.update(b"\0")
-    return digest.hexdigest()
 
 
 def memoised(key: str, build: Callable[[], tuple]) -> tuple:
@@ -157,4 +147,4 @@ def memoised(key: str, build: Callable[[], tuple]) -> tuple:
     return (*value, False)
 
 
-__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "content_key", "memoised"]
+__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised"]

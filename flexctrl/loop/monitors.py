@@ -38,6 +38,17 @@ class LoopMonitor:
     def __call__(self, t: float, x: np.ndarray) -> str | None:
         return self.verdict(np.array(self.deflection(x[: self.N])[0], dtype=float).ravel(), x)
 
+    def for_run(self):
+        """This monitor as ``monitor(t, x)`` with its deflections through a buffer bound for one run alone.
+
+        The Python loop calls the monitor every sample; a bound call skips the DM conversions.
+        One per run, so two runs in the threads of one Dask worker share no buffer.
+        """
+        from flexctrl.loop.plant_step import BoundFunction
+
+        deflection = BoundFunction(self.deflection)
+        return lambda t, x: self.verdict(deflection(x[: self.N])[0].ravel(), x)
+
     def verdict(self, w: np.ndarray, x: np.ndarray) -> str | None:
         """What :meth:`__call__` says of state ``x`` whose link tip deflections (m) are ``w``."""
         over = np.flatnonzero(np.abs(w) > self.limit)

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
-from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND, LoopMonitor
+from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
 from flexctrl.loop.plant_step import BoundFunction, advance_function, evaluate, output_map
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 from flexctrl.sim.trajectory import Trajectory
@@ -198,21 +198,17 @@ class LoopRun:
         self.done = 0
         self.end = n_samples * self.per + 1
         self.divergence = None
-        #: the sensors, the plant's advance and the monitor's deflections bound to arrays, one set per run (not
-        #: shared: a Dask worker may run two runs in threads), made on the first Python sample
-        self._bound: tuple[BoundFunction, BoundFunction] | None = None
-        self._deflection: BoundFunction | None = None
+        # the Python loop's per-sample calls, bound to arrays for this run alone (a Dask worker may run two in threads)
+        self._outputs, self._advance = BoundFunction(sensors.function), BoundFunction(advance)
+        self._monitor = monitor.for_run() if hasattr(monitor, "for_run") else monitor
 
     def python_sample(self, k: int) -> bool:
         """Run sample ``k`` in Python; True when the run diverged in it."""
         Ts, per = self.controller.sample_time, self.per
         t = k * Ts
-        if self._bound is None:
-            self._bound = (BoundFunction(self.sensors.function), BoundFunction(self.advance))
-        outputs, advance = self._bound
-        y = self.sensors.with_noise(outputs(self.x, self.u)[0].ravel(), self.rng)
+        y = self.sensors.with_noise(self._outputs(self.x, self.u)[0].ravel(), self.rng)
         self.u = u = self.controller.step(t, y)
-        block = advance(self.x, u, self.dt)[0]
+        block = self._advance(self.x, u, self.dt)[0]
         self.X[k * per + 1 : (k + 1) * per + 1] = block[self.stride - 1 :: self.stride]
         self.U[k * per : (k + 1) * per] = u
         self.x = block[-1]
@@ -229,12 +225,8 @@ class LoopRun:
             reason = f"a modal coordinate beyond {MODAL_BOUND:g} m"
         elif np.max(np.abs(block[:, plant.n_q :])) > RATE_BOUND:
             reason = f"a rate beyond {RATE_BOUND:g}"
-        elif isinstance(self.monitor, LoopMonitor):  # its deflections through this run's own bound call
-            if self._deflection is None:
-                self._deflection = BoundFunction(self.monitor.deflection)
-            reason = self.monitor.verdict(self._deflection(self.x[: plant.n_q])[0].ravel(), self.x)
-        elif self.monitor is not None:
-            reason = self.monitor(t_end, self.x)
+        elif self._monitor is not None:
+            reason = self._monitor(t_end, self.x)
         if reason is None:
             return False
         Ts, dt = self.controller.sample_time, self.dt

@@ -47,7 +47,7 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import casadi as ca
 
@@ -191,17 +191,22 @@ def host_identity() -> str:
     return "|".join(parts)
 
 
+def content_key(*parts: Any) -> str:
+    """SHA-256 (hex) of ``parts``, strings as they are and everything else by ``repr``, each ended by a NUL."""
+    digest = hashlib.sha256()
+    for part in parts:
+        digest.update((part if isinstance(part, str) else repr(part)).encode())
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
 def cache_key(fun: ca.Function, flags: Sequence[str], compiler: str) -> str:
     """Hash of the Function's serialized form, the flags, the compiler and CasADi's version.
 
     With ``-march=native`` among the flags the host's CPU identity is hashed too.
     """
-    digest = hashlib.sha256()
     host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    for part in (fun.serialize(), " ".join(flags), compiler_identity(compiler), ca.__version__, host):
-        digest.update(part.encode())
-        digest.update(b"\0")
-    return digest.hexdigest()[:24]
+    return content_key(fun.serialize(), " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
 
 
 def compile_function(

@@ -69,19 +69,19 @@ class AffinityQueue:
         """The next run for ``worker``: its group's next, a new group's first, or the end of the fullest group."""
         group = self.held.get(worker)
         if group in self.groups:
-            return self._take(group, worker, from_end=False)
+            return self._take(group, from_end=False)
         taken = set(self.held.values())
         for candidate in self.groups:
             if candidate not in taken:
                 self.held[worker] = candidate
-                return self._take(candidate, worker, from_end=False)
+                return self._take(candidate, from_end=False)
         if not self.groups:
             return None
         fullest = max(self.groups, key=lambda g: len(self.groups[g]))
         self.held[worker] = fullest
-        return self._take(fullest, worker, from_end=True)
+        return self._take(fullest, from_end=True)
 
-    def _take(self, group: str, worker: int, *, from_end: bool) -> Any:
+    def _take(self, group: str, *, from_end: bool) -> Any:
         runs = self.groups[group]
         run = runs.pop() if from_end else runs.popleft()
         if not runs:
