@@ -8,24 +8,10 @@ import pytest
 
 from flexctrl import linear as L
 from flexctrl.control import design
-from flexctrl.control.nmpc import RK4_BOUND, auto_substeps
+from flexctrl.control.nmpc import RK4_BOUND, auto_substeps, design_nmpc
 from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.spec.arm import arm_from_document
-
-
-@pytest.fixture(scope="module")
-def onelink():
-    doc = {
-        "name": "onelink",
-        "gravity": [0.0, -9.81],
-        "payload": {"mass": 0.5, "inertia": 1e-3},
-        "links": [{"length": 1.0, "mass_per_length": 1.5, "EI": 400.0, "inertia": 1.5 / 12, "n_modes": 1,
-                   "damping_ratio": 0.02}],
-        "joints": [{"hub_mass": 0.0, "hub_inertia": 0.05, "torque_limit": 15.0}],
-    }
-    model = build_amm(arm_from_document(doc, "onelink.toml"), 1)
-    return model, L.equilibrium(model, [0.5])
 
 
 SMALL = dict(compile=False, horizon=15, sample_time=0.02, deflection_limit=0.02)
@@ -89,7 +75,7 @@ def test_rti_closed_loop_reaches_the_target_within_torque_limits(onelink):
 
 def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
     model, op = onelink
-    ctrl = design(model, op, NMPCSettings(**SMALL))
+    ctrl = design_nmpc(model, op, NMPCSettings(**SMALL), screen=False)  # the whole QP, the one made to fail
     ctrl.reset()
     x = op.x.copy()
     x[0] -= 0.05
@@ -102,6 +88,7 @@ def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
                                     {"N": lay.N, "nx": [lay.n] * (lay.N + 1), "nu": [lay.m + lay.ns] * lay.N + [0],
                                      "ng": [2 * lay.ns] * lay.N + [0], "hpipm": {"iter_max": 1},
                                      "error_on_fail": False})
+    ctrl._rti_calls = None  # bound anew to the failing solver
     u = ctrl.step(0.02, x)
     np.testing.assert_allclose(u, op.u + ctrl.problem.Su * plan[1])
     assert ctrl.stats.fallbacks[-1][2] == "shift"
@@ -109,6 +96,7 @@ def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
         u = ctrl.step(0.02 * k, x)
     assert ctrl.stats.fallbacks[-1][2] == "lqr"
     ctrl.functions["qp"] = good
+    ctrl._rti_calls = None
     ctrl.step(1.0, x)
     assert ctrl.stats.status["solved"] == 2
 
@@ -177,30 +165,31 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
     x[0] -= 0.05
     ctrl.step(0.0, x)
     plan = ctrl._plan.copy()
-    prepare = ctrl.functions["prepare"]
+    calls = ctrl._calls()  # the RTI's two calls per sample (nmpc_calls)
+    linearise, solve = calls.linearise, calls.solve
 
     def nan_bounds(z0, w):
-        a, lba, uba = prepare(z0, w)
+        a, lba, uba = linearise(z0, w)
+        lba = lba.copy()
         lba[3] = np.nan
         return a, lba, uba
 
-    ctrl.functions["prepare"] = nan_bounds
+    calls.linearise = nan_bounds
     u = ctrl.step(0.02, x)  # would be HPIPM's "Ill-posed problem detected" assertion
     np.testing.assert_allclose(u, op.u + ctrl.problem.Su * plan[1])
     t, reason, used = ctrl.stats.fallbacks[-1]
     assert (t, used) == (0.02, "shift") and "NaN" in reason
     assert ctrl._w is None  # the next sample starts from a fresh rollout
-    ctrl.functions["prepare"] = prepare
+    calls.linearise = linearise
 
-    def raising_qp(**kwargs):
+    def raising_qp(*args):
         raise RuntimeError("Error in Function::call for 'nmpc_qp' [HpipmInterface]: Ill-posed problem detected")
 
-    good = ctrl.functions["qp"]
-    ctrl.functions["qp"] = raising_qp
+    calls.solve = raising_qp
     u = ctrl.step(0.04, x)
     assert np.all(np.isfinite(u))
     assert "QP solver error" in ctrl.stats.fallbacks[-1][1] and "Ill-posed" in ctrl.stats.fallbacks[-1][1]
-    ctrl.functions["qp"] = good
+    calls.solve = solve
     ctrl.step(0.06, x)
     assert ctrl.stats.status["solved"] == 2
     assert ctrl.stats.summary()["fallbacks"] == 2

@@ -81,7 +81,7 @@ def test_output_map_values_are_the_models_outputs(models):
 def test_a_bound_function_gives_the_calls_values_as_rows_and_copies():
     import casadi as ca
 
-    from flexctrl.loop.plant_step import BoundFunction
+    from flexctrl.sim.bound import BoundFunction
 
     x, u = ca.MX.sym("x", 3), ca.MX.sym("u", 2)
     fun = ca.Function("f", [x, u], [ca.horzcat(x * u[0], ca.sin(x) + u[1]), ca.sumsqr(x)])

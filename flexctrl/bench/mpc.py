@@ -131,13 +131,25 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
+#: NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.design_nmpc`, not settings.
+DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen")
+
+
 def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`), stepped interleaved.
 
-    ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): HPIPM warm-started
-    from the shifted previous solution, predicting with the joints and the three slowest
-    coupled modes at the target, the estimate's fast modes removed (12 states, 2 RK4
-    substeps).  The others predict with the whole design model (18 states, 9 substeps):
+    ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
+    per sample at the interval's middle RK4 node, frozen over it (``sensitivities =
+    "midpoint"``), HPIPM warm-started from the shifted previous solution, the QP without
+    its soft rows tried first, the RTI's calls through bound buffers, predicting with the
+    joints and the three slowest coupled modes at the target, the estimate's fast modes
+    removed (12 states, 2 RK4 substeps).  Against it, one change each:
+    ``rti_frozen_dm_calls`` the RTI's calls as before, through CasADi's DM conversions and
+    the whole QP every sample (``bound_calls``, an argument of ``design_nmpc``);
+    ``rti_frozen_whole_qp`` always the whole QP (``screen``, an argument of ``design_nmpc``;
+    the same optimum to the solver's tolerance); ``rti_frozen_per_step`` one Jacobian per
+    RK4 step at its start (``sensitivities = "frozen"``, the setting before).
+    The others predict with the whole design model (18 states, 9 substeps):
     ``rti_frozen_full`` the setting before (``controllers/nmpc_full.toml``);
     ``rti_frozen_cold`` with HPIPM's default start; ``rti_frozen_factored`` with the
     Jacobian of ``f`` through one factorisation of the mass matrix (the key ``jacobian`` is
@@ -148,8 +160,12 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     with the tuned weights).  ``docs/control.md``, "NMPC speed".
     """
     reduced = {"prediction_modes": 1, "qp_warm_start": True}
+    shipped = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
     return {
-        "rti_frozen": {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"},
+        "rti_frozen": {**shipped, "sensitivities": "midpoint"},
+        "rti_frozen_dm_calls": {**shipped, "sensitivities": "midpoint", "bound_calls": False},
+        "rti_frozen_whole_qp": {**shipped, "sensitivities": "midpoint", "screen": False},
+        "rti_frozen_per_step": {**shipped},
         "rti_frozen_full": {"qp_warm_start": True},
         "rti_frozen_factored": {"qp_warm_start": True, "jacobian": "factored"},
         "rti_frozen_cold": {},
@@ -186,9 +202,9 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
     for name, overrides in variants.items():
         start = time.perf_counter()
         settings = NMPCSettings(horizon=horizon, sample_time=sample_time,
-                                **{k: v for k, v in overrides.items() if k != "jacobian"})
-        controllers[name] = (design_nmpc(model, op, settings, jacobian=overrides["jacobian"]) if "jacobian" in overrides
-                             else design(model, op, settings))
+                                **{k: v for k, v in overrides.items() if k not in DESIGN_ARGUMENTS})
+        arguments = {k: v for k, v in overrides.items() if k in DESIGN_ARGUMENTS}
+        controllers[name] = design_nmpc(model, op, settings, **arguments) if arguments else design(model, op, settings)
         builds[name] = time.perf_counter() - start
 
     def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:

@@ -28,8 +28,13 @@ The QP solution is the new trajectory (full step).  With ``sensitivities = "froz
 matrices of RK4 applied to the dynamics linearised at the start of each step (one
 Jacobian of ``f`` per RK4 step, frozen over its four stages): an inexact-Jacobian SQP
 whose fixed points still satisfy the nonlinear shooting equations, since the gaps use
-the nonlinear ``F``.  ``"exact"`` propagates the Jacobian of ``f`` through every RK4
-stage (4 ``substeps`` Jacobians per interval).
+the nonlinear ``F``.  ``"midpoint"`` (shipped in ``controllers/nmpc.toml``) takes one
+Jacobian per interval at its middle RK4 node, frozen over the interval: second order in
+the sample time where the start point is first order (``docs/control.md``).  ``"exact"``
+propagates the Jacobian of ``f`` through every RK4 stage (4 ``substeps`` Jacobians per
+interval).  Per sample the two calls (linearise and assemble, then the QP) go through
+buffers bound once (:mod:`flexctrl.control.nmpc_calls`), and the QP without its soft rows
+is tried first (:mod:`flexctrl.control.nmpc_screen`).
 
 Why one Jacobian per RK4 step and not per sample (the first version): during a
 saturated transient of the three-link arm the state moves within a sample (the
@@ -97,8 +102,11 @@ from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
+from flexctrl.control.nmpc_calls import BoundRTICalls, DMRTICalls
+from flexctrl.control.nmpc_screen import ScreenedQP, hpipm_options
 from flexctrl.control.nmpc_interval import RK4_BOUND, auto_substeps, interval_core, interval_functions, memoised
 from flexctrl.control.nmpc_model import Prediction, prediction_model
+from flexctrl.control.nmpc_nlp import lqr_rollout, nlp_functions
 from flexctrl.control.nmpc_jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
@@ -129,7 +137,8 @@ class NMPCController(Controller):
 
     def __init__(self, settings: NMPCSettings, plant: LinearPlant, limits: np.ndarray, problem: ScaledProblem,
                  observer, functions: dict, layout: _Layout, substeps: int, compiled: bool,
-                 prediction: Prediction | None = None, prediction_plant: LinearPlant | None = None):
+                 prediction: Prediction | None = None, prediction_plant: LinearPlant | None = None,
+                 bound_calls: bool = True, screen: bool = True):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
         self.plant = plant
         #: the model predicted with and the selection ``x[keep]`` of the design state it sees
@@ -155,6 +164,25 @@ class NMPCController(Controller):
         self._w_ref: np.ndarray | None = None
         #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
         self._cost_window: tuple | None = None
+        #: the RTI's calls through bound buffers (else CasADi's DM calls; :mod:`flexctrl.control.nmpc_calls`)
+        self.bound_calls = bound_calls
+        #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc_screen`)
+        self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
+        self._rti_calls = None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_rti_calls": None}  # buffers bound to this process's memory stay behind
+
+    def _calls(self):
+        if self._rti_calls is None:
+            fn, pb = self.functions, self.problem
+            if not self.bound_calls:
+                self._rti_calls = DMRTICalls(fn["prepare"], fn["qp"], fn["H"])
+            else:
+                screen = (ScreenedQP(self.layout, fn["Hnp"].toarray(), fn["prepare"].sparsity_out(0), pb.C, pb.c_lo,
+                                     pb.c_hi, self.settings.qp_warm_start) if self.screen else None)
+                self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
+        return self._rti_calls
 
     def _reset(self) -> None:
         self.observer.reset()
@@ -251,7 +279,8 @@ class NMPCController(Controller):
         ``status`` (the caller falls back, see :meth:`_step`).
         """
         start = time.perf_counter()
-        a, lba, uba = self.functions["prepare"](z0, w0)
+        calls = self._calls()
+        a, lba, uba = calls.linearise(z0, w0)
         lbx, ubx = self._bounds(z0)
         mid = time.perf_counter()
         self.timing["linearize_qp"].append(mid - start)
@@ -260,18 +289,14 @@ class NMPCController(Controller):
             self.timing["qp"].append(0.0)
             return Solution(False, f"non-finite QP data ({problem})", np.full_like(w0, np.nan), 0,
                             time.perf_counter() - start)
-        qp = self.functions["qp"]
-        g = self.functions["g0"] if g is None else g
         try:
-            out = qp(h=self.functions["H"], g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx, x0=w0)
+            w, stats = calls.solve(self.functions["g0"] if g is None else g, lbx, ubx)
         except RuntimeError as exc:  # CasADi's checks (e.g. HPIPM's ill-posed bounds) raise
             end = time.perf_counter()
             self.timing["qp"].append(end - mid)
             text = " ".join(str(exc).split())
             return Solution(False, f"QP solver error: {text[-300:]}", np.full_like(w0, np.nan), 0, end - start)
         end = time.perf_counter()
-        stats = qp.stats()
-        w = np.array(out["x"], dtype=float).ravel()
         self.timing["qp"].append(end - mid)
         ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
         if ok:
@@ -415,9 +440,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     opts: dict = {"error_on_fail": False}
     a_sp = prepare.sparsity_out(0)
     if settings.qp_solver == "hpipm":
-        opts.update({"N": N, "nx": [n] * (N + 1), "nu": [m + ns] * N + [0], "ng": [2 * ns] * N + [0],
-                     "hpipm": {"mode": "speed", "iter_max": 30, "res_g_max": 1e-5, "res_b_max": 1e-6,
-                               "res_d_max": 1e-6, "res_m_max": 1e-6, **({"warm_start": 1} if settings.qp_warm_start else {})}})
+        opts.update(hpipm_options(N, n, m + ns, 2 * ns, settings.qp_warm_start))
     elif settings.qp_solver == "qpoases":
         opts.update({"printLevel": "none", "sparse": True})
     elif settings.qp_solver == "osqp":
@@ -427,7 +450,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
     vr = ca.fmin(ca.fmax(vref - ca.mtimes(ca.DM(pb.K), zr - zref), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
     step = ca.Function("nmpc_lqr_step", [zr, zref, vref], [Fz(zr, vr), vr])
-    rollout = _rollout(step, N, n, m)
+    rollout = lqr_rollout(step, N, n, m)
     import scipy.sparse as sp
 
     functions = {"prepare": prepare, "lbx0": lbx0, "ubx0": ubx0, "qp": qp, "H": Hs, "g0": g,
@@ -438,7 +461,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
                            "reused": reused}}
     # full NLP (also the RTI initialisation)
     if settings.mode == "full" or settings.init_iter > 0:
-        functions.update(_nlp_functions(settings, pb, lay, Fz, H, g))
+        functions.update(nlp_functions(settings, pb, lay, Fz, H, g))
     return functions, lay, compiled
 
 
@@ -496,54 +519,18 @@ def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
     return [ca.vertcat(*rows), ca.vertcat(*lba), ca.vertcat(*uba)]
 
 
-def _rollout(step: ca.Function, N: int, n: int, m: int) -> ca.Function:
-    """``rollout(z0, Z_ref, V_ref) -> (Z, V)``: ``N`` closed-loop steps of ``step(z, z_ref, v_ref)``."""
-    z0 = ca.MX.sym("z0", n)
-    Zr, Vr = ca.MX.sym("Z_ref", n, N), ca.MX.sym("V_ref", m, N)
-    Z, V = [], []
-    z = z0
-    for k in range(N):
-        z, vk = step(z, Zr[:, k], Vr[:, k])
-        Z.append(z)
-        V.append(vk)
-    return ca.Function("nmpc_rollout", [z0, Zr, Vr], [ca.horzcat(*Z), ca.horzcat(*V)])
-
-
-def _nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay: _Layout, Fz: ca.Function, H: np.ndarray,
-                   g: np.ndarray) -> dict:
-    N, n, ns = lay.N, lay.n, lay.ns
-    w = ca.MX.sym("w", lay.nw)
-    p = ca.MX.sym("p", n + lay.nw)  # the initial state, then the linear cost (the reference enters there)
-    Z, V, S = lay.split(w)
-    Fmap = Fz.map(N)
-    ends = Fmap(Z[:, :N], V)
-    # stage-wise order: gap_k, then the soft rows of stage k written on F(z_k, v_k) (= z_{k+1})
-    cons, lbg, ubg = [], [], []
-    C = ca.DM(pb.C)
-    for k in range(N):
-        cons.append(ends[:, k] - Z[:, k + 1])
-        lbg.append(np.zeros(n))
-        ubg.append(np.zeros(n))
-        if ns:
-            CF = ca.mtimes(C, ends[:, k])
-            cons += [CF - S[:, k], CF + S[:, k]]
-            lbg += [np.full(ns, -np.inf), pb.c_lo]
-            ubg += [pb.c_hi, np.full(ns, np.inf)]
-    cost = 0.5 * ca.bilin(ca.DM(ca.sparsify(ca.DM(H))), w, w) + ca.dot(p[n:], w)
-    nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*cons)}
-    opts = {"ipopt": {"print_level": 0, "max_iter": settings.max_iter, "hessian_approximation": "limited-memory",
-                      "warm_start_init_point": "yes", "tol": 1e-6, "sb": "yes"},
-            "print_time": False, "error_on_fail": False}
-    solver = ca.nlpsol("nmpc_nlp", settings.nlp_solver, nlp, opts)
-    return {"nlp": solver, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg)}
-
-
-def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic") -> NMPCController:
+def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic",
+                bound_calls: bool = True, screen: bool = True) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
 
     ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
     (``"symbolic"``) or through one factorisation of the mass matrix (``"factored"``,
     :mod:`flexctrl.control.nmpc_jacobian`: equal to rounding, not faster; ``docs/control.md``).
+    ``bound_calls``: the RTI's two calls per sample through buffers bound once (default) or
+    CasADi's DM calls (the slower path, same values; :mod:`flexctrl.control.nmpc_calls`).
+    ``screen``: solve the QP without its soft rows first and keep that answer when they hold
+    (HPIPM with bound calls; the same optimum to the solver's tolerance,
+    :mod:`flexctrl.control.nmpc_screen`); False always solves the whole QP.
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
@@ -571,7 +558,7 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
-                          prediction, pplant)
+                          prediction, pplant, bound_calls, screen)
 
 
 __all__ = ["NMPCController", "design_nmpc", "interval_functions", "auto_substeps", "RK4_BOUND"]

@@ -4,6 +4,11 @@
 (``f`` is called, not inlined, so generated code holds it once).  ``FJ(x, u)`` adds
 ``A = dx_next/dx`` and ``B = dx_next/du``:
 
+``"midpoint"`` one Jacobian per interval at the RK4 node nearest its middle (after
+              ``substeps // 2`` steps: the temporal middle for an even count), frozen over
+              the interval (``Phi^substeps`` and ``(I + ... + Phi^(substeps-1)) Gam``): the
+              midpoint rule, O(h^3) per interval where the start point is O(h^2), at half
+              the Jacobians of ``"frozen"`` with 2 substeps (``docs/control.md``).
 ``"exact"``   the Jacobian of ``f`` propagated through every RK4 stage (4 ``substeps``
               Jacobians per interval): the derivative of the nonlinear RK4 map.
 ``"frozen"``  the products over the interval's RK4 steps of the exact transition
@@ -101,6 +106,16 @@ def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, se
             for _ in range(steps - 1):
                 xe = rk4_next(rhs, xe, h)
             done += steps
+    elif sensitivities == "midpoint":
+        # one Jacobian per interval, at the RK4 node nearest its middle, frozen over the interval
+        half = substeps // 2
+        for _ in range(half):
+            xe = rk4_next(rhs, xe, h)
+        k1, Jx, Ju = fx(xe, u, *extra)
+        Ad, Bd = _frozen_transition(Jx, Ju, h, substeps, eye)
+        xe = rk4_next(rhs, xe, h, k1=k1)
+        for _ in range(substeps - half - 1):
+            xe = rk4_next(rhs, xe, h)
     else:
         for _ in range(substeps):
             xe, Ad, Bd = rk4_next(with_sensitivities, (xe, Ad, Bd), h)

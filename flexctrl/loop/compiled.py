@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
-from flexctrl.loop.plant_step import evaluate
+from flexctrl.sim.bound import evaluate
 
 
 def sample_function(run, law) -> ca.Function:

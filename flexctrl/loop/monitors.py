@@ -44,7 +44,7 @@ class LoopMonitor:
         The Python loop calls the monitor every sample; a bound call skips the DM conversions.
         One per run, so two runs in the threads of one Dask worker share no buffer.
         """
-        from flexctrl.loop.plant_step import BoundFunction
+        from flexctrl.sim.bound import BoundFunction
 
         deflection = BoundFunction(self.deflection)
         return lambda t, x: self.verdict(deflection(x[: self.N])[0].ravel(), x)

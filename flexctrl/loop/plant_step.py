@@ -83,52 +83,6 @@ def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
     return derived(model, ("output_map", count, compile), build)
 
 
-def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
-    """``fun(*args)`` through a CasADi FunctionBuffer bound to numpy arrays (no DM conversions).
-
-    CasADi is column-major, so an input or output of shape (rows, cols) is a C-ordered
-    numpy array of shape (cols, rows): pass states as rows, get results as rows.
-    """
-    buffer, trigger = fun.buffer()
-    inputs = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float).reshape(-1), (fun.nnz_in(i),)))
-              for i, a in enumerate(args)]
-    outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
-    for i, a in enumerate(inputs):
-        buffer.set_arg(i, memoryview(a))
-    for i, r in enumerate(outputs):
-        buffer.set_res(i, memoryview(r))
-    trigger()
-    return outputs
-
-
-class BoundFunction:
-    """A CasADi Function bound once to numpy arrays, for calls in a loop: no DM conversions per call.
-
-    ``bound(*args)`` copies the inputs into the bound arrays, evaluates and returns copies of
-    the outputs as rows (an output of shape (rows, cols) comes back as (cols, rows), as from
-    :func:`evaluate`).  Measured on the Python loop's per-sample calls (amm:2, 17 RK4 steps
-    per sample): the plant's advance 150 -> 55 us, the sensors and the deflection monitor
-    about 60 -> 5 us each, under load; the same values (the same compiled code).  Not
-    picklable: make one per run.
-    """
-
-    def __init__(self, fun: ca.Function):
-        self.function = fun
-        self._buffer, self._trigger = fun.buffer()
-        self._inputs = [np.zeros(fun.nnz_in(i)) for i in range(fun.n_in())]
-        self._outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
-        for i, a in enumerate(self._inputs):
-            self._buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self._outputs):
-            self._buffer.set_res(i, memoryview(r))
-
-    def __call__(self, *args) -> list[np.ndarray]:
-        for bound, value in zip(self._inputs, args):
-            bound[:] = np.asarray(value, dtype=float).reshape(-1)
-        self._trigger()
-        return [r.copy() for r in self._outputs]
-
-
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:
     """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, compiled; and whether it is.
 

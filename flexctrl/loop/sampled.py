@@ -37,7 +37,8 @@ import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
-from flexctrl.loop.plant_step import BoundFunction, advance_function, evaluate, output_map
+from flexctrl.loop.plant_step import advance_function, output_map
+from flexctrl.sim.bound import BoundFunction, evaluate
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 from flexctrl.sim.trajectory import Trajectory
 

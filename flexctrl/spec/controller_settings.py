@@ -334,11 +334,14 @@ class NMPCSettings:
     substeps : int
         RK4 steps per interval; 0 (default): the fewest with ``|lambda|_max h <= 2.5`` for the
         linearisation at the target (RK4 is stable on the imaginary axis up to 2.83).
-    sensitivities : {"frozen", "exact"}
+    sensitivities : {"frozen", "midpoint", "exact"}
         RTI Jacobians of each shooting interval: of RK4 applied to the dynamics linearised
-        at the start of each RK4 step (one Jacobian of ``f`` per RK4 step; one per interval
-        was 2-9 % wrong in saturated transients and drove the RTI unstable), or exact
-        derivatives of the nonlinear RK4 map (one Jacobian of ``f`` per RK4 stage).
+        at the start of each RK4 step (``"frozen"``: one Jacobian of ``f`` per RK4 step; one
+        per interval at its start was 2-9 % wrong in saturated transients and drove the RTI
+        unstable); of RK4 applied to the dynamics linearised once per interval at its middle
+        RK4 node (``"midpoint"``: second order in the sample time, half the Jacobians of
+        ``"frozen"`` with 2 substeps and closer to the exact ones, ``docs/control.md``); or
+        exact derivatives of the nonlinear RK4 map (one Jacobian of ``f`` per RK4 stage).
         The shooting gaps always use the nonlinear RK4 map.
     weights : Weights
         Stage weights; terminal weight from the DARE at the target.

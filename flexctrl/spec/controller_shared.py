@@ -26,7 +26,7 @@ NLPSolver = Literal["ipopt"]
 PredictionMap = Literal["modal", "select"]
 PredictionBasis = Literal["assumed", "coupled"]
 RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
-Sensitivities = Literal["frozen", "exact"]
+Sensitivities = Literal["frozen", "midpoint", "exact"]
 Shaper = Literal["zv", "zvd", "none"]
 FrequencySource = Literal["closed_loop", "locked"]
 
