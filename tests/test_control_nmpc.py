@@ -197,7 +197,8 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
 
 def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
-    sample diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step NMPC settles."""
+    sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or one per
+    sample at its middle node (controllers/nmpc.toml now), NMPC settles."""
     from flexctrl.scenes.closed_loop import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 

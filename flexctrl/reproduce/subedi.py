@@ -9,7 +9,10 @@ Figs 8-13 (:mod:`~flexctrl.reproduce.subedi_time`, runs in
 
 ``reduced`` keeps every code path with coarser angle grids (90 instead of 30 degrees for
 the shape families, 45 instead of 10-15 for the frequency slices and maps) and shorter
-runs (2 s of free vibration, which Fig 14 needs, 1 s of forced vibration).
+runs (2 s of free vibration, which Fig 14 needs, 1 s of forced vibration), the
+scheduled-modes runs in CasADi's virtual machine (on an empty library cache, as in CI,
+compiling each took 30-50 s, more than the VM's run: 164 s for the four, against about
+70 s in the VM).
 """
 
 from __future__ import annotations
