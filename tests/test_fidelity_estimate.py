@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flexctrl.errors import FlexctrlError
 from flexctrl.fidelity.ladder import LINEAR_FACTOR, ToleranceUnreachable, tip_distance
 from flexctrl.scenes import auto as auto_fidelity
 from flexctrl.scenes.auto_linear import grid_maps, linear_closed_rung
@@ -144,3 +145,51 @@ def test_the_run_at_the_choice_reuses_the_choices_own_run_and_equals_a_fresh_run
         np.testing.assert_array_equal(run.trajectory.inputs, first.trajectory.inputs)
         assert {k: v for k, v in run.metrics.items() if k not in timing} == \
                {k: v for k, v in first.metrics.items() if k not in timing and k in run.metrics}
+
+
+@pytest.mark.parametrize("name", ["pd", "shaped", "lqr", "lqg", "lqr_scheduled", "robust", "mpc"])
+def test_has_sampled_law_says_before_a_step_what_sampled_law_gives_after_one(name):
+    from flexctrl.scenes.auto_linear import loop_at
+
+    ctrl = loop_at(_scene("controller_fidelity='amm:2'"), "amm:2", f"controllers/{name}.toml", (), CACHE).controller
+    ctrl.reset()
+    said = ctrl.has_sampled_law()
+    ctrl.step(0.0, np.zeros(ctrl.sensors.n_y))
+    assert said == (ctrl.sampled_law() is not None)
+    assert said == (name not in ("mpc", "lqr_scheduled"))  # the two that optimise or interpolate per sample
+
+
+@pytest.mark.slow  # the small case with the MPC up to amm:3: 4 nonlinear runs of 2.8 s
+def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_runs():
+    scene = _scene("controller_fidelity='amm:2'", "tolerance=1e-2")
+    tol, mpc, cache = 1e-2, "controllers/mpc.toml", SceneCache()
+    options = {"top": 3, "reference": "amm:4"}  # amm:1 fails, amm:2 and amm:3 meet 1e-2 m: the walk stops between
+    choice = auto_fidelity.choose_closed_loop_fidelity(scene, tol, controller=mpc, cache=cache, **options)
+    assert choice.evidence["linear_estimate_skipped"] and "linear_estimate" not in choice.evidence
+    assert choice.evidence["method"].startswith("closed loop") and "from the top rung down" in choice.evidence["method"]
+    # the rule, recomputed from the nonlinear runs: every rung from the choice to the top meets the tolerance,
+    # the rung below the choice does not
+    ref_n, top = parse_fidelity(options["reference"]).count, options["top"]
+    low = 1  # the MPC measures strain: rigid cannot be built
+    with pytest.raises(FlexctrlError, match="strain gauges"):
+        auto_fidelity.simulate_closed_rung(scene, "rigid", controller=mpc, cache=cache)
+    runs = {k: auto_fidelity.simulate_closed_rung(scene, _rung(k), controller=mpc, cache=cache)
+            for k in range(low, ref_n + 1)}
+    est = {m: 2.0 * max(tip_distance(runs[k], runs[m]).max for k in range(m + 1, min(m + 2, ref_n) + 1))
+           for m in range(low, top + 1)}
+    n = parse_fidelity(str(choice.choice)).modes_per_link
+    assert all(est[m] <= tol for m in range(n, top + 1)) and (n == low or est[n - 1] > tol), est
+    assert low < n < top, est  # the case tests the stop between rungs
+    assert choice.estimated_error == pytest.approx(est[n], rel=1e-12)
+    # the reference's step check is the estimate walk's: its linear loop at its own step against the exact hold,
+    # the only linear runs made
+    assert cache.stats()["linear_runs"]["misses"] == 1
+    exact = linear_closed_rung(scene, options["reference"], None, controller=mpc, cache=cache)
+    at_h = linear_closed_rung(scene, options["reference"], runs[ref_n].dt, controller=mpc, cache=cache)
+    assert choice.evidence["reference"]["convergence"]["step_error_linear_m"] == tip_distance(exact, at_h).max
+    assert choice.evidence["bandwidth_rule"]["torques_from"].startswith(f"the closed loop with the plant at amm:{top}")
+    # the slow path, kept as fidelity_walk = "linear": linear estimates first, the same choice from the same runs
+    linear = auto_fidelity.choose_closed_loop_fidelity(scene, tol, controller=mpc, cache=cache, walk="linear", **options)
+    assert "linear_estimate" in linear.evidence and not linear.evidence["linear_estimate_skipped"]
+    assert str(linear.choice) == str(choice.choice) and linear.estimated_error == choice.estimated_error
+

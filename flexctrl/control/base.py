@@ -233,6 +233,15 @@ class Controller(ABC):
         """
         return None
 
+    def has_sampled_law(self) -> bool:
+        """Whether :meth:`sampled_law` gives a law once the controller has stepped (known before any step).
+
+        False here and for the controllers that solve an optimisation per sample: their loop
+        steps in Python, so a run of theirs costs about the same on a linear plant as on the
+        nonlinear one (the automatic-fidelity chooser uses this, :mod:`flexctrl.scenes.auto`).
+        """
+        return False
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={list(self.sensors.names)})"
 

@@ -162,6 +162,10 @@ class LQRController(Controller):
     def _reset(self) -> None:
         self.observer.reset()
 
+    def has_sampled_law(self) -> bool:
+        """True unless the gains are scheduled (see :meth:`sampled_law`)."""
+        return self.schedule is None
+
     def sampled_law(self) -> SampledLaw | None:
         """The law and its estimator as one CasADi map (None with a gain schedule); see :class:`SampledLaw`.
 

@@ -172,6 +172,10 @@ class PDController(Controller):
         N = X.shape[1] // 2
         return np.hstack([X[:, : self.n_u], X[:, N : N + self.n_u], U, Us])
 
+    def has_sampled_law(self) -> bool:
+        """True: the PD law and its filters are one CasADi map (:meth:`sampled_law`)."""
+        return True
+
     def sampled_law(self) -> SampledLaw:
         """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same order.
 

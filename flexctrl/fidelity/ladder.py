@@ -75,7 +75,7 @@ import numpy as np
 
 from flexctrl.errors import FlexctrlError, SimulationError, SpecError
 from flexctrl.sim.tip_error import TipError, tip_error
-from flexctrl.spec.fidelity import parse_fidelity
+from flexctrl.spec.fidelity import FIDELITY_WALKS, parse_fidelity
 
 
 
@@ -279,12 +279,20 @@ METHOD = ("lowest rung whose safety * (largest tip distance to the next two rung
 #: times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear estimate 0.43-1.17,
 #: docs/auto_fidelity.md; tests/test_fidelity_estimate.py checks a small case).
 LINEAR_FACTOR = 3.0
-#: The walks of the closed-loop chooser: ``estimate`` (linear estimate first, then nonlinear certification) and
-#: ``ladder`` (the nonlinear walk from the bandwidth rule's start, with the reference at a small step).
-WALKS = ("estimate", "ladder")
+#: The walks of the closed-loop chooser (:data:`flexctrl.spec.fidelity.FIDELITY_WALKS`).
+WALKS = FIDELITY_WALKS
 METHOD_ESTIMATE = ("linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 step), then "
                    "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * (largest "
                    "tip distance to the next two rungs, up to the reference model) <= tolerance, walking up")
+
+
+METHOD_FROM_TOP = ("nonlinear runs from the top rung down (the controller steps in Python: a linear run would cost as much "
+                   "as a nonlinear one): the lowest rung of the unbroken run from the top whose safety * (largest tip "
+                   "distance to the next two rungs, up to the reference model) <= tolerance")
+
+
+def _method(linear, from_top: bool) -> str:
+    return METHOD_FROM_TOP if from_top else METHOD if linear is None else METHOD_ESTIMATE
 
 
 def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int, safety: float,
@@ -344,6 +352,14 @@ def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int,
     return n, evidence
 
 
+def _buildable_estimate(estimate, m: int) -> float:
+    """``estimate(m)``, infinite when rung ``m`` cannot be built (``FlexctrlError``, e.g. strain gauges on ``rigid``)."""
+    try:
+        return estimate(m)
+    except FlexctrlError:
+        return math.inf
+
+
 def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict[str, float]:
     """Rung ``m``'s distances to the rungs above and its estimate (empty when it was not estimated)."""
     if m not in distances:
@@ -384,7 +400,7 @@ def check_tolerance(tol: Any, *, source: str | None = None, key: str = "toleranc
 def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
                     rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
                     runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None,
-                    linear=None, factor: float = LINEAR_FACTOR) -> FidelityChoice:
+                    linear=None, factor: float = LINEAR_FACTOR, from_top: bool = False) -> FidelityChoice:
     """Method steps 2 and 3, shared by arm and closed-loop scenes.
 
     With ``linear`` (the estimate-first walk, :func:`linear_candidate`), the walk starts
@@ -412,6 +428,13 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         without integrator error.  None: the ladder walk from ``start``.
     factor : float
         Bound assumed on the linear estimate's error, either way (``LINEAR_FACTOR``).
+    from_top : bool
+        The estimate walk for loops whose linear run costs what the nonlinear one does
+        (a controller stepped in Python): no linear estimate of the rungs; the nonlinear
+        walk starts at ``top`` and goes down while the rung below meets the tolerance (the
+        lowest rung of the unbroken run of rungs from the top that meet it; ``top``
+        failing is a measured :class:`ToleranceUnreachable`). The reference and its
+        linear step check are the estimate walk's (``linear`` is still needed for them).
     """
     ref_n = parse_fidelity(reference).count
     # (b) the walk, estimates from the (two) rungs above
@@ -429,7 +452,14 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         return safety * max(distances[m])
 
     linear_evidence = None
-    if linear is None:
+    own_step = linear is not None  # the reference is the reference model at its own step
+    if from_top:
+        if linear is None:
+            raise ValueError("from_top needs the linear runs for the reference's step check")
+        n = top
+        while n - 1 >= low and estimate(n) <= tol and _buildable_estimate(estimate, n - 1) <= tol:
+            n -= 1
+    elif linear is None:
         n = start
         if estimate(n) <= tol:
             while n - 1 >= low and estimate(n - 1) <= tol:
@@ -461,7 +491,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     if not met:
         best = min(distances, key=lambda m: max(distances[m]))
         best_estimate = safety * max(distances[best])
-        evidence = {"method": METHOD if linear is None else METHOD_ESTIMATE, "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
+        evidence = {"method": _method(linear, from_top), "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
                     "bandwidth_rule": rule, "candidates": [{**runs[m].facts(), **_estimates(m, distances, safety)}
                                                            for m in sorted(runs)],
                     "scene": name, "reference": None, **(extra or {}),
@@ -473,7 +503,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
 
     # (c) the reference and its convergence
     finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
-    if linear is None:
+    if not own_step:
         ref_dt = reference_dt
         ref_run = run_reference(ref_dt)
         half = run_reference(ref_dt / 2)
@@ -485,20 +515,23 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
                               "choice against")
     below = run(ref_n - 1)
     model_check = tip_distance(ref_run, below).max
-    if linear is None:
-        step_check = tip_distance(half, ref_run).max
-        convergence = {"step_halving_m": step_check, "half_step_run": half.facts()}
+    if not own_step:
+        step_error = tip_distance(half, ref_run).max
+        convergence = {"step_halving_m": step_error, "half_step_run": half.facts()}
     else:
         exact = linear[1]()
-        step_check = tip_distance(exact, linear[0](ref_n)).max
-        convergence = {"step_error_linear_m": step_check,
+        step_error = tip_distance(exact, linear[0](ref_n)).max
+        convergence = {"step_error_linear_m": step_error,
                        "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
                                      "the same loop without integrator error (zero-order hold)"}
-        linear_evidence["reference_exact"] = exact.facts()
+        if linear_evidence is not None:
+            linear_evidence["reference_exact"] = exact.facts()
+        else:
+            convergence["reference_exact"] = exact.facts()
     convergence.update({"rung_below_m": model_check, "rung_below": rung_name(ref_n - 1)})
-    if max(step_check, model_check) > 0.5 * tol:
-        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m with "
-                      f"{'half its step' if linear is None else 'no integrator error (linear estimate)'} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
+    if max(step_error, model_check) > 0.5 * tol:
+        how = "half its step" if not own_step else "no integrator error (linear estimate)"
+        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_error:.3g} m with {how} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
                       f"{tol:.3g} m, so it may not be converged enough to judge the choice", stacklevel=3)
 
     rungs = []
@@ -510,11 +543,11 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         rungs.append({**item, **_estimates(m, distances, safety)})
 
     evidence = {
-        "method": METHOD if linear is None else METHOD_ESTIMATE,
+        "method": _method(linear, from_top),
         "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
         "reference": {**ref_run.facts(), "convergence": convergence,
-                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if linear is None else
-                               "the reference model at its own RK4 step (fidelity_walk = 'estimate')")},
+                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if not own_step else
+                               "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')")},
         "candidates": rungs, "scene": name, **(extra or {}),
     }
     chosen = run(n)

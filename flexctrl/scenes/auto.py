@@ -325,15 +325,20 @@ def choose_closed_loop_fidelity(
         As in :func:`choose_fidelity`.
     cache : SceneCache, optional
         Where models, runs and the choice are kept (a fresh one when None).
-    walk : {"estimate", "ladder"}
-        ``estimate`` (default): every rung's loop first on its linearised plant
+    walk : {"estimate", "linear", "ladder"}
+        ``linear``: every rung's loop first on its linearised plant
         (:mod:`flexctrl.scenes.auto_linear`, milliseconds to a second each); the lowest rung
         whose linear estimate is within :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the
         tolerance is certified by the nonlinear runs of the estimate's formula, walking up
         while it fails; no rung within the factor is a predicted :class:`ToleranceUnreachable`
         without nonlinear runs; the reference is the reference model at its own step (its step
-        error estimated linearly).  ``ladder``: the nonlinear walk from the bandwidth rule's
-        start, the reference at ``reference_omega_dt`` and half its step (issue 7's method).
+        error estimated linearly).  ``estimate`` (default): the same for a controller with a
+        sampled law (``has_sampled_law``: the linear loop is one compiled call); for one
+        stepped in Python (MPC, NMPC, a gain schedule), whose linear run costs what its
+        nonlinear run does, no linear estimate of the rungs: the nonlinear walk from ``top``
+        down while the rung below meets the tolerance (the reference and its linear step
+        check as before).  ``ladder``: the nonlinear walk from the bandwidth rule's start, the
+        reference at ``reference_omega_dt`` and half its step (issue 7's method).
 
     Returns
     -------
@@ -387,9 +392,9 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
 
     design_rung = 0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
     first = min(max(low, design_rung), top)
-    linear = None
-    if walk == "estimate":  # the linear runs give the torques: no nonlinear run before the candidate is known
-        from flexctrl.scenes.auto_linear import linear_closed_rung
+    linear, from_top = None, False
+    if walk in ("estimate", "linear"):
+        from flexctrl.scenes.auto_linear import linear_closed_rung, loop_at
 
         def linear_rung(m: int) -> RunRecord:
             h = rk4_step(model_for(plant, rung_name(m), cache).omega_max, plant.dt)
@@ -399,7 +404,15 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
 
         linear = (linear_rung, lambda: linear_closed_rung(scene, reference, None, controller=controller,
                                                           overrides=overrides, cache=cache))
-        runs, record = {}, linear_rung(first)
+        # a controller stepped in Python costs as much on a linear plant as on the nonlinear one: no linear
+        # estimate of the rungs, the nonlinear walk from the top down (the step check stays linear)
+        from_top = walk == "estimate" and not loop_at(scene, rung_name(first), controller, overrides,
+                                                      cache).controller.has_sampled_law()
+    if from_top:
+        runs = {top: rung(top)}
+        record = runs[top]
+    elif linear is not None:  # the linear runs give the torques: no nonlinear run before the candidate is known
+        runs, record = {}, linear[0](first)
     else:
         runs = {first: rung(first)}
         record = runs[first]
@@ -419,8 +432,9 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
             "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
             "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": rung_name(start),
             "lowest_rung_for_initial_state": rung_name(low),
-            "torques_from": f"the closed loop with the plant at {rung_name(first)} (the design model's rung"
-                            f"{', linearised' if linear is not None else ''})"}
+            "torques_from": (f"the closed loop with the plant at {rung_name(top)} (the top rung: the walk starts there)"
+                             if from_top else f"the closed loop with the plant at {rung_name(first)} (the design "
+                             f"model's rung{', linearised' if linear is not None else ''})")}
     ref_dt = plant.dt / max(1, math.ceil(plant.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
     extra = {"kind": "closed_loop", "controller": str(controller or scene.controller),
              "controller_overrides": list(overrides), "design_fidelity": str(design),
@@ -433,7 +447,8 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
             run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller,
                                                           overrides=overrides, cache=cache),
             reference_dt=ref_dt, runs=runs,
-            extra={**extra, "walk": walk}, linear=linear, factor=LINEAR_FACTOR)
+            extra={**extra, "walk": walk, "linear_estimate_skipped": from_top}, linear=linear, factor=LINEAR_FACTOR,
+            from_top=from_top)
         chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
     finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
         cache.drop(WHOLE_RUNS, keep=chosen)
@@ -441,4 +456,5 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
                                  "each rung; " + choice.evidence["method"])
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
     return choice
+
 

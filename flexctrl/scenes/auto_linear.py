@@ -103,7 +103,6 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
         (the grid step when exact); ``wall_time_s`` the whole estimate (linearising,
         discretising and the loop).
     """
-    from flexctrl.linear import Linearizer, equilibrium
     from flexctrl.loop.compiled import run_compiled
     from flexctrl.loop.sampled import LoopRun, mapped
     from flexctrl.spec.fidelity import parse_fidelity
@@ -112,11 +111,9 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
     start = time.perf_counter()
     grid = float(scene.plant.dt)
     plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity), dt=grid)
-    setup = build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
+    setup, op, A, B = _linearised_loop(scene, fidelity, controller, overrides, cache)
     plant, ctrl = setup.plant, setup.controller
     build = time.perf_counter() - start
-    op = equilibrium(plant, scene.target_q)
-    A, B = Linearizer(plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
     Phi, Gamma = grid_maps(A, B, grid, h)
     Ts = ctrl.sample_time
     substeps = int(round(Ts / grid))
@@ -141,3 +138,22 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
                      dt=grid if h is None else float(h), omega_max=float(plant.omega_max),
                      wall_time_s=time.perf_counter() - start - build, build_time_s=build, time=times, tip=tip,
                      diverged_at=diverged, torque=torque)
+
+
+def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):
+    """The scene's loop with the plant at ``fidelity`` on the scene's grid step (models and design from ``cache``)."""
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity), dt=float(scene.plant.dt))
+    return build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
+
+
+def _linearised_loop(scene, fidelity: str, controller, overrides, cache: SceneCache):
+    """:func:`loop_at`, its static equilibrium at the target, and ``(A, B)`` there."""
+    from flexctrl.linear import Linearizer, equilibrium
+
+    setup = loop_at(scene, fidelity, controller, overrides, cache)
+    op = equilibrium(setup.plant, scene.target_q)
+    A, B = Linearizer(setup.plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
+    return setup, op, A, B
+

@@ -12,7 +12,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     payload = 2.0                     # kg (default: the model file's)
     fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
-    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate" (linear first) or "ladder"
+    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate", "linear" or "ladder"
                                       # (flexctrl.scenes.auto chooses the model)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
@@ -46,7 +46,7 @@ from typing import Any, Literal
 import numpy as np
 
 from flexctrl.spec.arm import DAMPING_FORMS
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 
 MODES = ("frozen", "scheduled")
@@ -260,7 +260,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         duration=duration,
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
-        fidelity_walk=r.string("fidelity_walk", "estimate", choices=("estimate", "ladder")),
+        fidelity_walk=r.string("fidelity_walk", "estimate", choices=FIDELITY_WALKS),
         axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
     )

@@ -15,6 +15,11 @@ from typing import Literal
 from flexctrl.errors import SpecError
 
 KINDS = ("rigid", "amm", "fem", "auto")
+#: How ``fidelity = "auto"`` walks the ladder for a closed loop (``fidelity_walk``; flexctrl.scenes.auto):
+#: ``estimate`` (linear estimates first, or the nonlinear walk from the top rung down for a controller stepped in
+#: Python), ``linear`` (linear estimates first for every controller: the estimate walk before it had the
+#: walk from the top) and ``ladder`` (issue 7's nonlinear walk with a small-step reference).
+FIDELITY_WALKS = ("estimate", "linear", "ladder")
 _LIMITS = {"amm": (0, 6), "fem": (1, 64)}
 SPELLINGS = "'rigid', 'amm:N' (N = 0..6 modes per link), 'fem:N' (N = 1..64 elements per link) or 'auto'"
 
