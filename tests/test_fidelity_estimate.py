@@ -166,6 +166,8 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
     options = {"top": 3, "reference": "amm:4"}  # amm:1 fails, amm:2 and amm:3 meet 1e-2 m: the walk stops between
     choice = auto_fidelity.choose_closed_loop_fidelity(scene, tol, controller=mpc, cache=cache, **options)
     assert choice.evidence["linear_estimate_skipped"] and "linear_estimate" not in choice.evidence
+    assert choice.evidence["walk_taken"] == "from_top"
+    assert choice.evidence["bandwidth_rule"]["start"] == f"amm:{options['top']}"
     assert choice.evidence["method"].startswith("closed loop") and "from the top rung down" in choice.evidence["method"]
     # the rule, recomputed from the nonlinear runs: every rung from the choice to the top meets the tolerance,
     # the rung below the choice does not
@@ -191,5 +193,9 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
     # the slow path, kept as fidelity_walk = "linear": linear estimates first, the same choice from the same runs
     linear = auto_fidelity.choose_closed_loop_fidelity(scene, tol, controller=mpc, cache=cache, walk="linear", **options)
     assert "linear_estimate" in linear.evidence and not linear.evidence["linear_estimate_skipped"]
+    assert linear.evidence["walk_taken"] == "linear_first"
+    # a top rung that fails is a measured failure that says only the top was tried (the runs are in the cache)
+    with pytest.raises(ToleranceUnreachable, match="the top rung amm:3 does not meet") as failed:
+        auto_fidelity.choose_closed_loop_fidelity(scene, 1e-6, controller=mpc, cache=cache, **options)
+    assert failed.value.evidence["best"]["rung"] == "amm:3"
     assert str(linear.choice) == str(choice.choice) and linear.estimated_error == choice.estimated_error
-

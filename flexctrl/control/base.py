@@ -236,6 +236,9 @@ class Controller(ABC):
     def has_sampled_law(self) -> bool:
         """Whether :meth:`sampled_law` gives a law once the controller has stepped (known before any step).
 
+        Override it together with :meth:`sampled_law`: a controller that gives a law but
+        says False here is only walked more slowly by the fidelity chooser, never wrongly.
+
         False here and for the controllers that solve an optimisation per sample: their loop
         steps in Python, so a run of theirs costs about the same on a linear plant as on the
         nonlinear one (the automatic-fidelity chooser uses this, :mod:`flexctrl.scenes.auto`).

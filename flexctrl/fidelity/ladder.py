@@ -353,10 +353,14 @@ def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int,
 
 
 def _buildable_estimate(estimate, m: int) -> float:
-    """``estimate(m)``, infinite when rung ``m`` cannot be built (``FlexctrlError``, e.g. strain gauges on ``rigid``)."""
+    """``estimate(m)``, infinite when rung ``m`` cannot be built (``SpecError``, e.g. strain gauges on ``rigid``).
+
+    Only a rung that cannot be built stops the walk this way; a solver or simulation
+    failure on it is raised, as the other walks raise it.
+    """
     try:
         return estimate(m)
-    except FlexctrlError:
+    except SpecError:
         return math.inf
 
 
@@ -496,6 +500,13 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
                                                            for m in sorted(runs)],
                     "scene": name, "reference": None, **(extra or {}),
                     "best": {"rung": rung_name(best), "estimated_error_m": best_estimate}}
+        if from_top:
+            raise ToleranceUnreachable(
+                f"the top rung amm:{top} does not meet the tolerance {tol:.3g} m on scene '{name}': its estimate is "
+                f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); the walk from the top "
+                "tries no rung below a top that fails; allowed: a tolerance >= "
+                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or 'ladder' (they try the "
+                "rungs below)", evidence)
         raise ToleranceUnreachable(
             f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
             f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
@@ -559,4 +570,3 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         reference_error_rms=err.rms,
         cost_ratio=chosen.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf,
         integrator=chosen.integrator, dt=chosen.dt, evidence=evidence)
-

@@ -430,8 +430,8 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
         start = min(max([low, *kept]), top)
     rule = {"excitation_bandwidth_hz": bandwidth, "energy_fraction": energy_fraction, "factor": bandwidth_factor,
             "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
-            "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": rung_name(start),
-            "lowest_rung_for_initial_state": rung_name(low),
+            "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept,
+            "start": rung_name(top if from_top else start), "lowest_rung_for_initial_state": rung_name(low),
             "torques_from": (f"the closed loop with the plant at {rung_name(top)} (the top rung: the walk starts there)"
                              if from_top else f"the closed loop with the plant at {rung_name(first)} (the design "
                              f"model's rung{', linearised' if linear is not None else ''})")}
@@ -447,7 +447,9 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
             run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller,
                                                           overrides=overrides, cache=cache),
             reference_dt=ref_dt, runs=runs,
-            extra={**extra, "walk": walk, "linear_estimate_skipped": from_top}, linear=linear, factor=LINEAR_FACTOR,
+            extra={**extra, "walk": walk, "linear_estimate_skipped": from_top,
+                   "walk_taken": "from_top" if from_top else "linear_first" if linear is not None else "ladder"},
+            linear=linear, factor=LINEAR_FACTOR,
             from_top=from_top)
         chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
     finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
@@ -456,5 +458,3 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
                                  "each rung; " + choice.evidence["method"])
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
     return choice
-
-

@@ -156,4 +156,3 @@ def _linearised_loop(scene, fidelity: str, controller, overrides, cache: SceneCa
     op = equilibrium(setup.plant, scene.target_q)
     A, B = Linearizer(setup.plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
     return setup, op, A, B
-

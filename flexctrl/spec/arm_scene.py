@@ -127,7 +127,8 @@ class ArmScene:
     source: str = ""
     kind: str = "arm"
     tolerance: float | None = None
-    #: How ``fidelity = "auto"`` walks the ladder for a closed loop: ``estimate`` (linear estimate first) or ``ladder``.
+    #: How ``fidelity = "auto"`` walks the ladder for a closed loop: one of ``FIDELITY_WALKS``
+    #: (:mod:`flexctrl.spec.fidelity`): ``estimate``, ``linear`` or ``ladder``.
     fidelity_walk: str = "estimate"
     axial_shortening: bool | None = None
     axial_stretch: bool | None = None
