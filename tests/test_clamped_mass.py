@@ -20,6 +20,7 @@ from scipy.linalg import eigh
 from scipy.optimize import brentq
 
 from flexctrl.beam.clamped_mass import (
+    ROOT_RTOL,
     ClampedMassModes,
     IndefiniteTipInertiaWarning,
     clamped_mass_modes,
@@ -271,7 +272,7 @@ def test_roots_match_fe_count_order_and_modes(tip, n):
 def root_residual_bound(lam, mu, eta, kappa):
     """How far from zero the scaled determinant may be at a root found to rounding.
 
-    Two parts. The root finder stops within ``rtol = 8.9e-16`` of ``lam`` (relative),
+    Two parts. The root finder stops within ``ROOT_RTOL`` (8.9e-16) of ``lam`` (relative),
     which moves the determinant by at most its slope times that step (slope by central
     difference here; four times the step for brentq's bracket). And the determinant is
     evaluated in floating point: each term of ``Delta / (cosh W)`` carries rounding of
@@ -292,7 +293,7 @@ def root_residual_bound(lam, mu, eta, kappa):
     w = 1.0 + mu * lam + 2.0 * abs(kappa) * l2 + eta * lam * l2 + abs(mu * eta - kappa * kappa) * l2 * l2
     h = 1e-7 * lam
     slope = (frequency_determinant(lam + h, mu, eta, kappa) - frequency_determinant(lam - h, mu, eta, kappa)) / (2 * h)
-    return 16.0 * eps * size / w + 4.0 * 8.9e-16 * lam * np.abs(slope)
+    return 16.0 * eps * size / w + 4.0 * ROOT_RTOL * lam * np.abs(slope)
 
 
 @settings(max_examples=60, deadline=None)

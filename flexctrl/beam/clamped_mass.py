@@ -159,13 +159,17 @@ def _roots(n: int, mu: float, eta: float, kappa: float) -> list[float]:
     return sorted(roots)[:n]
 
 
+#: brentq's relative tolerance on a root ``lam`` (4 eps, the smallest it accepts).
+ROOT_RTOL = 8.9e-16
+
+
 def _polish(a: float, b: float, na: int, mu: float, eta: float, kappa: float) -> float:
     """The single eigenvalue in ``[a, b)``: brentq on the sign change, else count-bisection."""
     fa, fb = _delta(a, mu, eta, kappa), _delta(b, mu, eta, kappa)
     if fa == 0.0:
         return a
     if fa * fb < 0.0:
-        return brentq(_delta, a, b, args=(mu, eta, kappa), xtol=1e-300, rtol=8.9e-16)
+        return brentq(_delta, a, b, args=(mu, eta, kappa), xtol=1e-300, rtol=ROOT_RTOL)
     while b - a > 4e-16 * b:  # no sign change seen (root within rounding of b)
         m = 0.5 * (a + b)
         if _count(m, mu, eta, kappa) > na:

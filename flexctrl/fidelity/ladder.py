@@ -456,7 +456,6 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         return safety * max(distances[m])
 
     linear_evidence = None
-    own_step = linear is not None  # the reference is the reference model at its own step
     if from_top:
         if linear is None:
             raise ValueError("from_top needs the linear runs for the reference's step check")
@@ -514,7 +513,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
 
     # (c) the reference and its convergence
     finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
-    if not own_step:
+    if linear is None:
         ref_dt = reference_dt
         ref_run = run_reference(ref_dt)
         half = run_reference(ref_dt / 2)
@@ -526,13 +525,13 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
                               "choice against")
     below = run(ref_n - 1)
     model_check = tip_distance(ref_run, below).max
-    if not own_step:
-        step_error = tip_distance(half, ref_run).max
-        convergence = {"step_halving_m": step_error, "half_step_run": half.facts()}
+    if linear is None:
+        step_check = tip_distance(half, ref_run).max
+        convergence = {"step_halving_m": step_check, "half_step_run": half.facts()}
     else:
         exact = linear[1]()
-        step_error = tip_distance(exact, linear[0](ref_n)).max
-        convergence = {"step_error_linear_m": step_error,
+        step_check = tip_distance(exact, linear[0](ref_n)).max
+        convergence = {"step_error_linear_m": step_check,
                        "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
                                      "the same loop without integrator error (zero-order hold)"}
         if linear_evidence is not None:
@@ -540,9 +539,9 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         else:
             convergence["reference_exact"] = exact.facts()
     convergence.update({"rung_below_m": model_check, "rung_below": rung_name(ref_n - 1)})
-    if max(step_error, model_check) > 0.5 * tol:
-        how = "half its step" if not own_step else "no integrator error (linear estimate)"
-        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_error:.3g} m with {how} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
+    if max(step_check, model_check) > 0.5 * tol:
+        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m with "
+                      f"{'half its step' if linear is None else 'no integrator error (linear estimate)'} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
                       f"{tol:.3g} m, so it may not be converged enough to judge the choice", stacklevel=3)
 
     rungs = []
@@ -557,7 +556,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         "method": _method(linear, from_top),
         "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
         "reference": {**ref_run.facts(), "convergence": convergence,
-                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if not own_step else
+                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if linear is None else
                                "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')")},
         "candidates": rungs, "scene": name, **(extra or {}),
     }

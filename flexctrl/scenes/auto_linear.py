@@ -103,23 +103,24 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
         (the grid step when exact); ``wall_time_s`` the whole estimate (linearising,
         discretising and the loop).
     """
+    from flexctrl.linear import Linearizer, equilibrium
     from flexctrl.loop.compiled import run_compiled
     from flexctrl.loop.sampled import LoopRun, mapped
-    from flexctrl.spec.fidelity import parse_fidelity
 
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
     grid = float(scene.plant.dt)
-    plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity), dt=grid)
-    setup, op, A, B = _linearised_loop(scene, fidelity, controller, overrides, cache)
+    setup = loop_at(scene, fidelity, controller, overrides, cache)
     plant, ctrl = setup.plant, setup.controller
     build = time.perf_counter() - start
+    op = equilibrium(plant, scene.target_q)
+    A, B = Linearizer(plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
     Phi, Gamma = grid_maps(A, B, grid, h)
     Ts = ctrl.sample_time
     substeps = int(round(Ts / grid))
     advance = linear_advance(np.asarray(op.x, dtype=float), np.asarray(op.u, dtype=float), Phi, Gamma, substeps)
     run = LoopRun(plant, ctrl, setup.sensors, None, None, grid, substeps, 1,
-                  int(math.ceil(plant_scene.duration / Ts - 1e-9)), advance, setup.x0)
+                  int(math.ceil(scene.plant.duration / Ts - 1e-9)), advance, setup.x0)
     run.python_sample(0)
     law = ctrl.sampled_law() if run.divergence is None else None
     if law is not None:
@@ -144,15 +145,5 @@ def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):
     """The scene's loop with the plant at ``fidelity`` on the scene's grid step (models and design from ``cache``)."""
     from flexctrl.spec.fidelity import parse_fidelity
 
-    plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity), dt=float(scene.plant.dt))
+    plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity))
     return build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
-
-
-def _linearised_loop(scene, fidelity: str, controller, overrides, cache: SceneCache):
-    """:func:`loop_at`, its static equilibrium at the target, and ``(A, B)`` there."""
-    from flexctrl.linear import Linearizer, equilibrium
-
-    setup = loop_at(scene, fidelity, controller, overrides, cache)
-    op = equilibrium(setup.plant, scene.target_q)
-    A, B = Linearizer(setup.plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
-    return setup, op, A, B
