@@ -132,7 +132,7 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
 
 
 #: NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.design_nmpc`, not settings.
-DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen")
+DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen", "direct_qp")
 
 
 def default_nmpc_variants() -> dict[str, dict[str, Any]]:
@@ -141,10 +141,11 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
     per sample at the interval's middle RK4 node, frozen over it (``sensitivities =
     "midpoint"``), HPIPM warm-started from the shifted previous solution, the QP without
-    its soft rows tried first, the RTI's calls through bound buffers, predicting with the
+    its soft rows tried first (through HPIPM called directly), the RTI's calls through bound buffers, predicting with the
     joints and the three slowest coupled modes at the target, the estimate's fast modes
     removed (12 states, 2 RK4 substeps).  Against it, one change each:
-    ``rti_frozen_dm_calls`` the RTI's calls as before, through CasADi's DM conversions and
+    ``rti_frozen_conic_qp`` the QP without soft rows through ``casadi.conic`` (``direct_qp``, an
+    argument of ``design_nmpc``); ``rti_frozen_dm_calls`` the RTI's calls as before, through CasADi's DM conversions and
     the whole QP every sample (``bound_calls``, an argument of ``design_nmpc``);
     ``rti_frozen_whole_qp`` always the whole QP (``screen``, an argument of ``design_nmpc``;
     the same optimum to the solver's tolerance); ``rti_frozen_per_step`` one Jacobian per
@@ -163,6 +164,7 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     shipped = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
     return {
         "rti_frozen": {**shipped, "sensitivities": "midpoint"},
+        "rti_frozen_conic_qp": {**shipped, "sensitivities": "midpoint", "direct_qp": False},
         "rti_frozen_dm_calls": {**shipped, "sensitivities": "midpoint", "bound_calls": False},
         "rti_frozen_whole_qp": {**shipped, "sensitivities": "midpoint", "screen": False},
         "rti_frozen_per_step": {**shipped},

@@ -138,7 +138,7 @@ class NMPCController(Controller):
     def __init__(self, settings: NMPCSettings, plant: LinearPlant, limits: np.ndarray, problem: ScaledProblem,
                  observer, functions: dict, layout: _Layout, substeps: int, compiled: bool,
                  prediction: Prediction | None = None, prediction_plant: LinearPlant | None = None,
-                 bound_calls: bool = True, screen: bool = True):
+                 bound_calls: bool = True, screen: bool = True, direct_qp: bool = True):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
         self.plant = plant
         #: the model predicted with and the selection ``x[keep]`` of the design state it sees
@@ -168,6 +168,8 @@ class NMPCController(Controller):
         self.bound_calls = bound_calls
         #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc_screen`)
         self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
+        #: the screened QP through HPIPM called directly (:mod:`flexctrl.control.hpipm_ocp`), else ``casadi.conic``
+        self.direct_qp = direct_qp
         self._rti_calls = None
 
     def __getstate__(self) -> dict:
@@ -180,7 +182,7 @@ class NMPCController(Controller):
                 self._rti_calls = DMRTICalls(fn["prepare"], fn["qp"], fn["H"])
             else:
                 screen = (ScreenedQP(self.layout, fn["Hnp"].toarray(), fn["prepare"].sparsity_out(0), pb.C, pb.c_lo,
-                                     pb.c_hi, self.settings.qp_warm_start) if self.screen else None)
+                                     pb.c_hi, self.settings.qp_warm_start, self.direct_qp) if self.screen else None)
                 self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
         return self._rti_calls
 
@@ -520,7 +522,7 @@ def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
 
 
 def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic",
-                bound_calls: bool = True, screen: bool = True) -> NMPCController:
+                bound_calls: bool = True, screen: bool = True, direct_qp: bool = True) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
 
     ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
@@ -531,6 +533,8 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     ``screen``: solve the QP without its soft rows first and keep that answer when they hold
     (HPIPM with bound calls; the same optimum to the solver's tolerance,
     :mod:`flexctrl.control.nmpc_screen`); False always solves the whole QP.
+    ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
+    (:mod:`flexctrl.control.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
@@ -558,7 +562,7 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
-                          prediction, pplant, bound_calls, screen)
+                          prediction, pplant, bound_calls, screen, direct_qp)
 
 
 __all__ = ["NMPCController", "design_nmpc", "interval_functions", "auto_substeps", "RK4_BOUND"]

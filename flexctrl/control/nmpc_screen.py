@@ -14,8 +14,15 @@ numbers move in their last digits (``docs/control.md``, "NMPC speed").
 
 The smaller QP has ``m`` instead of ``m + ns`` inputs and no general rows per stage: on the
 benchmark's problem (12 states, 3 torques, 3 deflection limits, horizon 20; ``flexctrl bench
-mpc``, in blocks) the QP step takes 0.57 instead of 0.76 ms, 3 iterations instead of 4.
-Samples whose prediction reaches a deflection limit pay both solves.
+mpc``, in blocks) the QP step took 0.57 instead of 0.76 ms through ``casadi.conic``, 3
+iterations instead of 4.  Samples whose prediction reaches a deflection limit pay both solves.
+
+Since it has only the torque bounds, it is solved by HPIPM called directly
+(:class:`HpipmStages`, :mod:`flexctrl.control.hpipm_ocp`: memory made once, ``z_0``
+eliminated, no state boxes), ``direct=False`` keeps ``casadi.conic``.  One bench run
+(``flexctrl bench mpc --json --pc-solves 0``, load 0.1-0.5): QP step 0.41 against 0.80 ms in
+blocks, 0.55 against 0.80 ms interleaved; the whole sample 1.12 against 1.96 ms in blocks and
+1.46 against 1.63 ms interleaved (``rti_frozen`` against ``rti_frozen_conic_qp``).
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from flexctrl.control.hpipm_ocp import HpipmOCP, HpipmUnavailable
 from flexctrl.sim.bound import BoundFunction
 
 
@@ -49,10 +57,14 @@ class ScreenedQP:
         The soft rows' outputs ``C z_{k+1}`` and their limits.
     warm_start : bool
         HPIPM starts from the shifted previous solution.
+    direct : bool
+        Solve through :class:`HpipmStages` (HPIPM called directly, its memory made once; default)
+        or through ``casadi.conic`` (the slower path, kept to measure against; also the fall-back
+        when CasADi's ``libhpipm`` cannot be loaded, named in :attr:`backend`).
     """
 
     def __init__(self, layout, H: np.ndarray, a_sparsity: ca.Sparsity, C: np.ndarray, c_lo: np.ndarray,
-                 c_hi: np.ndarray, warm_start: bool):
+                 c_hi: np.ndarray, warm_start: bool, direct: bool = True):
         n, m, ns, N = layout.n, layout.m, layout.ns, layout.N
         self.layout = layout
         slack = np.zeros(layout.nw, dtype=bool)
@@ -64,16 +76,27 @@ class ScreenedQP:
         numbered = ca.DM(a_sparsity, np.arange(1, a_sparsity.nnz() + 1, dtype=float))
         sub = numbered[self.rows.tolist(), self.keep.tolist()]
         self.entries = np.array(sub.nonzeros(), dtype=int) - 1
-        Hk = H[np.ix_(self.keep, self.keep)]
-        H_sp = ca.DM(ca.sparsify(ca.DM(Hk)))
-        self.qp = ca.conic("nmpc_qp_screened", "hpipm", {"h": H_sp.sparsity(), "a": sub.sparsity()},
-                           {"error_on_fail": False, **hpipm_options(N, n, m, 0, warm_start)})
-        self._bound = BoundFunction(self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True)
-        self._in = self._bound.arrays
-        self._x = self._bound.arrays["x"].reshape(-1)
         self.C, self.c_lo, self.c_hi = np.asarray(C, dtype=float), np.asarray(c_lo, dtype=float), np.asarray(c_hi, dtype=float)
         #: the smaller QP's ``z_1 .. z_N`` in its own ``w``
         self._z_next = np.array([self.keep.searchsorted(layout.z[k + 1]) for k in range(N)])
+        options = hpipm_options(N, n, m, 0, warm_start)
+        #: how the smaller QP is solved: ``"hpipm (direct)"`` or ``"casadi.conic hpipm"`` (and why, if not direct)
+        self.backend = "casadi.conic hpipm"
+        self.direct: HpipmStages | None = None
+        if direct:
+            try:
+                self.direct = HpipmStages(layout, H, a_sparsity, self.rows, options["hpipm"])
+                self.backend = "hpipm (direct)"
+            except HpipmUnavailable as exc:
+                self.backend = f"casadi.conic hpipm ({exc})"
+        if self.direct is None:
+            Hk = H[np.ix_(self.keep, self.keep)]
+            H_sp = ca.DM(ca.sparsify(ca.DM(Hk)))
+            self.qp = ca.conic("nmpc_qp_screened", "hpipm", {"h": H_sp.sparsity(), "a": sub.sparsity()},
+                               {"error_on_fail": False, **options})
+            self._bound = BoundFunction(self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True)
+            self._in = self._bound.arrays
+            self._x = self._bound.arrays["x"].reshape(-1)
 
     def solve(self, a: np.ndarray, lba: np.ndarray, uba: np.ndarray, g: np.ndarray, lbx: np.ndarray,
               ubx: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray | None, dict]:
@@ -83,24 +106,117 @@ class ScreenedQP:
         Raises as the QP solver does (CasADi's checks).
         """
         keep, rows = self.keep, self.rows
-        self._in["a"][:] = a[self.entries]
-        self._in["lba"][:] = lba[rows]
-        self._in["uba"][:] = uba[rows]
-        self._in["g"][:] = g[keep]
-        self._in["lbx"][:] = lbx[keep]
-        self._in["ubx"][:] = ubx[keep]
-        self._in["x0"][:] = w0[keep]
-        self._bound.evaluate()
-        stats = self._bound.stats()
-        x = self._x
-        if not stats.get("success", False) or not np.all(np.isfinite(x)):
-            return None, stats
-        y = self.C @ x[self._z_next].T  # (ns, N): the limited outputs on z_1 .. z_N
+        if self.direct is not None:
+            w, stats = self.direct.solve(a, lba, g, lbx, ubx, w0)
+            if not stats["success"] or not np.all(np.isfinite(w)):
+                return None, stats
+            z_next = w[self.direct.z_index[1:]]
+        else:
+            self._in["a"][:] = a[self.entries]
+            self._in["lba"][:] = lba[rows]
+            self._in["uba"][:] = uba[rows]
+            self._in["g"][:] = g[keep]
+            self._in["lbx"][:] = lbx[keep]
+            self._in["ubx"][:] = ubx[keep]
+            self._in["x0"][:] = w0[keep]
+            self._bound.evaluate()
+            stats = self._bound.stats()
+            x = self._x
+            if not stats.get("success", False) or not np.all(np.isfinite(x)):
+                return None, stats
+            z_next = x[self._z_next]
+            w = np.zeros(self.layout.nw)
+            w[keep] = x
+        y = self.C @ z_next.T  # (ns, N): the limited outputs on z_1 .. z_N
         if np.any(y > self.c_hi[:, None]) or np.any(y < self.c_lo[:, None]):
             return None, stats
-        w = np.zeros(self.layout.nw)
-        w[keep] = x
         return w, stats
 
 
-__all__ = ["ScreenedQP", "hpipm_options"]
+class HpipmStages:
+    """The smaller QP's data moved from the whole QP's arrays into :class:`~flexctrl.control.hpipm_ocp.HpipmOCP`.
+
+    The whole QP's shooting rows read ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's
+    ``x_{k+1} = A_k x_k + B_k u_k + b_k`` has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds
+    (``lbx = ubx = z_0``) and eliminated.  The stage costs are the Hessian's diagonal blocks
+    ``Q_k = H[z_k, z_k]``, ``R_k = H[v_k, v_k]`` (the NMPC's has no cross terms; one with them is
+    refused), halved as ``casadi.conic`` hands them to HPIPM; the inputs' bounds are read from
+    ``lbx, ubx`` every solve.  Any other bound on a state (there is
+    none in the NMPC's QP) is refused when the data are read, not dropped.
+    """
+
+    def __init__(self, layout, H: np.ndarray, a_sparsity: ca.Sparsity, rows: np.ndarray, options: dict):
+        n, m, N = layout.n, layout.m, layout.N
+        self.layout = layout
+        self.ocp = HpipmOCP(N, n, m, options)
+        self.z_index = np.array([layout.z[k] for k in range(N + 1)])  # (N + 1, n)
+        self.v_index = np.array([layout.v[k] for k in range(N)])      # (N, m)
+        # nonzero numbers of the whole A (1-based; 0 a structural zero) at the shooting rows
+        nnz = a_sparsity.nnz()
+        numbered = np.array(ca.densify(ca.DM(a_sparsity, np.arange(1, nnz + 1, dtype=float))), dtype=float)
+        numbered = numbered.astype(np.int64) - 1
+        numbered[numbered < 0] = nnz  # the sentinel entry: 0
+        shooting = rows.reshape(N, n)
+        # HPIPM's column-major blocks as C-ordered (cols, rows) arrays: A_k[i, j] at [k, j, i]
+        self._ia = np.stack([numbered[np.ix_(shooting[k], self.z_index[k])].T for k in range(N)])
+        self._ib = np.stack([numbered[np.ix_(shooting[k], self.v_index[k])].T for k in range(N)])
+        self._shooting = shooting
+        self._a = np.zeros(nnz + 1)
+        ocp = self.ocp
+        blocks = np.zeros_like(H, dtype=bool)
+        for k in range(N + 1):
+            z = self.z_index[k]
+            blocks[np.ix_(z, z)] = True
+            if k > 0:
+                ocp.Q[k] = 0.5 * H[np.ix_(z, z)].T
+            if k < N:
+                v = self.v_index[k]
+                blocks[np.ix_(v, v)] = True
+                ocp.R[k] = 0.5 * H[np.ix_(v, v)].T
+        kept = np.zeros(layout.nw, dtype=bool)
+        kept[self.z_index.ravel()] = kept[self.v_index.ravel()] = True
+        if np.any(H[np.ix_(kept, kept)][~blocks[np.ix_(kept, kept)]] != 0.0):
+            raise ValueError("the direct HPIPM path takes a Hessian without cross terms between stages, states and "
+                             "inputs (the NMPC's); use ScreenedQP(..., direct=False)")
+        state_bounds = np.ones(layout.nw, dtype=bool)
+        state_bounds[self.v_index.ravel()] = False
+        state_bounds[self.z_index[0]] = False
+        slack = np.zeros(layout.nw, dtype=bool)
+        slack[layout.s.ravel()] = True
+        self._state_bounds = np.flatnonzero(state_bounds & ~slack)
+
+    def solve(self, a: np.ndarray, lba: np.ndarray, g: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
+              w0: np.ndarray) -> tuple[np.ndarray, dict]:
+        """The smaller QP's solution as the whole QP's ``w`` (zero slacks) and HPIPM's statistics.
+
+        Raises
+        ------
+        ValueError
+            ``z_0``'s bounds differ (``lbx != ubx``) or another state has a finite bound.
+        """
+        ocp, N = self.ocp, self.layout.N
+        z0 = lbx[self.z_index[0]]
+        if not np.array_equal(z0, ubx[self.z_index[0]]) or np.any(np.isfinite(lbx[self._state_bounds])) \
+                or np.any(np.isfinite(ubx[self._state_bounds])):
+            raise ValueError("the direct HPIPM path takes z_0 fixed and only the inputs bounded; "
+                             "use ScreenedQP(..., direct=False) for other bounds")
+        self._a[:-1] = a
+        ocp.A[:] = self._a[self._ia]
+        ocp.B[:] = self._a[self._ib]
+        ocp.b[:] = -lba[self._shooting]
+        ocp.b[0] += ocp.A[0].T @ z0
+        ocp.q[1:] = 0.5 * g[self.z_index[1:]]
+        ocp.r[:N] = 0.5 * g[self.v_index]
+        ocp.lbu[:N] = lbx[self.v_index]
+        ocp.ubu[:N] = ubx[self.v_index]
+        ocp.u[:N] = w0[self.v_index]
+        ocp.x[1:] = w0[self.z_index[1:]]
+        stats = ocp.solve()
+        w = np.zeros(self.layout.nw)
+        w[self.z_index[0]] = z0
+        w[self.v_index] = ocp.u[:N]
+        w[self.z_index[1:]] = ocp.x[1:]
+        return w, stats
+
+
+__all__ = ["ScreenedQP", "HpipmStages", "hpipm_options"]

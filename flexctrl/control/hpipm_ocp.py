@@ -1,0 +1,215 @@
+"""HPIPM called directly (ctypes) on an input-bounded optimal-control QP, its memory made once.
+
+The problem, ``N`` stages, ``x_0`` given::
+
+    min  sum_k 1/2 u_k' R_k u_k + x_k' S_k' u_k + 1/2 x_k' Q_k x_k + r_k' u_k + q_k' x_k  (k = 0..N, u_N none)
+    s.t. x_{k+1} = A_k x_k + B_k u_k + b_k,   lbu <= u_k <= ubu
+
+Why not ``casadi.conic("hpipm")``: on the NMPC's QP (12 states, 3 inputs, horizon 20) its call
+costs about 0.2 ms before the first iteration, because every call allocates and creates HPIPM's
+dimensions, QP, solution, arguments and workspace anew (``malloc`` and the workspace's set-up),
+projects the sparse constraint matrix and Hessian into stage blocks, and boxes every state with
+bounds of +-1e8 (CasADi gives HPIPM all variables as boxed), so HPIPM's interior point carries
+``2 (N + 1) n_x`` inequalities that never bind.  Here the structures are made once per solver,
+``x_0`` is eliminated (stage 0 has no state: ``b_0 <- A_0 x_0 + b_0``, ``r_0 <- r_0 + S_0 x_0``),
+only the inputs are bounded, and one solve is three C calls (set the data, set the primal start,
+solve) plus two for the status, on numpy arrays bound once.
+
+The library is the ``libhpipm`` that ships with CasADi (the one ``casadi.conic`` loads), with the
+same options (mode, iteration limit, the four residual tolerances, primal warm start).  Like
+CasADi, the cost is handed to HPIPM halved (``1/2 H``, ``1/2 g``: the same minimiser), so the
+residual tolerances mean what they mean through ``casadi.conic``.  The two are the same optimum
+to the interior point's tolerance, not to the bit (other inequalities, so other iterates):
+``tests/test_hpipm_ocp.py`` compares them.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import glob
+import os
+
+import numpy as np
+
+#: HPIPM's ``enum hpipm_mode``
+MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
+#: HPIPM's ``enum hpipm_status``
+STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
+#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc_screen.hpipm_options` and their HPIPM setters
+_TOLERANCES = {"res_g_max": "tol_stat", "res_b_max": "tol_eq", "res_d_max": "tol_ineq", "res_m_max": "tol_comp"}
+
+
+class HpipmUnavailable(RuntimeError):
+    """HPIPM's shared library could not be found or loaded next to CasADi."""
+
+
+@functools.lru_cache(maxsize=1)
+def library() -> ctypes.CDLL:
+    """CasADi's ``libhpipm`` (loaded once; its ``libblasfeo`` sits beside it).
+
+    Raises
+    ------
+    HpipmUnavailable
+        No loadable ``libhpipm`` in CasADi's package folder.
+    """
+    import casadi
+
+    folder = os.path.dirname(casadi.__file__)
+    names = sorted(glob.glob(os.path.join(folder, "libhpipm.*")) + glob.glob(os.path.join(folder, "hpipm.dll")))
+    errors = []
+    for name in names:
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError as exc:
+            errors.append(f"{name}: {exc}")
+            continue
+        for fn in ("d_ocp_qp_ipm_solve", "d_ocp_qp_set_all", "d_ocp_qp_sol_get_all", "d_ocp_qp_ipm_get_status"):
+            getattr(lib, fn).restype = None
+        for fn in ("d_ocp_qp_dim_strsize", "d_ocp_qp_dim_memsize", "d_ocp_qp_strsize", "d_ocp_qp_memsize",
+                   "d_ocp_qp_sol_strsize", "d_ocp_qp_sol_memsize", "d_ocp_qp_ipm_arg_strsize",
+                   "d_ocp_qp_ipm_arg_memsize", "d_ocp_qp_ipm_ws_strsize", "d_ocp_qp_ipm_ws_memsize"):
+            getattr(lib, fn).restype = ctypes.c_size_t
+        return lib
+    raise HpipmUnavailable(f"no loadable libhpipm in CasADi's folder {folder!r}"
+                           + (f" ({'; '.join(errors)})" if errors else ""))
+
+
+def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
+    """A C array of pointers to consecutive blocks of ``sizes`` entries of the contiguous ``array``."""
+    base, step = array.ctypes.data, array.itemsize
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
+    return (ctypes.c_void_p * len(sizes))(*[base + int(o) * step for o in offsets])
+
+
+class HpipmOCP:
+    """HPIPM on the problem of the module docstring; one per controller (not picklable, not thread-safe).
+
+    Parameters
+    ----------
+    N, nx, nu : int
+        Stages, states and inputs per stage.
+    options : dict
+        ``{"mode", "iter_max", "res_g_max", "res_b_max", "res_d_max", "res_m_max", "warm_start"}``
+        as for ``casadi.conic``'s HPIPM (:func:`~flexctrl.control.nmpc_screen.hpipm_options`);
+        ``warm_start`` 1 starts from the primal guess given to :meth:`solve`.
+
+    The data are written into :attr:`A`, :attr:`B`, :attr:`b`, :attr:`Q`, :attr:`S`, :attr:`R`,
+    :attr:`q`, :attr:`r`, :attr:`lbu`, :attr:`ubu` (numpy arrays bound to HPIPM's pointers; each
+    stage's matrix as its transpose in C order, which is HPIPM's column-major block) before
+    :meth:`solve`, the cost already halved or not as the caller chooses.
+    """
+
+    def __init__(self, N: int, nx: int, nu: int, options: dict):
+        lib = library()
+        self.lib, self.N, self.nx, self.nu = lib, N, nx, nu
+        unknown = set(options) - {"mode", "iter_max", "warm_start", *_TOLERANCES}
+        if unknown:
+            raise ValueError(f"HPIPM options {sorted(unknown)} are not interfaced; allowed: "
+                             f"{sorted({'mode', 'iter_max', 'warm_start', *_TOLERANCES})}")
+        mode = options.get("mode", "speed")
+        if mode not in MODES:
+            raise ValueError(f"HPIPM mode {mode!r} is not allowed; allowed: {sorted(MODES)}")
+        # stage sizes: stage 0 has no state (x_0 eliminated), the last no input
+        nxs = np.array([0] + [nx] * N, dtype=np.int32)
+        nus = np.array([nu] * N + [0], dtype=np.int32)
+        zeros = np.zeros(N + 1, dtype=np.int32)
+        self._ints = (nxs, nus, zeros)
+        self._mem: list = []  # every buffer HPIPM points into, kept alive with the solver
+
+        def struct(name: str, *args) -> ctypes.Array:
+            memory = ctypes.create_string_buffer(int(getattr(lib, f"{name}_strsize")()))
+            self._mem.append(memory)
+            return memory
+
+        def memory(size: int) -> ctypes.Array:
+            block = ctypes.create_string_buffer(int(size) + 64)
+            self._mem.append(block)
+            return ctypes.c_void_p((ctypes.addressof(block) + 63) // 64 * 64)  # aligned as HPIPM asks
+
+        self._dim = struct("d_ocp_qp_dim")
+        lib.d_ocp_qp_dim_create(N, self._dim, memory(lib.d_ocp_qp_dim_memsize(N)))
+        ptr = lambda a: a.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
+        # nx, nu, nbx, nbu, ng, ns
+        lib.d_ocp_qp_dim_set_all(ptr(nxs), ptr(nus), ptr(zeros), ptr(nus), ptr(zeros), ptr(zeros), self._dim)
+        self._qp = struct("d_ocp_qp")
+        lib.d_ocp_qp_create(self._dim, self._qp, memory(lib.d_ocp_qp_memsize(self._dim)))
+        self._sol = struct("d_ocp_qp_sol")
+        lib.d_ocp_qp_sol_create(self._dim, self._sol, memory(lib.d_ocp_qp_sol_memsize(self._dim)))
+        self._arg = struct("d_ocp_qp_ipm_arg")
+        lib.d_ocp_qp_ipm_arg_create(self._dim, self._arg, memory(lib.d_ocp_qp_ipm_arg_memsize(self._dim)))
+        lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], self._arg)
+        if "iter_max" in options:
+            lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(ctypes.c_int(int(options["iter_max"]))), self._arg)
+        for key, setter in _TOLERANCES.items():
+            if key in options:
+                getattr(lib, f"d_ocp_qp_ipm_arg_set_{setter}")(ctypes.byref(ctypes.c_double(float(options[key]))),
+                                                               self._arg)
+        lib.d_ocp_qp_ipm_arg_set_warm_start(ctypes.byref(ctypes.c_int(int(options.get("warm_start", 0)))), self._arg)
+        self._ws = struct("d_ocp_qp_ipm_ws")
+        lib.d_ocp_qp_ipm_ws_create(self._dim, self._arg, self._ws,
+                                   memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)))
+        # data arrays, HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered (cols, rows) array
+        self.A = np.zeros((N, nx, nx))          # stage 0's A has no columns (x_0 eliminated): A[0] unused
+        self.B = np.zeros((N, nu, nx))
+        self.b = np.zeros((N, nx))
+        self.Q = np.zeros((N + 1, nx, nx))      # Q[0] unused
+        self.S = np.zeros((N + 1, nx, nu))      # S_k (nu x nx) as (nx, nu); S[0] unused
+        self.R = np.zeros((N + 1, nu, nu))      # R[N] unused
+        self.q = np.zeros((N + 1, nx))
+        self.r = np.zeros((N + 1, nu))
+        self.lbu = np.zeros((N + 1, nu))
+        self.ubu = np.zeros((N + 1, nu))
+        self.u = np.zeros((N + 1, nu))          # primal start, then the solution
+        self.x = np.zeros((N + 1, nx))          # x[0] unused
+        idxbu = np.tile(np.arange(nu, dtype=np.int32), N + 1)
+        spare = np.zeros(4 * (N + 1) * (nx + nu) + 1)  # multipliers and unused fields (sizes 0 or nu)
+        self._keep = (idxbu, spare)
+        P = lambda a, sizes: _pointers(a, sizes)  # noqa: E731
+        A_p = P(self.A, [nx * nx] * N)
+        B_p = P(self.B, [nu * nx] * N)
+        b_p = P(self.b, [nx] * N)
+        Q_p, S_p, R_p = P(self.Q, [nx * nx] * (N + 1)), P(self.S, [nx * nu] * (N + 1)), P(self.R, [nu * nu] * (N + 1))
+        q_p, r_p = P(self.q, [nx] * (N + 1)), P(self.r, [nu] * (N + 1))
+        lbu_p, ubu_p = P(self.lbu, [nu] * (N + 1)), P(self.ubu, [nu] * (N + 1))
+        idx_p = P(idxbu, [nu] * (N + 1))
+        no_slack = np.full((N + 1) * nu, -1, dtype=np.int32)  # idxs_rev: no constraint has a slack
+        self._keep += (no_slack,)
+        rev_p = P(no_slack, [nu] * (N + 1))
+        none = P(spare, [0] * (N + 1))          # empty fields: every stage points at the spare block
+        # the stage pointers of A and x and the first stage's S and Q point one stage ahead of a 0-state stage:
+        # HPIPM reads nx[0] = 0 columns there, so they are never dereferenced
+        self._set_all = (A_p, B_p, b_p, Q_p, S_p, R_p, q_p, r_p, none, none, none, idx_p, lbu_p, ubu_p,
+                         none, none, none, none, none, none, none, none, none, rev_p, none, none, self._qp)
+        u_p, x_p = P(self.u, [nu] * (N + 1)), P(self.x, [nx] * (N + 1))
+        lam = [P(spare, [0] * (N + 1)) for _ in range(9)]  # ls, us, pi, lam_lb, lam_ub, lam_lg, lam_ug, lam_ls, lam_us
+        multipliers = np.zeros(2 * (N + 1) * (nx + nu) + N * nx)
+        self._keep += (multipliers,)
+        pi_p = P(multipliers, [nx] * N)
+        lb_p = P(multipliers[N * nx:], [nu] * (N + 1))
+        ub_p = P(multipliers[N * nx + (N + 1) * nu:], [nu] * (N + 1))
+        self._sol_all = (u_p, x_p, lam[0], lam[1], pi_p, lb_p, ub_p, lam[2], lam[3], lam[4], lam[5])
+        self._status, self._iter = ctypes.c_int(-1), ctypes.c_int(-1)
+
+    def solve(self) -> dict:
+        """Solve on the data in the bound arrays from the primal start in :attr:`u`, :attr:`x`; the solution replaces them.
+
+        Returns
+        -------
+        dict
+            ``success`` (HPIPM's status is SUCCESS), ``return_status`` (its name) and ``iter_count``,
+            the keys of ``casadi.conic``'s statistics that the NMPC reads.
+        """
+        lib = self.lib
+        lib.d_ocp_qp_set_all(*self._set_all)
+        lib.d_ocp_qp_sol_set_all(*self._sol_all, self._sol)
+        lib.d_ocp_qp_ipm_solve(self._qp, self._sol, self._arg, self._ws)
+        lib.d_ocp_qp_sol_get_all(self._sol, *self._sol_all)
+        lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
+        lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
+        status = int(self._status.value)
+        return {"success": status == 0, "return_status": STATUS.get(status, f"status {status}"),
+                "iter_count": int(self._iter.value)}
+
+
+__all__ = ["HpipmOCP", "HpipmUnavailable", "library", "MODES", "STATUS"]
