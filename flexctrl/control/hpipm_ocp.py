@@ -117,7 +117,7 @@ class HpipmOCP:
         self._ints = (nxs, nus, zeros)
         self._mem: list = []  # every buffer HPIPM points into, kept alive with the solver
 
-        def struct(name: str, *args) -> ctypes.Array:
+        def struct(name: str) -> ctypes.Array:
             memory = ctypes.create_string_buffer(int(getattr(lib, f"{name}_strsize")()))
             self._mem.append(memory)
             return memory
@@ -163,9 +163,9 @@ class HpipmOCP:
         self.u = np.zeros((N + 1, nu))          # primal start, then the solution
         self.x = np.zeros((N + 1, nx))          # x[0] unused
         idxbu = np.tile(np.arange(nu, dtype=np.int32), N + 1)
-        spare = np.zeros(4 * (N + 1) * (nx + nu) + 1)  # multipliers and unused fields (sizes 0 or nu)
+        spare = np.zeros(1)  # what the fields of size 0 point at (never read or written)
         self._keep = (idxbu, spare)
-        P = lambda a, sizes: _pointers(a, sizes)  # noqa: E731
+        P = _pointers
         A_p = P(self.A, [nx * nx] * N)
         B_p = P(self.B, [nu * nx] * N)
         b_p = P(self.b, [nx] * N)
@@ -176,19 +176,18 @@ class HpipmOCP:
         no_slack = np.full((N + 1) * nu, -1, dtype=np.int32)  # idxs_rev: no constraint has a slack
         self._keep += (no_slack,)
         rev_p = P(no_slack, [nu] * (N + 1))
-        none = P(spare, [0] * (N + 1))          # empty fields: every stage points at the spare block
-        # the stage pointers of A and x and the first stage's S and Q point one stage ahead of a 0-state stage:
-        # HPIPM reads nx[0] = 0 columns there, so they are never dereferenced
+        none = P(spare, [0] * (N + 1))          # fields of size 0 (no state bounds, general rows or slacks)
+        # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns of them
         self._set_all = (A_p, B_p, b_p, Q_p, S_p, R_p, q_p, r_p, none, none, none, idx_p, lbu_p, ubu_p,
                          none, none, none, none, none, none, none, none, none, rev_p, none, none, self._qp)
         u_p, x_p = P(self.u, [nu] * (N + 1)), P(self.x, [nx] * (N + 1))
-        lam = [P(spare, [0] * (N + 1)) for _ in range(9)]  # ls, us, pi, lam_lb, lam_ub, lam_lg, lam_ug, lam_ls, lam_us
         multipliers = np.zeros(2 * (N + 1) * (nx + nu) + N * nx)
         self._keep += (multipliers,)
         pi_p = P(multipliers, [nx] * N)
         lb_p = P(multipliers[N * nx:], [nu] * (N + 1))
         ub_p = P(multipliers[N * nx + (N + 1) * nu:], [nu] * (N + 1))
-        self._sol_all = (u_p, x_p, lam[0], lam[1], pi_p, lb_p, ub_p, lam[2], lam[3], lam[4], lam[5])
+        # u, x, ls, us, pi, lam_lb, lam_ub, lam_lg, lam_ug, lam_ls, lam_us
+        self._sol_all = (u_p, x_p, none, none, pi_p, lb_p, ub_p, none, none, none, none)
         self._status, self._iter = ctypes.c_int(-1), ctypes.c_int(-1)
 
     def solve(self) -> dict:

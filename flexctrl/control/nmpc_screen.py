@@ -74,8 +74,6 @@ class ScreenedQP:
         self.rows = np.concatenate([k * (n + 2 * ns) + np.arange(n) for k in range(N)])
         # nonzeros of the whole A that the kept rows and columns select, in the smaller A's order
         numbered = ca.DM(a_sparsity, np.arange(1, a_sparsity.nnz() + 1, dtype=float))
-        sub = numbered[self.rows.tolist(), self.keep.tolist()]
-        self.entries = np.array(sub.nonzeros(), dtype=int) - 1
         self.C, self.c_lo, self.c_hi = np.asarray(C, dtype=float), np.asarray(c_lo, dtype=float), np.asarray(c_hi, dtype=float)
         #: the smaller QP's ``z_1 .. z_N`` in its own ``w``
         self._z_next = np.array([self.keep.searchsorted(layout.z[k + 1]) for k in range(N)])
@@ -85,11 +83,13 @@ class ScreenedQP:
         self.direct: HpipmStages | None = None
         if direct:
             try:
-                self.direct = HpipmStages(layout, H, a_sparsity, self.rows, options["hpipm"])
+                self.direct = HpipmStages(layout, H, numbered, self.rows, options["hpipm"])
                 self.backend = "hpipm (direct)"
             except HpipmUnavailable as exc:
                 self.backend = f"casadi.conic hpipm ({exc})"
         if self.direct is None:
+            sub = numbered[self.rows.tolist(), self.keep.tolist()]
+            self.entries = np.array(sub.nonzeros(), dtype=int) - 1
             Hk = H[np.ix_(self.keep, self.keep)]
             H_sp = ca.DM(ca.sparsify(ca.DM(Hk)))
             self.qp = ca.conic("nmpc_qp_screened", "hpipm", {"h": H_sp.sparsity(), "a": sub.sparsity()},
@@ -145,16 +145,15 @@ class HpipmStages:
     none in the NMPC's QP) is refused when the data are read, not dropped.
     """
 
-    def __init__(self, layout, H: np.ndarray, a_sparsity: ca.Sparsity, rows: np.ndarray, options: dict):
+    def __init__(self, layout, H: np.ndarray, numbered: ca.DM, rows: np.ndarray, options: dict):
         n, m, N = layout.n, layout.m, layout.N
         self.layout = layout
         self.ocp = HpipmOCP(N, n, m, options)
         self.z_index = np.array([layout.z[k] for k in range(N + 1)])  # (N + 1, n)
         self.v_index = np.array([layout.v[k] for k in range(N)])      # (N, m)
-        # nonzero numbers of the whole A (1-based; 0 a structural zero) at the shooting rows
-        nnz = a_sparsity.nnz()
-        numbered = np.array(ca.densify(ca.DM(a_sparsity, np.arange(1, nnz + 1, dtype=float))), dtype=float)
-        numbered = numbered.astype(np.int64) - 1
+        # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a structural zero)
+        nnz = numbered.nnz()
+        numbered = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
         numbered[numbered < 0] = nnz  # the sentinel entry: 0
         shooting = rows.reshape(N, n)
         # HPIPM's column-major blocks as C-ordered (cols, rows) arrays: A_k[i, j] at [k, j, i]
