@@ -47,3 +47,32 @@ def test_grouped_runs_share_a_worker_and_the_table_is_the_plain_pools(selftest_s
     assert len(workers) == 12 and len({w for ws in workers.values() for w in ws}) == 2
     split = [cell for cell, ws in workers.items() if len(ws) > 1]
     assert len(split) <= 1, split  # only the last group may be shared, when the other worker runs dry
+
+
+PRELOAD_PROBE = """
+import concurrent.futures as cf, sys
+from flexctrl.study.runner import pool_context
+context = pool_context({preload!r})
+with cf.ProcessPoolExecutor(1, mp_context=context) as pool:
+    print(pool.submit(eval, "sorted(m for m in __import__('sys').modules if m.startswith('flexctrl.study'))").result())
+"""
+
+
+def test_the_fork_server_imports_the_executors_module_once_for_its_workers():
+    """A worker forked by a preloading server has the executor's module before its first run; without it, not.
+
+    Each probe is a fresh interpreter: a process starts its fork server once, so an earlier pool in the test
+    process would decide what the server holds.
+    """
+    import ast
+    import subprocess
+    import sys
+
+    module = "flexctrl.study.executors.selftest"
+    loaded = {}
+    for preload in (module, None):
+        out = subprocess.run([sys.executable, "-c", PRELOAD_PROBE.format(preload=preload)], capture_output=True,
+                             text=True, timeout=120, check=True).stdout
+        loaded[preload] = set(ast.literal_eval(out.strip().splitlines()[-1]))
+    assert {module, "flexctrl.study.runner"} <= loaded[module]
+    assert module not in loaded[None] and "flexctrl.study.runner" not in loaded[None]

@@ -30,6 +30,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--no-affinity", action="store_true",
                         help="local pool: give each run to whichever worker is free, instead of keeping the runs that "
                              "share a model on one worker (the slow path, for measuring side by side)")
+    parser.add_argument("--no-preload", action="store_true",
+                        help="local pool: each worker imports the executor's code in its first run, instead of the fork "
+                             "server importing it once before forking the workers (the slow path, for measuring side by side)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
     return parser
@@ -50,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     with stop_signals_interrupt():
         result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                            progress="none" if args.quiet else args.progress, report=not args.no_report,
-                           affinity=not args.no_affinity)
+                           affinity=not args.no_affinity, preload=not args.no_preload)
     c = result.counts
     if not args.quiet:
         print(f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "

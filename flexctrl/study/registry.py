@@ -100,6 +100,8 @@ class Executor:
     report: Callable[..., list[str]] | None = None
     needs_model: bool = True
     unavailable: Callable[[dict], dict[str, str]] | None = None
+    #: the module that holds the executor's code, which a local pool's fork server imports once for its workers
+    module: str | None = None
 
     def unavailable_metrics(self, settings: dict) -> dict[str, str]:
         """``{metric: reason}`` of the metrics this run cannot produce, known from its settings alone."""
@@ -142,7 +144,7 @@ def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None
     existing = _REGISTRY.get(name)
     if existing is not None and existing.run is not fn:
         raise ValueError(f"executor '{name}' is registered already (to {existing.run.__module__}.{existing.run.__qualname__})")
-    _REGISTRY[name] = Executor(name, fn, check, summary, report)
+    _REGISTRY[name] = Executor(name, fn, check, summary, report, module=fn.__module__)
 
 
 def executor_names() -> tuple[str, ...]:
@@ -201,7 +203,7 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
         return {} if fn is None else fn(settings)
 
     run.__qualname__ = run.__name__ = f"run_{name}"
-    _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model, unavailable)
+    _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model, unavailable, module)
 
 
 
