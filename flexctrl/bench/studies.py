@@ -8,7 +8,8 @@ compiled-library cache on disk as it is) and a *repeated pass* in the same proce
 worker cache holds the models, designs and choices of the first).  Alternating the
 studies round by round lets the machine's load move them together; the figures are
 each study's wall time per pass, the summed per-run wall time (``results.csv``'s
-``wall_time_s``), and the ratios of every study to the first one.  Each pass's table is
+``wall_time_s``), and the ratios of every study to the first one (of the medians, and
+round by round for the first pass).  ``--set KEY=VALUE`` overrides apply to every study.  Each pass's table is
 compared with the first pass's, every column but the timing and memory ones
 (``tables_identical``).
 """
@@ -35,8 +36,8 @@ _PASSES = """
 import json, sys, time
 from flexctrl.study.runner import run_study
 from flexctrl.study.spec import load_study
-study, outs, workers = sys.argv[1], sys.argv[2:-1], int(sys.argv[-1])
-spec, walls = load_study(study), []
+study, overrides, outs, workers = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3:-1], int(sys.argv[-1])
+spec, walls = load_study(study, overrides=overrides), []
 for out in outs:
     start = time.perf_counter()
     run_study(spec, out, workers=workers, progress="none", report=False)
@@ -56,10 +57,14 @@ def stable_columns(rows: list[dict[str, str]]) -> list[tuple]:
     return [tuple((k, v) for k, v in row.items() if k not in VOLATILE) for row in rows]
 
 
-def run_passes(study: Path, passes: int, workers: int, folder: Path) -> dict[str, Any]:
-    """One fresh process running ``study`` ``passes`` times; wall times, summed run times, status counts."""
+def run_passes(study: Path, passes: int, workers: int, folder: Path, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    """One fresh process running ``study`` (with ``overrides``, as ``flexctrl study --set``) ``passes`` times.
+
+    Returns wall times, summed run times and status counts.
+    """
     outs = [folder / f"pass{i + 1}" for i in range(passes)]
-    done = subprocess.run([sys.executable, "-c", _PASSES, str(study), *map(str, outs), str(workers)],
+    done = subprocess.run([sys.executable, "-c", _PASSES, str(study), json.dumps(list(overrides)), *map(str, outs),
+                           str(workers)],
                           capture_output=True, text=True, check=True, env=os.environ.copy())
     walls = json.loads(done.stdout.strip().splitlines()[-1])
     tables = [read_table(out / "results.csv") for out in outs]
@@ -76,14 +81,22 @@ def run_passes(study: Path, passes: int, workers: int, folder: Path) -> dict[str
 
 
 def bench_studies(studies: Sequence[str | Path] = DEFAULT_STUDIES, *, rounds: int = 1, passes: int = 2,
-                  workers: int = 0, keep: str | Path | None = None) -> dict[str, Any]:
-    """Measure what the module docstring describes; a JSON-ready dict."""
+                  workers: int = 0, keep: str | Path | None = None, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    """Measure what the module docstring describes; a JSON-ready dict.
+
+    ``overrides`` (``KEY=VALUE``, as ``flexctrl study --set``) apply to every study; each study is
+    loaded with them here first, so a bad one is refused before any pass runs.
+    """
+    from flexctrl.study.spec import load_study
+
+    for study in studies:
+        load_study(study, overrides=list(overrides))
     folder = Path(keep) if keep is not None else Path(tempfile.mkdtemp(prefix="flexctrl-bench-studies-"))
     names = [Path(s).stem for s in studies]
     results: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
     for r in range(rounds):
         for study, name in zip(studies, names):
-            results[name].append(run_passes(Path(study), passes, workers, folder / f"round{r + 1}" / name))
+            results[name].append(run_passes(Path(study), passes, workers, folder / f"round{r + 1}" / name, overrides))
     per: dict[str, Any] = {}
     for name in names:
         rows = results[name]
@@ -97,8 +110,11 @@ def bench_studies(studies: Sequence[str | Path] = DEFAULT_STUDIES, *, rounds: in
     base = per[names[0]]
     ratios = {name: {"first_pass": per[name]["first_pass_s"] / base["first_pass_s"],
                      "repeated_pass": (per[name]["repeated_pass_s"] / base["repeated_pass_s"]
-                                       if passes > 1 else None)} for name in names[1:]}
-    return {"studies": [str(s) for s in studies], "rounds": rounds, "passes": passes, "workers": workers,
+                                       if passes > 1 else None),
+                     "first_pass_rounds": [x["wall_s"][0] / b["wall_s"][0]
+                                           for x, b in zip(results[name], results[names[0]])]} for name in names[1:]}
+    return {"studies": [str(s) for s in studies], "overrides": list(overrides), "rounds": rounds, "passes": passes,
+            "workers": workers,
             "results": per, "ratio_to_first_study": ratios,
             "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None, "folder": str(folder)}
 
@@ -115,5 +131,6 @@ def format_studies(result: dict[str, Any]) -> str:
     first = next(iter(result["results"]))
     for name, q in result["ratio_to_first_study"].items():
         rep = "" if q["repeated_pass"] is None else f", repeated pass {q['repeated_pass']:.2f}"
-        lines.append(f"  {name} / {first}: first pass {q['first_pass']:.2f}{rep}")
+        each = ", ".join(f"{x:.2f}" for x in q["first_pass_rounds"])
+        lines.append(f"  {name} / {first}: first pass {q['first_pass']:.2f} (rounds: {each}){rep}")
     return "\n".join(lines)

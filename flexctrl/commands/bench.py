@@ -46,6 +46,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         help="studies: a study file (repeatable; the first is the baseline)")
     parser.add_argument("--workers", type=int, default=0, metavar="N", help="studies: workers per pass (default 0: in the process)")
     parser.add_argument("--keep", default=None, metavar="DIR", help="studies: write the passes' folders here")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="studies: override a key of every study file, as 'flexctrl study --set' (repeatable)")
     parser.add_argument("--tree", action="append", default=None, metavar="DIR",
                         help="runs: a source checkout (twice: the old one first, then the new one)")
     parser.add_argument("--by", default="controller", metavar="COLUMN", help="runs: group wall times by this column")
@@ -128,7 +130,8 @@ def _run_studies(args: argparse.Namespace) -> int:
     if args.repeats < 1 or args.workers < 0:
         raise SpecError(f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
                         key="--repeats")
-    result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep)
+    result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep,
+                           overrides=args.set)
     print(json.dumps(result, indent=2) if args.json else format_studies(result))
     return 0
 
