@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import multiprocessing
 from collections import defaultdict
+
+import pytest
 
 from flexctrl.study import load_study, run_study
 from flexctrl.study.affinity import AffinityQueue, affinity_key
@@ -58,17 +61,21 @@ with cf.ProcessPoolExecutor(1, mp_context=context) as pool:
 """
 
 
-def test_the_fork_server_imports_the_executors_module_once_for_its_workers():
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="no forkserver here")
+def test_the_fork_server_imports_the_executors_module_for_its_workers():
     """A worker forked by a preloading server has the executor's module before its first run; without it, not.
 
-    Each probe is a fresh interpreter: a process starts its fork server once, so an earlier pool in the test
-    process would decide what the server holds.
+    The module is the one the registry records for ``_selftest``.  Each probe is a fresh interpreter: a process
+    starts its fork server once, so an earlier pool in the test process would decide what the server holds.
     """
     import ast
     import subprocess
     import sys
 
-    module = "flexctrl.study.executors.selftest"
+    from flexctrl.study.registry import get_executor
+
+    module = get_executor("_selftest").module
+    assert module == "flexctrl.study.executors.selftest"
     loaded = {}
     for preload in (module, None):
         out = subprocess.run([sys.executable, "-c", PRELOAD_PROBE.format(preload=preload)], capture_output=True,
@@ -76,3 +83,25 @@ def test_the_fork_server_imports_the_executors_module_once_for_its_workers():
         loaded[preload] = set(ast.literal_eval(out.strip().splitlines()[-1]))
     assert {module, "flexctrl.study.runner"} <= loaded[module]
     assert module not in loaded[None] and "flexctrl.study.runner" not in loaded[None]
+
+
+def test_no_preload_is_kept_through_a_resume_and_named_in_the_backend(selftest_study, tmp_path):
+    spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q3=[0]"])  # 4 runs
+    first = run_study(spec, tmp_path / "out", workers=2, progress="none", report=False, preload=False)
+    assert "imports in each worker" in first.backend
+    (tmp_path / "out" / "runs" / f"{spec.runs[0].run_id}.json").unlink()
+    again = run_study(spec, tmp_path / "out", workers=2, progress="none", report=False, preload=False, resume=True)
+    assert again.counts["ran"] == 1 and "imports in each worker" in again.backend
+    assert "imports" not in run_study(spec, tmp_path / "pre", workers=2, progress="none", report=False).backend
+
+
+def test_the_pool_asks_its_fork_server_for_the_executors_registered_module(selftest_study, tmp_path, monkeypatch):
+    from flexctrl.study import runner
+
+    asked = []
+    real = runner.pool_context
+    monkeypatch.setattr(runner, "pool_context", lambda preload=None: asked.append(preload) or real(preload))
+    spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q2=[0]", "grid.q3=[0]"])  # 2 runs
+    run_study(spec, tmp_path / "pre", workers=1, progress="none", report=False)
+    run_study(spec, tmp_path / "plain", workers=1, progress="none", report=False, preload=False)
+    assert asked == ["flexctrl.study.executors.selftest", None]

@@ -32,7 +32,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                              "share a model on one worker (the slow path, for measuring side by side)")
     parser.add_argument("--no-preload", action="store_true",
                         help="local pool: each worker imports the executor's code in its first run, instead of the fork "
-                             "server importing it once before forking the workers (the slow path, for measuring side by side)")
+                             "server importing it once before forking the workers (the old path: the imports land in each worker's first run)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
     return parser

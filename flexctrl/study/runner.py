@@ -29,7 +29,7 @@ local pool (default)
     them in its first run (about 1.3 s a worker on this machine, which used to
     land in that run's ``wall_time_s``); ``preload=False`` (``--no-preload``)
     keeps the imports in the workers.  The server is started once per Python
-    process, so the choice holds for the process's first pool.
+    process, so the choice holds for the process's first pool (see :func:`pool_context`).
 Dask (``scheduler="tcp://host:8786"`` or ``client=...``)
     ``dask.distributed`` (an optional dependency, imported only here), at most
     ``2 x threads`` runs in flight.  Workers need flexctrl installed and the
@@ -194,9 +194,15 @@ def default_workers() -> int:
 def pool_context(preload: str | None = None):
     """The local pool's start method: ``forkserver`` (``spawn`` where there is none).
 
-    ``preload`` names a module the fork server imports before it forks any worker
-    (with ``__main__``, as by default); it takes effect only if this process has not
-    started its fork server yet.
+    ``preload`` names a module the fork server imports before it forks any worker,
+    after ``__main__`` (as by default) and this module (which holds
+    :func:`execute_run`).  The list takes effect only if this process has not started
+    its fork server yet: a running server keeps what it loaded, and ``preload=None``
+    leaves an earlier list in place.  ``spawn`` has no server and ignores it.  The
+    server imports with the interpreter's start-up ``sys.path``, not the parent's
+    current one, so a parent that put another copy of flexctrl on ``sys.path`` at run
+    time (a notebook) gets workers with the installed copy; pass ``preload=False`` to
+    the backend there.
     """
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
@@ -484,7 +490,8 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
         (:mod:`flexctrl.study.affinity`); False: each run to whichever worker is free.
     preload
         Local pool: the fork server imports the executor's module once before it forks
-        the workers; False: each worker imports it in its first run (the slow path).
+        the workers; False: each worker imports it in its first run (the old path: the
+        imports land in that run's wall time).
 
     Raises
     ------
