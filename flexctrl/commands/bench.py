@@ -27,7 +27,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
         "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio. 'studies': --study files (default "
         "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a fresh process run twice "
-        "(first pass, repeated pass), --repeats rounds; prints the pass times and their ratios to the first study. "
+        "(first pass, repeated pass), --repeats rounds, with the --set overrides applied to every study; prints the "
+        "pass times and their ratios to the first study (of the medians, and round by round for the first pass). "
         "'runs': the runs of one --study under two --tree source checkouts (one worker process each), alternated run "
         "by run; prints each tree's summed per-run wall time by --by and the ratio.",
     )
@@ -58,6 +59,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.set and args.what != "studies":
+        raise SpecError(f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with 'bench studies' only",
+                        key="--set")
     if args.what == "mpc":
         return _run_mpc(args)
     if args.what == "loop":
@@ -130,6 +134,10 @@ def _run_studies(args: argparse.Namespace) -> int:
     if args.repeats < 1 or args.workers < 0:
         raise SpecError(f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
                         key="--repeats")
+    from flexctrl.study.spec import load_study
+
+    for study in args.study or DEFAULT_STUDIES:  # a bad study or override is refused before any pass runs
+        load_study(study, overrides=args.set)
     result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep,
                            overrides=args.set)
     print(json.dumps(result, indent=2) if args.json else format_studies(result))
