@@ -40,7 +40,8 @@ import control
 import numpy as np
 
 from flexctrl.dynamics.amm import locked_spectrum
-from flexctrl.dynamics.model import derived, jacobian_function
+from flexctrl.dynamics.jacobians import jacobian_function
+from flexctrl.dynamics.model import derived
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.spec.units import warn_if_degrees
 
@@ -395,8 +396,8 @@ class Linearizer:
 
     Use for many linearisations of one model (gain scheduling, frequency maps);
     :func:`linearize` builds one and calls it once.  The Jacobian Function is kept with
-    the model (:func:`flexctrl.dynamics.model.derived`) for each sensor Function, so the
-    designs and linear verdicts of a study worker build it once per model.
+    the model (:func:`flexctrl.dynamics.model.derived`) for each sensor Function; its dynamics'
+    part is built once per model structure (``shared=True``: the same values).
     """
 
     def __init__(self, model, outputs: Sequence[str] | Sensors = ("joints",), *, q_joints: Sequence[float] | None = None):
@@ -404,7 +405,7 @@ class Linearizer:
         self.sensors = outputs if isinstance(outputs, Sensors) else Sensors.build(model, outputs, q_joints=q_joints)
         # kept per model and sensor Function (building the AD graph costs more than a linearisation)
         self.function = derived(model, ("jacobians", self.sensors.function.serialize()),
-                                lambda: jacobian_function(model, inputs=True, outputs=self.sensors.function))
+                                lambda: jacobian_function(model, inputs=True, outputs=self.sensors.function, shared=True))
 
     def matrices(self, op: OperatingPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(A, B, C, D)`` at ``op``."""

@@ -110,7 +110,7 @@ def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_
     import casadi as ca
 
     from flexctrl.loop.plant_step import advance_function, plant_step_function
-    from flexctrl.sim.parametric import constants_as_parameters
+    from flexctrl.dynamics.parametric import constants_as_parameters
 
     arm = load_arm(root / "models" / "subedi3link.toml").with_payload(2.0)
     models = [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in ([0, 30, -60], [0, 120, 45])]

@@ -95,9 +95,9 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.base import Controller
-from flexctrl.sim.base import try_expand as _expanded
+from flexctrl.dynamics.parametric import try_expand as _expanded
 from flexctrl.sim.compile import content_key
-from flexctrl.sim.parametric import constants_as_parameters
+from flexctrl.dynamics.parametric import constants_as_parameters
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem

@@ -28,13 +28,12 @@ Jacobian per step and not per sample: ``docs/control.md`` ("sensitivities per RK
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-from flexctrl.sim.base import try_expand as _expanded
+from flexctrl.dynamics.parametric import Memo, try_expand as _expanded
 from flexctrl.sim.rk4 import rk4_next
 
 #: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).
@@ -137,8 +136,8 @@ def interval_functions(model, dt: float, substeps: int, sensitivities: str | Non
 
 
 #: Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least recently used beyond ``MEMO_SIZE``).
-_BUILT: OrderedDict[str, tuple] = OrderedDict()
 MEMO_SIZE = 8
+_BUILT = Memo(MEMO_SIZE)
 
 
 def memoised(key: str, build: Callable[[], tuple]) -> tuple:
@@ -152,14 +151,8 @@ def memoised(key: str, build: Callable[[], tuple]) -> tuple:
     serialization that finds the library on disk, are paid once per worker).  The built
     Functions hold no state between calls; each controller keeps its own QP solver.
     """
-    if key in _BUILT:
-        _BUILT.move_to_end(key)
-        return (*_BUILT[key], True)
-    value = build()
-    _BUILT[key] = value
-    while len(_BUILT) > MEMO_SIZE:
-        _BUILT.popitem(last=False)
-    return (*value, False)
+    value, reused = _BUILT.get(key, build)
+    return (*value, reused)
 
 
 __all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised"]

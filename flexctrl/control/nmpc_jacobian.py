@@ -14,7 +14,7 @@ with ``a`` held fixed while ``M a`` is differentiated: one LDL^T factorisation o
 common subexpression elimination) serves ``qdd`` and every column of the Jacobian.
 
 :func:`factored_dynamics` returns ``f`` and ``(f, f_x, f_u)`` built this way with the
-numeric constants of the pieces as an input (:func:`flexctrl.sim.parametric.constants_as_parameters`),
+numeric constants of the pieces as an input (:func:`flexctrl.dynamics.parametric.constants_as_parameters`),
 so the compiled NMPC sensitivities still depend only on the model's graph structure.
 """
 
@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.amm import ldl_solve
-from flexctrl.sim.parametric import constants_as_parameters
+from flexctrl.dynamics.parametric import constants_as_parameters
 
 
 def equation_terms(model) -> ca.Function:

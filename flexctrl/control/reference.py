@@ -50,7 +50,7 @@ from flexctrl.dynamics.model import derived
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
 from flexctrl.sim.compile import QUICK_FLAGS, compile_function
-from flexctrl.sim.parametric import parametric
+from flexctrl.dynamics.parametric import parametric
 
 from flexctrl.spec.reference import DEFLECTIONS, JointReference
 
@@ -71,7 +71,7 @@ def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function
     in CasADi's virtual machine.  Otherwise (``None``: unless switched off, as
     :func:`flexctrl.sim.compile.compile_function`) the generalised forces are rebuilt with
     their numeric constants as an input, one per use
-    (:func:`flexctrl.sim.parametric.constants_as_parameters`), differentiated with the
+    (:func:`flexctrl.dynamics.parametric.constants_as_parameters`), differentiated with the
     constants symbolic and compiled as ONE Function of all seven outputs, named by the
     sizes alone: every configuration and payload of one model shape shares one library,
     and a new configuration pays the lift and the Jacobians (about 0.2 s for ``amm:2``

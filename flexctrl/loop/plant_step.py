@@ -9,8 +9,8 @@ import numpy as np
 
 from flexctrl.dynamics.model import derived
 from flexctrl.sim.compile import compile_function
-from flexctrl.sim.parametric import parametric
-from flexctrl.sim.base import try_expand
+from flexctrl.dynamics.parametric import parametric
+from flexctrl.dynamics.parametric import try_expand
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 
@@ -25,7 +25,7 @@ def plant_step_function(model, substeps: int, f: ca.Function | None = None, n_co
     The steps are unrolled into one expression (compiled whole by :func:`advance_function`
     up to :data:`UNROLL_LIMIT` steps).  With ``f = fp(x, u, c)`` (the model's ``f`` with
     its constants as the input ``c`` of length ``n_constants``, from
-    :func:`flexctrl.sim.parametric.constants_as_parameters`) the constants are an input
+    :func:`flexctrl.dynamics.parametric.constants_as_parameters`) the constants are an input
     too, and the Function's name depends only on the sizes: every configuration of one
     model shape then shares one compiled library.
     """
@@ -60,7 +60,7 @@ def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
 
     The rows of ``Y`` are the energies, tip and deflections.  Compiled with the model's
     constants as an input, one per use of a constant (one library per model shape, whatever
-    the configuration: :func:`flexctrl.sim.parametric.constants_as_parameters`), and mapped
+    the configuration: :func:`flexctrl.dynamics.parametric.constants_as_parameters`), and mapped
     with the model's constants; kept per model and count.  Its values can differ from the virtual
     machine's in the last digits (fused multiply-adds);
     ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.

@@ -35,23 +35,14 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
-from flexctrl.dynamics.model import jacobian_function
+from flexctrl.dynamics.jacobians import jacobian_function
+from flexctrl.dynamics.parametric import try_expand
 from flexctrl.errors import SpecError
 from flexctrl.sim.divergence import DivergenceMonitor
 from flexctrl.sim.trajectory import Trajectory
 
 #: Rows of the output vector y(x) evaluated along a trajectory.
 OUTPUT_ROWS = ("E_kin", "E_el", "E_grav", "tip_x", "tip_y")  # then w1..w_nlinks
-
-
-def try_expand(fun: ca.Function) -> ca.Function:
-    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile)."""
-    if fun.is_a("SXFunction"):
-        return fun
-    try:
-        return fun.expand()
-    except RuntimeError:
-        return fun
 
 
 def output_function(model) -> ca.Function:

@@ -28,7 +28,8 @@ from typing import ClassVar, Sequence
 
 import casadi as ca
 
-from flexctrl.sim.base import output_function, try_expand
+from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.base import output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS
 from flexctrl.sim.rk4 import RK4
 

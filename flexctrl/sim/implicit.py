@@ -23,7 +23,8 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
-from flexctrl.sim.base import Integrator, try_expand
+from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.base import Integrator
 
 
 class Sundials(Integrator):

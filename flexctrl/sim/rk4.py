@@ -47,7 +47,8 @@ from typing import Any, Callable, ClassVar, Sequence
 import casadi as ca
 import numpy as np
 
-from flexctrl.sim.base import Integrator, output_function, try_expand
+from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.base import Integrator, output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
 
 

@@ -17,7 +17,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from flexctrl.errors import SimulationError, SpecError
-from flexctrl.sim.base import Integrator, try_expand
+from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.base import Integrator
 
 METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 _USES_JACOBIAN = ("Radau", "BDF", "LSODA")

@@ -92,9 +92,9 @@ from flexctrl.analysis.stability.theory import (
     classify_eigenvalues,
     theoretical_step_limit,
 )
-from flexctrl.dynamics.model import jacobian_function
+from flexctrl.dynamics.jacobians import jacobian_function
 from flexctrl.errors import SimulationError, SolverError, SpecError
-from flexctrl.sim.base import try_expand
+from flexctrl.dynamics.parametric import try_expand
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 
 Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
@@ -106,7 +106,7 @@ Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
 def linearisation_function(model) -> ca.Function:
     """``(x, u) -> (f, A = df/dx)`` of the model's forward dynamics (free joints, torques held), expanded to SX.
 
-    :func:`flexctrl.dynamics.model.jacobian_function`, the one Jacobian builder.
+    :func:`flexctrl.dynamics.jacobians.jacobian_function`, the one Jacobian builder.
     """
     return try_expand(jacobian_function(model, value=True))
 

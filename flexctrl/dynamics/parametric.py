@@ -11,11 +11,50 @@ compiled library (the cache key is a hash of the generated code).  Used by the N
 
 from __future__ import annotations
 
+from collections import OrderedDict
+from typing import Any, Callable
+
 import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.model import derived
-from flexctrl.sim.base import try_expand
+
+
+class Memo:
+    """Values built from a content key, kept once per process (least recently used beyond ``size``).
+
+    For what is a pure function of its key's content (a Function built from another's
+    serialized form): the value for one model serves every other of the same structure.
+    """
+
+    def __init__(self, size: int):
+        self.size = size
+        self._built: OrderedDict[str, Any] = OrderedDict()
+
+    def get(self, key: str, build: Callable[[], Any]) -> tuple[Any, bool]:
+        """``(value, reused)``: ``build()`` the first time ``key`` is asked for, the kept value after."""
+        if key in self._built:
+            self._built.move_to_end(key)
+            return self._built[key], True
+        value = build()
+        self._built[key] = value
+        while len(self._built) > self.size:
+            self._built.popitem(last=False)
+        return value, False
+
+    def clear(self) -> None:
+        """Forget every kept value."""
+        self._built.clear()
+
+
+def try_expand(fun: ca.Function) -> ca.Function:
+    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile)."""
+    if fun.is_a("SXFunction"):
+        return fun
+    try:
+        return fun.expand()
+    except RuntimeError:
+        return fun
 
 
 def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:

@@ -1,0 +1,97 @@
+"""Exact Jacobians of a model's forward dynamics, the one Jacobian builder.
+
+CasADi builds the derivative of a Function once per Function object: for a new model
+(a new configuration or payload of a frozen-modes arm) the symbolic Jacobian of its
+``f`` is built from scratch, 0.13 s on ``amm:2`` of the three-link arm and 0.6-0.9 s on
+``amm:5``, though the models of one structure differ only in the values of their
+constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its
+constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, the same lift
+the compiled plant step uses) and kept once per process for each lifted structure
+(its serialized form), so every later model of that structure evaluates the kept
+Jacobian at its own constants.  The operations are the same ones in the same order
+(the lift keeps them; the constants are read from an input instead of the code), and
+the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
+model whose ``f`` does not lift (it calls other Functions, say) gets the per-model
+Jacobian.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import casadi as ca
+
+from flexctrl.dynamics.parametric import Memo, parametric
+
+#: Jacobians of lifted dynamics built in this process, by the lift's serialized form and the outputs asked for.
+SHARED = Memo(8)
+
+
+def jacobian_function(model, *, value: bool = False, inputs: bool = False,
+                      outputs: ca.Function | None = None, shared: bool = False) -> ca.Function:
+    """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
+
+    The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`, with
+    ``shared=True``), stability advice (:meth:`flexctrl.sim.base.Integrator.jacobian_radius`)
+    and the stability probe (:mod:`flexctrl.analysis.stability.probe`) all use it.
+    Expanding it to SX (as the last two do) changes its values in the last digits, so
+    each user keeps its choice.
+
+    Parameters
+    ----------
+    model
+        Anything with ``functions["f"]``, ``n_x`` and ``n_u`` (a :class:`~flexctrl.dynamics.model.Model`).
+    value
+        Put ``f`` itself first.
+    inputs
+        Add ``B = df/du``.
+    outputs
+        A Function ``y(x, u)`` (sensors): add ``C = dy/dx`` and ``D = dy/du`` (never shared).
+    shared
+        Take ``f``'s part from the Jacobian kept for the model's lifted structure (see
+        the module docstring); the values are the same.
+
+    Returns
+    -------
+    casadi.Function
+        ``(x, u) -> ([f,] A[, B][, C, D])``, in that order.
+    """
+    x = ca.MX.sym("x", model.n_x)
+    u = ca.MX.sym("u", model.n_u)
+    dynamics = _shared_dynamics(model, value, inputs) if shared else None
+    if dynamics is not None:
+        fp, constants = dynamics
+        outs = list(fp(x, u, ca.DM(constants)))
+    else:
+        outs = _dynamics_jacobians(model.functions["f"], x, u, value, inputs)
+    names = ["f"] * value + ["A"] + ["B"] * inputs
+    if outputs is not None:
+        y = outputs(x, u)
+        outs += [ca.jacobian(y, x), ca.jacobian(y, u)]
+        names += ["C", "D"]
+    return ca.Function("jacobians", [x, u], outs, ["x", "u"], names)
+
+
+def _dynamics_jacobians(f: ca.Function, x, u, value: bool, inputs: bool, *extra) -> list:
+    """``[f,] A[, B]`` of ``f(x, u, *extra)``, as MX expressions."""
+    xdot = f(x, u, *extra)
+    return [xdot] * value + [ca.jacobian(xdot, x)] + [ca.jacobian(xdot, u)] * inputs
+
+
+def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, object] | None:
+    """``(J(x, u, c), c)``: the kept Jacobian Function of the model's lifted ``f`` and its constants, or None."""
+    lifted, constants = parametric(model, "f", lambda: model.functions["f"])
+    if constants.size == 0:
+        return None
+    key = hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
+
+    def build() -> ca.Function:
+        x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
+        c = ca.MX.sym("c", constants.size)
+        return ca.Function("jacobians_lifted", [x, u, c], _dynamics_jacobians(lifted, x, u, value, inputs, c))
+
+    function, _ = SHARED.get(key, build)
+    return function, constants
+
+
+__all__ = ["jacobian_function", "SHARED"]

@@ -1,0 +1,63 @@
+"""The Jacobian kept once per lifted model structure gives the per-model Jacobian to the last bit."""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import flexctrl as fc
+from flexctrl.dynamics.build import build_model
+from flexctrl.dynamics.jacobians import SHARED, jacobian_function
+from flexctrl.linear import Linearizer, equilibrium
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return fc.load_arm(ROOT / "models" / "subedi3link.toml")
+
+
+def _at(fun, model, seed=0):
+    rng = np.random.default_rng(seed)
+    return [np.array(m, dtype=float) for m in fun(rng.uniform(-0.2, 0.2, model.n_x), rng.uniform(-5, 5, model.n_u))]
+
+
+def test_one_structure_serves_every_configuration_with_the_same_bits(arm):
+    SHARED.clear()
+    for fidelity, poses in (("amm:2", ([0, 0, 0], [0, 1.2, -0.7], [0, 1.57, 0])), ("amm:3", ([0, 0, 0], [0, -0.5, 1.0]))):
+        for q in poses:
+            model = build_model(arm, fidelity, reference_q=q)
+            for value in (False, True):
+                own = _at(jacobian_function(model, value=value, inputs=True), model)
+                kept = _at(jacobian_function(model, value=value, inputs=True, shared=True), model)
+                assert len(own) == len(kept) == 2 + value
+                assert all(np.array_equal(a, b) for a, b in zip(own, kept)), (fidelity, q, value)
+    assert len(SHARED._built) == 4  # one per fidelity and output recipe, whatever the pose
+
+
+def test_the_linearizer_takes_the_kept_jacobian_and_its_sensors_own(arm):
+    model = build_model(arm, "amm:2", reference_q=[0, 0.8, -0.3])
+    SHARED.clear()
+    lin = Linearizer(model, ("joints", "strain"))
+    assert len(SHARED._built) == 1
+    op = equilibrium(model, np.array([0.1, 0.8, -0.3]))
+    A, B, C, D = lin.matrices(op)
+    own = jacobian_function(model, inputs=True, outputs=lin.sensors.function)
+    for a, b in zip((A, B, C, D), own(op.x, op.u)):
+        assert np.array_equal(a, np.array(b, dtype=float))
+    assert C.shape == (lin.sensors.n_y, model.n_x) and np.any(C != 0) and np.any(A != 0)
+
+
+def test_dynamics_without_constants_to_lift_keep_their_own_jacobian():
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
+    model = SimpleNamespace(functions={"f": ca.Function("f", [x, u], [ca.vertcat(x[1], u - x[0] * x[1])])}, n_x=2, n_u=1)
+    SHARED.clear()
+    A, B = _at(jacobian_function(model, inputs=True, shared=True), model)
+    assert len(SHARED._built) == 0
+    rng = np.random.default_rng(0)
+    x0, u0 = rng.uniform(-0.2, 0.2, 2), rng.uniform(-5, 5, 1)
+    assert np.array_equal(A, [[0.0, 1.0], [-x0[1], -x0[0]]]) and np.array_equal(B, [[0.0], [1.0]])
