@@ -16,12 +16,16 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/flexctrl study studies/quickstart.toml --out out/quickstart
 
-# Every shipped description is validated (flexctrl check) before the tests run.
+# Every shipped description is validated (flexctrl check) before the tests run.  The suite
+# runs on TEST_WORKERS processes (pytest-xdist), each test file whole on one of them so that
+# a file's module fixtures are built once: on this 2-core machine 9.1 min against 16 min in
+# one process.  `make test TEST_WORKERS=0` runs it in one process.
+TEST_WORKERS ?= 2
 SHIPPED := $(sort $(wildcard models/*.toml controllers/*.toml studies/*.toml studies/*/*.toml studies/*/*/*.toml))
 
 test: $(STAMP)
 	$(BIN)/flexctrl check $(SHIPPED)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 # Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
 # about 15 minutes the first time on 2 busy cores, under a minute after; docs/make_figures.py
