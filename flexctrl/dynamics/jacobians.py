@@ -5,8 +5,8 @@ CasADi builds the derivative of a Function once per Function object: for a new m
 ``f`` is built from scratch, 0.13 s on ``amm:2`` of the three-link arm and 0.6-0.9 s on
 ``amm:5``, though the models of one structure differ only in the values of their
 constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its
-constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, the same lift
-the compiled plant step uses) and kept once per process for each lifted structure
+constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, one constant per
+use, so that coinciding values do not change the structure) and kept once per process for each lifted structure
 (its serialized form), so every later model of that structure evaluates the kept
 Jacobian at its own constants.  The operations are the same ones in the same order
 (the lift keeps them; the constants are read from an input instead of the code), and
@@ -80,7 +80,9 @@ def _dynamics_jacobians(f: ca.Function, x, u, value: bool, inputs: bool, *extra)
 
 def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, object] | None:
     """``(J(x, u, c), c)``: the kept Jacobian Function of the model's lifted ``f`` and its constants, or None."""
-    lifted, constants = parametric(model, "f", lambda: model.functions["f"])
+    # per use: a reduced model's constants coincide by value at some configurations, and a lift
+    # per node would then give each configuration a structure (and a Jacobian) of its own
+    lifted, constants = parametric(model, "f", lambda: model.functions["f"], per_use=True)
     if constants.size == 0:
         return None
     key = hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
