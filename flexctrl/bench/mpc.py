@@ -139,17 +139,18 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`), stepped interleaved.
 
     ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
-    per sample at the interval's middle RK4 node, frozen over it (``sensitivities =
-    "midpoint"``), HPIPM warm-started from the shifted previous solution, the QP without
+    per sample, at the middle RK4 node of the horizon's middle interval, held over the whole
+    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started from the shifted previous solution, the QP without
     its soft rows tried first (through HPIPM called directly), the RTI's calls through bound buffers, predicting with the
     joints and the three slowest coupled modes at the target, the estimate's fast modes
     removed (12 states, 2 RK4 substeps).  Against it, one change each:
+    ``rti_frozen_per_interval`` one Jacobian per interval of the horizon (the setting before);
     ``rti_frozen_conic_qp`` the QP without soft rows through ``casadi.conic`` (``direct_qp``, an
     argument of ``design_nmpc``); ``rti_frozen_dm_calls`` the RTI's calls as before, through CasADi's DM conversions and
     the whole QP every sample (``bound_calls``, an argument of ``design_nmpc``);
     ``rti_frozen_whole_qp`` always the whole QP (``screen``, an argument of ``design_nmpc``;
     the same optimum to the solver's tolerance); ``rti_frozen_per_step`` one Jacobian per
-    RK4 step at its start (``sensitivities = "frozen"``, the setting before).
+    RK4 step at its start (``sensitivities = "frozen"``, the setting before the midpoint).
     The others predict with the whole design model (18 states, 9 substeps):
     ``rti_frozen_full`` the setting before (``controllers/nmpc_full.toml``);
     ``rti_frozen_cold`` with HPIPM's default start; ``rti_frozen_factored`` with the
@@ -161,13 +162,15 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     with the tuned weights).  ``docs/control.md``, "NMPC speed".
     """
     reduced = {"prediction_modes": 1, "qp_warm_start": True}
-    shipped = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
+    per_interval = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
+    shipped = {**per_interval, "stages_per_jacobian": 20}
     return {
         "rti_frozen": {**shipped, "sensitivities": "midpoint"},
+        "rti_frozen_per_interval": {**per_interval, "sensitivities": "midpoint"},
         "rti_frozen_conic_qp": {**shipped, "sensitivities": "midpoint", "direct_qp": False},
         "rti_frozen_dm_calls": {**shipped, "sensitivities": "midpoint", "bound_calls": False},
         "rti_frozen_whole_qp": {**shipped, "sensitivities": "midpoint", "screen": False},
-        "rti_frozen_per_step": {**shipped},
+        "rti_frozen_per_step": {**per_interval},
         "rti_frozen_full": {"qp_warm_start": True},
         "rti_frozen_factored": {"qp_warm_start": True, "jacobian": "factored"},
         "rti_frozen_cold": {},

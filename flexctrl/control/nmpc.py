@@ -104,7 +104,8 @@ from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
 from flexctrl.control.nmpc_calls import BoundRTICalls, DMRTICalls
 from flexctrl.control.nmpc_screen import ScreenedQP, hpipm_options
-from flexctrl.control.nmpc_interval import RK4_BOUND, auto_substeps, interval_core, interval_functions, memoised
+from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, grouped_sensitivities, interval_core,
+                                           interval_functions, memoised)
 from flexctrl.control.nmpc_model import Prediction, prediction_model
 from flexctrl.control.nmpc_nlp import lqr_rollout, nlp_functions
 from flexctrl.control.nmpc_jacobian import factored_dynamics
@@ -411,7 +412,8 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     build = lambda: _horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings)  # noqa: E731
     try:
         key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
-                          substeps, settings.sensitivities, settings.jacobian_every, settings.compile)
+                          substeps, settings.sensitivities, settings.jacobian_every, settings.compile,
+                          *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []))
     except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
         key = None
     linmap, compiled, compile_seconds, cache_hit, reused = (memoised(key, build) if key is not None
@@ -475,18 +477,22 @@ def _horizon_linearisation(fp, f_jac, nc: int, n: int, m: int, N: int, dt: float
     ``settings.compile`` (the library from the disk cache when its code was built before).
     """
     extra = (ca.MX.sym("c", nc),) if nc else ()
-    _, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
+    Fp, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
                             settings.jacobian_every)
     p = ca.MX.sym("p", 2 * n + 2 * m + nc)
     xop, uop = p[:n], p[n:n + m]
     Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
     z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *((p[2 * n + 2 * m:],) if nc else ()))
+    consts = (p[2 * n + 2 * m:],) if nc else ()
+    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *consts)
     Fs = (xn - xop) / Sx
     As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
     Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
     lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
     linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
+    if settings.stages_per_jacobian > 1:
+        shoot = ca.Function("nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx])
+        linmap = grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
     if not settings.compile:
         return linmap, False, 0.0, False
     from flexctrl.sim.compile import compile_function

@@ -135,6 +135,37 @@ def interval_functions(model, dt: float, substeps: int, sensitivities: str | Non
     return interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities, jacobian_every=jacobian_every)
 
 
+def group_centres(N: int, stages: int) -> list[int]:
+    """The interval whose Jacobian serves each group of ``stages`` consecutive intervals of ``N``.
+
+    The middle one of each group (the earlier of two middles), the last group shorter when
+    ``stages`` does not divide ``N``.
+    """
+    return [j + (min(stages, N - j) - 1) // 2 for j in range(0, N, stages)]
+
+
+def grouped_sensitivities(shoot: ca.Function, lin: ca.Function, n: int, m: int, N: int,
+                          stages: int) -> ca.Function:
+    """``(Z, V, p) -> (F, A, B)`` over ``N`` intervals with one ``(A, B)`` per ``stages`` of them.
+
+    ``shoot(z, v, p) -> F`` gives every interval's nonlinear shooting end; ``lin(z, v, p) ->
+    (F, A, B)`` is evaluated only at :func:`group_centres` and its ``(A, B)`` held over the
+    group: the RTI keeps the fixed points of the nonlinear shooting equations (the ends
+    are exact), with sensitivities frozen along the horizon for ``stages`` samples.  The
+    outputs have the layout of ``lin.map(N)``, so the QP assembly is unchanged.
+    """
+    centres = group_centres(N, stages)
+    Z, V, p = ca.MX.sym("Z", n, N), ca.MX.sym("V", m, N), ca.MX.sym("p", lin.sparsity_in(2))
+    F = shoot.map("nmpc_shoot_map", "serial", N, [2], [])(Z, V, p)
+    _, Ac, Bc = lin.map("nmpc_centres_map", "serial", len(centres), [2], [])(Z[:, centres], V[:, centres], p)
+    A, B = [], []
+    for g, j in enumerate(range(0, N, stages)):
+        for _ in range(min(stages, N - j)):
+            A.append(Ac[:, g * n:(g + 1) * n])
+            B.append(Bc[:, g * m:(g + 1) * m])
+    return ca.Function(f"nmpc_linearize_{N}_by_{stages}", [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)])
+
+
 #: Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least recently used beyond ``MEMO_SIZE``).
 MEMO_SIZE = 8
 _BUILT = Memo(MEMO_SIZE)
@@ -155,4 +186,5 @@ def memoised(key: str, build: Callable[[], tuple]) -> tuple:
     return (*value, reused)
 
 
-__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised"]
+__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised", "group_centres",
+           "grouped_sensitivities"]

@@ -297,6 +297,7 @@ def _read_nmpc(r: TableReader) -> NMPCSettings:
                                      _field_type(NMPCSettings, "prediction_basis")),
         "prediction_map": _literal(r, "prediction_map", d.prediction_map, _field_type(NMPCSettings, "prediction_map")),
         "jacobian_every": r.integer("jacobian_every", d.jacobian_every, low=1, high=200),
+        "stages_per_jacobian": r.integer("stages_per_jacobian", d.stages_per_jacobian, low=1, high=1000),
         "qp_warm_start": r.boolean("qp_warm_start", d.qp_warm_start),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),

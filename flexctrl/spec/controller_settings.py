@@ -382,6 +382,11 @@ class NMPCSettings:
         ``sensitivities = "frozen"`` only: one Jacobian of ``f`` per this many RK4 steps
         (1, default: every step), frozen over them (the transition of the frozen
         linearisation over the steps is exact).
+    stages_per_jacobian : int
+        RTI only: one interval Jacobian ``(A, B)`` per this many consecutive shooting
+        intervals of the horizon, taken at the middle interval of each group and held over
+        it (1, default: every interval its own); the shooting ends stay nonlinear on every
+        interval (:func:`flexctrl.control.nmpc._horizon_linearisation`).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``) instead of its default start (about half the
@@ -411,6 +416,7 @@ class NMPCSettings:
     prediction_basis: PredictionBasis = "coupled"
     prediction_map: PredictionMap = "modal"
     jacobian_every: int = 1
+    stages_per_jacobian: int = 1
     qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
@@ -436,6 +442,7 @@ class NMPCSettings:
         choice_field("prediction_basis", self.prediction_basis, PredictionBasis)
         choice_field("prediction_map", self.prediction_map, PredictionMap)
         integer_field("jacobian_every", self.jacobian_every, low=1, high=200)
+        integer_field("stages_per_jacobian", self.stages_per_jacobian, low=1, high=1000)
         boolean_field("qp_warm_start", self.qp_warm_start)
 
 
