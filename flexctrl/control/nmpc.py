@@ -413,6 +413,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     try:
         key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
                           substeps, settings.sensitivities, settings.jacobian_every, settings.compile,
+                          # named only when grouped: the per-interval key (and its library on disk) stays as it was
                           *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []))
     except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
         key = None
@@ -489,10 +490,11 @@ def _horizon_linearisation(fp, f_jac, nc: int, n: int, m: int, N: int, dt: float
     As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
     Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
     lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
-    linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
     if settings.stages_per_jacobian > 1:
         shoot = ca.Function("nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx])
         linmap = grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
+    else:
+        linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
     if not settings.compile:
         return linmap, False, 0.0, False
     from flexctrl.sim.compile import compile_function
