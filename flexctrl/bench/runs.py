@@ -7,7 +7,9 @@ of the two alternating from run to run, so the machine's load moves them togethe
 Reported: each tree's summed per-run wall time (:func:`flexctrl.study.runner.execute_run`'s
 ``wall_time_s``) per value of ``--by`` (default the ``controller`` column) and in all, the
 ratios to the first tree, and the largest relative difference of any non-timing metric
-between the trees (with the run and metric where it is).  ``--exclude KEY=VALUE`` leaves
+between the trees (with the run and metric where it is; for metrics below
+:data:`~flexctrl.bench.loop.FLOOR` in both trees, round-off, the absolute difference, as
+:func:`~flexctrl.bench.loop.metric_differences` compares them).  ``--exclude KEY=VALUE`` leaves
 runs out (e.g. ``controller=nmpc``).  Both trees read the same study file (and the scene,
 model and controller files it names); they must expand it into the same runs.  Every
 process's first run includes its imports.
@@ -23,7 +25,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any, Sequence
 
-from flexctrl.bench.loop import TIMING_METRICS
+from flexctrl.bench.loop import FLOOR, TIMING_METRICS
 
 _WORKER = """
 import json, sys
@@ -81,7 +83,8 @@ def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "con
                 other = results[len(trees) - 1]["metrics"].get(name)
                 if name in TIMING_METRICS or other is None or other == value:
                     continue
-                d = abs(value - other) / max(abs(value), abs(other))
+                scale = max(abs(value), abs(other))
+                d = abs(value - other) / (scale if scale > FLOOR else 1.0)  # round-off below FLOOR: absolute
                 if d > worst[0]:
                     worst = (d, {"run_id": listed[index][0], "metric": name, "values": [value, other]})
     finally:

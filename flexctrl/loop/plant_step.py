@@ -55,32 +55,35 @@ def _name(text: str) -> str:
     return re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")
 
 
-def output_map(model, count: int, compile: bool | None = None) -> ca.Function:
+def output_map(model, count: int, compile: bool | None = None, *, energies: bool = True) -> ca.Function:
     """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.base.output_function`, compiled.
 
-    The rows of ``Y`` are the energies, tip and deflections.  Compiled with the model's
+    The rows of ``Y`` are the energies, tip and deflections (``energies=False``: the tip and
+    deflections alone, a tenth of the cost or less).  Compiled with the model's
     constants as an input, one per use of a constant (one library per model shape, whatever
     the configuration: :func:`flexctrl.dynamics.parametric.constants_as_parameters`), and mapped
-    with the model's constants; kept per model and count.  Its values can differ from the virtual
-    machine's in the last digits (fused multiply-adds);
+    with the model's constants; kept per model, count and rows.  Its values can differ from the virtual
+    machine's in the last digits (fused multiply-adds), and the two row sets' tip and deflections
+    from each other's (about 1e-15 m here);
     ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
     """
     def build():
         from flexctrl.sim.base import output_function
 
-        fun = output_function(model)
-        fp, constants = parametric(model, "outputs", lambda: fun, per_use=True)
+        fun = output_function(model, energies)
+        fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
         X = ca.MX.sym("X", model.n_x, count)
         if constants.size == 0:
-            return ca.Function("outputs", [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
+            return ca.Function(fun.name(), [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
         # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a reduced
         # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
         # evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
-        single = ca.Function("outputs_c", [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
-        return ca.Function("outputs", [X], [single.map(count, "serial")(X)])
+        single = ca.Function(fun.name() + "_c", [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
+        return ca.Function(fun.name(), [X], [single.map(count, "serial")(X)])
 
-    return derived(model, ("output_map", count, compile), build)
+    key = ("output_map", count, compile) if energies else ("output_map", count, compile, "kinematic")
+    return derived(model, key, build)
 
 
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:

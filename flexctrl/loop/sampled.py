@@ -40,12 +40,14 @@ from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
 from flexctrl.loop.plant_step import advance_function, output_map
 from flexctrl.sim.bound import BoundFunction, evaluate
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
-from flexctrl.sim.trajectory import Trajectory
+from flexctrl.sim.trajectory import LazyEnergies, Trajectory, energy_dict
 
 
 #: How the samples are run: ``"python"`` (one iteration per sample), ``"compiled"`` (one CasADi call for all but
 #: the first; an error for a controller without a :meth:`sampled_law`), ``"auto"`` (compiled when offered).
 LOOPS = ("auto", "compiled", "python")
+#: When a closed loop's energies are evaluated (:func:`trajectory_from_states`).
+ENERGY_MODES = ("lazy", "eager")
 
 
 def mapped(model, name: str, count: int, *args):
@@ -53,29 +55,50 @@ def mapped(model, name: str, count: int, *args):
 
 
 def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, meta: dict[str, Any], *,
-                           compiled: bool = False, compile: bool | None = None) -> Trajectory:
+                           compiled: bool = False, compile: bool | None = None, energies: str = "lazy") -> Trajectory:
     """A :class:`Trajectory` with energies, tip and deflections of the states ``X`` (rows).
 
-    ``compiled``: from the compiled output map (:func:`flexctrl.loop.plant_step.output_map`),
+    ``compiled``: from the compiled output maps (:func:`flexctrl.loop.plant_step.output_map`),
     else by mapped calls of the model's Functions in CasADi's virtual machine.
+    ``energies``: ``"lazy"`` (default) evaluates them when first read
+    (:class:`~flexctrl.sim.trajectory.LazyEnergies`; no metric of the loop reads them, and on
+    ``amm:5`` they cost ten times the tip and deflections), ``"eager"`` with the tip and deflections,
+    in one map (the slow path, kept to measure against).
     """
+    if energies not in ENERGY_MODES:
+        raise SpecError(f"value {energies!r} is not allowed; allowed: {', '.join(map(repr, ENERGY_MODES))}",
+                        key="energies")
     count = t.size
-    if compiled:
+    if compiled and energies == "eager":
         Y = evaluate(output_map(model, count, compile), X)[0]
-        kin, el, grav, tip, deflection = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3:5], Y[:, 5:]
+        tip, deflection = Y[:, 3:5], Y[:, 5:]
+        values: Any = energy_dict(Y[:, 0], Y[:, 1], Y[:, 2])
+    elif compiled:
+        Y = evaluate(output_map(model, count, compile, energies=False), X)[0]
+        tip, deflection = Y[:, 0:2], Y[:, 2:]
+
+        def compute():
+            E = evaluate(output_map(model, count, compile), X)[0]
+            return E[:, 0], E[:, 1], E[:, 2]
+
+        values = LazyEnergies(compute)
     else:
         q, qd = X[:, : model.n_q].T, X[:, model.n_q :].T
-        kin, el, grav = (np.array(v, dtype=float).ravel() for v in mapped(model, "energies", count, q, qd))
         tip = np.array(mapped(model, "tip", count, q, qd)[0], dtype=float).T
         deflection = np.array(mapped(model, "deflection", count, q)[0], dtype=float).T
-    energies = {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
-    return Trajectory(time=t, states=X, inputs=U, coordinate_names=model.coordinate_names, energies=energies,
+
+        def compute_vm():
+            return tuple(np.array(v, dtype=float).ravel() for v in mapped(model, "energies", count, q, qd))
+
+        values = LazyEnergies(compute_vm) if energies == "lazy" else energy_dict(*compute_vm())
+    return Trajectory(time=t, states=X, inputs=U, coordinate_names=model.coordinate_names, energies=values,
                       tip=tip, deflections=deflection, meta=meta)
 
 
 def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,
                          sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None,
-                         monitor=None, stop_on_divergence: bool = False, loop: str = "auto") -> tuple[Trajectory, np.ndarray]:
+                         monitor=None, stop_on_divergence: bool = False, loop: str = "auto",
+                         energies: str = "lazy") -> tuple[Trajectory, np.ndarray]:
     """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
 
     Parameters
@@ -93,6 +116,8 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
         How the samples are run (:data:`LOOPS`, module docstring).  The energies, tip and
         deflections come from the compiled output map except with ``"python"`` (the slow
         path throughout: mapped calls in CasADi's virtual machine).
+    energies : {"lazy", "eager"}
+        When the trajectory's energies are evaluated (:func:`trajectory_from_states`).
 
     Returns
     -------
@@ -109,7 +134,8 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
     t, X, U, meta, samples = integrate_closed_loop(plant, controller, x0, duration, dt, sensors=sensors, rng=rng,
                                                    compile=compile, monitor=monitor,
                                                    stop_on_divergence=stop_on_divergence, loop=loop)
-    return trajectory_from_states(plant, t, X, U, meta, compiled=loop != "python", compile=compile), samples
+    return trajectory_from_states(plant, t, X, U, meta, compiled=loop != "python", compile=compile,
+                                  energies=energies), samples
 
 
 def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,

@@ -73,7 +73,7 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
                           plots: bool | None = None, overrides=(), on_divergence: str = "raise",
                           auto_options: dict[str, Any] | None = None,
                           cache: SceneCache | None = None, loop: str = "auto", choice=None,
-                          reference_compile: bool | None = None) -> ClosedLoopResult:
+                          reference_compile: bool | None = None, energies: str = "lazy") -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -115,6 +115,10 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         (:func:`~flexctrl.scenes.loop_setup.build_loop`): ``False`` in CasADi's virtual
         machine (the slow path, for comparison), ``True`` compiled; None follows the
         plant's ``solver.compile``.
+    energies : {"lazy", "eager"}
+        When the trajectory's energies are evaluated (no metric reads them): when first read
+        (default), or with the tip and deflections (the slow path, for comparison;
+        :func:`~flexctrl.loop.sampled.trajectory_from_states`).
 
     Returns
     -------
@@ -157,13 +161,14 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         ctrl.stats = copy.deepcopy(whole["stats"])
         meta = {**whole["meta"], "reused": "the fidelity choice's run of this scene at the chosen rung and step"}
         trajectory = trajectory_from_states(plant, whole["t"], whole["X"].copy(), whole["U"].copy(), meta,
-                                            compiled=loop != "python", compile=plant_scene.solver.get("compile"))
+                                            compiled=loop != "python", compile=plant_scene.solver.get("compile"),
+                                            energies=energies)
     else:
         rng = np.random.default_rng(scene.seed) if scene.noise else None
         trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt,
                                              sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
                                              monitor=setup.monitor, stop_on_divergence=on_divergence == "record",
-                                             loop=loop)
+                                             loop=loop, energies=energies)
     tip_target = tip_at_rest(plant, scene.target_q)
     report = ctrl.stats.summary()
     metrics = run_metrics(

@@ -21,13 +21,69 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
 from flexctrl.sim.spectrum import dominant_frequencies
 
 ENERGY_NAMES = ("E_kin", "E_el", "E_grav", "E_total")
+
+
+def energy_dict(kin: np.ndarray, el: np.ndarray, grav: np.ndarray) -> dict[str, np.ndarray]:
+    """``{E_kin, E_el, E_grav, E_total}`` (J) from the three energies; ``E_total`` is their sum."""
+    return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
+
+
+class LazyEnergies(Mapping):
+    """The energies of a trajectory, evaluated on first access (a read-only mapping like a dict).
+
+    ``compute()`` returns ``(E_kin, E_el, E_grav)`` (J, each shape (T,)); ``E_total`` is
+    their sum.  A closed loop's metrics read the tip and deflections only, and the kinetic
+    energy (the mass matrix at every plant step) costs most of the outputs, so the
+    closed loop leaves it to whoever reads it (the CSV, the plots, the energy figures).
+    Copied or pickled, it is evaluated and becomes a plain dict.
+    """
+
+    def __init__(self, compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]]):
+        self._compute = compute
+        self._values: dict[str, np.ndarray] | None = None
+
+    @property
+    def evaluated(self) -> bool:
+        """Whether the energies have been computed."""
+        return self._values is not None
+
+    def _get(self) -> dict[str, np.ndarray]:
+        if self._values is None:
+            self._values = energy_dict(*self._compute())
+            self._compute = None
+        return self._values
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if key not in ENERGY_NAMES:
+            raise KeyError(key)
+        return self._get()[key]
+
+    def __contains__(self, key: object) -> bool:
+        return key in ENERGY_NAMES
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(ENERGY_NAMES)
+
+    def __len__(self) -> int:
+        return len(ENERGY_NAMES)
+
+    def __reduce__(self):
+        return dict, (self._get(),)
+
+    def __deepcopy__(self, memo):
+        import copy
+
+        return copy.deepcopy(self._get(), memo)
+
+    def __repr__(self) -> str:
+        return f"LazyEnergies({'evaluated' if self.evaluated else 'not evaluated yet'})"
 
 
 @dataclass
@@ -44,8 +100,9 @@ class Trajectory:
         Joint torques (N m) applied from each sample on, shape (T, n).
     coordinate_names : tuple of str
         Names of the N coordinates (``q1..qn, qf11, ...``).
-    energies : dict of str to numpy.ndarray
-        ``E_kin``, ``E_el``, ``E_grav`` and ``E_total`` (J), each shape (T,).
+    energies : mapping of str to numpy.ndarray
+        ``E_kin``, ``E_el``, ``E_grav`` and ``E_total`` (J), each shape (T,): a dict, or
+        :class:`LazyEnergies` (evaluated when first read) from the closed loop.
     tip : numpy.ndarray
         Tip position of the last link in the world frame (m), shape (T, 2).
     deflections : numpy.ndarray
@@ -58,7 +115,7 @@ class Trajectory:
     states: np.ndarray
     inputs: np.ndarray
     coordinate_names: tuple[str, ...]
-    energies: dict[str, np.ndarray]
+    energies: Mapping[str, np.ndarray]
     tip: np.ndarray
     deflections: np.ndarray
     meta: dict[str, Any] = field(default_factory=dict)
