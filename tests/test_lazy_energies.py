@@ -14,7 +14,7 @@ import pytest
 
 from flexctrl.errors import SpecError
 from flexctrl.loop.plant_step import output_map
-from flexctrl.loop.sampled import integrate_closed_loop, trajectory_from_states
+from flexctrl.loop.sampled import integrate_closed_loop, mapped, tip_positions, trajectory_from_states
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.closed_loop import run_closed_loop_scene
 from flexctrl.scenes.loop_setup import build_loop
@@ -83,6 +83,15 @@ def test_lazy_energies_mapping():
     np.testing.assert_array_equal(energies["E_total"], [-1.5, 6.25])
     np.testing.assert_array_equal(energies["E_grav"], grav)
     assert len(calls) == 1  # computed once
+
+
+def test_tip_positions_are_the_trajectorys_tip(run):
+    """The fidelity chooser's tip paths: the compiled map's, within round-off of the VM's mapped calls."""
+    _, _, plant, t, X, U, meta = run
+    tip = tip_positions(plant, X[::7])
+    np.testing.assert_array_equal(tip, trajectory_from_states(plant, t, X, U, meta, compiled=True).tip[::7])
+    vm = np.array(mapped(plant, "tip", tip.shape[0], X[::7, : plant.n_q].T, X[::7, plant.n_q :].T)[0]).T
+    assert np.max(np.abs(tip - vm)) <= 1e-14 * np.max(np.abs(vm))
 
 
 def test_copies_and_pickles_are_plain_dicts(run):

@@ -54,6 +54,16 @@ def mapped(model, name: str, count: int, *args):
     return model.functions[name].map(count)(*args)
 
 
+def tip_positions(model, X: np.ndarray, compile: bool | None = None) -> np.ndarray:
+    """The tip positions (m, shape (T, 2)) of the states ``X`` (rows), from the compiled map without energies.
+
+    The same values as :attr:`Trajectory.tip` of :func:`trajectory_from_states` (compiled):
+    the fidelity chooser compares rungs by them.  Over 16,000 states of ``amm:2`` here
+    about 0.005 s, against 0.09 s for mapped calls in CasADi's virtual machine.
+    """
+    return evaluate(output_map(model, X.shape[0], compile, energies=False), X)[0][:, 0:2]
+
+
 def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, meta: dict[str, Any], *,
                            compiled: bool = False, compile: bool | None = None, energies: str = "lazy") -> Trajectory:
     """A :class:`Trajectory` with energies, tip and deflections of the states ``X`` (rows).

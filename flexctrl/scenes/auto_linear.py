@@ -105,7 +105,7 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
     """
     from flexctrl.linear import Linearizer, equilibrium
     from flexctrl.loop.compiled import run_compiled
-    from flexctrl.loop.sampled import LoopRun, mapped
+    from flexctrl.loop.sampled import LoopRun, tip_positions
 
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
@@ -132,7 +132,7 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
     X, U = run.X[: run.end], run.U[: run.end]
     U[-1] = run.u
     t = np.arange(X.shape[0]) * grid
-    tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
+    tip = tip_positions(plant, X, scene.plant.solver.get("compile"))
     times, tip, torque = read_only(t, tip, U.copy())
     diverged = None if run.divergence is None else float(run.divergence["time"])
     return RunRecord(fidelity=str(fidelity), integrator="linear-exact" if h is None else "linear-rk4",

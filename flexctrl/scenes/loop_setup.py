@@ -23,7 +23,7 @@ from flexctrl.control.reference import ReferenceTrajectory
 from flexctrl.errors import FlexctrlError, SolverError, SpecError
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
-from flexctrl.loop.sampled import integrate_closed_loop, mapped
+from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
 from flexctrl.scenes.arm import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
 
@@ -229,7 +229,7 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
         X, U = X[::stride], U[::stride]
         t = np.arange(X.shape[0]) * (float(dt) * stride)
     plant = setup.plant
-    tip = np.array(mapped(plant, "tip", t.size, X[:, : plant.n_q].T, X[:, plant.n_q :].T)[0], dtype=float).T
+    tip = tip_positions(plant, X, plant_scene.solver.get("compile"))
     divergence = meta.get("divergence")
     return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time_s"]),
             "build_time_s": setup.build_time_s + float(meta["setup_time_s"]), "omega_max": float(plant.omega_max),
