@@ -40,8 +40,9 @@ REPO = Path(__file__).resolve().parents[2]
 DEFAULT_SCENE = REPO / "studies" / "scenes" / "move_joint1_30deg.toml"
 DEFAULT_CONTROLLER = REPO / "controllers" / "lqr.toml"
 TARGET_RATIO = 2.0
-#: Metrics that are wall times (they differ between any two runs).
-TIMING_METRICS = ("controller_time_median", "controller_time_p95", "controller_time_max")
+#: Metrics that are wall times or their ratios (they differ between any two runs).
+TIMING_METRICS = ("controller_time_median", "controller_time_p95", "controller_time_max", "choice_time_s",
+                  "choice_cost_ratio")
 
 
 #: Magnitude (SI) below which a metric is round-off, compared absolutely: ``final_tip_error`` of a

@@ -7,7 +7,7 @@ of the two alternating from run to run, so the machine's load moves them togethe
 Reported: each tree's summed per-run wall time (:func:`flexctrl.study.runner.execute_run`'s
 ``wall_time_s``) per value of ``--by`` (default the ``controller`` column) and in all, the
 ratios to the first tree, and the largest relative difference of any non-timing metric
-between the trees (with the run and metric where it is; for metrics below
+between the trees (with the run and metric where it is, and the largest per metric; for metrics below
 :data:`~flexctrl.bench.loop.FLOOR` in both trees, round-off, the absolute difference, as
 :func:`~flexctrl.bench.loop.metric_differences` compares them).  ``--exclude KEY=VALUE`` leaves
 runs out (e.g. ``controller=nmpc``).  Both trees read the same study file (and the scene,
@@ -72,6 +72,7 @@ def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "con
     runs = [i for i, (_, coords) in enumerate(listed) if not any(coords.get(k) == v for k, v in drop)]
     walls: list[dict[str, float]] = [defaultdict(float) for _ in trees]
     worst = (0.0, None)
+    by_metric: dict[str, float] = {}
     try:
         for j, index in enumerate(runs):
             order = list(range(len(trees)))[:: 1 if j % 2 == 0 else -1]
@@ -87,6 +88,7 @@ def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "con
                 d = abs(value - other) / (scale if scale > FLOOR else 1.0)  # round-off below FLOOR: absolute
                 if d > worst[0]:
                     worst = (d, {"run_id": listed[index][0], "metric": name, "values": [value, other]})
+                by_metric[name] = max(by_metric.get(name, 0.0), d)
     finally:
         for proc in procs:
             proc.stdin.close()
@@ -97,6 +99,7 @@ def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "con
             "ratio_to_first": [{g: walls[0][g] / w[g] for g in w} | {"total": totals[0] / t}
                                for w, t in zip(walls, totals)],
             "max_metric_relative_difference": worst[0], "where": worst[1],
+            "metric_differences": dict(sorted(by_metric.items(), key=lambda item: -item[1])),
             "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
 
 
