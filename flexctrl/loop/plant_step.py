@@ -62,28 +62,36 @@ def output_map(model, count: int, compile: bool | None = None, *, energies: bool
     deflections alone, a tenth of the cost or less).  Compiled with the model's
     constants as an input, one per use of a constant (one library per model shape, whatever
     the configuration: :func:`flexctrl.dynamics.parametric.constants_as_parameters`), and mapped
-    with the model's constants; kept per model, count and rows.  Its values can differ from the virtual
+    with the model's constants; the compiled point Function is kept per model and rows, the map
+    per count too.  Its values can differ from the virtual
     machine's in the last digits (fused multiply-adds), and the two row sets' tip and deflections
     from each other's (about 1e-15 m here);
     ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
     """
     def build():
+        single = _output_point(model, compile, energies)
+        X = ca.MX.sym("X", model.n_x, count)
+        return ca.Function(single.name(), [X], [single.map(count, "serial")(X)])
+
+    return derived(model, ("output_map", count, compile, energies), build)
+
+
+def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
+    """The compiled outputs ``y(x)`` of one state, the model's constants embedded; kept per model and rows."""
+    def build():
         from flexctrl.sim.base import output_function
 
         fun = output_function(model, energies)
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
-        X = ca.MX.sym("X", model.n_x, count)
         if constants.size == 0:
-            return ca.Function(fun.name(), [X], [compile_function(fun, enabled=compile).function.map(count)(X)])
+            return compile_function(fun, enabled=compile).function
         # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a reduced
         # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
         # evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
-        single = ca.Function(fun.name() + "_c", [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
-        return ca.Function(fun.name(), [X], [single.map(count, "serial")(X)])
+        return ca.Function(fun.name(), [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
 
-    key = ("output_map", count, compile) if energies else ("output_map", count, compile, "kinematic")
-    return derived(model, key, build)
+    return derived(model, ("output_point", compile, energies), build)
 
 
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:

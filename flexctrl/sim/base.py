@@ -56,12 +56,9 @@ def output_function(model, energies: bool = True) -> ca.Function:
     q, qd = x[: model.n_q], x[model.n_q :]
     p, _v = model.functions["tip"](q, qd)
     w, _dw = model.functions["deflection"](q)
-    if not energies:
-        y = ca.vertcat(ca.vec(p)[:2], ca.vec(w))
-        return try_expand(ca.Function("kinematic_outputs", [x], [y], ["x"], ["y"]))
-    e_kin, e_el, e_grav = model.functions["energies"](q, qd)
-    y = ca.vertcat(e_kin, e_el, e_grav, ca.vec(p)[:2], ca.vec(w))
-    return try_expand(ca.Function("outputs", [x], [y], ["x"], ["y"]))
+    rows = [*(model.functions["energies"](q, qd) if energies else ()), ca.vec(p)[:2], ca.vec(w)]
+    name = "outputs" if energies else "kinematic_outputs"
+    return try_expand(ca.Function(name, [x], [ca.vertcat(*rows)], ["x"], ["y"]))
 
 
 def check_input_function(fun: ca.Function | None, n_u: int) -> ca.Function | None:
