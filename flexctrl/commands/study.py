@@ -33,6 +33,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--no-preload", action="store_true",
                         help="local pool: each worker imports the executor's code in its first run, instead of the fork "
                              "server importing it once before forking the workers (the old path: the imports land in each worker's first run)")
+    parser.add_argument("--blas-threads", default="auto", metavar="N",
+                        help="local pool: BLAS threads per worker; auto (default): usable CPUs // workers, at least 1, as "
+                             "Dask's nanny gives its workers one; 0: the libraries' own default (the old path: on 2 CPUs two "
+                             "workers' spinning OpenBLAS threads slow each other's runs)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
     return parser
@@ -42,9 +46,11 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from flexctrl.commands.common import stop_signals_interrupt
+    from flexctrl.study.blas_threads import parse_blas_threads
     from flexctrl.study.runner import run_study
     from flexctrl.study.spec import load_study
 
+    blas_threads = parse_blas_threads(args.blas_threads)
     spec = load_study(args.study, overrides=args.set)
     if not args.quiet:
         for note in spec.unavailable_notes():
@@ -53,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     with stop_signals_interrupt():
         result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                            progress="none" if args.quiet else args.progress, report=not args.no_report,
-                           affinity=not args.no_affinity, preload=not args.no_preload)
+                           affinity=not args.no_affinity, preload=not args.no_preload,
+                           blas_threads=blas_threads)
     c = result.counts
     if not args.quiet:
         print(f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "

@@ -30,6 +30,10 @@ local pool (default)
     land in that run's ``wall_time_s``); ``preload=False`` (``--no-preload``)
     keeps the imports in the workers.  The server is started once per Python
     process, so the choice holds for the process's first pool (see :func:`pool_context`).
+    Each worker holds its BLAS libraries to ``usable CPUs // workers`` threads (at least
+    1), as Dask's nanny does for its workers (:mod:`flexctrl.study.blas_threads`: on 2
+    CPUs, 2 workers' spinning OpenBLAS threads cost each run about a quarter of its wall
+    time); ``blas_threads=0`` (``--blas-threads 0``) leaves the libraries' default.
 Dask (``scheduler="tcp://host:8786"`` or ``client=...``)
     ``dask.distributed`` (an optional dependency, imported only here), at most
     ``2 x threads`` runs in flight.  Workers need flexctrl installed and the
@@ -185,10 +189,9 @@ class InProcessBackend:
 
 def default_workers() -> int:
     """Usable CPUs of this process."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
+    from flexctrl.study.blas_threads import usable_cpus
+
+    return usable_cpus()
 
 
 def pool_context(preload: str | None = None):
@@ -215,15 +218,28 @@ def pool_context(preload: str | None = None):
 class LocalPoolBackend:
     """A process pool on this machine (see the module docstring)."""
 
-    def __init__(self, workers: int, affinity: bool = True, preload: bool = True):
+    def __init__(self, workers: int, affinity: bool = True, preload: bool = True, blas_threads: int | str = "auto"):
+        from flexctrl.study.blas_threads import blas_thread_budget
+
         self.workers = workers
         #: runs that share a model go to the same worker (:mod:`flexctrl.study.affinity`); False: any free worker
         self.affinity = affinity and workers > 1
         #: the fork server imports the executor's module once for all workers; False: each worker in its first run
         self.preload = preload
+        #: as asked (``"auto"``, a count, 0); :attr:`threads` is the count each worker holds its BLAS to (0: no limit)
+        self.blas_threads = blas_threads
+        self.threads = blas_thread_budget(blas_threads, workers)
         self.description = (f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
                             + (", runs grouped by model per worker" if self.affinity else "")
-                            + ("" if preload else ", imports in each worker"))
+                            + ("" if preload else ", imports in each worker")
+                            + (f", {self.threads} BLAS thread{'s' if self.threads != 1 else ''} per worker"
+                               if self.threads else ", BLAS threads as the libraries start them"))
+
+    def pool(self, size: int, context) -> cf.ProcessPoolExecutor:
+        """A process pool of ``size`` workers, each holding its BLAS libraries to :attr:`threads` threads."""
+        from flexctrl.study.blas_threads import limit_blas_threads
+
+        return cf.ProcessPoolExecutor(size, mp_context=context, initializer=limit_blas_threads, initargs=(self.threads,))
 
     def start(self) -> None:
         """The pool starts with the first run."""
@@ -239,7 +255,7 @@ class LocalPoolBackend:
         if self.affinity:
             yield from run_pinned(runs, self.workers,
                                   lambda pool, run: pool.submit(execute_run, executor, run.settings, options),
-                                  lambda: cf.ProcessPoolExecutor(1, mp_context=context),
+                                  lambda: self.pool(1, context),
                                   lambda run: affinity_key(run.settings), _failed, describe_exception)
             return
         pending = deque(runs)
@@ -250,7 +266,7 @@ class LocalPoolBackend:
         try:
             while pending or suspects or inflight:
                 if pool is None:
-                    pool = cf.ProcessPoolExecutor(self.workers, mp_context=context)
+                    pool = self.pool(self.workers, context)
                 if suspects:
                     if not inflight:
                         run = suspects.popleft()
@@ -443,11 +459,12 @@ class StudyResult:
 
 
 def make_backend(workers: int | None = None, scheduler: str | None = None, client: Any = None, affinity: bool = True,
-                 preload: bool = True):
+                 preload: bool = True, blas_threads: int | str = "auto"):
     """The backend for the given options (see the module docstring); call its ``start()`` and ``close()``.
 
     ``affinity``: the local pool sends the runs that share a model to one worker (:mod:`flexctrl.study.affinity`);
-    ``preload``: its fork server imports the executor's module once for all workers.
+    ``preload``: its fork server imports the executor's module once for all workers; ``blas_threads``: BLAS
+    threads per local worker (:func:`~flexctrl.study.blas_threads.blas_thread_budget`).
     """
     if scheduler is not None or client is not None:
         if workers is not None:
@@ -457,12 +474,13 @@ def make_backend(workers: int | None = None, scheduler: str | None = None, clien
         raise SpecError(f"value {workers} is not allowed; allowed: 0 (in this process) or more workers", key="--workers")
     if workers == 0:
         return InProcessBackend()
-    return LocalPoolBackend(workers if workers is not None else default_workers(), affinity, preload)
+    return LocalPoolBackend(workers if workers is not None else default_workers(), affinity, preload, blas_threads)
 
 
 def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = None, scheduler: str | None = None,
               client: Any = None, resume: bool = False, progress: str = "auto", stream=None,
-              report: bool = True, affinity: bool = True, preload: bool = True) -> StudyResult:
+              report: bool = True, affinity: bool = True, preload: bool = True,
+              blas_threads: int | str = "auto") -> StudyResult:
     """Run every run of ``spec`` not yet recorded in ``out``; write the table and the report.
 
     Parameters
@@ -492,6 +510,10 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
         Local pool: the fork server imports the executor's module once before it forks
         the workers; False: each worker imports it in its first run (the old path: the
         imports land in that run's wall time).
+    blas_threads
+        Local pool: BLAS threads per worker, ``"auto"`` (usable CPUs // workers, at
+        least 1), a whole number, or 0 for the libraries' own default (the old path;
+        :mod:`flexctrl.study.blas_threads`).
 
     Raises
     ------
@@ -510,7 +532,7 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
                         f"not '{spec.name}'; choose another --out", key="--out")
     options = {"metrics": None if spec.metrics is None else list(spec.metrics),
                "keep_trajectories": spec.keep_trajectories, "decimation": spec.decimation}
-    backend = make_backend(workers, scheduler, client, affinity, preload)
+    backend = make_backend(workers, scheduler, client, affinity, preload, blas_threads)
     backend.start()
     try:
         return _run(spec, store, previous, backend, options, resume, progress, stream, report, start)
@@ -528,7 +550,8 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
         skip = {run.run_id for run in spec.runs if recorded.get(run.run_id) in keep}
         todo = [run for run in spec.runs if run.run_id not in skip]
         if isinstance(backend, LocalPoolBackend) and backend.workers > max(1, len(todo)):
-            backend = LocalPoolBackend(max(1, len(todo)), backend.affinity, backend.preload)  # no idle processes for a short resume
+            backend = LocalPoolBackend(max(1, len(todo)), backend.affinity, backend.preload,  # no idle processes for a short resume
+                                       backend.blas_threads)
         store.write_plan(spec.runs)
         document = previous or {"format": STUDY_FORMAT, "start": now_iso(), "sessions": []}
         session: dict[str, Any] = {"start": now_iso(), "end": None, "backend": backend.description, "resume": resume,
