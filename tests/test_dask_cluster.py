@@ -14,6 +14,7 @@ from flexctrl.study import load_study, run_study
 
 distributed = pytest.importorskip("distributed")
 
+from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget  # noqa: E402
 from flexctrl.study.executors.dask_cluster import LocalhostCluster  # noqa: E402
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -42,6 +43,7 @@ def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(s
     out = tmp_path / "dask"
     with LocalhostCluster(workers=2, threads=1) as cluster:
         pids = [p.pid for p in cluster.workers]
+        assert worker_blas_threads(cluster) == {pid: [blas_thread_budget("auto", 2)] * 2 for pid in pids}
         killed: dict = {}
 
         def kill_after_some_runs():
@@ -65,3 +67,32 @@ def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(s
     assert "dask scheduler tcp://127.0.0.1:" in result.backend and "2 workers" in result.backend
     workers = {int(row["worker"].rsplit(":", 1)[1]) for row in table.rows}
     assert workers == set(pids) and os.getpid() not in workers  # both worker processes ran, not this one
+
+
+def worker_blas_threads(cluster: LocalhostCluster) -> dict[int, list[int]]:
+    """Each worker's pid and the thread counts of NumPy's and SciPy's BLAS, once both are loaded there."""
+    from distributed import Client
+
+    def in_worker() -> tuple[int, list[int]]:  # nested, so cloudpickle sends it by value
+        import os
+
+        import numpy  # noqa: F401
+        import scipy.linalg  # noqa: F401
+
+        from flexctrl.study.blas_threads import blas_threads_now
+
+        return os.getpid(), blas_threads_now()
+
+    with Client(cluster.address, timeout="30s", set_as_default=False) as client:
+        return dict(client.run(in_worker).values())
+
+
+def test_cluster_workers_get_the_blas_thread_budget_in_their_environment(monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.setenv(name, "7")
+    auto = LocalhostCluster(workers=2)
+    assert auto.blas_threads == blas_thread_budget("auto", 2)
+    assert all(auto._worker_env()[name] == str(auto.blas_threads) for name in THREAD_VARIABLES)
+    assert all(LocalhostCluster(workers=2, blas_threads=3)._worker_env()[name] == "3" for name in THREAD_VARIABLES)
+    assert all(LocalhostCluster(workers=2, blas_threads=0)._worker_env()[name] == "7" for name in THREAD_VARIABLES)
+    assert all(auto._env()[name] == "7" for name in THREAD_VARIABLES)  # the scheduler's is left as it is

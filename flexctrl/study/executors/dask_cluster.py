@@ -10,10 +10,12 @@ killed worker; :func:`throughput` times one study on 1, 2, ... workers.
 Command line (a study, the worker counts, study-file overrides)::
 
     python -m flexctrl.study.executors.dask_cluster studies/quickstart.toml --workers 1 2 \\
-        --set 'grid.controller=["../controllers/lqr.toml"]'
+        --set 'grid.controller=["../controllers/lqr.toml"]' [--blas-threads 0]
 
 prints runs per minute per worker count and the speed-up against one worker, with the
-load average (the figures depend on what else the machine runs).
+load average (the figures depend on what else the machine runs).  ``--blas-threads 0``
+starts the workers with this process's environment, their BLAS libraries at their own
+thread count, to measure the default budget side by side.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from typing import Sequence
 
 import flexctrl
 from flexctrl.errors import FlexctrlError
+from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget, parse_blas_threads
 
 #: seconds to wait for the scheduler's file and for the workers to register
 START_TIMEOUT_S = 120.0
@@ -58,13 +61,22 @@ class LocalhostCluster:
         nanny, so a killed worker stays dead).
     directory
         Where the scheduler file and the workers' scratch space go (default: a temporary folder).
+    blas_threads
+        BLAS threads per worker process, set through the environment variables the
+        libraries read when they load: ``"auto"`` (default) ``max(1, usable CPUs // workers)``,
+        a whole number, or 0 to pass this process's environment unchanged.  A nanny sets
+        them to 1 by itself (Dask's ``distributed.nanny.pre-spawn-environ``); a worker
+        without one would otherwise start a thread per CPU in each library
+        (see :mod:`flexctrl.study.blas_threads`).
 
     Use as a context manager; :attr:`address` is the scheduler's, :attr:`workers` the
     worker ``Popen`` objects (``kill_worker(i)`` sends SIGKILL to one).
     """
 
-    def __init__(self, workers: int = 1, threads: int = 1, *, nanny: bool = False, directory: str | os.PathLike | None = None):
+    def __init__(self, workers: int = 1, threads: int = 1, *, nanny: bool = False,
+                 directory: str | os.PathLike | None = None, blas_threads: int | str = "auto"):
         self.n_workers, self.threads, self.nanny = int(workers), int(threads), nanny
+        self.blas_threads = blas_thread_budget(blas_threads, self.n_workers)
         self._tmp = None if directory else tempfile.TemporaryDirectory(prefix="flexctrl-dask-")
         self.directory = Path(directory or self._tmp.name)
         self.scheduler_file = self.directory / "scheduler.json"
@@ -77,6 +89,12 @@ class LocalhostCluster:
         # the workers import the same flexctrl as this process (a source tree or an install)
         root = str(Path(flexctrl.__file__).resolve().parents[1])
         env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+        return env
+
+    def _worker_env(self) -> dict:
+        env = self._env()
+        if self.blas_threads:
+            env.update({name: str(self.blas_threads) for name in THREAD_VARIABLES})
         return env
 
     def start(self) -> "LocalhostCluster":
@@ -100,7 +118,7 @@ class LocalhostCluster:
                    "--local-directory", str(self.directory / f"worker-{i}")]
             if not self.nanny:
                 cmd.append("--no-nanny")
-            self.workers.append(subprocess.Popen(cmd, env=self._env(), stdout=subprocess.DEVNULL,
+            self.workers.append(subprocess.Popen(cmd, env=self._worker_env(), stdout=subprocess.DEVNULL,
                                                  stderr=open(logs / f"worker-{i}.log", "wb"), start_new_session=True))
         self.wait_for_workers(self.n_workers, deadline - time.monotonic())
         return self
@@ -148,26 +166,28 @@ class LocalhostCluster:
         self.close()
 
 
-def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), overrides: Sequence[str] = ()) -> dict:
+def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), overrides: Sequence[str] = (),
+               blas_threads: int | str = "auto") -> dict:
     """Runs per minute of ``study`` on a :class:`LocalhostCluster` of each size in ``worker_counts``.
 
     Every size runs the whole study into a fresh folder with fresh workers (the compiled
     code cache on disk is shared, as on a cluster with a shared file system); the result
     has per size ``runs``, ``ok``, ``elapsed_s``, ``runs_per_minute`` and the ``speedup``
-    against the first size, plus the load average before and after.
+    against the first size, plus the load average before and after.  ``blas_threads`` is
+    :class:`LocalhostCluster`'s (0: the workers' BLAS libraries start as many threads as they like).
     """
     from flexctrl.study import load_study, run_study
 
     spec = load_study(study, overrides=list(overrides))
-    result: dict = {"study": str(study), "overrides": list(overrides), "cpu_count": os.cpu_count(),
+    result: dict = {"study": str(study), "overrides": list(overrides), "cpu_count": os.cpu_count(), "blas_threads": blas_threads,
                     "load_average_before": list(os.getloadavg()), "sizes": {}}
     for n in worker_counts:
-        with tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out, LocalhostCluster(n) as cluster:
+        with tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out, LocalhostCluster(n, blas_threads=blas_threads) as cluster:
             start = time.perf_counter()
             run = run_study(spec, Path(out) / "study", scheduler=cluster.address, progress="none", report=False)
             elapsed = time.perf_counter() - start
         runs = sum(run.counts.get(k, 0) for k in ("ok", "failed"))
-        result["sizes"][str(n)] = {"workers": n, "runs": runs, "ok": run.counts.get("ok", 0), "elapsed_s": elapsed,
+        result["sizes"][str(n)] = {"workers": n, "blas_threads_per_worker": cluster.blas_threads, "runs": runs, "ok": run.counts.get("ok", 0), "elapsed_s": elapsed,
                                    "runs_per_minute": 60.0 * runs / elapsed, "backend": run.backend}
     first = result["sizes"][str(worker_counts[0])]["runs_per_minute"]
     for size in result["sizes"].values():
@@ -182,16 +202,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("study")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="study-file override (repeatable)")
+    parser.add_argument("--blas-threads", default="auto", metavar="N",
+                        help="BLAS threads per worker: auto (CPUs // workers, the default), a whole number, or 0 to leave the libraries alone")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    result = throughput(args.study, args.workers, args.set)
+    try:
+        blas_threads = parse_blas_threads(args.blas_threads)
+    except FlexctrlError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    result = throughput(args.study, args.workers, args.set, blas_threads)
     if args.json:
         print(json.dumps(result, indent=1))
     else:
         print(f"{args.study}: load {result['load_average_before'][0]:.2f} -> {result['load_average_after'][0]:.2f} "
               f"on {result['cpu_count']} CPUs")
         for size in result["sizes"].values():
-            print(f"  {size['workers']} worker(s): {size['runs']} runs ({size['ok']} ok) in {size['elapsed_s']:.1f} s = "
+            print(f"  {size['workers']} worker(s), {size['blas_threads_per_worker'] or 'default'} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) in {size['elapsed_s']:.1f} s = "
                   f"{size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}")
     return 0
 
