@@ -19,13 +19,17 @@ demo: $(STAMP)
 # Every shipped description is validated (flexctrl check) before the tests run.  The suite
 # runs on TEST_WORKERS processes (pytest-xdist), each test file whole on one of them so that
 # a file's module fixtures are built once: on this 2-core machine 9.1 min against 16 min in
-# one process.  `make test TEST_WORKERS=0` runs it in one process.
+# one process.  `make test TEST_WORKERS=0` runs it in one process.  Each test process holds
+# its BLAS libraries to one thread: NumPy and SciPy each start a pool per core, and two test
+# processes on two cores spinning four pools slow each other (docs/studies.md, "Backends";
+# warm compile cache, one after the other: 8:02 min, 788 s of CPU, against 8:45 min, 875 s).
 TEST_WORKERS ?= 2
+ONE_BLAS_THREAD := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 SHIPPED := $(sort $(wildcard models/*.toml controllers/*.toml studies/*.toml studies/*/*.toml studies/*/*/*.toml))
 
 test: $(STAMP)
 	$(BIN)/flexctrl check $(SHIPPED)
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+	$(ONE_BLAS_THREAD) $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 # Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
 # about 15 minutes the first time on 2 busy cores, under a minute after; docs/make_figures.py
