@@ -6,17 +6,16 @@ Kalman gains, discretisations, the MPC's set-up), too small for a second thread 
 but an OpenBLAS thread that has finished its share spins for a while before it sleeps.
 On 2 CPUs with 2 workers that is four busy threads on two CPUs, and every worker's run
 waits for the other worker's spinning threads.  Measured on
-``studies/payload_configuration_slice.toml`` (2 workers on 2 CPUs, alternated, two passes
-each, warm compile cache): the six controllers' summed per-run wall 16.9 and 16.2 s with
-the libraries' own thread count, 12.2 and 13.6 s with one BLAS thread per worker; the
-study's wall 12.9 / 12.3 s against 10.2 / 10.5 s.  In one process on the same machine the
-thread count changed no wall time (13.4 s either way) but the second thread burnt about
-3.7 s of CPU on the other core (user time 17.0 against 13.1 s).
+``studies/payload_configuration_slice.toml`` (2 workers on 2 CPUs, alternated, warm compile
+cache): the six controllers' summed per-run wall, median of seven rounds, 16.5 s with the
+libraries' own thread count against 14.0 s with one BLAS thread per worker, tables identical
+(the rounds: ``docs/studies.md``, "Backends").
 
 A Dask worker started by ``dask worker`` (under its nanny) already gets
 ``OMP_NUM_THREADS = MKL_NUM_THREADS = OPENBLAS_NUM_THREADS = 1``
 (``distributed.nanny.pre-spawn-environ`` in distributed's own configuration); this module
-gives the local pool the same rule, sized to the machine: ``auto`` is
+gives the local pool (and ``LocalhostCluster``'s workers, started without a nanny) the same
+rule, sized to the machine: ``auto`` is
 ``max(1, usable CPUs // workers)`` threads per worker, so one worker on 2 CPUs keeps the
 libraries' default of 2 and two workers get 1 each.  ``0`` leaves the libraries alone
 (the old path, kept to measure side by side: ``flexctrl study --blas-threads 0``).
