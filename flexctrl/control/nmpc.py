@@ -104,7 +104,7 @@ from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.qp_backends import Solution
 from flexctrl.control.nmpc_calls import BoundRTICalls, DMRTICalls
 from flexctrl.control.nmpc_screen import ScreenedQP, hpipm_options
-from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, grouped_sensitivities, interval_core,
+from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, horizon_linearisation, interval_core,
                                            interval_functions, memoised)
 from flexctrl.control.nmpc_model import Prediction, prediction_model
 from flexctrl.control.nmpc_nlp import lqr_rollout, nlp_functions
@@ -385,11 +385,13 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
 
 
 def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int,
-           jacobian: str = "symbolic", per_use: bool = False):
+           jacobian: str = "symbolic", per_use: bool = False, by_recipe: bool = True):
     """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
 
     ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
     constants coincide by value at some configurations (the reduced prediction's basis).
+    ``by_recipe``: the compiled linearisation found on disk by its recipe before it is built
+    (:func:`~flexctrl.control.nmpc_interval.horizon_linearisation`).
     """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
@@ -409,7 +411,6 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     Fz = ca.Function("nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d])
     # The linearisation depends on the lifted f, its Jacobian, the sizes and the recipe alone:
     # built (and compiled) once per worker for every configuration of one model structure.
-    build = lambda: _horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings)  # noqa: E731
     try:
         key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
                           substeps, settings.sensitivities, settings.jacobian_every, settings.compile,
@@ -417,6 +418,16 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
                           *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []))
     except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
         key = None
+
+    def reproduces_the_model(linmap: ca.Function) -> bool:
+        # the first interval's shooting end at a generic point against the model's own RK4
+        z, v = 1e-3 * np.sin(np.arange(1, n + 1)), 1e-3 * np.cos(np.arange(1, m + 1))
+        ends = np.array(linmap(np.tile(z[:, None], N), np.tile(v[:, None], N), P)[0])[:, 0]
+        expected = np.array(Fz(z, v)).ravel()
+        return bool(np.max(np.abs(ends - expected)) <= 1e-9 * (1.0 + np.max(np.abs(expected))))
+
+    build = lambda: horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings,  # noqa: E731
+                                          recipe=key if by_recipe else None, check=reproduces_the_model)
     linmap, compiled, compile_seconds, cache_hit, reused = (memoised(key, build) if key is not None
                                                             else (*build(), False))
     # QP assembly in the virtual machine around the compiled linearisation, one Function of (z0, w).
@@ -470,39 +481,6 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     return functions, lay, compiled
 
 
-def _horizon_linearisation(fp, f_jac, nc: int, n: int, m: int, N: int, dt: float, substeps: int,
-                           settings: NMPCSettings) -> tuple:
-    """``(linmap, compiled, compile_seconds, cache_hit)``: the scaled shooting intervals over the horizon.
-
-    ``linmap(Z, V, p) -> (F, A, B)`` with ``p = (x_op, u_op, S_x, S_u, c)``; compiled to C when
-    ``settings.compile`` (the library from the disk cache when its code was built before).
-    """
-    extra = (ca.MX.sym("c", nc),) if nc else ()
-    Fp, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
-                            settings.jacobian_every)
-    p = ca.MX.sym("p", 2 * n + 2 * m + nc)
-    xop, uop = p[:n], p[n:n + m]
-    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
-    z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    consts = (p[2 * n + 2 * m:],) if nc else ()
-    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *consts)
-    Fs = (xn - xop) / Sx
-    As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
-    Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
-    lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
-    if settings.stages_per_jacobian > 1:
-        shoot = ca.Function("nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx])
-        linmap = grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
-    else:
-        linmap = lin.map(f"nmpc_linearize_{N}", "serial", N, [2], [])
-    if not settings.compile:
-        return linmap, False, 0.0, False
-    from flexctrl.sim.compile import compile_function
-
-    result = compile_function(linmap)
-    return result.function, result.compiled, result.compile_seconds, result.cache_hit
-
-
 def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
     """``[A, lba, uba]`` of the RTI's QP along ``w`` (MX): shooting rows, then the stage's soft rows."""
     n, m, ns, N = lay.n, lay.m, lay.ns, lay.N
@@ -530,7 +508,8 @@ def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
 
 
 def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic",
-                bound_calls: bool = True, screen: bool = True, direct_qp: bool = True) -> NMPCController:
+                bound_calls: bool = True, screen: bool = True, direct_qp: bool = True,
+                library_by_recipe: bool = True) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
 
     ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
@@ -543,6 +522,8 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     :mod:`flexctrl.control.nmpc_screen`); False always solves the whole QP.
     ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
     (:mod:`flexctrl.control.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
+    ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
+    from before it is built (default), or always built and then looked up by its content.
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
@@ -567,7 +548,8 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     substeps = settings.substeps or auto_substeps(pplant)
     # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
     # compiled library serves every configuration of a payload (as for the design model)
-    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced)
+    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced,
+                                         library_by_recipe)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
                           prediction, pplant, bound_calls, screen, direct_qp)

@@ -27,7 +27,12 @@ Jacobian per step and not per sample: ``docs/control.md`` ("sensitivities per RK
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
+import sys
+import warnings
+from pathlib import Path
 from typing import Callable
 
 import casadi as ca
@@ -163,7 +168,86 @@ def grouped_sensitivities(shoot: ca.Function, lin: ca.Function, n: int, m: int, 
         for _ in range(min(stages, N - j)):
             A.append(Ac[:, g * n:(g + 1) * n])
             B.append(Bc[:, g * m:(g + 1) * m])
-    return ca.Function(f"nmpc_linearize_{N}_by_{stages}", [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)])
+    return ca.Function(linearisation_name(N, stages), [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)])
+
+
+def linearisation_name(N: int, stages: int) -> str:
+    """The name of the horizon linearisation's Function (and of its library's symbol)."""
+    return f"nmpc_linearize_{N}_by_{stages}" if stages > 1 else f"nmpc_linearize_{N}"
+
+
+def symbolic_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
+                           substeps: int, settings) -> ca.Function:
+    """``linmap(Z, V, p) -> (F, A, B)``: the scaled shooting intervals over the horizon, ``p = (x_op, u_op, S_x, S_u, c)``.
+
+    ``fp(x, u, c)`` is the model's ``f`` with its ``nc`` constants lifted to an input (``fp(x, u)``
+    when ``nc = 0``); ``settings`` an :class:`~flexctrl.spec.controller_settings.NMPCSettings`.
+    """
+    extra = (ca.MX.sym("c", nc),) if nc else ()
+    Fp, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
+                            settings.jacobian_every)
+    p = ca.MX.sym("p", 2 * n + 2 * m + nc)
+    xop, uop = p[:n], p[n:n + m]
+    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
+    z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
+    consts = (p[2 * n + 2 * m:],) if nc else ()
+    xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *consts)
+    Fs = (xn - xop) / Sx
+    As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
+    Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
+    lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
+    if settings.stages_per_jacobian > 1:
+        shoot = ca.Function("nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx])
+        return grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
+    return lin.map(linearisation_name(N, 1), "serial", N, [2], [])
+
+
+@functools.lru_cache(maxsize=1)
+def builder_source_digest() -> str:
+    """SHA-256 of the source of the modules that build the linearisation from ``fp``.
+
+    This module (interval, grouping, the horizon), the RK4 step and the lift's ``try_expand``:
+    part of the recipe a library is found by, so an edit to any of them builds anew.
+    """
+    from flexctrl.dynamics import parametric
+    from flexctrl.sim import rk4
+
+    digest = hashlib.sha256()
+    for module in (sys.modules[__name__], rk4, parametric):
+        digest.update(Path(module.__file__).read_bytes())
+    return digest.hexdigest()
+
+
+def horizon_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
+                          substeps: int, settings, recipe: str | None = None,
+                          check: Callable[[ca.Function], bool] | None = None) -> tuple:
+    """``(linmap, compiled, compile_seconds, cache_hit)`` of :func:`symbolic_linearisation`.
+
+    Compiled to C when ``settings.compile`` (the library from the disk cache when its code
+    was built before).  With ``recipe`` (a key naming ``fp``, ``f_jac``, the sizes and the
+    settings: the caller's memo key) the library is looked up by the recipe and
+    :func:`builder_source_digest` before anything is built, so a worker whose cache holds it
+    skips the symbolic construction and the serialization that finds its library (0.38 s of
+    a first NMPC design on the three-link arm's ``amm:2``; see ``docs/control.md``).  A library
+    found by its recipe must pass ``check`` (the caller's comparison with the model at a
+    generic point); one that fails is removed, with a warning, and built again.
+    """
+    build = lambda: symbolic_linearisation(fp, f_jac, nc, n, m, N, dt, substeps, settings)  # noqa: E731
+    if not settings.compile:
+        return build(), False, 0.0, False
+    from flexctrl.sim.compile import compile_by_recipe, compile_function
+
+    if recipe is None:
+        result = compile_function(build())
+    else:
+        result = compile_by_recipe(linearisation_name(N, settings.stages_per_jacobian),
+                                   f"{recipe}\0{builder_source_digest()}", build)
+        if result.cache_hit and check is not None and not check(result.function):
+            warnings.warn(f"the library {result.path} found by its recipe does not reproduce the model; "
+                          "removed and built again", stacklevel=2)
+            result.path.unlink(missing_ok=True)
+            result = compile_function(build())
+    return result.function, result.compiled, result.compile_seconds, result.cache_hit
 
 
 #: Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least recently used beyond ``MEMO_SIZE``).
@@ -187,4 +271,5 @@ def memoised(key: str, build: Callable[[], tuple]) -> tuple:
 
 
 __all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised", "group_centres",
-           "grouped_sensitivities"]
+           "grouped_sensitivities", "horizon_linearisation", "symbolic_linearisation", "linearisation_name",
+           "builder_source_digest"]

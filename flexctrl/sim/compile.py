@@ -30,6 +30,13 @@ instead of four calls of ``f``) took 5.7 s to compile for no gain.  Because
 ``-march=native`` code only runs on the CPU it was built for, the cache key
 includes the host's CPU identity; if the compiler rejects the flags, the
 portable ``-O2`` is tried before giving up.
+
+:func:`compile_by_recipe` finds a library without building its Function: for a Function whose
+symbolic construction costs more than loading it (the NMPC's horizon linearisation), the
+caller names everything the construction depends on (a *recipe*: its inputs' serialized
+forms and the source of the code that builds it), and the first build leaves a hard link
+``<name>_r<key>.so`` to the library, ``key`` hashing the recipe with the flags, compiler,
+CasADi version and host as above.
 """
 
 from __future__ import annotations
@@ -47,7 +54,7 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import casadi as ca
 
@@ -254,6 +261,60 @@ def compile_function(
     message = f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's virtual machine"
     warnings.warn(message, stacklevel=2)
     return CompiledFunction(fun, compiled=False, reason=message)
+
+
+def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], *, enabled: bool | None = None,
+                      cache_dir: str | os.PathLike | None = None,
+                      flags: Sequence[str] = DEFAULT_FLAGS) -> CompiledFunction:
+    """The library of the Function ``build()`` returns, found by ``recipe`` without calling ``build`` when it exists.
+
+    Parameters
+    ----------
+    name
+        The name of the Function ``build`` returns (the library's symbol).
+    recipe
+        A string naming everything ``build()`` depends on: its inputs (serialized) and the
+        source text of the code that builds it.  A recipe that leaves out something the
+        Function depends on loads a stale library: that is the caller's contract.
+    build
+        Makes the Function (called only when no library is found by the recipe).
+    enabled, cache_dir, flags
+        As for :func:`compile_function`.
+
+    Returns
+    -------
+    CompiledFunction
+        ``cache_hit`` True, ``path`` the recipe's link, when found by the recipe; otherwise
+        what :func:`compile_function` returns for ``build()``, after linking its library
+        under the recipe's name (only for the flags asked for, not the portable fall-back).
+    """
+    if enabled is None:
+        enabled = not compile_disabled_by_env()
+    compiler = find_compiler() if enabled else None
+    if compiler is None:
+        return compile_function(build(), enabled=enabled, cache_dir=cache_dir, flags=flags)
+    flags = tuple(flags)
+    directory = private_directory(cache_directory(cache_dir))
+    host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
+    key = content_key(recipe, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
+    link = directory / f"{name}_r{key}.so"
+    if link.is_file() and trusted_file(link):
+        try:
+            return CompiledFunction(ca.external(name, str(link)), compiled=True, cache_hit=True, path=link, flags=flags)
+        except RuntimeError as exc:  # unreadable: build it again
+            log.warning("library %s could not be loaded (%s); building %s again", link, exc, name)
+    fun = build()
+    if fun.name() != name:
+        raise ValueError(f"compile_by_recipe: build() made '{fun.name()}', not '{name}'")
+    result = compile_function(fun, enabled=True, cache_dir=cache_dir, flags=flags)
+    if result.compiled and result.path is not None and tuple(result.flags) == flags:
+        temporary = link.with_name(f"{link.name}.{os.getpid()}.tmp")
+        try:
+            os.link(result.path, temporary)
+        except OSError:  # a file system without hard links
+            shutil.copy2(result.path, temporary)
+        os.replace(temporary, link)
+    return result
 
 
 def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]) -> CompiledFunction | str:

@@ -386,7 +386,7 @@ class NMPCSettings:
         RTI only: one interval Jacobian ``(A, B)`` per this many consecutive shooting
         intervals of the horizon, taken at the middle interval of each group and held over
         it (1, default: every interval its own); the shooting ends stay nonlinear on every
-        interval (:func:`flexctrl.control.nmpc._horizon_linearisation`).
+        interval (:func:`flexctrl.control.nmpc_interval.symbolic_linearisation`).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``) instead of its default start (about half the
