@@ -37,7 +37,9 @@ def stable(table) -> list[dict]:
     return [{k: v for k, v in row.items() if k not in VOLATILE} for row in table.rows]
 
 
-def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(slow_study, tmp_path):
+def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(slow_study, tmp_path, monkeypatch):
+    for name in THREAD_VARIABLES:  # as outside `make test` (which sets them to 1): the workers get the budget from us
+        monkeypatch.delenv(name, raising=False)
     spec = load_study(slow_study)
     pool = run_study(spec, tmp_path / "pool", workers=2, progress="none", report=False)
     out = tmp_path / "dask"

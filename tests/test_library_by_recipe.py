@@ -74,8 +74,38 @@ def test_an_untrusted_link_is_built_again(tmp_path):
     os.chmod(link, 0o722)  # others may write it (and so the library it shares an inode with)
     again = Builds(square_plus())
     result = compile_by_recipe("sq", "recipe-1", again, cache_dir=tmp_path)
-    assert again.calls == 1 and not (result.cache_hit and result.path == link)
-    assert built.compiled
+    assert built.compiled and again.calls == 1 and result.path != link
+
+
+def test_a_found_library_that_fails_the_check_or_raises_in_it_is_unlinked_and_built(tmp_path):
+    compile_by_recipe("sq", "recipe-1", Builds(square_plus()), cache_dir=tmp_path)
+    link = next(tmp_path.rglob("sq_r*.so"))
+    passing = Builds(square_plus())
+    compile_by_recipe("sq", "recipe-1", passing, cache_dir=tmp_path, check=lambda f: float(f([1.0, 2.0])[0]) == 2.0)
+    assert passing.calls == 0
+    failing = Builds(square_plus())
+    with pytest.warns(UserWarning, match="does not reproduce what it should"):
+        compile_by_recipe("sq", "recipe-1", failing, cache_dir=tmp_path, check=lambda f: False)
+    assert failing.calls == 1 and link.exists()  # unlinked, then linked again by the build
+
+    def wrong_signature(f):
+        return f([1.0, 2.0, 3.0])  # CasADi refuses a 3-vector for a 2-vector input
+
+    raising = Builds(square_plus())
+    with pytest.warns(UserWarning, match="the check raised"):
+        compile_by_recipe("sq", "recipe-1", raising, cache_dir=tmp_path, check=wrong_signature)
+    assert raising.calls == 1
+
+
+def test_a_leftover_temporary_file_does_not_fail_a_build(tmp_path):
+    first = compile_by_recipe("sq", "recipe-1", Builds(square_plus()), cache_dir=tmp_path)
+    link = next(tmp_path.rglob("sq_r*.so"))
+    # what a process killed between linking and renaming leaves: a link to the library under a name of its own
+    os.link(first.path, link.with_name(f"{link.name}.{os.getpid()}.tmp"))
+    link.unlink()
+    again = Builds(square_plus())
+    result = compile_by_recipe("sq", "recipe-1", again, cache_dir=tmp_path)
+    assert again.calls == 1 and result.compiled and link.exists()
 
 
 def test_switched_off_compilation_builds_for_the_virtual_machine(tmp_path):
@@ -136,15 +166,20 @@ def test_a_library_that_does_not_reproduce_the_model_is_removed_and_built_again(
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))
     stale = design_nmpc(model, op, other)
     stale_library = next(p for p in fresh_cache.rglob("nmpc_linearize_*_r*.so") if p != link)
+    stale_inode = os.stat(stale_library).st_ino
     os.replace(stale_library, link)
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))
-    with pytest.warns(UserWarning, match="does not reproduce the model"):
+    with pytest.warns(UserWarning, match="does not reproduce what it should"):
         rebuilt = design_nmpc(model, op, settings)
-    assert not link.exists()  # removed; the next build links the right one again
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))
     reference = design_nmpc(model, op, settings, library_by_recipe=False)
     for a, b in zip(linmap_at_a_point(rebuilt), linmap_at_a_point(reference)):
         np.testing.assert_array_equal(a, b)
+    # the build linked the right library in the stale one's place (checked by file: this process has the
+    # stale one loaded under the link's path, and the loader would hand it back for that path)
+    assert link.exists() and os.stat(link).st_ino != stale_inode
+    content = [p for p in fresh_cache.rglob("nmpc_linearize_*.so") if "_r" not in p.name]
+    assert any(os.path.samefile(link, p) for p in content)
     assert stale.functions["build"]["n_constants"] == rebuilt.functions["build"]["n_constants"]
 
 
@@ -166,7 +201,8 @@ def test_an_edit_to_the_code_that_builds_it_builds_it_again(onelink, fresh_cache
     assert calls == [1]
 
 
-def test_the_builder_digest_covers_the_interval_rk4_and_lift_modules():
+def test_the_builder_digest_covers_the_interval_rk4_and_lift_modules_as_imported():
+    """The digest is of the three modules' files as they were when this process imported them."""
     import hashlib
     from pathlib import Path
 

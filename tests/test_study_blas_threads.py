@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 
@@ -9,7 +11,7 @@ import pytest
 
 from flexctrl.errors import SpecError
 from flexctrl.study import load_study, run_study
-from flexctrl.study.blas_threads import blas_thread_budget, parse_blas_threads, usable_cpus
+from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget, parse_blas_threads, usable_cpus
 from flexctrl.study.runner import LocalPoolBackend, pool_context
 
 #: Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report every thread count.
@@ -52,21 +54,38 @@ def test_a_pool_worker_holds_every_blas_library_to_its_budget():
         assert set(counts) == {threads}, (threads, counts)
 
 
+#: Run in a fresh interpreter without the thread variables (``make test`` sets them to 1, and the
+#: fork server keeps the environment it started with): a plain pool worker's counts, then a
+#: ``blas_threads=0`` worker's.
+ZERO_AGAINST_PLAIN = f"""
+import concurrent.futures as cf, json
+from flexctrl.study.runner import LocalPoolBackend, pool_context
+with cf.ProcessPoolExecutor(1, mp_context=pool_context(None)) as pool:
+    plain = pool.submit(eval, {PROBE!r}).result(timeout=120)
+with LocalPoolBackend(2, blas_threads=0).pool(1, pool_context(None)) as pool:
+    zero = pool.submit(eval, {PROBE!r}).result(timeout=120)
+print(json.dumps([plain, zero]))
+"""
+
+
+@pytest.mark.skipif(usable_cpus() < 2, reason="one CPU: OpenBLAS starts one thread anyway")
 def test_zero_leaves_the_libraries_as_they_start():
     """``--blas-threads 0`` (the old path) passes no limit: the worker's counts are those of a plain worker."""
-    import concurrent.futures as cf
-
-    with cf.ProcessPoolExecutor(1, mp_context=pool_context(None)) as pool:
-        plain = pool.submit(eval, PROBE).result(timeout=120)
-    assert worker_threads(0) == plain
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    done = subprocess.run([sys.executable, "-c", ZERO_AGAINST_PLAIN], env=env, capture_output=True, text=True,
+                          timeout=300, check=True)
+    plain, zero = json.loads(done.stdout.strip().splitlines()[-1])
+    assert zero == plain
+    assert max(plain) >= 2, plain  # the libraries started more than one thread: nothing held them
 
 
 def test_the_budget_is_named_in_the_backend_and_the_table_does_not_move(selftest_study, tmp_path):
     spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q3=[0]"])  # 4 runs
     limited = run_study(spec, tmp_path / "one", workers=2, progress="none", report=False, blas_threads=1)
-    library = run_study(spec, tmp_path / "lib", workers=2, progress="none", report=False, blas_threads=0)
+    library = run_study(spec, tmp_path / "two", workers=2, progress="none", report=False, blas_threads=2)
     assert "2 workers" in limited.backend and "1 BLAS thread per worker" in limited.backend
-    assert "BLAS threads as the libraries start them" in library.backend
+    assert "2 BLAS threads per worker" in library.backend  # set, whatever the environment says
+    assert "BLAS threads as the libraries start them" in LocalPoolBackend(2, blas_threads=0).description
     volatile = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
     strip = lambda table: [{k: v for k, v in row.items() if k not in volatile} for row in table.rows]  # noqa: E731
     assert strip(limited.table()) == strip(library.table())

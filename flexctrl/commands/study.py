@@ -34,9 +34,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         help="local pool: each worker imports the executor's code in its first run, instead of the fork "
                              "server importing it once before forking the workers (the old path: the imports land in each worker's first run)")
     parser.add_argument("--blas-threads", default="auto", metavar="N",
-                        help="local pool: BLAS threads per worker; auto (default): usable CPUs // workers, at least 1, as "
-                             "Dask's nanny gives its workers one; 0: the libraries' own default (the old path: on 2 CPUs two "
-                             "workers' spinning OpenBLAS threads slow each other's runs)")
+                        help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto (default): "
+                             "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 CPUs "
+                             "two workers' spinning OpenBLAS threads slow each other's runs)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
     return parser

@@ -27,11 +27,9 @@ Jacobian per step and not per sample: ``docs/control.md`` ("sensitivities per RK
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import math
 import sys
-import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -202,13 +200,7 @@ def symbolic_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, 
     return lin.map(linearisation_name(N, 1), "serial", N, [2], [])
 
 
-@functools.lru_cache(maxsize=1)
-def builder_source_digest() -> str:
-    """SHA-256 of the source of the modules that build the linearisation from ``fp``.
-
-    This module (interval, grouping, the horizon), the RK4 step and the lift's ``try_expand``:
-    part of the recipe a library is found by, so an edit to any of them builds anew.
-    """
+def _source_digest() -> str:
     from flexctrl.dynamics import parametric
     from flexctrl.sim import rk4
 
@@ -216,6 +208,20 @@ def builder_source_digest() -> str:
     for module in (sys.modules[__name__], rk4, parametric):
         digest.update(Path(module.__file__).read_bytes())
     return digest.hexdigest()
+
+
+#: The digest of the source this process imported (read once, at import: an edit to the files
+#: during a long study must not name a library built by the code already loaded).
+_BUILDER_SOURCE_DIGEST = _source_digest()
+
+
+def builder_source_digest() -> str:
+    """SHA-256 of the source of the modules that build the linearisation from ``fp``, as imported.
+
+    This module (interval, grouping, the horizon), the RK4 step and the lift's ``try_expand``:
+    part of the recipe a library is found by, so an edit to any of them builds anew.
+    """
+    return _BUILDER_SOURCE_DIGEST
 
 
 def horizon_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
@@ -241,12 +247,7 @@ def horizon_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n
         result = compile_function(build())
     else:
         result = compile_by_recipe(linearisation_name(N, settings.stages_per_jacobian),
-                                   f"{recipe}\0{builder_source_digest()}", build)
-        if result.cache_hit and check is not None and not check(result.function):
-            warnings.warn(f"the library {result.path} found by its recipe does not reproduce the model; "
-                          "removed and built again", stacklevel=2)
-            result.path.unlink(missing_ok=True)
-            result = compile_function(build())
+                                   f"{recipe}\0{builder_source_digest()}", build, check=check)
     return result.function, result.compiled, result.compile_seconds, result.cache_hit
 
 

@@ -51,6 +51,7 @@ import stat
 import subprocess
 import tempfile
 import time
+import uuid
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -264,8 +265,8 @@ def compile_function(
 
 
 def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], *, enabled: bool | None = None,
-                      cache_dir: str | os.PathLike | None = None,
-                      flags: Sequence[str] = DEFAULT_FLAGS) -> CompiledFunction:
+                      cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
+                      check: Callable[[ca.Function], bool] | None = None) -> CompiledFunction:
     """The library of the Function ``build()`` returns, found by ``recipe`` without calling ``build`` when it exists.
 
     Parameters
@@ -280,6 +281,10 @@ def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], 
         Makes the Function (called only when no library is found by the recipe).
     enabled, cache_dir, flags
         As for :func:`compile_function`.
+    check
+        Applied to a library found by the recipe (the caller's comparison with what it
+        should compute); one that fails it, or raises, is unlinked with a warning and the
+        Function is built.
 
     Returns
     -------
@@ -287,6 +292,7 @@ def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], 
         ``cache_hit`` True, ``path`` the recipe's link, when found by the recipe; otherwise
         what :func:`compile_function` returns for ``build()``, after linking its library
         under the recipe's name (only for the flags asked for, not the portable fall-back).
+        Deleting a library to force its rebuild means deleting its ``<name>_r*.so`` links too.
     """
     if enabled is None:
         enabled = not compile_disabled_by_env()
@@ -298,23 +304,53 @@ def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], 
     host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
     key = content_key(recipe, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
     link = directory / f"{name}_r{key}.so"
-    if link.is_file() and trusted_file(link):
-        try:
-            return CompiledFunction(ca.external(name, str(link)), compiled=True, cache_hit=True, path=link, flags=flags)
-        except RuntimeError as exc:  # unreadable: build it again
-            log.warning("library %s could not be loaded (%s); building %s again", link, exc, name)
+    found = _load_link(name, link, flags, check)
+    if found is not None:
+        return found
     fun = build()
     if fun.name() != name:
         raise ValueError(f"compile_by_recipe: build() made '{fun.name()}', not '{name}'")
     result = compile_function(fun, enabled=True, cache_dir=cache_dir, flags=flags)
     if result.compiled and result.path is not None and tuple(result.flags) == flags:
-        temporary = link.with_name(f"{link.name}.{os.getpid()}.tmp")
-        try:
-            os.link(result.path, temporary)
-        except OSError:  # a file system without hard links
-            shutil.copy2(result.path, temporary)
-        os.replace(temporary, link)
+        _link(result.path, link)
     return result
+
+
+def _load_link(name: str, link: Path, flags: tuple[str, ...], check) -> CompiledFunction | None:
+    """The library at ``link`` if it is trusted, loads and passes ``check``; otherwise None (a failing one unlinked)."""
+    if not (link.is_file() and trusted_file(link)):
+        return None
+    try:
+        function = ca.external(name, str(link))
+    except RuntimeError as exc:  # unreadable: build it again
+        log.warning("library %s could not be loaded (%s); building %s again", link, exc, name)
+        return None
+    try:
+        passed = check is None or check(function)
+    except RuntimeError as exc:  # another signature: not this recipe's Function
+        passed, why = False, f" (the check raised: {exc})"
+    else:
+        why = ""
+    if passed:
+        return CompiledFunction(function, compiled=True, cache_hit=True, path=link, flags=flags)
+    warnings.warn(f"the library {link} found by its recipe does not reproduce what it should{why}; "
+                  f"removed and built again", stacklevel=3)
+    link.unlink(missing_ok=True)
+    return None
+
+
+def _link(library: Path, link: Path) -> None:
+    """``link`` made a hard link to ``library`` (a copy where the file system has none), atomically; a failure is logged."""
+    temporary = link.with_name(f"{link.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        try:
+            os.link(library, temporary)
+        except OSError:  # a file system without hard links
+            shutil.copy2(library, temporary)
+        os.replace(temporary, link)
+    except OSError as exc:  # the library itself is fine: only the next process's shortcut is lost
+        log.warning("could not link %s as %s (%s); the next process builds it again", library, link, exc)
+        temporary.unlink(missing_ok=True)
 
 
 def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]) -> CompiledFunction | str:

@@ -31,9 +31,9 @@ local pool (default)
     keeps the imports in the workers.  The server is started once per Python
     process, so the choice holds for the process's first pool (see :func:`pool_context`).
     Each worker holds its BLAS libraries to ``usable CPUs // workers`` threads (at least
-    1), as Dask's nanny does for its workers (:mod:`flexctrl.study.blas_threads`: on 2
-    CPUs, 2 workers' spinning OpenBLAS threads cost each run about a quarter of its wall
-    time); ``blas_threads=0`` (``--blas-threads 0``) leaves the libraries' default.
+    1; Dask's nanny gives its workers 1) (:mod:`flexctrl.study.blas_threads`: on 2 CPUs,
+    2 workers' spinning OpenBLAS threads cost the slice's runs about 15 % of their summed
+    wall time); ``blas_threads=0`` (``--blas-threads 0``) leaves the libraries' default.
 Dask (``scheduler="tcp://host:8786"`` or ``client=...``)
     ``dask.distributed`` (an optional dependency, imported only here), at most
     ``2 x threads`` runs in flight.  Workers need flexctrl installed and the

@@ -65,8 +65,9 @@ class LocalhostCluster:
         BLAS threads per worker process, set through the environment variables the
         libraries read when they load: ``"auto"`` (default) ``max(1, usable CPUs // workers)``,
         a whole number, or 0 to pass this process's environment unchanged.  A nanny sets
-        them to 1 by itself (Dask's ``distributed.nanny.pre-spawn-environ``); a worker
-        without one would otherwise start a thread per CPU in each library
+        them to 1 where the environment does not set them already (Dask's
+        ``distributed.nanny.pre-spawn-environ``), so with one these values win too; a worker
+        without a nanny would otherwise start a thread per CPU in each library
         (see :mod:`flexctrl.study.blas_threads`).
 
     Use as a context manager; :attr:`address` is the scheduler's, :attr:`workers` the
