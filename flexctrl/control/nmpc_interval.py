@@ -176,7 +176,9 @@ def linearisation_name(N: int, stages: int) -> str:
 
 def symbolic_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
                            substeps: int, settings) -> ca.Function:
-    """``linmap(Z, V, p) -> (F, A, B)``: the scaled shooting intervals over the horizon, ``p = (x_op, u_op, S_x, S_u, c)``.
+    """``linmap(Z, V, p) -> (F, A, B)``: the scaled shooting intervals over the horizon.
+
+    ``p = (x_op, u_op, S_x, S_u, c)``.
 
     ``fp(x, u, c)`` is the model's ``f`` with its ``nc`` constants lifted to an input (``fp(x, u)``
     when ``nc = 0``); ``settings`` an :class:`~flexctrl.spec.controller_settings.NMPCSettings`.

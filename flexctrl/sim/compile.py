@@ -213,8 +213,17 @@ def cache_key(fun: ca.Function, flags: Sequence[str], compiler: str) -> str:
 
     With ``-march=native`` among the flags the host's CPU identity is hashed too.
     """
+    return library_key(fun.serialize(), flags, compiler)
+
+
+def library_key(what: str, flags: Sequence[str], compiler: str) -> str:
+    """24 hex digits of ``what`` (a Function's serialized form, or a recipe) with what compiled it.
+
+    The flags, the compiler's identity, CasADi's version, and the host's CPU identity when
+    ``-march=native`` is among the flags.
+    """
     host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    return content_key(fun.serialize(), " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
+    return content_key(what, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
 
 
 def compile_function(
@@ -267,7 +276,7 @@ def compile_function(
 def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], *, enabled: bool | None = None,
                       cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
                       check: Callable[[ca.Function], bool] | None = None) -> CompiledFunction:
-    """The library of the Function ``build()`` returns, found by ``recipe`` without calling ``build`` when it exists.
+    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it exists.
 
     Parameters
     ----------
@@ -301,9 +310,7 @@ def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], 
         return compile_function(build(), enabled=enabled, cache_dir=cache_dir, flags=flags)
     flags = tuple(flags)
     directory = private_directory(cache_directory(cache_dir))
-    host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    key = content_key(recipe, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
-    link = directory / f"{name}_r{key}.so"
+    link = directory / f"{name}_r{library_key(recipe, flags, compiler)}.so"
     found = _load_link(name, link, flags, check)
     if found is not None:
         return found
@@ -317,7 +324,10 @@ def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], 
 
 
 def _load_link(name: str, link: Path, flags: tuple[str, ...], check) -> CompiledFunction | None:
-    """The library at ``link`` if it is trusted, loads and passes ``check``; otherwise None (a failing one unlinked)."""
+    """The library at ``link`` if it is trusted, loads and passes ``check``; otherwise None.
+
+    A library that fails ``check`` (or makes it raise) is unlinked, with a warning.
+    """
     if not (link.is_file() and trusted_file(link)):
         return None
     try:
@@ -340,7 +350,10 @@ def _load_link(name: str, link: Path, flags: tuple[str, ...], check) -> Compiled
 
 
 def _link(library: Path, link: Path) -> None:
-    """``link`` made a hard link to ``library`` (a copy where the file system has none), atomically; a failure is logged."""
+    """``link`` made a hard link to ``library`` (a copy where the file system has none), atomically.
+
+    A failure is logged, not raised: the library is fine, only the next process's shortcut is lost.
+    """
     temporary = link.with_name(f"{link.name}.{uuid.uuid4().hex}.tmp")
     try:
         try:
@@ -348,7 +361,7 @@ def _link(library: Path, link: Path) -> None:
         except OSError:  # a file system without hard links
             shutil.copy2(library, temporary)
         os.replace(temporary, link)
-    except OSError as exc:  # the library itself is fine: only the next process's shortcut is lost
+    except OSError as exc:
         log.warning("could not link %s as %s (%s); the next process builds it again", library, link, exc)
         temporary.unlink(missing_ok=True)
 

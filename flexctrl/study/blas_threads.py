@@ -98,6 +98,11 @@ def parse_blas_threads(text: str) -> int | str:
     return value
 
 
+def thread_environment(threads: int) -> dict[str, str]:
+    """The environment variables that hold libraries loaded later to ``threads`` threads (none for 0)."""
+    return {name: str(threads) for name in THREAD_VARIABLES} if threads > 0 else {}
+
+
 def limit_blas_threads(threads: int) -> None:
     """Hold this process's BLAS and OpenMP libraries to ``threads`` threads (a pool worker's initializer).
 
@@ -107,8 +112,7 @@ def limit_blas_threads(threads: int) -> None:
     """
     if threads <= 0:
         return
-    for name in THREAD_VARIABLES:
-        os.environ[name] = str(threads)
+    os.environ.update(thread_environment(threads))
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=threads)
@@ -122,4 +126,4 @@ def blas_threads_now() -> list[int]:
 
 
 __all__ = ["THREAD_VARIABLES", "blas_thread_budget", "blas_threads_now", "limit_blas_threads", "parse_blas_threads",
-           "usable_cpus"]
+           "thread_environment", "usable_cpus"]

@@ -34,7 +34,7 @@ from typing import Sequence
 
 import flexctrl
 from flexctrl.errors import FlexctrlError
-from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget, parse_blas_threads
+from flexctrl.study.blas_threads import blas_thread_budget, parse_blas_threads, thread_environment
 
 #: seconds to wait for the scheduler's file and for the workers to register
 START_TIMEOUT_S = 120.0
@@ -93,10 +93,7 @@ class LocalhostCluster:
         return env
 
     def _worker_env(self) -> dict:
-        env = self._env()
-        if self.blas_threads:
-            env.update({name: str(self.blas_threads) for name in THREAD_VARIABLES})
-        return env
+        return {**self._env(), **thread_environment(self.blas_threads)}
 
     def start(self) -> "LocalhostCluster":
         dask = _dask_command()
@@ -180,15 +177,17 @@ def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), 
     from flexctrl.study import load_study, run_study
 
     spec = load_study(study, overrides=list(overrides))
-    result: dict = {"study": str(study), "overrides": list(overrides), "cpu_count": os.cpu_count(), "blas_threads": blas_threads,
-                    "load_average_before": list(os.getloadavg()), "sizes": {}}
+    result: dict = {"study": str(study), "overrides": list(overrides), "cpu_count": os.cpu_count(),
+                    "blas_threads": blas_threads, "load_average_before": list(os.getloadavg()), "sizes": {}}
     for n in worker_counts:
-        with tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out, LocalhostCluster(n, blas_threads=blas_threads) as cluster:
+        with (tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out,
+              LocalhostCluster(n, blas_threads=blas_threads) as cluster):
             start = time.perf_counter()
             run = run_study(spec, Path(out) / "study", scheduler=cluster.address, progress="none", report=False)
             elapsed = time.perf_counter() - start
         runs = sum(run.counts.get(k, 0) for k in ("ok", "failed"))
-        result["sizes"][str(n)] = {"workers": n, "blas_threads_per_worker": cluster.blas_threads, "runs": runs, "ok": run.counts.get("ok", 0), "elapsed_s": elapsed,
+        result["sizes"][str(n)] = {"workers": n, "blas_threads_per_worker": cluster.blas_threads, "runs": runs,
+                                   "ok": run.counts.get("ok", 0), "elapsed_s": elapsed,
                                    "runs_per_minute": 60.0 * runs / elapsed, "backend": run.backend}
     first = result["sizes"][str(worker_counts[0])]["runs_per_minute"]
     for size in result["sizes"].values():
@@ -204,7 +203,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="study-file override (repeatable)")
     parser.add_argument("--blas-threads", default="auto", metavar="N",
-                        help="BLAS threads per worker: auto (CPUs // workers, the default), a whole number, or 0 to leave the libraries alone")
+                        help="BLAS threads per worker: auto (CPUs // workers, the default), a whole number, "
+                             "or 0 to leave the libraries alone")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     try:
@@ -219,8 +219,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{args.study}: load {result['load_average_before'][0]:.2f} -> {result['load_average_after'][0]:.2f} "
               f"on {result['cpu_count']} CPUs")
         for size in result["sizes"].values():
-            print(f"  {size['workers']} worker(s), {size['blas_threads_per_worker'] or 'default'} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) in {size['elapsed_s']:.1f} s = "
-                  f"{size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}")
+            threads = size["blas_threads_per_worker"] or "default"
+            print(f"  {size['workers']} worker(s), {threads} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) "
+                  f"in {size['elapsed_s']:.1f} s = {size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}")
     return 0
 
 
