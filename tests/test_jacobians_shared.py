@@ -10,6 +10,7 @@ import pytest
 import flexctrl as fc
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.jacobians import SHARED, jacobian_function
+from flexctrl.dynamics.parametric import FROM_LIFTED
 from flexctrl.linear import Linearizer, equilibrium
 
 
@@ -28,6 +29,7 @@ def _at(fun, model, seed=0):
 
 def test_one_structure_serves_every_configuration_with_the_same_bits(arm):
     SHARED.clear()
+    FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
     for fidelity, poses in (("amm:2", ([0, 0, 0], [0, 1.2, -0.7], [0, 1.57, 0])), ("amm:3", ([0, 0, 0], [0, -0.5, 1.0]))):
         for q in poses:
             model = build_model(arm, fidelity, reference_q=q)
@@ -42,6 +44,7 @@ def test_one_structure_serves_every_configuration_with_the_same_bits(arm):
 def test_the_linearizer_takes_the_kept_jacobian_and_its_sensors_own(arm):
     model = build_model(arm, "amm:2", reference_q=[0, 0.8, -0.3])
     SHARED.clear()
+    FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
     lin = Linearizer(model, ("joints", "strain"))
     assert len(SHARED._built) == 1
     op = equilibrium(model, np.array([0.1, 0.8, -0.3]))
@@ -56,6 +59,7 @@ def test_dynamics_without_constants_to_lift_keep_their_own_jacobian():
     x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
     model = SimpleNamespace(functions={"f": ca.Function("f", [x, u], [ca.vertcat(x[1], u - x[0] * x[1])])}, n_x=2, n_u=1)
     SHARED.clear()
+    FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
     A, B = _at(jacobian_function(model, inputs=True, shared=True), model)
     assert len(SHARED._built) == 0
     rng = np.random.default_rng(0)

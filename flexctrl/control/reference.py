@@ -49,7 +49,7 @@ import numpy as np
 from flexctrl.dynamics.model import derived
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
-from flexctrl.sim.compile import QUICK_FLAGS, compile_function
+from flexctrl.sim.compile import QUICK_FLAGS, compile_for
 from flexctrl.dynamics.parametric import parametric
 
 from flexctrl.spec.reference import DEFLECTIONS, JointReference
@@ -73,9 +73,9 @@ def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function
     their numeric constants as an input, one per use
     (:func:`flexctrl.dynamics.parametric.constants_as_parameters`), differentiated with the
     constants symbolic and compiled as ONE Function of all seven outputs, named by the
-    sizes alone: every configuration and payload of one model shape shares one library,
-    and a new configuration pays the lift and the Jacobians (about 0.2 s for ``amm:2``
-    of the three-link arm), not a compiler run.  The three Functions bind the model's
+    sizes alone: every configuration and payload of one model shape shares one library.
+    The compiled Function is kept with the lifted forces (:func:`flexctrl.sim.compile.compile_for`),
+    so a new configuration pays the lift alone, not the Jacobians, the cache key or the load.  The three Functions bind the model's
     constants to it.  When the constants cannot be lifted or nothing compiles, the
     virtual machine's Functions are returned.  Compiled values differ from the
     virtual machine's in the last digits (fused multiply-adds, no constant folding).
@@ -101,12 +101,15 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
     fp, constants = parametric(model, "reference_forces", lambda: forces, per_use=True)
     if constants.size == 0:
         return path_functions(model, False)
-    c = ca.SX.sym("c", constants.size)
-    force, static = fp(*args, c)
-    outs = _outputs(force, static, qr, qdr, qddr, qf, n)
-    one = ca.Function(f"reference_p_{n}_{N}_{constants.size}", [*args, c], outs, [*names, "c"],
-                      ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"])
-    compiled = compile_function(one, enabled=compile, flags=QUICK_FLAGS)
+
+    def one() -> ca.Function:
+        c = ca.SX.sym("c", constants.size)
+        outs = _outputs(*fp(*args, c), qr, qdr, qddr, qf, n)
+        return ca.Function(f"reference_p_{n}_{N}_{constants.size}", [*args, c], outs, [*names, "c"],
+                           ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"])
+
+    # kept with the lifted forces: a later configuration of the model shape skips the Jacobians and the load
+    compiled = compile_for(fp, "reference", one, enabled=compile, flags=QUICK_FLAGS)
     if not compiled.compiled:
         return path_functions(model, False)
     mx = [ca.MX.sym(name, a.sparsity()) for name, a in zip(names, args)]

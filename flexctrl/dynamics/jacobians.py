@@ -7,8 +7,8 @@ CasADi builds the derivative of a Function once per Function object: for a new m
 constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its
 constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, one constant per
 use, so that coinciding values do not change the structure) and kept once per process for
-each lifted structure (its serialized form), so every later model of that structure evaluates the kept
-Jacobian at its own constants.  The operations are the same ones in the same order
+each lifted structure (with the kept lift itself, and by its serialized form), so every later
+model of that structure evaluates the kept Jacobian at its own constants.  The operations are the same ones in the same order
 (the lift keeps them; the constants are read from an input instead of the code), and
 the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
 model whose ``f`` does not lift (it calls other Functions, say) gets the per-model
@@ -21,7 +21,7 @@ import hashlib
 
 import casadi as ca
 
-from flexctrl.dynamics.parametric import Memo, parametric
+from flexctrl.dynamics.parametric import FROM_LIFTED, Memo, parametric
 
 #: Jacobians of lifted dynamics built in this process, by the lift's serialized form and the outputs asked for.
 SHARED = Memo(8)
@@ -85,15 +85,22 @@ def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, obj
     lifted, constants = parametric(model, "f", lambda: model.functions["f"], per_use=True)
     if constants.size == 0:
         return None
-    key = hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
 
     def build() -> ca.Function:
         x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
         c = ca.MX.sym("c", constants.size)
         return ca.Function("jacobians_lifted", [x, u, c], _dynamics_jacobians(lifted, x, u, value, inputs, c))
 
-    function, _ = SHARED.get(key, build)
-    return function, constants
+    def by_content() -> ca.Function:  # a lift made again (its kept object forgotten) finds it by its serialized form
+        return SHARED.get(content_key(lifted, value, inputs), build)[0]
+
+    # the lift kept for the structure is the same object for every model of it: no serializing per model
+    return FROM_LIFTED.get(lifted, ("jacobians", value, inputs), by_content), constants
+
+
+def content_key(lifted: ca.Function, value: bool, inputs: bool) -> str:
+    """The key of :data:`SHARED`: a hash of the lifted Function's serialized form and the outputs asked for."""
+    return hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
 
 
 __all__ = ["jacobian_function", "SHARED"]

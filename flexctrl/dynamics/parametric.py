@@ -63,6 +63,38 @@ class Memo:
         self._built.clear()
 
 
+class ObjectMemo:
+    """Values built from one object (a kept lifted Function), found again by the object's identity.
+
+    A lift kept in :data:`LIFTED` is returned as the same object to every model of its
+    structure, so what is built from it alone (its compiled library, the key of its
+    Jacobian) can be kept with it: a later model skips building, serializing and loading
+    again.  The object is held with its value, so its ``id`` cannot pass to another object
+    while the entry lasts; least recently used beyond ``size``.
+    """
+
+    def __init__(self, size: int):
+        self._memo = Memo(size)
+
+    def get(self, owner: Any, tag: Any, build: Callable[[], Any]) -> Any:
+        """``build()`` the first time ``(owner, tag)`` is asked for, the kept value after."""
+        key = (id(owner), tag)
+        kept = self._memo.lookup(key)
+        if kept is not None and kept[0] is owner:
+            return kept[1]
+        value = build()
+        self._memo.keep(key, (owner, value))
+        return value
+
+    def clear(self) -> None:
+        """Forget every kept value."""
+        self._memo.clear()
+
+
+#: What is built from a kept lifted Function alone, by its identity and a tag (:class:`ObjectMemo`).
+FROM_LIFTED = ObjectMemo(64)
+
+
 def try_expand(fun: ca.Function) -> ca.Function:
     """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile)."""
     if fun.is_a("SXFunction"):

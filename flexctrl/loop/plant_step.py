@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.model import derived
-from flexctrl.sim.compile import compile_function
+from flexctrl.sim.compile import compile_for, compile_function
 from flexctrl.dynamics.parametric import parametric
 from flexctrl.dynamics.parametric import try_expand
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
@@ -89,7 +89,8 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
         # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
         # evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
-        return ca.Function(fun.name(), [x], [compile_function(fp, enabled=compile).function(x, ca.DM(constants))])
+        compiled = compile_for(fp, "itself", lambda: fp, enabled=compile)  # every model of the structure
+        return ca.Function(fun.name(), [x], [compiled.function(x, ca.DM(constants))])
 
     return derived(model, ("output_point", compile, energies), build)
 
@@ -102,7 +103,9 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
     at 38 us under a 10 ms LQR: 260 steps): ONE compiled RK4 step, chained by a CasADi
     ``mapaccum`` loop in the virtual machine, so one library per model serves every
     step count and step size (compiling ``amm:5``'s step takes about 13 s here, the
-    same as six unrolled steps).  Built once per model and step count (:func:`flexctrl.dynamics.model.derived`).
+    same as six unrolled steps).  Built once per model and step count (:func:`flexctrl.dynamics.model.derived`);
+    the compiled Function is kept with the lifted ``f`` (:func:`flexctrl.sim.compile.compile_for`), so a
+    later configuration of the model shape wraps it with its own constants without building it again.
     """
     return derived(model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile))
 
@@ -114,10 +117,12 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
         if constants.size == 0:  # f could not be rebuilt: one library per model
             compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
             return compiled.function, compiled.compiled
-        compiled = compile_function(plant_step_function(model, substeps, fp, constants.size), enabled=compile)
+        # kept with the lifted f: a later configuration of the model shape neither builds nor loads it again
+        compiled = compile_for(fp, ("advance", substeps),
+                               lambda: plant_step_function(model, substeps, fp, constants.size), enabled=compile)
         X = compiled.function(x, u, h, ca.DM(constants))
     else:
-        compiled = compile_function(_single_step(model, fp, constants.size), enabled=compile)
+        compiled = compile_for(fp, "rk4_step", lambda: _single_step(model, fp, constants.size), enabled=compile)
         # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
         c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
         X = compiled.function.mapaccum(substeps)(x, ca.repmat(u, 1, substeps), ca.repmat(h, 1, substeps), *([c] if constants.size else []))

@@ -37,6 +37,10 @@ caller names everything the construction depends on (a *recipe*: its inputs' ser
 forms and the source of the code that builds it), and the first build leaves a hard link
 ``<name>_r<key>.so`` to the library, ``key`` hashing the recipe with the flags, compiler,
 CasADi version and host as above.
+
+:func:`compile_for` keeps a compiled Function with the object it was built from (a lifted
+Function kept per model structure): the next model of that structure gets it without building
+it, serializing it for its key or loading the library again.
 """
 
 from __future__ import annotations
@@ -364,6 +368,25 @@ def _link(library: Path, link: Path) -> None:
     except OSError as exc:
         log.warning("could not link %s as %s (%s); the next process builds it again", library, link, exc)
         temporary.unlink(missing_ok=True)
+
+
+def compile_for(owner: Any, tag: Any, build: Callable[[], ca.Function], *, enabled: bool | None = None,
+                flags: Sequence[str] = DEFAULT_FLAGS) -> CompiledFunction:
+    """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function) and ``tag``.
+
+    For a Function built from ``owner`` alone (a plant step of the lifted ``f``, say): the
+    first model of a structure builds and compiles (or loads) it, later models of the
+    same structure get the kept result without building the Function, serializing it for
+    its cache key or loading the library again.  The settings that decide the result
+    (compiled or not, the cache folder, the flags) are part of the key, so switching
+    compilation off or pointing ``FLEXCTRL_CACHE`` elsewhere builds anew.
+    """
+    from flexctrl.dynamics.parametric import FROM_LIFTED
+
+    if enabled is None:
+        enabled = not compile_disabled_by_env()
+    settings = ("compiled", tag, bool(enabled), str(cache_directory()) if enabled else "", tuple(flags))
+    return FROM_LIFTED.get(owner, settings, lambda: compile_function(build(), enabled=enabled, flags=flags))
 
 
 def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]) -> CompiledFunction | str:
