@@ -5,6 +5,8 @@ reference's compiled forces and the dynamics Jacobian without building, serializ
 loading them again, and with the same values to the last bit as a build from scratch.
 """
 
+import gc
+import weakref
 from pathlib import Path
 
 import casadi as ca
@@ -17,7 +19,7 @@ from flexctrl.control.reference import path_functions
 from flexctrl.dynamics import jacobians
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import FROM_LIFTED, ObjectMemo
-from flexctrl.loop.plant_step import advance_function, output_map
+from flexctrl.loop.plant_step import UNROLL_LIMIT, advance_function, output_map
 
 ROOT = Path(__file__).resolve().parents[1]
 POSES = ([0.0, 0.0, 0.0], [0.0, 1.2, -0.7], [0.0, 1.57, 0.0])
@@ -104,6 +106,51 @@ def test_switching_compilation_off_or_moving_the_cache_builds_anew(arm, compiles
     assert any(path.name.startswith("advance_p") for path in (tmp_path / "elsewhere").iterdir())
 
 
+def test_each_step_count_gets_its_own_plant_step(arm):
+    # the tag holds the step count: a kept 3-step advance must not serve 5 steps, nor the mapaccum loop
+    FROM_LIFTED.clear()
+    counts = (3, 5, UNROLL_LIMIT + 1)
+    models = [build_model(arm, "amm:2", reference_q=q) for q in POSES]
+    x, u = _point(models[0])
+    kept = [np.array(advance_function(m, n)[0](x, u, 1e-4)) for m, n in zip(models, counts)]
+    FROM_LIFTED.clear()
+    fresh = [np.array(advance_function(build_model(arm, "amm:2", reference_q=q), n)[0](x, u, 1e-4))
+             for q, n in zip(POSES, counts)]
+    for n, a, b in zip(counts, kept, fresh):
+        assert a.shape == (models[0].n_x, n) and np.array_equal(a, b), n
+
+
+def test_a_failed_compilation_is_not_kept(arm, compiles, monkeypatch, tmp_path):
+    # the same compiler fails once (a full disk, a killed build): that model gets the virtual
+    # machine; the next model compiles instead of inheriting the fall-back
+    FROM_LIFTED.clear()
+    works = tmp_path / "works"
+    script = tmp_path / "flaky-cc"
+    script.write_text(f"#!/bin/sh\ncase \"$*\" in *--version*) exec {compile_module.find_compiler()} \"$@\";; esac\n"
+                      f"[ -f {works} ] && exec {compile_module.find_compiler()} \"$@\"\nexit 1\n")
+    script.chmod(0o755)
+    monkeypatch.setenv("FLEXCTRL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("CC", str(script))
+    with pytest.warns(UserWarning):
+        _, compiled = advance_function(build_model(arm, "amm:2", reference_q=POSES[0]), 3)
+    assert not compiled
+    works.touch()
+    _, compiled = advance_function(build_model(arm, "amm:2", reference_q=POSES[1]), 3)
+    assert compiled
+
+
+def test_another_compiler_builds_anew(arm, compiles, monkeypatch, tmp_path):
+    FROM_LIFTED.clear()
+    advance_function(build_model(arm, "amm:2", reference_q=POSES[0]), 3)
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "mycc").symlink_to(compile_module.find_compiler())
+    monkeypatch.setenv("CC", str(bin_dir / "mycc"))
+    del compiles[:]
+    advance_function(build_model(arm, "amm:2", reference_q=POSES[1]), 3)
+    assert any(name.startswith("advance_p") for name in compiles)
+
+
 def test_an_object_memo_holds_its_owner_and_tells_owners_apart():
     memo = ObjectMemo(2)
     a, b = ca.Function("a", [], []), ca.Function("b", [], [])
@@ -112,3 +159,17 @@ def test_an_object_memo_holds_its_owner_and_tells_owners_apart():
     assert memo.get(a, "other", lambda: 3) == 3
     assert memo.get(b, "t", lambda: 4) == 4  # the least recently used entry, (a, "t"), is forgotten
     assert memo.get(a, "t", lambda: 5) == 5
+
+
+def test_an_object_memo_keeps_its_owner_alive_so_its_id_cannot_pass_on():
+    class Owner:
+        pass
+
+    memo = ObjectMemo(4)
+    owner = Owner()
+    alive = weakref.ref(owner)
+    memo.get(owner, "t", lambda: "value")
+    del owner
+    gc.collect()
+    assert alive() is not None and memo.lookup(alive(), "t") == "value"
+    assert memo.lookup(Owner(), "t") is None  # another object, whatever its id

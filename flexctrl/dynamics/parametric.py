@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import bisect
 import hashlib
+import threading
 from collections import OrderedDict
 from typing import Any, Callable
 
@@ -33,7 +34,8 @@ class Memo:
 
     def __init__(self, size: int):
         self.size = size
-        self._built: OrderedDict[str, Any] = OrderedDict()
+        self._built: OrderedDict[Any, Any] = OrderedDict()
+        self._lock = threading.Lock()  # a Dask worker may run two runs in threads
 
     def get(self, key: str, build: Callable[[], Any]) -> tuple[Any, bool]:
         """``(value, reused)``: ``build()`` the first time ``key`` is asked for, the kept value after."""
@@ -46,21 +48,24 @@ class Memo:
 
     def lookup(self, key: str) -> Any:
         """The value kept for ``key`` (now the most recently used), or None."""
-        if key not in self._built:
-            return None
-        self._built.move_to_end(key)
-        return self._built[key]
+        with self._lock:
+            if key not in self._built:
+                return None
+            self._built.move_to_end(key)
+            return self._built[key]
 
     def keep(self, key: str, value: Any) -> None:
         """Keep ``value`` for ``key``, forgetting the least recently used beyond ``size``."""
-        self._built[key] = value
-        self._built.move_to_end(key)
-        while len(self._built) > self.size:
-            self._built.popitem(last=False)
+        with self._lock:
+            self._built[key] = value
+            self._built.move_to_end(key)
+            while len(self._built) > self.size:
+                self._built.popitem(last=False)
 
     def clear(self) -> None:
         """Forget every kept value."""
-        self._built.clear()
+        with self._lock:
+            self._built.clear()
 
 
 class ObjectMemo:
@@ -78,13 +83,20 @@ class ObjectMemo:
 
     def get(self, owner: Any, tag: Any, build: Callable[[], Any]) -> Any:
         """``build()`` the first time ``(owner, tag)`` is asked for, the kept value after."""
-        key = (id(owner), tag)
-        kept = self._memo.lookup(key)
-        if kept is not None and kept[0] is owner:
-            return kept[1]
-        value = build()
-        self._memo.keep(key, (owner, value))
+        value = self.lookup(owner, tag)
+        if value is None:
+            value = build()
+            self.keep(owner, tag, value)
         return value
+
+    def lookup(self, owner: Any, tag: Any) -> Any:
+        """The value kept for ``(owner, tag)``, or None."""
+        kept = self._memo.lookup((id(owner), tag))
+        return kept[1] if kept is not None and kept[0] is owner else None
+
+    def keep(self, owner: Any, tag: Any, value: Any) -> None:
+        """Keep ``value`` for ``(owner, tag)``, holding ``owner`` with it."""
+        self._memo.keep((id(owner), tag), (owner, value))
 
     def clear(self) -> None:
         """Forget every kept value."""
@@ -92,7 +104,7 @@ class ObjectMemo:
 
 
 #: What is built from a kept lifted Function alone, by its identity and a tag (:class:`ObjectMemo`).
-FROM_LIFTED = ObjectMemo(64)
+FROM_LIFTED = ObjectMemo(32)
 
 
 def try_expand(fun: ca.Function) -> ca.Function:

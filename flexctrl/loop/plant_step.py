@@ -122,7 +122,10 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
                                lambda: plant_step_function(model, substeps, fp, constants.size), enabled=compile)
         X = compiled.function(x, u, h, ca.DM(constants))
     else:
-        compiled = compile_for(fp, "rk4_step", lambda: _single_step(model, fp, constants.size), enabled=compile)
+        build = lambda: _single_step(model, fp, constants.size)  # noqa: E731
+        # without constants the step reads the model's own f: one library per model, not per lift
+        compiled = (compile_for(fp, "rk4_step", build, enabled=compile) if constants.size
+                    else compile_function(build(), enabled=compile))
         # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
         c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
         X = compiled.function.mapaccum(substeps)(x, ca.repmat(u, 1, substeps), ca.repmat(h, 1, substeps), *([c] if constants.size else []))

@@ -378,15 +378,24 @@ def compile_for(owner: Any, tag: Any, build: Callable[[], ca.Function], *, enabl
     first model of a structure builds and compiles (or loads) it, later models of the
     same structure get the kept result without building the Function, serializing it for
     its cache key or loading the library again.  The settings that decide the result
-    (compiled or not, the cache folder, the flags) are part of the key, so switching
-    compilation off or pointing ``FLEXCTRL_CACHE`` elsewhere builds anew.
+    (compiled or not, the cache folder, the compiler, the flags) are part of the key, so
+    switching compilation off, pointing ``FLEXCTRL_CACHE`` elsewhere or changing ``$CC``
+    builds anew.  A compilation that failed (the virtual machine's Function returned, with
+    a warning) is not kept: the next model tries again, as it would without this.
     """
     from flexctrl.dynamics.parametric import FROM_LIFTED
 
     if enabled is None:
         enabled = not compile_disabled_by_env()
-    settings = ("compiled", tag, bool(enabled), str(cache_directory()) if enabled else "", tuple(flags))
-    return FROM_LIFTED.get(owner, settings, lambda: compile_function(build(), enabled=enabled, flags=flags))
+    settings = ("compiled", tag, bool(enabled), str(cache_directory()) if enabled else "",
+                find_compiler() if enabled else "", tuple(flags))
+    kept = FROM_LIFTED.lookup(owner, settings)
+    if kept is not None:
+        return kept
+    result = compile_function(build(), enabled=enabled, flags=flags)
+    if result.compiled or not enabled:
+        FROM_LIFTED.keep(owner, settings, result)
+    return result
 
 
 def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]) -> CompiledFunction | str:
