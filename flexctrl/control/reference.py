@@ -75,8 +75,8 @@ def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function
     constants symbolic and compiled as ONE Function of all seven outputs, named by the
     sizes alone: every configuration and payload of one model shape shares one library.
     The compiled Function is kept with the lifted forces (:func:`flexctrl.sim.compile.compile_for`),
-    so a new configuration pays the lift alone, not the Jacobians, the cache key or the load.  The three Functions bind the model's
-    constants to it.  When the constants cannot be lifted or nothing compiles, the
+    so a new configuration pays the lift alone, not the Jacobians, the cache key or the load.
+    The three Functions bind the model's constants to it.  When the constants cannot be lifted or nothing compiles, the
     virtual machine's Functions are returned.  Compiled values differ from the
     virtual machine's in the last digits (fused multiply-adds, no constant folding).
     """

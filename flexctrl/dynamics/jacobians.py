@@ -8,8 +8,8 @@ constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its
 constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, one constant per
 use, so that coinciding values do not change the structure) and kept once per process for
 each lifted structure (with the kept lift itself, and by its serialized form), so every later
-model of that structure evaluates the kept Jacobian at its own constants.  The operations are the same ones in the same order
-(the lift keeps them; the constants are read from an input instead of the code), and
+model of that structure evaluates the kept Jacobian at its own constants.  The operations are
+the same ones in the same order (the lift keeps them; the constants are read from an input instead of the code), and
 the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
 model whose ``f`` does not lift (it calls other Functions, say) gets the per-model
 Jacobian.
