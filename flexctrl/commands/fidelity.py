@@ -86,9 +86,10 @@ def run(args: argparse.Namespace) -> int:
             check_auto(auto, args.controller)
             choice = choose_closed_loop_fidelity(pin_design(auto), tol, controller=args.controller, top=args.top,
                                                  reference=args.reference, safety=args.safety,
-                                                 walk=auto.plant.fidelity_walk)
+                                                 walk=auto.plant.fidelity_walk, checks=auto.plant.fidelity_checks)
         else:
-            choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety)
+            choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety,
+                                     checks=scene.fidelity_checks)
     except ToleranceUnreachable as exc:
         if args.json:
             print(json.dumps({"choice": None, "error": str(exc), **exc.evidence}, indent=2, default=_json_default))

@@ -404,7 +404,8 @@ def check_tolerance(tol: Any, *, source: str | None = None, key: str = "toleranc
 def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
                     rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
                     runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None,
-                    linear=None, factor: float = LINEAR_FACTOR, from_top: bool = False) -> FidelityChoice:
+                    linear=None, factor: float = LINEAR_FACTOR, from_top: bool = False,
+                    checks: str = "full") -> FidelityChoice:
     """Method steps 2 and 3, shared by arm and closed-loop scenes.
 
     With ``linear`` (the estimate-first walk, :func:`linear_candidate`), the walk starts
@@ -439,7 +440,18 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         lowest rung of the unbroken run of rungs from the top that meet it; ``top``
         failing is a measured :class:`ToleranceUnreachable`). The reference and its
         linear step check are the estimate walk's (``linear`` is still needed for them).
+    checks : {"full", "tolerance"}
+        ``full``: the walks from the top and the ladder's go down while the rung below
+        meets the tolerance (the choice is the lowest that does), and the reference's
+        convergence is checked (its step; the rung below it).  ``tolerance``: only the
+        runs that certify the tolerance: no rung below a rung that meets it is tried (the
+        choice may be higher than needed; the estimate-first walk's candidate is still the
+        lowest its linear estimate allows), no step check, and the distance from the rung
+        below the reference only when that rung was run anyway.  The evidence says which.
     """
+    if checks not in ("full", "tolerance"):
+        raise ValueError(f"checks {checks!r}: allowed 'full' or 'tolerance'")
+    full = checks == "full"
     ref_n = parse_fidelity(reference).count
     # (b) the walk, estimates from the (two) rungs above
     distances: dict[int, Any] = {}
@@ -460,12 +472,12 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         if linear is None:
             raise ValueError("from_top needs the linear runs for the reference's step check")
         n = top
-        while n - 1 >= low and estimate(n) <= tol and _buildable_estimate(estimate, n - 1) <= tol:
+        while full and n - 1 >= low and estimate(n) <= tol and _buildable_estimate(estimate, n - 1) <= tol:
             n -= 1
     elif linear is None:
         n = start
         if estimate(n) <= tol:
-            while n - 1 >= low and estimate(n - 1) <= tol:
+            while full and n - 1 >= low and estimate(n - 1) <= tol:
                 n -= 1
         else:
             while n < top and estimate(n) > tol:
@@ -494,7 +506,8 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     if not met:
         best = min(distances, key=lambda m: max(distances[m]))
         best_estimate = safety * max(distances[best])
-        evidence = {"method": _method(linear, from_top), "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)],
+        evidence = {"method": _method(linear, from_top), "checks": checks, "safety": safety,
+                    "ladder": [rung_name(m) for m in range(low, top + 1)],
                     "bandwidth_rule": rule, "candidates": [{**runs[m].facts(), **_estimates(m, distances, safety)}
                                                            for m in sorted(runs)],
                     "scene": name, "reference": None, **(extra or {}),
@@ -516,16 +529,18 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     if linear is None:
         ref_dt = reference_dt
         ref_run = run_reference(ref_dt)
-        half = run_reference(ref_dt / 2)
+        half = run_reference(ref_dt / 2) if full else ref_run
     else:  # the estimate-first walk: the reference model at its own step, its step error estimated linearly
         ref_dt, ref_run, half = finest.dt, finest, finest
     if ref_run.diverged_at is not None or half.diverged_at is not None:
         raise SimulationError(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
                               f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
                               "choice against")
-    below = run(ref_n - 1)
-    model_check = tip_distance(ref_run, below).max
-    if linear is None:
+    below = run(ref_n - 1) if full or ref_n - 1 in runs else None
+    model_check = 0.0 if below is None else tip_distance(ref_run, below).max
+    if not full:
+        step_check, convergence = 0.0, {"step_check": "not made (fidelity_checks = 'tolerance')"}
+    elif linear is None:
         step_check = tip_distance(half, ref_run).max
         convergence = {"step_halving_m": step_check, "half_step_run": half.facts()}
     else:
@@ -538,7 +553,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             linear_evidence["reference_exact"] = exact.facts()
         else:
             convergence["reference_exact"] = exact.facts()
-    convergence.update({"rung_below_m": model_check, "rung_below": rung_name(ref_n - 1)})
+    convergence.update({"rung_below_m": None if below is None else model_check, "rung_below": rung_name(ref_n - 1)})
     if max(step_check, model_check) > 0.5 * tol:
         warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m with "
                       f"{'half its step' if linear is None else 'no integrator error (linear estimate)'} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
@@ -553,7 +568,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         rungs.append({**item, **_estimates(m, distances, safety)})
 
     evidence = {
-        "method": _method(linear, from_top),
+        "method": _method(linear, from_top), "checks": checks,
         "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
         "reference": {**ref_run.facts(), "convergence": convergence,
                       "role": ("the reference model at omega_max * dt <= reference_omega_dt" if linear is None else

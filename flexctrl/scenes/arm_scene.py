@@ -36,6 +36,7 @@ def resolve_auto(scene: ArmScene, cache: SceneCache | None = None, **options: An
     if scene.fidelity.kind != "auto":
         return scene, None
     tol = check_tolerance(scene.tolerance, source=scene.source, key="tolerance")
+    options.setdefault("checks", scene.fidelity_checks)
     choice = choose_fidelity(scene, tol, cache=cache, **options)
     solver = dict(scene.solver) if choice.integrator == scene.integrator else {}
     chosen = dataclasses.replace(scene, fidelity=choice.choice, integrator=choice.integrator, dt=choice.dt, solver=solver)

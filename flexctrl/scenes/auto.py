@@ -30,13 +30,14 @@ from flexctrl.scenes.arm import scene_arm, simulate_arm_scene
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, closed_loop_tip_path
 from flexctrl.sim.rk4 import rk4_step
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import FIDELITY_CHECKS, Fidelity, parse_fidelity
 
 
 def scene_key(scene) -> str:
     """A canonical string of everything in an arm scene that changes its simulation (not its fidelity)."""
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "fidelity_walk", "name", "source", "fft_span", "fft_peaks"):
+    for name in ("fidelity", "tolerance_m", "fidelity_walk", "fidelity_checks", "name", "source", "fft_span",
+                 "fft_peaks"):
         settings.pop(name, None)
     path = Path(scene.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
@@ -109,6 +110,7 @@ def choose_fidelity(
     bandwidth_factor: float = 5.0,
     reference_omega_dt: float = 0.5,
     cache: SceneCache | None = None,
+    checks: str = "full",
 ) -> FidelityChoice:
     """The lowest rung of ``rigid, amm:1 .. amm:top`` estimated to keep the tip within ``tol`` (see module docstring).
 
@@ -132,6 +134,8 @@ def choose_fidelity(
         ``omega_max * dt`` of the reference's RK4 step (0 < value <= 2.5).
     cache : SceneCache, optional
         Where models, runs and the choice are kept (a fresh one when None).
+    checks : {"full", "tolerance"}
+        What is checked beyond the tolerance (:func:`~flexctrl.fidelity.ladder.walk_and_judge`).
 
     Returns
     -------
@@ -151,14 +155,22 @@ def choose_fidelity(
         raise SpecError(f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; allowed: a kind = \"arm\" scene",
                         source=getattr(scene, "source", None), key="kind")
     ref = check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
+    check_checks(checks, scene.source)
     cache = SceneCache() if cache is None else cache
     options = (tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
-               float(reference_omega_dt))
+               float(reference_omega_dt), checks)
     return cache.get("choices", (scene_key(scene), options), lambda: _choose(scene, cache, *options))
 
 
+def check_checks(checks, source) -> None:
+    """:class:`SpecError` unless ``checks`` is one of ``FIDELITY_CHECKS`` (the scene key ``fidelity_checks``)."""
+    if checks not in FIDELITY_CHECKS:
+        raise SpecError(f"value {checks!r} is not allowed; allowed: {', '.join(map(repr, FIDELITY_CHECKS))}",
+                        source=source, key="fidelity_checks")
+
+
 def _choose(scene, cache: SceneCache, tol: float, top: int, reference: str, safety: float, energy_fraction: float,
-            bandwidth_factor: float, reference_omega_dt: float) -> FidelityChoice:
+            bandwidth_factor: float, reference_omega_dt: float, checks: str) -> FidelityChoice:
     ref_n = parse_fidelity(reference).count
     low = required_modes(scene)
     if low > top:
@@ -187,7 +199,8 @@ def _choose(scene, cache: SceneCache, tol: float, top: int, reference: str, safe
     return walk_and_judge(
         name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
         run_rung=lambda m: simulate_rung(scene, rung_name(m), cache=cache),
-        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt, cache=cache), reference_dt=ref_dt)
+        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt, cache=cache), reference_dt=ref_dt,
+        checks=checks)
 
 
 def controller_digest(path: str | Path) -> str:
@@ -205,7 +218,8 @@ def closed_loop_key(scene, controller: str | Path | None = None, overrides: tupl
     model file's modification time, the controller file's path, sha256 and overrides.
     """
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "fidelity_walk", "name", "source", "fft_span", "fft_peaks", "controller"):
+    for name in ("fidelity", "tolerance_m", "fidelity_walk", "fidelity_checks", "name", "source", "fft_span",
+                 "fft_peaks", "controller"):
         settings.pop(name, None)
     path = Path(scene.plant.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
@@ -290,6 +304,7 @@ def choose_closed_loop_fidelity(
     reference_omega_dt: float = 0.5,
     cache: SceneCache | None = None,
     walk: str = "estimate",
+    checks: str = "full",
 ) -> FidelityChoice:
     """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a closed loop's tip within ``tol``.
 
@@ -339,6 +354,10 @@ def choose_closed_loop_fidelity(
         down while the rung below meets the tolerance (the reference and its linear step
         check as before).  ``ladder``: the nonlinear walk from the bandwidth rule's start, the
         reference at ``reference_omega_dt`` and half its step (issue 7's method).
+    checks : {"full", "tolerance"}
+        What is checked beyond the tolerance (:func:`~flexctrl.fidelity.ladder.walk_and_judge`):
+        ``tolerance`` makes only the runs that certify it (no rung below a rung that meets
+        it is tried, no step check of the reference).
 
     Returns
     -------
@@ -368,17 +387,18 @@ def choose_closed_loop_fidelity(
         raise SpecError(f"value {walk!r} is not allowed; allowed: {', '.join(map(repr, WALKS))}", source=scene.source,
                         key="fidelity_walk")
     ref = check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
+    check_checks(checks, scene.source)
     cache = SceneCache() if cache is None else cache
     overrides = tuple(overrides)
     options = (tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
-               float(reference_omega_dt), walk)
+               float(reference_omega_dt), walk, checks)
     key = (closed_loop_key(scene, controller, overrides), options)
     return cache.get("closed_choices", key, lambda: _choose_closed(scene, controller, overrides, cache, *options))
 
 
 def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCache, tol: float, top: int,
                    reference: str, safety: float, energy_fraction: float, bandwidth_factor: float,
-                   reference_omega_dt: float, walk: str) -> FidelityChoice:
+                   reference_omega_dt: float, walk: str, checks: str) -> FidelityChoice:
     started = time.perf_counter()
     plant = scene.plant
     low = required_modes(plant)
@@ -450,7 +470,7 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
             extra={**extra, "walk": walk, "linear_estimate_skipped": from_top,
                    "walk_taken": "from_top" if from_top else "linear_first" if linear is not None else "ladder"},
             linear=linear, factor=LINEAR_FACTOR,
-            from_top=from_top)
+            from_top=from_top, checks=checks)
         chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
     finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
         cache.drop(WHOLE_RUNS, keep=chosen)

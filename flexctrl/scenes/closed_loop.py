@@ -51,6 +51,7 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
     scene = pin_design(scene)
     tol = check_tolerance(scene.plant.tolerance, source=scene.source, key="tolerance")
     options.setdefault("walk", scene.plant.fidelity_walk)
+    options.setdefault("checks", scene.plant.fidelity_checks)
     choice = choose_closed_loop_fidelity(scene, tol, controller=controller, overrides=tuple(overrides), cache=cache,
                                          **options)
     plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=choice.dt)

@@ -14,6 +14,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
     fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate", "linear" or "ladder"
                                       # (flexctrl.scenes.auto chooses the model)
+    fidelity_checks = "full"          # or "tolerance": auto certifies the tolerance only (no rung below, no step check)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
     axial_stretch = true              # axially compliant assumed-modes links (default: the model file's)
@@ -46,7 +47,7 @@ from typing import Any, Literal
 import numpy as np
 
 from flexctrl.spec.arm import DAMPING_FORMS
-from flexctrl.spec.fidelity import FIDELITY_WALKS, Fidelity, parse_fidelity
+from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 
 MODES = ("frozen", "scheduled")
@@ -130,6 +131,8 @@ class ArmScene:
     #: How ``fidelity = "auto"`` walks the ladder for a closed loop: one of ``FIDELITY_WALKS``
     #: (:mod:`flexctrl.spec.fidelity`): ``estimate``, ``linear`` or ``ladder``.
     fidelity_walk: str = "estimate"
+    #: What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full`` or ``tolerance``.
+    fidelity_checks: str = "full"
     axial_shortening: bool | None = None
     axial_stretch: bool | None = None
 
@@ -147,7 +150,7 @@ class ArmScene:
                       "t_accel": self.input.t_accel, "t_decel": self.input.t_decel, "t_start": self.input.t_start},
             "integrator": self.integrator, "dt": self.dt, "duration": self.duration, "solver": dict(self.solver),
             "fft_span": self.fft_span, "fft_peaks": self.fft_peaks, "tolerance_m": self.tolerance,
-            "fidelity_walk": self.fidelity_walk,
+            "fidelity_walk": self.fidelity_walk, "fidelity_checks": self.fidelity_checks,
         }
 
 
@@ -262,6 +265,7 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
         fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
         fidelity_walk=r.string("fidelity_walk", "estimate", choices=FIDELITY_WALKS),
+        fidelity_checks=r.string("fidelity_checks", "full", choices=FIDELITY_CHECKS),
         axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
     )

@@ -20,6 +20,11 @@ KINDS = ("rigid", "amm", "fem", "auto")
 #: Python), ``linear`` (linear estimates first for every controller: the estimate walk before it had the
 #: walk from the top) and ``ladder`` (issue 7's nonlinear walk with a small-step reference).
 FIDELITY_WALKS = ("estimate", "linear", "ladder")
+#: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``; flexctrl.fidelity.ladder.walk_and_judge):
+#: ``full`` (the rung below a rung that meets the tolerance is tried, so the choice is the lowest that meets it; the
+#: reference's step is checked) or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the rungs
+#: its estimate needs and the reference; the choice may be higher than needed, the reference's step is not checked).
+FIDELITY_CHECKS = ("full", "tolerance")
 _LIMITS = {"amm": (0, 6), "fem": (1, 64)}
 SPELLINGS = "'rigid', 'amm:N' (N = 0..6 modes per link), 'fem:N' (N = 1..64 elements per link) or 'auto'"
 

@@ -1,0 +1,149 @@
+"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance (issue 14).
+
+The walk itself is checked on synthetic runs whose tip paths converge geometrically
+with the rung (every walk: from the top, the ladder's from a start, the estimate-first),
+counting which rungs and references each walk runs; one closed loop (the small case of
+:mod:`tests.test_fidelity_estimate`, MPC from the top) checks the scene key end to end
+against the full checks and against distances recomputed from its runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexctrl.errors import SpecError
+from flexctrl.fidelity.ladder import RunRecord, tip_distance, walk_and_judge
+from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes.cache import SceneCache
+from flexctrl.scenes.closed_loop import resolve_auto
+from flexctrl.scenes.loop_setup import pin_design
+from flexctrl.spec.fidelity import FIDELITY_CHECKS
+from flexctrl.spec.scene import load_scene
+
+TIME = np.linspace(0.0, 1.0, 101)
+
+
+def _record(m: int, *, dt: float = 1e-3, linear: str = "") -> RunRecord:
+    """Rung ``m`` (0 = rigid) of a ladder converging as ``2^-m`` mm onto the reference's path (``m = 4``)."""
+    tip = np.column_stack([np.cos(TIME), np.sin(TIME)])
+    tip[:, 0] += 1e-3 * 2.0 ** -m * np.sin(7 * TIME) * (m < 4)
+    return RunRecord(fidelity=f"amm:{m}", integrator=linear or "rk4", dt=dt, omega_max=1.0, wall_time_s=0.1,
+                     build_time_s=0.0, time=TIME, tip=tip)
+
+
+def _walk(checks: str, **kind):
+    """``walk_and_judge`` on the synthetic ladder (top amm:3, reference amm:4, tolerance 0.3 mm), and what it ran."""
+    made: list = []
+
+    def run_rung(m):
+        made.append(m)
+        return _record(m)
+
+    def run_reference(dt):
+        made.append(("reference", dt))
+        return _record(4, dt=dt)
+
+    choice = walk_and_judge(name="synthetic", tol=3e-4, low=0, start=kind.pop("start", 3), top=3, reference="amm:4",
+                            safety=2.0, rule={}, run_rung=run_rung, run_reference=run_reference, reference_dt=1e-4,
+                            checks=checks, **kind)
+    return choice, made
+
+
+def _linear(made: list):
+    def linear_rung(m):
+        made.append(("linear", m))
+        return _record(m, linear="linear-rk4")
+
+    def linear_exact():
+        made.append(("linear", "exact"))
+        return _record(4, linear="linear-exact")
+
+    return linear_rung, linear_exact
+
+
+def test_from_the_top_tolerance_stops_at_the_top_and_makes_no_step_check():
+    # estimates 2 x the distance to the rungs above: amm:3 0.25 mm, amm:2 0.75 mm (> 0.3 mm)
+    made: list = []
+    full, full_made = _walk("full", linear=_linear(made), from_top=True)
+    assert str(full.choice) == "amm:3" and ("linear", "exact") in made  # full: amm:2 tried, the step checked
+    assert sorted(m for m in full_made if isinstance(m, int)) == [2, 3, 4]
+    made.clear()
+    only, only_made = _walk("tolerance", linear=_linear(made), from_top=True)
+    assert str(only.choice) == "amm:3" and sorted(only_made) == [3, 4] and made == []
+    assert only.estimated_error == full.estimated_error == pytest.approx(2 * 1e-3 * 2.0 ** -3, rel=1e-2)
+    assert only.evidence["checks"] == "tolerance" and full.evidence["checks"] == "full"
+    convergence = only.evidence["reference"]["convergence"]
+    assert "step_error_linear_m" not in convergence and "not made" in convergence["step_check"]
+    assert convergence["rung_below_m"] == tip_distance(_record(4), _record(3)).max  # amm:3 was run anyway
+
+
+def test_tolerance_keeps_a_higher_rung_where_full_finds_a_lower_one():
+    # with 1 mm every rung from amm:1 up meets: full walks down to it; tolerance keeps the top it started from
+    made: list = []
+    kw = dict(tol=1e-3, low=0, top=3, reference="amm:4", safety=2.0, rule={}, reference_dt=1e-4, name="synthetic",
+              run_rung=lambda m: (made.append(m), _record(m))[1], run_reference=lambda dt: _record(4, dt=dt))
+    full = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True)
+    made.clear()
+    only = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True, checks="tolerance")
+    assert str(full.choice) == "amm:1" and str(only.choice) == "amm:3" and sorted(made) == [3, 4]
+    assert only.estimated_error <= 1e-3 and only.reference_error <= only.estimated_error
+
+
+def test_ladder_walk_tolerance_makes_no_half_step_reference_and_no_walk_down():
+    full, full_made = _walk("full", start=3)
+    only, only_made = _walk("tolerance", start=3)
+    assert ("reference", 5e-5) in full_made and [m for m in only_made if isinstance(m, tuple)] == [("reference", 1e-4)]
+    assert 2 in full_made and 2 not in only_made
+    assert "step_halving_m" in full.evidence["reference"]["convergence"]
+    assert "step_halving_m" not in only.evidence["reference"]["convergence"]
+    # from a start below the choice the walk goes up in both: the estimates decide, not the checks
+    up, up_made = _walk("tolerance", start=1)
+    assert str(up.choice) == "amm:3" and {1, 2, 3, 4} <= set(up_made)
+
+
+def test_estimate_first_walk_keeps_its_candidate_and_drops_only_the_step_check():
+    made: list = []
+    full, _ = _walk("full", linear=_linear(made))
+    full_linear = list(made)
+    made.clear()
+    only, _ = _walk("tolerance", linear=_linear(made))
+    assert str(only.choice) == str(full.choice) and only.estimated_error == full.estimated_error
+    # the full walk's last two linear runs are its step check: the exact loop and the reference's at its step
+    assert full_linear[-2:] == [("linear", "exact"), ("linear", 4)] and made == full_linear[:-2]
+
+
+def test_a_bad_value_is_refused_naming_the_key_and_the_values_allowed():
+    with pytest.raises(SpecError, match="fidelity_checks") as bad:
+        load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity_checks='some'"])
+    assert all(repr(value) in str(bad.value) for value in FIDELITY_CHECKS) and "'some'" in str(bad.value)
+    scene = pin_design(load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity='auto'", "tolerance=1e-2"]))
+    with pytest.raises(SpecError, match="fidelity_checks"):
+        auto_fidelity.choose_closed_loop_fidelity(scene, 1e-2, checks="none")
+    with pytest.raises(ValueError, match="checks"):
+        _walk("none")
+
+
+def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_runs_are_made():
+    short = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]", "fidelity='auto'", "tolerance=1e-2",
+             "controller_fidelity='amm:2'"]
+    mpc, options = "controllers/mpc.toml", {"top": 3, "reference": "amm:4"}
+    full_cache, cache = SceneCache(), SceneCache()
+    _, full = resolve_auto(pin_design(load_scene("studies/scenes/move_joint1_30deg.toml", short)), mpc,
+                           cache=full_cache, **options)
+    scene = pin_design(load_scene("studies/scenes/move_joint1_30deg.toml", [*short, "fidelity_checks='tolerance'"]))
+    _, only = resolve_auto(scene, mpc, cache=cache, **options)
+    assert only.evidence["checks"] == "tolerance" and full.evidence["checks"] == "full"
+    assert str(full.choice) == "amm:2" and str(only.choice) == "amm:3"  # full finds the lower rung that also meets
+    assert cache.stats()["closed_runs"]["misses"] == 2 and "linear_runs" not in cache.stats()
+    assert full_cache.stats()["closed_runs"]["misses"] == 4 and full_cache.stats()["linear_runs"]["misses"] == 1
+    # the choices are kept apart by what they check; the runs are shared (no new run)
+    _, again = resolve_auto(pin_design(load_scene("studies/scenes/move_joint1_30deg.toml", short)), mpc, cache=cache,
+                            **options)
+    assert str(again.choice) == "amm:2" and again.estimated_error == full.estimated_error
+    assert cache.stats()["closed_runs"]["misses"] == 4  # amm:1 and amm:2 added for the full walk
+    # the certificate recomputed from the full walk's runs (the same runs, to the last digit)
+    ref = auto_fidelity.simulate_closed_rung(scene, "amm:4", controller=mpc, cache=full_cache)
+    at3 = auto_fidelity.simulate_closed_rung(scene, "amm:3", controller=mpc, cache=full_cache)
+    assert only.estimated_error == 2.0 * tip_distance(ref, at3).max <= 1e-2
+    assert only.reference_error == tip_distance(ref, at3).max
