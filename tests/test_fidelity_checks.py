@@ -147,3 +147,18 @@ def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_run
     at3 = auto_fidelity.simulate_closed_rung(scene, "amm:3", controller=mpc, cache=full_cache)
     assert only.estimated_error == 2.0 * tip_distance(ref, at3).max <= 1e-2
     assert only.reference_error == tip_distance(ref, at3).max
+
+
+def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it():
+    # reference amm:6: a choice of amm:2 is estimated from amm:3 and amm:4, so the rung below (amm:5) is no run of it
+    made: list = []
+    kw = dict(tol=1e-3, low=0, start=2, top=3, reference="amm:6", safety=2.0, rule={}, reference_dt=1e-4,
+              name="synthetic", run_rung=lambda m: (made.append(m), _record(m))[1],
+              run_reference=lambda dt: _record(4, dt=dt))
+    full = walk_and_judge(**kw)
+    assert str(full.choice) == "amm:1" and 5 in made
+    assert full.evidence["reference"]["convergence"]["rung_below_m"] == 0.0  # amm:5 follows the reference's path
+    made.clear()
+    only = walk_and_judge(**kw, checks="tolerance")
+    assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4, 6]
+    assert only.evidence["reference"]["convergence"]["rung_below_m"] is None
