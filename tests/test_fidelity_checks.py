@@ -9,12 +9,17 @@ against the full checks and against distances recomputed from its runs.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from flexctrl.cli import main
+from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
-from flexctrl.fidelity.ladder import RunRecord, tip_distance, walk_and_judge
+from flexctrl.fidelity.ladder import RunRecord, ToleranceUnreachable, tip_distance, walk_and_judge
 from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes.arm_scene import resolve_auto as resolve_arm_auto
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.closed_loop import resolve_auto
 from flexctrl.scenes.loop_setup import pin_design
@@ -45,7 +50,7 @@ def _walk(checks: str, **kind):
         return _record(4, dt=dt)
 
     choice = walk_and_judge(name="synthetic", tol=3e-4, low=0, start=kind.pop("start", 3), top=3, reference="amm:4",
-                            safety=2.0, rule={}, run_rung=run_rung, run_reference=run_reference, reference_dt=1e-4,
+                            safety=2.0, rule={"excitation_bandwidth_hz": None, "start": "amm:3"}, run_rung=run_rung, run_reference=run_reference, reference_dt=1e-4,
                             checks=checks, **kind)
     return choice, made
 
@@ -160,5 +165,62 @@ def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it()
     assert full.evidence["reference"]["convergence"]["rung_below_m"] == 0.0  # amm:5 follows the reference's path
     made.clear()
     only = walk_and_judge(**kw, checks="tolerance")
-    assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4, 6]
+    # neither the rung below the reference nor the finest model at its own step (the ladder walk's cost evidence)
+    assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4]
     assert only.evidence["reference"]["convergence"]["rung_below_m"] is None
+    assert only.evidence["cost_ratio_vs_finest"] is None and full.evidence["cost_ratio_vs_finest"] == 1.0
+
+
+@pytest.mark.parametrize("kind", [{"start": 3}, {"from_top": True}, {}], ids=["ladder", "from_top", "estimate"])
+def test_the_table_says_which_checks_were_not_made(kind):
+    linear = {} if kind.get("start") else {"linear": _linear([])}
+    only, _ = _walk("tolerance", **kind, **linear)
+    full, _ = _walk("full", **kind, **linear)
+    text = format_table(only.to_dict())
+    assert "step check not made (fidelity_checks = 'tolerance')" in text and f"choice {only.choice}" in text
+    assert "not made" not in format_table(full.to_dict()) and "not run" not in format_table(full.to_dict())
+
+
+def test_in_tolerance_mode_a_convergence_warning_names_only_the_check_made():
+    # amm:3 is 0.125 mm from the reference amm:4, above half of a 0.2 mm tolerance: the reference may not be converged
+    kw = dict(tol=2e-4, low=0, start=3, top=3, reference="amm:4", safety=1.0, rule={}, reference_dt=1e-4,
+              name="synthetic", run_rung=_record, run_reference=lambda dt: _record(4, dt=dt))
+    with pytest.warns(UserWarning, match="moves by .* with half its step and differs by"):
+        walk_and_judge(**kw)
+    with pytest.warns(UserWarning, match=r"\(rk4, dt = 0.0001 s\) differs by 0.000125 m from amm:3") as caught:
+        walk_and_judge(**kw, checks="tolerance")
+    assert not any("moves by" in str(w.message) for w in caught)
+
+
+def test_a_predicted_failure_records_the_checks_asked_for():
+    def far(m):
+        return _record(m, linear="linear-rk4") if m < 4 else _record(4, linear="linear-rk4")
+
+    with pytest.raises(ToleranceUnreachable) as failed:
+        walk_and_judge(name="synthetic", tol=1e-6, low=0, start=3, top=3, reference="amm:4", safety=2.0, rule={},
+                       run_rung=_record, run_reference=lambda dt: _record(4, dt=dt), reference_dt=1e-4,
+                       linear=(far, lambda: _record(4)), checks="tolerance")
+    assert failed.value.evidence["predicted"] and failed.value.evidence["checks"] == "tolerance"
+
+
+def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
+    # the slow light move of tests/test_auto_fidelity.py: the ladder walk, rungs up to amm:2 against amm:3
+    argv = ["fidelity", "studies/scenes/slow_move_light.toml", "--tol", "1e-3", "--set", "duration=1.0", "--top", "2",
+            "--reference", "amm:3"]
+    assert main([*argv, "--json"]) == 0
+    full = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--set", "fidelity_checks='tolerance'", "--json"]) == 0
+    only = json.loads(capsys.readouterr().out)
+    assert full["checks"] == "full" and only["checks"] == "tolerance"
+    assert "step_halving_m" in full["reference"]["convergence"] and "step_check" in only["reference"]["convergence"]
+    assert len(only["candidates"]) < len(full["candidates"])  # full walks down to the lowest rung that meets
+    assert main([*argv, "--set", "fidelity_checks='tolerance'"]) == 0
+    assert "step check not made" in capsys.readouterr().out
+    # the scene's own resolution (kind = "arm"), with the choices of the two modes kept apart in one cache
+    cache = SceneCache()
+    scenes = [load_scene("studies/scenes/slow_move_light.toml", ["duration=1.0", "fidelity='auto'", "tolerance=1e-3",
+                                                                 *extra]) for extra in ([], ["fidelity_checks='tolerance'"])]
+    _, by_full = resolve_arm_auto(scenes[0], cache=cache, top=2, reference="amm:3")
+    _, by_only = resolve_arm_auto(scenes[1], cache=cache, top=2, reference="amm:3")
+    assert by_full.evidence["checks"] == "full" and by_only.evidence["checks"] == "tolerance"
+    assert str(by_full.choice) == full["choice"] and str(by_only.choice) == only["choice"]

@@ -102,6 +102,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _step_check(conv: dict) -> str:
+    """The reference's step check, as made (or "not made", with ``fidelity_checks = "tolerance"``)."""
+    if "step_halving_m" in conv:
+        return f"halving its step moves the tip {conv['step_halving_m']:.2e} m; "
+    if "step_error_linear_m" in conv:
+        return f"its step error (linear estimate) {conv['step_error_linear_m']:.2e} m; "
+    return f"step check {conv['step_check']}; "
+
+
+def _rung_below(conv: dict) -> str:
+    """The reference's distance from the rung below it (not run with ``fidelity_checks = "tolerance"``)."""
+    if conv["rung_below_m"] is None:
+        return f"{conv['rung_below']} not run; "
+    return f"{conv['rung_below']} differs by {conv['rung_below_m']:.2e} m; "
+
+
 def format_table(data: dict) -> str:
     """A readable report of :meth:`FidelityChoice.to_dict` output."""
     rule = data["bandwidth_rule"]
@@ -114,10 +130,7 @@ def format_table(data: dict) -> str:
          f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}")
         if bw is not None else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
         (f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): " +
-         (f"halving its step moves the tip {conv['step_halving_m']:.2e} m; " if "step_halving_m" in conv else
-          f"its step error (linear estimate) {conv['step_error_linear_m']:.2e} m; ") +
-         f"{conv['rung_below']} differs by "
-         f"{conv['rung_below_m']:.2e} m; integration {ref['wall_time_s']:.3g} s"),
+         _step_check(conv) + _rung_below(conv) + f"integration {ref['wall_time_s']:.3g} s"),
         "",
         f"{'rung':>7} {'dt (s)':>9} {'wall (s)':>9} {'to next (m)':>12} {'estimate (m)':>12} {'vs ref (m)':>11} {'cost':>8}",
     ]

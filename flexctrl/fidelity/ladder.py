@@ -75,7 +75,7 @@ import numpy as np
 
 from flexctrl.errors import FlexctrlError, SimulationError, SpecError
 from flexctrl.sim.tip_error import TipError, tip_error
-from flexctrl.spec.fidelity import FIDELITY_WALKS, parse_fidelity
+from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, parse_fidelity
 
 
 
@@ -446,11 +446,12 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         convergence is checked (its step; the rung below it).  ``tolerance``: only the
         runs that certify the tolerance: no rung below a rung that meets it is tried (the
         choice may be higher than needed; the estimate-first walk's candidate is still the
-        lowest its linear estimate allows), no step check, and the distance from the rung
-        below the reference only when that rung was run anyway.  The evidence says which.
+        lowest its linear estimate allows), no step check, the distance from the rung below
+        the reference and the ladder walk's finest run at its own step (its cost ratio) only
+        when run anyway.  The evidence says which.
     """
-    if checks not in ("full", "tolerance"):
-        raise ValueError(f"checks {checks!r}: allowed 'full' or 'tolerance'")
+    if checks not in FIDELITY_CHECKS:
+        raise ValueError(f"checks {checks!r}: allowed {' or '.join(map(repr, FIDELITY_CHECKS))}")
     full = checks == "full"
     ref_n = parse_fidelity(reference).count
     # (b) the walk, estimates from the (two) rungs above
@@ -494,7 +495,7 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
                 f"{factor:g} x the tolerance (the bound assumed on its error), so no nonlinear run was made; allowed: a "
                 f"tolerance >= {best.get('estimated_error_m', math.inf) / factor:.3g} m, a higher top rung, or "
                 "fidelity_walk = 'ladder'",
-                {"method": METHOD_ESTIMATE, "safety": safety, "scene": name, "reference": None, "candidates": [],
+                {"method": METHOD_ESTIMATE, "checks": checks, "safety": safety, "scene": name, "reference": None, "candidates": [],
                  "bandwidth_rule": rule, **extra, "predicted": True,
                  "best": {"rung": best["fidelity"], "estimated_error_m": best.get("estimated_error_m"),
                           "from": "linear estimate"}})
@@ -525,7 +526,9 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
 
     # (c) the reference and its convergence
-    finest = run(ref_n)  # the reference model as a user would run it (its own step): the "always finest" cost
+    # the reference model as a user would run it (its own step): the "always finest" cost; in the ladder walk only
+    # evidence (its cost ratio), so not run for it with checks = "tolerance"
+    finest = run(ref_n) if full or linear is not None or ref_n in runs else None
     if linear is None:
         ref_dt = reference_dt
         ref_run = run_reference(ref_dt)
@@ -555,9 +558,11 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             convergence["reference_exact"] = exact.facts()
     convergence.update({"rung_below_m": None if below is None else model_check, "rung_below": rung_name(ref_n - 1)})
     if max(step_check, model_check) > 0.5 * tol:
-        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) moves by {step_check:.3g} m with "
-                      f"{'half its step' if linear is None else 'no integrator error (linear estimate)'} and differs by {model_check:.3g} m from {rung_name(ref_n - 1)}: above half the tolerance "
-                      f"{tol:.3g} m, so it may not be converged enough to judge the choice", stacklevel=3)
+        moves = (f"moves by {step_check:.3g} m with {'half its step' if linear is None else 'no integrator error (linear estimate)'}"
+                 " and " if full else "")
+        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) {moves}differs by {model_check:.3g} m from "
+                      f"{rung_name(ref_n - 1)}: above half the tolerance {tol:.3g} m, so it may not be converged enough to "
+                      "judge the choice", stacklevel=3)
 
     rungs = []
     for m in sorted(runs):
@@ -577,7 +582,8 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     }
     chosen = run(n)
     err = tip_distance(ref_run, chosen)
-    evidence["cost_ratio_vs_finest"] = chosen.wall_time_s / finest.wall_time_s if finest.wall_time_s > 0 else math.inf
+    evidence["cost_ratio_vs_finest"] = (None if finest is None else
+                                        chosen.wall_time_s / finest.wall_time_s if finest.wall_time_s > 0 else math.inf)
     evidence["finest"] = rung_name(ref_n)
     return FidelityChoice(
         choice=parse_fidelity(rung_name(n)), tolerance=tol, estimated_error=estimate(n), reference_error=err.max,
