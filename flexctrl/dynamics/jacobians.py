@@ -13,6 +13,16 @@ the same ones in the same order (the lift keeps them; the constants are read fro
 the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
 model whose ``f`` does not lift (it calls other Functions, say) gets the per-model
 Jacobian.
+
+The kept Jacobian is built on an SX graph (``graph="sx"``, the default) when the lift is an
+SX Function, as it is for every assumed-modes model: CasADi then differentiates the
+expression itself instead of an MX call of it, which builds 3-4x faster (three-link arm,
+one process: ``amm:5`` 0.18 s against 0.58 s, ``amm:4`` 0.10 against 0.45 s; ``amm:1..5``
+together 0.35 against 1.28 s) and gave the same bits on ``amm:1..5`` at three poses and
+fifteen random states each.  On the rigid model two of its entries moved by 3e-17 (the two
+graphs order a few operations differently), so ``tests/test_jacobians_shared.py`` holds the
+bits for the assumed-modes rungs only.  ``graph="mx"`` keeps the former construction
+(measured side by side: ``docs/auto_fidelity.md``, "The Jacobians' graph").
 """
 
 from __future__ import annotations
@@ -28,7 +38,8 @@ SHARED = Memo(8)
 
 
 def jacobian_function(model, *, value: bool = False, inputs: bool = False,
-                      outputs: ca.Function | None = None, shared: bool = False) -> ca.Function:
+                      outputs: ca.Function | None = None, shared: bool = False,
+                      graph: str = "sx") -> ca.Function:
     """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
 
     The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`, with
@@ -50,6 +61,9 @@ def jacobian_function(model, *, value: bool = False, inputs: bool = False,
     shared
         Take ``f``'s part from the Jacobian kept for the model's lifted structure (see
         the module docstring); the values are the same.
+    graph
+        ``"sx"``: the kept Jacobian of an SX lift is built on an SX graph (faster to build);
+        ``"mx"``: on an MX call of the lift, as before (module docstring).  Only with ``shared``.
 
     Returns
     -------
@@ -58,7 +72,9 @@ def jacobian_function(model, *, value: bool = False, inputs: bool = False,
     """
     x = ca.MX.sym("x", model.n_x)
     u = ca.MX.sym("u", model.n_u)
-    dynamics = _shared_dynamics(model, value, inputs) if shared else None
+    if graph not in ("sx", "mx"):
+        raise ValueError(f"jacobian_function: graph = {graph!r}; allowed: 'sx', 'mx'")
+    dynamics = _shared_dynamics(model, value, inputs, graph) if shared else None
     if dynamics is not None:
         fp, constants = dynamics
         outs = list(fp(x, u, ca.DM(constants)))
@@ -78,7 +94,7 @@ def _dynamics_jacobians(f: ca.Function, x, u, value: bool, inputs: bool, *extra)
     return [xdot] * value + [ca.jacobian(xdot, x)] + [ca.jacobian(xdot, u)] * inputs
 
 
-def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, object] | None:
+def _shared_dynamics(model, value: bool, inputs: bool, graph: str = "sx") -> tuple[ca.Function, object] | None:
     """``(J(x, u, c), c)``: the kept Jacobian Function of the model's lifted ``f`` and its constants, or None."""
     # per use: a reduced model's constants coincide by value at some configurations, and a lift
     # per node would then give each configuration a structure (and a Jacobian) of its own
@@ -86,16 +102,18 @@ def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, obj
     if constants.size == 0:
         return None
 
+    symbol = ca.SX if graph == "sx" and lifted.is_a("SXFunction") else ca.MX
+
     def build() -> ca.Function:
-        x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
-        c = ca.MX.sym("c", constants.size)
+        x, u = symbol.sym("x", model.n_x), symbol.sym("u", model.n_u)
+        c = symbol.sym("c", constants.size)
         return ca.Function("jacobians_lifted", [x, u, c], _dynamics_jacobians(lifted, x, u, value, inputs, c))
 
     def by_content() -> ca.Function:  # a lift made again (its kept object forgotten) finds it by its serialized form
-        return SHARED.get(content_key(lifted, value, inputs), build)[0]
+        return SHARED.get(content_key(lifted, value, inputs) + f"|graph={symbol.__name__}", build)[0]
 
     # the lift kept for the structure is the same object for every model of it: no serializing per model
-    return FROM_LIFTED.get(lifted, ("jacobians", value, inputs), by_content), constants
+    return FROM_LIFTED.get(lifted, ("jacobians", value, inputs, symbol.__name__), by_content), constants
 
 
 def content_key(lifted: ca.Function, value: bool, inputs: bool) -> str:
