@@ -4,7 +4,8 @@ Each round starts one fresh Python process per graph (alternated, so both see th
 machine); each builds the three-link arm's ``rigid`` and ``amm:1..5`` models at one pose
 and times the first ``jacobian_function(..., shared=True)`` of each (the build a process
 pays once per structure), then evaluates it at three random states.  Printed: the median
-build time per rung and graph, their ratio, and whether the two graphs gave the same bits.
+build time per rung and graph, their ratio, whether the two graphs gave the same bits and the
+largest difference between their values.
 
     .venv/bin/python docs/bench_jacobians.py [ROUNDS]
 """
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import json
 import statistics
+
+import numpy as np
 import subprocess
 import sys
 from pathlib import Path
@@ -52,16 +55,19 @@ def one(graph: str) -> dict:
 def main(rounds: int = 3) -> None:
     times = {graph: {rung: [] for rung in RUNGS} for graph in ("sx", "mx")}
     same = {rung: True for rung in RUNGS}
+    largest = {rung: 0.0 for rung in RUNGS}
     for _ in range(rounds):
         got = {graph: one(graph) for graph in ("sx", "mx")}
         for rung in RUNGS:
             for graph in ("sx", "mx"):
                 times[graph][rung].append(got[graph][rung]["build_s"])
             same[rung] &= got["sx"][rung]["values"] == got["mx"][rung]["values"]
-    print(f"{'rung':<7} {'sx build (s)':>13} {'mx build (s)':>13} {'mx / sx':>8}  same bits")
+            for sx, mx in zip(got["sx"][rung]["values"], got["mx"][rung]["values"]):
+                largest[rung] = max([largest[rung]] + [float(np.max(np.abs(np.subtract(a, b)))) for a, b in zip(sx, mx)])
+    print(f"{'rung':<7} {'sx build (s)':>13} {'mx build (s)':>13} {'mx / sx':>8}  same bits  largest difference")
     for rung in RUNGS:
         sx, mx = statistics.median(times["sx"][rung]), statistics.median(times["mx"][rung])
-        print(f"{rung:<7} {sx:13.3f} {mx:13.3f} {mx / sx:8.2f}  {same[rung]}")
+        print(f"{rung:<7} {sx:13.3f} {mx:13.3f} {mx / sx:8.2f}  {str(same[rung]):<9}  {largest[rung]:.1e}")
     total_sx = sum(statistics.median(v) for v in times["sx"].values())
     total_mx = sum(statistics.median(v) for v in times["mx"].values())
     print(f"{'all':<7} {total_sx:13.3f} {total_mx:13.3f} {total_mx / total_sx:8.2f}  ({rounds} rounds, medians)")

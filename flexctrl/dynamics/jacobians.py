@@ -16,13 +16,13 @@ Jacobian.
 
 The kept Jacobian is built on an SX graph (``graph="sx"``, the default) when the lift is an
 SX Function, as it is for every assumed-modes model: CasADi then differentiates the
-expression itself instead of an MX call of it, which builds 3-4x faster (three-link arm,
-one process: ``amm:5`` 0.18 s against 0.58 s, ``amm:4`` 0.10 against 0.45 s; ``amm:1..5``
-together 0.35 against 1.28 s) and gave the same bits on ``amm:1..5`` at three poses and
-fifteen random states each.  On the rigid model two of its entries moved by 3e-17 (the two
-graphs order a few operations differently), so ``tests/test_jacobians_shared.py`` holds the
-bits for the assumed-modes rungs only.  ``graph="mx"`` keeps the former construction
-(measured side by side: ``docs/auto_fidelity.md``, "The Jacobians' graph").
+expression itself instead of an MX call of it.  ``.venv/bin/python docs/bench_jacobians.py 3``
+(fresh processes, the lift included) measured ``amm:5`` 0.33 s against 0.67 s and the rigid
+model to ``amm:5`` together 0.74 s against 1.42 s, with the same bits on ``amm:1..5``; on
+the rigid model some entries differ by up to 2.8e-17 (the two graphs order a few operations
+differently), so ``tests/test_jacobians_shared.py`` holds the bits on assumed-modes rungs
+only.  ``graph="mx"`` keeps the former construction (``docs/auto_fidelity.md``, "The
+Jacobians' graph").
 """
 
 from __future__ import annotations
