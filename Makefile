@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test figures clean
+.PHONY: demo test lint format figures clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,11 +25,23 @@ demo: $(STAMP)
 # warm compile cache, one after the other: 8:02 min, 788 s of CPU, against 8:45 min, 875 s).
 TEST_WORKERS ?= 2
 ONE_BLAS_THREAD := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-SHIPPED := $(sort $(wildcard models/*.toml controllers/*.toml studies/*.toml studies/*/*.toml studies/*/*/*.toml))
+DATA := src/flexctrl/data
+SHIPPED := $(sort $(wildcard $(DATA)/models/*.toml $(DATA)/controllers/*.toml $(DATA)/studies/*.toml $(DATA)/studies/*/*.toml $(DATA)/studies/*/*/*.toml))
 
 test: $(STAMP)
 	$(BIN)/flexctrl check $(SHIPPED)
 	$(ONE_BLAS_THREAD) $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+
+# ruff (lint and format check) and mypy, configured in pyproject.toml.
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+
+# Rewrites the sources in the project's format (ruff format) and applies ruff's safe fixes.
+format: $(STAMP)
+	$(BIN)/ruff format .
+	$(BIN)/ruff check --fix .
 
 # Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
 # about 15 minutes the first time on 2 busy cores, under a minute after; docs/make_figures.py
@@ -38,4 +50,4 @@ figures: $(STAMP)
 	$(BIN)/python docs/make_figures.py
 
 clean:
-	rm -rf $(VENV) out .flexctrl-cache
+	rm -rf $(VENV) out

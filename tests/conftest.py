@@ -1,4 +1,4 @@
-"""Paths and small plants shared by the tests (the Agg backend and the cache folder are set in the repository's conftest.py)."""
+"""Fixtures shared by the tests: paths and small plants (the Agg backend is set in the repository's conftest.py)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / "subedi3link.toml"
+from support import DATA, MODEL, ROOT
 
 
 @pytest.fixture
@@ -17,7 +16,8 @@ def model_path() -> Path:
 
 @pytest.fixture
 def root() -> Path:
-    return ROOT
+    """The shipped description files (``models/``, ``controllers/``, ``studies/``)."""
+    return DATA
 
 
 @pytest.fixture

@@ -13,10 +13,10 @@ import pytest
 import flexctrl as fc
 from flexctrl.errors import SpecError
 
-from conftest import ROOT
+from support import DATA, ROOT
 
-MODEL = str(ROOT / "models" / "subedi3link.toml")
-SCENE = str(ROOT / "studies" / "scenes" / "move_joint1_30deg.toml")
+MODEL = str(DATA / "models" / "subedi3link.toml")
+SCENE = str(DATA / "studies" / "scenes" / "move_joint1_30deg.toml")
 DAMPED = {f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)}
 
 
@@ -86,10 +86,10 @@ def test_linearize_names_states_inputs_and_outputs(model, op):
 
 def test_closed_loop_equals_the_scene_file_at_the_same_step(model, op):
     """The Python API and the scene runner build the loop separately (reference, x0, window, sensors)."""
-    lqr = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "lqr.toml"))
+    lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml"))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     res = fc.closed_loop(model, lqr, move, duration=8.0, dt=5e-4, metrics=fc.MetricSettings(settle_allowance=1.0))
-    scene = fc.run_scene(fc.load_scene(SCENE), controller=str(ROOT / "controllers" / "lqr.toml"))
+    scene = fc.run_scene(fc.load_scene(SCENE), controller=str(DATA / "controllers" / "lqr.toml"))
     np.testing.assert_array_equal(res.trajectory.tip, scene.trajectory.tip)
     for key in ("tip_residual_rms", "settling_time", "peak_deflection", "stable", "closed_loop_radius"):
         assert res.metrics[key] == scene.metrics[key], key
@@ -100,7 +100,7 @@ def test_closed_loop_equals_the_scene_file_at_the_same_step(model, op):
 
 
 def test_closed_loop_result_plots_saves_and_tabulates(model, op, tmp_path):
-    pd = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "pd.toml"))
+    pd = fc.design(model, op, fc.load_controller(DATA / "controllers" / "pd.toml"))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     res = fc.closed_loop(model, pd, move, duration=4.0)
     fig = res.plot()
@@ -116,7 +116,7 @@ def test_closed_loop_result_plots_saves_and_tabulates(model, op, tmp_path):
 
 
 def test_closed_loop_refuses_bad_input(model, op):
-    pd = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "pd.toml"))
+    pd = fc.design(model, op, fc.load_controller(DATA / "controllers" / "pd.toml"))
     move = fc.Move(start=[0.0, 0.0, 0.0], target=[0.5, 0.0, 0.0], time=1.0)
     with pytest.raises(SpecError, match="key 'controller'"):
         fc.closed_loop(model, "controllers/pd.toml", move, 3.0)
@@ -133,7 +133,7 @@ def test_closed_loop_refuses_bad_input(model, op):
 
 
 def test_scene_refuses_design_keys_with_a_designed_controller(model, op):
-    lqr = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "lqr.toml"))
+    lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml"))
     scene = fc.load_scene(SCENE, ["design_payload=0.0", "duration=3.0"])
     with pytest.raises(SpecError, match="key 'design_payload'.*designed in Python"):
         fc.run_scene(scene, controller=lqr)

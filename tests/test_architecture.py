@@ -20,13 +20,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE = ROOT / "flexctrl"
+PACKAGE = ROOT / "src" / "flexctrl"
 
 #: The layers, bottom to top (docs/architecture.md).  A module may import its own layer's
 #: package (the same top-level name) and any layer below; names on one line are peers that
 #: must not import each other.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors",),
+    ("errors", "user_cache"),
     ("spec",),
     ("beam",),
     ("modal",),
@@ -51,7 +51,7 @@ _MODULE_STRING = re.compile(r"flexctrl(\.\w+)+(:\w+)?")
 def _modules() -> dict[str, Path]:
     mods = {}
     for path in PACKAGE.rglob("*.py"):
-        rel = path.relative_to(ROOT).with_suffix("")
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
         parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
         mods[".".join(parts)] = path
     return mods

@@ -16,9 +16,9 @@ from flexctrl.study.executors.baumgarte_sweep import read_sweep_scene
 from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SlidingBeamModel
 from flexctrl.errors import SpecError
 
-ROOT = Path(__file__).resolve().parents[1]
-STUDY = ROOT / "studies" / "baumgarte_sweep.toml"
-SCENE = ROOT / "studies" / "scenes" / "bk_fast_push.toml"
+from support import DATA, ROOT
+STUDY = DATA / "studies" / "baumgarte_sweep.toml"
+SCENE = DATA / "studies" / "scenes" / "bk_fast_push.toml"
 DT = 1e-3
 
 

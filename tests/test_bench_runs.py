@@ -3,11 +3,13 @@
 
 from flexctrl import cli
 from flexctrl.bench.runs import bench_runs, format_runs
+from support import ROOT
 
 STUDY = "tests/data/study_selftest.toml"
 
 
-def test_the_same_tree_twice_gives_the_same_metrics_and_every_run(root):
+def test_the_same_tree_twice_gives_the_same_metrics_and_every_run():
+    root = ROOT
     result = bench_runs(root / STUDY, [root, root], exclude=["controller=stiff", "payload=0.0"])
     assert result["runs"] == 6  # 24 runs, half of them stiff, half of the rest at 0 kg
     assert result["max_metric_relative_difference"] == 0.0 and result["where"] is None
@@ -16,7 +18,8 @@ def test_the_same_tree_twice_gives_the_same_metrics_and_every_run(root):
     assert "soft" in format_runs(result)
 
 
-def test_bad_arguments_are_refused(root, capsys):
+def test_bad_arguments_are_refused(capsys):
+    root = ROOT
     for argv, message in ((["--tree", str(root)], "two --tree"),
                           (["--tree", str(root), "--tree", str(root / "tests")], "not a flexctrl checkout"),
                           (["--tree", str(root), "--tree", str(root), "--exclude", "nmpc"], "KEY=VALUE")):

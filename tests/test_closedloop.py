@@ -12,6 +12,7 @@ from flexctrl.errors import SimulationError, SpecError
 from flexctrl.linear import Sensors, equilibrium
 from flexctrl.sim import simulate
 from flexctrl.spec.arm import load_arm
+from support import DATA
 
 
 class _Schedule(Controller):
@@ -39,7 +40,7 @@ class _Schedule(Controller):
 
 @pytest.fixture(scope="module")
 def arm_model(model_path=None):
-    from conftest import MODEL
+    from support import MODEL
 
     arm = load_arm(MODEL, overrides=["gravity=[0.0, 0.0]"])
     return build_model(arm.with_modes(1), "amm:1")
@@ -112,7 +113,7 @@ def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_
     from flexctrl.loop.plant_step import advance_function, plant_step_function
     from flexctrl.dynamics.parametric import constants_as_parameters
 
-    arm = load_arm(root / "models" / "subedi3link.toml").with_payload(2.0)
+    arm = load_arm(DATA / "models" / "subedi3link.toml").with_payload(2.0)
     models = [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in ([0, 30, -60], [0, 120, 45])]
     fps = [constants_as_parameters(m.functions["f"], reuse=False) for m in models]
     assert all(c.size > 0 for _, c in fps)

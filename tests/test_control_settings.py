@@ -19,8 +19,8 @@ from flexctrl.spec.controller_settings import (
 from flexctrl.errors import SpecError
 from flexctrl.spec.controller import load_controller
 
-ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = sorted((ROOT / "controllers").glob("*.toml"))
+from support import DATA, ROOT
+SHIPPED = sorted((DATA / "controllers").glob("*.toml"))
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
@@ -38,7 +38,7 @@ def test_degrees_in_files_become_radians():
     import tomllib
 
     for name in ("lqr", "lqg", "pd"):
-        path = ROOT / "controllers" / f"{name}.toml"
+        path = DATA / "controllers" / f"{name}.toml"
         document = tomllib.loads(path.read_text())
         s = load_controller(path)
         if "weights" in document:
@@ -100,10 +100,10 @@ def test_bad_values_name_file_key_value_and_allowed(tmp_path, text, key, fragmen
 
 
 def test_overrides_apply_before_validation(tmp_path):
-    s = load_controller(ROOT / "controllers" / "mpc.toml", ["horizon=30", "osqp.eps_abs=1e-5"])
+    s = load_controller(DATA / "controllers" / "mpc.toml", ["horizon=30", "osqp.eps_abs=1e-5"])
     assert s.horizon == 30 and s.osqp.eps_abs == 1e-5
     with pytest.raises(SpecError, match="horizon"):
-        load_controller(ROOT / "controllers" / "mpc.toml", ["horizon=-1"])
+        load_controller(DATA / "controllers" / "mpc.toml", ["horizon=-1"])
 
 
 def test_schedule_reads_degrees_and_sorts_joints(tmp_path):

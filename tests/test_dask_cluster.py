@@ -16,17 +16,18 @@ distributed = pytest.importorskip("distributed")
 
 from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget  # noqa: E402
 from flexctrl.study.executors.dask_cluster import LocalhostCluster  # noqa: E402
+from support import DATA as SHIPPED
 
-DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
 
 
 @pytest.fixture
 def slow_study(tmp_path, root) -> Path:
     """The example study (24 runs) with 0.3 s per run, its files copied to tmp_path."""
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
+    shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
     (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
+    shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")
     study = tmp_path / "tests" / "data" / "study_selftest.toml"
     slow = study.with_name("slow.toml")
     slow.write_text(study.read_text().replace("[grid]", '[set]\n"scene.sleep_s" = 0.3\n\n[grid]'))

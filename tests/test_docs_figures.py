@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import ROOT
 FIGURES = ROOT / "docs" / "figures"
 IMAGE = re.compile(r"!\[[^\]]*\]\(([^)]+\.png)\)")
 

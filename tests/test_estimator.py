@@ -7,17 +7,17 @@ import pytest
 
 import flexctrl as fc
 
-from conftest import ROOT
+from support import DATA, ROOT
 
 TARGET = np.radians([30.0, 0.0, 0.0])
 
 
 @pytest.mark.parametrize("name", ["lqr", "lqg", "mpc"])
 def test_estimate_converges_from_a_wrong_initial_state_at_the_predicted_rate(name):
-    model = fc.load_model(ROOT / "models" / "subedi3link.toml", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0],
+    model = fc.load_model(DATA / "models" / "subedi3link.toml", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0],
                           overrides={f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)})
     op = fc.equilibrium(model, TARGET)
-    ctrl = fc.design(model, op, fc.load_controller(ROOT / "controllers" / f"{name}.toml"))
+    ctrl = fc.design(model, op, fc.load_controller(DATA / "controllers" / f"{name}.toml"))
     estimator = ctrl.observer
     assert not ctrl.sensors.full_state and hasattr(estimator, "M")
     wrong = np.zeros(model.n_x)

@@ -30,7 +30,7 @@ from flexctrl.modal.paper_data import SUBEDI_TABLE3_HZ, SUBEDI_TABLE3_ROUNDING_H
 from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.spec.arm import load_arm
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "subedi3link.toml"
+from support import MODEL
 CONFIGS = [(0.0, 0.0, 0.0), (0.0, 90.0, 0.0), (0.0, 45.0, -90.0)]
 
 

@@ -20,8 +20,8 @@ from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT / "studies" / "scenes"
+from support import DATA, ROOT
+SCENES = DATA / "studies" / "scenes"
 BK = ("bk_slow_push", "bk_fast_push", "bk_fast_pull")
 HEADER = "t,W,tip_y,phi_max,phidot_max"
 
@@ -130,7 +130,7 @@ def test_rp_arm_without_rotation_is_the_sliding_beam(case, driven_end):
 
 @pytest.fixture(scope="module")
 def rp_run():
-    spec = load_rp_arm(ROOT / "models" / "rp_arm.toml")
+    spec = load_rp_arm(DATA / "models" / "rp_arm.toml")
     motion = RPMotion(C1=0.3, C2=-0.4, T=1.0, theta0=0.0, dtheta=math.radians(60.0))
     return spec, motion, simulate_rp_arm(spec, motion, 8, dt=1e-3, duration=1.5)
 
@@ -185,7 +185,7 @@ def test_rp_arm_energy_balance(rp_run):
 
 
 def test_rp_model_file_is_validated():
-    doc = read_toml(ROOT / "models" / "rp_arm.toml")
+    doc = read_toml(DATA / "models" / "rp_arm.toml")
     spec = rp_arm_from_document(doc, "models/rp_arm.toml")
     assert spec.D == pytest.approx(0.2) and spec.EI == pytest.approx(212.8)
     bad = apply_overrides(doc, ["housing.support_outer=0.5"])

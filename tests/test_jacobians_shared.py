@@ -14,12 +14,12 @@ from flexctrl.dynamics.parametric import FROM_LIFTED
 from flexctrl.linear import Linearizer, equilibrium
 
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import DATA, ROOT
 
 
 @pytest.fixture(scope="module")
 def arm():
-    return fc.load_arm(ROOT / "models" / "subedi3link.toml")
+    return fc.load_arm(DATA / "models" / "subedi3link.toml")
 
 
 def _at(fun, model, seed=0):

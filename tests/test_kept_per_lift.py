@@ -21,13 +21,13 @@ from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import FROM_LIFTED, ObjectMemo
 from flexctrl.loop.plant_step import UNROLL_LIMIT, advance_function, output_map
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import DATA, ROOT
 POSES = ([0.0, 0.0, 0.0], [0.0, 1.2, -0.7], [0.0, 1.57, 0.0])
 
 
 @pytest.fixture(scope="module")
 def arm():
-    return fc.load_arm(ROOT / "models" / "subedi3link.toml")
+    return fc.load_arm(DATA / "models" / "subedi3link.toml")
 
 
 @pytest.fixture

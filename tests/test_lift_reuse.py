@@ -19,7 +19,7 @@ from flexctrl.dynamics.parametric import LIFTED, constants_as_parameters
 from flexctrl.sim.base import output_function
 from flexctrl.spec.arm import load_arm
 
-from conftest import MODEL
+from support import MODEL
 
 # degrees: the straight arm merges coinciding constants, so its graph has fewer constant nodes
 CONFIGURATIONS = ([0, 90, -90], [0, 0, 0], [0, 30, 60])

@@ -19,7 +19,7 @@ from flexctrl.spec.arm import load_arm
 
 @pytest.fixture(scope="module")
 def arm(request):
-    from conftest import MODEL
+    from support import MODEL
 
     return load_arm(MODEL)
 

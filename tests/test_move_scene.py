@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from flexctrl.cli import main
+from support import DATA
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"
 SETTLED_WITHIN_S = 6.0   # tip error stays below 1 mm after this time
@@ -21,11 +22,11 @@ SETTLED_WITHIN_S = 6.0   # tip error stays below 1 mm after this time
 def runs(tmp_path_factory):
     import os
 
-    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    root = DATA
     results = {}
     for name in ("pd", "lqr", "mpc"):
         out = tmp_path_factory.mktemp(name)
-        assert main(["simulate", str(root / SCENE), "--controller", str(root / "controllers" / f"{name}.toml"), "--out", str(out), "--no-plots"]) == 0
+        assert main(["simulate", str(root / SCENE), "--controller", str(DATA / "controllers" / f"{name}.toml"), "--out", str(out), "--no-plots"]) == 0
         results[name] = json.loads((out / "summary.json").read_text())
     return results
 
@@ -64,7 +65,7 @@ def test_summary_interface_keys(runs):
 
 
 def test_arm_scene_refuses_a_controller(tmp_path):
-    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    root = DATA
     assert main(["simulate", str(root / "studies/scenes/bangbang.toml"), "--controller", str(root / "controllers/pd.toml"), "--out", str(tmp_path)]) == 2
 
 

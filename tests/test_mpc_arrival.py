@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import flexctrl as fc
-from conftest import ROOT
+from support import DATA, ROOT
 from flexctrl.control.mpc_arrival import shortest_arrival
 from flexctrl.control.mpc_qp import ScaledProblem, condensed_qp
 from flexctrl.errors import SpecError
@@ -56,7 +56,7 @@ def test_arrival_needs_the_condensed_form_and_a_positive_band():
 
 
 def test_unknown_arrival_key_is_refused(tmp_path):
-    text = (ROOT / "studies" / "tuning" / "start" / "mpc_time_optimal.toml").read_text().replace("margin =", "margn =")
+    text = (DATA / "studies" / "tuning" / "start" / "mpc_time_optimal.toml").read_text().replace("margin =", "margn =")
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(SpecError, match="margn"):
@@ -65,10 +65,10 @@ def test_unknown_arrival_key_is_refused(tmp_path):
 
 @pytest.fixture(scope="module")
 def fast_runs():
-    fast = fc.load_scene(ROOT / "studies" / "scenes" / "fast_move_30deg.toml")
-    quintic = fc.load_scene(ROOT / "studies" / "scenes" / "move_joint1_30deg.toml")
-    mpc = fc.run_scene(fast, controller=str(ROOT / "controllers" / "mpc_time_optimal.toml"), plots=False)
-    lqr = fc.run_scene(quintic, controller=str(ROOT / "controllers" / "lqr.toml"), plots=False)
+    fast = fc.load_scene(DATA / "studies" / "scenes" / "fast_move_30deg.toml")
+    quintic = fc.load_scene(DATA / "studies" / "scenes" / "move_joint1_30deg.toml")
+    mpc = fc.run_scene(fast, controller=str(DATA / "controllers" / "mpc_time_optimal.toml"), plots=False)
+    lqr = fc.run_scene(quintic, controller=str(DATA / "controllers" / "lqr.toml"), plots=False)
     return mpc, lqr
 
 

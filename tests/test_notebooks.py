@@ -27,8 +27,8 @@ pytest.importorskip("ipykernel", reason="notebook tests need the 'notebooks' ext
 from jupyter_client.kernelspec import KernelSpec, KernelSpecManager  # noqa: E402  (nbclient depends on it)
 from jupyter_client.manager import AsyncKernelManager  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-NOTEBOOKS = sorted((ROOT / "studies" / "notebooks").glob("*.ipynb"))
+from support import DATA, ROOT
+NOTEBOOKS = sorted((DATA / "studies" / "notebooks").glob("*.ipynb"))
 TIMEOUT_S = 600  # per cell
 
 

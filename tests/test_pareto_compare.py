@@ -12,7 +12,7 @@ from flexctrl.analysis.pareto_compare import case_table, compare, main, markdown
 from flexctrl.errors import SpecError
 from flexctrl.study.executors import speed_vs_accuracy as study
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import DATA, ROOT
 COLUMNS = ["scene", "method", "model", "integrator", "runs_ok", "runs_failed", "wall_per_sim_s", "tip_error_rms",
            "tip_error_rms_worst", "tip_error_max_worst", "n_states", "omega_max", "step_s", "pareto"]
 
@@ -98,7 +98,7 @@ def test_plot_and_command_line(pair, tmp_path, capsys):
 def _run_settings(study_file: str, method: str, scene: str, *overrides: str) -> dict:
     from flexctrl.study.spec import load_study
 
-    spec = load_study(ROOT / "studies" / study_file, list(overrides))
+    spec = load_study(DATA / "studies" / study_file, list(overrides))
     return next(r.settings for r in spec.runs
                 if Path(r.settings["scene"]).name == scene and f'scene.method="{method}"' in r.settings["overrides"])
 

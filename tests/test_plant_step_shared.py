@@ -19,7 +19,7 @@ from flexctrl.sim.base import output_function
 from flexctrl.dynamics.parametric import constants_as_parameters
 from flexctrl.spec.arm import load_arm
 
-from conftest import MODEL
+from support import MODEL
 
 CONFIGURATIONS = ([0, 0, 0], [0, 90, -90])  # degrees: the straight arm merges coinciding constants
 

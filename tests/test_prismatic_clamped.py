@@ -16,8 +16,8 @@ from flexctrl.dynamics.fem.rp_arm_full import simulate_rp_arm_full
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import load_rp_arm
 
-ROOT = Path(__file__).resolve().parents[1]
-SPEC = load_rp_arm(ROOT / "models" / "rp_arm_clamped.toml")
+from support import DATA, ROOT
+SPEC = load_rp_arm(DATA / "models" / "rp_arm_clamped.toml")
 MOTION = RPMotion(C1=0.2, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
 
@@ -88,10 +88,10 @@ def test_clamped_joint_is_driven_at_E_and_read_from_the_file(tmp_path):
     with pytest.raises(SpecError, match="driven_end"):
         RPArmModel(SPEC, MOTION, 4, driven_end="H")
     bad = tmp_path / "bad.toml"
-    bad.write_text((ROOT / "models" / "rp_arm_clamped.toml").read_text().replace('"clamped"', '"clampd"'))
+    bad.write_text((DATA / "models" / "rp_arm_clamped.toml").read_text().replace('"clamped"', '"clampd"'))
     with pytest.raises(SpecError, match="joint.*did you mean 'clamped'"):
         load_rp_arm(bad)
-    assert SPEC.joint == "clamped" and load_rp_arm(ROOT / "models" / "rp_arm.toml").joint == "supports"
+    assert SPEC.joint == "clamped" and load_rp_arm(DATA / "models" / "rp_arm.toml").joint == "supports"
 
 
 def test_scene_with_the_clamped_joint(tmp_path):
@@ -101,7 +101,7 @@ def test_scene_with_the_clamped_joint(tmp_path):
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import read_toml
 
-    path = ROOT / "studies" / "scenes" / "rp_clamped_extend.toml"
+    path = DATA / "studies" / "scenes" / "rp_clamped_extend.toml"
     for extra in ([], ["drive.coupling='full'"]):
         doc = apply_overrides(read_toml(path), ["duration=0.2", "n_elements=4", *extra])
         summary = run_fem_scene(doc, str(path), tmp_path / str(len(extra)), None)

@@ -21,8 +21,9 @@ from flexctrl import cli
 from flexctrl.study import load_study, run_study
 from flexctrl.study.report import write_report
 from flexctrl.study.units import display
+from support import DATA as SHIPPED
 
-DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture
@@ -41,9 +42,9 @@ def captured(monkeypatch) -> dict[str, Figure]:
 
 @pytest.fixture
 def selftest_out(tmp_path, root) -> Path:
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
+    shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
     (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
+    shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")
     out = tmp_path / "out"
     run_study(load_study(tmp_path / "tests" / "data" / "study_selftest.toml"), out, workers=0, progress="none",
               report=False)
@@ -85,9 +86,9 @@ def test_maps_best_and_ratio_maps_carry_units_and_one_panel_per_cell_group(selft
 def test_a_large_grid_is_drawn_without_text_in_its_cells_and_the_report_says_where_the_values_are(
         tmp_path, root, captured):
     # 9 x 8 = 72 cells a panel: beyond TEXT_CELLS (64) names and values would overlap their neighbours
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
+    shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
     (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
+    shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")
     out = tmp_path / "out"
     grid = ["grid.payload=[2.0]", "grid.q2=[-120, -90, -60, -30, 0, 30, 60, 90, 120]",
             "grid.q3=[-105, -75, -45, -15, 15, 45, 75, 105]"]
@@ -173,12 +174,12 @@ def test_worst_case_overlays_every_controller_of_its_cell_like_compare(tmp_path,
     assert len(tip.patches) == 1 and tip.patches[0].get_x() == pytest.approx(2.5)  # window 2.5 s to the end
     assert len(joints.lines) == 2 * 3
     # the Python side: the same runs through fc.compare draw the same panels
-    model = fc.load_model(root / "models" / "subedi3link.toml", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0],
+    model = fc.load_model(SHIPPED / "models" / "subedi3link.toml", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0],
                           overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)])
     op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     judge = fc.MetricSettings(settle_allowance=1.0)
-    results = {name: fc.closed_loop(model, fc.design(model, op, fc.load_controller(root / "controllers" / f"{name}.toml")),
+    results = {name: fc.closed_loop(model, fc.design(model, op, fc.load_controller(SHIPPED / "controllers" / f"{name}.toml")),
                                     move, duration=4.0, metrics=judge) for name in ("pd", "lqr")}
     python = fc.compare(results)
     assert [ax.get_ylabel() for ax in python.axes] == labels

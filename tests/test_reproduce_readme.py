@@ -7,7 +7,7 @@ from pathlib import Path
 
 from flexctrl.reproduce.readme import BEGIN, END, rewrite, table
 
-ROOT = Path(__file__).resolve().parents[1]
+from support import ROOT
 
 
 def test_readme_table_is_generated_from_the_stored_full_runs():

@@ -9,21 +9,21 @@ import flexctrl as fc
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.verdict import linear_closed_loop_radius
 
-from conftest import ROOT
+from support import DATA, ROOT
 
 DESIGN_Q = np.radians([30.0, 0.0, 0.0])
 DAMPED = {f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)}
 
 
 def _model(payload: float, q):
-    return fc.load_model(ROOT / "models" / "subedi3link.toml", payload=payload, fidelity="amm:2", gravity=[0.0, 0.0],
+    return fc.load_model(DATA / "models" / "subedi3link.toml", payload=payload, fidelity="amm:2", gravity=[0.0, 0.0],
                          overrides=DAMPED, reference_q=q)
 
 
 @pytest.fixture(scope="module")
 def robust():
     design = _model(2.0, DESIGN_Q)
-    return fc.design(design, fc.equilibrium(design, DESIGN_Q), fc.load_controller(ROOT / "controllers" / "robust.toml"))
+    return fc.design(design, fc.equilibrium(design, DESIGN_Q), fc.load_controller(DATA / "controllers" / "robust.toml"))
 
 
 @pytest.mark.parametrize("payload", [0.0, 2.0, 4.0])

@@ -17,8 +17,8 @@ from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import load_rp_arm
 from full_coupling_checks import check_constraint_derivatives, check_rigid_limit
 
-ROOT = Path(__file__).resolve().parents[1]
-SPEC = load_rp_arm(ROOT / "models" / "rp_arm.toml")
+from support import DATA, ROOT
+SPEC = load_rp_arm(DATA / "models" / "rp_arm.toml")
 MOTION = RPMotion(C1=0.3, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
 
@@ -174,14 +174,14 @@ def test_scenes_with_a_drive_table(tmp_path):
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import read_toml
 
-    force_scene = ROOT / "studies" / "scenes" / "rp_torque_force.toml"
+    force_scene = DATA / "studies" / "scenes" / "rp_torque_force.toml"
     doc = apply_overrides(read_toml(force_scene), ["duration=0.2"])
     summary = run_fem_scene(doc, str(force_scene), tmp_path, None)
     data = np.genfromtxt(tmp_path / "trajectory.csv", delimiter=",", names=True)
     assert data.dtype.names[-2:] == ("torque", "force")
     assert data["torque"][50] == pytest.approx(doc["drive"]["torque_amplitude"] * math.sin(2 * math.pi * 0.05))
     assert data["theta"][-1] > 0 and summary["max_phi_violation_m"] < 1e-6
-    motion_scene = ROOT / "studies" / "scenes" / "rp_extend_rotate.toml"
+    motion_scene = DATA / "studies" / "scenes" / "rp_extend_rotate.toml"
     doc = apply_overrides(read_toml(motion_scene), ["duration=0.2", "drive.coupling='full'", "n_elements=4"])
     run_fem_scene(doc, str(motion_scene), tmp_path / "m", None)
     data = np.genfromtxt(tmp_path / "m" / "trajectory.csv", delimiter=",", names=True)

@@ -8,6 +8,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from support import MODEL
 
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
@@ -28,7 +29,7 @@ duration = 0.05
 def _scene(tmp_path, body: str = "", model=None, name="scene.toml"):
     from pathlib import Path
 
-    model = model or str(Path(__file__).resolve().parents[1] / "models" / "subedi3link.toml")
+    model = model or str(MODEL)
     path = tmp_path / name
     path.write_text(BASE.format(model=model) + textwrap.dedent(body))
     return path

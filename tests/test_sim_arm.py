@@ -13,6 +13,7 @@ from flexctrl.errors import SimulationError
 from flexctrl.scenes import run_scene
 from flexctrl.sim import RK4
 from flexctrl.spec.scene import load_scene
+from support import DATA
 
 SCENES = "studies/scenes"
 
@@ -84,7 +85,7 @@ def test_bangbang_energy_equals_work_of_the_torque(root):
 def test_bench_sim_reports_its_figures(root):
     from flexctrl.bench.sim import bench_sim
 
-    result = bench_sim(root / "models" / "subedi3link.toml", duration=0.05, repeats=1, scipy_span=0.005,
+    result = bench_sim(DATA / "models" / "subedi3link.toml", duration=0.05, repeats=1, scipy_span=0.005,
                        use_cache=True)
     for key in ("realtime_factor_compiled", "realtime_factor_vm", "realtime_factor_scipy", "ratio_vs_scipy",
                 "compile_time_s", "repeats"):

@@ -42,7 +42,9 @@ def _write(tmp_path, text):
     return path
 
 
-BASE = (__import__("pathlib").Path(__file__).resolve().parents[1] / "models" / "subedi3link.toml").read_text()
+from support import MODEL
+
+BASE = MODEL.read_text()
 
 
 @pytest.mark.parametrize(

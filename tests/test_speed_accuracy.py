@@ -16,12 +16,12 @@ from flexctrl.analysis.accuracy import (
 from flexctrl.sim.tip_error import tip_error
 from flexctrl.errors import SpecError
 
-ROOT = Path(__file__).resolve().parents[1]
-STUDY = ROOT / "studies" / "speed_vs_accuracy.toml"
+from support import DATA, ROOT
+STUDY = DATA / "studies" / "speed_vs_accuracy.toml"
 
 
 def _settings(scene: str, method: str, *extra: str, payload: float = 2.0, q=(0.0, 0.0, 0.0)) -> dict:
-    return {"scene": str(ROOT / "studies" / "scenes" / scene), "model": str(ROOT / "models" / "subedi3link.toml"),
+    return {"scene": str(DATA / "studies" / "scenes" / scene), "model": str(DATA / "models" / "subedi3link.toml"),
             "controller": None, "payload": payload, "q0_deg": list(q), "fidelity": None,
             "overrides": sorted([f'scene.method="{method}"', *extra]), "digests": {}, "seed": 1}
 
@@ -142,7 +142,7 @@ def test_open_loop_driver_matches_the_package_integrator():
     from flexctrl.scenes import run_scene
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene(ROOT / "studies" / "scenes" / "bangbang.toml", ["duration=0.3", "fidelity='amm:1'"])
+    scene = load_scene(DATA / "studies" / "scenes" / "bangbang.toml", ["duration=0.3", "fidelity='amm:1'"])
     direct = run_scene(scene).trajectory
     plan = study.plan_from_settings(_settings("bangbang.toml", "amm:1/rk4@1ms", "scene.horizon=0.3"))
     run, _ = study.simulate_method(plan, plan.method)

@@ -36,8 +36,8 @@ from flexctrl.sim.newmark_model import newmark_critical_step
 from flexctrl.sim.rk4 import RK4, RK4_STABILITY_LIMIT
 from flexctrl.sim.toymodel import spring_pendulum
 
-ROOT = Path(__file__).resolve().parents[1]
-STUDY = ROOT / "studies" / "stability_limits.toml"
+from support import DATA, ROOT
+STUDY = DATA / "studies" / "stability_limits.toml"
 
 
 # -- independent references -------------------------------------------------------------
@@ -88,7 +88,7 @@ def arm_amm1():
     from flexctrl.dynamics.build import build_model
     from flexctrl.spec.arm import load_arm
 
-    arm = load_arm(ROOT / "models" / "subedi3link.toml").with_payload(2.0)
+    arm = load_arm(DATA / "models" / "subedi3link.toml").with_payload(2.0)
     model = build_model(arm, "amm:1", reference_q=(0.0, 0.0, 0.0))
     return model, equilibrium(model, (0.0, 0.0, 0.0))
 
@@ -195,11 +195,11 @@ def test_newmark_integrator_matches_simulate_model_newmark(toy):
 def test_scene_accepts_the_new_integrators_and_newmark_parameters():
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene(ROOT / "studies" / "scenes" / "free_vibration.toml",
+    scene = load_scene(DATA / "studies" / "scenes" / "free_vibration.toml",
                        ["integrator='newmark'", "solver.alpha=0.3", "solver.delta=0.6"])
     assert (scene.integrator, scene.solver) == ("newmark", {"alpha": 0.3, "delta": 0.6})
     with pytest.raises(SpecError, match="alpha.*does not apply to integrator 'euler'"):
-        load_scene(ROOT / "studies" / "scenes" / "free_vibration.toml", ["integrator='euler'", "solver.alpha=0.3"])
+        load_scene(DATA / "studies" / "scenes" / "free_vibration.toml", ["integrator='euler'", "solver.alpha=0.3"])
 
 
 # -- measurement on the linear oscillator ----------------------------------------------

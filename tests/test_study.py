@@ -25,17 +25,18 @@ from flexctrl.study.progress import Progress
 from flexctrl.study.runner import execute_run
 from flexctrl.study.spec import toml_literal
 from flexctrl.study.store import Table
+from support import DATA as SHIPPED
 
-DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
 
 
 @pytest.fixture
 def study(tmp_path, root) -> Path:
     """The example study and its files copied to tmp_path (isolated from edits of models/)."""
-    shutil.copytree(DATA, tmp_path / "tests" / "data")
+    shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
     (tmp_path / "models").mkdir()
-    shutil.copy(root / "models" / "subedi3link.toml", tmp_path / "models")
+    shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")
     return tmp_path / "tests" / "data" / "study_selftest.toml"
 
 
@@ -324,7 +325,7 @@ def test_quoted_dotted_axis_is_replaced_by_a_nested_override(study):
 
 def test_quoted_override_key_reaches_a_quoted_axis_beside_a_file_axis(root):
     """grid.scene (files) and grid."scene.method" cannot both nest; --set must still reach the latter."""
-    path = root / "studies" / "speed_vs_accuracy.toml"
+    path = SHIPPED / "studies" / "speed_vs_accuracy.toml"
     methods = ["amm:2/rk4@0.25ms", "amm:2+sched/rk4@1ms"]
     spec = load_study(path, ['grid.scene=["scenes/free_vibration.toml"]', f"grid.\"scene.method\"={methods!r}".replace("'", '"')])
     axes = {a.key: a.values for a in spec.axes}
@@ -347,6 +348,6 @@ def test_same_setting_spelt_quoted_and_nested_is_refused(study):
 
 
 def test_executors_without_a_model_need_no_model_key(root):
-    spec = load_study(root / "studies" / "baumgarte_sweep.toml", ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]",
+    spec = load_study(SHIPPED / "studies" / "baumgarte_sweep.toml", ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]",
                                                                  "grid.scene.feedback=['explicit']"])
     assert len(spec.runs) == 1 and spec.runs[0].settings["model"] is None

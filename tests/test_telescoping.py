@@ -18,10 +18,10 @@ from flexctrl.spec.fem_models import (Contact, LinkProps, TelescopingSpec, load_
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml
 
-ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / "telescoping.toml"
-SCENE = ROOT / "studies" / "scenes" / "telescoping_extend.toml"
-RP = load_rp_arm(ROOT / "models" / "rp_arm.toml")
+from support import DATA, ROOT
+MODEL = DATA / "models" / "telescoping.toml"
+SCENE = DATA / "studies" / "scenes" / "telescoping_extend.toml"
+RP = load_rp_arm(DATA / "models" / "rp_arm.toml")
 ROTATE = RPMotion(C1=0.3, C2=-0.4, T=1.0, theta0=0.0, dtheta=math.radians(60.0))
 
 

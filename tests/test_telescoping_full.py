@@ -16,8 +16,8 @@ from flexctrl.errors import SimulationError
 from flexctrl.spec.fem_models import load_telescoping
 from full_coupling_checks import check_constraint_derivatives
 
-ROOT = Path(__file__).resolve().parents[1]
-SPEC = load_telescoping(ROOT / "models" / "telescoping.toml")
+from support import DATA, ROOT
+SPEC = load_telescoping(DATA / "models" / "telescoping.toml")
 MOTION = RPMotion(C1=0.1, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
 

@@ -15,12 +15,13 @@ from flexctrl.errors import SpecError
 from flexctrl.spec.tuning import load_tuning
 from flexctrl.tuning.controller_file import with_values
 
-from conftest import ROOT
+from support import ROOT
+from support import DATA as SHIPPED
 
-DATA = ROOT / "tests" / "data"
-TUNING = DATA / "tunings" / "one_link.toml"
-SCENE = DATA / "scenes" / "one_link_move.toml"
-CONTROLLER = DATA / "controllers" / "one_link_lqr.toml"
+TEST_DATA = ROOT / "tests" / "data"
+TUNING = TEST_DATA / "tunings" / "one_link.toml"
+SCENE = TEST_DATA / "scenes" / "one_link_move.toml"
+CONTROLLER = TEST_DATA / "controllers" / "one_link_lqr.toml"
 
 
 @pytest.fixture(scope="module")
@@ -81,15 +82,15 @@ def test_a_diverging_candidate_is_a_recorded_infeasible_evaluation(tmp_path):
     # a faster PD than the untuned 1 Hz (2 Hz torque filter) destabilises the arm's light hubs
     # (flexctrl/control/pd.py): measured, 3 and 5 Hz diverge on this move
     tuning = tmp_path / "pd.toml"
-    tuning.write_text(f'''controller = "{ROOT / 'studies' / 'tuning' / 'start' / 'pd.toml'}"
+    tuning.write_text(f'''controller = "{SHIPPED / 'studies' / 'tuning' / 'start' / 'pd.toml'}"
 [[parameters]]
 key = "bandwidth"
 low = 1.0
 high = 5.0
 scale = "linear"
 [scenarios]
-scene = "{ROOT / 'studies' / 'scenes' / 'move_joint1_30deg.toml'}"
-model = "{ROOT / 'models' / 'subedi3link.toml'}"
+scene = "{SHIPPED / 'studies' / 'scenes' / 'move_joint1_30deg.toml'}"
+model = "{SHIPPED / 'models' / 'subedi3link.toml'}"
 [optimizer]
 evaluations = 5
 population = 5
@@ -111,7 +112,7 @@ def _tuning(tmp_path, text: str):
 
 GOOD = (f'controller = "{CONTROLLER}"\n'
         '[[parameters]]\nkey = "weights.joint_deg"\nlow = 0.1\nhigh = 1.0\n'
-        f'[scenarios]\nscene = "{SCENE}"\nmodel = "{DATA / "models" / "one_link.toml"}"\n')
+        f'[scenarios]\nscene = "{SCENE}"\nmodel = "{TEST_DATA / "models" / "one_link.toml"}"\n')
 
 
 @pytest.mark.parametrize("change, key, fragment", [
@@ -142,10 +143,10 @@ def test_the_command_line_exits_2_on_a_bad_file_with_one_line(tmp_path, capsys):
 
 
 def test_load_tuning_reads_the_files_initial_values():
-    spec = load_tuning(ROOT / "studies" / "tune_lqr.toml")
+    spec = load_tuning(SHIPPED / "studies" / "tune_lqr.toml")
     initial = {p.key: p.initial for p in spec.parameters}
     document = tomllib.loads(spec.controller.read_text())
-    assert spec.controller == (ROOT / "studies" / "tuning" / "start" / "lqr.toml").resolve()
+    assert spec.controller == (SHIPPED / "studies" / "tuning" / "start" / "lqr.toml").resolve()
     assert initial["weights.joint_deg"] == min(max(document["weights"]["joint_deg"], 0.01), 1.0)
 
 

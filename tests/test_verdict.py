@@ -10,9 +10,9 @@ from flexctrl.linear import Linearizer, discretize
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.verdict import closed_loop_matrix, linear_closed_loop_radius
 
-from conftest import ROOT
+from support import DATA, ROOT
 
-MODEL = ROOT / "models" / "subedi3link.toml"
+MODEL = DATA / "models" / "subedi3link.toml"
 TARGET = np.radians([30.0, 0.0, 0.0])
 
 
@@ -31,7 +31,7 @@ def test_full_state_radius_is_the_spectral_radius_of_ad_minus_bd_k(nominal):
     import control
 
     model, op = nominal
-    lqr = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "lqr.toml",
+    lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml",
                                                   ["sensors.outputs=['state']"]))
     A, B, _C, _D = Linearizer(model, ("joints",)).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), lqr.sample_time)
@@ -44,7 +44,7 @@ def test_observer_loop_has_the_separation_principles_poles_on_the_design_model(n
     import control
 
     model, op = nominal
-    lqg = fc.design(model, op, fc.load_controller(ROOT / "controllers" / "lqg.toml"))
+    lqg = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqg.toml"))
     A, B, C, D = Linearizer(model, lqg.sensors).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), lqg.sample_time)
     Ad, Bd = np.asarray(sysd.A), np.asarray(sysd.B)
@@ -58,7 +58,7 @@ def test_pd_radius_predicts_the_decay_rate_of_the_nonlinear_run():
     """The slowest pole of the PD loop sets how fast a small joint error dies out in the simulation."""
     model = _model(2.0)
     target = TARGET + np.radians([0.5, 0.0, 0.0])
-    start = ROOT / "studies" / "tuning" / "start" / "pd.toml"  # the untuned 1 Hz PD: a fixed file
+    start = DATA / "studies" / "tuning" / "start" / "pd.toml"  # the untuned 1 Hz PD: a fixed file
     pd = fc.design(model, fc.equilibrium(model, target), fc.load_controller(start))
     radius = linear_closed_loop_radius(model, pd, target)
     assert 0.99 < radius < 1.0  # slow (a 1 Hz PD sampled at 1 kHz), but stable
@@ -75,7 +75,7 @@ def test_verdict_and_simulation_agree_off_the_design_payload():
     """A 2 kg LQG on the 0 kg arm: the linear verdict says unstable, and so does the run."""
     design, plant = _model(2.0), _model(0.0)
     op = fc.equilibrium(design, TARGET)
-    lqg = fc.design(design, op, fc.load_controller(ROOT / "controllers" / "lqg.toml"))
+    lqg = fc.design(design, op, fc.load_controller(DATA / "controllers" / "lqg.toml"))
     sensors = plant_sensors(plant, lqg.sensors, tuple(TARGET))
     radius = linear_closed_loop_radius(plant, lqg, TARGET, sensors)
     move = fc.Move(start=np.radians([0, 0, 0]), target=TARGET, time=1.5)

@@ -1,0 +1,66 @@
+"""The exception family of flexctrl, built on the builtins.
+
+Every error a user can cause by their input is a :class:`SpecError` (a
+``ValueError``) whose message names the file, the key, the value and what is
+allowed, on one line; a valid but doubtful value is a :class:`SpecWarning`
+located the same way.  Numerical failures are :class:`SimulationError`
+(a ``RuntimeError``) or :class:`SolverError`.
+"""
+
+from __future__ import annotations
+
+
+class FlexctrlError(Exception):
+    """Base class of every error raised on purpose by flexctrl."""
+
+
+def _located(message: str, source: str | None, key: str | None) -> str:
+    """``"<source>: key '<key>': <message>"`` with the parts that are known."""
+    where = [str(source)] if source else []
+    if key:
+        where.append(f"key '{key}'")
+    prefix = ": ".join(where)
+    return f"{prefix}: {message}" if prefix else message
+
+
+class SpecError(FlexctrlError, ValueError):
+    """A description (model, scene, controller or study file) is invalid.
+
+    Parameters
+    ----------
+    message
+        What is wrong, naming the key, the value and what is allowed.
+    source
+        The file (or other origin) the value came from.
+    key
+        The dotted key of the offending value, e.g. ``links[2].EI``.
+    """
+
+    def __init__(self, message: str, *, source: str | None = None, key: str | None = None):
+        self.message = message
+        self.source = source
+        self.key = key
+        super().__init__(_located(message, source, key))
+
+
+class SpecWarning(UserWarning):
+    """A description is valid but probably not what its author meant (a unit slip, an odd value).
+
+    The message names the file, the key, the value and what was expected, on one line,
+    as :class:`SpecError`'s does; the command line prints it as one line on stderr.
+    """
+
+
+def warn_spec(message: str, *, source: str | None = None, key: str | None = None, stacklevel: int = 3) -> None:
+    """Issue a :class:`SpecWarning` located like a :class:`SpecError` (file, then key)."""
+    import warnings
+
+    warnings.warn(_located(message, source, key), SpecWarning, stacklevel=stacklevel)
+
+
+class SimulationError(FlexctrlError, RuntimeError):
+    """An integration failed (divergence, non-finite state, constraint drift)."""
+
+
+class SolverError(FlexctrlError, RuntimeError):
+    """A numerical solver (root finder, QP, NLP, Newton iteration) failed."""

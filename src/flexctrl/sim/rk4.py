@@ -1,0 +1,251 @@
+"""Classical fixed-step Runge-Kutta (RK4), the whole horizon run in compiled code.
+
+One step is a CasADi Function ``(x, t, u, h) -> (x_next, y_next)`` that calls the
+model's forward dynamics four times (kept as calls, so the generated C holds ``f``
+once and compiles quickly) and evaluates the outputs (energies, tip, deflections)
+at the new state.  ``mapaccum`` chains ``chunk`` steps (1000 by default) into one
+Function; it is compiled to C and cached on disk by :mod:`flexctrl.sim.compile`,
+or evaluated by CasADi's virtual machine when compilation is off or impossible.
+The step ``h`` is an input, so one library serves every dt; the last chunk of a
+horizon that is not a whole number of chunks is padded and the padding dropped.
+
+Stability and numerical damping
+    RK4's amplification factor on an undamped mode is ``R(i y)``, ``y = omega h``,
+    with ``|R(iy)|^2 = 1 - y^6/72 + y^8/576``: stable up to ``y = 2 sqrt(2) = 2.83``
+    on the imaginary axis (advice uses 2.785, the real-axis limit, to be safe).
+    Below the limit RK4 does not conserve energy: a mode keeps the fraction
+    ``|R|^2`` of its energy per step, which is 1 - 2e-8 at y = 0.1 but 0.81 at
+    y = 1.65 and 0.52 at y = 2.05.  High modes are therefore damped out
+    numerically while low ones are kept almost exactly.
+
+Measured on the paper's free-vibration scene (``studies/scenes/free_vibration.toml``:
+three links, two modes each, 2 kg payload, gravity, q = 0, q_f31 = 0.1 m,
+q_f32 = 0.002 m, no damping) at the paper's 1 ms step
+    ``Model.omega_max`` (joints locked) is 1188 rad/s (189 Hz, y = 1.19), but with the
+    joints free the Jacobian at the initial state has modes at 263 Hz (y = 1.65) and
+    325 Hz (y = 2.05; |R| = 0.72, its energy falls a thousandfold in 10 steps).
+    The initial deformation of link 3 puts part of its 5.63 J of elastic energy
+    into those modes, and RK4 removes it: the total energy (7.29 J at t = 0) is
+    0.36 J lower after 10 ms, 1.06 J after 50 ms, 1.15 J after 0.1 s; the
+    swinging arm keeps re-exciting the fast modes slightly, so the loss reaches
+    1.31 J at 1 s and 2.17 J at 5 s (0.22 % of the 987 J exchanged between gravity
+    and motion).  At 0.5 ms the 5 s loss is 1.32 J, at 0.1 ms 0.0074 J
+    (7.5e-6 of the exchanged energy); a 0.2 s run at 20 us keeps it to 1e-9
+    (tests/test_sim_arm.py).  So the paper's 1 ms RK4 runs are stable but have the
+    fast free-joint modes damped away.  The low-frequency content is unaffected:
+    the FFT peaks of the damped scene over 2 s (Section 4.4) are link 1: 0.50 and
+    1.50 Hz, link 2: 0.50 and 42.5 Hz, link 3: 42.5 and 1.00 Hz at both 1 ms and
+    0.1 ms (the paper: 0.49/1.47, 0.88/42.48, 0.98/42.48 Hz at 0.49 Hz resolution).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Callable, ClassVar, Sequence
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.base import Integrator, output_function
+from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
+
+
+def _axpy(x, a, k):
+    """``x + a * k``, entry by entry for tuples (an augmented state)."""
+    if isinstance(x, tuple):
+        return tuple(_axpy(xi, a, ki) for xi, ki in zip(x, k))
+    return x + a * k
+
+
+def _rk4_combine(x, h, k1, k2, k3, k4):
+    """``x + (h / 6) (k1 + 2 k2 + 2 k3 + k4)``, entry by entry for tuples."""
+    if isinstance(x, tuple):
+        return tuple(_rk4_combine(xi, h, a, b, c, d) for xi, a, b, c, d in zip(x, k1, k2, k3, k4))
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def rk4_next(f: Callable, x, h, t=None, *, k1=None):
+    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given) of length ``h``.
+
+    The one place RK4's stages are written; symbolic (CasADi) or numeric.  The
+    expression is, in this order of floating-point operations,
+    ``k2 = f(x + (0.5 h) k1)``, ``k3 = f(x + (0.5 h) k2)``, ``k4 = f(x + h k3)``,
+    ``x + (h / 6) (((k1 + 2 k2) + 2 k3) + k4)``, with the stage times ``t``,
+    ``t + 0.5 h``, ``t + 0.5 h``, ``t + h``.
+
+    Parameters
+    ----------
+    f
+        The right-hand side: a callable of the state (and time), e.g.
+        ``lambda s: fun(s, u, c)`` for a CasADi Function with torques and parameters.
+    x
+        The state, or a tuple of states (an augmented system such as a state with its
+        sensitivities: ``f`` then returns a tuple of the same length).
+    h
+        Step (s): a number or a symbol.
+    t
+        Time at ``x``; None when ``f`` does not take one.
+    k1
+        ``f(x)`` already evaluated (e.g. together with its Jacobian).
+    """
+    if t is None:
+        k1 = f(x) if k1 is None else k1
+        k2 = f(_axpy(x, 0.5 * h, k1))
+        k3 = f(_axpy(x, 0.5 * h, k2))
+        k4 = f(_axpy(x, h, k3))
+    else:
+        k1 = f(x, t) if k1 is None else k1
+        k2 = f(_axpy(x, 0.5 * h, k1), t + 0.5 * h)
+        k3 = f(_axpy(x, 0.5 * h, k2), t + 0.5 * h)
+        k4 = f(_axpy(x, h, k3), t + h)
+    return _rk4_combine(x, h, k1, k2, k3, k4)
+
+
+def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: bool = False) -> ca.Function:
+    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`output_function`)."""
+    f = try_expand(model.functions["f"])
+    outputs = output_function(model)
+    x = ca.MX.sym("x", model.n_x)
+    t = ca.MX.sym("t")
+    u = ca.MX.sym("u", model.n_u)
+    h = ca.MX.sym("h")
+
+    def rhs(xs, ts):
+        torque = u if u_function is None else u + ca.vec(u_function(ts))
+        return f(xs, torque)
+
+    x_next = rk4_next(rhs, x, h, t)
+    step = ca.Function("rk4_step", [x, t, u, h], [x_next, outputs(x_next)], ["x", "t", "u", "h"], ["x_next", "y_next"])
+    return step.expand() if expand else step
+
+
+def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca.Function:
+    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining any one-step map ``step(x, t, u, h)``."""
+    acc = step.mapaccum(n_steps)
+    x0 = ca.MX.sym("x0", step.size1_in(0))
+    T = ca.MX.sym("T", 1, n_steps)
+    U = ca.MX.sym("U", step.size1_in(2), n_steps)
+    h = ca.MX.sym("h")
+    X, Y = acc(x0, T, U, ca.repmat(h, 1, n_steps))
+    return ca.Function(f"{name}{n_steps}", [x0, T, U, h], [X, Y], ["x0", "T", "U", "h"], ["X", "Y"])
+
+
+def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
+    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
+    return loop_function(step, n_steps, "rk4_loop")
+
+
+def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "held_rk4") -> ca.Function:
+    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h`` (s), torque held.
+
+    The sample-level building block of the FEM timing report and the speed/accuracy
+    study: the output is the state at the end of each of ``chunk`` samples.
+    """
+    f = model.functions["f"]
+    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
+    step = ca.Function("rk4", [x, u], [rk4_next(lambda s: f(s, u), x, h)])
+    xs = ca.MX.sym("x", model.n_x)
+    sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
+    loop = sample.mapaccum(chunk)
+    args = loop.mx_in()
+    return ca.Function(name, args, loop.call(args))
+
+
+#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the imaginary-axis
+#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the polynomial).  The one copy.
+RK4_STABILITY_LIMIT = 2.785
+
+#: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.
+RK4_MARGIN = 0.9
+
+
+def rk4_step(omega_max: float, scene_dt: float, margin: float = RK4_MARGIN) -> float:
+    """The scene's step divided by the smallest whole number that makes RK4 stable (s).
+
+    ``omega_max * dt <= margin * RK4_STABILITY_LIMIT``; the scene's step itself when it already is.
+    """
+    if omega_max <= 0:
+        return scene_dt
+    k = max(1, math.ceil(scene_dt * omega_max / (margin * RK4_STABILITY_LIMIT) - 1e-12))
+    return scene_dt / k
+
+
+class RK4(Integrator):
+    """Fixed-step RK4 over compiled chunks (see module docstring).
+
+    Parameters
+    ----------
+    model, dt, u_function, chunk, energy_factor
+        See :class:`~flexctrl.sim.base.Integrator`.
+    compile : bool or None
+        ``False``: CasADi virtual machine; ``None`` (default): compile unless
+        ``FLEXCTRL_NO_COMPILE`` is set; ``True``: compile (falls back with a
+        warning when it cannot).
+    cache_dir : path, optional
+        Library cache (default :func:`flexctrl.user_cache.cache_directory`).
+    flags : sequence of str
+        C compiler flags.
+    expand : bool
+        Expand the step into one SX expression (larger code, sometimes faster in
+        the virtual machine).
+    """
+
+    name: ClassVar[str] = "rk4"
+    stability_limit: ClassVar[float] = RK4_STABILITY_LIMIT
+
+    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
+                 energy_factor: float = 100.0, compile: bool | None = None,
+                 cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
+                 expand: bool = False):
+        super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor)
+        self.compile = compile
+        self.cache_dir = cache_dir
+        self.flags = tuple(flags)
+        self.expand = expand
+        self.compiled: CompiledFunction | None = None
+
+    def settings(self) -> dict[str, Any]:
+        """Integrator settings plus how the loop is evaluated."""
+        out = super().settings()
+        c = self.compiled
+        out.update({
+            "compiled": bool(c and c.compiled),
+            "cache_hit": bool(c and c.cache_hit),
+            "compile_time_s": c.compile_seconds if c else 0.0,
+            "library": str(c.path) if c and c.path else None,
+            "flags": list(c.flags) if c and c.compiled else [],
+            "vm_reason": c.reason if c else "",
+        })
+        return out
+
+    def step_function(self) -> ca.Function:
+        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` that :meth:`_setup` chains and compiles."""
+        return rk4_step_function(self.model, self.u_function, expand=self.expand)
+
+    def _setup(self) -> None:
+        loop = loop_function(self.step_function(), self.chunk, f"{self.name}_loop")
+        self.compiled = compile_function(loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags)
+        # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per chunk.
+        # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows) array.
+        n = self.chunk
+        self._args = [np.zeros(self.model.n_x), np.zeros(n), np.zeros((n, self.model.n_u)), np.array([self.dt])]
+        self._res = [np.zeros((n, self.model.n_x)), np.zeros((n, loop.size1_out(1)))]
+        self._buffer, self._evaluate = self.compiled.function.buffer()
+        for i, a in enumerate(self._args):
+            self._buffer.set_arg(i, memoryview(a))
+        for i, r in enumerate(self._res):
+            self._buffer.set_res(i, memoryview(r))
+
+    def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = U.shape[0]
+        x_arg, t_arg, u_arg, _h = self._args
+        x_arg[:] = x0
+        t_arg[:k] = times[:k]
+        u_arg[:k] = U
+        if k < self.chunk:  # pad the last chunk; the extra steps are dropped
+            t_arg[k:] = times[k - 1] + self.dt * np.arange(1, self.chunk - k + 1)
+            u_arg[k:] = U[-1]
+        self._evaluate()
+        return self._res[0][:k].copy(), self._res[1][:k].copy()

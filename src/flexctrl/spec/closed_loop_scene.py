@@ -1,0 +1,212 @@
+"""Closed-loop scenes (``kind = "closed_loop"``): a plant scene plus a target and a controller.
+
+Everything of a ``kind = "arm"`` scene (model, payload, fidelity, modes, gravity,
+integrator, dt, duration, ``[initial]``, ``[damping]``) describes the *plant*,
+integrated at ``dt`` (s); the controller runs at its own sample time with a
+zero-order hold.  The extra keys::
+
+    kind = "closed_loop"
+    controller = "controllers/lqr.toml"  # default controller file (CLI --controller overrides)
+    design_payload = 2.0                 # kg the controller is designed for (mismatch; default: payload)
+    controller_fidelity = "amm:2"        # model the controller is designed on (default: fidelity)
+    design_configuration = [0, 90, 0]    # degrees: the joint angles the controller is designed
+                                         # (linearised) at (default: the target)
+    [target]   q = [30, 0, 0]            # degrees: the joint angles to move to
+               # or move = [30, 0, 0]    # degrees relative to the initial joint angles (for sweeps)
+               profile = "quintic"       # "step" (default: the reference jumps at t = 0) or "quintic"
+               move_time = 1.5           # s, duration of the quintic (required with it; unused by a step)
+               deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static" or "static"
+    [noise]    enabled = true, seed = 0  # measurement noise as set in the controller's sensors
+    [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
+               divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the link's
+                                             # length means the closed loop diverged
+               divergence_angle = 90.0       # deg: so does a joint this far outside the range of its move
+               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last second below it
+
+Angles are in degrees in the file and radians in the dataclass.  The reference
+(:mod:`flexctrl.control.reference`) goes from the initial joint angles to the target;
+every controller reads it at its sample times.  The residual-vibration window of
+:mod:`flexctrl.loop.metrics` starts ``settle_allowance`` after the reference arrives (at
+t = 0 for the step, at ``move_time`` for the quintic).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.reader import TableReader
+from flexctrl.spec import shipped
+from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
+
+@dataclass(frozen=True)
+class MetricSettings:
+    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the file's).
+
+    Attributes
+    ----------
+    settle_allowance : float
+        s after the reference arrives before the residual-vibration window opens.
+    band : float
+        m: the settling band of the tip error.
+    divergence_deflection : float
+        A link tip deflection beyond this fraction of the link's length means divergence.
+    divergence_angle : float
+        rad: so does a joint this far outside the range of its move.
+    stable_band : float
+        m: ``stable = 1`` needs the tip error of the run's last second below it.
+    """
+
+    settle_allowance: float = 2.0
+    band: float = 1e-3
+    divergence_deflection: float = 0.1
+    divergence_angle: float = math.pi / 2
+    stable_band: float = 0.01
+
+
+_EXTRA_KEYS = ("controller", "design_payload", "controller_fidelity", "design_configuration", "target", "noise",
+               "metrics")
+
+
+@dataclass(frozen=True)
+class ClosedLoopScene:
+    """A validated closed-loop scene; ``plant`` holds the plant part (an :class:`ArmScene`)."""
+
+    plant: ArmScene
+    target_q: tuple[float, ...]
+    controller: Path | None
+    design_payload: float | None
+    controller_fidelity: Fidelity | None
+    noise: bool
+    seed: int
+    settle_allowance: float
+    band: float
+    profile: str = "step"
+    move_time: float = 0.0
+    deflection: str = "quasi_static"
+    design_q: tuple[float, ...] | None = None
+    divergence_deflection: float = 0.1
+    divergence_angle: float = math.pi / 2
+    stable_band: float = 0.01
+    kind: str = "closed_loop"
+
+    @property
+    def name(self) -> str:
+        return self.plant.name
+
+    @property
+    def source(self) -> str:
+        return self.plant.source
+
+    @property
+    def start_q(self) -> tuple[float, ...]:
+        """Joint angles (rad) the reference starts from: the initial ones (zero when not given)."""
+        return self.plant.q0 if self.plant.q0 is not None else (0.0,) * len(self.target_q)
+
+    @property
+    def design_configuration(self) -> tuple[float, ...]:
+        """Joint angles (rad) the controller is designed at (default: the target)."""
+        return self.design_q if self.design_q is not None else self.target_q
+
+    def joint_reference(self):
+        """The :class:`~flexctrl.control.reference.JointReference` from the initial angles to the target."""
+        from flexctrl.spec.reference import JointReference
+
+        return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
+
+    @property
+    def t_arrive(self) -> float:
+        """Time (s) the reference reaches the target (0 for the step, ``move_time`` for the quintic)."""
+        return self.move_time if self.profile == "quintic" else 0.0
+
+    def settings(self) -> dict[str, Any]:
+        """Plain JSON-ready data (angles in degrees)."""
+        return {
+            **self.plant.settings(),
+            "kind": self.kind,
+            "target_q_deg": [math.degrees(a) for a in self.target_q],
+            "profile": self.profile,
+            "move_time_s": self.move_time,
+            "deflection_reference": self.deflection,
+            "design_configuration_deg": [math.degrees(a) for a in self.design_configuration],
+            "controller": str(self.controller) if self.controller else None,
+            "design_payload_kg": self.design_payload,
+            "controller_fidelity": str(self.controller_fidelity) if self.controller_fidelity else None,
+            "noise": self.noise,
+            "seed": self.seed,
+            "settle_allowance_s": self.settle_allowance,
+            "band_m": self.band,
+            "divergence_deflection": self.divergence_deflection,
+            "divergence_angle_deg": math.degrees(self.divergence_angle),
+            "stable_band_m": self.stable_band,
+        }
+
+
+def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path) -> ClosedLoopScene:
+    """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
+    plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
+    r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
+    controller = None
+    if r.has("controller"):
+        name = r.string("controller")
+        try:
+            controller = shipped.find(name, "controller", base_dir)
+        except SpecError as exc:
+            raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
+    design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
+    cf = parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity") if r.has("controller_fidelity") else None
+    target = r.table_of("target")
+    if target.has("q") == target.has("move"):
+        given = "both are given" if target.has("q") else "missing required key"
+        raise target.error("q", f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
+                                "to initial.q), degrees")
+    if target.has("q"):
+        target_q = tuple(math.radians(a) for a in target.degrees("q"))
+    else:
+        move = target.degrees("move")
+        start = plant.q0 if plant.q0 is not None else (0.0,) * len(move)
+        if len(move) != len(start):
+            raise target.error("move", f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint")
+        target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
+    from flexctrl.spec.reference import DEFLECTIONS, PROFILES
+
+    profile = target.string("profile", "step", choices=PROFILES)
+    if profile == "quintic":
+        if not target.has("move_time"):
+            raise target.error("move_time", "is missing; allowed: a move time > 0 s, required with profile = \"quintic\"")
+        move_time = target.positive("move_time", unit="s")
+    else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch profiles
+        move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
+    deflection = target.string("deflection", "quasi_static", choices=DEFLECTIONS)
+    target.finish()
+    design_q = None
+    if r.has("design_configuration"):
+        values = r.degrees("design_configuration")
+        if len(values) != len(target_q):
+            raise r.error("design_configuration", f"has {len(values)} values for {len(target_q)} joints; "
+                                                  "allowed: one angle per joint (degrees)")
+        design_q = tuple(math.radians(a) for a in values)
+    noise = r.table_of("noise", {})
+    enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
+    noise.finish()
+    metrics = r.table_of("metrics", {})
+    default = MetricSettings()
+    settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
+    band = metrics.positive("band", default.band, unit="m")
+    div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
+    div_angle = math.radians(metrics.positive("divergence_angle", math.degrees(default.divergence_angle),
+                                              unit="degrees"))
+    stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
+    metrics.finish()
+    r.finish()
+    t_arrive = move_time if profile == "quintic" else 0.0
+    move_time = move_time if profile == "quintic" else 0.0
+    if t_arrive + settle >= plant.duration:
+        raise r.error("metrics.settle_allowance", f"value {settle!r} leaves no residual window after the move "
+                                                  f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
+                                                  f"({plant.duration - t_arrive:g} s)")
+    return ClosedLoopScene(plant, target_q, controller, design_payload, cf, enabled, seed, settle, band, profile,
+                           move_time, deflection, design_q, div_deflection, div_angle, stable_band)
