@@ -24,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 ONE_PROCESS = r"""
 import functools, json, sys, time
-import flexctrl.control.nmpc as nmpc
+import flexctrl.control.nmpc.controller as nmpc
 from flexctrl.study.runner import run_study
-from flexctrl.study.spec import load_study
+from flexctrl.study.study_file import load_study
 
 design, times = nmpc.design_nmpc, []
 

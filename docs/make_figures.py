@@ -107,7 +107,7 @@ def modes(args) -> list[Path]:
     from matplotlib.figure import Figure
 
     from flexctrl.modal.arm_modes import arm_modes
-    from flexctrl.modal.plots import frequency_maps
+    from flexctrl.modal.mode_plots import frequency_maps
     from flexctrl.spec.arm import load_arm
 
     arm = load_arm(ROOT / "models" / "subedi3link.toml")

@@ -19,7 +19,7 @@ from scipy.integrate import solve_ivp
 import flexctrl
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import ModelFamilyUnavailable, build_model
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.spec.arm import load_arm

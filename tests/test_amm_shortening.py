@@ -142,7 +142,7 @@ def test_shortening_changes_only_second_order_terms(arm):
 
 
 def test_switch_reaches_the_model_from_files_and_scenes(model_path, tmp_path):
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.spec.scene import load_scene
 
     assert load_arm(model_path).axial_shortening is None  # each family's default

@@ -17,7 +17,7 @@ from scipy.optimize import brentq
 
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
-from flexctrl.dynamics.fem.spectrum import locked_fem_hz
+from flexctrl.dynamics.fem.locked_spectrum import locked_fem_hz
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import load_arm
 from test_amm_shortening import _energy_drift, one_link  # noqa: E402  (helpers of the shortening tests)
@@ -117,7 +117,7 @@ def test_energy_conserved_at_rk4_order(arm):
 
 
 def test_switch_reaches_the_model_and_bad_values_are_refused(model_path, tmp_path):
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.spec.scene import load_scene
 
     assert load_arm(model_path).axial_stretch is None

@@ -2,8 +2,8 @@
 
 The graph is built from the source with ``ast`` (no module is imported): every
 ``import`` and ``from ... import`` (inside functions too) and every string constant
-that names a flexctrl module (``"flexctrl.study.executors.closed_loop"``, registry
-entries such as ``"flexctrl.scenes.arm:run_arm_scene"``) is an edge; imports under
+that names a flexctrl module (``"flexctrl.study.executors.closed_loop_executor"``, registry
+entries such as ``"flexctrl.scenes.arm_setup:run_arm_scene"``) is an edge; imports under
 ``if TYPE_CHECKING:`` are not.  A package's ``__init__`` naming its own sub-modules and
 a module naming its parent package are not edges (Python imports the parent first
 anyway).

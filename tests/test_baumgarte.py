@@ -12,7 +12,7 @@ import pytest
 from flexctrl.analysis.baumgarte import (EXPLICIT_LIMIT, constraint_states, defect_gain, error_amplification,
                                          fastest_decay, propagate_errors, run_point, spectral_radius,
                                          stability_limit, steady_drift_response, step_defects)
-from flexctrl.study.executors.baumgarte_sweep import read_sweep_scene
+from flexctrl.study.executors.baumgarte_sweep_executor import read_sweep_scene
 from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SlidingBeamModel
 from flexctrl.errors import SpecError
 
@@ -146,7 +146,7 @@ def test_scene_keys_are_validated():
 
 def test_reduced_study_writes_csv_and_report(tmp_path):
     from flexctrl.study.runner import run_study
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     unstable = 2.0 * EXPLICIT_LIMIT / DT
     spec = load_study(STUDY, ["grid.scene.feedback=[\"explicit\"]", "grid.scene.dt=[1e-3]",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from flexctrl.loop.sampled import simulate_closed_loop
-from flexctrl.control.base import Controller
+from flexctrl.control.controller import Controller
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.linear import Sensors, equilibrium

@@ -2,7 +2,7 @@
 
 The choice is checked against runs the chooser did not make: the reference plant and
 the chosen plant are run directly here (full plant rate, through
-:func:`flexctrl.scenes.closed_loop.run_closed_loop_scene` with a concrete fidelity) and their
+:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` with a concrete fidelity) and their
 tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`.  The error estimate is
 recomputed from the chooser's rung runs (kept in :data:`CACHE`) with the method's rule,
 ``safety`` times the largest pointwise tip distance on the scene's grid to the next two
@@ -26,7 +26,7 @@ from flexctrl.scenes.cache import SceneCache
 from flexctrl.sim.tip_error import tip_error
 from flexctrl.cli import main
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, pin_design
-from flexctrl.scenes.closed_loop import check_auto, run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import check_auto, run_closed_loop_scene
 from flexctrl.loop.mismatch import state_projection
 from flexctrl.errors import SpecError
 from flexctrl.spec.fidelity import parse_fidelity
@@ -187,7 +187,7 @@ def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
 
 def test_state_projection_matches_modes_by_name_and_the_modes_agree_across_rungs():
     from flexctrl.linear import state_names
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
 
     plant_scene = _scene().plant
     arm = scene_arm(plant_scene)

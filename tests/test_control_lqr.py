@@ -12,7 +12,7 @@ import scipy.linalg
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.estimator import kalman_gain
-from flexctrl.control.nmpc import interval_functions
+from flexctrl.control.nmpc.controller import interval_functions
 from flexctrl.spec.controller_settings import (
     EstimatorSettings,
     LQRSettings,
@@ -20,7 +20,7 @@ from flexctrl.spec.controller_settings import (
     ScheduleSettings,
     SensorSettings,
 )
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.errors import SpecError
 
 TARGET = np.radians([80.0, -10.0, -10.0])
@@ -233,7 +233,7 @@ def test_doubling_dare_agrees_with_scipy_and_refuses_an_uncontrollable_unstable_
 @pytest.mark.parametrize("target_deg", [[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
 def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
     """The move scene's LQG: the filter DARE the Schur method failed on at [30, 0, 0] (free rigid modes at z = 1)."""
-    from flexctrl.scenes.closed_loop import run_closed_loop_scene
+    from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene("studies/scenes/move_joint1_30deg.toml", [f"target.move={target_deg!r}", "duration=5.0"])

@@ -9,7 +9,7 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
 from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=True)
@@ -199,7 +199,7 @@ def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formula
 
 
 def test_benchmark_reports_every_variant():
-    from flexctrl.bench.mpc import default_variants, format_benchmark, mpc_benchmark
+    from flexctrl.bench.mpc_step import default_variants, format_benchmark, mpc_benchmark
 
     variants = {k: v for k, v in default_variants().items() if k in ("osqp_sparse", "osqp_condensed")}
     result = mpc_benchmark(steps=5, horizon=5, variants=variants, python_control_solves=0, nmpc=False)
@@ -234,7 +234,7 @@ def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
 def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(arm3, op3, formulation):
     """Reference in the bounds only: MPC's first move = LQR's u_ref - K (x - x_ref), and the QP pattern is unchanged."""
     from flexctrl.control.lqr import LQRSettings
-    from flexctrl.control.reference import ReferenceTrajectory
+    from flexctrl.control.reference_trajectory import ReferenceTrajectory
     from flexctrl.spec.reference import JointReference
 
     settings = MPCSettings(horizon=12, soft="deflection", formulation=formulation, osqp=TIGHT)

@@ -8,7 +8,7 @@ import pytest
 
 from flexctrl import linear as L
 from flexctrl.control import design
-from flexctrl.control.nmpc import RK4_BOUND, auto_substeps, design_nmpc
+from flexctrl.control.nmpc.controller import RK4_BOUND, auto_substeps, design_nmpc
 from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.spec.arm import arm_from_document
@@ -114,7 +114,7 @@ def test_auto_substeps_respect_the_rk4_bound(onelink):
 @pytest.mark.slow
 def test_rti_on_the_three_link_arm_converges_without_fallbacks():
     # the step time is a benchmark figure (`flexctrl bench mpc`), not a timed test: this machine is shared
-    from flexctrl.scenes.models import load_model
+    from flexctrl.scenes.model_files import load_model
 
     model = load_model("models/subedi3link.toml", fidelity="amm:2")
     op = L.equilibrium(model, np.radians([80.0, -10.0, -10.0]))
@@ -137,7 +137,7 @@ def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_mo
     (A payload mass of 0 or of a value CasADi keeps as a shared constant, 0.5 here, changes the
     structure; a stiffer link and another payload inertia do not.)
     """
-    from flexctrl.control.nmpc import constants_as_parameters
+    from flexctrl.control.nmpc.controller import constants_as_parameters
 
     model, op = onelink
     fp, const = constants_as_parameters(model.functions["f"])
@@ -199,7 +199,7 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
     sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or one per
     sample at its middle node (controllers/nmpc.toml now), NMPC settles."""
-    from flexctrl.scenes.closed_loop import run_closed_loop_scene
+    from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene("studies/scenes/move_joint1_30deg.toml",
@@ -216,7 +216,7 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
 def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
     # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of consecutive
     # samples: every variant has its own plant and is reset, so the order may change the times, not the runs
-    from flexctrl.bench.mpc import _run_nmpcs
+    from flexctrl.bench.mpc_step import _run_nmpcs
 
     model, op = onelink
     dx0 = np.zeros(model.n_x)

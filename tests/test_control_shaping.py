@@ -10,10 +10,10 @@ import scipy.linalg
 
 from flexctrl import linear as L
 from flexctrl.control import design
-from flexctrl.control.nmpc import interval_functions
+from flexctrl.control.nmpc.controller import interval_functions
 from flexctrl.spec.controller_settings import ShapedSettings
 from flexctrl.control.shaping import Shaper, design_shaper, residual_vibration, zv, zvd
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 
 
 @pytest.mark.parametrize("f, zeta", [(2.0, 0.0), (5.3, 0.05), (0.7, 0.3)])

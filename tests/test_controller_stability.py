@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from flexctrl.scenes.closed_loop import run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.errors import SimulationError
 from flexctrl.spec.scene import load_scene
 from flexctrl.study import execute_run

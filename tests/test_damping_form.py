@@ -7,7 +7,7 @@ import pytest
 
 from flexctrl.dynamics.build import ModelFamilyUnavailable, build_model
 from flexctrl.errors import SpecError
-from flexctrl.scenes.arm import scene_arm
+from flexctrl.scenes.arm_setup import scene_arm
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/free_vibration_damped.toml"

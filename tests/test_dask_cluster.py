@@ -15,7 +15,7 @@ from flexctrl.study import load_study, run_study
 distributed = pytest.importorskip("distributed")
 
 from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget  # noqa: E402
-from flexctrl.study.executors.dask_cluster import LocalhostCluster  # noqa: E402
+from flexctrl.study.dask_cluster import LocalhostCluster  # noqa: E402
 from support import DATA as SHIPPED
 
 TEST_DATA = Path(__file__).resolve().parent / "data"

@@ -1,4 +1,4 @@
-"""Floating-frame finite-element arm (flexctrl.dynamics.fem.arm) and the per-link FE modal check.
+"""Floating-frame finite-element arm (flexctrl.dynamics.fem.fem_arm) and the per-link FE modal check.
 
 Reference values are independent solutions or limits, never stored output: the
 closed-form clamped-mass frequencies, mesh refinement (h^4 eigenvalue
@@ -20,7 +20,7 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from flexctrl.dynamics.fem.arm import (build_fem_model, fem_coordinate_names, generalized_frequencies,
+from flexctrl.dynamics.fem.fem_arm import (build_fem_model, fem_coordinate_names, generalized_frequencies,
                                        locked_matrices, relax_axial)
 from flexctrl.dynamics.fem.newmark import simulate_model_newmark
 from flexctrl.errors import SpecError
@@ -215,7 +215,7 @@ def test_locked_frequencies_converge_from_above_at_fourth_order(arm, payload, q_
 def test_locked_frequencies_agree_with_assumed_modes(arm, q_deg):
     """AMM-4 is a Ritz basis of the same structure (clamped-mass modes of each link, coupled):
     with axially rigid links it must sit just above FEM-16; the file's EA lowers FEM slightly."""
-    from flexctrl.dynamics.fem.spectrum import locked_amm_hz, locked_fem_hz
+    from flexctrl.dynamics.fem.locked_spectrum import locked_amm_hz, locked_fem_hz
 
     a = arm.with_payload(2.0)
     amm4, amm2 = locked_amm_hz(a, 4, q_deg), locked_amm_hz(a, 2, q_deg)

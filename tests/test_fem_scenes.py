@@ -1,4 +1,4 @@
-"""Finite-element scenes (flexctrl.scenes.fem) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
+"""Finite-element scenes (flexctrl.scenes.run_fem_scene) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from scipy.integrate import cumulative_trapezoid
 from flexctrl.dynamics.fem.rp_arm import RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.sliding_beam import FAST_PULL, FAST_PUSH, simulate_sliding_beam
 from flexctrl.errors import SpecError
-from flexctrl.scenes.fem import run_fem_scene
+from flexctrl.scenes.run_fem_scene import run_fem_scene
 from flexctrl.spec.fem_models import RPArmSpec, load_rp_arm, rp_arm_from_document
 from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.overrides import apply_overrides
@@ -199,7 +199,7 @@ def test_rp_model_file_is_validated():
 
 def test_scene_kind_adapters(tmp_path):
     """The reader validates at load, the runner writes files at run."""
-    from flexctrl.scenes.fem import run_scene
+    from flexctrl.scenes.run_fem_scene import run_scene
     from flexctrl.spec.fem_scene import read_fem_scene as read_scene
 
     doc, src = scene("bk_fast_push", "duration=0.05")

@@ -19,9 +19,9 @@ from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import RunRecord, ToleranceUnreachable, tip_distance, walk_and_judge
 from flexctrl.scenes import auto as auto_fidelity
-from flexctrl.scenes.arm_scene import resolve_auto as resolve_arm_auto
+from flexctrl.scenes.run_arm_scene import resolve_auto as resolve_arm_auto
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.closed_loop import resolve_auto
+from flexctrl.scenes.run_closed_loop_scene import resolve_auto
 from flexctrl.scenes.loop_setup import pin_design
 from flexctrl.spec.fidelity import FIDELITY_CHECKS
 from flexctrl.spec.scene import load_scene

@@ -124,7 +124,7 @@ def test_unreachability_is_predicted_where_the_ladder_walk_finds_it():
 
 @pytest.mark.slow  # the small case with the MPC: its choice (linear and nonlinear runs) and two runs
 def test_the_run_at_the_choice_reuses_the_choices_own_run_and_equals_a_fresh_run():
-    from flexctrl.scenes.closed_loop import run_closed_loop_scene
+    from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 
     sets = [*SHORT, "controller_fidelity='amm:2'", "tolerance=1e-2"]  # m: what the MPC's small case can meet
     scene = load_scene(SCENE, sets)

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexctrl.control.hpipm_ocp import HpipmOCP
+from flexctrl.control.nmpc.hpipm_ocp import HpipmOCP
 
 N, NX, NU = 8, 4, 2
 TIGHT = {"mode": "robust", "iter_max": 100, "res_g_max": 1e-11, "res_b_max": 1e-11, "res_d_max": 1e-11,

@@ -185,7 +185,7 @@ def test_radian_argument_that_looks_like_degrees_warns():
 
 def test_study_axis_in_radians_warns(tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     with pytest.warns(SpecWarning, match=r"key 'grid.q2': value .* looks like radians"):
         load_study("studies/quickstart.toml", ["grid.q2=[0, 1.5708]"], check_executor=False)
@@ -344,7 +344,7 @@ def test_simulate_set_reaches_the_controller_file(capsys, monkeypatch, tmp_path)
 
 def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
     monkeypatch.chdir(ROOT)
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     spec = load_study("studies/quickstart.toml", ["per_controller.mpc.horizon=30"])
     by_controller = {}
@@ -364,7 +364,7 @@ def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
 
 def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monkeypatch):
     monkeypatch.chdir(ROOT)
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     spec = load_study("studies/controller_stability.toml", [
         'grid.controller=["../controllers/pd.toml", "../controllers/lqg.toml", "../controllers/nmpc.toml"]',
@@ -378,10 +378,10 @@ def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monke
 def test_a_metric_a_run_cannot_produce_is_an_empty_cell_with_its_reason(tmp_path, monkeypatch, declared):
     import csv
 
-    from flexctrl.study.executors import selftest
+    from flexctrl.study.executors import selftest_executor as selftest
     from flexctrl.study.outputs import RunOutput
     from flexctrl.study.runner import run_study
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     real = selftest.execute
 

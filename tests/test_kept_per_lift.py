@@ -15,7 +15,7 @@ import pytest
 
 import flexctrl as fc
 import flexctrl.sim.compile as compile_module
-from flexctrl.control.reference import path_functions
+from flexctrl.control.reference_trajectory import path_functions
 from flexctrl.dynamics import jacobians
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import FROM_LIFTED, ObjectMemo

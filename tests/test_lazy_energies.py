@@ -16,7 +16,7 @@ from flexctrl.errors import SpecError
 from flexctrl.loop.plant_step import output_map
 from flexctrl.loop.sampled import integrate_closed_loop, mapped, tip_positions, trajectory_from_states
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.closed_loop import run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.scenes.loop_setup import build_loop
 from flexctrl.sim.bound import evaluate
 from flexctrl.sim.trajectory import ENERGY_NAMES, LazyEnergies

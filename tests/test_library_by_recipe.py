@@ -15,8 +15,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import flexctrl.control.nmpc_interval as nmpc_interval
-from flexctrl.control.nmpc import design_nmpc
+import flexctrl.control.nmpc.interval as nmpc_interval
+from flexctrl.control.nmpc.controller import design_nmpc
 from flexctrl.dynamics.parametric import Memo
 from flexctrl.sim.compile import ENV_CACHE, compile_by_recipe, find_compiler
 

@@ -16,7 +16,7 @@ import pytest
 
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import LIFTED, constants_as_parameters
-from flexctrl.sim.base import output_function
+from flexctrl.sim.integrator import output_function
 from flexctrl.spec.arm import load_arm
 
 from support import MODEL

@@ -12,7 +12,7 @@ import scipy.linalg
 from flexctrl import linear as L
 from flexctrl.beam.clamped_mass import clamped_mass_modes
 from flexctrl.dynamics.amm import build_amm
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.errors import SpecError
 from flexctrl.sim.toymodel import spring_pendulum
 from flexctrl.spec.arm import arm_from_document

@@ -10,11 +10,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexctrl.bench.loop import metric_differences
+from flexctrl.bench.loop_overhead import metric_differences
 from flexctrl.errors import SpecError
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.closed_loop import run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.scenes.loop_setup import build_loop
 from flexctrl.spec.scene import load_scene
 

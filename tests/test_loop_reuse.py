@@ -6,7 +6,7 @@ cache after runs that differ from it in one input (configuration, payload, move,
 deflection, controller settings, sample time); its metrics must equal those of the same
 run on a fresh cache, to the last digit.  A key that forgot an input would hand the run
 another run's model, design or table, and the metrics would differ.  And the compiled
-reference tables against the virtual machine's (:func:`flexctrl.control.reference.path_functions`).
+reference tables against the virtual machine's (:func:`flexctrl.control.reference_trajectory.path_functions`).
 """
 
 import dataclasses
@@ -14,11 +14,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexctrl.bench.loop import TIMING_METRICS
-from flexctrl.control.reference import ReferenceTrajectory, path_functions
-from flexctrl.scenes.arm import scene_arm
+from flexctrl.bench.loop_overhead import TIMING_METRICS
+from flexctrl.control.reference_trajectory import ReferenceTrajectory, path_functions
+from flexctrl.scenes.arm_setup import scene_arm
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.closed_loop import run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"

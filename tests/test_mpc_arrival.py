@@ -9,8 +9,8 @@ import pytest
 
 import flexctrl as fc
 from support import DATA, ROOT
-from flexctrl.control.mpc_arrival import shortest_arrival
-from flexctrl.control.mpc_qp import ScaledProblem, condensed_qp
+from flexctrl.control.mpc.arrival_search import shortest_arrival
+from flexctrl.control.mpc.qp import ScaledProblem, condensed_qp
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import MPCSettings

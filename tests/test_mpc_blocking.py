@@ -9,7 +9,7 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
 from flexctrl.errors import SpecError
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
 
 TARGET = np.radians([30.0, 0.0, 0.0])
@@ -65,7 +65,7 @@ def test_blocked_unconstrained_plan_is_the_closed_form_and_held_over_its_blocks(
 
 
 def test_blocking_matrix_holds_each_block_move():
-    from flexctrl.control.mpc_qp import blocking_matrix
+    from flexctrl.control.mpc.qp import blocking_matrix
 
     T = blocking_matrix((1, 2), 2)
     np.testing.assert_array_equal(T @ np.array([1.0, 2.0, 3.0, 4.0]), [1.0, 2.0, 3.0, 4.0, 3.0, 4.0])

@@ -13,8 +13,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from flexctrl.control.nmpc import design_nmpc
-from flexctrl.control.nmpc_interval import group_centres
+from flexctrl.control.nmpc.controller import design_nmpc
+from flexctrl.control.nmpc.interval import group_centres
 from flexctrl.errors import SpecError
 from flexctrl.spec.controller import controller_from_document
 from flexctrl.spec.controller_settings import NMPCSettings
@@ -57,7 +57,7 @@ def test_a_loop_on_grouped_sensitivities_settles_where_the_per_interval_one_does
     finals = []
     for stages in (1, 10):
         ctrl = design_nmpc(model, op, dataclasses.replace(settings, stages_per_jacobian=stages))
-        from flexctrl.control.nmpc import interval_functions
+        from flexctrl.control.nmpc.controller import interval_functions
 
         F, _ = interval_functions(model, settings.sample_time, 4, None)
         x = op.x.copy()

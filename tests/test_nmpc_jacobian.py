@@ -1,4 +1,4 @@
-"""The Jacobian of f through one factorisation of M (flexctrl.control.nmpc_jacobian) against CasADi's."""
+"""The Jacobian of f through one factorisation of M (flexctrl.control.nmpc.jacobian) against CasADi's."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexctrl.control.nmpc_jacobian import factored_dynamics
-from flexctrl.scenes.models import load_model
-from flexctrl.control.nmpc import design_nmpc
+from flexctrl.control.nmpc.jacobian import factored_dynamics
+from flexctrl.scenes.model_files import load_model
+from flexctrl.control.nmpc.controller import design_nmpc
 from flexctrl.spec.controller_settings import NMPCSettings
 
 

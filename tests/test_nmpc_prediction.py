@@ -9,10 +9,10 @@ import pytest
 
 from flexctrl import linear as L
 from flexctrl.control import design
-from flexctrl.control.nmpc import interval_functions
-from flexctrl.control.nmpc_model import prediction_model, truncated_model
+from flexctrl.control.nmpc.controller import interval_functions
+from flexctrl.control.nmpc.prediction_model import prediction_model, truncated_model
 from flexctrl.errors import SpecError
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller import controller_from_document
 from flexctrl.spec.controller_settings import NMPCSettings
 

@@ -8,11 +8,11 @@ import scipy.linalg as sl
 
 from flexctrl import linear as L
 from flexctrl.control.lqr import build_sensors, linear_plant
-from flexctrl.control.nmpc_interval import interval_functions
-from flexctrl.control.nmpc_model import coupled_basis, modal_map
+from flexctrl.control.nmpc.interval import interval_functions
+from flexctrl.control.nmpc.prediction_model import coupled_basis, modal_map
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop
-from flexctrl.scenes.models import load_model
+from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import SensorSettings
 from flexctrl.spec.scene import load_scene
 
@@ -170,7 +170,7 @@ def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_pr
 def test_a_configuration_of_the_same_structure_reuses_the_linearisation_and_gets_the_same_numbers():
     # the horizon linearisation is memoised by the content of the lifted f and the recipe: a second
     # configuration reuses it; built afresh (memo emptied) it gives the same shooting ends and Jacobians
-    from flexctrl.control import nmpc_interval
+    from flexctrl.control.nmpc import interval as nmpc_interval
 
     def setup(q):
         return build_loop(load_scene(SCENE, [f"initial.q={q}"]), "controllers/nmpc.toml", ["compile=false"],

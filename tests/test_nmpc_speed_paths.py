@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from flexctrl.control.nmpc import design_nmpc, interval_functions
+from flexctrl.control.nmpc.controller import design_nmpc, interval_functions
 from flexctrl.sim.bound import BoundFunction
 from flexctrl.spec.controller_settings import NMPCSettings
 

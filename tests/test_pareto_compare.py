@@ -10,7 +10,7 @@ import pytest
 
 from flexctrl.analysis.pareto_compare import case_table, compare, main, markdown, merge, plot, read_pareto
 from flexctrl.errors import SpecError
-from flexctrl.study.executors import speed_vs_accuracy as study
+from flexctrl.study.executors import speed_vs_accuracy_executor as study
 
 from support import DATA, ROOT
 COLUMNS = ["scene", "method", "model", "integrator", "runs_ok", "runs_failed", "wall_per_sim_s", "tip_error_rms",
@@ -96,7 +96,7 @@ def test_plot_and_command_line(pair, tmp_path, capsys):
 
 
 def _run_settings(study_file: str, method: str, scene: str, *overrides: str) -> dict:
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     spec = load_study(DATA / "studies" / study_file, list(overrides))
     return next(r.settings for r in spec.runs
@@ -105,7 +105,7 @@ def _run_settings(study_file: str, method: str, scene: str, *overrides: str) -> 
 
 @pytest.mark.parametrize("scene", ["bangbang.toml", "move_joint1_30deg.toml"])
 def test_shortening_study_switches_the_plant_and_the_shipped_one_does_not(scene):
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
 
     for study_file, expected in (("speed_vs_accuracy_shortening.toml", True), ("speed_vs_accuracy.toml", None)):
         plan = study.plan_from_settings(_run_settings(study_file, "amm:2/rk4@1ms", scene))

@@ -15,7 +15,7 @@ import pytest
 
 from flexctrl.dynamics.build import build_model
 from flexctrl.loop.plant_step import UNROLL_LIMIT, _single_step, advance_function, output_map, plant_step_function
-from flexctrl.sim.base import output_function
+from flexctrl.sim.integrator import output_function
 from flexctrl.dynamics.parametric import constants_as_parameters
 from flexctrl.spec.arm import load_arm
 

@@ -97,7 +97,7 @@ def test_clamped_joint_is_driven_at_E_and_read_from_the_file(tmp_path):
 def test_scene_with_the_clamped_joint(tmp_path):
     """``studies/scenes/rp_clamped_extend.toml`` runs through the scene runner (partial and full
     coupling); ``driven_end = "H"`` with the clamped model is a load-time error naming the key."""
-    from flexctrl.scenes.fem import run_fem_scene
+    from flexctrl.scenes.run_fem_scene import run_fem_scene
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import read_toml
 

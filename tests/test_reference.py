@@ -1,12 +1,12 @@
-"""Reference trajectories (flexctrl.control.reference) against finite differences and the model's own dynamics."""
+"""Reference trajectories (flexctrl.control.reference_trajectory) against finite differences and the model's own dynamics."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from flexctrl.scenes.closed_loop import run_closed_loop_scene
-from flexctrl.control.reference import ReferenceTrajectory
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
+from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.spec.reference import JointReference
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError

@@ -20,7 +20,7 @@ import flexctrl as fc
 from flexctrl import cli
 from flexctrl.study import load_study, run_study
 from flexctrl.study.report import write_report
-from flexctrl.study.units import display
+from flexctrl.study.column_units import display
 from support import DATA as SHIPPED
 
 TEST_DATA = Path(__file__).resolve().parent / "data"

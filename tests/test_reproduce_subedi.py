@@ -12,10 +12,10 @@ import pytest
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
 from flexctrl.modal.paper_data import SUBEDI_FIG14_PEAKS_HZ
-from flexctrl.reproduce.api import reproduce_paper
+from flexctrl.reproduce.reproduction import reproduce_paper
 from flexctrl.reproduce.subedi import NUMBERED
 from flexctrl.reproduce.subedi_fft import RESOLUTION_HZ
-from flexctrl.sim.spectrum import dominant_frequencies
+from flexctrl.sim.fft_peaks import dominant_frequencies
 
 
 @pytest.fixture(scope="module")

@@ -170,7 +170,7 @@ def test_errors():
 def test_scenes_with_a_drive_table(tmp_path):
     """``[drive] kind = "force"`` runs full coupling; ``kind = "motion", coupling = "full"`` reports
     the torque and force the motion needs; inapplicable keys are errors naming file and key."""
-    from flexctrl.scenes.fem import run_fem_scene
+    from flexctrl.scenes.run_fem_scene import run_fem_scene
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import read_toml
 

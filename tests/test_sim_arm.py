@@ -83,7 +83,7 @@ def test_bangbang_energy_equals_work_of_the_torque(root):
 
 
 def test_bench_sim_reports_its_figures(root):
-    from flexctrl.bench.sim import bench_sim
+    from flexctrl.bench.simulation_speed import bench_sim
 
     result = bench_sim(DATA / "models" / "subedi3link.toml", duration=0.05, repeats=1, scipy_span=0.005,
                        use_cache=True)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexctrl.study.executors import speed_vs_accuracy as study
+from flexctrl.study.executors import speed_vs_accuracy_executor as study
 from flexctrl.analysis.accuracy import (
     Method, compute_reference, make_stepper, pareto_front, parse_method, run_open_loop,
 )
@@ -151,7 +151,7 @@ def test_open_loop_driver_matches_the_package_integrator():
 
 def test_divergence_is_an_error_not_nan():
     from flexctrl.errors import SimulationError
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.dynamics.build import build_model
 
     plan = study.plan_from_settings(_settings("bangbang.toml", "fem:2/rk4@1ms", "scene.horizon=0.3"))
@@ -169,7 +169,7 @@ def test_divergence_is_an_error_not_nan():
 
 def test_reduced_study_writes_pareto_csv_and_the_figure(tmp_path, monkeypatch):
     from flexctrl.study.runner import run_study
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     monkeypatch.setenv("FLEXCTRL_CACHE", str(tmp_path / "cache"))
     overrides = [

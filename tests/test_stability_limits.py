@@ -298,8 +298,8 @@ def test_probe_refuses_states_it_cannot_probe():
 
 
 def test_study_refuses_adaptive_integrators():
-    from flexctrl.study.executors.stability_limits import check_settings
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.executors.stability_limits_executor import check_settings
+    from flexctrl.study.study_file import load_study
 
     settings = load_study(STUDY, ["grid.fidelity=['amm:1']"], check_executor=False).runs[0].settings
     settings["overrides"] = ['scene.integrator="cvodes"']
@@ -313,7 +313,7 @@ def test_study_refuses_adaptive_integrators():
 def test_study_writes_stability_limits_csv(tmp_path):
     from flexctrl.study.report import write_report
     from flexctrl.study.runner import run_study
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     spec = load_study(STUDY, ["grid.fidelity=['amm:1']"])
     run_study(spec, tmp_path, workers=0, progress="none")

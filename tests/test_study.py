@@ -19,11 +19,11 @@ from flexctrl import cli
 from flexctrl.errors import SpecError
 from flexctrl.spec.overrides import parse_value
 from flexctrl.study import RunOutput, load_study, register_executor, run_study
-from flexctrl.study.executors.selftest import _selftest_build, execute as run_selftest
+from flexctrl.study.executors.selftest_executor import _selftest_build, execute as run_selftest
 from flexctrl.study.hashing import canonical_json, derive_seed, identity, short_hash
 from flexctrl.study.progress import Progress
 from flexctrl.study.runner import execute_run
-from flexctrl.study.spec import toml_literal
+from flexctrl.study.study_file import toml_literal
 from flexctrl.study.store import Table
 from support import DATA as SHIPPED
 

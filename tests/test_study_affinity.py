@@ -75,7 +75,7 @@ def test_the_fork_server_imports_the_executors_module_for_its_workers():
     from flexctrl.study.registry import get_executor
 
     module = get_executor("_selftest").module
-    assert module == "flexctrl.study.executors.selftest"
+    assert module == "flexctrl.study.executors.selftest_executor"
     loaded = {}
     for preload in (module, None):
         out = subprocess.run([sys.executable, "-c", PRELOAD_PROBE.format(preload=preload)], capture_output=True,
@@ -104,4 +104,4 @@ def test_the_pool_asks_its_fork_server_for_the_executors_registered_module(selft
     spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q2=[0]", "grid.q3=[0]"])  # 2 runs
     run_study(spec, tmp_path / "pre", workers=1, progress="none", report=False)
     run_study(spec, tmp_path / "plain", workers=1, progress="none", report=False, preload=False)
-    assert asked == ["flexctrl.study.executors.selftest", None]
+    assert asked == ["flexctrl.study.executors.selftest_executor", None]

@@ -12,7 +12,7 @@ from scipy.integrate import cumulative_trapezoid
 from flexctrl.dynamics.fem.rp_arm import RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.telescoping import TelescopingModel, simulate_telescoping, static_tip_deflection
 from flexctrl.errors import SpecError
-from flexctrl.scenes.fem import run_fem_scene
+from flexctrl.scenes.run_fem_scene import run_fem_scene
 from flexctrl.spec.fem_models import (Contact, LinkProps, TelescopingSpec, load_rp_arm, load_telescoping,
                                       telescoping_from_document)
 from flexctrl.spec.overrides import apply_overrides

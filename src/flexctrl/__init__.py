@@ -20,7 +20,7 @@ import importlib as _importlib
 #: Public name -> the module that defines it.
 _EXPORTS: dict[str, str] = {
     # models and linearisation
-    "load_model": "flexctrl.scenes.models",
+    "load_model": "flexctrl.scenes.model_files",
     "build_model": "flexctrl.dynamics.build",
     "load_arm": "flexctrl.spec.arm",
     "equilibrium": "flexctrl.linear",
@@ -48,20 +48,20 @@ _EXPORTS: dict[str, str] = {
     # closed loop
     "Move": "flexctrl.spec.reference",
     "MetricSettings": "flexctrl.spec.closed_loop_scene",
-    "closed_loop": "flexctrl.loop.api",
+    "closed_loop": "flexctrl.loop.closed_loop",
     "ClosedLoopResult": "flexctrl.loop.result",
-    "compare": "flexctrl.loop.figures",
+    "compare": "flexctrl.loop.compare_figure",
     # scenes and studies
     "load_scene": "flexctrl.spec.scene",
     "run_scene": "flexctrl.scenes",
     "SceneCache": "flexctrl.scenes.cache",
-    "load_study": "flexctrl.study.spec",
+    "load_study": "flexctrl.study.study_file",
     "run_study": "flexctrl.study.runner",
     "write_report": "flexctrl.study.report",
     "load_tuning": "flexctrl.spec.tuning",
     "tune": "flexctrl.tuning.tuner",
     # the seed papers
-    "reproduce_paper": "flexctrl.reproduce.api",
+    "reproduce_paper": "flexctrl.reproduce.reproduction",
     # errors
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",

@@ -29,7 +29,7 @@ the ``advance`` calls only: model building, compilation (cached on disk) and
 controller computations are excluded, so ``wall_per_sim_s`` is the integration cost
 a user pays per simulated second once the model is built.
 
-Why not the :class:`~flexctrl.sim.base.Integrator` classes directly?  Their output
+Why not the :class:`~flexctrl.sim.integrator.Integrator` classes directly?  Their output
 grid is their step, so RK4 on a stiff finite-element model (steps of a few
 microseconds) would keep hundreds of thousands of states; here RK4 substeps inside
 one compiled call per output sample (as :func:`flexctrl.analysis.fem_report.rk4_sampler`).
@@ -264,7 +264,7 @@ class Stepper:
 def stable_substeps(model, dt: float, safety: float = RK4_SAFETY) -> int:
     """RK4 steps per output sample ``dt`` so that ``omega h <= safety`` (omega: the larger of
     ``Model.omega_max`` and the free-joint spectral radius at the reference configuration)."""
-    from flexctrl.dynamics.fem.spectrum import rk4_step_for
+    from flexctrl.dynamics.fem.locked_spectrum import rk4_step_for
 
     return rk4_step_for(model, dt, safety)
 

@@ -92,7 +92,7 @@ def _design(scene):
 def _bent_start(scene, model, arm) -> np.ndarray:
     """The free-vibration start as a shape of link 3 (module docstring), in ``model``'s coordinates."""
     from flexctrl.modal.arm_modes import link_modes
-    from flexctrl.scenes.arm import initial_state
+    from flexctrl.scenes.arm_setup import initial_state
 
     x0 = initial_state(dataclasses.replace(scene, qf0={}), model, arm)
     amplitudes = {int(k[3:]) - 1: v for k, v in scene.qf0.items()}  # qf3j -> mode j-1 of link 3
@@ -105,7 +105,7 @@ def _bent_start(scene, model, arm) -> np.ndarray:
             if name in model.coordinate_names:
                 x0[model.coordinate_names.index(name)] = value
         return x0
-    from flexctrl.dynamics.fem.arm import relax_axial
+    from flexctrl.dynamics.fem.fem_arm import relax_axial
 
     modes = link_modes(arm, x0[:arm.n_links], link, max(amplitudes) + 1)
     N = model.info["n_elements"]
@@ -130,14 +130,14 @@ def simulate(case: str, fidelity: str, shortening: bool, step: str = "stable", h
     (a diagnosis of how the light hub 3 limits the convergence; ``docs/amm.md`` section 11).
     """
     from flexctrl.dynamics.build import build_model
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
 
     scene = _scene(case, shortening, stretch and fidelity.startswith("amm:"))
     method = parse_method(f"{fidelity}/rk4@{step}")
     if case == "fast_move" and hub_inertia is not None:
         raise ValueError("hub_inertia applies to the open-loop cases only")
     if case == "fast_move":
-        from flexctrl.dynamics.fem.spectrum import rk4_step_for
+        from flexctrl.dynamics.fem.locked_spectrum import rk4_step_for
         from flexctrl.scenes.loop_setup import closed_loop_tip_path
 
         sample = 5e-4

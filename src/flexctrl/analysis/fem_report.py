@@ -5,8 +5,8 @@ of it compiling and running the 16-element RK4 reference); ``--quick`` skips the
 16-element runs.  Writes ``report.json`` and prints the tables.
 
 Everything is computed, nothing is stored: locked-joint frequencies come from
-:func:`flexctrl.dynamics.fem.arm.locked_matrices` and the assumed-modes model's
-``M`` and ``K`` (:mod:`flexctrl.dynamics.fem.spectrum`); the bang-bang runs use a compiled
+:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices` and the assumed-modes model's
+``M`` and ``K`` (:mod:`flexctrl.dynamics.fem.locked_spectrum`); the bang-bang runs use a compiled
 fixed-step RK4 (:func:`rk4_sampler`) with the step below the stability limit ``2.8 / omega_max``.
 """
 
@@ -22,8 +22,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from flexctrl.dynamics.fem.arm import build_fem_model
-from flexctrl.dynamics.fem.spectrum import free_joint_radius, locked_amm_hz, locked_fem_hz, rk4_step_for
+from flexctrl.dynamics.fem.fem_arm import build_fem_model
+from flexctrl.dynamics.fem.locked_spectrum import free_joint_radius, locked_amm_hz, locked_fem_hz, rk4_step_for
 from flexctrl.spec.arm import ArmSpec, load_arm
 from flexctrl.spec.shipped import data_root
 

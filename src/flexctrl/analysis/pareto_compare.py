@@ -1,7 +1,7 @@
 """Two ``speed_vs_accuracy`` results side by side: what moved between them.
 
 A study's report writes ``pareto.csv`` (one row per scene and method: median cost,
-median and worst tip error, Pareto flag; ``flexctrl.study.executors.speed_vs_accuracy``).
+median and worst tip error, Pareto flag; ``flexctrl.study.executors.speed_vs_accuracy_executor``).
 This module reads two of them, e.g. the shipped study and the same study with the
 assumed-modes models' axial shortening on (``docs/speed_accuracy.md``), and gives
 

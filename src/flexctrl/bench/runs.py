@@ -8,8 +8,8 @@ Reported: each tree's summed per-run wall time (:func:`flexctrl.study.runner.exe
 ``wall_time_s``) per value of ``--by`` (default the ``controller`` column) and in all, the
 ratios to the first tree, and the largest relative difference of any non-timing metric
 between the trees (with the run and metric where it is, and the largest per metric; for metrics below
-:data:`~flexctrl.bench.loop.FLOOR` in both trees, round-off, the absolute difference, as
-:func:`~flexctrl.bench.loop.metric_differences` compares them).  ``--exclude KEY=VALUE`` leaves
+:data:`~flexctrl.bench.loop_overhead.FLOOR` in both trees, round-off, the absolute difference, as
+:func:`~flexctrl.bench.loop_overhead.metric_differences` compares them).  ``--exclude KEY=VALUE`` leaves
 runs out (e.g. ``controller=nmpc``).  Both trees read the same study file (and the scene,
 model and controller files it names); they must expand it into the same runs.  Every
 process's first run includes its imports.
@@ -25,12 +25,12 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any, Sequence
 
-from flexctrl.bench.loop import FLOOR, TIMING_METRICS
+from flexctrl.bench.loop_overhead import FLOOR, TIMING_METRICS
 
 _WORKER = """
 import json, sys
 from flexctrl.study.runner import execute_run
-from flexctrl.study.spec import load_study
+from flexctrl.study.study_file import load_study
 spec = load_study(sys.argv[1])
 options = {"metrics": list(spec.metrics) if spec.metrics else None, "keep_trajectories": spec.keep_trajectories,
            "decimation": spec.decimation}

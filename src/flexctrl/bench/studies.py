@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from flexctrl.errors import FlexctrlError
+from flexctrl.spec.shipped import data_root
 
 REPO = data_root()
 DEFAULT_STUDIES = (REPO / "studies" / "quickstart_finest.toml", REPO / "studies" / "quickstart_auto.toml")
@@ -37,8 +38,7 @@ VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker", "choice_
 _PASSES = """
 import json, sys, time
 from flexctrl.study.runner import run_study
-from flexctrl.study.spec import load_study
-from flexctrl.spec.shipped import data_root
+from flexctrl.study.study_file import load_study
 study, overrides, outs, workers = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3:-1], int(sys.argv[-1])
 spec, walls = load_study(study, overrides=overrides), []
 for out in outs:

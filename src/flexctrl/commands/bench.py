@@ -1,4 +1,4 @@
-"""``flexctrl bench sim|mpc|loop|studies|runs``: simulation speed (:mod:`flexctrl.bench.sim`), MPC solve times (:mod:`flexctrl.bench.mpc`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop`), study files side by side (:mod:`flexctrl.bench.studies`), one study's runs under two source trees (:mod:`flexctrl.bench.runs`)."""
+"""``flexctrl bench sim|mpc|loop|studies|runs``: simulation speed (:mod:`flexctrl.bench.simulation_speed`), MPC solve times (:mod:`flexctrl.bench.mpc_step`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop_overhead`), study files side by side (:mod:`flexctrl.bench.studies`), one study's runs under two source trees (:mod:`flexctrl.bench.runs`)."""
 
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_studies(args)
     if args.what == "runs":
         return _run_runs(args)
-    from flexctrl.bench.sim import DEFAULT_MODEL, bench_sim
+    from flexctrl.bench.simulation_speed import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
         raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
@@ -99,8 +99,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_mpc(args: argparse.Namespace) -> int:
-    from flexctrl.bench.mpc import format_benchmark, mpc_benchmark
-    from flexctrl.bench.sim import DEFAULT_MODEL
+    from flexctrl.bench.mpc_step import format_benchmark, mpc_benchmark
+    from flexctrl.bench.simulation_speed import DEFAULT_MODEL
 
     if args.steps < 2 or args.pc_solves < 0:
         raise SpecError(f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, solves >= 0", key="--steps")
@@ -119,7 +119,7 @@ def _run_mpc(args: argparse.Namespace) -> int:
 
 
 def _run_loop(args: argparse.Namespace) -> int:
-    from flexctrl.bench.loop import DEFAULT_CONTROLLER, bench_loop, format_loop
+    from flexctrl.bench.loop_overhead import DEFAULT_CONTROLLER, bench_loop, format_loop
 
     if args.repeats < 1:
         raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
@@ -134,7 +134,7 @@ def _run_studies(args: argparse.Namespace) -> int:
     if args.repeats < 1 or args.workers < 0:
         raise SpecError(f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
                         key="--repeats")
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     for study in args.study or DEFAULT_STUDIES:  # a bad study or override is refused before any pass runs
         load_study(study, overrides=args.set)

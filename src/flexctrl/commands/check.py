@@ -12,7 +12,7 @@ holds (:func:`file_kind`; ``--kind`` names it instead):
   (:mod:`flexctrl.spec.fem_models`);
 * ``scene``: any other scene ``kind``, or ``model`` with ``dt``/``duration``
   (:func:`flexctrl.spec.scene.load_scene`, and a closed-loop scene's controller file);
-* ``study``: ``scene``, ``[grid]``, ``[set]`` or ``executor`` (:func:`flexctrl.study.spec.load_study`,
+* ``study``: ``scene``, ``[grid]``, ``[set]`` or ``executor`` (:func:`flexctrl.study.study_file.load_study`,
   every run's settings checked by its executor).
 
 Every file is checked (one failing file does not hide the next); each prints one line,
@@ -129,7 +129,7 @@ def _controller(path, document) -> str:
 
 
 def _study(path, document) -> str:
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     spec = load_study(path)
     notes = "".join(f"; {note}" for note in spec.unavailable_notes())

@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if scene.kind == "closed_loop":
             from flexctrl.scenes.auto import choose_closed_loop_fidelity
-            from flexctrl.scenes.closed_loop import check_auto
+            from flexctrl.scenes.run_closed_loop_scene import check_auto
             from flexctrl.scenes.loop_setup import pin_design
 
             design = scene.controller_fidelity

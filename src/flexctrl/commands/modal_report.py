@@ -33,7 +33,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from flexctrl.modal.arm_modes import arm_modes
     from flexctrl.modal.lookup import interpolation_error_hz, modal_lookup
-    from flexctrl.modal.plots import plot_boundary_values, plot_frequency_maps, plot_mode_shapes
+    from flexctrl.modal.mode_plots import plot_boundary_values, plot_frequency_maps, plot_mode_shapes
 
     arm, q = load_arm_from_args(args)
     out = Path(args.out)

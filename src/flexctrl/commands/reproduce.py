@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from flexctrl.reproduce.api import PAPERS
+from flexctrl.reproduce.reproduction import PAPERS
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -23,7 +23,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexctrl.reproduce.api import reproduce_paper
+    from flexctrl.reproduce.reproduction import reproduce_paper
 
     document = reproduce_paper(args.paper, args.out, args.reduced)
     items = document["items"]

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from flexctrl.commands.common import stop_signals_interrupt
     from flexctrl.study.blas_threads import parse_blas_threads
     from flexctrl.study.runner import run_study
-    from flexctrl.study.spec import load_study
+    from flexctrl.study.study_file import load_study
 
     blas_threads = parse_blas_threads(args.blas_threads)
     spec = load_study(args.study, overrides=args.set)

@@ -1,4 +1,4 @@
-"""Controllers for flexible arms, all with one small protocol (:class:`~flexctrl.control.base.Controller`).
+"""Controllers for flexible arms, all with one small protocol (:class:`~flexctrl.control.controller.Controller`).
 
 ``design(model, op, settings)`` builds the controller named by the settings type,
 regulating ``model`` to the target equilibrium ``op``
@@ -24,7 +24,7 @@ Closed loop (sampled, zero-order hold)::
 
 from __future__ import annotations
 
-from flexctrl.control.base import Controller, ControllerStats
+from flexctrl.control.controller import Controller, ControllerStats
 from flexctrl.errors import SpecError
 from flexctrl.spec.controller_settings import (
     SETTINGS,
@@ -55,8 +55,8 @@ def _check_holding_torque(model, op) -> None:
 DESIGNERS: dict[str, str] = {
     "pd": "flexctrl.control.pd:design_pd",
     "lqr": "flexctrl.control.lqr:design_lqr",
-    "mpc": "flexctrl.control.mpc:design_mpc",
-    "nmpc": "flexctrl.control.nmpc:design_nmpc",
+    "mpc": "flexctrl.control.mpc.controller:design_mpc",
+    "nmpc": "flexctrl.control.nmpc.controller:design_nmpc",
     "shaped": "flexctrl.control.shaping:design_shaped",
 }
 
@@ -65,8 +65,8 @@ DESIGNERS: dict[str, str] = {
 CONTROLLER_CLASSES: dict[str, str] = {
     "pd": "flexctrl.control.pd:PDController",
     "lqr": "flexctrl.control.lqr:LQRController",
-    "mpc": "flexctrl.control.mpc:MPCController",
-    "nmpc": "flexctrl.control.nmpc:NMPCController",
+    "mpc": "flexctrl.control.mpc.controller:MPCController",
+    "nmpc": "flexctrl.control.nmpc.controller:NMPCController",
     "shaped": "flexctrl.control.shaping:ShapedController",
 }
 

@@ -4,7 +4,7 @@ Design (:func:`design_lqr`): linearise the model at the design equilibrium ``op`
 with the controller's sensors as outputs, discretise by zero-order hold at the
 sample time, weight by Bryson's rule (:func:`weight_matrices`) and solve the DARE
 (by doubling, :mod:`flexctrl.control.riccati`).  Control law, in deviations from the
-reference (:mod:`flexctrl.control.reference`)::
+reference (:mod:`flexctrl.control.reference_trajectory`)::
 
     u = u_ref(t) - K(s) (x_hat - x_ref(t))
 
@@ -27,7 +27,7 @@ import control
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
-from flexctrl.control.base import Controller, SampledLaw
+from flexctrl.control.controller import Controller, SampledLaw
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.riccati import solve_dare
 from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights

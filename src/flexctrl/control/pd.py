@@ -2,7 +2,7 @@
 
 ``tau = tau_g(t) + tau_ff(t) + F(s) [Kp (q_ref(t) - q) + Kd (qd_ref(t) - qd)]`` on the joint
 coordinates, with ``q_ref``, ``qd_ref`` the joint path of the controller's reference
-(:mod:`flexctrl.control.reference`; the target itself when none is set; a subclass
+(:mod:`flexctrl.control.reference_trajectory`; the target itself when none is set; a subclass
 may shape it: :class:`~flexctrl.control.shaping.ShapedController`), ``tau_ff`` the
 inertial feed-forward ``u_ref - u_static`` of that reference (the rigid inverse
 dynamics along the path at the static deflection; zero for a step or no reference;
@@ -42,7 +42,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.base import Controller, SampledLaw
+from flexctrl.control.controller import Controller, SampledLaw
 from flexctrl.spec.controller_settings import PDSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits

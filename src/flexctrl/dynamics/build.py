@@ -38,7 +38,7 @@ def build_model(
     fidelity
         ``"rigid"`` (same as ``"amm:0"``), ``"amm:N"`` (N assumed modes on every
         link), ``"fem:N"`` (N finite elements per link,
-        :func:`flexctrl.dynamics.fem.arm.build_fem_model`), or None for each link's
+        :func:`flexctrl.dynamics.fem.fem_arm.build_fem_model`), or None for each link's
         ``n_modes`` from the file.  ``"auto"`` is resolved per scene, not here.
     modes
         ``"frozen"`` or ``"scheduled"`` modal parameters
@@ -64,7 +64,7 @@ def build_model(
         return build_amm(arm, [link.n_modes for link in arm.links], modes=modes, reference_q=reference_q, damping=damping)
     fid = parse_fidelity(fidelity)
     if fid.kind == "fem":
-        from flexctrl.dynamics.fem.arm import build_fem_model
+        from flexctrl.dynamics.fem.fem_arm import build_fem_model
 
         if modes != "frozen":
             raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")

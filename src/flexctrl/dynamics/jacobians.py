@@ -43,7 +43,7 @@ def jacobian_function(model, *, value: bool = False, inputs: bool = False,
     """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
 
     The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`, with
-    ``shared=True``), stability advice (:meth:`flexctrl.sim.base.Integrator.jacobian_radius`)
+    ``shared=True``), stability advice (:meth:`flexctrl.sim.integrator.Integrator.jacobian_radius`)
     and the stability probe (:mod:`flexctrl.analysis.stability.probe`) all use it.
     Expanding it to SX (as the last two do) changes its values in the last digits, so
     each user keeps its choice.

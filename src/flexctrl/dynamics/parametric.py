@@ -6,7 +6,7 @@ differs per configuration, so a study over configurations would compile once per
 :func:`constants_as_parameters` rebuilds such a Function with its constants as a
 vector input: models whose graphs differ only in constant values then share one
 compiled library (the cache key is a hash of the generated code).  Used by the NMPC
-(:mod:`flexctrl.control.nmpc`), the closed-loop plant step (:mod:`flexctrl.loop.plant_step`)
+(:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step (:mod:`flexctrl.loop.plant_step`)
 and the Jacobians shared by a model structure (:mod:`flexctrl.dynamics.jacobians`).
 :class:`Memo` keeps what is built from such a lifted Function once per process.
 """

@@ -8,5 +8,5 @@
 ``metrics``     vibration-suppression metrics and the run's verdicts;
 ``result``      :class:`~flexctrl.loop.result.ClosedLoopResult`;
 ``figures``     runs drawn side by side (:func:`flexctrl.compare`);
-``api``         :func:`~flexctrl.loop.api.closed_loop`, the Python entry point.
+``api``         :func:`~flexctrl.loop.closed_loop.closed_loop`, the Python entry point.
 """

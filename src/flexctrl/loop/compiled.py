@@ -3,7 +3,7 @@
 Per sample the Python loop (:mod:`flexctrl.loop.sampled`) measures, calls
 ``controller.step`` and the plant's compiled step: hundreds of microseconds of Python
 and conversions around a plant step of about 50 us.  A controller that is a fixed map
-with memory (LQR, LQG, PD, shaped; :meth:`~flexctrl.control.base.Controller.sampled_law`)
+with memory (LQR, LQG, PD, shaped; :meth:`~flexctrl.control.controller.Controller.sampled_law`)
 instead gives its law as a CasADi Function, and one sample becomes
 
     y_k = sensors(x_k, u_{k-1}) + sigma z_k

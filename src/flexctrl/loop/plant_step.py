@@ -56,7 +56,7 @@ def _name(text: str) -> str:
 
 
 def output_map(model, count: int, compile: bool | None = None, *, energies: bool = True) -> ca.Function:
-    """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.base.output_function`, compiled.
+    """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.integrator.output_function`, compiled.
 
     The rows of ``Y`` are the energies, tip and deflections (``energies=False``: the tip and
     deflections alone, a tenth of the cost or less).  Compiled with the model's
@@ -79,7 +79,7 @@ def output_map(model, count: int, compile: bool | None = None, *, energies: bool
 def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
     """The compiled outputs ``y(x)`` of one state, the model's constants embedded; kept per model and rows."""
     def build():
-        from flexctrl.sim.base import output_function
+        from flexctrl.sim.integrator import output_function
 
         fun = output_function(model, energies)
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)

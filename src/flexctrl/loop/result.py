@@ -22,7 +22,7 @@ def tip_at_rest(model, q_joints) -> np.ndarray:
 
 @dataclass
 class ClosedLoopResult:
-    """A closed-loop run (:func:`flexctrl.closed_loop`, :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene`).
+    """A closed-loop run (:func:`flexctrl.closed_loop`, :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`).
 
     Attributes
     ----------
@@ -80,7 +80,7 @@ class ClosedLoopResult:
         matplotlib.figure.Figure
             Four panels sharing the time axis (s); the residual window is shaded.
         """
-        from flexctrl.loop.figures import compare
+        from flexctrl.loop.compare_figure import compare
 
         return compare({label or self.summary.get("controller", {}).get("kind", "run"): self})
 

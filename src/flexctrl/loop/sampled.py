@@ -12,7 +12,7 @@ Per controller sample (period ``Ts = controller.sample_time``):
    (:mod:`flexctrl.loop.plant_step`), so the tip vibration is recorded at the plant rate.
 
 That is the ``loop = "python"`` path: one Python iteration per sample.  A controller whose
-law is a CasADi map (:meth:`~flexctrl.control.base.Controller.sampled_law`: LQR, LQG, PD,
+law is a CasADi map (:meth:`~flexctrl.control.controller.Controller.sampled_law`: LQR, LQG, PD,
 shaped) runs, after its first sample, every remaining sample in ONE CasADi call
 (``loop = "compiled"``, :mod:`flexctrl.loop.compiled`; ``"auto"``, the default, uses it
 when the controller offers it); the energies, tip and deflections come from a compiled

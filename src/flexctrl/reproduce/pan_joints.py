@@ -140,7 +140,7 @@ def fig2() -> Section:
 
 
 def fig3() -> Section:
-    from flexctrl.dynamics.fem.spectrum import locked_amm_hz, locked_fem_hz
+    from flexctrl.dynamics.fem.locked_spectrum import locked_amm_hz, locked_fem_hz
     from flexctrl.spec.arm import load_arm
 
     arm = load_arm(ROOT / "models" / "subedi3link.toml").with_payload(2.0)

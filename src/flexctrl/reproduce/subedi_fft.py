@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from flexctrl.modal.paper_data import SUBEDI_FIG14_DT_S, SUBEDI_FIG14_PEAKS_HZ, SUBEDI_FIG14_SAMPLES
-from flexctrl.reproduce.figures import figure, save
+from flexctrl.reproduce.drawing import figure, save
 from flexctrl.reproduce.items import Item, Section
 from flexctrl.reproduce.subedi_runs import Runs
-from flexctrl.sim.spectrum import amplitude_spectrum, dominant_frequencies
+from flexctrl.sim.fft_peaks import amplitude_spectrum, dominant_frequencies
 
 N_FFT = 2048  # 2**nextpow2(2000)
 RESOLUTION_HZ = 1.0 / (N_FFT * SUBEDI_FIG14_DT_S)

@@ -17,8 +17,8 @@ import numpy as np
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.modal.boundary import boundary_values
 from flexctrl.modal.paper_data import SUBEDI_TABLE3_HZ
-from flexctrl.modal.plots import frequency_maps, plot_boundary_values, plot_frequency_maps, plot_mode_shapes
-from flexctrl.reproduce.figures import figure, save
+from flexctrl.modal.mode_plots import frequency_maps, plot_boundary_values, plot_frequency_maps, plot_mode_shapes
+from flexctrl.reproduce.drawing import figure, save
 from flexctrl.reproduce.items import Item, Section
 from flexctrl.spec.arm import ArmSpec
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexctrl.scenes.arm import simulate_arm_scene
+from flexctrl.scenes.arm_setup import simulate_arm_scene
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.scene import load_scene
 from flexctrl.spec.shipped import data_root

@@ -23,7 +23,7 @@ from flexctrl.modal.paper_data import (
     SUBEDI_TABLE2_PAYLOAD_INERTIA,
     SUBEDI_TABLE3_ROUNDING_HZ,
 )
-from flexctrl.reproduce.figures import figure, save
+from flexctrl.reproduce.drawing import figure, save
 from flexctrl.reproduce.items import Item, Section
 from flexctrl.spec.arm import ArmSpec, SectionSpec
 

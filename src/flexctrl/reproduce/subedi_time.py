@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexctrl.reproduce.figures import figure, save
+from flexctrl.reproduce.drawing import figure, save
 from flexctrl.reproduce.items import Item, Section
 from flexctrl.reproduce.subedi_runs import FINE_DT, Runs, energy_loss, max_tip_difference, vibration_rms
 

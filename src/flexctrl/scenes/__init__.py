@@ -20,11 +20,11 @@ from typing import Any
 
 #: Scene kind -> ``"module:runner"``; a runner takes ``(scene, out, **options)``.
 SCENE_RUNNERS: dict[str, str] = {
-    "arm": "flexctrl.scenes.arm_scene:run_arm_scene",
-    "closed_loop": "flexctrl.scenes.closed_loop:run_closed_loop_scene",
-    "sliding_beam": "flexctrl.scenes.fem:run_scene",
-    "rp_arm": "flexctrl.scenes.fem:run_scene",
-    "telescoping": "flexctrl.scenes.fem:run_scene",
+    "arm": "flexctrl.scenes.run_arm_scene:run_arm_scene",
+    "closed_loop": "flexctrl.scenes.run_closed_loop_scene:run_closed_loop_scene",
+    "sliding_beam": "flexctrl.scenes.run_fem_scene:run_scene",
+    "rp_arm": "flexctrl.scenes.run_fem_scene:run_scene",
+    "telescoping": "flexctrl.scenes.run_fem_scene:run_scene",
 }
 
 
@@ -46,8 +46,8 @@ def run_scene(scene, out: str | Path | None = None, **options: Any):
     SceneResult or ClosedLoopResult or FemSceneResult
 
     ``fidelity = "auto"`` is resolved by the kind's runner: for ``kind = "arm"`` by
-    :func:`flexctrl.scenes.arm_scene.run_arm_scene`, for ``kind = "closed_loop"`` (the
-    plant's fidelity) by :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene`.
+    :func:`flexctrl.scenes.run_arm_scene.run_arm_scene`, for ``kind = "closed_loop"`` (the
+    plant's fidelity) by :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`.
     """
     module, _, name = SCENE_RUNNERS[scene.kind].partition(":")
     return getattr(importlib.import_module(module), name)(scene, out, **options)

@@ -26,7 +26,7 @@ from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import (IMPLICIT, LINEAR_FACTOR, WALKS, FidelityChoice, RunRecord, check_ladder,
                                       check_tolerance, excitation_bandwidth, required_modes, rung_name,
                                       sampled_bandwidth, walk_and_judge)
-from flexctrl.scenes.arm import scene_arm, simulate_arm_scene
+from flexctrl.scenes.arm_setup import scene_arm, simulate_arm_scene
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, closed_loop_tip_path
 from flexctrl.sim.rk4 import rk4_step
@@ -311,7 +311,7 @@ def choose_closed_loop_fidelity(
     As :func:`choose_fidelity`, with every candidate a whole closed-loop run: the
     controller (the scene's or ``controller`` with ``overrides``) designed on the
     scene's ``controller_fidelity`` (pinned: the plant's fidelity is what is chosen;
-    :func:`flexctrl.scenes.closed_loop.pin_design` gives ``amm:2`` when the scene names none),
+    :func:`flexctrl.scenes.run_closed_loop_scene.pin_design` gives ``amm:2`` when the scene names none),
     its payload and configuration, the same for every rung; the plant at the rung, RK4
     at the rung's step (the scene's ``dt`` divided by the smallest whole number that
     makes ``omega_max * dt <= 0.9 * 2.785``).  Differences from the arm method:
@@ -329,7 +329,7 @@ def choose_closed_loop_fidelity(
     ----------
     scene : ClosedLoopScene
         Its plant's fidelity is ignored; ``controller_fidelity`` must be set (see
-        :func:`flexctrl.scenes.closed_loop.pin_design`).
+        :func:`flexctrl.scenes.run_closed_loop_scene.pin_design`).
     tol : float
         Tolerance on the largest tip-position distance (m), > 0.
     controller : str or Path, optional

@@ -107,13 +107,13 @@ class SceneCache:
 
     def reference(self, arm, fidelity: str, modes: str, reference_q, path, deflection: str,
                   compile: bool | None = False):
-        """A :class:`~flexctrl.control.reference.ReferenceTrajectory` of ``path`` on :meth:`model`'s model, built once.
+        """A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of ``path`` on :meth:`model`'s model, built once.
 
         Keyed on the model's description, the joint path and the deflection (plain data), so
         the controllers designed on one model for one move share its tables (one per sample
         time): a table is a pure function of those and the sample time.
         """
-        from flexctrl.control.reference import ReferenceTrajectory
+        from flexctrl.control.reference_trajectory import ReferenceTrajectory
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
         key = (arm, str(fidelity), modes, reference_q, path, deflection, compile)

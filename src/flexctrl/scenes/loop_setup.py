@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.control.reference import ReferenceTrajectory
+from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import FlexctrlError, SolverError, SpecError
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
-from flexctrl.scenes.arm import initial_state, scene_arm
+from flexctrl.scenes.arm_setup import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
 
 
@@ -74,7 +74,7 @@ class LoopSetup:
 def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
     """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
 
-    ``reference``: the :class:`~flexctrl.control.reference.ReferenceTrajectory` of the scene's path on
+    ``reference``: the :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the scene's path on
     ``design_model`` when the caller keeps one (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
 
     Raises
@@ -124,7 +124,7 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
     trajectory is kept in ``cache`` ("references") under the design model's description,
     the path and the deflection, so every controller designed on one model for one move
     shares its tables.  ``reference_compile`` is the reference's ``compile``
-    (:class:`~flexctrl.control.reference.ReferenceTrajectory`: ``False`` CasADi's virtual
+    (:class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`: ``False`` CasADi's virtual
     machine, the slow path; ``True`` compiled); None (default) follows the plant's
     ``solver.compile`` (compiled unless switched off).
     """

@@ -1,6 +1,6 @@
 """Time integration of :class:`~flexctrl.dynamics.model.Model` objects.
 
-Integrators share one template (:class:`~flexctrl.sim.base.Integrator`) and are
+Integrators share one template (:class:`~flexctrl.sim.integrator.Integrator`) and are
 chosen by name or class, like scipy's ``solve_ivp(method=...)``:
 
 ``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
@@ -26,7 +26,7 @@ from __future__ import annotations
 from typing import Any
 
 from flexctrl.errors import SpecError
-from flexctrl.sim.base import Integrator
+from flexctrl.sim.integrator import Integrator
 from flexctrl.sim.euler import Euler
 from flexctrl.sim.implicit import CVODES, IDAS
 from flexctrl.sim.newmark_model import Newmark

@@ -1,4 +1,4 @@
-"""Divergence detection for :class:`~flexctrl.sim.base.Integrator` runs, chunk by chunk.
+"""Divergence detection for :class:`~flexctrl.sim.integrator.Integrator` runs, chunk by chunk.
 
 A run has diverged when a state or output is not finite, or when the kinetic
 plus elastic energy exceeds ``energy_factor`` (100 by default) times what the
@@ -19,7 +19,7 @@ import numpy as np
 from flexctrl.errors import SimulationError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from flexctrl.sim.base import Integrator
+    from flexctrl.sim.integrator import Integrator
 
 
 class DivergenceMonitor:

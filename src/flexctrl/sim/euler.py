@@ -29,13 +29,13 @@ from typing import ClassVar, Sequence
 import casadi as ca
 
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.base import output_function
+from flexctrl.sim.integrator import output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS
 from flexctrl.sim.rk4 import RK4
 
 
 def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Function:
-    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`~flexctrl.sim.base.output_function`)."""
+    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`~flexctrl.sim.integrator.output_function`)."""
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -53,7 +53,7 @@ class Euler(RK4):
     Parameters
     ----------
     model, dt, u_function, chunk, energy_factor
-        See :class:`~flexctrl.sim.base.Integrator`.
+        See :class:`~flexctrl.sim.integrator.Integrator`.
     compile, cache_dir, flags
         As for :class:`~flexctrl.sim.rk4.RK4`.
     expand

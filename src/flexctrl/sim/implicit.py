@@ -24,7 +24,7 @@ import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.base import Integrator
+from flexctrl.sim.integrator import Integrator
 
 
 class Sundials(Integrator):
@@ -33,7 +33,7 @@ class Sundials(Integrator):
     Parameters
     ----------
     model, dt, u_function, chunk, energy_factor
-        See :class:`~flexctrl.sim.base.Integrator`.
+        See :class:`~flexctrl.sim.integrator.Integrator`.
     rtol, atol : float
         Relative and absolute tolerances.
     max_num_steps : int

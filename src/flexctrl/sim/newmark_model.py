@@ -1,4 +1,4 @@
-"""Newmark's method for any :class:`~flexctrl.dynamics.model.Model`, behind the common :class:`~flexctrl.sim.base.Integrator`.
+"""Newmark's method for any :class:`~flexctrl.dynamics.model.Model`, behind the common :class:`~flexctrl.sim.integrator.Integrator`.
 
 This adapter runs :func:`flexctrl.dynamics.fem.newmark.simulate_model_newmark`'s
 machinery (the model as a :class:`~flexctrl.dynamics.fem.newmark_dae.DAEProblem`, built
@@ -52,7 +52,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.sim.base import Integrator
+from flexctrl.sim.integrator import Integrator
 
 Tangent = Literal["potential", "stiffness", "exact"]
 TANGENTS = ("potential", "stiffness", "exact")
@@ -97,7 +97,7 @@ class Newmark(Integrator):
     Parameters
     ----------
     model, dt, u_function, chunk, energy_factor
-        See :class:`~flexctrl.sim.base.Integrator`.
+        See :class:`~flexctrl.sim.integrator.Integrator`.
     alpha, delta
         Newmark parameters: 0.25, 0.5 (average acceleration, trapezoidal rule) by
         default; ``alpha`` in [0, 0.5], ``delta`` in [0.5, 1].

@@ -48,7 +48,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.base import Integrator, output_function
+from flexctrl.sim.integrator import Integrator, output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
 
 
@@ -178,7 +178,7 @@ class RK4(Integrator):
     Parameters
     ----------
     model, dt, u_function, chunk, energy_factor
-        See :class:`~flexctrl.sim.base.Integrator`.
+        See :class:`~flexctrl.sim.integrator.Integrator`.
     compile : bool or None
         ``False``: CasADi virtual machine; ``None`` (default): compile unless
         ``FLEXCTRL_NO_COMPILE`` is set; ``True``: compile (falls back with a

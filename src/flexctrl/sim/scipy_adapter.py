@@ -1,4 +1,4 @@
-"""``scipy.integrate.solve_ivp`` behind the :class:`~flexctrl.sim.base.Integrator` interface.
+"""``scipy.integrate.solve_ivp`` behind the :class:`~flexctrl.sim.integrator.Integrator` interface.
 
 ``method`` is any solve_ivp method (RK45, DOP853, Radau, BDF, LSODA, ...);
 ``rtol`` / ``atol`` are passed through.  The right-hand side and, for the
@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.base import Integrator
+from flexctrl.sim.integrator import Integrator
 
 METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 _USES_JACOBIAN = ("Radau", "BDF", "LSODA")
@@ -30,7 +30,7 @@ class ScipyIntegrator(Integrator):
     Parameters
     ----------
     model, dt, u_function, chunk, energy_factor
-        See :class:`~flexctrl.sim.base.Integrator`.
+        See :class:`~flexctrl.sim.integrator.Integrator`.
     method : str
         One of ``RK45, RK23, DOP853, Radau, BDF, LSODA``.
     rtol, atol : float

@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
-from flexctrl.sim.spectrum import dominant_frequencies
+from flexctrl.sim.fft_peaks import dominant_frequencies
 
 ENERGY_NAMES = ("E_kin", "E_el", "E_grav", "E_total")
 
@@ -251,7 +251,7 @@ class Trajectory:
 
         Uses matplotlib's Agg canvas directly (no pyplot state, no window).
         """
-        from flexctrl.sim.plots import plot_trajectory
+        from flexctrl.sim.trajectory_plots import plot_trajectory
 
         return plot_trajectory(self, Path(directory), prefix)
 

@@ -49,6 +49,7 @@ import numpy as np
 from flexctrl.spec.arm import DAMPING_FORMS
 from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
+from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
 
 MODES = ("frozen", "scheduled")

@@ -1,7 +1,7 @@
 """When a linear MPC must have arrived: the shortest feasible arrival plus a margin (plain data).
 
 :class:`ArrivalSettings` is the ``[arrival]`` table of an MPC controller file; the
-algorithm that uses it is :mod:`flexctrl.control.mpc_arrival`.
+algorithm that uses it is :mod:`flexctrl.control.mpc.arrival_search`.
 """
 
 from __future__ import annotations

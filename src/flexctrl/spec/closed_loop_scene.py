@@ -24,7 +24,7 @@ zero-order hold.  The extra keys::
                stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last second below it
 
 Angles are in degrees in the file and radians in the dataclass.  The reference
-(:mod:`flexctrl.control.reference`) goes from the initial joint angles to the target;
+(:mod:`flexctrl.control.reference_trajectory`) goes from the initial joint angles to the target;
 every controller reads it at its sample times.  The residual-vibration window of
 :mod:`flexctrl.loop.metrics` starts ``settle_allowance`` after the reference arrives (at
 t = 0 for the step, at ``move_time`` for the quintic).
@@ -112,7 +112,7 @@ class ClosedLoopScene:
         return self.design_q if self.design_q is not None else self.target_q
 
     def joint_reference(self):
-        """The :class:`~flexctrl.control.reference.JointReference` from the initial angles to the target."""
+        """The :class:`~flexctrl.control.reference_trajectory.JointReference` from the initial angles to the target."""
         from flexctrl.spec.reference import JointReference
 
         return JointReference(self.start_q, self.target_q, self.profile, self.move_time)

@@ -174,7 +174,7 @@ class OSQPSettings:
 
     ``scaling`` (OSQP's Ruiz equilibration) is off by default: the MPC scales its states
     itself, and on the three-link arm Ruiz scaling on top raised the cold-start
-    iterations from 70 to 1700 (sparse formulation; see :mod:`flexctrl.bench.mpc`).
+    iterations from 70 to 1700 (sparse formulation; see :mod:`flexctrl.bench.mpc_step`).
     """
 
     eps_abs: float = 1e-3
@@ -240,7 +240,7 @@ class MPCSettings:
         QP solver: OSQP directly, or a solver shipped with CasADi via ``casadi.conic``.
     scaling : {"auto", "bryson", "none"}
         State scaling to O(1): from the LQR response, by the weights, or none
-        (see :mod:`flexctrl.control.mpc`).
+        (see :mod:`flexctrl.control.mpc.controller`).
     warm_start : {"shift", "previous", "none"}
     fallback : {"shift", "lqr", "hold"}
         When the QP is not solved: the previous plan shifted (then LQR once it runs out),
@@ -254,7 +254,7 @@ class MPCSettings:
     accept_inaccurate : bool
         Use an OSQP "solved inaccurate" solution instead of falling back.
     arrival : ArrivalSettings
-        Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc_arrival`).
+        Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc.arrival_search`).
     osqp : OSQPSettings
     sensors, estimator
         As for LQR.
@@ -349,7 +349,7 @@ class NMPCSettings:
         Real-time iteration (one SQP step per sample, Gauss-Newton QP) or a full NLP solve.
     nlp_solver : {"ipopt"}
         For ``full`` and for the RTI initialisation (FATROP's structure detection rejected
-        this formulation in CasADi 3.8; see the module docs of :mod:`flexctrl.control.nmpc`).
+        this formulation in CasADi 3.8; see the module docs of :mod:`flexctrl.control.nmpc.controller`).
     qp_solver : {"hpipm", "osqp", "qpoases"}
         QP of the RTI (through ``casadi.conic``).
     max_iter : int
@@ -363,19 +363,19 @@ class NMPCSettings:
         Generate and compile C for the sensitivities (cached on disk).
     prediction_modes : int
         Elastic modes per link of the model the NMPC predicts with: the lowest ones of the
-        design model, a Galerkin truncation (:mod:`flexctrl.control.nmpc_model`); 0
+        design model, a Galerkin truncation (:mod:`flexctrl.control.nmpc.prediction_model`); 0
         (default): all of them.  Fewer modes need fewer RK4 substeps (the fastest mode
         bounds the step); the estimator keeps the design model.
     prediction_basis : {"assumed", "coupled"}
         The reduced model's coordinates: the first ``prediction_modes`` assumed modes per
         link (``"assumed"``) or the joints and as many directions spanning the elastic
         parts of the design model's slowest coupled modes at the target (``"coupled"``,
-        default; :func:`flexctrl.control.nmpc_model.coupled_basis`).
+        default; :func:`flexctrl.control.nmpc.prediction_model.coupled_basis`).
     prediction_map : {"modal", "select"}
         How a reduced prediction model (``prediction_modes > 0``) sees the design model's
         state: ``"modal"`` (default) removes the dropped (fast) modes of the linearisation
         at the target before selecting the kept coordinates, so the fast modes are not fed
-        back (:func:`flexctrl.control.nmpc_model.modal_map`); ``"select"`` takes the kept
+        back (:func:`flexctrl.control.nmpc.prediction_model.modal_map`); ``"select"`` takes the kept
         coordinates as they are (their fast-mode content destabilises the tuned loop,
         ``docs/control.md``).
     jacobian_every : int
@@ -386,7 +386,7 @@ class NMPCSettings:
         RTI only: one interval Jacobian ``(A, B)`` per this many consecutive shooting
         intervals of the horizon, taken at the middle interval of each group and held over
         it (1, default: every interval its own); the shooting ends stay nonlinear on every
-        interval (:func:`flexctrl.control.nmpc_interval.symbolic_linearisation`).
+        interval (:func:`flexctrl.control.nmpc.interval.symbolic_linearisation`).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``) instead of its default start (about half the

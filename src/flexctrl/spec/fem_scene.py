@@ -6,7 +6,7 @@
 :class:`FemScene`; :meth:`FemScene.settings` gives them back as the plain data
 ``summary.json`` records under ``"scene"``.  ``--set`` overrides are applied to the raw
 document first, so ``--set axial_shortening=false`` is validated like the file.  Running
-is :func:`flexctrl.scenes.fem.run_scene`.
+is :func:`flexctrl.scenes.run_fem_scene.run_scene`.
 
 Keys (SI units; angles in degrees)::
 

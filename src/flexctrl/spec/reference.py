@@ -9,7 +9,7 @@
 the minimum-jerk point-to-point path: zero velocity and acceleration at both ends,
 peak velocity ``1.875 dq / T`` at mid-move, peak acceleration ``5.774 dq / T^2`` at
 ``tau = 0.211`` and ``0.789``.  The deflections and torques that go with it on a model
-are :class:`flexctrl.control.reference.ReferenceTrajectory`'s.
+are :class:`flexctrl.control.reference_trajectory.ReferenceTrajectory`'s.
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ class Move:
         When the move starts, s.
     deflection : {"quasi_static", "static"}
         The elastic part of the reference the model-based controllers track
-        (:class:`flexctrl.control.reference.ReferenceTrajectory`).
+        (:class:`flexctrl.control.reference_trajectory.ReferenceTrajectory`).
 
     Examples
     --------

@@ -1,7 +1,7 @@
 """Batch studies: a grid of runs over payloads, configurations, controllers and settings.
 
 ``load_study(path)`` reads and validates a study file into a :class:`StudySpec`
-with every run expanded (:mod:`flexctrl.study.spec`); ``run_study(spec, out)``
+with every run expanded (:mod:`flexctrl.study.study_file`); ``run_study(spec, out)``
 runs what is not yet recorded in ``out`` on a local process pool or a Dask
 cluster (:mod:`flexctrl.study.runner`), writing one record per run as it
 finishes (:mod:`flexctrl.study.store`); ``write_report(out)`` draws the report
@@ -14,7 +14,7 @@ from flexctrl.study.outputs import RunOutput, per_worker_cache
 from flexctrl.study.registry import executor_names, get_executor, register_executor
 from flexctrl.study.report import write_report
 from flexctrl.study.runner import StudyResult, execute_run, run_study
-from flexctrl.study.spec import ReportSpec, RunSpec, StudySpec, load_study
+from flexctrl.study.study_file import ReportSpec, RunSpec, StudySpec, load_study
 from flexctrl.study.store import ResultStore, Table
 
 __all__ = [

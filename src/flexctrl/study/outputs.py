@@ -1,7 +1,7 @@
 """What a study executor returns, and the helpers its authors use (see :mod:`flexctrl.study.registry`).
 
 An executor is a function ``fn(settings: dict) -> RunOutput`` (the settings are the
-plain dict of :mod:`flexctrl.study.spec`).  Worker processes live for the whole study,
+plain dict of :mod:`flexctrl.study.study_file`).  Worker processes live for the whole study,
 so expensive build steps are kept per worker: in :func:`worker_scene_cache` (models,
 fidelity choices) or behind :func:`per_worker_cache` (keyed by the settings that matter,
 including the files' digests so an edited file is rebuilt).

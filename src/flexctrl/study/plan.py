@@ -1,4 +1,4 @@
-"""The plan of a study as plain frozen data: its runs, axes and report settings (read by :mod:`flexctrl.study.spec`)."""
+"""The plan of a study as plain frozen data: its runs, axes and report settings (read by :mod:`flexctrl.study.study_file`)."""
 
 from __future__ import annotations
 

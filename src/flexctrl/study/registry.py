@@ -2,7 +2,7 @@
 
 The seam
 --------
-A run is a plain JSON-able dict of settings, built by :mod:`flexctrl.study.spec`::
+A run is a plain JSON-able dict of settings, built by :mod:`flexctrl.study.study_file`::
 
     {"executor": "closed_loop",
      "scene": "/abs/studies/scenes/move.toml",      # absolute paths
@@ -60,10 +60,10 @@ needs it, with ``execute(settings)`` and optionally ``check_settings(settings)``
 ``report_sections(directory, rows, figures)``; :data:`BUILTIN` names them.
 
 ``closed_loop``
-    :mod:`flexctrl.study.executors.closed_loop`: build the model, design the
+    :mod:`flexctrl.study.executors.closed_loop_executor`: build the model, design the
     controller, simulate the closed loop.
 ``stability_limits``, ``speed_vs_accuracy``, ``baumgarte_sweep``
-    The analyses' studies (:mod:`flexctrl.study.executors.stability_limits` ...).
+    The analyses' studies (:mod:`flexctrl.study.executors.stability_limits_executor` ...).
 ``_selftest``
     A damped oscillator simulated with numpy in a few milliseconds: its natural
     frequency follows the model's last link, the payload and the configuration,
@@ -209,15 +209,15 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
 
 #: The shipped executors: name -> (module, one line for ``flexctrl study --help``, needs a model file).
 BUILTIN: dict[str, tuple[str, str, bool]] = {
-    "closed_loop": ("flexctrl.study.executors.closed_loop",
+    "closed_loop": ("flexctrl.study.executors.closed_loop_executor",
                     "build the model, design the controller, simulate the closed loop", True),
-    "_selftest": ("flexctrl.study.executors.selftest",
+    "_selftest": ("flexctrl.study.executors.selftest_executor",
                   "a damped oscillator in numpy: checks the runner, store, report and backends", True),
-    "stability_limits": ("flexctrl.study.executors.stability_limits",
+    "stability_limits": ("flexctrl.study.executors.stability_limits_executor",
                          "largest stable step of each integrator for each model fidelity, beside theory", True),
-    "speed_vs_accuracy": ("flexctrl.study.executors.speed_vs_accuracy",
+    "speed_vs_accuracy": ("flexctrl.study.executors.speed_vs_accuracy_executor",
                           "tip error against a converged reference and wall time per simulated second", True),
-    "baumgarte_sweep": ("flexctrl.study.executors.baumgarte_sweep",
+    "baumgarte_sweep": ("flexctrl.study.executors.baumgarte_sweep_executor",
                         "constraint drift and stability of the beam over supports as gamma = beta sweeps", False),
 }
 for _name, (_module, _summary, _needs_model) in BUILTIN.items():

@@ -38,11 +38,11 @@ from typing import Any, Sequence
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.study.spec import ReportSpec
+from flexctrl.study.study_file import ReportSpec
 from flexctrl.study.report_figures import (TEXT_CELLS, draw_best_map, draw_ranking, draw_signals, draw_value_maps,
                                            wants_log)
 from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
-from flexctrl.study.units import display, with_unit
+from flexctrl.study.column_units import display, with_unit
 
 TIMING = re.compile(r"(controller|solve|solver|step|compute|cpu|qp|nlp)_?time", re.IGNORECASE)
 MAX_PANELS = 12
@@ -377,10 +377,10 @@ def _worst(ctx: _Context) -> list[str]:
 
 
 def _draw_cell(ctx: _Context, path: Path, stored, label, title: str, highlight: str) -> None:
-    """The closed loop's four panels (:func:`flexctrl.loop.figures.draw_runs`) or any executor's signals."""
+    """The closed loop's four panels (:func:`flexctrl.loop.compare_figure.draw_runs`) or any executor's signals."""
     time_name = ctx.spec.time
     if all(k in stored[0][1] for k in (time_name, "u1", "w1")) and not ctx.spec.signals:
-        from flexctrl.loop.figures import draw_runs
+        from flexctrl.loop.compare_figure import draw_runs
 
         curves = [_run_curves(ctx, row, arrays, label(row)) for row, arrays in stored]
         fig = draw_runs(curves, title=title, highlight=highlight)
@@ -391,7 +391,7 @@ def _draw_cell(ctx: _Context, path: Path, stored, label, title: str, highlight: 
 
 def _run_curves(ctx: _Context, row: dict, arrays: dict[str, np.ndarray], label: str):
     """A closed-loop run's stored trajectories (``t``, ``e``, ``q<k>``, ``u<k>``, ``w<k>``) as curves."""
-    from flexctrl.loop.figures import RunCurves
+    from flexctrl.loop.compare_figure import RunCurves
 
     def stack(prefix: str) -> np.ndarray:
         names = [f"{prefix}{k}" for k in range(1, 100) if f"{prefix}{k}" in arrays]

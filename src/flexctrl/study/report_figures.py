@@ -1,6 +1,6 @@
 """The study report's figures: metric maps, best-per-cell and ratio maps, ranking, worst cases.
 
-Every number is drawn in the unit a reader expects (:mod:`flexctrl.study.units`); a
+Every number is drawn in the unit a reader expects (:mod:`flexctrl.study.column_units`); a
 colour scale or value axis is logarithmic when its values span more than
 :data:`LOG_SPAN` (a 0.008 mm bar beside 1 mm ones stays visible).  Plain matplotlib
 ``Figure`` objects (no pyplot state), saved at 100 dpi.
@@ -14,7 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from flexctrl.study.units import Shown, display
+from flexctrl.study.column_units import Shown, display
 
 #: Ratio of the largest to the smallest positive value above which a scale is logarithmic.
 LOG_SPAN = 20.0
@@ -143,7 +143,7 @@ def draw_ranking(path: Path, groups: dict[Any, dict[Any, list[float]]], candidat
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from flexctrl.study.units import with_unit
+    from flexctrl.study.column_units import with_unit
 
     fig = Figure(figsize=(max(5.5, 0.45 * len(groups) * max(1, len(candidates)) + 3.0), 4.0), layout="constrained")
     FigureCanvasAgg(fig)

@@ -63,7 +63,7 @@ from typing import Any, Iterable, Iterator
 import numpy as np
 
 from flexctrl.errors import FlexctrlError, SpecError
-from flexctrl.study.spec import RESERVED_COLUMNS, RunSpec, StudySpec
+from flexctrl.study.study_file import RESERVED_COLUMNS, RunSpec, StudySpec
 from flexctrl.study.store import ResultStore, Table, now_iso
 
 STUDY_FORMAT = 1
@@ -486,7 +486,7 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
     Parameters
     ----------
     spec
-        From :func:`flexctrl.study.spec.load_study` (validated before anything runs).
+        From :func:`flexctrl.study.study_file.load_study` (validated before anything runs).
     out
         The result folder (see :mod:`flexctrl.study.store`).
     workers

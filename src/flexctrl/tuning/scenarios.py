@@ -10,7 +10,7 @@ from flexctrl.loop.metrics import JOINT_METRICS, METRICS
 from flexctrl.spec.tuning import ParameterSpec, TuningSpec
 from flexctrl.study.hashing import canonical_json, file_digest, run_id
 from flexctrl.study.plan import RunSpec, StudySpec, toml_literal
-from flexctrl.study.spec import nest_dotted_keys, study_from_document
+from flexctrl.study.study_file import nest_dotted_keys, study_from_document
 
 _JOINT_METRIC = re.compile(rf"^({'|'.join(JOINT_METRICS)})_[1-9][0-9]?$")
 

@@ -202,7 +202,7 @@ def _log(stream, progress: bool, spec: TuningSpec, evaluations: list[Evaluation]
 
 
 def _write(result: TuningResult) -> None:
-    from flexctrl.tuning.report import metric_unit, write_report
+    from flexctrl.tuning.tuning_report import metric_unit, write_report
 
     out = result.directory
     out.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""Kinematics, mass matrix and energies of the finite-element arm (see :mod:`flexctrl.dynamics.fem.arm`).
+"""Kinematics, mass matrix and energies of the finite-element arm (see :mod:`flexctrl.dynamics.fem.fem_arm`).
 
 Kinematics and kinetic energy of link i (Eqs 2-6, 30)
     In the frame ``(r_i, R(alpha_i))`` a material point ``x`` is at

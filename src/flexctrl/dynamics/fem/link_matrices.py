@@ -3,7 +3,7 @@
 A link of length ``L`` is cut into ``N`` equal elements: Hermite cubics for the
 transverse deflection ``w(x) = N_w(x) q_w`` and linear elements for the axial
 displacement ``u(x) = N_u(x) q_u`` (:mod:`flexctrl.beam.elements`).  The base node
-is clamped in the link frame (see :mod:`flexctrl.dynamics.fem.arm` for why), so the
+is clamped in the link frame (see :mod:`flexctrl.dynamics.fem.fem_arm` for why), so the
 dofs are those of nodes ``1..N``::
 
     q_w = (w_1, theta_1, ..., w_N, theta_N)   (m, rad; theta = dw/dx)
@@ -20,7 +20,7 @@ Integrals (``rho`` kg/m, ``x`` from the link base), all exact (Gauss-Legendre wi
 ``G_e = int_e N_w'^T N_w'`` (4 x 4, per element)              ``int_e w'^2 = q_e^T G_e q_e``
 
 ``G_e`` gives the element mean of ``w'^2`` used in the membrane strain of the
-axial-shortening option (:mod:`flexctrl.dynamics.fem.arm`).
+axial-shortening option (:mod:`flexctrl.dynamics.fem.fem_arm`).
 """
 
 from __future__ import annotations

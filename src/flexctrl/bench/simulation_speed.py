@@ -63,7 +63,7 @@ def bench_sim(model_path: str | Path = DEFAULT_MODEL, *, fidelity: str = "amm:2"
               scipy_method: str = "RK45", scipy_rtol: float = 1e-8, scipy_atol: float = 1e-10,
               use_cache: bool = False) -> dict[str, Any]:
     """Measure the simulation speeds described in the module docstring; returns a dict."""
-    from flexctrl.scenes.models import load_model
+    from flexctrl.scenes.model_files import load_model
     from flexctrl.sim import RK4, ScipyIntegrator
 
     start = time.perf_counter()

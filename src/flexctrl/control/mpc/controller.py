@@ -9,7 +9,7 @@ Problem (deviations from the reference over the horizon, scaled, see below)::
                                                                  (soft: deflection or tip error)
 
 with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) - x_op``
-(:mod:`flexctrl.control.reference`: the joint path, its quasi-static deflection and the
+(:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection and the
 feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The
 prediction ``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the
 Jacobians of the design point along the reference: exact for a reference that is a
@@ -46,7 +46,7 @@ Backends
 Minimum-time arrival
     With ``[arrival] kind = "minimum_time"`` (condensed) the controller plans, at its first
     sample, the earliest time the arm can be held inside a band and asks every later
-    prediction to be there from then on (:mod:`flexctrl.control.mpc_arrival`).
+    prediction to be there from then on (:mod:`flexctrl.control.mpc.arrival_search`).
 
 Fallback
     When the QP is not solved (OSQP ``max_iter``/``time_limit`` reached, infeasible,
@@ -62,12 +62,12 @@ import time
 
 import numpy as np
 
-from flexctrl.control.base import Controller
+from flexctrl.control.controller import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
-from flexctrl.control.mpc_arrival import shortest_arrival, stage_times
-from flexctrl.control.mpc_qp import QP, ScaledProblem, condensed_qp, scaled_problem, sparse_qp
-from flexctrl.control.qp_backends import Solution, make_backend
+from flexctrl.control.mpc.arrival_search import shortest_arrival, stage_times
+from flexctrl.control.mpc.qp import QP, ScaledProblem, condensed_qp, scaled_problem, sparse_qp
+from flexctrl.control.mpc.qp_backends import Solution, make_backend
 from flexctrl.linear import OperatingPoint, torque_limits
 from flexctrl.spec.controller_settings import MPCSettings
 
@@ -140,7 +140,7 @@ class MPCController(Controller):
         """Which constrained stages have their arrival rows released at ``t`` (None: no arrival rows).
 
         The first call after a reset or a new reference plans the arrival time
-        (:func:`~flexctrl.control.mpc_arrival.shortest_arrival` plus the margin) and records
+        (:func:`~flexctrl.control.mpc.arrival_search.shortest_arrival` plus the margin) and records
         it in :attr:`stats` (``arrival_time_s``, ``arrival_feasible``, ``arrival_search_ms``).
         """
         arrival = self.settings.arrival

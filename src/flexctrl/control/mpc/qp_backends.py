@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from flexctrl.control.mpc_qp import QP
+from flexctrl.control.mpc.qp import QP
 from flexctrl.spec.controller_settings import MPCSettings
 
 

@@ -3,7 +3,7 @@
 :func:`scene_arm` loads the arm and applies the scene's payload, gravity and damping;
 :func:`initial_state` builds ``x0``; :func:`simulate_arm_scene` builds the model at
 the scene's fidelity (frozen modes at the initial configuration) and integrates.
-Running a whole scene with its files is :func:`flexctrl.scenes.arm_scene.run_arm_scene`.
+Running a whole scene with its files is :func:`flexctrl.scenes.run_arm_scene.run_arm_scene`.
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     model
         The built model, when the caller has it (e.g. from a cache); built here otherwise.
     integrator
-        A set-up :class:`~flexctrl.sim.base.Integrator` for ``model`` at ``scene.dt``, when the caller has one.
+        A set-up :class:`~flexctrl.sim.integrator.Integrator` for ``model`` at ``scene.dt``, when the caller has one.
     **integrator_options
         Passed to the integrator class (e.g. ``compile=False``).
 

@@ -11,14 +11,14 @@ a different question, and a linear programme answers it exactly on the predictio
                                       |C_a z_j| <= band         for j >= k  (arrival rows)
 
 where ``z_j = Phi_j z_0 + Gamma_j T b`` is the condensed prediction (move blocking ``T``)
-and ``C_a`` are the arrival rows of :func:`flexctrl.control.mpc_qp.arrival_rows` (the tip
+and ``C_a`` are the arrival rows of :func:`flexctrl.control.mpc.qp.arrival_rows` (the tip
 position error and each joint's error as tip motion, m).  Feasibility is monotone in ``k``
 (a plan that stays in the band from ``k`` on also does from ``k + 1``), so bisection over
 the constrained stages needs ``log2(S)`` linear programmes (HiGHS through
 :func:`scipy.optimize.linprog`; about 0.1 s for the shipped 1.5 s horizon, once per move).
 
 The controller solves this when it first sees a target (its first sample after
-:meth:`~flexctrl.control.base.Controller.reset`) and fixes the absolute arrival time
+:meth:`~flexctrl.control.controller.Controller.reset`) and fixes the absolute arrival time
 ``t_a = t_0 + (k* + 1) T_s + margin``.  From then on every QP keeps its quadratic cost but
 asks the predicted states at and after ``t_a`` to be inside the band through the arrival
 rows (soft, with the MPC's exact L1 slack penalty, so a plant that strays from the
@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexctrl.control.mpc_qp import QP
+from flexctrl.control.mpc.qp import QP
 
 
 def _rows(qp: QP, lba: np.ndarray, uba: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ records the CPU count and load average.
 
 Example
 -------
-``python -c "from flexctrl.bench.mpc import mpc_benchmark; import json; print(json.dumps(mpc_benchmark(), indent=1))"``
+``python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; print(json.dumps(mpc_benchmark(), indent=1))"``
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-COMMAND = ('python -c "from flexctrl.bench.mpc import mpc_benchmark; import json; '
+COMMAND = ('python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; '
            'print(json.dumps(mpc_benchmark(), indent=1))"')
 
 
@@ -131,7 +131,7 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
-#: NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.design_nmpc`, not settings.
+#: NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.controller.design_nmpc`, not settings.
 DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen", "direct_qp")
 
 
@@ -155,7 +155,7 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     ``rti_frozen_full`` the setting before (``controllers/nmpc_full.toml``);
     ``rti_frozen_cold`` with HPIPM's default start; ``rti_frozen_factored`` with the
     Jacobian of ``f`` through one factorisation of the mass matrix (the key ``jacobian`` is
-    an argument of :func:`~flexctrl.control.nmpc.design_nmpc`, not a setting);
+    an argument of :func:`~flexctrl.control.nmpc.controller.design_nmpc`, not a setting);
     ``rti_exact`` cold with exact sensitivities; ``rti_frozen_every3`` one Jacobian of
     ``f`` per three RK4 steps.  ``rti_first_modes`` predicts with the first assumed mode
     of every link, the estimate selected (12 states, 2 substeps; destabilises the full arm
@@ -198,7 +198,7 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
     """
     from flexctrl.control import design
     from flexctrl.control.lqr import build_sensors, linear_plant
-    from flexctrl.control.nmpc import auto_substeps, design_nmpc, interval_functions
+    from flexctrl.control.nmpc.controller import auto_substeps, design_nmpc, interval_functions
     from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
     plant_substeps = auto_substeps(linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time))
@@ -310,7 +310,7 @@ def mpc_benchmark(
 
     from flexctrl import linear as L
     from flexctrl.spec.controller_settings import MPCSettings
-    from flexctrl.scenes.models import load_model
+    from flexctrl.scenes.model_files import load_model
 
     model = load_model(model_path, fidelity=fidelity)
     op = L.equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))

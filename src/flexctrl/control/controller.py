@@ -10,9 +10,9 @@ A closed loop needs only this::
     ctrl.stats.summary()                        # wall time per step, status counts, fallbacks
 
 A controller regulates to its :attr:`Controller.reference`: by default its operating
-point (:class:`~flexctrl.control.reference.HoldReference`), or a moving reference
+point (:class:`~flexctrl.control.reference_trajectory.HoldReference`), or a moving reference
 given by :meth:`Controller.set_reference` (a
-:class:`~flexctrl.control.reference.ReferenceTrajectory`: joint path, reference state,
+:class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`: joint path, reference state,
 feed-forward torque), which every controller reads at its sample times.
 
 ``step`` is a template method (like scipy's ``OdeSolver.step``): the base class
@@ -150,12 +150,12 @@ class Controller(ABC):
         self.design_model = None
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
-        from flexctrl.control.reference import HoldReference
+        from flexctrl.control.reference_trajectory import HoldReference
 
         self.reference = HoldReference(op)
 
     def set_reference(self, reference) -> None:
-        """Track ``reference`` (a :class:`~flexctrl.control.reference.ReferenceTrajectory`) from now on.
+        """Track ``reference`` (a :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`) from now on.
 
         Parameters
         ----------
@@ -163,7 +163,7 @@ class Controller(ABC):
             Built on the controller's design model; ``None`` restores regulation to the
             operating point.  The reference survives :meth:`reset`.
         """
-        from flexctrl.control.reference import HoldReference
+        from flexctrl.control.reference_trajectory import HoldReference
 
         if reference is not None and len(reference.path.q_target) != self.n_u:
             raise SpecError(f"the reference has {len(reference.path.q_target)} joint angles; expected {self.n_u}",

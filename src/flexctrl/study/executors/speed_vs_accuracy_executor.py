@@ -198,9 +198,9 @@ def _stepper(arm, method: Method, q0: tuple[float, ...]):
 def _controller(plan_scene: tuple, controller: str | None, controller_digest: str | None, overrides: tuple[str, ...]):
     """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload (or
     ``design_payload``) at its design configuration, tracking the scene's reference path, as
-    :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
+    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
     from flexctrl.scenes.loop_setup import design_scene_controller
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.spec.controller import load_controller
 
     scene = _scene(plan_scene)
@@ -225,7 +225,7 @@ def _controller(plan_scene: tuple, controller: str | None, controller_digest: st
 def simulate_method(plan: RunPlan, method: Method) -> tuple[MethodRun, Any]:
     """Run ``method`` on the plan's scene once; returns the run and the model."""
     from flexctrl.loop.mismatch import plant_sensors
-    from flexctrl.scenes.arm import initial_state, scene_arm
+    from flexctrl.scenes.arm_setup import initial_state, scene_arm
 
     key = _plan_scene(plan)
     scene = _scene(key)
@@ -506,7 +506,7 @@ def mesh_convergence(scene: str | Path, meshes: tuple[str, ...] = ("fem:4", "fem
 
     Examples
     --------
-    ``python -c "from flexctrl.study.executors.speed_vs_accuracy import mesh_convergence as m; print(m('studies/scenes/bangbang.toml'))"``
+    ``python -c "from flexctrl.study.executors.speed_vs_accuracy_executor import mesh_convergence as m; print(m('studies/scenes/bangbang.toml'))"``
     """
     from flexctrl.sim.tip_error import tip_error
 

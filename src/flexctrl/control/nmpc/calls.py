@@ -5,7 +5,7 @@ numpy arrays once per controller: ``prepare`` writes the constraint matrix and b
 straight into the arrays the QP reads, the linearisation trajectory ``w`` is also the
 QP's start ``x0``, and the Hessian's entries are bound once (the QP's buffer is renewed per
 solve, as an ordinary call's memory is: :class:`~flexctrl.sim.bound.BoundFunction`).
-With a :class:`~flexctrl.control.nmpc_screen.ScreenedQP` the QP without its soft rows is
+With a :class:`~flexctrl.control.nmpc.screened_qp.ScreenedQP` the QP without its soft rows is
 tried first and the whole QP solved only when the soft rows do not hold.  :class:`DMRTICalls` makes
 the same two calls through CasADi's ordinary call (every vector converted to a ``DM`` and
 back).  Same compiled code, same values to the bit; measured on the benchmark problem
@@ -19,7 +19,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.nmpc_screen import ScreenedQP
+from flexctrl.control.nmpc.screened_qp import ScreenedQP
 from flexctrl.sim.bound import BoundFunction
 
 
@@ -27,7 +27,7 @@ class BoundRTICalls:
     """``prepare`` and ``qp`` bound to shared arrays (see the module docstring); one per controller."""
 
     def __init__(self, prepare: ca.Function, qp: ca.Function, H: ca.DM, screen: ScreenedQP | None = None):
-        #: the QP without its soft rows, tried first (:mod:`flexctrl.control.nmpc_screen`); samples it served
+        #: the QP without its soft rows, tried first (:mod:`flexctrl.control.nmpc.screened_qp`); samples it served
         self.screen, self.screened, self.solves = screen, 0, 0
         if qp.sparsity_in("a") != prepare.sparsity_out("a") or qp.sparsity_in("h") != H.sparsity():
             raise ValueError("the QP solver's sparsity differs from its data's: build them together (nmpc._build)")

@@ -14,7 +14,7 @@ import math
 import time
 
 from flexctrl.errors import FlexctrlError, SpecError
-from flexctrl.scenes.closed_loop import check_auto, resolve_auto, run_closed_loop_scene
+from flexctrl.scenes.run_closed_loop_scene import check_auto, resolve_auto, run_closed_loop_scene
 from flexctrl.spec.controller import load_controller
 from flexctrl.spec.scene import load_scene
 from flexctrl.study.outputs import RunOutput, overrides_for, scene_overrides, worker_scene_cache

@@ -1,11 +1,11 @@
 """Nonlinear MPC in CasADi: multiple shooting with RK4, real-time iteration or full NLP.
 
 The model predicted with is the design model or a reduction of it
-(``prediction_modes``; :mod:`flexctrl.control.nmpc_model`: the joints and the slowest
+(``prediction_modes``; :mod:`flexctrl.control.nmpc.prediction_model`: the joints and the slowest
 coupled modes at the target, the estimate mapped with its fast modes removed); the
-shooting interval and its sensitivities are :mod:`flexctrl.control.nmpc_interval`.
+shooting interval and its sensitivities are :mod:`flexctrl.control.nmpc.interval`.
 
-Variables are the scaled deviations of :mod:`flexctrl.control.mpc` (same scales,
+Variables are the scaled deviations of :mod:`flexctrl.control.mpc.controller` (same scales,
 weights, DARE terminal cost, torque bounds and soft constraints), stage-wise::
 
     w = [z_0, v_0, s_0, z_1, v_1, s_1, ..., z_N]
@@ -33,8 +33,8 @@ Jacobian per interval at its middle RK4 node, frozen over the interval: second o
 the sample time where the start point is first order (``docs/control.md``).  ``"exact"``
 propagates the Jacobian of ``f`` through every RK4 stage (4 ``substeps`` Jacobians per
 interval).  Per sample the two calls (linearise and assemble, then the QP) go through
-buffers bound once (:mod:`flexctrl.control.nmpc_calls`), and the QP without its soft rows
-is tried first (:mod:`flexctrl.control.nmpc_screen`).
+buffers bound once (:mod:`flexctrl.control.nmpc.calls`), and the QP without its soft rows
+is tried first (:mod:`flexctrl.control.nmpc.screened_qp`).
 
 Why one Jacobian per RK4 step and not per sample (the first version): during a
 saturated transient of the three-link arm the state moves within a sample (the
@@ -66,7 +66,7 @@ previous plan, then the LQR law about the reference) with the reason, and the ne
 sample linearises along a fresh rollout from the measured state instead of the
 trajectory that failed.
 
-A moving reference (:mod:`flexctrl.control.reference`) enters only the linear cost,
+A moving reference (:mod:`flexctrl.control.reference_trajectory`) enters only the linear cost,
 ``g = g0 - H w_ref`` with ``w_ref`` the scaled reference states and feed-forward torques
 over the horizon: the stage costs penalise deviations from the reference while the
 shooting constraints stay the nonlinear model (no reference consistency is assumed).
@@ -94,21 +94,21 @@ import time
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.base import Controller
+from flexctrl.control.controller import Controller
 from flexctrl.dynamics.parametric import try_expand as _expanded
 from flexctrl.sim.compile import content_key
 from flexctrl.dynamics.parametric import constants_as_parameters
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
-from flexctrl.control.mpc_qp import ScaledProblem, _shift_blocks, scaled_problem
-from flexctrl.control.qp_backends import Solution
-from flexctrl.control.nmpc_calls import BoundRTICalls, DMRTICalls
-from flexctrl.control.nmpc_screen import ScreenedQP, hpipm_options
-from flexctrl.control.nmpc_interval import (RK4_BOUND, auto_substeps, horizon_linearisation, interval_core,
+from flexctrl.control.mpc.qp import ScaledProblem, _shift_blocks, scaled_problem
+from flexctrl.control.mpc.qp_backends import Solution
+from flexctrl.control.nmpc.calls import BoundRTICalls, DMRTICalls
+from flexctrl.control.nmpc.screened_qp import ScreenedQP, hpipm_options
+from flexctrl.control.nmpc.interval import (RK4_BOUND, auto_substeps, horizon_linearisation, interval_core,
                                            interval_functions, memoised)
-from flexctrl.control.nmpc_model import Prediction, prediction_model
-from flexctrl.control.nmpc_nlp import lqr_rollout, nlp_functions
-from flexctrl.control.nmpc_jacobian import factored_dynamics
+from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
+from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
+from flexctrl.control.nmpc.jacobian import factored_dynamics
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
 
@@ -165,11 +165,11 @@ class NMPCController(Controller):
         self._w_ref: np.ndarray | None = None
         #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
         self._cost_window: tuple | None = None
-        #: the RTI's calls through bound buffers (else CasADi's DM calls; :mod:`flexctrl.control.nmpc_calls`)
+        #: the RTI's calls through bound buffers (else CasADi's DM calls; :mod:`flexctrl.control.nmpc.calls`)
         self.bound_calls = bound_calls
-        #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc_screen`)
+        #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc.screened_qp`)
         self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
-        #: the screened QP through HPIPM called directly (:mod:`flexctrl.control.hpipm_ocp`), else ``casadi.conic``
+        #: the screened QP through HPIPM called directly (:mod:`flexctrl.control.nmpc.hpipm_ocp`), else ``casadi.conic``
         self.direct_qp = direct_qp
         self._rti_calls = None
 
@@ -236,7 +236,7 @@ class NMPCController(Controller):
 
         ``w_ref`` holds the scaled reference states ``(x_ref,k - x_op) / S_x`` and inputs
         ``(u_ref,k - u_op) / S_u``, so the stage costs penalise deviations from the
-        reference (:mod:`flexctrl.control.reference`); ``g0`` for a reference at ``op``.
+        reference (:mod:`flexctrl.control.reference_trajectory`); ``g0`` for a reference at ``op``.
         """
         lay, pb = self.layout, self.problem
         X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
@@ -391,7 +391,7 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
     constants coincide by value at some configurations (the reduced prediction's basis).
     ``by_recipe``: the compiled linearisation found on disk by its recipe before it is built
-    (:func:`~flexctrl.control.nmpc_interval.horizon_linearisation`).
+    (:func:`~flexctrl.control.nmpc.interval.horizon_linearisation`).
     """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
@@ -514,14 +514,14 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
 
     ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
     (``"symbolic"``) or through one factorisation of the mass matrix (``"factored"``,
-    :mod:`flexctrl.control.nmpc_jacobian`: equal to rounding, not faster; ``docs/control.md``).
+    :mod:`flexctrl.control.nmpc.jacobian`: equal to rounding, not faster; ``docs/control.md``).
     ``bound_calls``: the RTI's two calls per sample through buffers bound once (default) or
-    CasADi's DM calls (the slower path, same values; :mod:`flexctrl.control.nmpc_calls`).
+    CasADi's DM calls (the slower path, same values; :mod:`flexctrl.control.nmpc.calls`).
     ``screen``: solve the QP without its soft rows first and keep that answer when they hold
     (HPIPM with bound calls; the same optimum to the solver's tolerance,
-    :mod:`flexctrl.control.nmpc_screen`); False always solves the whole QP.
+    :mod:`flexctrl.control.nmpc.screened_qp`); False always solves the whole QP.
     ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
-    (:mod:`flexctrl.control.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
+    (:mod:`flexctrl.control.nmpc.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
     ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
     from before it is built (default), or always built and then looked up by its content.
 

@@ -9,7 +9,7 @@ killed worker; :func:`throughput` times one study on 1, 2, ... workers.
 
 Command line (a study, the worker counts, study-file overrides)::
 
-    python -m flexctrl.study.executors.dask_cluster studies/quickstart.toml --workers 1 2 \\
+    python -m flexctrl.study.dask_cluster studies/quickstart.toml --workers 1 2 \\
         --set 'grid.controller=["../controllers/lqr.toml"]' [--blas-threads 0]
 
 prints runs per minute per worker count and the speed-up against one worker, with the
@@ -197,7 +197,7 @@ def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m flexctrl.study.executors.dask_cluster",
+    parser = argparse.ArgumentParser(prog="python -m flexctrl.study.dask_cluster",
                                      description="runs per minute of a study on a localhost Dask cluster of 1, 2, ... workers")
     parser.add_argument("study")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])

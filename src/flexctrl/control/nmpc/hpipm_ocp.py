@@ -36,7 +36,7 @@ import numpy as np
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 #: HPIPM's ``enum hpipm_status``
 STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
-#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc_screen.hpipm_options` and their HPIPM setters
+#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their HPIPM setters
 _TOLERANCES = {"res_g_max": "tol_stat", "res_b_max": "tol_eq", "res_d_max": "tol_ineq", "res_m_max": "tol_comp"}
 
 
@@ -91,7 +91,7 @@ class HpipmOCP:
         Stages, states and inputs per stage.
     options : dict
         ``{"mode", "iter_max", "res_g_max", "res_b_max", "res_d_max", "res_m_max", "warm_start"}``
-        as for ``casadi.conic``'s HPIPM (:func:`~flexctrl.control.nmpc_screen.hpipm_options`);
+        as for ``casadi.conic``'s HPIPM (:func:`~flexctrl.control.nmpc.screened_qp.hpipm_options`);
         ``warm_start`` 1 starts from the primal guess given to :meth:`solve`.
 
     The data are written into :attr:`A`, :attr:`B`, :attr:`b`, :attr:`Q`, :attr:`S`, :attr:`R`,

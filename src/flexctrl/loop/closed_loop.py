@@ -41,7 +41,7 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
     ----------
     model : flexctrl.dynamics.model.Model
         The model the controller was designed on.
-    controller : flexctrl.control.base.Controller
+    controller : flexctrl.control.controller.Controller
         From :func:`flexctrl.design`.  It is reset and given the reference.
     reference : Move or JointReference
         The joint path (rad, s).
@@ -104,7 +104,7 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
                         f"({path.t_arrive:g} s)", key="duration")
     plant = model if plant is None else plant
     judge = MetricSettings() if metrics is None else metrics
-    from flexctrl.control.reference import ReferenceTrajectory
+    from flexctrl.control.reference_trajectory import ReferenceTrajectory
 
     controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
     controller.reset()

@@ -1,7 +1,7 @@
 """Frequencies of a model: locked-joint frequencies of the FE arm and of the assumed-modes model, the
 free-joint spectral radius, and the fixed RK4 step they allow.
 
-Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.arm.locked_matrices`) and the
+Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`) and the
 Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of ``docs/fem.md``) and
 :mod:`flexctrl.analysis.accuracy` (the speed/accuracy study).
 """
@@ -14,7 +14,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from flexctrl.dynamics.fem.arm import generalized_frequencies, locked_matrices
+from flexctrl.dynamics.fem.fem_arm import generalized_frequencies, locked_matrices
 from flexctrl.spec.arm import ArmSpec
 
 

@@ -3,7 +3,7 @@
 :func:`lqr_rollout` chains the saturated-LQR step of the scaled shooting map over the
 horizon (the RTI's first guess); :func:`nlp_functions` builds the stage-wise NLP of
 ``mode = "full"`` (and the RTI's ``init_iter``) on the same variables as the RTI's QP
-(:mod:`flexctrl.control.nmpc`'s module docstring).
+(:mod:`flexctrl.control.nmpc.controller`'s module docstring).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.mpc_qp import ScaledProblem
+from flexctrl.control.mpc.qp import ScaledProblem
 from flexctrl.spec.controller_settings import NMPCSettings
 
 

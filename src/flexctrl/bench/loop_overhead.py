@@ -1,6 +1,6 @@
 """The closed-loop benchmark: one whole run of a closed-loop scene against the plant's compiled simulation alone.
 
-``run_wall_s`` is the wall time of :func:`flexctrl.scenes.closed_loop.run_closed_loop_scene`
+``run_wall_s`` is the wall time of :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`
 on ``studies/scenes/move_joint1_30deg.toml`` with the LQR (build, design, simulate,
 metrics, verdict), warm: in-process, with the worker's :class:`~flexctrl.scenes.cache.SceneCache`
 after a first run (models built, libraries compiled, the design and its reference
@@ -18,7 +18,7 @@ with a fresh design on the kept model (design, reference table and verdict paid)
 configuration in a sweep: the model built, its constants lifted, Jacobians and
 reference Functions built).  Each of the two also runs with the reference table's
 Newton iteration in CasADi's virtual machine (``reference_vm``, the slow path:
-``reference_compile=False`` of :func:`~flexctrl.scenes.closed_loop.run_closed_loop_scene`)
+``reference_compile=False`` of :func:`~flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`)
 beside the compiled one, in the same round.  Medians of the rounds; the metrics of the
 two loop paths are compared (``max_metric_relative_difference``), and those of the two
 reference paths (``reference_metric_differences``).
@@ -78,7 +78,7 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
                repeats: int = 5) -> dict[str, Any]:
     """Measure what the module docstring describes; returns a JSON-serialisable dict."""
     from flexctrl.scenes.cache import SceneCache
-    from flexctrl.scenes.closed_loop import run_closed_loop_scene
+    from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.sim import RK4
     from flexctrl.spec.scene import load_scene
 

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from flexctrl.fidelity.ladder import check_tolerance
-from flexctrl.scenes.arm import SceneResult, model_facts, simulate_arm_scene
+from flexctrl.scenes.arm_setup import SceneResult, model_facts, simulate_arm_scene
 from flexctrl.scenes.auto import choose_fidelity, prepared
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.sim.trajectory import jsonable

@@ -1,6 +1,6 @@
 """The linear MPC's quadratic programme: scaled problem data, the sparse and condensed QPs, move blocking.
 
-See :mod:`flexctrl.control.mpc` for the problem, the formulations and the scaling.
+See :mod:`flexctrl.control.mpc.controller` for the problem, the formulations and the scaling.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The RTI's QP screened for its soft rows: solve without them first, keep that when they hold.
 
-The RTI's QP (:mod:`flexctrl.control.nmpc`) carries soft output constraints, two rows and
+The RTI's QP (:mod:`flexctrl.control.nmpc.controller`) carries soft output constraints, two rows and
 one slack per limited output and stage, penalised by ``l1 s + l2 s^2 / 2`` with
 ``l1 > 0``.  Drop the soft rows and the slacks and solve what is left (the shooting
 equalities, the torque bounds, the same costs).  If its solution ``w`` satisfies every
@@ -18,7 +18,7 @@ mpc``, in blocks) the QP step took 0.57 instead of 0.76 ms through ``casadi.coni
 iterations instead of 4.  Samples whose prediction reaches a deflection limit pay both solves.
 
 Since it has only the torque bounds, it is solved by HPIPM called directly
-(:class:`HpipmStages`, :mod:`flexctrl.control.hpipm_ocp`: memory made once, ``z_0``
+(:class:`HpipmStages`, :mod:`flexctrl.control.nmpc.hpipm_ocp`: memory made once, ``z_0``
 eliminated, no state boxes), ``direct=False`` keeps ``casadi.conic``.  One bench run
 (``flexctrl bench mpc --json --pc-solves 0``, load 0.1-0.5): QP step 0.41 against 0.80 ms in
 blocks, 0.55 against 0.80 ms interleaved; the whole sample 1.12 against 1.96 ms in blocks and
@@ -30,7 +30,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.hpipm_ocp import HpipmOCP, HpipmUnavailable
+from flexctrl.control.nmpc.hpipm_ocp import HpipmOCP, HpipmUnavailable
 from flexctrl.sim.bound import BoundFunction
 
 
@@ -134,7 +134,7 @@ class ScreenedQP:
 
 
 class HpipmStages:
-    """The smaller QP's data moved from the whole QP's arrays into :class:`~flexctrl.control.hpipm_ocp.HpipmOCP`.
+    """The smaller QP's data moved from the whole QP's arrays into :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
 
     The whole QP's shooting rows read ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's
     ``x_{k+1} = A_k x_k + B_k u_k + b_k`` has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds

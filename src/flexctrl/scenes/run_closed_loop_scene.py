@@ -61,7 +61,7 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
 def apply_choice(scene, choice, cache: SceneCache):
     """The auto scene run at a choice made for another run (a study's shared choice): the chosen rung, with
     the RK4 step the chooser's rule gives this scene's own model at that rung (:func:`~flexctrl.sim.rk4.rk4_step`)."""
-    from flexctrl.scenes.arm import scene_arm
+    from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.sim.rk4 import rk4_step
 
     scene = pin_design(scene)
