@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import json
 import statistics
-
-import numpy as np
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNGS = ("rigid", "amm:1", "amm:2", "amm:3", "amm:4", "amm:5")
@@ -47,8 +47,19 @@ print(json.dumps(out))
 
 def one(graph: str) -> dict:
     """One fresh process building every rung's kept Jacobian on ``graph``."""
-    done = subprocess.run([sys.executable, "-c", ONE_PROCESS, graph, ",".join(RUNGS),
-                           str(ROOT / "models" / "subedi3link.toml")], capture_output=True, text=True, check=True)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            ONE_PROCESS,
+            graph,
+            ",".join(RUNGS),
+            str(ROOT / "models" / "subedi3link.toml"),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(done.stdout)
 
 
@@ -63,14 +74,23 @@ def main(rounds: int = 3) -> None:
                 times[graph][rung].append(got[graph][rung]["build_s"])
             same[rung] &= got["sx"][rung]["values"] == got["mx"][rung]["values"]
             for sx, mx in zip(got["sx"][rung]["values"], got["mx"][rung]["values"]):
-                largest[rung] = max([largest[rung]] + [float(np.max(np.abs(np.subtract(a, b)))) for a, b in zip(sx, mx)])
-    print(f"{'rung':<7} {'sx build (s)':>13} {'mx build (s)':>13} {'mx / sx':>8}  same bits  largest difference")
+                largest[rung] = max(
+                    [largest[rung]]
+                    + [float(np.max(np.abs(np.subtract(a, b)))) for a, b in zip(sx, mx)]
+                )
+    print(
+        f"{'rung':<7} {'sx build (s)':>13} {'mx build (s)':>13} {'mx / sx':>8}  same bits  largest difference"
+    )
     for rung in RUNGS:
         sx, mx = statistics.median(times["sx"][rung]), statistics.median(times["mx"][rung])
-        print(f"{rung:<7} {sx:13.3f} {mx:13.3f} {mx / sx:8.2f}  {str(same[rung]):<9}  {largest[rung]:.1e}")
+        print(
+            f"{rung:<7} {sx:13.3f} {mx:13.3f} {mx / sx:8.2f}  {str(same[rung]):<9}  {largest[rung]:.1e}"
+        )
     total_sx = sum(statistics.median(v) for v in times["sx"].values())
     total_mx = sum(statistics.median(v) for v in times["mx"].values())
-    print(f"{'all':<7} {total_sx:13.3f} {total_mx:13.3f} {total_mx / total_sx:8.2f}  ({rounds} rounds, medians)")
+    print(
+        f"{'all':<7} {total_sx:13.3f} {total_mx:13.3f} {total_mx / total_sx:8.2f}  ({rounds} rounds, medians)"
+    )
 
 
 if __name__ == "__main__":

@@ -49,14 +49,23 @@ def main(rounds: int = 3) -> None:
     for _ in range(rounds):
         for path in ("recipe", "built"):
             with tempfile.TemporaryDirectory() as out:
-                done = subprocess.run([sys.executable, "-c", ONE_PROCESS, path, str(Path(out) / "study")], cwd=ROOT,
-                                      capture_output=True, text=True, check=True)
+                done = subprocess.run(
+                    [sys.executable, "-c", ONE_PROCESS, path, str(Path(out) / "study")],
+                    cwd=ROOT,
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                )
             results[path].append(json.loads(done.stdout.strip().splitlines()[-1]))
-    print(f"load average {os.getloadavg()[0]:.2f}; design_nmpc (s) per process: first pose, second pose")
+    print(
+        f"load average {os.getloadavg()[0]:.2f}; design_nmpc (s) per process: first pose, second pose"
+    )
     for path, runs in results.items():
         firsts = [r[0] for r in runs]
-        print(f"  {path:6s} first {', '.join(f'{t:.3f}' for t in firsts)} (median {statistics.median(firsts):.3f}); "
-              f"second {', '.join(f'{r[1]:.3f}' for r in runs)}")
+        print(
+            f"  {path:6s} first {', '.join(f'{t:.3f}' for t in firsts)} (median {statistics.median(firsts):.3f}); "
+            f"second {', '.join(f'{r[1]:.3f}' for r in runs)}"
+        )
 
 
 if __name__ == "__main__":

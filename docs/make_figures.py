@@ -45,8 +45,13 @@ DAMPED = [f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)]
 def comparison(args) -> Path:
     import flexctrl as fc
 
-    model = fc.load_model(ROOT / "models" / "subedi3link.toml", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0],
-                          overrides=DAMPED)
+    model = fc.load_model(
+        ROOT / "models" / "subedi3link.toml",
+        payload=2.0,
+        fidelity="amm:2",
+        gravity=[0.0, 0.0],
+        overrides=DAMPED,
+    )
     op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     judge = fc.MetricSettings(settle_allowance=1.0)
@@ -54,7 +59,10 @@ def comparison(args) -> Path:
     for name in ("pd", "lqr", "mpc"):
         controller = fc.design(model, op, fc.load_controller(ROOT / "controllers" / f"{name}.toml"))
         results[name.upper()] = fc.closed_loop(model, controller, move, duration=8.0, metrics=judge)
-    fig = fc.compare(results, title="30 degree move of joint 1 at 2 kg (amm:2, 1.5 s quintic), controllers/*.toml")
+    fig = fc.compare(
+        results,
+        title="30 degree move of joint 1 at 2 kg (amm:2, 1.5 s quintic), controllers/*.toml",
+    )
     return _save(fig, "comparison.png")
 
 
@@ -66,41 +74,80 @@ def _study(name: str, study: str, overrides: list[str], args, workers: int | Non
         shutil.rmtree(out)
     spec = fc.load_study(ROOT / study, overrides)
     try:
-        fc.run_study(spec, out, resume=out.exists(), workers=args.workers if workers is None else workers,
-                     progress="lines")
+        fc.run_study(
+            spec,
+            out,
+            resume=out.exists(),
+            workers=args.workers if workers is None else workers,
+            progress="lines",
+        )
     except fc.SpecError:  # the folder holds another version of the study: run it afresh
         shutil.rmtree(out)
-        fc.run_study(spec, out, workers=args.workers if workers is None else workers, progress="lines")
+        fc.run_study(
+            spec, out, workers=args.workers if workers is None else workers, progress="lines"
+        )
     return out
 
 
 def stability_map(args) -> Path:
-    out = _study("controller_stability", "studies/controller_stability.toml",
-                 ['grid.controller=["../controllers/pd.toml", "../controllers/lqr.toml", "../controllers/robust.toml"]'],
-                 args)
+    out = _study(
+        "controller_stability",
+        "studies/controller_stability.toml",
+        [
+            'grid.controller=["../controllers/pd.toml", "../controllers/lqr.toml", "../controllers/robust.toml"]'
+        ],
+        args,
+    )
     return _copy(out / "figures" / "map_stable.png", "stability_map.png")
 
 
-PARETO_METHODS = ["rigid/rk4@1ms", "amm:1/rk4@1ms", "amm:2/rk4@1ms", "amm:2/rk4@0.25ms", "amm:3/rk4@0.25ms",
-                  "amm:2/newmark@1ms", "amm:2/cvodes@1e-6", "fem:2/rk4@stable", "fem:4/rk4@stable"]
-PARETO_CASE = ['grid.scene=["scenes/bangbang.toml"]', "grid.payload=[2.0]", "grid.configuration=[[0, 0, 0]]",
-               'grid."scene.method"=[' + ", ".join(f'"{m}"' for m in PARETO_METHODS) + "]"]
+PARETO_METHODS = [
+    "rigid/rk4@1ms",
+    "amm:1/rk4@1ms",
+    "amm:2/rk4@1ms",
+    "amm:2/rk4@0.25ms",
+    "amm:3/rk4@0.25ms",
+    "amm:2/newmark@1ms",
+    "amm:2/cvodes@1e-6",
+    "fem:2/rk4@stable",
+    "fem:4/rk4@stable",
+]
+PARETO_CASE = [
+    'grid.scene=["scenes/bangbang.toml"]',
+    "grid.payload=[2.0]",
+    "grid.configuration=[[0, 0, 0]]",
+    'grid."scene.method"=[' + ", ".join(f'"{m}"' for m in PARETO_METHODS) + "]",
+]
 
 
 def pareto(args) -> Path:
-    out = _study("speed_vs_accuracy", "studies/speed_vs_accuracy.toml", PARETO_CASE, args, workers=1)
+    out = _study(
+        "speed_vs_accuracy", "studies/speed_vs_accuracy.toml", PARETO_CASE, args, workers=1
+    )
     return _copy(out / "figures" / "pareto.png", "pareto.png")
 
 
 def pareto_shortening(args) -> Path:
     from flexctrl.analysis.pareto_compare import compare, plot, read_pareto
 
-    off = _study("speed_vs_accuracy", "studies/speed_vs_accuracy.toml", PARETO_CASE, args, workers=1)
-    on = _study("speed_vs_accuracy_shortening", "studies/speed_vs_accuracy_shortening.toml", PARETO_CASE, args, workers=1)
-    return plot(compare(read_pareto(off), read_pareto(on)), FIGURES / "pareto_shortening.png",
-                ("axial shortening off", "on"),
-                title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and on (filled)\n"
-                      "(the finite elements have it in both; arrows: where a method moved)", dpi=DPI)
+    off = _study(
+        "speed_vs_accuracy", "studies/speed_vs_accuracy.toml", PARETO_CASE, args, workers=1
+    )
+    on = _study(
+        "speed_vs_accuracy_shortening",
+        "studies/speed_vs_accuracy_shortening.toml",
+        PARETO_CASE,
+        args,
+        workers=1,
+    )
+    return plot(
+        compare(read_pareto(off), read_pareto(on)),
+        FIGURES / "pareto_shortening.png",
+        ("axial shortening off", "on"),
+        title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and on (filled)\n"
+        "(the finite elements have it in both; arrows: where a method moved)",
+        dpi=DPI,
+    )
 
 
 def modes(args) -> list[Path]:
@@ -114,19 +161,29 @@ def modes(args) -> list[Path]:
     fig = Figure(figsize=(10.5, 3.6), layout="constrained")
     axes = fig.subplots(1, arm.n_links)
     for payload, style in ((0.0, "--"), (2.0, "-")):
-        for link, link_modes in enumerate(arm_modes(arm.with_payload(payload), np.zeros(arm.n_links), 2)):
+        for link, link_modes in enumerate(
+            arm_modes(arm.with_payload(payload), np.zeros(arm.n_links), 2)
+        ):
             x = np.linspace(0.0, arm.links[link].length, 151)
             for j, shape in enumerate(link_modes.shape(x)):
-                axes[link].plot(x, shape, ls=style, color=f"C{j}",
-                                label=f"mode {j + 1}, {payload:g} kg: {link_modes.frequency_hz[j]:.2f} Hz")
+                axes[link].plot(
+                    x,
+                    shape,
+                    ls=style,
+                    color=f"C{j}",
+                    label=f"mode {j + 1}, {payload:g} kg: {link_modes.frequency_hz[j]:.2f} Hz",
+                )
     for link, ax in enumerate(axes):
         ax.set_title(f"link {link + 1}", fontsize=9)
         ax.set_xlabel("position along the link x (m)")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=6.5)
     axes[0].set_ylabel("mode shape phi (-)")
-    fig.suptitle("clamped-mass mode shapes of the straight arm (q = 0 deg), normalised to the link mass; "
-                 "dashed: no payload, solid: 2 kg", fontsize=9)
+    fig.suptitle(
+        "clamped-mass mode shapes of the straight arm (q = 0 deg), normalised to the link mass; "
+        "dashed: no payload, solid: 2 kg",
+        fontsize=9,
+    )
     paths = [_save(fig, "mode_shapes.png")]
 
     maps = frequency_maps(arm.with_payload(2.0), 15.0, "exact")
@@ -146,7 +203,10 @@ def modes(args) -> list[Path]:
     axes[2].set_ylabel("frequency (Hz)")
     axes[2].legend(fontsize=7)
     axes[2].grid(True, alpha=0.3)
-    fig.suptitle("clamped-mass frequencies over the configuration, 2 kg payload (exact boundary inertia)", fontsize=9)
+    fig.suptitle(
+        "clamped-mass frequencies over the configuration, 2 kg payload (exact boundary inertia)",
+        fontsize=9,
+    )
     paths.append(_save(fig, "frequency_maps.png"))
     return paths
 
@@ -165,22 +225,33 @@ def _copy(source: Path, name: str) -> Path:
     return Path(shutil.copy(source, FIGURES / name))
 
 
-FIGURE_MAKERS = {"comparison": comparison, "stability_map": stability_map, "pareto": pareto,
-                 "pareto_shortening": pareto_shortening, "modes": modes}
+FIGURE_MAKERS = {
+    "comparison": comparison,
+    "stability_map": stability_map,
+    "pareto": pareto,
+    "pareto_shortening": pareto_shortening,
+    "modes": modes,
+}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--only", nargs="+", choices=sorted(FIGURE_MAKERS), help="redraw only these")
+    parser.add_argument(
+        "--only", nargs="+", choices=sorted(FIGURE_MAKERS), help="redraw only these"
+    )
     parser.add_argument("--workers", type=int, default=2, help="study workers (default 2)")
-    parser.add_argument("--fresh", action="store_true", help="rerun the studies instead of resuming them")
+    parser.add_argument(
+        "--fresh", action="store_true", help="rerun the studies instead of resuming them"
+    )
     args = parser.parse_args(argv)
     FIGURES.mkdir(parents=True, exist_ok=True)
     for name in args.only or FIGURE_MAKERS:
         start = time.perf_counter()
         made = FIGURE_MAKERS[name](args)
         for path in made if isinstance(made, list) else [made]:
-            print(f"{path.relative_to(ROOT)} ({path.stat().st_size / 1024:.0f} KiB, {time.perf_counter() - start:.0f} s)")
+            print(
+                f"{path.relative_to(ROOT)} ({path.stat().st_size / 1024:.0f} KiB, {time.perf_counter() - start:.0f} s)"
+            )
     return 0
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from support import DATA, MODEL, ROOT
 
 
@@ -42,8 +41,16 @@ def onelink():
         "name": "onelink",
         "gravity": [0.0, -9.81],
         "payload": {"mass": 0.5, "inertia": 1e-3},
-        "links": [{"length": 1.0, "mass_per_length": 1.5, "EI": 400.0, "inertia": 1.5 / 12, "n_modes": 1,
-                   "damping_ratio": 0.02}],
+        "links": [
+            {
+                "length": 1.0,
+                "mass_per_length": 1.5,
+                "EI": 400.0,
+                "inertia": 1.5 / 12,
+                "n_modes": 1,
+                "damping_ratio": 0.02,
+            }
+        ],
         "joints": [{"hub_mass": 0.0, "hub_inertia": 0.05, "torque_limit": 15.0}],
     }
     model = build_amm(arm_from_document(doc, "onelink.toml"), 1)

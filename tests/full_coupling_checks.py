@@ -12,7 +12,13 @@ from scipy.integrate import solve_ivp
 
 def rigid_rp(spec, forces, t_eval):
     """Rigid R-P arm, written out by hand: T = 1/2 J(r_E) theta'^2 + 1/2 m W'^2, V from gravity."""
-    L, rho, mt, mc, Jh = spec.length, spec.mass_per_length, spec.payload_mass, spec.carriage_mass, spec.hub_inertia
+    L, rho, mt, mc, Jh = (
+        spec.length,
+        spec.mass_per_length,
+        spec.payload_mass,
+        spec.carriage_mass,
+        spec.hub_inertia,
+    )
     gx, gy = spec.gravity
     mtot = mc + rho * L + mt
 
@@ -23,11 +29,22 @@ def rigid_rp(spec, forces, t_eval):
         dJ = 2 * mc * rE + rho * (2 * L * rE + L**2) + 2 * mt * (rE + L)
         first = mc * rE + rho * (L * rE + L * L / 2) + mt * (rE + L)
         g_ax, g_perp = gx * math.cos(th) + gy * math.sin(th), -gx * math.sin(th) + gy * math.cos(th)
-        return [thd, Wd, (forces.torque(t) + g_perp * first - dJ * Wd * thd) / J,
-                (forces.force(t) + mtot * g_ax + 0.5 * dJ * thd**2) / mtot]
+        return [
+            thd,
+            Wd,
+            (forces.torque(t) + g_perp * first - dJ * Wd * thd) / J,
+            (forces.force(t) + mtot * g_ax + 0.5 * dJ * thd**2) / mtot,
+        ]
 
-    sol = solve_ivp(rhs, (t_eval[0], t_eval[-1]), [forces.theta0, forces.W0, 0.0, 0.0], t_eval=t_eval,
-                    method="DOP853", rtol=1e-11, atol=1e-12)
+    sol = solve_ivp(
+        rhs,
+        (t_eval[0], t_eval[-1]),
+        [forces.theta0, forces.W0, 0.0, 0.0],
+        t_eval=t_eval,
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+    )
     return sol.y[0], sol.y[1]
 
 
@@ -41,13 +58,17 @@ def check_rigid_limit(spec, W0: float) -> None:
     forces = RPForces.sine(2.0, 2.0, 1.0, theta0=0.3, W0=W0)
     errors = {}
     for scale, dt in ((1e4, 1e-3), (1e4, 5e-4), (1.0, 1e-3)):
-        res = simulate_rp_arm_full(dataclasses.replace(spec, EI=spec.EI * scale), forces, 4, dt=dt, duration=1.0)
+        res = simulate_rp_arm_full(
+            dataclasses.replace(spec, EI=spec.EI * scale), forces, 4, dt=dt, duration=1.0
+        )
         th, W = rigid_rp(spec, forces, res.t)
         assert np.ptp(th) > 0.1 and np.ptp(W) > 0.05  # a real motion
         assert res.phi_violation.max() < 1e-6
         errors[scale, dt] = max(np.abs(res.theta - th).max(), np.abs(res.W - W).max())
     assert errors[1e4, 1e-3] < 1e-5  # rad and m, against 0.2 rad and 0.11 m of motion
-    assert errors[1e4, 1e-3] / errors[1e4, 5e-4] > 3.0  # what remains is O(dt^2) time discretisation
+    assert (
+        errors[1e4, 1e-3] / errors[1e4, 5e-4] > 3.0
+    )  # what remains is O(dt^2) time discretisation
     assert errors[1.0, 1e-3] > 30 * errors[1e4, 1e-3]  # flexibility shows at the file's EI
 
 
@@ -65,16 +86,30 @@ def check_constraint_derivatives(model, W: float, seed: int) -> None:
         return z + s * zd + 0.5 * s * s * zdd
 
     second = (prob.phi(path(eps), 0) - 2 * prob.phi(path(0), 0) + prob.phi(path(-eps), 0)) / eps**2
-    np.testing.assert_allclose(prob.phi_q(z, 0) @ zdd - prob.h(z, zd, 0), second, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        prob.phi_q(z, 0) @ zdd - prob.h(z, zd, 0), second, rtol=1e-5, atol=1e-6
+    )
     for k in range(model.nz):
         e = np.zeros(model.nz)
         e[k] = 1e-6
-        np.testing.assert_allclose((prob.phi(z + e, 0) - prob.phi(z - e, 0)) / 2e-6, prob.phi_q(z, 0)[:, k],
-                                   rtol=1e-6, atol=1e-8)
-        np.testing.assert_allclose((prob.h(z + e, zd, 0) - prob.h(z - e, zd, 0)) / 2e-6, prob.h_q(z, zd, 0)[:, k],
-                                   rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose((prob.h(z, zd + e, 0) - prob.h(z, zd - e, 0)) / 2e-6, prob.h_qd(z, zd, 0)[:, k],
-                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(
+            (prob.phi(z + e, 0) - prob.phi(z - e, 0)) / 2e-6,
+            prob.phi_q(z, 0)[:, k],
+            rtol=1e-6,
+            atol=1e-8,
+        )
+        np.testing.assert_allclose(
+            (prob.h(z + e, zd, 0) - prob.h(z - e, zd, 0)) / 2e-6,
+            prob.h_q(z, zd, 0)[:, k],
+            rtol=1e-5,
+            atol=1e-6,
+        )
+        np.testing.assert_allclose(
+            (prob.h(z, zd + e, 0) - prob.h(z, zd - e, 0)) / 2e-6,
+            prob.h_qd(z, zd, 0)[:, k],
+            rtol=1e-5,
+            atol=1e-6,
+        )
     M = prob.mass(z, 0)
     np.testing.assert_allclose(M, M.T, atol=1e-14)
     assert np.linalg.eigvalsh(M).min() > 0

@@ -19,9 +19,9 @@ from scipy.integrate import solve_ivp
 import flexctrl
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import ModelFamilyUnavailable, build_model
-from flexctrl.scenes.model_files import load_model
 from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.modal.arm_modes import link_modes
+from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.arm import load_arm
 
 
@@ -29,7 +29,10 @@ from flexctrl.spec.arm import load_arm
 def _arm(model_path, n_links=3):
     arm = load_arm(model_path)
     return dataclasses.replace(
-        arm, links=arm.links[:n_links], joints=arm.joints[:n_links], configuration=arm.configuration[:n_links]
+        arm,
+        links=arm.links[:n_links],
+        joints=arm.joints[:n_links],
+        configuration=arm.configuration[:n_links],
     )
 
 
@@ -38,9 +41,15 @@ def _general_arm(model_path, n_links=3, slender=False):
     then J_l = m L^2/12 as for a beam), slanted gravity."""
     arm = _arm(model_path, n_links)
     links = tuple(
-        dataclasses.replace(l, inertia=l.mass * l.length**2 / 12 if slender else 1.3 * l.inertia + 0.01) for l in arm.links
+        dataclasses.replace(
+            l, inertia=l.mass * l.length**2 / 12 if slender else 1.3 * l.inertia + 0.01
+        )
+        for l in arm.links
     )
-    joints = tuple(dataclasses.replace(j, hub_mass=j.hub_mass + 0.7, hub_inertia=j.hub_inertia + 0.003) for j in arm.joints)
+    joints = tuple(
+        dataclasses.replace(j, hub_mass=j.hub_mass + 0.7, hub_inertia=j.hub_inertia + 0.003)
+        for j in arm.joints
+    )
     return dataclasses.replace(arm, links=links, joints=joints, gravity=(2.0, -9.0))
 
 
@@ -79,7 +88,10 @@ def rnea(arm, q, qd, qdd, gravity):
         e, omega, alpha, acc0 = frames[i]
         link, joint = arm.links[i], arm.joints[i]
         span = link.length * e
-        bodies = [(joint.hub_mass, joint.hub_inertia, 0.0 * e), (link.mass, link.inertia, 0.5 * span)]
+        bodies = [
+            (joint.hub_mass, joint.hub_inertia, 0.0 * e),
+            (link.mass, link.inertia, 0.5 * span),
+        ]
         if i == n - 1:
             bodies.append((arm.payload.mass, arm.payload.effective_inertia, span))
         moment = moment + _cross(span, force)
@@ -107,15 +119,27 @@ def test_pendulum_rigid_single_link(model_path):
     model = build_model(arm, "rigid")
     link, hub, pay = arm.links[0], arm.joints[0], arm.payload
     L, m = link.length, link.mass
-    inertia = hub.hub_inertia + link.inertia + m * L**2 / 4 + pay.mass * L**2 + pay.effective_inertia
+    inertia = (
+        hub.hub_inertia + link.inertia + m * L**2 / 4 + pay.mass * L**2 + pay.effective_inertia
+    )
     assert model.coordinate_names == ("q1",)
     for q in np.linspace(-3, 3, 7):
         np.testing.assert_allclose(model.mass_matrix([q]), [[inertia]], rtol=1e-12)
-        np.testing.assert_allclose(model.gravity([q]), [9.81 * (m * L / 2 + pay.mass * L) * math.cos(q)], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            model.gravity([q]),
+            [9.81 * (m * L / 2 + pay.mass * L) * math.cos(q)],
+            rtol=1e-12,
+            atol=1e-12,
+        )
         np.testing.assert_allclose(model.coriolis([q], [2.0]), [0.0], atol=1e-12)
         tau = 3.0
         qdd = model.forward_dynamics([q], [0.5], [tau])
-        np.testing.assert_allclose(qdd, [(tau - 9.81 * (m * L / 2 + pay.mass * L) * math.cos(q)) / inertia], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            qdd,
+            [(tau - 9.81 * (m * L / 2 + pay.mass * L) * math.cos(q)) / inertia],
+            rtol=1e-12,
+            atol=1e-12,
+        )
     assert model.omega_max == 0.0
 
 
@@ -131,9 +155,15 @@ def test_rigid_part_matches_newton_euler(model_path, n_links, n_modes):
         qd = np.concatenate([qd_r, np.zeros(N - n)])
         M_ref, c_ref, g_ref = rigid_terms(arm, q_r, qd_r)
         scale = np.abs(M_ref).max()
-        np.testing.assert_allclose(model.mass_matrix(q)[:n, :n], M_ref, rtol=1e-9, atol=1e-12 * scale)
-        np.testing.assert_allclose(model.coriolis(q, qd)[:n], c_ref, rtol=1e-9, atol=1e-9 * (np.abs(c_ref).max() + scale))
-        np.testing.assert_allclose(model.gravity(q)[:n], g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max())
+        np.testing.assert_allclose(
+            model.mass_matrix(q)[:n, :n], M_ref, rtol=1e-9, atol=1e-12 * scale
+        )
+        np.testing.assert_allclose(
+            model.coriolis(q, qd)[:n], c_ref, rtol=1e-9, atol=1e-9 * (np.abs(c_ref).max() + scale)
+        )
+        np.testing.assert_allclose(
+            model.gravity(q)[:n], g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max()
+        )
 
 
 @pytest.mark.parametrize("modes", ["frozen", "scheduled"])
@@ -177,7 +207,9 @@ def test_coriolis_forms_agree(model_path):
     for _ in range(5):
         q, qd = _state(rng, bodies, deflection=0.05)
         ref = lagrange.coriolis(q, qd)
-        np.testing.assert_allclose(bodies.coriolis(q, qd), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+        np.testing.assert_allclose(
+            bodies.coriolis(q, qd), ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max()
+        )
 
 
 @pytest.mark.parametrize("solver", ["ldl", "qr"])
@@ -197,7 +229,9 @@ def test_forward_dynamics_solves_equations_of_motion(model_path, solver):
         tau = rng.normal(size=3) * 10
         qdd = model.forward_dynamics(q, qd, tau)
         lhs = model.mass_matrix(q) @ qdd + model.coriolis(q, qd) + model.gravity(q) + K @ q + D @ qd
-        np.testing.assert_allclose(lhs, np.concatenate([tau, np.zeros(model.n_q - 3)]), atol=1e-9 * np.abs(K @ q).max())
+        np.testing.assert_allclose(
+            lhs, np.concatenate([tau, np.zeros(model.n_q - 3)]), atol=1e-9 * np.abs(K @ q).max()
+        )
 
 
 @pytest.mark.parametrize("modes", ["frozen", "scheduled"])
@@ -227,11 +261,20 @@ def test_jacobian_of_f_matches_central_differences(model_path, modes):
 def _integrate_energy(model, x0, t_end=0.3, samples=61):
     f = model.functions["f"]
     u = np.zeros(model.n_u)
-    sol = solve_ivp(lambda t, x: np.array(f(x, u)).ravel(), (0.0, t_end), x0, method="DOP853", rtol=1e-11, atol=1e-12,
-                    t_eval=np.linspace(0.0, t_end, samples))
+    sol = solve_ivp(
+        lambda t, x: np.array(f(x, u)).ravel(),
+        (0.0, t_end),
+        x0,
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+        t_eval=np.linspace(0.0, t_end, samples),
+    )
     assert sol.success, sol.message
     N = model.n_q
-    parts = np.array([[float(v) for v in model.functions["energies"](x[:N], x[N:])] for x in sol.y.T])
+    parts = np.array(
+        [[float(v) for v in model.functions["energies"](x[:N], x[N:])] for x in sol.y.T]
+    )
     return parts
 
 
@@ -281,14 +324,20 @@ def test_output_functions_consistent(model_path):
         np.testing.assert_allclose(v, (pp - pm) / (2 * h), rtol=1e-6, atol=1e-8)
         w, dw = (np.array(a).ravel() for a in model.functions["deflection"](q))
         qf = q[3:].reshape(3, 2)
-        np.testing.assert_allclose(w, [modes[i].tip_deflection @ qf[i] for i in range(3)], rtol=1e-12, atol=1e-15)
-        np.testing.assert_allclose(dw, [modes[i].tip_slope @ qf[i] for i in range(3)], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(
+            w, [modes[i].tip_deflection @ qf[i] for i in range(3)], rtol=1e-12, atol=1e-15
+        )
+        np.testing.assert_allclose(
+            dw, [modes[i].tip_slope @ qf[i] for i in range(3)], rtol=1e-12, atol=1e-15
+        )
         # each hub sits at the previous one plus the deflected tip vector of the link (Eqs 4, 7)
         theta, frame = 0.0, np.eye(2)
         expected = [np.zeros(2)]
         for i in range(3):
             theta += q[i]
-            rot = frame @ np.array([[math.cos(q[i]), -math.sin(q[i])], [math.sin(q[i]), math.cos(q[i])]])
+            rot = frame @ np.array(
+                [[math.cos(q[i]), -math.sin(q[i])], [math.sin(q[i]), math.cos(q[i])]]
+            )
             expected.append(expected[-1] + rot @ np.array([arm.links[i].length, w[i]]))
             frame = rot @ np.array([[1.0, -dw[i]], [dw[i], 1.0]])
         np.testing.assert_allclose(hubs, np.column_stack(expected), atol=1e-13)
@@ -311,7 +360,9 @@ def _energies_by_quadrature(arm, modes, q, qd, points=24):
         out = []  # (kind, mass or rho-weights, positions, angle, inertia)
         for i, (link, joint, md) in enumerate(zip(arm.links, arm.joints, modes_at(q[:n]))):
             qf = q[offsets[i] : offsets[i + 1]]
-            W = frame @ np.array([[math.cos(q[i]), -math.sin(q[i])], [math.sin(q[i]), math.cos(q[i])]])
+            W = frame @ np.array(
+                [[math.cos(q[i]), -math.sin(q[i])], [math.sin(q[i]), math.cos(q[i])]]
+            )
             angle = angle + q[i]
             out.append((joint.hub_mass, r.copy(), angle, joint.hub_inertia))
             x = 0.5 * link.length * (xg + 1)
@@ -356,8 +407,13 @@ def test_energies_match_quadrature_of_the_continuum(model_path):
         for j in range(model.n_q):
             e = np.zeros(model.n_q)
             e[j] = 1e-6
-            grad[j] = (_energies_by_quadrature(arm, modes, q + e, qd)[1] - _energies_by_quadrature(arm, modes, q - e, qd)[1]) / 2e-6
-        np.testing.assert_allclose(model.gravity(q), grad, rtol=1e-6, atol=1e-6 * np.abs(grad).max())
+            grad[j] = (
+                _energies_by_quadrature(arm, modes, q + e, qd)[1]
+                - _energies_by_quadrature(arm, modes, q - e, qd)[1]
+            ) / 2e-6
+        np.testing.assert_allclose(
+            model.gravity(q), grad, rtol=1e-6, atol=1e-6 * np.abs(grad).max()
+        )
 
 
 class _SignedModes:
@@ -398,7 +454,9 @@ def test_scheduled_mass_matrix_equals_frozen_at_zero_deflection(model_path):
     frozen, scheduled = build_amm(arm, 2, reference_q=q_ref), build_amm(arm, 2, modes="scheduled")
     S = _sign_matrix(arm, q_ref, _lookups(arm))  # lookup modes may be sign-flipped
     q = np.concatenate([q_ref, np.zeros(6)])
-    np.testing.assert_allclose(scheduled.mass_matrix(q), S @ frozen.mass_matrix(q) @ S, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(
+        scheduled.mass_matrix(q), S @ frozen.mass_matrix(q) @ S, rtol=1e-7, atol=1e-9
+    )
 
 
 def test_scheduled_inertial_load_equals_frozen_at_rest_deflection(model_path):
@@ -436,8 +494,12 @@ def test_scheduled_kinetic_energy_matches_moving_shapes_quadrature(model_path):
         q = np.concatenate([q_r, 0.05 * rng.normal(size=6)])
         qd = np.concatenate([rng.normal(size=3) * 2.0, rng.normal(size=6) * 0.2])
         T_model = float(scheduled.functions["energies"](q, qd)[0])
-        T_ref = _energies_by_quadrature(arm, lambda q_now: _exact_modes_like_lookup(arm, q_now, lookups), q, qd)[0]
-        T_still = _energies_by_quadrature(arm, _exact_modes_like_lookup(arm, q_r, lookups), q, qd)[0]  # shapes held still
+        T_ref = _energies_by_quadrature(
+            arm, lambda q_now: _exact_modes_like_lookup(arm, q_now, lookups), q, qd
+        )[0]
+        T_still = _energies_by_quadrature(arm, _exact_modes_like_lookup(arm, q_r, lookups), q, qd)[
+            0
+        ]  # shapes held still
         assert abs(T_ref - T_still) > 2e-5 * T_ref  # the shapes' motion is really in the reference
         assert abs(T_model - T_ref) < 0.01 * abs(T_ref - T_still)
         assert np.linalg.eigvalsh(scheduled.mass_matrix(q)).min() > 0.0
@@ -447,15 +509,23 @@ def test_scheduled_equals_frozen_where_modes_agree(model_path):
     """At the reference configuration (a grid point of the table) both see the same modes."""
     arm = _arm(model_path)
     frozen, scheduled = build_amm(arm, 2), build_amm(arm, 2, modes="scheduled")
-    np.testing.assert_allclose(scheduled.info["locked_frequencies_rad_s"], frozen.info["locked_frequencies_rad_s"], rtol=1e-8)
+    np.testing.assert_allclose(
+        scheduled.info["locked_frequencies_rad_s"],
+        frozen.info["locked_frequencies_rad_s"],
+        rtol=1e-8,
+    )
     np.testing.assert_allclose(scheduled.omega_max, frozen.omega_max, rtol=1e-8)
     rng = np.random.default_rng(9)
     for _ in range(3):  # the rigid block does not depend on the modes
         q, _ = _state(rng, frozen)
         q[3:] = 0.0
-        np.testing.assert_allclose(scheduled.mass_matrix(q)[:3, :3], frozen.mass_matrix(q)[:3, :3], rtol=1e-12)
+        np.testing.assert_allclose(
+            scheduled.mass_matrix(q)[:3, :3], frozen.mass_matrix(q)[:3, :3], rtol=1e-12
+        )
     K_s = np.array(scheduled.functions["K"](np.zeros(9)))
-    np.testing.assert_allclose(np.diag(K_s), np.diag(np.array(frozen.functions["K"]()["K"])), rtol=1e-8)
+    np.testing.assert_allclose(
+        np.diag(K_s), np.diag(np.array(frozen.functions["K"]()["K"])), rtol=1e-8
+    )
 
 
 def test_build_model_interface(model_path):
@@ -465,13 +535,27 @@ def test_build_model_interface(model_path):
     q = np.array([0.3, -0.5, 1.1])
     np.testing.assert_allclose(rigid.mass_matrix(q), amm0.mass_matrix(q), rtol=1e-14)
     model = flexctrl.load_model(model_path, payload=0.0, fidelity="amm:2")
-    assert model.coordinate_names == ("q1", "q2", "q3", "qf11", "qf12", "qf21", "qf22", "qf31", "qf32")
+    assert model.coordinate_names == (
+        "q1",
+        "q2",
+        "q3",
+        "qf11",
+        "qf12",
+        "qf21",
+        "qf22",
+        "qf31",
+        "qf32",
+    )
     assert model.spec.payload.mass == 0.0 and model.n_x == 18 and model.n_u == 3
     assert len(model.info["link_frequencies_rad_s"]) == 3 and model.omega_max > 0
     per_file = load_model(model_path, fidelity=None, overrides=["links[1].n_modes=1"])
     assert per_file.info["n_modes"] == [1, 2, 2]
     fem = load_model(model_path, fidelity="fem:2")  # the same file builds as finite elements
-    assert str(fem.fidelity) == "fem:2" and fem.n_u == 3 and fem.coordinate_names[:3] == ("q1", "q2", "q3")
+    assert (
+        str(fem.fidelity) == "fem:2"
+        and fem.n_u == 3
+        and fem.coordinate_names[:3] == ("q1", "q2", "q3")
+    )
     with pytest.raises(ModelFamilyUnavailable, match="assumed modes only") as err:
         load_model(model_path, fidelity="fem:2", modes="scheduled")
     assert isinstance(err.value, FlexctrlError) and isinstance(err.value, NotImplementedError)

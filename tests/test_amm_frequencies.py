@@ -31,8 +31,16 @@ from flexctrl.spec.arm import load_arm
 def _arm(model_path, n_links):
     arm = load_arm(model_path)
     # slender links: make J_l exactly m L^2/12 so the rigid inertia equals int rho x^2 of the beam
-    links = tuple(dataclasses.replace(l, inertia=l.mass * l.length**2 / 12) for l in arm.links[:n_links])
-    return dataclasses.replace(arm, links=links, joints=arm.joints[:n_links], configuration=(0.0,) * n_links, gravity=(0.0, 0.0))
+    links = tuple(
+        dataclasses.replace(l, inertia=l.mass * l.length**2 / 12) for l in arm.links[:n_links]
+    )
+    return dataclasses.replace(
+        arm,
+        links=links,
+        joints=arm.joints[:n_links],
+        configuration=(0.0,) * n_links,
+        gravity=(0.0, 0.0),
+    )
 
 
 def locked_frequencies(model, q_r):
@@ -75,7 +83,15 @@ def stepped_cantilever(arm, elements_per_link=24):
 def test_single_link_locked_frequencies_are_clamped_mass_frequencies(model_path, payload):
     arm = _arm(model_path, 1).with_payload(payload)
     link = arm.links[0]
-    exact = clamped_mass_modes(link.length, link.mass_per_length, link.EI, 4, m_tip=payload, J_tip=arm.payload.effective_inertia, M_tip=0.0).omega
+    exact = clamped_mass_modes(
+        link.length,
+        link.mass_per_length,
+        link.EI,
+        4,
+        m_tip=payload,
+        J_tip=arm.payload.effective_inertia,
+        M_tip=0.0,
+    ).omega
     fem = stepped_cantilever(arm, 60)[:4]
     np.testing.assert_allclose(exact, fem, rtol=1e-6)  # the two references agree
     for n_modes in (1, 2, 3, 4):
@@ -84,7 +100,9 @@ def test_single_link_locked_frequencies_are_clamped_mass_frequencies(model_path,
             np.testing.assert_allclose(locked_frequencies(model, [q1]), exact[:n_modes], rtol=1e-9)
             # omega_max bounds explicit steps: the higher of the free-joint and locked spectra
             free = max(model.info["free_frequencies_rad_s"])
-            assert free >= exact[n_modes - 1] * (1 - 1e-9)  # freeing the joint stiffens no mode down
+            assert free >= exact[n_modes - 1] * (
+                1 - 1e-9
+            )  # freeing the joint stiffens no mode down
             np.testing.assert_allclose(model.omega_max, max(free, exact[n_modes - 1]), rtol=1e-9)
 
 
@@ -131,17 +149,28 @@ def test_single_link_modal_damping_ratio(model_path, damping):
     (``damping="ratio"``) or zeta / m_l (Eq 68 as printed, ``damping="paper"``)."""
     zeta = 0.03
     arm = _arm(model_path, 1)
-    arm = dataclasses.replace(arm, links=(dataclasses.replace(arm.links[0], damping_ratios=(zeta,)),))
+    arm = dataclasses.replace(
+        arm, links=(dataclasses.replace(arm.links[0], damping_ratios=(zeta,)),)
+    )
     model = build_amm(arm, 3, damping=damping)
     N = model.n_q
     xs = ca.MX.sym("x", 2 * N)
-    A = np.array(ca.Function("lin", [xs], [ca.jacobian(model.functions["f"](xs, ca.MX.zeros(1)), xs)])(np.zeros(2 * N)))
+    A = np.array(
+        ca.Function("lin", [xs], [ca.jacobian(model.functions["f"](xs, ca.MX.zeros(1)), xs)])(
+            np.zeros(2 * N)
+        )
+    )
     M = model.mass_matrix(np.zeros(N))
     # tangent stiffness and damping of the whole model; clamping the joint keeps the elastic block
     K_t, D_t = -M @ A[N:, :N], -M @ A[N:, N:]
     M_ff, K_ff, D_ff = M[1:, 1:], K_t[1:, 1:], D_t[1:, 1:]
     n_f = N - 1
-    A_locked = np.block([[np.zeros((n_f, n_f)), np.eye(n_f)], [-np.linalg.solve(M_ff, K_ff), -np.linalg.solve(M_ff, D_ff)]])
+    A_locked = np.block(
+        [
+            [np.zeros((n_f, n_f)), np.eye(n_f)],
+            [-np.linalg.solve(M_ff, K_ff), -np.linalg.solve(M_ff, D_ff)],
+        ]
+    )
     lam = np.linalg.eigvals(A_locked)
     lam = lam[lam.imag > 0]
     ratios = np.sort(-lam.real / np.abs(lam))

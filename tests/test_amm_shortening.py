@@ -13,13 +13,13 @@ import dataclasses
 import casadi as ca
 import numpy as np
 import pytest
+from test_fem_arm import rotating_frequency  # noqa: E402  (the spinning-beam helper of the FEM tests)
 
 from flexctrl.analysis.accuracy import make_stepper, parse_method, run_open_loop
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import load_arm
-from test_fem_arm import rotating_frequency  # noqa: E402  (the spinning-beam helper of the FEM tests)
 
 
 @pytest.fixture
@@ -29,8 +29,13 @@ def arm(model_path):
 
 def one_link(arm, payload: float, gravity=(0.0, 0.0), link: int = 2):
     """Link ``link`` of the arm alone, clamped at a massless hub, carrying ``payload`` kg."""
-    return dataclasses.replace(arm.with_payload(payload), links=arm.links[link:link + 1], configuration=(0.0,),
-                               gravity=gravity, joints=(dataclasses.replace(arm.joints[link], hub_mass=0.0),))
+    return dataclasses.replace(
+        arm.with_payload(payload),
+        links=arm.links[link : link + 1],
+        configuration=(0.0,),
+        gravity=gravity,
+        joints=(dataclasses.replace(arm.joints[link], hub_mass=0.0),),
+    )
 
 
 def static_elastic(model, q_joints):
@@ -67,7 +72,9 @@ def test_static_foreshortening_under_tip_load_matches_closed_form(arm, n_modes, 
     assert closed > 5e-4  # a measurable shortening (m)
     off = build_amm(one, n_modes, axial_shortening=False)
     q_off = static_elastic(off, [0.0])
-    assert float(off.functions["tip"](q_off, np.zeros(off.n_q))[0][0]) == pytest.approx(L, abs=1e-12)
+    assert float(off.functions["tip"](q_off, np.zeros(off.n_q))[0][0]) == pytest.approx(
+        L, abs=1e-12
+    )
 
 
 @pytest.mark.parametrize("shortening, coefficient", [(True, 0.1933), (False, -1.0)])
@@ -93,15 +100,18 @@ def _energy_drift(model, x0, h, duration=0.2):
 def test_energy_conserved_at_rk4_order(arm, modes):
     """Undamped free swing under gravity with link 3 bent and the joints moving: the energy error of
     RK4 falls by at least 2^3.5 when the step halves, and is small at the fine step."""
-    arm = dataclasses.replace(arm.with_payload(2.0), links=tuple(dataclasses.replace(l, damping_ratios=(0.0,)) for l in arm.links),
-                              joints=tuple(dataclasses.replace(j, friction=0.0) for j in arm.joints),
-                              axial_shortening=True)
+    arm = dataclasses.replace(
+        arm.with_payload(2.0),
+        links=tuple(dataclasses.replace(l, damping_ratios=(0.0,)) for l in arm.links),
+        joints=tuple(dataclasses.replace(j, friction=0.0) for j in arm.joints),
+        axial_shortening=True,
+    )
     model = build_model(arm, "amm:2", modes=modes)
     assert model.info["axial_shortening"] is True
     x0 = np.zeros(model.n_x)
     x0[[0, 1, 2]] = [0.2, -0.3, 0.4]
     x0[model.coordinate_names.index("qf31")] = 0.05
-    x0[model.n_q:model.n_q + 3] = [1.0, -2.0, 3.0]
+    x0[model.n_q : model.n_q + 3] = [1.0, -2.0, 3.0]
     coarse, swing = _energy_drift(model, x0, 2.5e-4)
     fine, _ = _energy_drift(model, x0, 1.25e-4)
     assert swing > 0.05  # the joints really move (rad)
@@ -123,8 +133,12 @@ def test_rigid_limit_and_rest_frequencies_unchanged(arm):
         a, b = (np.asarray(m.functions["c"](q, qd), dtype=float) for m in rigid)
         assert np.array_equal(a, b)
     for qr in ([0.0, 0.0, 0.0], [0.0, np.pi / 2, 0.0], [0.0, np.pi / 4, -np.pi / 2]):
-        on, off = (build_amm(loaded, 2, reference_q=qr, axial_shortening=flag) for flag in (True, False))
-        assert on.info["locked_frequencies_rad_s"] == pytest.approx(off.info["locked_frequencies_rad_s"], rel=1e-12)
+        on, off = (
+            build_amm(loaded, 2, reference_q=qr, axial_shortening=flag) for flag in (True, False)
+        )
+        assert on.info["locked_frequencies_rad_s"] == pytest.approx(
+            off.info["locked_frequencies_rad_s"], rel=1e-12
+        )
         q0 = np.r_[qr, np.zeros(on.n_q - 3)]
         assert np.allclose(on.mass_matrix(q0), off.mass_matrix(q0), rtol=0, atol=1e-13)
 
@@ -136,8 +150,12 @@ def test_shortening_changes_only_second_order_terms(arm):
     on, off = (build_amm(loaded, 2, axial_shortening=flag) for flag in (True, False))
     q = np.r_[0.3, -0.2, 0.5, 0.003, 0.001, -0.002, 0.0005, 0.004, -0.001]
     scale = np.r_[1, 1, 1, 2, 2, 2, 2, 2, 2]
-    d1, d2 = (np.asarray(on.functions["tip"](v, 0 * v)[0] - off.functions["tip"](v, 0 * v)[0], dtype=float).ravel()
-              for v in (q, q * scale))
+    d1, d2 = (
+        np.asarray(
+            on.functions["tip"](v, 0 * v)[0] - off.functions["tip"](v, 0 * v)[0], dtype=float
+        ).ravel()
+        for v in (q, q * scale)
+    )
     assert np.linalg.norm(d2) / np.linalg.norm(d1) == pytest.approx(4.0, rel=2e-2)
 
 
@@ -148,12 +166,19 @@ def test_switch_reaches_the_model_from_files_and_scenes(model_path, tmp_path):
     assert load_arm(model_path).axial_shortening is None  # each family's default
     assert build_model(load_arm(model_path), "amm:1").info["axial_shortening"] is False
     assert build_model(load_arm(model_path), "fem:1").info["axial_shortening"] is True
-    assert build_model(load_arm(model_path, ["axial_shortening=true"]), "amm:1").info["axial_shortening"] is True
+    assert (
+        build_model(load_arm(model_path, ["axial_shortening=true"]), "amm:1").info[
+            "axial_shortening"
+        ]
+        is True
+    )
     assert load_arm(model_path, ["axial_shortening=false"]).axial_shortening is False
     with pytest.raises(SpecError, match="axial_shortening"):
         load_arm(model_path, ["axial_shortening=1"])
     scene_file = tmp_path / "s.toml"
-    scene_file.write_text(f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\naxial_shortening = false\n')
+    scene_file.write_text(
+        f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\naxial_shortening = false\n'
+    )
     scene = load_scene(scene_file)
     assert scene.axial_shortening is False and scene_arm(scene).axial_shortening is False
     assert build_model(scene_arm(scene), "amm:1").info["axial_shortening"] is False

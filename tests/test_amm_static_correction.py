@@ -35,12 +35,18 @@ def test_corrected_shapes_are_mass_and_stiffness_orthonormal(arm, link, kind):
     assert np.allclose(mass / base.link_mass, np.eye(c.n_modes), atol=1e-7)
     # trapezoid on piecewise-linear curvature (pinned shapes): 1e-4; smooth shapes: 1e-7
     tol = 2e-4 if kind == "pinned_root" else 1e-6
-    assert np.allclose(stiff / (base.link_mass * np.outer(c.omega, c.omega)), np.eye(c.n_modes), atol=tol)
+    assert np.allclose(
+        stiff / (base.link_mass * np.outer(c.omega, c.omega)), np.eye(c.n_modes), atol=tol
+    )
     # the clamped-mass modes and their frequencies are untouched
     assert np.array_equal(c.omega[:3], base.omega)
-    assert np.allclose(c.shape(np.linspace(0, base.length, 7))[:3], base.shape(np.linspace(0, base.length, 7)))
+    assert np.allclose(
+        c.shape(np.linspace(0, base.length, 7))[:3], base.shape(np.linspace(0, base.length, 7))
+    )
     # admissible: clamped at the root
-    assert np.allclose(c.shape(np.array([0.0]))[:, 0], 0.0) and np.allclose(c.shape(np.array([0.0]), 1)[:, 0], 0.0, atol=1e-9)
+    assert np.allclose(c.shape(np.array([0.0]))[:, 0], 0.0) and np.allclose(
+        c.shape(np.array([0.0]), 1)[:, 0], 0.0, atol=1e-9
+    )
     x = np.linspace(0.0, base.length, 40001)
     assert np.allclose(c.v, base.rho * np.trapezoid(c.shape(x), x), rtol=1e-6, atol=1e-9)
     assert np.allclose(c.w, base.rho * np.trapezoid(x * c.shape(x), x), rtol=1e-6, atol=1e-9)
@@ -71,8 +77,11 @@ def test_build_amm_with_correction_adds_one_shape_per_inner_link_and_lowers_lock
     assert plain.n_q == 3 + 6 and corrected.n_q == 3 + 8
     assert corrected.info["static_correction"] == [True, True, False]
     assert "static-correction" in corrected.name and "static-correction" not in plain.name
-    a, b = np.array(plain.info["locked_frequencies_rad_s"]), np.array(corrected.info["locked_frequencies_rad_s"])
+    a, b = (
+        np.array(plain.info["locked_frequencies_rad_s"]),
+        np.array(corrected.info["locked_frequencies_rad_s"]),
+    )
     # Rayleigh-Ritz: a larger basis lowers (never raises) every locked frequency
-    assert np.all(b[:a.size] <= a * (1 + 1e-9))
+    assert np.all(b[: a.size] <= a * (1 + 1e-9))
     # the default is off: the model is the one without correction
     assert plain.info["static_correction"] == [False, False, False]

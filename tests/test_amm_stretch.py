@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import brentq
+from test_amm_shortening import _energy_drift, one_link  # noqa: E402  (helpers of the shortening tests)
 
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.fem.locked_spectrum import locked_fem_hz
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import load_arm
-from test_amm_shortening import _energy_drift, one_link  # noqa: E402  (helpers of the shortening tests)
 
 
 @pytest.fixture
@@ -45,7 +45,9 @@ def test_axial_frequency_of_one_link_against_the_rod_with_a_tip_mass(arm, payloa
     quotient, so it lies above the exact value and within 0.5 % (2 kg) / 0.05 % (10 kg)."""
     one = one_link(arm, payload)
     link = one.links[0]
-    without, with_ = (_locked(build_amm(one, 2, axial_stretch=flag), [0.0]) for flag in (False, True))
+    without, with_ = (
+        _locked(build_amm(one, 2, axial_stretch=flag), [0.0]) for flag in (False, True)
+    )
     new = [w for w in with_ if np.min(np.abs(without - w) / w) > 1e-9]
     assert len(new) == 1 and np.allclose(np.sort(np.setdiff1d(with_, new)), without, rtol=1e-9)
     ratio = link.mass / payload
@@ -90,7 +92,10 @@ def test_bent_arm_frequencies_meet_the_finite_elements(arm, q_deg):
     loaded = arm.with_payload(2.0)
     fem = 2 * math.pi * locked_fem_hz(loaded, 16, q_deg, n_modes=6)
     q = np.radians(q_deg)
-    off, on = (_locked(build_amm(loaded, 4, reference_q=q, axial_stretch=flag), q)[:6] for flag in (False, True))
+    off, on = (
+        _locked(build_amm(loaded, 4, reference_q=q, axial_stretch=flag), q)[:6]
+        for flag in (False, True)
+    )
     err_off, err_on = np.abs(off / fem - 1), np.abs(on / fem - 1)
     assert err_off.max() > 5e-4  # the discrepancy the elongations are for
     assert err_on.max() < 0.1 * err_off.max(), (err_on, err_off)
@@ -99,16 +104,20 @@ def test_bent_arm_frequencies_meet_the_finite_elements(arm, q_deg):
 def test_energy_conserved_at_rk4_order(arm):
     """Undamped free swing under gravity with shortening and stretch: the energy error of RK4 falls by
     at least 2^3.5 when the step halves."""
-    a = dataclasses.replace(arm.with_payload(2.0), links=tuple(dataclasses.replace(l, damping_ratios=(0.0,)) for l in arm.links),
-                            joints=tuple(dataclasses.replace(j, friction=0.0) for j in arm.joints),
-                            axial_shortening=True, axial_stretch=True)
+    a = dataclasses.replace(
+        arm.with_payload(2.0),
+        links=tuple(dataclasses.replace(l, damping_ratios=(0.0,)) for l in arm.links),
+        joints=tuple(dataclasses.replace(j, friction=0.0) for j in arm.joints),
+        axial_shortening=True,
+        axial_stretch=True,
+    )
     model = build_model(a, "amm:2")
     assert model.info["axial_stretch"] is True and model.coordinate_names[-3:] == ("e1", "e2", "e3")
     x0 = np.zeros(model.n_x)
     x0[[0, 1, 2]] = [0.2, -0.3, 0.4]
     x0[model.coordinate_names.index("qf31")] = 0.05
     x0[model.coordinate_names.index("e2")] = 1e-5
-    x0[model.n_q:model.n_q + 3] = [1.0, -2.0, 3.0]
+    x0[model.n_q : model.n_q + 3] = [1.0, -2.0, 3.0]
     coarse, swing = _energy_drift(model, x0, 1e-4)
     fine, _ = _energy_drift(model, x0, 5e-5)
     assert swing > 0.05
@@ -130,7 +139,9 @@ def test_switch_reaches_the_model_and_bad_values_are_refused(model_path, tmp_pat
     with pytest.raises(SpecError, match="frozen"):
         build_model(load_arm(model_path, ["axial_stretch=true"]), "amm:1", modes="scheduled")
     scene_file = tmp_path / "s.toml"
-    scene_file.write_text(f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\naxial_stretch = true\n')
+    scene_file.write_text(
+        f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\naxial_stretch = true\n'
+    )
     scene = load_scene(scene_file)
     assert scene.axial_stretch is True and scene_arm(scene).axial_stretch is True
     assert build_model(scene_arm(scene), "amm:1").info["axial_stretch"] is True
@@ -154,7 +165,10 @@ def _damped_locked(model, q, count):
 def test_stiffness_damping_form_damps_like_the_finite_elements(arm):
     """``damping_form = "stiffness"``: the assumed modes' locked modes get the damping ratios of the
     finite elements' (2 zeta / omega_1) K, where modal ratios leave the higher modes at zeta."""
-    a = dataclasses.replace(arm.with_payload(2.0), links=tuple(dataclasses.replace(l, damping_ratios=(0.005,)) for l in arm.links))
+    a = dataclasses.replace(
+        arm.with_payload(2.0),
+        links=tuple(dataclasses.replace(l, damping_ratios=(0.005,)) for l in arm.links),
+    )
     q = np.zeros(3)
     w_fem, z_fem = _damped_locked(build_model(a, "fem:8"), q, 5)
     w_st, z_st = _damped_locked(build_model(a, "amm:4", damping="stiffness"), q, 5)
@@ -170,6 +184,8 @@ def test_links_without_modes_stay_rigid(arm):
     rigid_on, rigid_off = (build_amm(loaded, 0, axial_stretch=flag) for flag in (True, False))
     assert rigid_on.coordinate_names == rigid_off.coordinate_names == ("q1", "q2", "q3")
     q = np.array([0.3, -0.5, 0.8])
-    assert np.array_equal(np.asarray(rigid_on.functions["M"](q)), np.asarray(rigid_off.functions["M"](q)))
+    assert np.array_equal(
+        np.asarray(rigid_on.functions["M"](q)), np.asarray(rigid_off.functions["M"](q))
+    )
     mixed = build_amm(loaded, [2, 0, 1], axial_stretch=True)
     assert mixed.coordinate_names[-2:] == ("e1", "e3") and mixed.n_q == 3 + 3 + 2

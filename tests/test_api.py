@@ -9,11 +9,10 @@ import sys
 
 import numpy as np
 import pytest
+from support import DATA
 
 import flexctrl as fc
 from flexctrl.errors import SpecError
-
-from support import DATA, ROOT
 
 MODEL = str(DATA / "models" / "subedi3link.toml")
 SCENE = str(DATA / "studies" / "scenes" / "move_joint1_30deg.toml")
@@ -21,8 +20,19 @@ DAMPED = {f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)}
 
 
 def test_every_public_name_resolves_and_has_a_numpydoc_docstring():
-    assert set(fc.__all__) >= {"load_model", "equilibrium", "linearize", "load_controller", "design", "Move",
-                               "closed_loop", "compare", "run_study", "load_scene", "run_scene"}
+    assert set(fc.__all__) >= {
+        "load_model",
+        "equilibrium",
+        "linearize",
+        "load_controller",
+        "design",
+        "Move",
+        "closed_loop",
+        "compare",
+        "run_study",
+        "load_scene",
+        "run_scene",
+    }
     for name in fc.__all__:
         if name == "__version__":
             continue
@@ -30,7 +40,9 @@ def test_every_public_name_resolves_and_has_a_numpydoc_docstring():
         doc = inspect.getdoc(value) or ""
         assert doc.strip(), f"flexctrl.{name} has no docstring"
         if inspect.isfunction(value) and inspect.signature(value).parameters:
-            assert "Parameters\n----------" in doc, f"flexctrl.{name} has no numpydoc Parameters section"
+            assert "Parameters\n----------" in doc, (
+                f"flexctrl.{name} has no numpydoc Parameters section"
+            )
 
 
 def test_unknown_public_name_is_an_attribute_error():
@@ -58,23 +70,30 @@ def test_load_model_keys_and_overrides_reach_the_description(model):
     assert model.spec.payload.mass == 2.0 and tuple(model.spec.gravity) == (0.0, 0.0)
     assert [link.damping_ratios for link in model.spec.links] == [(0.005,)] * 3
     as_strings = fc.load_model(MODEL, fidelity="rigid", overrides=["links[1].damping_ratio=0.005"])
-    assert as_strings.spec.links[0].damping_ratios == (0.005,) and as_strings.spec.links[1].damping_ratios == (0.0,)
+    assert as_strings.spec.links[0].damping_ratios == (0.005,) and as_strings.spec.links[
+        1
+    ].damping_ratios == (0.0,)
 
 
-@pytest.mark.parametrize("kwargs, key, fragment", [
-    ({"payload": "0.5"}, "payload.mass", "'0.5'"),
-    ({"payload": -1.0}, "payload.mass", "-1.0"),
-    ({"payload": math.nan}, "payload.mass", "nan"),
-    ({"gravity": [0.0]}, "gravity", "2"),
-    ({"gravty": [0.0, 0.0]}, "gravty", "did you mean 'gravity'"),
-    ({"overrides": {"links[1].EI": "stiff"}}, "links[1].EI", "'stiff'"),
-    ({"overrides": {"links[9].EI": 1.0}}, "links[9].EI", "index 9"),
-])
+@pytest.mark.parametrize(
+    "kwargs, key, fragment",
+    [
+        ({"payload": "0.5"}, "payload.mass", "'0.5'"),
+        ({"payload": -1.0}, "payload.mass", "-1.0"),
+        ({"payload": math.nan}, "payload.mass", "nan"),
+        ({"gravity": [0.0]}, "gravity", "2"),
+        ({"gravty": [0.0, 0.0]}, "gravty", "did you mean 'gravity'"),
+        ({"overrides": {"links[1].EI": "stiff"}}, "links[1].EI", "'stiff'"),
+        ({"overrides": {"links[9].EI": 1.0}}, "links[9].EI", "index 9"),
+    ],
+)
 def test_load_model_bad_arguments_are_one_line_spec_errors(kwargs, key, fragment):
     with pytest.raises(SpecError) as info:
         fc.load_model(MODEL, fidelity="rigid", **kwargs)
     message = str(info.value)
-    assert "\n" not in message and MODEL in message and key in message and fragment in message, message
+    assert "\n" not in message and MODEL in message and key in message and fragment in message, (
+        message
+    )
 
 
 def test_linearize_names_states_inputs_and_outputs(model, op):
@@ -88,15 +107,25 @@ def test_closed_loop_equals_the_scene_file_at_the_same_step(model, op):
     """The Python API and the scene runner build the loop separately (reference, x0, window, sensors)."""
     lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml"))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
-    res = fc.closed_loop(model, lqr, move, duration=8.0, dt=5e-4, metrics=fc.MetricSettings(settle_allowance=1.0))
+    res = fc.closed_loop(
+        model, lqr, move, duration=8.0, dt=5e-4, metrics=fc.MetricSettings(settle_allowance=1.0)
+    )
     scene = fc.run_scene(fc.load_scene(SCENE), controller=str(DATA / "controllers" / "lqr.toml"))
     np.testing.assert_array_equal(res.trajectory.tip, scene.trajectory.tip)
-    for key in ("tip_residual_rms", "settling_time", "peak_deflection", "stable", "closed_loop_radius"):
+    for key in (
+        "tip_residual_rms",
+        "settling_time",
+        "peak_deflection",
+        "stable",
+        "closed_loop_radius",
+    ):
         assert res.metrics[key] == scene.metrics[key], key
     # a designed controller runs the scene file too, with the same result
     again = fc.run_scene(fc.load_scene(SCENE), controller=lqr)
     np.testing.assert_array_equal(again.trajectory.tip, scene.trajectory.tip)
-    assert again.summary["controller"]["file"] is None and again.summary["controller"]["kind"] == "lqr"
+    assert (
+        again.summary["controller"]["file"] is None and again.summary["controller"]["kind"] == "lqr"
+    )
 
 
 def test_closed_loop_result_plots_saves_and_tabulates(model, op, tmp_path):
@@ -105,7 +134,12 @@ def test_closed_loop_result_plots_saves_and_tabulates(model, op, tmp_path):
     res = fc.closed_loop(model, pd, move, duration=4.0)
     fig = res.plot()
     labels = [ax.get_ylabel() for ax in fig.axes]
-    assert labels == ["tip error (mm)", "link tip deflection (mm)", "torque (N m)", "joint angle (deg)"]
+    assert labels == [
+        "tip error (mm)",
+        "link tip deflection (mm)",
+        "torque (N m)",
+        "joint angle (deg)",
+    ]
     assert fig.axes[-1].get_xlabel() == "time (s)"
     files = {p.name for p in res.save(tmp_path)}
     assert {"trajectory.csv", "summary.json", "tip.png"} <= files

@@ -87,14 +87,22 @@ def import_graph() -> dict[str, set[str]]:
                     parts = parts[: len(parts) - (node.level - 1)]
                     base = ".".join(parts + ([base] if base else []))
                 targets = [base] + [f"{base}.{alias.name}" for alias in node.names]
-            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and _MODULE_STRING.fullmatch(node.value):
+            elif (
+                isinstance(node, ast.Constant)
+                and isinstance(node.value, str)
+                and _MODULE_STRING.fullmatch(node.value)
+            ):
                 targets = [node.value.split(":")[0]]
             for target in targets:
                 if not target.startswith("flexctrl"):
                     continue
                 resolved = _resolve(target, mods)
-                if (resolved is None or resolved == module or (is_package and resolved.startswith(module + "."))
-                        or module.startswith(resolved + ".")):
+                if (
+                    resolved is None
+                    or resolved == module
+                    or (is_package and resolved.startswith(module + "."))
+                    or module.startswith(resolved + ".")
+                ):
                     continue
                 edges[module].add(resolved)
     return edges
@@ -175,8 +183,12 @@ def layer_violations(edges: dict[str, set[str]]) -> list[str]:
 
 
 def test_every_top_level_name_has_a_layer():
-    names = {p.stem if p.suffix else p.name for p in PACKAGE.iterdir()
-             if (p.suffix == ".py" and p.stem != "__init__") or (p.is_dir() and (p / "__init__.py").exists())}
+    names = {
+        p.stem if p.suffix else p.name
+        for p in PACKAGE.iterdir()
+        if (p.suffix == ".py" and p.stem != "__init__")
+        or (p.is_dir() and (p / "__init__.py").exists())
+    }
     assert names - set(RANK) == set()
 
 
@@ -189,7 +201,9 @@ def test_imports_run_down_the_layers():
 
 
 def test_no_module_over_600_lines():
-    sizes = {str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")}
+    sizes = {
+        str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")
+    }
     assert {p: n for p, n in sizes.items() if n > MAX_LINES} == {}
 
 
@@ -198,18 +212,29 @@ def test_the_checks_can_fail():
     edges = import_graph()
     edges["flexctrl.errors"] = edges["flexctrl.errors"] | {"flexctrl.spec.arm"}
     assert any("flexctrl.errors" in c for c in cycles(edges))
-    assert "flexctrl.errors -> flexctrl.spec.arm (layer 'errors' may not import 'spec')" in layer_violations(edges)
+    assert (
+        "flexctrl.errors -> flexctrl.spec.arm (layer 'errors' may not import 'spec')"
+        in layer_violations(edges)
+    )
 
 
-@pytest.mark.parametrize("code, heavy", [
-    ("import flexctrl", ("casadi", "control", "osqp", "matplotlib")),
-    ("import flexctrl.spec, flexctrl.spec.controller, flexctrl.spec.controller_settings, flexctrl.spec.scene, flexctrl.spec.closed_loop_scene, "
-     "flexctrl.spec.fem_scene, flexctrl.spec.reference; "
-     "flexctrl.spec.scene.load_scene('studies/scenes/move_joint1_30deg.toml'); "
-     "flexctrl.spec.controller.load_controller('controllers/lqr.toml')", ("casadi", "control", "osqp")),
-])
+@pytest.mark.parametrize(
+    "code, heavy",
+    [
+        ("import flexctrl", ("casadi", "control", "osqp", "matplotlib")),
+        (
+            "import flexctrl.spec, flexctrl.spec.controller, flexctrl.spec.controller_settings, flexctrl.spec.scene, flexctrl.spec.closed_loop_scene, "
+            "flexctrl.spec.fem_scene, flexctrl.spec.reference; "
+            "flexctrl.spec.scene.load_scene('studies/scenes/move_joint1_30deg.toml'); "
+            "flexctrl.spec.controller.load_controller('controllers/lqr.toml')",
+            ("casadi", "control", "osqp"),
+        ),
+    ],
+)
 def test_light_imports_stay_light(code, heavy):
     """``import flexctrl`` and reading descriptions load neither casadi nor python-control."""
     probe = f"{code}; import sys; print(','.join(m for m in {heavy!r} if m in sys.modules))"
-    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True
+    )
     assert out.stdout.strip() == ""

@@ -27,17 +27,17 @@ import json
 import numpy as np
 import pytest
 
-from flexctrl.fidelity.ladder import FidelityChoice, excitation_bandwidth
-from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT as RK4_LIMIT
-from flexctrl.sim.rk4 import RK4_MARGIN, rk4_step
-from flexctrl.scenes.auto import choose_fidelity, model_for, simulate_rung
-from flexctrl.scenes.cache import SceneCache
-from flexctrl.sim.tip_error import tip_error
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
-from flexctrl.spec.fidelity import parse_fidelity
+from flexctrl.fidelity.ladder import FidelityChoice, excitation_bandwidth
 from flexctrl.scenes import run_scene
+from flexctrl.scenes.auto import choose_fidelity, model_for, simulate_rung
+from flexctrl.scenes.cache import SceneCache
 from flexctrl.sim import simulate
+from flexctrl.sim.rk4 import RK4_MARGIN, rk4_step
+from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT as RK4_LIMIT
+from flexctrl.sim.tip_error import tip_error
+from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.scene import load_scene
 
 SLOW = "studies/scenes/slow_move_light.toml"
@@ -92,7 +92,9 @@ def _estimator(scene, choice: FidelityChoice):
 
     def run(m: int):
         if m not in runs:
-            runs[m] = simulate_rung(scene, _rung(m), cache=CACHE)  # the rung at its own step: the chooser's run
+            runs[m] = simulate_rung(
+                scene, _rung(m), cache=CACHE
+            )  # the rung at its own step: the chooser's run
         return runs[m]
 
     def estimate(m: int) -> tuple[list[float], float]:
@@ -108,13 +110,20 @@ def _reference_by_cvodes(scene, choice: FidelityChoice):
     assert all(a == 0.0 for a in scene.q0) and not scene.qf0 and not any(scene.qd0 or ())
     ref = choice.evidence["reference"]
     runs = []
-    for fidelity, method, dt in ((ref["fidelity"], "cvodes", ref["dt_s"]), (str(choice.choice), "rk4", choice.dt)):
+    for fidelity, method, dt in (
+        (ref["fidelity"], "cvodes", ref["dt_s"]),
+        (str(choice.choice), "rk4", choice.dt),
+    ):
         model = model_for(scene, fidelity, CACHE)
         n = int(round(scene.duration / dt))
         assert n * dt == pytest.approx(scene.duration)
         u = scene.input.samples(n, dt, model.n_joints)
         options = {"compile": False} if method == "rk4" else {}
-        runs.append(simulate(model, np.zeros(model.n_x), scene.duration, dt=dt, method=method, u=u, **options))
+        runs.append(
+            simulate(
+                model, np.zeros(model.n_x), scene.duration, dt=dt, method=method, u=u, **options
+            )
+        )
     return runs
 
 
@@ -128,7 +137,9 @@ def _check_choice(scene, choice: FidelityChoice, tol: float) -> None:
             distances, mine = estimate(parse_fidelity(name).modes_per_link)
             assert row["distance_to_next_m"] == pytest.approx(distances[0], rel=1e-9, abs=1e-15)
             if len(distances) > 1:
-                assert row.get("distance_to_second_next_m") == pytest.approx(distances[1], rel=1e-9, abs=1e-15)
+                assert row.get("distance_to_second_next_m") == pytest.approx(
+                    distances[1], rel=1e-9, abs=1e-15
+                )
             assert row["estimated_error_m"] == pytest.approx(mine, rel=1e-9, abs=1e-15)
     m = choice.choice.modes_per_link
     assert choice.dt == rows[str(choice.choice)]["dt_s"]
@@ -142,7 +153,9 @@ def _check_choice(scene, choice: FidelityChoice, tol: float) -> None:
     ref = choice.evidence["reference"]
     conv = ref["convergence"]
     cvodes, chosen = _reference_by_cvodes(scene, choice)
-    rk4_reference = simulate_rung(scene, ref["fidelity"], "rk4", ref["dt_s"], cache=CACHE)  # the chooser's reference
+    rk4_reference = simulate_rung(
+        scene, ref["fidelity"], "rk4", ref["dt_s"], cache=CACHE
+    )  # the chooser's reference
     np.testing.assert_array_equal(cvodes.time, rk4_reference.time)
     # RK4 is 4th order: its error at step h is at most 16/15 of its distance from the run at h / 2
     slack = 16 / 15 * conv["step_halving_m"] + CVODES_ERROR
@@ -164,7 +177,9 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
     ref = choice.evidence["reference"]
     chosen_run = simulate_rung(scene, str(choice.choice), cache=CACHE)
     reference_run = simulate_rung(scene, ref["fidelity"], "rk4", ref["dt_s"], cache=CACHE)
-    assert choice.cost_ratio == pytest.approx(chosen_run.wall_time_s / reference_run.wall_time_s, rel=1e-12)
+    assert choice.cost_ratio == pytest.approx(
+        chosen_run.wall_time_s / reference_run.wall_time_s, rel=1e-12
+    )
     assert choice.cost_ratio < 1
     # every rung runs RK4 at the scene's step divided by the smallest whole number k that is stable with the
     # documented margin (omega_max from the model itself), so outputs stay on the scene's grid
@@ -175,7 +190,9 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
         k = round(k)
         assert omega * row["dt_s"] <= RK4_MARGIN * RK4_LIMIT + 1e-12
         assert k == 1 or omega * scene.dt / (k - 1) > RK4_MARGIN * RK4_LIMIT
-    assert any(row["dt_s"] < scene.dt for row in choice.evidence["candidates"])  # the rule is exercised
+    assert any(
+        row["dt_s"] < scene.dt for row in choice.evidence["candidates"]
+    )  # the rule is exercised
 
 
 @pytest.mark.slow
@@ -184,30 +201,53 @@ def test_fast_heavy_bangbang_needs_more_modes(slow):
     scene = load_scene(HEAVY, HEAVY_SET)
     choice = choose_fidelity(scene, scene.tolerance, top=3, cache=CACHE)
     assert choice.choice.modes_per_link > slow_choice.choice.modes_per_link
-    _check_choice(scene, choice, scene.tolerance)  # with the rung below failing the (recomputed) estimate
+    _check_choice(
+        scene, choice, scene.tolerance
+    )  # with the rung below failing the (recomputed) estimate
     assert _rung(choice.choice.modes_per_link - 1) in choice.evidence["ladder"]
 
 
 def test_choices_are_kept_in_the_callers_cache(slow):
     scene, choice = slow
-    again = choose_fidelity(load_scene(SLOW, SLOW_SET), scene.tolerance, **SLOW_OPTIONS, cache=CACHE)
+    again = choose_fidelity(
+        load_scene(SLOW, SLOW_SET), scene.tolerance, **SLOW_OPTIONS, cache=CACHE
+    )
     assert again is choice
     # so are its runs, which the other checks here reuse: every rung at its step, the reference and its half step
     ref = choice.evidence["reference"]
     made = {(row["fidelity"], row["dt_s"]) for row in choice.evidence["candidates"]}
-    made |= {(ref["fidelity"], ref["dt_s"]), (ref["fidelity"], ref["convergence"]["half_step_run"]["dt_s"])}
+    made |= {
+        (ref["fidelity"], ref["dt_s"]),
+        (ref["fidelity"], ref["convergence"]["half_step_run"]["dt_s"]),
+    }
     assert SLOW_CHOICE_RUNS["entries"] == len(made)
     before = CACHE.stats()["runs"]["misses"]
     for fidelity, dt in made:
         simulate_rung(scene, fidelity, "rk4", dt, cache=CACHE)
     assert CACHE.stats()["runs"]["misses"] == before
-    assert choose_fidelity(load_scene(SLOW, SLOW_SET), 2 * scene.tolerance, **SLOW_OPTIONS, cache=CACHE) is not choice
+    assert (
+        choose_fidelity(
+            load_scene(SLOW, SLOW_SET), 2 * scene.tolerance, **SLOW_OPTIONS, cache=CACHE
+        )
+        is not choice
+    )
 
 
 def test_cli_json_has_the_four_keys(slow, capsys):
     _scene, choice = slow
-    argv = ["fidelity", SLOW, "--tol", repr(choice.tolerance), "--set", "duration=1.0", "--top", "2",
-            "--reference", "amm:3", "--json"]
+    argv = [
+        "fidelity",
+        SLOW,
+        "--tol",
+        repr(choice.tolerance),
+        "--set",
+        "duration=1.0",
+        "--top",
+        "2",
+        "--reference",
+        "amm:3",
+        "--json",
+    ]
     assert main(argv) == 0
     data = json.loads(capsys.readouterr().out)
     assert isinstance(data["choice"], str) and parse_fidelity(data["choice"]) == choice.choice
@@ -215,24 +255,33 @@ def test_cli_json_has_the_four_keys(slow, capsys):
     for key in ("estimated_error", "reference_error", "reference_error_rms"):
         assert data[key] == pytest.approx(getattr(choice, key), rel=1e-9, abs=1e-15)
     assert data["reference"]["fidelity"] == "amm:3"
-    assert [c["fidelity"] for c in data["candidates"]] == [c["fidelity"] for c in choice.evidence["candidates"]]
+    assert [c["fidelity"] for c in data["candidates"]] == [
+        c["fidelity"] for c in choice.evidence["candidates"]
+    ]
     for mine, api in zip(data["candidates"], choice.evidence["candidates"]):
-        assert mine["reference_error_max_m"] == pytest.approx(api["reference_error_max_m"], rel=1e-9, abs=1e-15)
+        assert mine["reference_error_max_m"] == pytest.approx(
+            api["reference_error_max_m"], rel=1e-9, abs=1e-15
+        )
     # the cost ratio is the chosen row's wall time over the reference's (timings differ from the API's run)
     row = next(c for c in data["candidates"] if c["fidelity"] == data["choice"])
-    assert data["cost_ratio"] == pytest.approx(row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12)
+    assert data["cost_ratio"] == pytest.approx(
+        row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12
+    )
     # the table form prints the choice too
     assert main(argv[:-1]) == 0
     assert f"choice {choice.choice}" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("argv, key", [
-    (["--tol", "0"], "--tol"),
-    (["--tol=-1e-3"], "--tol"),
-    (["--tol", "nan"], "--tol"),
-    (["--set", "tolerance=-1"], "tolerance"),
-    (["--set", "fidelity='auto'", "--set", "tolerance=0.0", "--tol", "1e-3"], "tolerance"),
-])
+@pytest.mark.parametrize(
+    "argv, key",
+    [
+        (["--tol", "0"], "--tol"),
+        (["--tol=-1e-3"], "--tol"),
+        (["--tol", "nan"], "--tol"),
+        (["--set", "tolerance=-1"], "tolerance"),
+        (["--set", "fidelity='auto'", "--set", "tolerance=0.0", "--tol", "1e-3"], "tolerance"),
+    ],
+)
 def test_bad_tolerance_exits_2_naming_the_key(argv, key, capsys):
     assert main(["fidelity", SLOW, *argv]) == 2
     err = capsys.readouterr().err
@@ -246,9 +295,24 @@ def test_auto_without_tolerance_is_refused():
 
 def test_unreachable_tolerance_exits_3_naming_the_best(slow, capsys):
     _scene, choice = slow
-    tiny = 0.1 * min(c["estimated_error_m"] for c in choice.evidence["candidates"] if "estimated_error_m" in c)
+    tiny = 0.1 * min(
+        c["estimated_error_m"] for c in choice.evidence["candidates"] if "estimated_error_m" in c
+    )
     # no rung meets it, so no reference run is made (it only judges a choice): exit 3 with the best estimate
-    status = main(["fidelity", SLOW, "--tol", repr(tiny), "--set", "duration=1.0", "--top", "2", "--reference", "amm:3"])
+    status = main(
+        [
+            "fidelity",
+            SLOW,
+            "--tol",
+            repr(tiny),
+            "--set",
+            "duration=1.0",
+            "--top",
+            "2",
+            "--reference",
+            "amm:3",
+        ]
+    )
     assert status == 3
     err = capsys.readouterr().err
     assert "best estimate" in err and "allowed: a tolerance >=" in err
@@ -295,4 +359,6 @@ def test_choose_rejects_bad_options(slow):
     with pytest.raises(SpecError, match="key 'tolerance'"):
         choose_fidelity(scene, float("inf"))
     with pytest.raises(SpecError, match="key 'safety'"):
-        choose_fidelity(scene, 1e-3, top=2, reference="amm:3", safety=0.5)  # below 1: would shrink the estimate
+        choose_fidelity(
+            scene, 1e-3, top=2, reference="amm:3", safety=0.5
+        )  # below 1: would shrink the estimate

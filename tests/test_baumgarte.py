@@ -4,19 +4,28 @@ from __future__ import annotations
 
 import csv
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from support import DATA
 
-from flexctrl.analysis.baumgarte import (EXPLICIT_LIMIT, constraint_states, defect_gain, error_amplification,
-                                         fastest_decay, propagate_errors, run_point, spectral_radius,
-                                         stability_limit, steady_drift_response, step_defects)
-from flexctrl.study.executors.baumgarte_sweep_executor import read_sweep_scene
+from flexctrl.analysis.baumgarte import (
+    EXPLICIT_LIMIT,
+    constraint_states,
+    defect_gain,
+    error_amplification,
+    fastest_decay,
+    propagate_errors,
+    run_point,
+    spectral_radius,
+    stability_limit,
+    steady_drift_response,
+    step_defects,
+)
 from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SlidingBeamModel
 from flexctrl.errors import SpecError
+from flexctrl.study.executors.baumgarte_sweep_executor import read_sweep_scene
 
-from support import DATA, ROOT
 STUDY = DATA / "studies" / "baumgarte_sweep.toml"
 SCENE = DATA / "studies" / "scenes" / "bk_fast_push.toml"
 DT = 1e-3
@@ -35,7 +44,11 @@ def unstabilised():
 def test_characteristic_polynomials(g, b):
     """np.poly of G equals the hand-derived polynomials (explicit: one step of lag; implicit: trapezoidal)."""
     pm = np.polynomial.polynomial
-    lag, damping, stiffness = pm.polypow([-1, 1], 2), g * np.array([-1.0, 0.0, 1.0]), b * b / 4 * pm.polypow([1, 1], 2)
+    lag, damping, stiffness = (
+        pm.polypow([-1, 1], 2),
+        g * np.array([-1.0, 0.0, 1.0]),
+        b * b / 4 * pm.polypow([1, 1], 2),
+    )
     # ascending coefficients; np.poly gives descending ones of the monic polynomial
     explicit = pm.polyadd(pm.polyadd(pm.polymul([0, 1], lag), damping), stiffness)[::-1]
     quad = pm.polyadd(pm.polyadd(lag, damping), stiffness)
@@ -49,7 +62,11 @@ def test_implicit_feedback_is_the_trapezoidal_rule_on_the_error_ode():
     gamma, beta, h = 30.0, 20.0, 0.01
     s = np.roots([1.0, 2 * gamma, beta**2])
     expected = sorted((1 + s * h / 2) / (1 - s * h / 2), key=lambda z: (z.real, z.imag))
-    got = [z for z in np.linalg.eigvals(error_amplification(gamma * h, beta * h, "implicit")) if abs(z) > 1e-12]
+    got = [
+        z
+        for z in np.linalg.eigvals(error_amplification(gamma * h, beta * h, "implicit"))
+        if abs(z) > 1e-12
+    ]
     np.testing.assert_allclose(sorted(got, key=lambda z: (z.real, z.imag)), expected, atol=1e-12)
     assert stability_limit(1.0, "implicit") == math.inf
     assert spectral_radius(1e3, 1e3, "implicit") < 1.0 < spectral_radius(1e3, 1e3, "explicit")
@@ -123,7 +140,9 @@ def test_explicit_feedback_blows_up_just_above_the_predicted_limit_and_not_below
     blown = run_point(FAST_PUSH, 4, DT, bad, bad, duration=1.0, max_violation=1e-3)
     assert not blown.bounded
     assert 0.0 < blown.blowup_time < 1.0
-    assert np.all(np.isfinite(blown.result.phi_violation)) and blown.result.t[-1] < blown.blowup_time
+    assert (
+        np.all(np.isfinite(blown.result.phi_violation)) and blown.result.t[-1] < blown.blowup_time
+    )
     assert blown.growth_per_step() == pytest.approx(spectral_radius(bad * DT, bad * DT), rel=0.05)
     assert run_point(FAST_PUSH, 4, DT, bad, bad, feedback="implicit", duration=0.3).bounded
 
@@ -140,7 +159,7 @@ def test_scene_keys_are_validated():
         read_sweep_scene(str(SCENE), ("baumgarte=-1",))
     with pytest.raises(SpecError, match="gama"):
         read_sweep_scene(str(SCENE), ("gama=3",))
-    s = read_sweep_scene(str(SCENE), ("baumgarte=0", "feedback=\"implicit\""))
+    s = read_sweep_scene(str(SCENE), ("baumgarte=0", 'feedback="implicit"'))
     assert (s.gamma, s.beta, s.feedback) == (0.0, 0.0, "implicit")
 
 
@@ -149,9 +168,16 @@ def test_reduced_study_writes_csv_and_report(tmp_path):
     from flexctrl.study.study_file import load_study
 
     unstable = 2.0 * EXPLICIT_LIMIT / DT
-    spec = load_study(STUDY, ["grid.scene.feedback=[\"explicit\"]", "grid.scene.dt=[1e-3]",
-                              f"grid.scene.baumgarte=[0.0, 50.0, {unstable!r}]", "set.scene.duration=0.3",
-                              "set.scene.reference_dt=2e-4"])
+    spec = load_study(
+        STUDY,
+        [
+            'grid.scene.feedback=["explicit"]',
+            "grid.scene.dt=[1e-3]",
+            f"grid.scene.baumgarte=[0.0, 50.0, {unstable!r}]",
+            "set.scene.duration=0.3",
+            "set.scene.reference_dt=2e-4",
+        ],
+    )
     assert len(spec.runs) == 3
     run_study(spec, tmp_path / "out", workers=0, progress="none")
     with open(tmp_path / "out" / "baumgarte.csv", newline="") as fh:

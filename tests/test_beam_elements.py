@@ -39,12 +39,14 @@ def test_element_matrices_match_integrals_of_shape_functions(l):
     lin = np.array([F1, (F2 - F1) / l])
     Kg = np.array([[integral(P.polymul(lin, P.polymul(a, b)), l) for b in d1] for a in d1])
     np.testing.assert_allclose(el.geometric_stiffness_linear(F1, F2, l), Kg, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(el.geometric_stiffness(lambda z: P.polyval(z, lin), l), Kg,
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        el.geometric_stiffness(lambda z: P.polyval(z, lin), l), Kg, rtol=1e-12, atol=1e-12
+    )
     quint = np.array([1.0, -2.0, 0.7, 0.3, -0.2, 0.05])  # degree 5: still exact
     Kq = np.array([[integral(P.polymul(quint, P.polymul(a, b)), l) for b in d1] for a in d1])
-    np.testing.assert_allclose(el.geometric_stiffness(lambda z: P.polyval(z, quint), l), Kq,
-                               rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(
+        el.geometric_stiffness(lambda z: P.polyval(z, quint), l), Kq, rtol=1e-11, atol=1e-12
+    )
     # shape functions and derivatives at arbitrary points
     z = np.linspace(-0.1 * l, 1.1 * l, 7)
     for d in range(4):
@@ -54,9 +56,13 @@ def test_element_matrices_match_integrals_of_shape_functions(l):
     x0 = 0.4
     S0, S1 = el.mass_integrals(rho, l, x0)
     np.testing.assert_allclose(S0, [rho * integral(c, l) for c in N], rtol=1e-12)
-    np.testing.assert_allclose(S1, [rho * integral(P.polymul([x0, 1.0], c), l) for c in N], rtol=1e-12)
+    np.testing.assert_allclose(
+        S1, [rho * integral(P.polymul([x0, 1.0], c), l) for c in N], rtol=1e-12
+    )
     # axial element
-    np.testing.assert_allclose(el.axial_mass(rho, l), rho * np.array([[l / 3, l / 6], [l / 6, l / 3]]))
+    np.testing.assert_allclose(
+        el.axial_mass(rho, l), rho * np.array([[l / 3, l / 6], [l / 6, l / 3]])
+    )
     np.testing.assert_allclose(el.axial_stiffness(EI, l) @ [1.0, 1.0], 0.0, atol=1e-12)
 
 
@@ -72,7 +78,9 @@ def test_rigid_modes_and_total_mass():
         assert abs(mode @ b.K @ mode) < 1e-9  # no strain energy
         np.testing.assert_allclose(b.K @ mode, 0.0, atol=1e-9)
     assert translation @ b.M @ translation == pytest.approx(rho * L, rel=1e-13)
-    assert rotation @ b.M @ rotation == pytest.approx(rho * L**3 / 3, rel=1e-13)  # inertia about x=0
+    assert rotation @ b.M @ rotation == pytest.approx(
+        rho * L**3 / 3, rel=1e-13
+    )  # inertia about x=0
     assert b.S0 @ translation == pytest.approx(rho * L, rel=1e-13)
     assert b.S1 @ translation == pytest.approx(rho * L**2 / 2, rel=1e-13)
     assert b.S1 @ rotation == pytest.approx(rho * L**3 / 3, rel=1e-13)
@@ -122,7 +130,10 @@ def test_static_tip_load_is_exact(n):
 
 def test_buckling_loads_converge_to_euler():
     L, EI = 1.5, 2.0
-    for support, exact in (("pinned", np.pi**2 * EI / L**2), ("cantilever", np.pi**2 * EI / (4 * L**2))):
+    for support, exact in (
+        ("pinned", np.pi**2 * EI / L**2),
+        ("cantilever", np.pi**2 * EI / (4 * L**2)),
+    ):
         errs = []
         for n in (2, 4, 8, 16):
             b = el.assemble_beam(n, L, 1.0, EI)

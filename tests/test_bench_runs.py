@@ -1,9 +1,9 @@
 """``flexctrl bench runs``: one study's runs under two source trees, alternated run by run."""
 
+from support import ROOT
 
 from flexctrl import cli
 from flexctrl.bench.runs import bench_runs, format_runs
-from support import ROOT
 
 STUDY = "tests/data/study_selftest.toml"
 
@@ -20,8 +20,10 @@ def test_the_same_tree_twice_gives_the_same_metrics_and_every_run():
 
 def test_bad_arguments_are_refused(capsys):
     root = ROOT
-    for argv, message in ((["--tree", str(root)], "two --tree"),
-                          (["--tree", str(root), "--tree", str(root / "tests")], "not a flexctrl checkout"),
-                          (["--tree", str(root), "--tree", str(root), "--exclude", "nmpc"], "KEY=VALUE")):
+    for argv, message in (
+        (["--tree", str(root)], "two --tree"),
+        (["--tree", str(root), "--tree", str(root / "tests")], "not a flexctrl checkout"),
+        (["--tree", str(root), "--tree", str(root), "--exclude", "nmpc"], "KEY=VALUE"),
+    ):
         assert cli.main(["bench", "runs", "--study", STUDY, *argv]) != 0
         assert message in capsys.readouterr().err

@@ -42,10 +42,31 @@ def classical_roots(f, n, hi=22.0, step=1e-3):
 def fe_matrices(length, rho, EI, m, J, M, n_el):
     """Hermite-cubic beam, consistent mass, clamped at node 0, tip body at the last node."""
     h = length / n_el
-    ke = EI / h**3 * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
-                               [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-    me = rho * h / 420 * np.array([[156, 22 * h, 54, -13 * h], [22 * h, 4 * h * h, 13 * h, -3 * h * h],
-                                   [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h * h, -22 * h, 4 * h * h]])
+    ke = (
+        EI
+        / h**3
+        * np.array(
+            [
+                [12, 6 * h, -12, 6 * h],
+                [6 * h, 4 * h * h, -6 * h, 2 * h * h],
+                [-12, -6 * h, 12, -6 * h],
+                [6 * h, 2 * h * h, -6 * h, 4 * h * h],
+            ]
+        )
+    )
+    me = (
+        rho
+        * h
+        / 420
+        * np.array(
+            [
+                [156, 22 * h, 54, -13 * h],
+                [22 * h, 4 * h * h, 13 * h, -3 * h * h],
+                [54, 13 * h, 156, -22 * h],
+                [-13 * h, -3 * h * h, -22 * h, 4 * h * h],
+            ]
+        )
+    )
     nd = 2 * (n_el + 1)
     K, Mm = np.zeros((nd, nd)), np.zeros((nd, nd))
     for e in range(n_el):
@@ -83,7 +104,10 @@ def quad(f, length, panels=16):
 
 def tip_form(modes: ClampedMassModes):
     """Eq-40 tip terms ``u_j^T T u_k`` evaluated exactly (fractions) for the given floats."""
-    u = [(Fraction(float(a)), Fraction(float(b))) for a, b in zip(modes.tip_deflection, modes.tip_slope)]
+    u = [
+        (Fraction(float(a)), Fraction(float(b)))
+        for a, b in zip(modes.tip_deflection, modes.tip_slope)
+    ]
     m, J, M = Fraction(modes.m_tip), Fraction(modes.J_tip), Fraction(modes.M_tip)
     n = modes.n_modes
     out = np.zeros((n, n))
@@ -97,8 +121,11 @@ def tip_form(modes: ClampedMassModes):
 def tip_scale(modes: ClampedMassModes):
     """``|u|^T |T| |u|`` per pair: the size of the terms Eq 40 sums."""
     a, b = np.abs(modes.tip_deflection), np.abs(modes.tip_slope)
-    return (modes.m_tip * np.outer(a, a) + abs(modes.M_tip) * (np.outer(a, b) + np.outer(b, a))
-            + modes.J_tip * np.outer(b, b))
+    return (
+        modes.m_tip * np.outer(a, a)
+        + abs(modes.M_tip) * (np.outer(a, b) + np.outer(b, a))
+        + modes.J_tip * np.outer(b, b)
+    )
 
 
 def check_modes(modes: ClampedMassModes):
@@ -117,7 +144,9 @@ def check_modes(modes: ClampedMassModes):
     assert np.allclose(energy, modes.stiffness, rtol=1e-9, atol=0)
     # clamped root, tip conditions (scaled by the size of their terms)
     root = modes.shape(np.array([0.0, 0.0]), 0)[:, 0], modes.shape(np.array([0.0]), 1)[:, 0]
-    assert np.all(np.abs(root[0]) <= 1e-13) and np.all(np.abs(root[1]) <= 1e-12 * modes.beta + 1e-13)
+    assert np.all(np.abs(root[0]) <= 1e-13) and np.all(
+        np.abs(root[1]) <= 1e-12 * modes.beta + 1e-13
+    )
     d = [modes.shape(np.array([L]), k)[:, 0] for k in range(4)]
     w2 = modes.omega**2
     assert np.allclose(d[0], modes.tip_deflection, rtol=1e-13, atol=1e-14)
@@ -153,8 +182,17 @@ def test_point_mass_against_classical_equation(mu):
     assert np.allclose(modes.beta * L, classical_roots(f, 6), rtol=1e-11)
 
 
-@pytest.mark.parametrize("m,J,M", [(0.0, 0.3, 0.0), (0.5, 0.02, 0.0), (1.0, 0.05, 0.1),
-                                   (0.8, 0.1, -0.2), (2.0, 3.2e-4, 0.0), (0.3, 0.3 * 0.4**2, 0.3 * 0.4)])
+@pytest.mark.parametrize(
+    "m,J,M",
+    [
+        (0.0, 0.3, 0.0),
+        (0.5, 0.02, 0.0),
+        (1.0, 0.05, 0.1),
+        (0.8, 0.1, -0.2),
+        (2.0, 3.2e-4, 0.0),
+        (0.3, 0.3 * 0.4**2, 0.3 * 0.4),
+    ],
+)
 def test_tip_body_against_finite_elements(m, J, M):
     L, rho, EI = 1.2, 0.75, 30.0
     modes = clamped_mass_modes(L, rho, EI, 4, m, J, M)
@@ -187,15 +225,27 @@ def test_huge_tip_inertia_limit():
     sliding = classical_roots(lambda x: math.cos(x) * math.tanh(x) + math.sin(x), 3)
     assert np.allclose(modes.beta[1:] * L, sliding, rtol=1e-4)
     assert modes.omega[0] == pytest.approx(math.sqrt(EI / (J * L)), rel=1e-4)
-    both = clamped_mass_modes(L, rho, EI, 4, m_tip=1e4, J_tip=1e4)  # clamped-clamped beyond two body modes
+    both = clamped_mass_modes(
+        L, rho, EI, 4, m_tip=1e4, J_tip=1e4
+    )  # clamped-clamped beyond two body modes
     clamped = classical_roots(lambda x: 1 / math.cosh(x) - math.cos(x), 2)
     assert np.allclose(both.beta[2:] * L, clamped, rtol=1e-4)
 
 
 # --- modes and modal integrals ---------------------------------------------------------
-@pytest.mark.parametrize("m,J,M", [(0.0, 0.0, 0.0), (2.0, 3.2e-4, 0.0), (0.7, 0.05, -0.15),
-                                   (1e4, 0.0, 0.0), (0.0, 1e4, 0.0), (1e4, 1e4, 9e3), (1e-9, 1e-9, 0.0),
-                                   (50.0, 2.0, -10.0)])
+@pytest.mark.parametrize(
+    "m,J,M",
+    [
+        (0.0, 0.0, 0.0),
+        (2.0, 3.2e-4, 0.0),
+        (0.7, 0.05, -0.15),
+        (1e4, 0.0, 0.0),
+        (0.0, 1e4, 0.0),
+        (1e4, 1e4, 9e3),
+        (1e-9, 1e-9, 0.0),
+        (50.0, 2.0, -10.0),
+    ],
+)
 def test_modes_orthonormal_integrals_and_bcs(m, J, M):
     check_modes(clamped_mass_modes(**LINK, n_modes=6, m_tip=m, J_tip=J, M_tip=M))
 
@@ -206,8 +256,12 @@ def test_sine_cosine_coefficients_reproduce_the_shape():
     bx = np.outer(modes.beta, x)
     c = modes.coefficients
     assert np.allclose(c[:, 2], -c[:, 0]) and np.allclose(c[:, 3], -c[:, 1])
-    direct = (c[:, :1] * np.sin(bx) + c[:, 1:2] * np.cos(bx) + c[:, 2:3] * np.sinh(bx)
-              + c[:, 3:4] * np.cosh(bx))
+    direct = (
+        c[:, :1] * np.sin(bx)
+        + c[:, 1:2] * np.cos(bx)
+        + c[:, 2:3] * np.sinh(bx)
+        + c[:, 3:4] * np.cosh(bx)
+    )
     assert np.allclose(direct, modes.shape(x), rtol=0, atol=1e-9)
     assert np.all(modes.tip_deflection > 0)
 
@@ -289,10 +343,25 @@ def root_residual_bound(lam, mu, eta, kappa):
     lam = np.asarray(lam, dtype=float)
     eps = np.finfo(float).eps
     l2 = lam * lam
-    size = 2.0 + mu * lam + 2.0 * abs(kappa) * l2 + eta * lam * l2 + (mu * eta + kappa * kappa) * l2 * l2
-    w = 1.0 + mu * lam + 2.0 * abs(kappa) * l2 + eta * lam * l2 + abs(mu * eta - kappa * kappa) * l2 * l2
+    size = (
+        2.0
+        + mu * lam
+        + 2.0 * abs(kappa) * l2
+        + eta * lam * l2
+        + (mu * eta + kappa * kappa) * l2 * l2
+    )
+    w = (
+        1.0
+        + mu * lam
+        + 2.0 * abs(kappa) * l2
+        + eta * lam * l2
+        + abs(mu * eta - kappa * kappa) * l2 * l2
+    )
     h = 1e-7 * lam
-    slope = (frequency_determinant(lam + h, mu, eta, kappa) - frequency_determinant(lam - h, mu, eta, kappa)) / (2 * h)
+    slope = (
+        frequency_determinant(lam + h, mu, eta, kappa)
+        - frequency_determinant(lam - h, mu, eta, kappa)
+    ) / (2 * h)
     return 16.0 * eps * size / w + 4.0 * ROOT_RTOL * lam * np.abs(slope)
 
 
@@ -315,12 +384,23 @@ def test_frequency_determinant_is_bounded(lam, mu, eta, s):
 
 
 # --- argument validation ---------------------------------------------------------------
-@pytest.mark.parametrize("kwargs,name", [
-    (dict(length=0.0), "length"), (dict(length=-1.0), "length"), (dict(rho=0.0), "rho"),
-    (dict(EI=-2.0), "EI"), (dict(EI=float("nan")), "EI"), (dict(length=float("inf")), "length"),
-    (dict(m_tip=-1e-3), "m_tip"), (dict(J_tip=-1.0), "J_tip"), (dict(m_tip=float("nan")), "m_tip"),
-    (dict(M_tip=float("nan")), "M_tip"), (dict(n_modes=-1), "n_modes"), (dict(n_modes=7), "n_modes"),
-])
+@pytest.mark.parametrize(
+    "kwargs,name",
+    [
+        (dict(length=0.0), "length"),
+        (dict(length=-1.0), "length"),
+        (dict(rho=0.0), "rho"),
+        (dict(EI=-2.0), "EI"),
+        (dict(EI=float("nan")), "EI"),
+        (dict(length=float("inf")), "length"),
+        (dict(m_tip=-1e-3), "m_tip"),
+        (dict(J_tip=-1.0), "J_tip"),
+        (dict(m_tip=float("nan")), "m_tip"),
+        (dict(M_tip=float("nan")), "M_tip"),
+        (dict(n_modes=-1), "n_modes"),
+        (dict(n_modes=7), "n_modes"),
+    ],
+)
 def test_invalid_arguments_raise_value_error(kwargs, name):
     args = dict(length=1.0, rho=1.0, EI=1.0, n_modes=2) | kwargs
     with pytest.raises(ValueError) as err:

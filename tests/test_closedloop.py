@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support import DATA
 
-from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.control.controller import Controller
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.linear import Sensors, equilibrium
+from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.sim import simulate
 from flexctrl.spec.arm import load_arm
-from support import DATA
 
 
 class _Schedule(Controller):
@@ -69,7 +69,9 @@ def test_torques_are_clipped_to_the_limits_and_divergence_is_an_error(arm_model)
     model = arm_model
     op = equilibrium(model, np.zeros(model.n_u))
     sensors = Sensors.build(model, ("joints",))
-    ctrl = _Schedule(np.full((5, model.n_u), 1e3), 0.01, sensors, np.array([200.0, 100.0, 50.0]), op)
+    ctrl = _Schedule(
+        np.full((5, model.n_u), 1e3), 0.01, sensors, np.array([200.0, 100.0, 50.0]), op
+    )
     traj, _ = simulate_closed_loop(model, ctrl, np.zeros(model.n_x), 0.05, 0.001, compile=False)
     assert np.max(np.abs(traj.inputs), axis=0) == pytest.approx([200.0, 100.0, 50.0])
     crazy = _Schedule(np.full((100, model.n_u), 1e9), 0.01, sensors, np.full(model.n_u, np.inf), op)
@@ -79,7 +81,13 @@ def test_torques_are_clipped_to_the_limits_and_divergence_is_an_error(arm_model)
 
 def test_plant_step_must_divide_the_sample_time(arm_model):
     op = equilibrium(arm_model, np.zeros(arm_model.n_u))
-    ctrl = _Schedule(np.zeros((1, arm_model.n_u)), 0.01, Sensors.build(arm_model, ("joints",)), np.full(3, np.inf), op)
+    ctrl = _Schedule(
+        np.zeros((1, arm_model.n_u)),
+        0.01,
+        Sensors.build(arm_model, ("joints",)),
+        np.full(3, np.inf),
+        op,
+    )
     with pytest.raises(SpecError, match="does not divide"):
         simulate_closed_loop(arm_model, ctrl, np.zeros(arm_model.n_x), 0.1, 0.003, compile=False)
 
@@ -90,31 +98,53 @@ def test_divergence_can_stop_the_run_and_be_recorded(arm_model):
     op = equilibrium(model, np.zeros(model.n_u))
     sensors = Sensors.build(model, ("joints",))
     crazy = _Schedule(np.full((100, model.n_u), 1e9), 0.01, sensors, np.full(model.n_u, np.inf), op)
-    traj, times = simulate_closed_loop(model, crazy, np.zeros(model.n_x), 1.0, 0.001, compile=False,
-                                       stop_on_divergence=True)
+    traj, times = simulate_closed_loop(
+        model, crazy, np.zeros(model.n_x), 1.0, 0.001, compile=False, stop_on_divergence=True
+    )
     div = traj.meta["divergence"]
     assert div is not None and 0 < div["time"] < 1.0 and "diverged at t =" in div["message"]
     assert np.all(np.isfinite(traj.states)) and traj.time[-1] <= div["time"] + 1e-12
     assert times[-1] < div["time"]
     # a monitor stops a run that stays finite: here any joint beyond 0.01 rad
-    gentle = _Schedule(np.full((100, model.n_u), 5.0), 0.01, sensors, np.full(model.n_u, np.inf), op)
-    monitor = lambda t, x: "joint beyond 0.01 rad" if np.max(np.abs(x[: model.n_u])) > 0.01 else None  # noqa: E731
-    traj, _ = simulate_closed_loop(model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor,
-                                   stop_on_divergence=True)
+    gentle = _Schedule(
+        np.full((100, model.n_u), 5.0), 0.01, sensors, np.full(model.n_u, np.inf), op
+    )
+    monitor = lambda t, x: (
+        "joint beyond 0.01 rad" if np.max(np.abs(x[: model.n_u])) > 0.01 else None
+    )  # noqa: E731
+    traj, _ = simulate_closed_loop(
+        model,
+        gentle,
+        np.zeros(model.n_x),
+        1.0,
+        0.001,
+        compile=False,
+        monitor=monitor,
+        stop_on_divergence=True,
+    )
     assert traj.meta["divergence"]["reason"] == "joint beyond 0.01 rad"
-    assert np.max(np.abs(traj.states[-1, : model.n_u])) > 0.01 > np.max(np.abs(traj.states[-12, : model.n_u]))
+    assert (
+        np.max(np.abs(traj.states[-1, : model.n_u]))
+        > 0.01
+        > np.max(np.abs(traj.states[-12, : model.n_u]))
+    )
     with pytest.raises(SimulationError, match="joint beyond 0.01 rad"):
-        simulate_closed_loop(model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor)
+        simulate_closed_loop(
+            model, gentle, np.zeros(model.n_x), 1.0, 0.001, compile=False, monitor=monitor
+        )
 
 
 def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_exact(root):
     import casadi as ca
 
-    from flexctrl.loop.plant_step import advance_function, plant_step_function
     from flexctrl.dynamics.parametric import constants_as_parameters
+    from flexctrl.loop.plant_step import advance_function, plant_step_function
 
     arm = load_arm(DATA / "models" / "subedi3link.toml").with_payload(2.0)
-    models = [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in ([0, 30, -60], [0, 120, 45])]
+    models = [
+        build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q))
+        for q in ([0, 30, -60], [0, 120, 45])
+    ]
     fps = [constants_as_parameters(m.functions["f"], reuse=False) for m in models]
     assert all(c.size > 0 for _, c in fps)
     # the two configurations differ only in constant values: one generated code serves both
@@ -129,7 +159,9 @@ def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_
         generator = ca.CodeGenerator("advance.c")
         generator.add(plant_step_function(m, 4))
         embedded_texts.append(generator.dump())
-    assert embedded_texts[0] != embedded_texts[1]  # without the parameter every configuration compiles anew
+    assert (
+        embedded_texts[0] != embedded_texts[1]
+    )  # without the parameter every configuration compiles anew
     rng = np.random.default_rng(3)
     for model in models:
         x = np.concatenate([np.radians([10, 20, -30]), rng.normal(0, 1e-3, model.n_x - 3)])

@@ -21,14 +21,14 @@ import json
 import numpy as np
 import pytest
 
+from flexctrl.cli import main
+from flexctrl.errors import SpecError
+from flexctrl.loop.mismatch import state_projection
 from flexctrl.scenes import auto as auto_fidelity
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.sim.tip_error import tip_error
-from flexctrl.cli import main
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, pin_design
 from flexctrl.scenes.run_closed_loop_scene import check_auto, run_closed_loop_scene
-from flexctrl.loop.mismatch import state_projection
-from flexctrl.errors import SpecError
+from flexctrl.sim.tip_error import tip_error
 from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.scene import load_scene
 
@@ -38,7 +38,11 @@ SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
 #: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step 2).
 SAFETY = 2.0
-OPTIONS = {"top": 2, "reference": "amm:3", "walk": "ladder"}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
+OPTIONS = {
+    "top": 2,
+    "reference": "amm:3",
+    "walk": "ladder",
+}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
 #: One cache for the module: the runs below share models and the choice, as a study worker does.
 CACHE = SceneCache()
 
@@ -63,13 +67,17 @@ def _estimate(choice: dict, m: int) -> float:
     """
     scene = pin_design(_scene())
     ref_n = parse_fidelity(choice["reference"]["fidelity"]).count
-    runs = {k: auto_fidelity.simulate_closed_rung(scene, _rung(k), controller=CONTROLLER, cache=CACHE)
-            for k in range(m, min(m + 2, ref_n) + 1)}
+    runs = {
+        k: auto_fidelity.simulate_closed_rung(scene, _rung(k), controller=CONTROLLER, cache=CACHE)
+        for k in range(m, min(m + 2, ref_n) + 1)
+    }
     grid = choice["comparison_grid_dt_s"]
     for run in runs.values():
         assert run.diverged_at is None
         np.testing.assert_allclose(run.time, grid * np.arange(run.time.size), rtol=0, atol=1e-12)
-    distances = [float(np.linalg.norm(runs[k].tip - runs[m].tip, axis=1).max()) for k in runs if k != m]
+    distances = [
+        float(np.linalg.norm(runs[k].tip - runs[m].tip, axis=1).max()) for k in runs if k != m
+    ]
     return SAFETY * max(distances)
 
 
@@ -82,7 +90,9 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
     assert summary["plant"]["fidelity"] == choice["choice"]
     assert summary["design"]["fidelity"] == AUTO_DESIGN_FIDELITY  # pinned, not the chosen plant
     metrics = summary["metrics"]
-    assert metrics["chosen_modes"] == (0 if choice["choice"] == "rigid" else int(choice["choice"].split(":")[1]))
+    assert metrics["chosen_modes"] == (
+        0 if choice["choice"] == "rigid" else int(choice["choice"].split(":")[1])
+    )
     assert metrics["chosen_dt"] == choice["dt_s"] == pytest.approx(auto_run.trajectory.meta["dt"])
     # the estimate, recomputed from the chooser's runs: it meets the tolerance, the rung below's does not
     assert choice["safety"] == SAFETY
@@ -95,8 +105,12 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
     for name, row in rows.items():
         if "estimated_error_m" in row:
             m = parse_fidelity(name).modes_per_link
-            assert row["estimated_error_m"] == pytest.approx(_estimate(choice, m), rel=1e-9, abs=1e-15)
-    assert _rung(chosen - 1) in ladder  # the scene exercises the claim below: a rung under the choice fails
+            assert row["estimated_error_m"] == pytest.approx(
+                _estimate(choice, m), rel=1e-9, abs=1e-15
+            )
+    assert (
+        _rung(chosen - 1) in ladder
+    )  # the scene exercises the claim below: a rung under the choice fails
     assert _estimate(choice, chosen - 1) > TOL
     conv = choice["reference"]["convergence"]
     assert max(conv["step_halving_m"], conv["rung_below_m"]) <= 0.5 * TOL
@@ -104,8 +118,17 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
     # independent: run the reference plant directly at its step, compare the tip paths at the full plant rate
     ref = choice["reference"]
     direct_ref = run_closed_loop_scene(
-        load_scene(SCENE, [*SHORT, f"fidelity='{ref['fidelity']}'", f"dt={ref['dt_s']!r}",
-                           f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'"]), controller=CONTROLLER).trajectory
+        load_scene(
+            SCENE,
+            [
+                *SHORT,
+                f"fidelity='{ref['fidelity']}'",
+                f"dt={ref['dt_s']!r}",
+                f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'",
+            ],
+        ),
+        controller=CONTROLLER,
+    ).trajectory
     traj = auto_run.trajectory
     err = tip_error(direct_ref.time, direct_ref.tip, traj.time, traj.tip)
     assert err.max <= TOL
@@ -114,37 +137,59 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
     assert choice["reference_error"] <= err.max * (1 + 1e-9) + 1e-12
     stride = int(round(choice["comparison_grid_dt_s"] / ref["dt_s"]))
     chosen_stride = int(round(choice["comparison_grid_dt_s"] / choice["dt_s"]))
-    np.testing.assert_allclose(direct_ref.time[::stride], traj.time[::chosen_stride], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        direct_ref.time[::stride], traj.time[::chosen_stride], rtol=0, atol=1e-12
+    )
     on_grid = np.linalg.norm(direct_ref.tip[::stride] - traj.tip[::chosen_stride], axis=1)
     assert choice["reference_error"] == pytest.approx(on_grid.max(), rel=1e-9, abs=1e-15)
     # and the chosen run is what a direct run of the chosen plant gives
     direct = run_closed_loop_scene(
-        load_scene(SCENE, [*SHORT, f"fidelity='{choice['choice']}'", f"dt={choice['dt_s']!r}",
-                           f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'"]), controller=CONTROLLER).trajectory
+        load_scene(
+            SCENE,
+            [
+                *SHORT,
+                f"fidelity='{choice['choice']}'",
+                f"dt={choice['dt_s']!r}",
+                f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'",
+            ],
+        ),
+        controller=CONTROLLER,
+    ).trajectory
     np.testing.assert_allclose(direct.tip, traj.tip, rtol=0, atol=1e-12)
 
 
 @pytest.mark.slow  # the module fixture: ~20 s with compiled models on disk, ~30 s without
 def test_choice_is_kept_in_the_cache_and_keyed_by_the_controller(auto_run):
     before = CACHE.stats()["closed_choices"]
-    again = run_closed_loop_scene(_scene(), controller=CONTROLLER, auto_options=OPTIONS, cache=CACHE)
+    again = run_closed_loop_scene(
+        _scene(), controller=CONTROLLER, auto_options=OPTIONS, cache=CACHE
+    )
     after = CACHE.stats()["closed_choices"]
     assert after["hits"] == before["hits"] + 1 and after["misses"] == before["misses"]
-    assert again.summary["fidelity_choice"]["choice"] == auto_run.summary["fidelity_choice"]["choice"]
+    assert (
+        again.summary["fidelity_choice"]["choice"] == auto_run.summary["fidelity_choice"]["choice"]
+    )
     scene = _scene()
     base = auto_fidelity.closed_loop_key(scene, CONTROLLER, ())
     assert auto_fidelity.closed_loop_key(scene, CONTROLLER, ("weights.joint_deg=1.0",)) != base
     assert auto_fidelity.closed_loop_key(scene, "controllers/pd.toml", ()) != base
     assert auto_fidelity.closed_loop_key(_scene("payload=0.0"), CONTROLLER, ()) != base
-    assert auto_fidelity.closed_loop_key(_scene("initial.q=[0.0, 0.0, 0.0]"), CONTROLLER, ()) != base
-    assert auto_fidelity.closed_loop_key(_scene("tolerance=1e-3"), CONTROLLER, ()) == base  # the tolerance keys the choice cache
+    assert (
+        auto_fidelity.closed_loop_key(_scene("initial.q=[0.0, 0.0, 0.0]"), CONTROLLER, ()) != base
+    )
+    assert (
+        auto_fidelity.closed_loop_key(_scene("tolerance=1e-3"), CONTROLLER, ()) == base
+    )  # the tolerance keys the choice cache
 
 
-@pytest.mark.parametrize("sets, key", [
-    (["fidelity='auto'", "tolerance=-1e-3"], "tolerance"),
-    (["fidelity='auto'", "tolerance=0.0"], "tolerance"),
-    (["fidelity='auto'"], "tolerance"),  # missing
-])
+@pytest.mark.parametrize(
+    "sets, key",
+    [
+        (["fidelity='auto'", "tolerance=-1e-3"], "tolerance"),
+        (["fidelity='auto'", "tolerance=0.0"], "tolerance"),
+        (["fidelity='auto'"], "tolerance"),  # missing
+    ],
+)
 def test_bad_tolerance_with_auto_is_refused_naming_the_key(sets, key):
     with pytest.raises(SpecError) as info:
         load_scene(SCENE, [*SHORT, *sets])
@@ -158,14 +203,32 @@ def test_auto_refusals_name_key_value_and_allowed():
     with pytest.raises(SpecError, match=r"'integrator'.*'cvodes'.*allowed: 'rk4'"):
         check_auto(_scene("integrator='cvodes'"), CONTROLLER)
     with pytest.raises(SpecError, match=r"'controller_fidelity'.*allowed"):
-        auto_fidelity.choose_closed_loop_fidelity(scene, TOL, controller=CONTROLLER)  # design model not pinned
+        auto_fidelity.choose_closed_loop_fidelity(
+            scene, TOL, controller=CONTROLLER
+        )  # design model not pinned
 
 
 @pytest.mark.slow  # the module fixture: ~20 s with compiled models on disk, ~30 s without
 def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
     sets = [item for s in [*SHORT, f"tolerance={TOL!r}"] for item in ("--set", s)]
-    code = main(["fidelity", SCENE, "--controller", CONTROLLER, "--top", "2", "--reference", "amm:3", "--json",
-                 "--set", f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'", "--set", "fidelity_walk='ladder'", *sets])
+    code = main(
+        [
+            "fidelity",
+            SCENE,
+            "--controller",
+            CONTROLLER,
+            "--top",
+            "2",
+            "--reference",
+            "amm:3",
+            "--json",
+            "--set",
+            f"controller_fidelity='{AUTO_DESIGN_FIDELITY}'",
+            "--set",
+            "fidelity_walk='ladder'",
+            *sets,
+        ]
+    )
     assert code == 0
     data = json.loads(capsys.readouterr().out)
     assert list(data)[:1] == ["choice"]
@@ -179,7 +242,9 @@ def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
     assert data["estimated_error"] <= TOL
     # the cost ratio is the chosen loop's wall time over the reference loop's (timings differ from the API's run)
     row = next(c for c in data["candidates"] if c["fidelity"] == data["choice"])
-    assert data["cost_ratio"] == pytest.approx(row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12)
+    assert data["cost_ratio"] == pytest.approx(
+        row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12
+    )
     # a bad --tol is refused naming the option
     assert main(["fidelity", SCENE, "--tol", "-1", *sets]) == 2
     assert "--tol" in capsys.readouterr().err

@@ -13,6 +13,8 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.estimator import kalman_gain
 from flexctrl.control.nmpc.controller import interval_functions
+from flexctrl.errors import SpecError
+from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import (
     EstimatorSettings,
     LQRSettings,
@@ -20,8 +22,6 @@ from flexctrl.spec.controller_settings import (
     ScheduleSettings,
     SensorSettings,
 )
-from flexctrl.scenes.model_files import load_model
-from flexctrl.errors import SpecError
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 
@@ -50,7 +50,9 @@ def plant3(arm3):
 def test_lqr_gain_agrees_with_scipy_dare_and_is_stabilising(arm3, op3):
     ctrl = design(arm3, op3, LQRSettings())
     A, B = ctrl.plant.Ad, ctrl.plant.Bd
-    Q = np.diag(1 / np.r_[np.full(3, 0.01), np.full(6, 0.002), np.full(3, 0.5), np.full(6, 0.5)] ** 2)
+    Q = np.diag(
+        1 / np.r_[np.full(3, 0.01), np.full(6, 0.002), np.full(3, 0.5), np.full(6, 0.5)] ** 2
+    )
     R = np.diag(1 / (0.5 * np.array([200.0, 100.0, 50.0])) ** 2)
     P = scipy.linalg.solve_discrete_are(A, B, Q, R)
     K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
@@ -101,8 +103,10 @@ def test_kalman_gain_of_a_scalar_system_is_analytic():
 
 
 def test_lqg_with_encoders_and_strain_gauges_regulates_the_nonlinear_arm(arm3, op3, plant3):
-    settings = LQRSettings(sensors=SensorSettings(outputs=("joints", "strain"), joints=1e-5, strain=1e-5),
-                           estimator=EstimatorSettings(torque_noise=2.0, modal_force_noise=1.0))
+    settings = LQRSettings(
+        sensors=SensorSettings(outputs=("joints", "strain"), joints=1e-5, strain=1e-5),
+        estimator=EstimatorSettings(torque_noise=2.0, modal_force_noise=1.0),
+    )
     ctrl = design(arm3, op3, settings)
     assert ctrl.measurement_names == ("q1", "q2", "q3", "kappa1", "kappa2", "kappa3")
     ctrl.reset()
@@ -139,7 +143,9 @@ def test_gain_schedule_reproduces_node_gains_and_interpolates(arm3, op3):
     x[1] = grid[0]
     np.testing.assert_allclose(ctrl.gain(x), node.K, rtol=1e-8, atol=1e-10 * np.max(np.abs(node.K)))
     # the target itself is a node: the fixed design
-    np.testing.assert_allclose(ctrl.gain(op3.x), ctrl.K, rtol=1e-6, atol=1e-8 * np.max(np.abs(ctrl.K)))
+    np.testing.assert_allclose(
+        ctrl.gain(op3.x), ctrl.K, rtol=1e-6, atol=1e-8 * np.max(np.abs(ctrl.K))
+    )
     # half way between nodes: the mean; outside the grid: the edge
     x[1] = 0.5 * (grid[0] + grid[1])
     np.testing.assert_allclose(ctrl.gain(x), 0.5 * (node.K + ctrl.schedule.gains[1]))
@@ -164,8 +170,11 @@ def test_pd_holds_the_equilibrium_and_has_automatic_gains(arm3, op3):
 
 
 def test_pd_with_measured_gravity_compensation_matches_static_torque(arm3, op3):
-    ctrl = design(arm3, op3, PDSettings(gravity="measured", kp=(0.0, 0.0, 0.0), kd=(0.0, 0.0, 0.0),
-                                        saturate=False))
+    ctrl = design(
+        arm3,
+        op3,
+        PDSettings(gravity="measured", kp=(0.0, 0.0, 0.0), kd=(0.0, 0.0, 0.0), saturate=False),
+    )
     q = TARGET + np.radians([5.0, -3.0, 2.0])
     tau = ctrl.step(0.0, np.r_[q, np.zeros(3)])
     expected = arm3.gravity(np.r_[q, op3.q[3:]])[:3]  # K has no joint rows
@@ -175,8 +184,11 @@ def test_pd_with_measured_gravity_compensation_matches_static_torque(arm3, op3):
 @pytest.fixture(scope="module")
 def damped3():
     """The arm with 0.5 % modal damping (as the scenes use)."""
-    return load_model("models/subedi3link.toml", fidelity="amm:2",
-                      overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)])
+    return load_model(
+        "models/subedi3link.toml",
+        fidelity="amm:2",
+        overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)],
+    )
 
 
 def _sampled_pd_radius(model, op, settings):
@@ -189,7 +201,11 @@ def _sampled_pd_radius(model, op, settings):
     N = model.n_q
     K = np.zeros((3, 2 * N))
     K[range(3), range(3)], K[range(3), N + np.arange(3)] = kp, kd
-    a = math.exp(-2 * math.pi * settings.torque_filter * settings.sample_time) if settings.torque_filter else 0.0
+    a = (
+        math.exp(-2 * math.pi * settings.torque_filter * settings.sample_time)
+        if settings.torque_filter
+        else 0.0
+    )
     # f_k = a f_{k-1} - (1 - a) K x_k;  x_{k+1} = A x_k + B f_k   (state (x_k, f_{k-1}))
     Acl = np.block([[A - (1 - a) * B @ K, a * B], [-(1 - a) * K, a * np.eye(3)]])
     return float(np.max(np.abs(np.linalg.eigvals(Acl))))
@@ -197,7 +213,9 @@ def _sampled_pd_radius(model, op, settings):
 
 def test_sampled_pd_needs_the_torque_filter_on_light_hubs(damped3):
     op = L.equilibrium(damped3, TARGET)
-    assert _sampled_pd_radius(damped3, op, PDSettings(torque_filter=0.0)) > 2.0  # unfiltered: unstable
+    assert (
+        _sampled_pd_radius(damped3, op, PDSettings(torque_filter=0.0)) > 2.0
+    )  # unfiltered: unstable
     assert _sampled_pd_radius(damped3, op, PDSettings()) < 1.0  # the default filter: stable
 
 
@@ -225,7 +243,12 @@ def test_doubling_dare_agrees_with_scipy_and_refuses_an_uncontrollable_unstable_
     for _ in range(5):
         A = rng.normal(size=(6, 6)) / 2
         B, Q, R = rng.normal(size=(6, 2)), np.eye(6), np.diag([1.0, 3.0])
-        np.testing.assert_allclose(solve_dare(A, B, Q, R), scipy.linalg.solve_discrete_are(A, B, Q, R), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(
+            solve_dare(A, B, Q, R),
+            scipy.linalg.solve_discrete_are(A, B, Q, R),
+            rtol=1e-8,
+            atol=1e-10,
+        )
     with pytest.raises(SolverError):
         solve_dare(np.diag([1.5, 0.5]), np.array([[0.0], [1.0]]), np.eye(2), np.eye(1))
 
@@ -236,7 +259,9 @@ def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene("studies/scenes/move_joint1_30deg.toml", [f"target.move={target_deg!r}", "duration=5.0"])
+    scene = load_scene(
+        "studies/scenes/move_joint1_30deg.toml", [f"target.move={target_deg!r}", "duration=5.0"]
+    )
     result = run_closed_loop_scene(scene, None, controller="controllers/lqg.toml", plots=False)
     m = result.summary["metrics"]
     assert m["stable"] == 1

@@ -8,8 +8,8 @@ import pytest
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
-from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
 from flexctrl.scenes.model_files import load_model
+from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=True)
@@ -31,28 +31,32 @@ def closed_form_first_move(Ad, Bd, Q, R, P, N, dx0):
     nz = N * (n + m)  # w = [u_0..u_{N-1}, x_1..x_N]
     H = np.zeros((nz, nz))
     for k in range(N):
-        H[k * m:(k + 1) * m, k * m:(k + 1) * m] = R
+        H[k * m : (k + 1) * m, k * m : (k + 1) * m] = R
         xs = N * m + k * n
-        H[xs:xs + n, xs:xs + n] = P if k == N - 1 else Q
+        H[xs : xs + n, xs : xs + n] = P if k == N - 1 else Q
     E = np.zeros((N * n, nz))
     e = np.zeros(N * n)
     for k in range(N):
         rows = slice(k * n, (k + 1) * n)
-        E[rows, k * m:(k + 1) * m] = -Bd
-        E[rows, N * m + k * n:N * m + (k + 1) * n] = np.eye(n)
+        E[rows, k * m : (k + 1) * m] = -Bd
+        E[rows, N * m + k * n : N * m + (k + 1) * n] = np.eye(n)
         if k == 0:
             e[rows] = Ad @ dx0
         else:
-            E[rows, N * m + (k - 1) * n:N * m + k * n] = -Ad
+            E[rows, N * m + (k - 1) * n : N * m + k * n] = -Ad
     kkt = np.block([[H, E.T], [E, np.zeros((N * n, N * n))]])
     sol = np.linalg.solve(kkt, np.r_[np.zeros(nz), e])
     return sol[:m]
 
 
-@pytest.mark.parametrize("formulation, backend", [("sparse", "osqp"), ("condensed", "osqp"), ("sparse", "hpipm"),
-                                                  ("condensed", "daqp")])
+@pytest.mark.parametrize(
+    "formulation, backend",
+    [("sparse", "osqp"), ("condensed", "osqp"), ("sparse", "hpipm"), ("condensed", "daqp")],
+)
 def test_unconstrained_first_move_is_lqr_and_closed_form(arm3, op3, formulation, backend):
-    settings = MPCSettings(horizon=12, soft="none", formulation=formulation, backend=backend, osqp=TIGHT)
+    settings = MPCSettings(
+        horizon=12, soft="none", formulation=formulation, backend=backend, osqp=TIGHT
+    )
     ctrl = design(arm3, op3, settings)
     ctrl.reset()
     dx = np.zeros(18)
@@ -123,7 +127,9 @@ def test_deflection_limit_is_respected_when_possible(arm3, op3):
     def run(ctrl, steps=100):
         """Linear closed loop; the peak |tip deflection| per link (linear output map)."""
         ctrl.reset()
-        C = np.hstack([np.array(arm3.functions["deflection"].jacobian()(op3.q, 0, 0)[0]), np.zeros((3, 9))])
+        C = np.hstack(
+            [np.array(arm3.functions["deflection"].jacobian()(op3.q, 0, 0)[0]), np.zeros((3, 9))]
+        )
         dx, peak = dx0.copy(), np.zeros(3)
         for k in range(steps):
             u = ctrl.step(0.01 * k, op3.x + dx)
@@ -152,7 +158,9 @@ def test_forced_osqp_failure_falls_back_to_shifted_plan_then_lqr(arm3, op3):
     for k in range(2, ctrl.problem.horizon + 1):
         uk = ctrl.step(0.01 * k, op3.x + dx)
     assert ctrl.stats.fallbacks[-1][2] == "lqr"
-    np.testing.assert_allclose(uk, np.clip(op3.u - ctrl.K @ dx, -ctrl.limits, ctrl.limits), rtol=1e-9)
+    np.testing.assert_allclose(
+        uk, np.clip(op3.u - ctrl.K @ dx, -ctrl.limits, ctrl.limits), rtol=1e-9
+    )
     assert ctrl.stats.summary()["fallbacks"] == ctrl.problem.horizon
     assert ctrl.stats.status["fallback_shift"] == ctrl.problem.horizon - 1
 
@@ -169,10 +177,14 @@ def test_max_iter_one_from_the_start_uses_lqr(arm3, op3):
 
 
 def test_hold_fallback_keeps_the_previous_torque(arm3, op3):
-    ctrl = design(arm3, op3, MPCSettings(fallback="hold", osqp=OSQPSettings(max_iter=1, check_termination=1)))
+    ctrl = design(
+        arm3, op3, MPCSettings(fallback="hold", osqp=OSQPSettings(max_iter=1, check_termination=1))
+    )
     ctrl.reset()
     u = ctrl.step(0.0, op3.x + 0.001)
-    np.testing.assert_allclose(u, op3.u)  # the previous torque after reset is the target's static torque
+    np.testing.assert_allclose(
+        u, op3.u
+    )  # the previous torque after reset is the target's static torque
 
 
 def test_sparsity_never_changes_between_steps(arm3, op3):
@@ -201,8 +213,12 @@ def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formula
 def test_benchmark_reports_every_variant():
     from flexctrl.bench.mpc_step import default_variants, format_benchmark, mpc_benchmark
 
-    variants = {k: v for k, v in default_variants().items() if k in ("osqp_sparse", "osqp_condensed")}
-    result = mpc_benchmark(steps=5, horizon=5, variants=variants, python_control_solves=0, nmpc=False)
+    variants = {
+        k: v for k, v in default_variants().items() if k in ("osqp_sparse", "osqp_condensed")
+    }
+    result = mpc_benchmark(
+        steps=5, horizon=5, variants=variants, python_control_solves=0, nmpc=False
+    )
     assert set(result["variants"]) == {"osqp_sparse", "osqp_condensed"}
     for v in result["variants"].values():
         assert v["solve_ms"]["median"] > 0 and v["status"] and v["fallbacks"] == 0
@@ -214,8 +230,11 @@ def test_benchmark_reports_every_variant():
 def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
     from flexctrl.spec.controller_settings import SensorSettings
 
-    ctrl = design(arm3, op3, MPCSettings(sensors=SensorSettings(outputs=("joints", "strain"), joints=1e-6,
-                                                                strain=1e-6)))
+    ctrl = design(
+        arm3,
+        op3,
+        MPCSettings(sensors=SensorSettings(outputs=("joints", "strain"), joints=1e-6, strain=1e-6)),
+    )
     assert ctrl.measurement_names == ("q1", "q2", "q3", "kappa1", "kappa2", "kappa3")
     ctrl.reset()
     Ad, Bd = ctrl.plant.Ad, ctrl.plant.Bd
@@ -231,7 +250,9 @@ def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
 
 
 @pytest.mark.parametrize("formulation", ["sparse", "condensed"])
-def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(arm3, op3, formulation):
+def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(
+    arm3, op3, formulation
+):
     """Reference in the bounds only: MPC's first move = LQR's u_ref - K (x - x_ref), and the QP pattern is unchanged."""
     from flexctrl.control.lqr import LQRSettings
     from flexctrl.control.reference_trajectory import ReferenceTrajectory
@@ -240,7 +261,9 @@ def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(ar
     settings = MPCSettings(horizon=12, soft="deflection", formulation=formulation, osqp=TIGHT)
     ctrl = design(arm3, op3, settings)
     lqr = design(arm3, op3, LQRSettings(weights=settings.weights))
-    path = JointReference(tuple(TARGET - np.radians([4.0, -2.0, 1.0])), tuple(TARGET), "quintic", move_time=1.0)
+    path = JointReference(
+        tuple(TARGET - np.radians([4.0, -2.0, 1.0])), tuple(TARGET), "quintic", move_time=1.0
+    )
     ref = ReferenceTrajectory(arm3, path)
     pattern = ctrl.qp.A.copy()
     for c in (ctrl, lqr):

@@ -9,10 +9,9 @@ import pytest
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.nmpc.controller import RK4_BOUND, auto_substeps, design_nmpc
-from flexctrl.spec.controller_settings import NMPCSettings
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.spec.arm import arm_from_document
-
+from flexctrl.spec.controller_settings import NMPCSettings
 
 SMALL = dict(compile=False, horizon=15, sample_time=0.02, deflection_limit=0.02)
 
@@ -35,7 +34,9 @@ def test_rti_with_exact_sensitivities_converges_to_the_ipopt_optimum(onelink):
     scale = np.max(np.abs(nlp.w))
     assert np.max(np.abs(w - nlp.w)) < 1e-3 * scale
     v = w[rti.layout.v]
-    assert np.any(np.isclose(np.abs(v * rti.problem.Su + op.u), 15.0, rtol=1e-4))  # the torque limit is active
+    assert np.any(
+        np.isclose(np.abs(v * rti.problem.Su + op.u), 15.0, rtol=1e-4)
+    )  # the torque limit is active
 
 
 def test_frozen_sensitivities_reach_a_feasible_point_near_the_optimum(onelink):
@@ -51,7 +52,9 @@ def test_frozen_sensitivities_reach_a_feasible_point_near_the_optimum(onelink):
         w = rti._rti(z0, w).w
     Z, V, _S = (np.array(a) for a in rti.layout.split(ca.DM(w)))
     ends = np.array(rti.functions["F"].map(rti.layout.N)(Z[:, :-1], V))
-    assert np.max(np.abs(ends - Z[:, 1:])) < 1e-8 * max(1.0, np.max(np.abs(Z)))  # nonlinear shooting closed
+    assert np.max(np.abs(ends - Z[:, 1:])) < 1e-8 * max(
+        1.0, np.max(np.abs(Z))
+    )  # nonlinear shooting closed
     first = lambda ww: ww[rti.layout.v[0]]  # noqa: E731
     assert np.max(np.abs(first(w) - first(nlp.w))) < 0.05 * np.max(np.abs(nlp.w[rti.layout.v]))
 
@@ -75,7 +78,9 @@ def test_rti_closed_loop_reaches_the_target_within_torque_limits(onelink):
 
 def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
     model, op = onelink
-    ctrl = design_nmpc(model, op, NMPCSettings(**SMALL), screen=False)  # the whole QP, the one made to fail
+    ctrl = design_nmpc(
+        model, op, NMPCSettings(**SMALL), screen=False
+    )  # the whole QP, the one made to fail
     ctrl.reset()
     x = op.x.copy()
     x[0] -= 0.05
@@ -84,10 +89,19 @@ def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
     good = ctrl.functions["qp"]
     H, a_sp = ctrl.functions["H"], ctrl.functions["prepare"].sparsity_out(0)
     lay = ctrl.layout
-    ctrl.functions["qp"] = ca.conic("failing", "hpipm", {"h": H.sparsity(), "a": a_sp},
-                                    {"N": lay.N, "nx": [lay.n] * (lay.N + 1), "nu": [lay.m + lay.ns] * lay.N + [0],
-                                     "ng": [2 * lay.ns] * lay.N + [0], "hpipm": {"iter_max": 1},
-                                     "error_on_fail": False})
+    ctrl.functions["qp"] = ca.conic(
+        "failing",
+        "hpipm",
+        {"h": H.sparsity(), "a": a_sp},
+        {
+            "N": lay.N,
+            "nx": [lay.n] * (lay.N + 1),
+            "nu": [lay.m + lay.ns] * lay.N + [0],
+            "ng": [2 * lay.ns] * lay.N + [0],
+            "hpipm": {"iter_max": 1},
+            "error_on_fail": False,
+        },
+    )
     ctrl._rti_calls = None  # bound anew to the failing solver
     u = ctrl.step(0.02, x)
     np.testing.assert_allclose(u, op.u + ctrl.problem.Su * plan[1])
@@ -131,7 +145,9 @@ def test_rti_on_the_three_link_arm_converges_without_fallbacks():
     assert np.max(np.abs(x[:3] - op.x[:3])) < np.radians(3.0) * 0.5
 
 
-def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_model_constants(onelink):
+def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_model_constants(
+    onelink,
+):
     """One generated library serves every target, reference and model of the same graph structure.
 
     (A payload mass of 0 or of a value CasADi keeps as a shared constant, 0.5 here, changes the
@@ -143,14 +159,33 @@ def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_mo
     fp, const = constants_as_parameters(model.functions["f"])
     assert const.size > 0
     x, u = np.linspace(-0.3, 0.4, model.n_x), np.array([1.5])
-    np.testing.assert_allclose(np.array(fp(x, u, const)), np.array(model.functions["f"](x, u)), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(
+        np.array(fp(x, u, const)), np.array(model.functions["f"](x, u)), rtol=1e-13, atol=1e-13
+    )
     a = design(model, op, NMPCSettings(**SMALL))
     b = design(model, L.equilibrium(model, [1.1]), NMPCSettings(**SMALL))
-    stiffer = build_amm(arm_from_document({
-        "name": "onelink", "gravity": [0.0, -9.81], "payload": {"mass": 0.5, "inertia": 2e-3},
-        "links": [{"length": 1.0, "mass_per_length": 1.5, "EI": 600.0, "inertia": 1.5 / 12, "n_modes": 1,
-                   "damping_ratio": 0.03}],
-        "joints": [{"hub_mass": 0.0, "hub_inertia": 0.05, "torque_limit": 15.0}]}, "onelink.toml"), 1)
+    stiffer = build_amm(
+        arm_from_document(
+            {
+                "name": "onelink",
+                "gravity": [0.0, -9.81],
+                "payload": {"mass": 0.5, "inertia": 2e-3},
+                "links": [
+                    {
+                        "length": 1.0,
+                        "mass_per_length": 1.5,
+                        "EI": 600.0,
+                        "inertia": 1.5 / 12,
+                        "n_modes": 1,
+                        "damping_ratio": 0.03,
+                    }
+                ],
+                "joints": [{"hub_mass": 0.0, "hub_inertia": 0.05, "torque_limit": 15.0}],
+            },
+            "onelink.toml",
+        ),
+        1,
+    )
     c = design(stiffer, L.equilibrium(stiffer, [0.5]), NMPCSettings(**SMALL, substeps=a.substeps))
     assert not np.allclose(a.functions["params"], b.functions["params"])
     assert a.functions["linmap"].serialize() == b.functions["linmap"].serialize()
@@ -183,12 +218,17 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
     calls.linearise = linearise
 
     def raising_qp(*args):
-        raise RuntimeError("Error in Function::call for 'nmpc_qp' [HpipmInterface]: Ill-posed problem detected")
+        raise RuntimeError(
+            "Error in Function::call for 'nmpc_qp' [HpipmInterface]: Ill-posed problem detected"
+        )
 
     calls.solve = raising_qp
     u = ctrl.step(0.04, x)
     assert np.all(np.isfinite(u))
-    assert "QP solver error" in ctrl.stats.fallbacks[-1][1] and "Ill-posed" in ctrl.stats.fallbacks[-1][1]
+    assert (
+        "QP solver error" in ctrl.stats.fallbacks[-1][1]
+        and "Ill-posed" in ctrl.stats.fallbacks[-1][1]
+    )
     calls.solve = solve
     ctrl.step(0.06, x)
     assert ctrl.stats.status["solved"] == 2
@@ -202,15 +242,21 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene("studies/scenes/move_joint1_30deg.toml",
-                       ["payload=0.0", "initial.q=[0.0,-150.0,-30.0]", 'target.profile="step"', "duration=4.0"])
-    lqr = run_closed_loop_scene(scene, controller="tests/data/controllers/lqr_full_state.toml", on_divergence="record")
+    scene = load_scene(
+        "studies/scenes/move_joint1_30deg.toml",
+        ["payload=0.0", "initial.q=[0.0,-150.0,-30.0]", 'target.profile="step"', "duration=4.0"],
+    )
+    lqr = run_closed_loop_scene(
+        scene, controller="tests/data/controllers/lqr_full_state.toml", on_divergence="record"
+    )
     assert lqr.summary["metrics"]["settled"] == 1
     nmpc = run_closed_loop_scene(scene, controller="controllers/nmpc.toml", on_divergence="record")
     metrics = nmpc.summary["metrics"]
     assert metrics["stable"] == 1 and metrics["settled"] == 1
     report = nmpc.summary["controller"]
-    assert report["fallbacks"] == sum(v for k, v in report["status"].items() if k.startswith("fallback_"))
+    assert report["fallbacks"] == sum(
+        v for k, v in report["status"].items() if k.startswith("fallback_")
+    )
 
 
 def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
@@ -221,11 +267,17 @@ def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
     model, op = onelink
     dx0 = np.zeros(model.n_x)
     dx0[0] = -0.3
-    variants = {"warm": {"compile": False, "qp_warm_start": True, "deflection_limit": 0.02},
-                "exact": {"compile": False, "sensitivities": "exact", "deflection_limit": 0.02}}
+    variants = {
+        "warm": {"compile": False, "qp_warm_start": True, "deflection_limit": 0.02},
+        "exact": {"compile": False, "sensitivities": "exact", "deflection_limit": 0.02},
+    }
     runs = _run_nmpcs(model, op, dx0, 7, 10, 0.02, variants, block_rounds=3)
     for name in variants:
         a, b = runs["sample"][name], runs["block"][name]
-        assert a["final_joint_error_deg"] == b["final_joint_error_deg"] and a["status"] == b["status"]
+        assert (
+            a["final_joint_error_deg"] == b["final_joint_error_deg"] and a["status"] == b["status"]
+        )
         assert a["final_joint_error_deg"] < np.degrees(0.3)  # the runs moved towards the target
-        assert sum(a["status"].values()) == sum(b["status"].values()) == 7  # every sample once, stats reset between
+        assert (
+            sum(a["status"].values()) == sum(b["status"].values()) == 7
+        )  # every sample once, stats reset between

@@ -6,7 +6,10 @@ import math
 from pathlib import Path
 
 import pytest
+from support import DATA
 
+from flexctrl.errors import SpecError
+from flexctrl.spec.controller import load_controller
 from flexctrl.spec.controller_settings import (
     LQRSettings,
     MPCSettings,
@@ -16,10 +19,7 @@ from flexctrl.spec.controller_settings import (
     SensorSettings,
     ShapedSettings,
 )
-from flexctrl.errors import SpecError
-from flexctrl.spec.controller import load_controller
 
-from support import DATA, ROOT
 SHIPPED = sorted((DATA / "controllers").glob("*.toml"))
 
 
@@ -42,9 +42,12 @@ def test_degrees_in_files_become_radians():
         document = tomllib.loads(path.read_text())
         s = load_controller(path)
         if "weights" in document:
-            assert s.weights.joint == pytest.approx(math.radians(document["weights"]["joint_deg"]), rel=1e-15)
-            assert s.weights.joint_rate == pytest.approx(math.radians(document["weights"]["joint_rate_deg_s"]),
-                                                         rel=1e-15)
+            assert s.weights.joint == pytest.approx(
+                math.radians(document["weights"]["joint_deg"]), rel=1e-15
+            )
+            assert s.weights.joint_rate == pytest.approx(
+                math.radians(document["weights"]["joint_rate_deg_s"]), rel=1e-15
+            )
         noise = document["sensors"]["noise"]
         assert s.sensors.outputs == tuple(document["sensors"]["outputs"])
         assert s.sensors.joints == pytest.approx(math.radians(noise["joints_deg"]), rel=1e-15)
@@ -60,22 +63,53 @@ def _write(tmp_path, text: str) -> Path:
 @pytest.mark.parametrize(
     "text, key, fragments",
     [
-        ('kind = "mpc"\nformulation = "dense"\n', "formulation", ["'dense'", "'sparse'", "'condensed'"]),
+        (
+            'kind = "mpc"\nformulation = "dense"\n',
+            "formulation",
+            ["'dense'", "'sparse'", "'condensed'"],
+        ),
         ('kind = "mpc"\nhorizon = 0\n', "horizon", ["0", "from 1"]),
         ('kind = "mpc"\nhorizn = 20\n', "horizn", ["did you mean 'horizon'"]),
         ('kind = "mpc"\n[osqp]\nmax_iter = -3\n', "osqp.max_iter", ["-3", "from 1"]),
         ('kind = "mpc"\n[osqp]\nrho = "big"\n', "osqp.rho", ["'big'", "not a number"]),
         ('kind = "lqr"\n[weights]\njoint_deg = -1\n', "weights.joint_deg", ["-1", "> 0", "deg"]),
         ('kind = "lqr"\n[weights]\njoint = 0.5\n', "weights.joint", ["renamed 'joint_deg'", "0.5"]),
-        ('kind = "lqr"\n[weights]\njoint_rate = 30\n', "weights.joint_rate", ["renamed 'joint_rate_deg_s'"]),
-        ('kind = "lqr"\n[sensors]\nnoise = { joints = 0.005 }\n', "sensors.noise.joints", ["renamed 'joints_deg'"]),
-        ('kind = "lqr"\n[sensors]\nnoise = { joint_rates = 0.05 }\n', "sensors.noise.joint_rates",
-         ["renamed 'joint_rates_deg_s'"]),
+        (
+            'kind = "lqr"\n[weights]\njoint_rate = 30\n',
+            "weights.joint_rate",
+            ["renamed 'joint_rate_deg_s'"],
+        ),
+        (
+            'kind = "lqr"\n[sensors]\nnoise = { joints = 0.005 }\n',
+            "sensors.noise.joints",
+            ["renamed 'joints_deg'"],
+        ),
+        (
+            'kind = "lqr"\n[sensors]\nnoise = { joint_rates = 0.05 }\n',
+            "sensors.noise.joint_rates",
+            ["renamed 'joint_rates_deg_s'"],
+        ),
         ('kind = "lqr"\n[schedule]\nq2 = [0, 10]\n', "schedule.q2", ["renamed 'q2_deg'"]),
-        ('kind = "lqr"\n[sensors]\noutputs = ["joints", "strian"]\n', "sensors.outputs[1]", ["'strian'", "did you mean 'strain'"]),
-        ('kind = "lqr"\n[sensors]\noutputs = ["state", "joints"]\n', "sensors.outputs", ["'state'", "stands alone"]),
-        ('kind = "lqr"\n[sensors]\nnoise = { joints_deg = -0.1 }\n', "sensors.noise.joints_deg", ["-0.1", ">= 0"]),
-        ('kind = "lqr"\n[schedule]\nq2_deg = [10, 0]\n', "schedule.q2_deg", ["strictly increasing"]),
+        (
+            'kind = "lqr"\n[sensors]\noutputs = ["joints", "strian"]\n',
+            "sensors.outputs[1]",
+            ["'strian'", "did you mean 'strain'"],
+        ),
+        (
+            'kind = "lqr"\n[sensors]\noutputs = ["state", "joints"]\n',
+            "sensors.outputs",
+            ["'state'", "stands alone"],
+        ),
+        (
+            'kind = "lqr"\n[sensors]\nnoise = { joints_deg = -0.1 }\n',
+            "sensors.noise.joints_deg",
+            ["-0.1", ">= 0"],
+        ),
+        (
+            'kind = "lqr"\n[schedule]\nq2_deg = [10, 0]\n',
+            "schedule.q2_deg",
+            ["strictly increasing"],
+        ),
         ('kind = "lqr"\n[schedule]\nx2 = [0, 10]\n', "schedule.x2", ["'q1_deg', 'q2_deg'"]),
         ('kind = "pd"\nkp = [1, 2]\nkd = [1]\n', "kd", ["1 gains", "kp has 2"]),
         ('kind = "pd"\ngravity = "measure"\n', "gravity", ["'measure'", "did you mean 'measured'"]),
@@ -83,9 +117,17 @@ def _write(tmp_path, text: str) -> Path:
         ('kind = "nmpc"\nqp_solver = "gurobi"\n', "qp_solver", ["'gurobi'", "'hpipm'"]),
         ('kind = "shaped"\nshaper = "zvdd"\n', "shaper", ["'zvdd'", "'zvd'"]),
         ('kind = "shaped"\n[pd]\nbandwidth = 0\n', "pd.bandwidth", ["0", "> 0", "Hz"]),
-        ('kind = "shaped"\n[pd.sensors]\noutputs = ["tip"]\n', "pd.sensors.outputs", ["'joint_rates'"]),
+        (
+            'kind = "shaped"\n[pd.sensors]\noutputs = ["tip"]\n',
+            "pd.sensors.outputs",
+            ["'joint_rates'"],
+        ),
         ('kind = "fuzzy"\n', "kind", ["'fuzzy'", "'mpc'"]),
-        ('kind = "mpc"\nbackend = "hpipm"\nformulation = "condensed"\n', "formulation", ["'sparse'"]),
+        (
+            'kind = "mpc"\nbackend = "hpipm"\nformulation = "condensed"\n',
+            "formulation",
+            ["'sparse'"],
+        ),
     ],
 )
 def test_bad_values_name_file_key_value_and_allowed(tmp_path, text, key, fragments):

@@ -11,9 +11,9 @@ import scipy.linalg
 from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.nmpc.controller import interval_functions
-from flexctrl.spec.controller_settings import ShapedSettings
 from flexctrl.control.shaping import Shaper, design_shaper, residual_vibration, zv, zvd
 from flexctrl.scenes.model_files import load_model
+from flexctrl.spec.controller_settings import ShapedSettings
 
 
 @pytest.mark.parametrize("f, zeta", [(2.0, 0.0), (5.3, 0.05), (0.7, 0.3)])
@@ -24,7 +24,9 @@ def test_zv_and_zvd_match_the_analytic_formulas(f, zeta):
     np.testing.assert_allclose(s.amplitudes, [1 / (1 + K), K / (1 + K)], rtol=1e-14)
     np.testing.assert_allclose(s.times, [0.0, Td / 2], rtol=1e-14)
     s = zvd(f, zeta)
-    np.testing.assert_allclose(s.amplitudes, [1 / (1 + K) ** 2, 2 * K / (1 + K) ** 2, K**2 / (1 + K) ** 2], rtol=1e-14)
+    np.testing.assert_allclose(
+        s.amplitudes, [1 / (1 + K) ** 2, 2 * K / (1 + K) ** 2, K**2 / (1 + K) ** 2], rtol=1e-14
+    )
     np.testing.assert_allclose(s.times, [0.0, Td / 2, Td], rtol=1e-14)
     assert s.amplitudes.sum() == pytest.approx(1.0)
 
@@ -56,7 +58,9 @@ def amplitude(state: np.ndarray, f: float, zeta: float) -> float:
 def test_shaped_step_leaves_no_residual_vibration(kind, f, zeta):
     shaper = {"zv": zv, "zvd": zvd}[kind](f, zeta)
     residual = amplitude(oscillator_after(shaper, f, zeta), f, zeta)
-    unshaped = amplitude(oscillator_after(Shaper(np.array([1.0]), np.array([0.0])), f, zeta), f, zeta)
+    unshaped = amplitude(
+        oscillator_after(Shaper(np.array([1.0]), np.array([0.0])), f, zeta), f, zeta
+    )
     assert unshaped == pytest.approx(1.0)
     assert residual < 1e-10
     assert residual_vibration(shaper, f, zeta) < 1e-12
@@ -84,8 +88,11 @@ def test_convolved_shapers_cancel_both_modes():
 
 @pytest.fixture(scope="module")
 def damped3():
-    return load_model("models/subedi3link.toml", fidelity="amm:2",
-                      overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)])
+    return load_model(
+        "models/subedi3link.toml",
+        fidelity="amm:2",
+        overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)],
+    )
 
 
 def test_shaped_controller_reference_steps_through_the_impulses(damped3):
@@ -123,7 +130,9 @@ def test_shaped_move_deflects_the_links_less_than_the_unshaped_step(damped3):
         x = start.x.copy()
         worst = 0.0
         for k in range(1500):
-            x = np.array(F(x, ctrl.step(0.001 * k, ctrl.sensors.measure(x, ctrl.u_previous))), dtype=float).ravel()
+            x = np.array(
+                F(x, ctrl.step(0.001 * k, ctrl.sensors.measure(x, ctrl.u_previous))), dtype=float
+            ).ravel()
             w = np.array(damped3.functions["deflection"](x[:9])[0], dtype=float).ravel()
             worst = max(worst, float(np.max(np.abs(w - static))))
         peak[kind] = worst

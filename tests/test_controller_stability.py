@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.errors import SimulationError
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.spec.scene import load_scene
 from flexctrl.study import execute_run
 
@@ -23,8 +23,13 @@ def _scene(payload: float, q2: float, q3: float):
 
 
 def test_far_from_the_design_point_with_a_heavy_payload_the_lqr_loop_is_unstable():
-    result = run_closed_loop_scene(_scene(4.0, 135.0, 90.0), None, controller="tests/data/controllers/lqr_full_state.toml", plots=False,
-                                   on_divergence="record")
+    result = run_closed_loop_scene(
+        _scene(4.0, 135.0, 90.0),
+        None,
+        controller="tests/data/controllers/lqr_full_state.toml",
+        plots=False,
+        on_divergence="record",
+    )
     m = result.summary["metrics"]
     assert m["stable"] == 0
     assert m["closed_loop_radius"] > 1.0  # linearly unstable too
@@ -33,8 +38,13 @@ def test_far_from_the_design_point_with_a_heavy_payload_the_lqr_loop_is_unstable
 
 
 def test_near_the_design_point_the_same_lqr_is_stable():
-    result = run_closed_loop_scene(_scene(2.0, 0.0, -90.0), None, controller="tests/data/controllers/lqr_full_state.toml", plots=False,
-                                   on_divergence="record")
+    result = run_closed_loop_scene(
+        _scene(2.0, 0.0, -90.0),
+        None,
+        controller="tests/data/controllers/lqr_full_state.toml",
+        plots=False,
+        on_divergence="record",
+    )
     m = result.summary["metrics"]
     assert m["stable"] == 1 and m["closed_loop_radius"] < 1.0
     assert m["divergence_time"] == pytest.approx(result.scene.plant.duration)
@@ -44,16 +54,34 @@ def test_near_the_design_point_the_same_lqr_is_stable():
 def test_a_diverging_run_is_recorded_as_a_finite_ok_row_or_raised_by_simulate(tmp_path):
     """Leaving the bounds stops the run: recorded (stable = 0, divergence_time) or a SimulationError."""
     # a tight deflection bound makes the unstable loop leave it within the run
-    overrides = DESIGN + ["payload=0.0", "initial.q=[0.0, 90.0, 0.0]", "metrics.divergence_deflection=0.01"]
+    overrides = DESIGN + [
+        "payload=0.0",
+        "initial.q=[0.0, 90.0, 0.0]",
+        "metrics.divergence_deflection=0.01",
+    ]
     scene = load_scene(SCENE, overrides)
     with pytest.raises(SimulationError, match="diverged at t = .*link . tip deflection"):
-        run_closed_loop_scene(scene, None, controller="tests/data/controllers/lqr_full_state.toml", plots=False)
-    settings = {"executor": "closed_loop", "scene": str(SCENE), "model": "models/subedi3link.toml",
-                "controller": "tests/data/controllers/lqr_full_state.toml", "payload": 0.0, "q0_deg": [0.0, 90.0, 0.0], "fidelity": None,
-                "overrides": [f"scene.{o}" for o in DESIGN] + ["scene.metrics.divergence_deflection=0.01"],
-                "digests": {}, "seed": 1}
-    row = execute_run("closed_loop", settings, {"metrics": ["stable", "divergence_time", "tip_residual_rms"]})
+        run_closed_loop_scene(
+            scene, None, controller="tests/data/controllers/lqr_full_state.toml", plots=False
+        )
+    settings = {
+        "executor": "closed_loop",
+        "scene": str(SCENE),
+        "model": "models/subedi3link.toml",
+        "controller": "tests/data/controllers/lqr_full_state.toml",
+        "payload": 0.0,
+        "q0_deg": [0.0, 90.0, 0.0],
+        "fidelity": None,
+        "overrides": [f"scene.{o}" for o in DESIGN] + ["scene.metrics.divergence_deflection=0.01"],
+        "digests": {},
+        "seed": 1,
+    }
+    row = execute_run(
+        "closed_loop", settings, {"metrics": ["stable", "divergence_time", "tip_residual_rms"]}
+    )
     assert row["status"] == "ok", row["error"]
     assert row["metrics"]["stable"] == 0
     assert 0 < row["metrics"]["divergence_time"] < 5.0
-    assert row["trajectories"]["t"][-1] == pytest.approx(row["metrics"]["divergence_time"], abs=0.011)
+    assert row["trajectories"]["t"][-1] == pytest.approx(
+        row["metrics"]["divergence_time"], abs=0.011
+    )

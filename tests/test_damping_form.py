@@ -14,7 +14,9 @@ SCENE = "studies/scenes/free_vibration_damped.toml"
 
 
 def _modal_damping(form):
-    scene = load_scene(SCENE, [f"damping.form='{form}'", "fidelity='amm:1'"] if form else ["fidelity='amm:1'"])
+    scene = load_scene(
+        SCENE, [f"damping.form='{form}'", "fidelity='amm:1'"] if form else ["fidelity='amm:1'"]
+    )
     arm = scene_arm(scene)
     model = build_model(arm, scene.fidelity, reference_q=scene.q0)
     D = model.functions["D"]
@@ -37,7 +39,12 @@ def test_scene_damping_form_rejects_an_unknown_value_on_one_line():
     with pytest.raises(SpecError) as info:
         load_scene(SCENE, ["damping.form='eq68'"])
     text = str(info.value)
-    assert "damping.form" in text and "'eq68'" in text and "'ratio', 'paper'" in text and "\n" not in text
+    assert (
+        "damping.form" in text
+        and "'eq68'" in text
+        and "'ratio', 'paper'" in text
+        and "\n" not in text
+    )
 
 
 def test_paper_form_is_refused_by_finite_elements():

@@ -14,9 +14,10 @@ from flexctrl.study import load_study, run_study
 
 distributed = pytest.importorskip("distributed")
 
+from support import DATA as SHIPPED
+
 from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget  # noqa: E402
 from flexctrl.study.dask_cluster import LocalhostCluster  # noqa: E402
-from support import DATA as SHIPPED
 
 TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
@@ -38,15 +39,21 @@ def stable(table) -> list[dict]:
     return [{k: v for k, v in row.items() if k not in VOLATILE} for row in table.rows]
 
 
-def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(slow_study, tmp_path, monkeypatch):
-    for name in THREAD_VARIABLES:  # as outside `make test` (which sets them to 1): the workers get the budget from us
+def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(
+    slow_study, tmp_path, monkeypatch
+):
+    for name in (
+        THREAD_VARIABLES
+    ):  # as outside `make test` (which sets them to 1): the workers get the budget from us
         monkeypatch.delenv(name, raising=False)
     spec = load_study(slow_study)
     pool = run_study(spec, tmp_path / "pool", workers=2, progress="none", report=False)
     out = tmp_path / "dask"
     with LocalhostCluster(workers=2, threads=1) as cluster:
         pids = [p.pid for p in cluster.workers]
-        assert worker_blas_threads(cluster) == {pid: [blas_thread_budget("auto", 2)] * 2 for pid in pids}
+        assert worker_blas_threads(cluster) == {
+            pid: [blas_thread_budget("auto", 2)] * 2 for pid in pids
+        }
         killed: dict = {}
 
         def kill_after_some_runs():
@@ -69,7 +76,9 @@ def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(s
     assert stable(table) == stable(pool.table())
     assert "dask scheduler tcp://127.0.0.1:" in result.backend and "2 workers" in result.backend
     workers = {int(row["worker"].rsplit(":", 1)[1]) for row in table.rows}
-    assert workers == set(pids) and os.getpid() not in workers  # both worker processes ran, not this one
+    assert (
+        workers == set(pids) and os.getpid() not in workers
+    )  # both worker processes ran, not this one
 
 
 def worker_blas_threads(cluster: LocalhostCluster) -> dict[int, list[int]]:
@@ -96,6 +105,14 @@ def test_cluster_workers_get_the_blas_thread_budget_in_their_environment(monkeyp
     auto = LocalhostCluster(workers=2)
     assert auto.blas_threads == blas_thread_budget("auto", 2)
     assert all(auto._worker_env()[name] == str(auto.blas_threads) for name in THREAD_VARIABLES)
-    assert all(LocalhostCluster(workers=2, blas_threads=3)._worker_env()[name] == "3" for name in THREAD_VARIABLES)
-    assert all(LocalhostCluster(workers=2, blas_threads=0)._worker_env()[name] == "7" for name in THREAD_VARIABLES)
-    assert all(auto._env()[name] == "7" for name in THREAD_VARIABLES)  # the scheduler's is left as it is
+    assert all(
+        LocalhostCluster(workers=2, blas_threads=3)._worker_env()[name] == "3"
+        for name in THREAD_VARIABLES
+    )
+    assert all(
+        LocalhostCluster(workers=2, blas_threads=0)._worker_env()[name] == "7"
+        for name in THREAD_VARIABLES
+    )
+    assert all(
+        auto._env()[name] == "7" for name in THREAD_VARIABLES
+    )  # the scheduler's is left as it is

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 from support import ROOT
+
 FIGURES = ROOT / "docs" / "figures"
 IMAGE = re.compile(r"!\[[^\]]*\]\(([^)]+\.png)\)")
 
@@ -24,8 +25,11 @@ def test_every_figure_is_shown_and_every_shown_figure_exists():
     pngs = sorted(FIGURES.glob("*.png"))
     assert len(pngs) >= 5
     assert [p.name for p in pngs if p.resolve() not in shown] == []
-    missing = [f"{p.relative_to(ROOT)} (in {', '.join(docs)})" for p, docs in shown.items()
-               if ROOT / "docs" in p.parents and not p.is_file()]
+    missing = [
+        f"{p.relative_to(ROOT)} (in {', '.join(docs)})"
+        for p, docs in shown.items()
+        if ROOT / "docs" in p.parents and not p.is_file()
+    ]
     assert missing == []
 
 

@@ -12,25 +12,29 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
+from support import MODEL
 
-from flexctrl.dynamics.fem.fem_arm import (build_fem_model, fem_coordinate_names, generalized_frequencies,
-                                       locked_matrices, relax_axial)
+from flexctrl.dynamics.fem.fem_arm import (
+    build_fem_model,
+    fem_coordinate_names,
+    generalized_frequencies,
+    locked_matrices,
+    relax_axial,
+)
 from flexctrl.dynamics.fem.newmark import simulate_model_newmark
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.errors import SpecError
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.modal.fem_modes import link_frequencies_fem
 from flexctrl.modal.paper_data import SUBEDI_TABLE3_HZ, SUBEDI_TABLE3_ROUNDING_HZ
-from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.spec.arm import load_arm
 
-from support import MODEL
 CONFIGS = [(0.0, 0.0, 0.0), (0.0, 90.0, 0.0), (0.0, 45.0, -90.0)]
 
 
@@ -49,8 +53,9 @@ def no_gravity(arm):
 
 
 def stiff_axial(arm, factor=1e4):
-    return dataclasses.replace(arm, links=tuple(dataclasses.replace(l, EA=l.axial_stiffness() * factor)
-                                                for l in arm.links))
+    return dataclasses.replace(
+        arm, links=tuple(dataclasses.replace(l, EA=l.axial_stiffness() * factor) for l in arm.links)
+    )
 
 
 # -- 1. per-link clamped-mass check ----------------------------------------------------------------
@@ -66,7 +71,9 @@ def test_link_frequencies_fem_converge_to_clamped_mass_modes(arm, payload):
         assert 3.5 < math.log2(second[1] / second[2]) < 4.5  # h^4 in frequency
         f16 = link_frequencies_fem(a, q, link, 2, 16)
         assert np.all(np.abs(f16 - exact) < 1e-3)  # Hz
-        np.testing.assert_allclose(f16, SUBEDI_TABLE3_HZ[payload][link], atol=SUBEDI_TABLE3_ROUNDING_HZ + 0.01)
+        np.testing.assert_allclose(
+            f16, SUBEDI_TABLE3_HZ[payload][link], atol=SUBEDI_TABLE3_ROUNDING_HZ + 0.01
+        )
 
 
 def test_link_frequencies_fem_validates_its_arguments(arm):
@@ -95,7 +102,9 @@ def test_model_interface(fem4):
     assert m.coordinate_names == fem_coordinate_names(3, 4)
     assert m.coordinate_names[:6] == ("q1", "q2", "q3", "w1_1", "th1_1", "w1_2")
     assert m.n_q == 3 + 3 * 4 * 3
-    assert {"M", "c", "g", "K", "D", "f", "energies", "tip", "hubs", "deflection"} <= set(m.functions)
+    assert {"M", "c", "g", "K", "D", "f", "energies", "tip", "hubs", "deflection"} <= set(
+        m.functions
+    )
     rng = np.random.default_rng(3)
     q = np.r_[rng.uniform(-1, 1, 3), 1e-3 * rng.normal(size=m.n_q - 3)]
     qd = rng.normal(size=m.n_q)
@@ -120,12 +129,14 @@ def test_build_rejects_what_it_cannot_model(arm):
         build_fem_model(arm, 0)
     with pytest.raises(SpecError, match="n_elements"):
         build_fem_model(arm, 65)
-    prismatic = dataclasses.replace(arm, joints=(dataclasses.replace(arm.joints[0], type="prismatic"),)
-                                    + arm.joints[1:])
+    prismatic = dataclasses.replace(
+        arm, joints=(dataclasses.replace(arm.joints[0], type="prismatic"),) + arm.joints[1:]
+    )
     with pytest.raises(SpecError, match="joints\\[1\\].type"):
         build_fem_model(prismatic, 2)
-    no_ea = dataclasses.replace(arm, links=(dataclasses.replace(arm.links[0], section=None, EA=None),)
-                                + arm.links[1:])
+    no_ea = dataclasses.replace(
+        arm, links=(dataclasses.replace(arm.links[0], section=None, EA=None),) + arm.links[1:]
+    )
     with pytest.raises(SpecError, match="EA"):
         build_fem_model(no_ea, 2)
 
@@ -140,8 +151,8 @@ def smooth_state(m, rng, slope):
     for i in range(3):
         s = rng.uniform(-slope, slope)
         base = 3 + 3 * N * i
-        q[base:base + 2 * N:2] = s * x**2 / 3.0
-        q[base + 1:base + 2 * N:2] = s * x / 1.5
+        q[base : base + 2 * N : 2] = s * x**2 / 3.0
+        q[base + 1 : base + 2 * N : 2] = s * x / 1.5
     return relax_axial(m, q)
 
 
@@ -161,12 +172,21 @@ def test_mass_matrix_symmetric_positive_definite_and_dynamics_consistent(fem4):
         # c = Mdot qd - 1/2 d(qd^T M qd)/dq, with derivatives by central differences of M
         e = 1e-6
         Mdot = (m.mass_matrix(q + e * qd) - m.mass_matrix(q - e * qd)) / (2 * e)
-        grad = np.array([(qd @ m.mass_matrix(q + e * ek) @ qd - qd @ m.mass_matrix(q - e * ek) @ qd) / (2 * e)
-                         for ek in np.eye(m.n_q)])
+        grad = np.array(
+            [
+                (qd @ m.mass_matrix(q + e * ek) @ qd - qd @ m.mass_matrix(q - e * ek) @ qd)
+                / (2 * e)
+                for ek in np.eye(m.n_q)
+            ]
+        )
         np.testing.assert_allclose(m.coriolis(q, qd), Mdot @ qd - 0.5 * grad, rtol=1e-6, atol=1e-6)
         rhs = np.r_[u, np.zeros(m.n_q - 3)] - m.coriolis(q, qd) - m.gravity(q) - K @ q - D @ qd
-        np.testing.assert_allclose(m.forward_dynamics(q, qd, u), np.linalg.solve(M, rhs), rtol=1e-9,
-                                   atol=1e-9 * np.abs(rhs).max())
+        np.testing.assert_allclose(
+            m.forward_dynamics(q, qd, u),
+            np.linalg.solve(M, rhs),
+            rtol=1e-9,
+            atol=1e-9 * np.abs(rhs).max(),
+        )
 
 
 def test_rigid_limit_matches_the_rigid_arm(arm):
@@ -181,16 +201,26 @@ def test_rigid_limit_matches_the_rigid_arm(arm):
         q, qd = np.r_[qr, np.zeros(m.n_q - 3)], np.r_[qdr, np.zeros(m.n_q - 3)]
         np.testing.assert_allclose(m.mass_matrix(q)[:3, :3], rigid.mass_matrix(qr), rtol=1e-13)
         np.testing.assert_allclose(m.gravity(q)[:3], rigid.gravity(qr), rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(m.coriolis(q, qd)[:3], rigid.coriolis(qr, qdr), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            m.coriolis(q, qd)[:3], rigid.coriolis(qr, qdr), rtol=1e-12, atol=1e-12
+        )
     # stiff links move like the rigid arm: 0.3 s of the bang-bang torque at joint 3, no gravity
-    stiff = no_gravity(dataclasses.replace(a, links=tuple(dataclasses.replace(l, EI=l.EI * 1e4)
-                                                          for l in a.links)))
+    stiff = no_gravity(
+        dataclasses.replace(a, links=tuple(dataclasses.replace(l, EI=l.EI * 1e4) for l in a.links))
+    )
     fem, rig = build_fem_model(stiff, 2), build_model(no_gravity(a), "rigid")
     # a smooth torque: Newmark's endpoint sampling of a bang-bang step would shift its impulse
     torque = lambda t: np.array([0.0, 0.0, 50.0 * math.sin(10 * math.pi * t) if t < 0.2 else 0.0])  # noqa: E731
     res = simulate_model_newmark(fem, np.zeros(fem.n_x), 0.3, 1e-3, torque=torque)
-    sol = solve_ivp(lambda t, y: np.r_[y[3:], rig.forward_dynamics(y[:3], y[3:], torque(t))], (0, 0.3),
-                    np.zeros(6), t_eval=res.t, rtol=1e-10, atol=1e-12, max_step=1e-3)
+    sol = solve_ivp(
+        lambda t, y: np.r_[y[3:], rig.forward_dynamics(y[:3], y[3:], torque(t))],
+        (0, 0.3),
+        np.zeros(6),
+        t_eval=res.t,
+        rtol=1e-10,
+        atol=1e-12,
+        max_step=1e-3,
+    )
     assert np.abs(sol.y[2]).max() > 0.1  # joint 3 swings
     np.testing.assert_allclose(res.q[:, :3], sol.y[:3].T, atol=2e-4)
 
@@ -200,8 +230,10 @@ def test_rigid_limit_matches_the_rigid_arm(arm):
 @pytest.mark.parametrize("q_deg", CONFIGS)
 def test_locked_frequencies_converge_from_above_at_fourth_order(arm, payload, q_deg):
     a = arm.with_payload(payload)
-    lam = {N: generalized_frequencies(*locked_matrices(a, N, np.radians(q_deg))[::-1])[:6] ** 2
-           for N in (2, 4, 8, 16, 32)}
+    lam = {
+        N: generalized_frequencies(*locked_matrices(a, N, np.radians(q_deg))[::-1])[:6] ** 2
+        for N in (2, 4, 8, 16, 32)
+    }
     for N in (2, 4, 8, 16):  # nested meshes, consistent mass: monotone from above
         assert np.all(lam[N] >= lam[2 * N] * (1 - 1e-10))
     err = {N: (lam[N] - lam[32]) / lam[32] for N in (4, 8)}
@@ -239,9 +271,15 @@ def test_free_motion_conserves_energy(arm):
     q0 = relax_axial(m, np.r_[np.radians([10.0, 40.0, -60.0]), 2e-3 * rng.normal(size=m.n_q - 3)])
     qd0 = np.r_[0.5, -0.3, 1.0, np.zeros(m.n_q - 3)]
     f = m.functions["f"]
-    sol = solve_ivp(lambda t, x: np.asarray(f(x, np.zeros(3))).ravel(), (0.0, 0.05), np.r_[q0, qd0],
-                    method="DOP853", rtol=1e-11, atol=1e-13)
-    E = np.array([m.energies(x[:m.n_q], x[m.n_q:])["E_total"] for x in sol.y.T])
+    sol = solve_ivp(
+        lambda t, x: np.asarray(f(x, np.zeros(3))).ravel(),
+        (0.0, 0.05),
+        np.r_[q0, qd0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+    )
+    E = np.array([m.energies(x[: m.n_q], x[m.n_q :])["E_total"] for x in sol.y.T])
     assert np.ptp(E) < 1e-8 * np.abs(E).max()
 
 
@@ -261,17 +299,29 @@ def test_locked_free_vibration_energy_with_newmark(arm):
         res = simulate_model_newmark(m, np.r_[q0, np.zeros(m.n_q)], 0.3, dt, locked=q_r)
         E = np.array([m.energies(q, qd)["E_total"] for q, qd in zip(res.q, res.qd)])
         drift[dt] = np.ptp(E) / E[0]
-        assert res.phi_violation.max() < 1e-12 and np.abs(res.qd[:, :3]).max() < 1e-12  # joints held
+        assert (
+            res.phi_violation.max() < 1e-12 and np.abs(res.qd[:, :3]).max() < 1e-12
+        )  # joints held
         assert np.abs(res.q[:, 3 + tip]).max() == pytest.approx(0.01, rel=0.02)
     assert drift[1e-3] < 1e-5
     assert drift[1e-3] / drift[5e-4] > 3.0  # second order
     # the linearised locked system: energy exact to rounding
     n = m.n_q - 3
-    lin = DAEProblem(n_q=n, n_c=0, mass=lambda q, t: M0, force=lambda q, qd, t: -K0 @ q,
-                     phi=lambda q, t: np.zeros(0), phi_q=lambda q, t: np.zeros((0, n)),
-                     phi_t=lambda q, t: np.zeros(0), h=lambda q, qd, t: np.zeros(0),
-                     force_q=lambda q, qd, t: -K0, force_qd=lambda q, qd, t: np.zeros((n, n)),
-                     h_q=lambda q, qd, t: np.zeros((0, n)), h_qd=lambda q, qd, t: np.zeros((0, n)), linear=True)
+    lin = DAEProblem(
+        n_q=n,
+        n_c=0,
+        mass=lambda q, t: M0,
+        force=lambda q, qd, t: -K0 @ q,
+        phi=lambda q, t: np.zeros(0),
+        phi_q=lambda q, t: np.zeros((0, n)),
+        phi_t=lambda q, t: np.zeros(0),
+        h=lambda q, qd, t: np.zeros(0),
+        force_q=lambda q, qd, t: -K0,
+        force_qd=lambda q, qd, t: np.zeros((n, n)),
+        h_q=lambda q, qd, t: np.zeros((0, n)),
+        h_qd=lambda q, qd, t: np.zeros((0, n)),
+        linear=True,
+    )
     static = np.linalg.solve(K0, np.eye(n)[tip])  # static tip-load shape: every mode excited
     r = simulate(lin, static, np.zeros(n), 0.3, 1e-3)
     El = np.array([0.5 * v @ M0 @ v + 0.5 * x @ K0 @ x for x, v in zip(r.q, r.qd)])
@@ -283,7 +333,11 @@ def rotating_frequency(model, spin):
     """Lowest transverse frequency (rad/s) of a one-link model spun at ``spin`` rad/s about its joint."""
     n = model.n_q
     q, qd = ca.SX.sym("q", n), ca.SX.sym("qd", n)
-    F = (model.functions["c"](q, qd) + model.functions["g"](q) + ca.mtimes(model.functions["K"]()["K"], q))[1:]
+    F = (
+        model.functions["c"](q, qd)
+        + model.functions["g"](q)
+        + ca.mtimes(model.functions["K"]()["K"], q)
+    )[1:]
     fun = ca.Function("F", [q, qd], [F, ca.jacobian(F, q)[:, 1:], ca.jacobian(F, qd)[:, 1:]])
     rate = np.r_[spin, np.zeros(n - 1)]
     qf = np.zeros(n - 1)
@@ -295,7 +349,9 @@ def rotating_frequency(model, spin):
             break
     _, KT, C = (np.asarray(v, dtype=float) for v in fun(np.r_[0.0, qf], rate))
     M = model.mass_matrix(np.r_[0.0, qf])[1:, 1:]
-    A = np.block([[np.zeros_like(M), np.eye(n - 1)], [-np.linalg.solve(M, KT), -np.linalg.solve(M, C)]])
+    A = np.block(
+        [[np.zeros_like(M), np.eye(n - 1)], [-np.linalg.solve(M, KT), -np.linalg.solve(M, C)]]
+    )
     ev = np.linalg.eigvals(A)
     return np.sort(np.abs(ev.imag[ev.imag > 1e-6]))[0]
 
@@ -304,8 +360,13 @@ def rotating_frequency(model, spin):
 def test_axial_shortening_gives_southwell_centrifugal_stiffening(arm, shortening, coefficient):
     """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2
     (Southwell; the -1 is the frame's softening, the 1.1933 Pan's axial-force term)."""
-    one = dataclasses.replace(arm.with_payload(0.0), links=arm.links[2:], configuration=(0.0,), gravity=(0.0, 0.0),
-                              joints=(dataclasses.replace(arm.joints[2], hub_mass=0.0),))
+    one = dataclasses.replace(
+        arm.with_payload(0.0),
+        links=arm.links[2:],
+        configuration=(0.0,),
+        gravity=(0.0, 0.0),
+        joints=(dataclasses.replace(arm.joints[2], hub_mass=0.0),),
+    )
     m = build_fem_model(one, 8, axial_shortening=shortening)
     w0 = rotating_frequency(m, 0.0)
     spin = 0.1 * w0
@@ -317,8 +378,12 @@ def test_axial_shortening_under_gravity(arm):
     """A hanging link with its payload is stiffened by the weight below each section, a standing one
     softened by as much (to first order): d(omega^2) = g int (rho (L - x) + m_t) phi'^2 / m_l for the
     clamped-mass mode phi (Rayleigh, exact to first order). Without the term neither changes."""
-    one = dataclasses.replace(arm.with_payload(2.0), links=arm.links[2:], configuration=(0.0,),
-                              joints=(dataclasses.replace(arm.joints[2], hub_mass=0.0),))
+    one = dataclasses.replace(
+        arm.with_payload(2.0),
+        links=arm.links[2:],
+        configuration=(0.0,),
+        joints=(dataclasses.replace(arm.joints[2], hub_mass=0.0),),
+    )
 
     def lowest(model, angle):  # linearised about the sagging equilibrium, joint clamped
         n = model.n_q
@@ -352,4 +417,6 @@ def test_relax_axial_removes_membrane_strain(fem4):
     K = np.array(fem4.functions["K"]()["K"])
     e_bending = 0.5 * bend @ K @ bend
     assert fem4.energies(q, np.zeros(fem4.n_q))["E_el"] == pytest.approx(e_bending, rel=1e-9)
-    assert fem4.energies(bend, np.zeros(fem4.n_q))["E_el"] > 1.2 * e_bending  # unrelaxed: membrane strain
+    assert (
+        fem4.energies(bend, np.zeros(fem4.n_q))["E_el"] > 1.2 * e_bending
+    )  # unrelaxed: membrane strain

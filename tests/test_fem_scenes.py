@@ -5,11 +5,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
+from support import DATA
 
 from flexctrl.dynamics.fem.rp_arm import RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.sliding_beam import FAST_PULL, FAST_PUSH, simulate_sliding_beam
@@ -20,7 +20,6 @@ from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import read_toml
 
-from support import DATA, ROOT
 SCENES = DATA / "studies" / "scenes"
 BK = ("bk_slow_push", "bk_fast_push", "bk_fast_pull")
 HEADER = "t,W,tip_y,phi_max,phidot_max"
@@ -68,7 +67,9 @@ def test_push_and_pull_coincide_without_axial_shortening(tmp_path):
             out = tmp_path / f"{name}_{flag}"
             run_fem_scene(doc, src, out, None)
             tips[name, flag] = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)[:, 2]
-    np.testing.assert_allclose(tips["bk_fast_push", "false"], tips["bk_fast_pull", "false"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        tips["bk_fast_push", "false"], tips["bk_fast_pull", "false"], rtol=0, atol=1e-12
+    )
     assert np.abs(tips["bk_fast_push", "true"] - tips["bk_fast_pull", "true"]).max() > 2e-3
 
 
@@ -78,20 +79,25 @@ def test_fidelity_sets_the_element_count():
     assert summary["n_elements"] == 8 and summary["model"]["ndof"] == 18
     with pytest.raises(SpecError, match="fem:N"):
         run_fem_scene(doc, src, None, Fidelity("amm", 2))
-    doc, src = scene("bk_fast_pull", "duration=0.05", "fidelity='fem:6'")  # as `simulate --fidelity` writes it
+    doc, src = scene(
+        "bk_fast_pull", "duration=0.05", "fidelity='fem:6'"
+    )  # as `simulate --fidelity` writes it
     assert run_fem_scene(doc, src, None, None)["n_elements"] == 6
     assert run_fem_scene(doc, src, None, "fem:2")["n_elements"] == 2  # the argument wins
 
 
-@pytest.mark.parametrize("override, key, words", [
-    ("axial_shortenning=false", "axial_shortenning", "did you mean 'axial_shortening'"),
-    ("tracked_end='X'", "tracked_end", "allowed: 'H', 'E'"),
-    ("axial_shortening=1", "axial_shortening", "allowed: true or false"),
-    ("C1=0.9", "C1", "within [0, L - D]"),
-    ("dt=5.0", "dt", "allowed: 0 < dt <= duration"),
-    ("kind='sliding'", "kind", "allowed: 'sliding_beam', 'rp_arm'"),
-    ("n_elements=0", "n_elements", "allowed: an integer from 1"),
-])
+@pytest.mark.parametrize(
+    "override, key, words",
+    [
+        ("axial_shortenning=false", "axial_shortenning", "did you mean 'axial_shortening'"),
+        ("tracked_end='X'", "tracked_end", "allowed: 'H', 'E'"),
+        ("axial_shortening=1", "axial_shortening", "allowed: true or false"),
+        ("C1=0.9", "C1", "within [0, L - D]"),
+        ("dt=5.0", "dt", "allowed: 0 < dt <= duration"),
+        ("kind='sliding'", "kind", "allowed: 'sliding_beam', 'rp_arm'"),
+        ("n_elements=0", "n_elements", "allowed: an integer from 1"),
+    ],
+)
 def test_scene_errors_name_file_key_value_and_allowed(override, key, words):
     doc, src = scene("bk_slow_push", override)
     with pytest.raises(SpecError) as info:
@@ -112,7 +118,9 @@ def test_rp_scene_runs(tmp_path):
 
 
 # -- the R-P arm -------------------------------------------------------------------------------------------
-BK_RP = RPArmSpec("bk", length=1.0, mass_per_length=1.0, EI=1.0, support_inner=0.55, support_outer=0.8)
+BK_RP = RPArmSpec(
+    "bk", length=1.0, mass_per_length=1.0, EI=1.0, support_inner=0.55, support_outer=0.8
+)
 
 
 @pytest.mark.parametrize("case", [FAST_PUSH, FAST_PULL], ids=lambda c: c.name)
@@ -122,8 +130,16 @@ def test_rp_arm_without_rotation_is_the_sliding_beam(case, driven_end):
     c = dataclasses.replace(case, driven_end=driven_end)
     ref = simulate_sliding_beam(c, 4, dt=1e-3, duration=0.5)
     motion = RPMotion(c.C1, c.C2, c.T, theta0=0.7, dtheta=0.0)
-    res = simulate_rp_arm(BK_RP, motion, 4, dt=1e-3, duration=0.5, driven_end=driven_end,
-                          tracked_end=c.tracked_end, initial="static_load")
+    res = simulate_rp_arm(
+        BK_RP,
+        motion,
+        4,
+        dt=1e-3,
+        duration=0.5,
+        driven_end=driven_end,
+        tracked_end=c.tracked_end,
+        initial="static_load",
+    )
     np.testing.assert_allclose(res.tip_y, ref.tip_y, rtol=0, atol=1e-12)
     np.testing.assert_allclose(res.lam, ref.lam, rtol=1e-9, atol=1e-12)
 
@@ -142,7 +158,9 @@ def test_rp_arm_constraints_and_kinematics(rp_run):
     assert res.W[-1] == pytest.approx(0.7) and res.theta[-1] == pytest.approx(math.radians(60.0))
     np.testing.assert_allclose(res.tip_world[0], [1.1, 0.0])
     radius = np.hypot(*res.tip_world[-1])
-    assert radius == pytest.approx(spec.support_outer + 0.7, abs=1e-5)  # 1.5 m, up to the deflection
+    assert radius == pytest.approx(
+        spec.support_outer + 0.7, abs=1e-5
+    )  # 1.5 m, up to the deflection
 
 
 def test_rp_arm_follows_the_quasi_static_deflection(rp_run):
@@ -174,8 +192,12 @@ def test_rp_arm_energy_balance(rp_run):
         res = simulate_rp_arm(spec, motion, 8, dt=dt, duration=1.2)
         m, prob = res.model, res.model.problem()
         E = np.array([m.vibration_energy(q, qd) for q, qd in zip(res.q, res.qd)])
-        power = np.array([qd @ (prob.force(q, qd, t) + m.K @ q - prob.phi_q(q, t).T @ lam)
-                          for t, q, qd, lam in zip(res.t, res.q, res.qd, res.lam)])
+        power = np.array(
+            [
+                qd @ (prob.force(q, qd, t) + m.K @ q - prob.phi_q(q, t).T @ lam)
+                for t, q, qd, lam in zip(res.t, res.q, res.qd, res.lam)
+            ]
+        )
         work = cumulative_trapezoid(power, res.t, initial=0.0)
         errors[dt] = np.abs(E - E[0] - work).max() / E.max()
         after = res.t > motion.T

@@ -9,8 +9,14 @@ import pytest
 from flexctrl.control.nmpc.hpipm_ocp import HpipmOCP
 
 N, NX, NU = 8, 4, 2
-TIGHT = {"mode": "robust", "iter_max": 100, "res_g_max": 1e-11, "res_b_max": 1e-11, "res_d_max": 1e-11,
-         "res_m_max": 1e-11}
+TIGHT = {
+    "mode": "robust",
+    "iter_max": 100,
+    "res_g_max": 1e-11,
+    "res_b_max": 1e-11,
+    "res_d_max": 1e-11,
+    "res_m_max": 1e-11,
+}
 
 
 def _problem(seed: int = 3):
@@ -37,9 +43,13 @@ def _stacked(A, B, b, Q, R, S, q, r, x0):
         H[x, x], H[u, u], H[u, x], H[x, u] = Q, R, S, S.T
         g[x], g[u] = q[k], r[k]
         rows = slice(k * NX, (k + 1) * NX)
-        E[rows, x], E[rows, u], E[rows, (k + 1) * blk:(k + 1) * blk + NX] = A[k], B[k], -np.eye(NX)
+        E[rows, x], E[rows, u], E[rows, (k + 1) * blk : (k + 1) * blk + NX] = (
+            A[k],
+            B[k],
+            -np.eye(NX),
+        )
         e[rows] = -b[k]
-    H[N * blk:, N * blk:], g[N * blk:] = 2 * Q, q[N]
+    H[N * blk :, N * blk :], g[N * blk :] = 2 * Q, q[N]
     return H, g, E, e
 
 
@@ -87,17 +97,31 @@ def test_direct_hpipm_finds_casadi_conics_optimum_with_bounds_binding():
     lbx, ubx = np.full(nw, -np.inf), np.full(nw, np.inf)
     lbx[:NX] = ubx[:NX] = x0
     for k in range(N):
-        lbx[k * (NX + NU) + NX:(k + 1) * (NX + NU)] = -bound
-        ubx[k * (NX + NU) + NX:(k + 1) * (NX + NU)] = bound
+        lbx[k * (NX + NU) + NX : (k + 1) * (NX + NU)] = -bound
+        ubx[k * (NX + NU) + NX : (k + 1) * (NX + NU)] = bound
     Hs, Es = ca.DM(ca.sparsify(ca.DM(H))), ca.DM(ca.sparsify(ca.DM(E)))
-    qp = ca.conic("reference", "hpipm", {"h": Hs.sparsity(), "a": Es.sparsity()},
-                  {"N": N, "nx": [NX] * (N + 1), "nu": [NU] * N + [0], "ng": [0] * (N + 1), "error_on_fail": False,
-                   "hpipm": TIGHT})
-    reference = np.asarray(qp(h=Hs, g=g, a=Es, lba=e, uba=e, lbx=lbx, ubx=ubx)["x"], dtype=float).ravel()
+    qp = ca.conic(
+        "reference",
+        "hpipm",
+        {"h": Hs.sparsity(), "a": Es.sparsity()},
+        {
+            "N": N,
+            "nx": [NX] * (N + 1),
+            "nu": [NU] * N + [0],
+            "ng": [0] * (N + 1),
+            "error_on_fail": False,
+            "hpipm": TIGHT,
+        },
+    )
+    reference = np.asarray(
+        qp(h=Hs, g=g, a=Es, lba=e, uba=e, lbx=lbx, ubx=ubx)["x"], dtype=float
+    ).ravel()
     w, stats = _direct(*data, bound=bound)
     assert stats["success"]
-    inputs = np.concatenate([w[k * (NX + NU) + NX:(k + 1) * (NX + NU)] for k in range(N)])
-    assert np.sum(np.isclose(np.abs(inputs), bound, atol=1e-7)) >= 3  # the bounds bind: not the unbounded optimum
+    inputs = np.concatenate([w[k * (NX + NU) + NX : (k + 1) * (NX + NU)] for k in range(N)])
+    assert (
+        np.sum(np.isclose(np.abs(inputs), bound, atol=1e-7)) >= 3
+    )  # the bounds bind: not the unbounded optimum
     np.testing.assert_allclose(w, reference, rtol=0, atol=1e-7)
 
 

@@ -1,20 +1,17 @@
 """The Jacobian kept once per lifted model structure gives the per-model Jacobian to the last bit."""
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 import pytest
+from support import DATA
 
 import flexctrl as fc
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.jacobians import SHARED, jacobian_function
 from flexctrl.dynamics.parametric import FROM_LIFTED
 from flexctrl.linear import Linearizer, equilibrium
-
-
-from support import DATA, ROOT
 
 
 @pytest.fixture(scope="module")
@@ -24,13 +21,19 @@ def arm():
 
 def _at(fun, model, seed=0):
     rng = np.random.default_rng(seed)
-    return [np.array(m, dtype=float) for m in fun(rng.uniform(-0.2, 0.2, model.n_x), rng.uniform(-5, 5, model.n_u))]
+    return [
+        np.array(m, dtype=float)
+        for m in fun(rng.uniform(-0.2, 0.2, model.n_x), rng.uniform(-5, 5, model.n_u))
+    ]
 
 
 def test_one_structure_serves_every_configuration_with_the_same_bits(arm):
     SHARED.clear()
     FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
-    for fidelity, poses in (("amm:2", ([0, 0, 0], [0, 1.2, -0.7], [0, 1.57, 0])), ("amm:3", ([0, 0, 0], [0, -0.5, 1.0]))):
+    for fidelity, poses in (
+        ("amm:2", ([0, 0, 0], [0, 1.2, -0.7], [0, 1.57, 0])),
+        ("amm:3", ([0, 0, 0], [0, -0.5, 1.0])),
+    ):
         for q in poses:
             model = build_model(arm, fidelity, reference_q=q)
             for value in (False, True):
@@ -57,7 +60,9 @@ def test_the_linearizer_takes_the_kept_jacobian_and_its_sensors_own(arm):
 
 def test_dynamics_without_constants_to_lift_keep_their_own_jacobian():
     x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
-    model = SimpleNamespace(functions={"f": ca.Function("f", [x, u], [ca.vertcat(x[1], u - x[0] * x[1])])}, n_x=2, n_u=1)
+    model = SimpleNamespace(
+        functions={"f": ca.Function("f", [x, u], [ca.vertcat(x[1], u - x[0] * x[1])])}, n_x=2, n_u=1
+    )
     SHARED.clear()
     FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
     A, B = _at(jacobian_function(model, inputs=True, shared=True), model)
@@ -75,9 +80,18 @@ def test_the_sx_graph_is_what_is_kept_and_gives_the_mx_graphs_bits(arm):
         model = build_model(arm, fidelity, reference_q=[0, 1.2, -0.7])
         for seed in range(3):
             sx = _at(jacobian_function(model, value=True, inputs=True, shared=True), model, seed)
-            mx = _at(jacobian_function(model, value=True, inputs=True, shared=True, graph="mx"), model, seed)
+            mx = _at(
+                jacobian_function(model, value=True, inputs=True, shared=True, graph="mx"),
+                model,
+                seed,
+            )
             assert all(np.array_equal(a, b) for a, b in zip(sx, mx)), (fidelity, seed)
     kept = list(SHARED._built.values())
-    assert sorted(f.is_a("SXFunction") for f in kept) == [False, False, True, True]  # one of each graph per fidelity
+    assert sorted(f.is_a("SXFunction") for f in kept) == [
+        False,
+        False,
+        True,
+        True,
+    ]  # one of each graph per fidelity
     with pytest.raises(ValueError, match="graph = 'ad'; allowed: 'sx', 'mx'"):
         jacobian_function(model, shared=True, graph="ad")

@@ -7,11 +7,11 @@ loading them again, and with the same values to the last bit as a build from scr
 
 import gc
 import weakref
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
+from support import DATA
 
 import flexctrl as fc
 import flexctrl.sim.compile as compile_module
@@ -21,7 +21,6 @@ from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import FROM_LIFTED, ObjectMemo
 from flexctrl.loop.plant_step import UNROLL_LIMIT, advance_function, output_map
 
-from support import DATA, ROOT
 POSES = ([0.0, 0.0, 0.0], [0.0, 1.2, -0.7], [0.0, 1.57, 0.0])
 
 
@@ -57,12 +56,18 @@ def _everything(model):
     reference = path_functions(model, None)["all"]
     rng = np.random.default_rng(1)
     args = [rng.uniform(-0.3, 0.3, n) for n in (model.n_u,) * 3 + (model.n_q - model.n_u,) * 3]
-    values = [advance(x, u, 2e-4), outputs(x.reshape(-1, 1)), *reference(*args),
-              *jacobians.jacobian_function(model, inputs=True, shared=True)(x, u)]
+    values = [
+        advance(x, u, 2e-4),
+        outputs(x.reshape(-1, 1)),
+        *reference(*args),
+        *jacobians.jacobian_function(model, inputs=True, shared=True)(x, u),
+    ]
     return [np.array(v, dtype=float) for v in values]
 
 
-def test_a_later_configuration_builds_nothing_again_and_gets_the_same_bits(arm, compiles, monkeypatch):
+def test_a_later_configuration_builds_nothing_again_and_gets_the_same_bits(
+    arm, compiles, monkeypatch
+):
     keys = []
     real_key = jacobians.content_key
     monkeypatch.setattr(jacobians, "content_key", lambda *a: keys.append(a) or real_key(*a))
@@ -70,7 +75,10 @@ def test_a_later_configuration_builds_nothing_again_and_gets_the_same_bits(arm, 
     first = build_model(arm, "amm:2", reference_q=POSES[0])
     _everything(first)
     built = list(compiles)
-    assert all(any(name.startswith(p) for name in built) for p in ("advance_p_", "reference_p_", "kinematic_outputs_p")), built
+    assert all(
+        any(name.startswith(p) for name in built)
+        for p in ("advance_p_", "reference_p_", "kinematic_outputs_p")
+    ), built
     assert len(keys) == 1
     kept = {}
     for q in POSES[1:]:
@@ -91,7 +99,9 @@ def test_a_later_configuration_builds_nothing_again_and_gets_the_same_bits(arm, 
         assert all(np.array_equal(a, b) for a, b in zip(fresh, kept[tuple(q)])), q
 
 
-def test_switching_compilation_off_or_moving_the_cache_builds_anew(arm, compiles, monkeypatch, tmp_path):
+def test_switching_compilation_off_or_moving_the_cache_builds_anew(
+    arm, compiles, monkeypatch, tmp_path
+):
     FROM_LIFTED.clear()
     advance_function(build_model(arm, "amm:2", reference_q=POSES[0]), 3)
     monkeypatch.setenv("FLEXCTRL_NO_COMPILE", "1")
@@ -114,8 +124,10 @@ def test_each_step_count_gets_its_own_plant_step(arm):
     x, u = _point(models[0])
     kept = [np.array(advance_function(m, n)[0](x, u, 1e-4)) for m, n in zip(models, counts)]
     FROM_LIFTED.clear()
-    fresh = [np.array(advance_function(build_model(arm, "amm:2", reference_q=q), n)[0](x, u, 1e-4))
-             for q, n in zip(POSES, counts)]
+    fresh = [
+        np.array(advance_function(build_model(arm, "amm:2", reference_q=q), n)[0](x, u, 1e-4))
+        for q, n in zip(POSES, counts)
+    ]
     for n, a, b in zip(counts, kept, fresh):
         assert a.shape == (models[0].n_x, n) and np.array_equal(a, b), n
 
@@ -126,8 +138,10 @@ def test_a_failed_compilation_is_not_kept(arm, compiles, monkeypatch, tmp_path):
     FROM_LIFTED.clear()
     works = tmp_path / "works"
     script = tmp_path / "flaky-cc"
-    script.write_text(f"#!/bin/sh\ncase \"$*\" in *--version*) exec {compile_module.find_compiler()} \"$@\";; esac\n"
-                      f"[ -f {works} ] && exec {compile_module.find_compiler()} \"$@\"\nexit 1\n")
+    script.write_text(
+        f'#!/bin/sh\ncase "$*" in *--version*) exec {compile_module.find_compiler()} "$@";; esac\n'
+        f'[ -f {works} ] && exec {compile_module.find_compiler()} "$@"\nexit 1\n'
+    )
     script.chmod(0o755)
     monkeypatch.setenv("FLEXCTRL_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("CC", str(script))

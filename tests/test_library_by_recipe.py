@@ -81,7 +81,13 @@ def test_a_found_library_that_fails_the_check_or_raises_in_it_is_unlinked_and_bu
     compile_by_recipe("sq", "recipe-1", Builds(square_plus()), cache_dir=tmp_path)
     link = next(tmp_path.rglob("sq_r*.so"))
     passing = Builds(square_plus())
-    compile_by_recipe("sq", "recipe-1", passing, cache_dir=tmp_path, check=lambda f: float(f([1.0, 2.0])[0]) == 2.0)
+    compile_by_recipe(
+        "sq",
+        "recipe-1",
+        passing,
+        cache_dir=tmp_path,
+        check=lambda f: float(f([1.0, 2.0])[0]) == 2.0,
+    )
     assert passing.calls == 0
     failing = Builds(square_plus())
     with pytest.warns(UserWarning, match="does not reproduce what it should"):
@@ -126,20 +132,26 @@ def linmap_at_a_point(ctrl) -> list[np.ndarray]:
     lay = ctrl.layout
     rng = np.random.default_rng(5)
     Z, V = rng.normal(0, 0.2, (lay.n, lay.N)), rng.normal(0, 0.2, (lay.m, lay.N))
-    return [np.array(a, dtype=float) for a in ctrl.functions["linmap"](Z, V, ctrl.functions["params"])]
+    return [
+        np.array(a, dtype=float) for a in ctrl.functions["linmap"](Z, V, ctrl.functions["params"])
+    ]
 
 
 SMALL = dict(compile=True, horizon=6, sample_time=0.02, deflection_limit=0.02)
 
 
-def test_an_nmpc_linearisation_is_found_by_its_recipe_and_is_the_built_one(onelink, fresh_cache, monkeypatch):
+def test_an_nmpc_linearisation_is_found_by_its_recipe_and_is_the_built_one(
+    onelink, fresh_cache, monkeypatch
+):
     from flexctrl.spec.controller_settings import NMPCSettings
 
     model, op = onelink
     settings = NMPCSettings(**SMALL)
     built = design_nmpc(model, op, settings)
     assert built.functions["build"]["cache_hit"] is False
-    monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))  # as a new worker process
+    monkeypatch.setattr(
+        nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE)
+    )  # as a new worker process
 
     def no_symbolic_build(*args, **kwargs):
         raise AssertionError("the linearisation was built although its library is on disk")
@@ -154,7 +166,9 @@ def test_an_nmpc_linearisation_is_found_by_its_recipe_and_is_the_built_one(oneli
         design_nmpc(model, op, settings, library_by_recipe=False)
 
 
-def test_a_library_that_does_not_reproduce_the_model_is_removed_and_built_again(onelink, fresh_cache, monkeypatch):
+def test_a_library_that_does_not_reproduce_the_model_is_removed_and_built_again(
+    onelink, fresh_cache, monkeypatch
+):
     from flexctrl.spec.controller_settings import NMPCSettings
 
     model, op = onelink
@@ -191,11 +205,17 @@ def test_an_edit_to_the_code_that_builds_it_builds_it_again(onelink, fresh_cache
     design_nmpc(model, op, settings)
     calls = []
     symbolic = nmpc_interval.symbolic_linearisation
-    monkeypatch.setattr(nmpc_interval, "symbolic_linearisation", lambda *a, **k: calls.append(1) or symbolic(*a, **k))
+    monkeypatch.setattr(
+        nmpc_interval,
+        "symbolic_linearisation",
+        lambda *a, **k: calls.append(1) or symbolic(*a, **k),
+    )
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))
     design_nmpc(model, op, settings)
     assert calls == []  # found by its recipe
-    monkeypatch.setattr(nmpc_interval, "builder_source_digest", lambda: "the builder's source, edited")
+    monkeypatch.setattr(
+        nmpc_interval, "builder_source_digest", lambda: "the builder's source, edited"
+    )
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))
     design_nmpc(model, op, settings)
     assert calls == [1]

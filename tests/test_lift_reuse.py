@@ -13,13 +13,12 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
+from support import MODEL
 
 from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import LIFTED, constants_as_parameters
 from flexctrl.sim.integrator import output_function
 from flexctrl.spec.arm import load_arm
-
-from support import MODEL
 
 # degrees: the straight arm merges coinciding constants, so its graph has fewer constant nodes
 CONFIGURATIONS = ([0, 90, -90], [0, 0, 0], [0, 30, 60])
@@ -28,7 +27,9 @@ CONFIGURATIONS = ([0, 90, -90], [0, 0, 0], [0, 30, 60])
 @pytest.fixture(scope="module")
 def models():
     arm = load_arm(MODEL).with_payload(2.0)
-    return [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in CONFIGURATIONS]
+    return [
+        build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in CONFIGURATIONS
+    ]
 
 
 def _evaluate(fp, c, f, rng):
@@ -43,7 +44,9 @@ def test_a_kept_lift_serves_later_configurations_as_a_lift_anew_would(models, pe
     LIFTED.clear()
     funs = [m.functions["f"] if which == "f" else output_function(m) for m in models]
     first, _ = constants_as_parameters(funs[0], per_use=per_use)
-    nodes = [sum(f.instruction_id(k) == ca.OP_CONST for k in range(f.n_instructions())) for f in funs]
+    nodes = [
+        sum(f.instruction_id(k) == ca.OP_CONST for k in range(f.n_instructions())) for f in funs
+    ]
     for fun in funs[1:]:
         kept, c = constants_as_parameters(fun, per_use=per_use)
         anew, c_anew = constants_as_parameters(fun, per_use=per_use, reuse=False)
@@ -51,14 +54,20 @@ def test_a_kept_lift_serves_later_configurations_as_a_lift_anew_would(models, pe
             assert kept is first  # no walk, no rebuild
         assert np.array_equal(c, c_anew)
         if kept is first:
-            assert kept.serialize() == anew.serialize()  # the kept structure is the one a lift anew builds
-        for a, b, d in zip(_evaluate(kept, c, fun, np.random.default_rng(4)),
-                           _evaluate(anew, c_anew, fun, np.random.default_rng(4)),
-                           [np.array(o, dtype=float) for o in _outputs(fun, np.random.default_rng(4))]):
+            assert (
+                kept.serialize() == anew.serialize()
+            )  # the kept structure is the one a lift anew builds
+        for a, b, d in zip(
+            _evaluate(kept, c, fun, np.random.default_rng(4)),
+            _evaluate(anew, c_anew, fun, np.random.default_rng(4)),
+            [np.array(o, dtype=float) for o in _outputs(fun, np.random.default_rng(4))],
+        ):
             assert np.array_equal(a, b)
             np.testing.assert_allclose(a, d, rtol=1e-12, atol=1e-12)
     if which == "outputs":
-        assert len(set(nodes)) > 1  # the case per use is for: the graphs' constant nodes differ in number
+        assert (
+            len(set(nodes)) > 1
+        )  # the case per use is for: the graphs' constant nodes differ in number
 
 
 def _outputs(fun, rng):

@@ -12,20 +12,30 @@ import scipy.linalg
 from flexctrl import linear as L
 from flexctrl.beam.clamped_mass import clamped_mass_modes
 from flexctrl.dynamics.amm import build_amm
-from flexctrl.scenes.model_files import load_model
 from flexctrl.errors import SpecError
+from flexctrl.scenes.model_files import load_model
 from flexctrl.sim.toymodel import spring_pendulum
 from flexctrl.spec.arm import arm_from_document
 
 
-def one_link_arm(n_modes: int = 3, payload: float = 0.8, gravity: float = -9.81, damping: float = 0.0):
+def one_link_arm(
+    n_modes: int = 3, payload: float = 0.8, gravity: float = -9.81, damping: float = 0.0
+):
     """A single flexible link on a hub (joint angle + modal coordinates), built by the assumed-modes code."""
     doc = {
         "name": "onelink",
         "gravity": [0.0, gravity],
         "payload": {"mass": payload, "inertia": 2.0e-3},
-        "links": [{"length": 1.2, "mass_per_length": 1.5, "EI": 900.0, "inertia": 1.5 * 1.2**3 / 12,
-                   "n_modes": n_modes, "damping_ratio": damping}],
+        "links": [
+            {
+                "length": 1.2,
+                "mass_per_length": 1.5,
+                "EI": 900.0,
+                "inertia": 1.5 * 1.2**3 / 12,
+                "n_modes": n_modes,
+                "damping_ratio": damping,
+            }
+        ],
         "joints": [{"hub_mass": 0.0, "hub_inertia": 0.01, "torque_limit": 40.0}],
     }
     arm = arm_from_document(doc, "onelink.toml")
@@ -66,7 +76,11 @@ def test_equilibrium_rejects_wrong_joint_count():
 
 @pytest.mark.parametrize("builder", ["toy", "onelink"])
 def test_linearisation_matches_central_differences(builder):
-    model = spring_pendulum(k=2.0e3, zeta=0.02, friction=0.1) if builder == "toy" else one_link_arm(damping=0.01)[1]
+    model = (
+        spring_pendulum(k=2.0e3, zeta=0.02, friction=0.1)
+        if builder == "toy"
+        else one_link_arm(damping=0.01)[1]
+    )
     rng = np.random.default_rng(3)
     n, N = model.n_u, model.n_q
     amplitude = np.r_[np.full(n, 0.3), np.full(N - n, 1e-3), np.full(n, 0.3), np.full(N - n, 1e-2)]
@@ -108,8 +122,12 @@ def test_output_jacobians_match_finite_differences():
     sys = L.linearize(model, op, outputs=sensors)
     y = lambda x, u: sensors.evaluate(x, u)  # noqa: E731
     h = 1e-6
-    C_fd = np.column_stack([(y(op.x + h * e, op.u) - y(op.x - h * e, op.u)) / (2 * h) for e in np.eye(model.n_x)])
-    D_fd = np.column_stack([(y(op.x, op.u + h * e) - y(op.x, op.u - h * e)) / (2 * h) for e in np.eye(model.n_u)])
+    C_fd = np.column_stack(
+        [(y(op.x + h * e, op.u) - y(op.x - h * e, op.u)) / (2 * h) for e in np.eye(model.n_x)]
+    )
+    D_fd = np.column_stack(
+        [(y(op.x, op.u + h * e) - y(op.x, op.u - h * e)) / (2 * h) for e in np.eye(model.n_u)]
+    )
     np.testing.assert_allclose(sys.C, C_fd, atol=1e-6 * (1 + np.max(np.abs(C_fd))))
     np.testing.assert_allclose(sys.D, D_fd, atol=1e-6 * (1 + np.max(np.abs(D_fd))))
     assert np.any(np.abs(sys.D) > 0)  # the accelerometer feels the torque
@@ -117,7 +135,9 @@ def test_output_jacobians_match_finite_differences():
 
 def test_strain_gauge_is_root_curvature_of_the_mode_shapes():
     arm, model = one_link_arm(n_modes=2)
-    modes = clamped_mass_modes(1.2, 1.5, 900.0, 2, m_tip=arm.payload.mass, J_tip=arm.payload.effective_inertia)
+    modes = clamped_mass_modes(
+        1.2, 1.5, 900.0, 2, m_tip=arm.payload.mass, J_tip=arm.payload.effective_inertia
+    )
     qf = np.array([0.02, -0.004])
     x = np.r_[0.1, qf, np.zeros(3)]
     sensors = L.Sensors.build(model, ("strain",))
@@ -165,7 +185,7 @@ def test_discretisation_matches_expm_of_augmented_matrix():
 
 def test_modal_summary_recovers_a_damped_oscillator():
     wn, zeta = 2 * math.pi * 7.0, 0.05
-    sys = control.ss([[0, 1], [-wn**2, -2 * zeta * wn]], [[0], [1]], [[1, 0]], 0)
+    sys = control.ss([[0, 1], [-(wn**2), -2 * zeta * wn]], [[0], [1]], [[1, 0]], 0)
     summary = L.modal_summary(sys)
     assert summary.frequency_hz == pytest.approx([7.0])
     assert summary.damping == pytest.approx([zeta])
@@ -177,7 +197,9 @@ def test_modal_summary_recovers_a_damped_oscillator():
 def test_locked_frequencies_of_one_link_equal_clamped_mass_beam():
     arm, model = one_link_arm(n_modes=4, payload=0.8)
     op = L.equilibrium(model, [0.7])
-    beam = clamped_mass_modes(1.2, 1.5, 900.0, 4, m_tip=arm.payload.mass, J_tip=arm.payload.effective_inertia)
+    beam = clamped_mass_modes(
+        1.2, 1.5, 900.0, 4, m_tip=arm.payload.mass, J_tip=arm.payload.effective_inertia
+    )
     np.testing.assert_allclose(L.locked_frequencies(model, op), beam.frequency_hz, rtol=1e-9)
 
 
@@ -192,6 +214,10 @@ def test_locked_frequencies_converge_with_modes_on_three_link_arm():
     firsts = np.array(firsts)
     # Rayleigh-Ritz on nested bases (the first modes are the same functions): more modes never
     # raise a frequency, and the changes shrink
-    assert np.all(firsts[1] <= firsts[0] * (1 + 1e-9)) and np.all(firsts[2] <= firsts[1] * (1 + 1e-9))
-    assert np.max(np.abs(firsts[2] - firsts[1]) / firsts[2]) < np.max(np.abs(firsts[1] - firsts[0]) / firsts[1])
+    assert np.all(firsts[1] <= firsts[0] * (1 + 1e-9)) and np.all(
+        firsts[2] <= firsts[1] * (1 + 1e-9)
+    )
+    assert np.max(np.abs(firsts[2] - firsts[1]) / firsts[2]) < np.max(
+        np.abs(firsts[1] - firsts[0]) / firsts[1]
+    )
     assert np.max(np.abs(firsts[2] - firsts[1]) / firsts[2]) < 0.02

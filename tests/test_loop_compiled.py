@@ -14,8 +14,8 @@ from flexctrl.bench.loop_overhead import metric_differences
 from flexctrl.errors import SpecError
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.scenes.loop_setup import build_loop
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"
@@ -29,7 +29,9 @@ def cache():
 
 def short_scene(duration=3.6, noise=False):
     scene = load_scene(SCENE)
-    return dataclasses.replace(scene, plant=dataclasses.replace(scene.plant, duration=duration), noise=noise)
+    return dataclasses.replace(
+        scene, plant=dataclasses.replace(scene.plant, duration=duration), noise=noise
+    )
 
 
 def both(scene, controller, cache, overrides=(), loops=("python", "compiled")):
@@ -37,9 +39,18 @@ def both(scene, controller, cache, overrides=(), loops=("python", "compiled")):
     for loop in loops:
         setup = build_loop(scene, controller, overrides, cache)
         rng = np.random.default_rng(scene.seed) if scene.noise else None
-        traj, samples = simulate_closed_loop(setup.plant, setup.controller, setup.x0, scene.plant.duration,
-                                             scene.plant.dt, sensors=setup.sensors, rng=rng, monitor=setup.monitor,
-                                             stop_on_divergence=True, loop=loop)
+        traj, samples = simulate_closed_loop(
+            setup.plant,
+            setup.controller,
+            setup.x0,
+            scene.plant.duration,
+            scene.plant.dt,
+            sensors=setup.sensors,
+            rng=rng,
+            monitor=setup.monitor,
+            stop_on_divergence=True,
+            loop=loop,
+        )
         ctrl = setup.controller
         out[loop] = (traj, samples, ctrl.stats.summary(), np.array(ctrl.u_previous))
     return out
@@ -52,14 +63,17 @@ def assert_close(a, b, tol=TOL):
     assert np.max(np.abs(a - b) / scale) <= tol
 
 
-@pytest.mark.parametrize("controller, noise, overrides", [
-    ("controllers/lqr.toml", False, ()),             # Kalman filter on encoders and strain gauges
-    ("controllers/lqg.toml", True, ()),              # with a tip accelerometer (feed-through) and noise
-    ("controllers/lqr_ideal.toml", False, ()),       # full state
-    ("controllers/pd.toml", True, ()),
-    ("controllers/pd.toml", False, ("gravity=measured",)),
-    ("controllers/shaped.toml", False, ()),
-])
+@pytest.mark.parametrize(
+    "controller, noise, overrides",
+    [
+        ("controllers/lqr.toml", False, ()),  # Kalman filter on encoders and strain gauges
+        ("controllers/lqg.toml", True, ()),  # with a tip accelerometer (feed-through) and noise
+        ("controllers/lqr_ideal.toml", False, ()),  # full state
+        ("controllers/pd.toml", True, ()),
+        ("controllers/pd.toml", False, ("gravity=measured",)),
+        ("controllers/shaped.toml", False, ()),
+    ],
+)
 def test_compiled_loop_matches_python(controller, noise, overrides, cache):
     runs = both(short_scene(noise=noise), controller, cache, overrides)
     (tp, sp, stp, up), (tc, sc, stc, uc) = runs["python"], runs["compiled"]
@@ -70,14 +84,20 @@ def test_compiled_loop_matches_python(controller, noise, overrides, cache):
         assert_close(getattr(tp, name), getattr(tc, name))
     for name in tp.energies:
         assert_close(tp.energies[name][:, None], tc.energies[name][:, None])
-    assert stp["steps"] == stc["steps"] and stp["status"] == stc["status"] and stp["saturated"] == stc["saturated"]
+    assert (
+        stp["steps"] == stc["steps"]
+        and stp["status"] == stc["status"]
+        and stp["saturated"] == stc["saturated"]
+    )
     np.testing.assert_allclose(up, uc, rtol=TOL, atol=TOL * np.max(np.abs(tp.inputs)))
 
 
 def test_scene_metrics_match(cache):
     scene = dataclasses.replace(short_scene(noise=True), controller="controllers/lqg.toml")
-    a, b = (run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop).metrics
-            for loop in ("python", "compiled"))
+    a, b = (
+        run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop).metrics
+        for loop in ("python", "compiled")
+    )
     differences = metric_differences(a, b)
     assert max(differences.values()) <= TOL, differences
     assert a["settled"] == b["settled"] and a["stable"] == b["stable"]
@@ -99,10 +119,19 @@ def test_loop_option_is_checked(cache):
     scene = short_scene()
     setup = build_loop(scene, "controllers/mpc.toml", (), cache)
     with pytest.raises(SpecError, match="no sampled law"):
-        simulate_closed_loop(setup.plant, setup.controller, setup.x0, 0.5, scene.plant.dt, sensors=setup.sensors,
-                             loop="compiled")
+        simulate_closed_loop(
+            setup.plant,
+            setup.controller,
+            setup.x0,
+            0.5,
+            scene.plant.dt,
+            sensors=setup.sensors,
+            loop="compiled",
+        )
     with pytest.raises(SpecError, match="'auto', 'compiled', 'python'"):
-        simulate_closed_loop(setup.plant, setup.controller, setup.x0, 0.5, scene.plant.dt, loop="fast")
+        simulate_closed_loop(
+            setup.plant, setup.controller, setup.x0, 0.5, scene.plant.dt, loop="fast"
+        )
 
 
 def test_design_is_kept_and_reset(cache):
@@ -131,7 +160,9 @@ def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache,
     np.testing.assert_array_equal(a.states, b.states)
     np.testing.assert_array_equal(a.inputs, b.inputs)
     np.testing.assert_array_equal(ua, ub)
-    kept = lambda stats: {k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"}  # noqa: E731
+    kept = lambda stats: {
+        k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"
+    }  # noqa: E731
     assert kept(stats_a) == kept(stats_b) and kept(stats_a)["steps"] == len(sa)
 
 

@@ -30,39 +30,52 @@ VARIANTS = {
     "payload": ["payload=1.0"],
     "move": ["target.move=[20.0, 0.0, 0.0]"],
     "move_time": ["target.move_time=1.2"],
-    "deflection": ["target.deflection=\"static\""],
+    "deflection": ['target.deflection="static"'],
 }
 
 
 def scene(overrides, controller):
     base = load_scene(SCENE, overrides)
-    return dataclasses.replace(base, plant=dataclasses.replace(base.plant, duration=2.5), controller=controller)
+    return dataclasses.replace(
+        base, plant=dataclasses.replace(base.plant, duration=2.5), controller=controller
+    )
 
 
 def metrics(result):
     return {k: v for k, v in result.metrics.items() if k not in TIMING_METRICS}
 
 
-@pytest.mark.parametrize("controller, overrides", [
-    ("controllers/lqr.toml", ()),
-    ("controllers/pd.toml", ()),
-    ("controllers/mpc.toml", ()),
-])
+@pytest.mark.parametrize(
+    "controller, overrides",
+    [
+        ("controllers/lqr.toml", ()),
+        ("controllers/pd.toml", ()),
+        ("controllers/mpc.toml", ()),
+    ],
+)
 def test_runs_through_one_cache_equal_runs_on_fresh_caches(controller, overrides):
     shared = SceneCache()
     seen = {}
     for name, scene_overrides in VARIANTS.items():
         run = scene(scene_overrides, controller)
-        reused = run_closed_loop_scene(run, cache=shared, on_divergence="record", overrides=overrides)
-        fresh = run_closed_loop_scene(run, cache=SceneCache(), on_divergence="record", overrides=overrides)
+        reused = run_closed_loop_scene(
+            run, cache=shared, on_divergence="record", overrides=overrides
+        )
+        fresh = run_closed_loop_scene(
+            run, cache=SceneCache(), on_divergence="record", overrides=overrides
+        )
         assert metrics(reused) == metrics(fresh), name
         seen[name] = fresh.metrics["tip_residual_rms"]
     # the variants are different runs (a test comparing a run with itself would pass whatever the keys), except
     # the deflection for PD: it reads the reference's rigid part only (elastic=False), the same for both
     same = {"deflection"} if "pd" in controller else set()
-    assert all(seen[name] != seen["nominal"] for name in VARIANTS if name != "nominal" and name not in same)
+    assert all(
+        seen[name] != seen["nominal"] for name in VARIANTS if name != "nominal" and name not in same
+    )
     stats = shared.stats()
-    assert stats["designs"]["misses"] == len(VARIANTS) and stats["models"]["misses"] == 3  # nominal, config, payload
+    assert (
+        stats["designs"]["misses"] == len(VARIANTS) and stats["models"]["misses"] == 3
+    )  # nominal, config, payload
 
 
 def test_controller_settings_and_sample_time_are_part_of_the_keys():
@@ -71,8 +84,12 @@ def test_controller_settings_and_sample_time_are_part_of_the_keys():
     run = scene([], "controllers/lqr.toml")
     variants = [(), ("sample_time=0.0075",), ("weights.modal=0.03",)]
     for overrides in variants:
-        reused = run_closed_loop_scene(run, cache=shared, on_divergence="record", overrides=overrides)
-        fresh = run_closed_loop_scene(run, cache=SceneCache(), on_divergence="record", overrides=overrides)
+        reused = run_closed_loop_scene(
+            run, cache=shared, on_divergence="record", overrides=overrides
+        )
+        fresh = run_closed_loop_scene(
+            run, cache=SceneCache(), on_divergence="record", overrides=overrides
+        )
         assert metrics(reused) == metrics(fresh), overrides
     stats = shared.stats()
     assert stats["designs"]["misses"] == len(variants)
@@ -88,13 +105,25 @@ def test_a_reference_is_shared_only_on_the_same_model_path_and_deflection():
     path = base.joint_reference()
     a = cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, 0.0), path, "quasi_static")
     assert cache.reference(arm, "amm:2", "frozen", (0, 0, 0), path, "quasi_static") is a
-    others = [cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, -1.0), path, "quasi_static"),
-              cache.reference(arm.with_payload(1.0), "amm:2", "frozen", (0.0, 0.0, 0.0), path, "quasi_static"),
-              cache.reference(arm, "amm:1", "frozen", (0.0, 0.0, 0.0), path, "quasi_static"),
-              cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, 0.0), dataclasses.replace(path, move_time=1.0),
-                              "quasi_static"),
-              cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, 0.0), path, "static"),
-              cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, 0.0), path, "quasi_static", compile=None)]
+    others = [
+        cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, -1.0), path, "quasi_static"),
+        cache.reference(
+            arm.with_payload(1.0), "amm:2", "frozen", (0.0, 0.0, 0.0), path, "quasi_static"
+        ),
+        cache.reference(arm, "amm:1", "frozen", (0.0, 0.0, 0.0), path, "quasi_static"),
+        cache.reference(
+            arm,
+            "amm:2",
+            "frozen",
+            (0.0, 0.0, 0.0),
+            dataclasses.replace(path, move_time=1.0),
+            "quasi_static",
+        ),
+        cache.reference(arm, "amm:2", "frozen", (0.0, 0.0, 0.0), path, "static"),
+        cache.reference(
+            arm, "amm:2", "frozen", (0.0, 0.0, 0.0), path, "quasi_static", compile=None
+        ),
+    ]
     assert all(o is not a for o in others)
     x = a.window(0.0, 0.01, 120)[0]
     for other in others[:-1]:  # the compiled one has the same table to round-off
@@ -103,8 +132,14 @@ def test_a_reference_is_shared_only_on_the_same_model_path_and_deflection():
 
 def relative(a, b):
     scale = np.maximum(np.abs(a), np.abs(b))
-    return float(np.max(np.where(scale > 1e-12, np.abs(a - b) / np.where(scale > 1e-12, scale, 1.0), np.abs(a - b)),
-                        initial=0.0))
+    return float(
+        np.max(
+            np.where(
+                scale > 1e-12, np.abs(a - b) / np.where(scale > 1e-12, scale, 1.0), np.abs(a - b)
+            ),
+            initial=0.0,
+        )
+    )
 
 
 @pytest.mark.parametrize("q0", [(0.0, 0.0, 0.0), (0.0, 1.5707963267948966, -1.5707963267948966)])
@@ -115,7 +150,9 @@ def test_compiled_reference_tables_match_the_virtual_machine(q0):
     constants, bound in the wrapper, must be its own (the tables differ between the
     configurations by far more than the tolerance).
     """
-    base = load_scene(SCENE, ["gravity=[0.0, -9.81]"])  # in a vertical plane: a static deflection and torque
+    base = load_scene(
+        SCENE, ["gravity=[0.0, -9.81]"]
+    )  # in a vertical plane: a static deflection and torque
     cache = SceneCache()
     model = cache.model(scene_arm(base.plant), "amm:2", "frozen", q0)
     assert path_functions(model, None)["all"].name() == "reference_all"
@@ -123,10 +160,14 @@ def test_compiled_reference_tables_match_the_virtual_machine(q0):
     for Ts, elastic in ((0.001, False), (0.0085, True)):
         vm = ReferenceTrajectory(model, base.joint_reference(), "quasi_static", compile=False)
         compiled = ReferenceTrajectory(model, base.joint_reference(), "quasi_static", compile=None)
-        for a, b in zip(vm.window(0.0, Ts, 400, elastic=elastic), compiled.window(0.0, Ts, 400, elastic=elastic)):
+        for a, b in zip(
+            vm.window(0.0, Ts, 400, elastic=elastic), compiled.window(0.0, Ts, 400, elastic=elastic)
+        ):
             assert relative(a, b) <= 1e-9
             assert np.max(np.abs(a)) > 0
     straight = cache.model(scene_arm(base.plant), "amm:2", "frozen", (0.0, 0.0, 0.0))
     if straight is not model:
         other = ReferenceTrajectory(straight, base.joint_reference(), "quasi_static", compile=None)
-        assert relative(other.window(0.0, 0.0085, 400)[0], compiled.window(0.0, 0.0085, 400)[0]) > 1e-6
+        assert (
+            relative(other.window(0.0, 0.0085, 400)[0], compiled.window(0.0, 0.0085, 400)[0]) > 1e-6
+        )

@@ -16,8 +16,16 @@ def test_decaying_sinusoid_metrics_match_closed_forms():
     err = amp * np.exp(-sigma * t) * np.cos(omega * t)
     tip = np.stack([1.0 + err, np.zeros_like(t)], axis=1)
     m = closed_loop_metrics(
-        t, tip, (1.0, 0.0), np.zeros((t.size, 1)), np.ones((t.size, 2)) * [2.0, -3.0], np.zeros((t.size, 2)), np.zeros((t.size, 2)),
-        t_arrive=1.0, settle_allowance=1.0, band=1e-3,
+        t,
+        tip,
+        (1.0, 0.0),
+        np.zeros((t.size, 1)),
+        np.ones((t.size, 2)) * [2.0, -3.0],
+        np.zeros((t.size, 2)),
+        np.zeros((t.size, 2)),
+        t_arrive=1.0,
+        settle_allowance=1.0,
+        band=1e-3,
     )
     window = t >= 2.0
     assert m["tip_residual_peak"] == pytest.approx(amp * math.exp(-sigma * 2.0), rel=1e-6)
@@ -36,4 +44,14 @@ def test_never_settling_and_empty_window():
     assert settling_time(t, err, 1e-3) == math.inf
     assert settling_time(t, err * 0, 1e-3) == 0.0
     with pytest.raises(ValueError, match="lengthen the scene's duration"):
-        closed_loop_metrics(t, np.zeros((11, 2)), (0, 0), np.zeros((11, 1)), np.zeros((11, 1)), np.zeros((11, 1)), np.zeros((11, 1)), t_arrive=0.8, settle_allowance=0.5)
+        closed_loop_metrics(
+            t,
+            np.zeros((11, 2)),
+            (0, 0),
+            np.zeros((11, 1)),
+            np.zeros((11, 1)),
+            np.zeros((11, 1)),
+            np.zeros((11, 1)),
+            t_arrive=0.8,
+            settle_allowance=0.5,
+        )

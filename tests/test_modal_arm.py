@@ -33,8 +33,15 @@ def test_table3_all_twelve_frequencies_within_0p01_hz(arm):
 
 def test_link3_rows_need_no_hub_mass(arm):
     """Link 3 of Table 3 is independent of the identified hubs: zero hubs give the same rows."""
-    stripped = arm.__class__(**{**arm.__dict__, "joints": tuple(j.__class__(**{**j.__dict__, "hub_mass": 0.0}) for j in arm.joints)})
-    for (p, l, m, ref, model, res), (_, _, _, _, model0, _) in zip(table3_residuals(arm, (3,)), table3_residuals(stripped, (3,))):
+    stripped = arm.__class__(
+        **{
+            **arm.__dict__,
+            "joints": tuple(j.__class__(**{**j.__dict__, "hub_mass": 0.0}) for j in arm.joints),
+        }
+    )
+    for (p, l, m, ref, model, res), (_, _, _, _, model0, _) in zip(
+        table3_residuals(arm, (3,)), table3_residuals(stripped, (3,))
+    ):
         assert model == pytest.approx(model0, abs=1e-12)
         assert abs(res) < 0.01
 
@@ -60,9 +67,24 @@ def _eq69(arm, q2, q3, payload, projected):
     else:  # law of cosines: full distance from joint 2
         d_l32_sq = l2**2 + (l3 / 2) ** 2 + l2 * l3 * math.cos(q3)
         d_p2_sq = l2**2 + l3**2 + 2 * l2 * l3 * math.cos(q3)
-    J1 = Jh2 + Jl2 + ml2 * (l2 / 2) ** 2 + Jh3 + mh3 * l2**2 + Jl3 + ml3 * d_l32_sq + Jp + payload * d_p2_sq
+    J1 = (
+        Jh2
+        + Jl2
+        + ml2 * (l2 / 2) ** 2
+        + Jh3
+        + mh3 * l2**2
+        + Jl3
+        + ml3 * d_l32_sq
+        + Jp
+        + payload * d_p2_sq
+    )
     m1 = mh2 + ml2 + mh3 + ml3 + payload
-    M1 = ml2 * l2 / 2 * math.cos(q2) + mh3 * l2 * math.cos(q2) + ml3 * (l2 * math.cos(q2) + l3 / 2 * math.cos(q2 + q3)) + payload * (l2 * math.cos(q2) + l3 * math.cos(q2 + q3))
+    M1 = (
+        ml2 * l2 / 2 * math.cos(q2)
+        + mh3 * l2 * math.cos(q2)
+        + ml3 * (l2 * math.cos(q2) + l3 / 2 * math.cos(q2 + q3))
+        + payload * (l2 * math.cos(q2) + l3 * math.cos(q2 + q3))
+    )
     J2 = Jh3 + Jl3 + ml3 * (l3 / 2) ** 2 + Jp + payload * l3**2
     m2 = mh3 + ml3 + payload
     M2 = (ml3 * l3 / 2 + payload * l3) * math.cos(q3)
@@ -79,22 +101,31 @@ def test_boundary_values_match_eqs_69_to_73(arm, convention, payload):
         expected = _eq69(loaded, q[1], q[2], payload, projected=(convention == "paper"))
         for link in range(3):
             bv = boundary_values(loaded, q, link, convention)
-            assert (float(bv.m), float(bv.J), float(bv.M)) == pytest.approx(expected[link], rel=1e-12, abs=1e-12)
+            assert (float(bv.m), float(bv.J), float(bv.M)) == pytest.approx(
+                expected[link], rel=1e-12, abs=1e-12
+            )
 
 
 def test_exact_and_paper_inertia_agree_only_at_0_and_180_degrees(arm):
     for q3 in (0.0, math.pi):
         q = np.array([0.0, 0.7, q3])
-        assert float(boundary_values(arm, q, 0, "exact").J) == pytest.approx(float(boundary_values(arm, q, 0, "paper").J), rel=1e-12)
+        assert float(boundary_values(arm, q, 0, "exact").J) == pytest.approx(
+            float(boundary_values(arm, q, 0, "paper").J), rel=1e-12
+        )
     q = np.array([0.0, 0.7, math.pi / 2])
-    assert float(boundary_values(arm, q, 0, "exact").J) - float(boundary_values(arm, q, 0, "paper").J) > 1.0
+    assert (
+        float(boundary_values(arm, q, 0, "exact").J) - float(boundary_values(arm, q, 0, "paper").J)
+        > 1.0
+    )
 
 
 def test_frequencies_fall_with_payload_and_link1_ignores_q1(arm):
     light, heavy = arm.with_payload(0.5), arm.with_payload(4.0)
     q = np.radians([30.0, 60.0, -45.0])
     for link in range(3):
-        assert np.all(link_modes(heavy, q, link).frequency_hz < link_modes(light, q, link).frequency_hz)
+        assert np.all(
+            link_modes(heavy, q, link).frequency_hz < link_modes(light, q, link).frequency_hz
+        )
     f_a = link_modes(arm, np.radians([0.0, 60.0, -45.0]), 0).frequency_hz
     f_b = link_modes(arm, np.radians([123.0, 60.0, -45.0]), 0).frequency_hz
     assert f_a == pytest.approx(f_b, rel=1e-12)
@@ -111,7 +142,9 @@ def test_lookup_table_interpolates_exact_solves(arm):
     assert got["omega"] == pytest.approx(exact.omega, rel=1e-9)
     assert np.abs(got["tip_deflection"]) == pytest.approx(np.abs(exact.tip_deflection), rel=1e-9)
     # wrapping: +-180 degrees are the same configuration
-    assert table.evaluate(np.radians([0, 180.0, 20.0]))["omega"] == pytest.approx(table.evaluate(np.radians([0, -180.0, 20.0]))["omega"], rel=1e-9)
+    assert table.evaluate(np.radians([0, 180.0, 20.0]))["omega"] == pytest.approx(
+        table.evaluate(np.radians([0, -180.0, 20.0]))["omega"], rel=1e-9
+    )
 
 
 def test_lookup_is_differentiable_and_its_derivative_matches_finite_differences(arm):
@@ -126,7 +159,9 @@ def test_lookup_is_differentiable_and_its_derivative_matches_finite_differences(
     for k in (1, 2):
         dq = np.zeros(3)
         dq[k] = h
-        fd = (np.array(table.function(q0 + dq)[0]) - np.array(table.function(q0 - dq)[0])).ravel() / (2 * h)
+        fd = (
+            np.array(table.function(q0 + dq)[0]) - np.array(table.function(q0 - dq)[0])
+        ).ravel() / (2 * h)
         assert J[:, k] == pytest.approx(fd, rel=1e-4, abs=1e-6)
     assert np.all(J[:, 0] == 0.0)
 
@@ -141,7 +176,24 @@ def test_lookup_cache_is_reused(arm, tmp_path, monkeypatch):
 
 
 def test_modes_cli_json_interface(capsys, model_path):
-    assert main(["modes", str(model_path), "--payload", "2", "--q", "0", "0", "0", "--n-modes", "2", "--json"]) == 0
+    assert (
+        main(
+            [
+                "modes",
+                str(model_path),
+                "--payload",
+                "2",
+                "--q",
+                "0",
+                "0",
+                "0",
+                "--n-modes",
+                "2",
+                "--json",
+            ]
+        )
+        == 0
+    )
     result = json.loads(capsys.readouterr().out)
     links = result["links"]
     assert [len(e["frequencies_hz"]) for e in links] == [2, 2, 2]
@@ -151,13 +203,32 @@ def test_modes_cli_json_interface(capsys, model_path):
 
 
 def test_modes_cli_set_and_fidelity(capsys, model_path):
-    assert main(["modes", str(model_path), "--q", "0", "0", "90", "--set", "boundary_inertia=paper", "--json"]) == 0
+    assert (
+        main(
+            [
+                "modes",
+                str(model_path),
+                "--q",
+                "0",
+                "0",
+                "90",
+                "--set",
+                "boundary_inertia=paper",
+                "--json",
+            ]
+        )
+        == 0
+    )
     paper = json.loads(capsys.readouterr().out)["links"][0]["frequencies_hz"]
     assert main(["modes", str(model_path), "--q", "0", "0", "90", "--json"]) == 0
     exact = json.loads(capsys.readouterr().out)["links"][0]["frequencies_hz"]
     assert paper[0] != pytest.approx(exact[0], rel=1e-3)
     assert main(["modes", str(model_path), "--fidelity", "amm:3", "--json"]) == 0
-    assert [len(e["frequencies_hz"]) for e in json.loads(capsys.readouterr().out)["links"]] == [3, 3, 3]
+    assert [len(e["frequencies_hz"]) for e in json.loads(capsys.readouterr().out)["links"]] == [
+        3,
+        3,
+        3,
+    ]
 
 
 @pytest.mark.parametrize(
@@ -172,7 +243,9 @@ def test_modes_cli_set_and_fidelity(capsys, model_path):
         (["--fidelity", "amm:9"], "--fidelity"),
     ],
 )
-def test_modes_cli_bad_input_exits_nonzero_with_one_line_naming_the_key(capsys, model_path, argv, key):
+def test_modes_cli_bad_input_exits_nonzero_with_one_line_naming_the_key(
+    capsys, model_path, argv, key
+):
     assert main(["modes", str(model_path), *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1

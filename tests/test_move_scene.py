@@ -8,25 +8,36 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
-
-from flexctrl.cli import main
 from support import DATA
 
+from flexctrl.cli import main
+
 SCENE = "studies/scenes/move_joint1_30deg.toml"
-SETTLED_WITHIN_S = 6.0   # tip error stays below 1 mm after this time
+SETTLED_WITHIN_S = 6.0  # tip error stays below 1 mm after this time
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    import os
 
     root = DATA
     results = {}
     for name in ("pd", "lqr", "mpc"):
         out = tmp_path_factory.mktemp(name)
-        assert main(["simulate", str(root / SCENE), "--controller", str(DATA / "controllers" / f"{name}.toml"), "--out", str(out), "--no-plots"]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    str(root / SCENE),
+                    "--controller",
+                    str(DATA / "controllers" / f"{name}.toml"),
+                    "--out",
+                    str(out),
+                    "--no-plots",
+                ]
+            )
+            == 0
+        )
         results[name] = json.loads((out / "summary.json").read_text())
     return results
 
@@ -58,15 +69,35 @@ def test_lqr_and_mpc_beat_pd_on_residual_vibration_with_the_smooth_reference(run
 
 def test_summary_interface_keys(runs):
     m = runs["mpc"]["metrics"]
-    for key in ("tip_residual_rms", "tip_residual_peak", "settling_time", "peak_deflection", "peak_torque",
-                "controller_time_median", "controller_time_p95", "fallbacks"):
+    for key in (
+        "tip_residual_rms",
+        "tip_residual_peak",
+        "settling_time",
+        "peak_deflection",
+        "peak_torque",
+        "controller_time_median",
+        "controller_time_p95",
+        "fallbacks",
+    ):
         assert key in m
     assert m["controller_time_median"] > 0 and len(m["peak_torque"]) == 3
 
 
 def test_arm_scene_refuses_a_controller(tmp_path):
     root = DATA
-    assert main(["simulate", str(root / "studies/scenes/bangbang.toml"), "--controller", str(root / "controllers/pd.toml"), "--out", str(tmp_path)]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                str(root / "studies/scenes/bangbang.toml"),
+                "--controller",
+                str(root / "controllers/pd.toml"),
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 2
+    )
 
 
 def test_bench_mpc_smoke(capsys):

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from support import DATA
 
 import flexctrl as fc
-from support import DATA, ROOT
 from flexctrl.control.mpc.arrival_search import shortest_arrival
 from flexctrl.control.mpc.qp import ScaledProblem, condensed_qp
 from flexctrl.errors import SpecError
@@ -16,15 +16,35 @@ from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import MPCSettings
 
 
-def double_integrator(inertia: float, torque: float, Ts: float, horizon: int, band: float) -> ScaledProblem:
+def double_integrator(
+    inertia: float, torque: float, Ts: float, horizon: int, band: float
+) -> ScaledProblem:
     """A rigid joint (kg m^2) under a torque limit (N m), ZOH at Ts, one arrival row on the angle (rad)."""
     A = np.array([[1.0, Ts], [0.0, 1.0]])
-    B = torque / inertia * np.array([[0.5 * Ts**2], [Ts]])  # scaled input: v = u / torque in [-1, 1]
+    B = (
+        torque / inertia * np.array([[0.5 * Ts**2], [Ts]])
+    )  # scaled input: v = u / torque in [-1, 1]
     eye = np.eye(2)
-    return ScaledProblem(A=A, B=B, Q=eye, R=np.eye(1), P=eye, K=np.zeros((1, 2)), Sx=np.ones(2), Su=np.ones(1),
-                         v_lo=np.array([-1.0]), v_hi=np.array([1.0]), C=np.array([[1.0, 0.0]]),
-                         c_lo=np.array([-band]), c_hi=np.array([band]), h=1.0, l1=1e3, l2=1e3, horizon=horizon,
-                         n_arrival=1)
+    return ScaledProblem(
+        A=A,
+        B=B,
+        Q=eye,
+        R=np.eye(1),
+        P=eye,
+        K=np.zeros((1, 2)),
+        Sx=np.ones(2),
+        Su=np.ones(1),
+        v_lo=np.array([-1.0]),
+        v_hi=np.array([1.0]),
+        C=np.array([[1.0, 0.0]]),
+        c_lo=np.array([-band]),
+        c_hi=np.array([band]),
+        h=1.0,
+        l1=1e3,
+        l2=1e3,
+        horizon=horizon,
+        n_arrival=1,
+    )
 
 
 @pytest.mark.parametrize("angle", [0.2, 0.5, 1.0])
@@ -56,7 +76,11 @@ def test_arrival_needs_the_condensed_form_and_a_positive_band():
 
 
 def test_unknown_arrival_key_is_refused(tmp_path):
-    text = (DATA / "studies" / "tuning" / "start" / "mpc_time_optimal.toml").read_text().replace("margin =", "margn =")
+    text = (
+        (DATA / "studies" / "tuning" / "start" / "mpc_time_optimal.toml")
+        .read_text()
+        .replace("margin =", "margn =")
+    )
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(SpecError, match="margn"):
@@ -67,7 +91,9 @@ def test_unknown_arrival_key_is_refused(tmp_path):
 def fast_runs():
     fast = fc.load_scene(DATA / "studies" / "scenes" / "fast_move_30deg.toml")
     quintic = fc.load_scene(DATA / "studies" / "scenes" / "move_joint1_30deg.toml")
-    mpc = fc.run_scene(fast, controller=str(DATA / "controllers" / "mpc_time_optimal.toml"), plots=False)
+    mpc = fc.run_scene(
+        fast, controller=str(DATA / "controllers" / "mpc_time_optimal.toml"), plots=False
+    )
     lqr = fc.run_scene(quintic, controller=str(DATA / "controllers" / "lqr.toml"), plots=False)
     return mpc, lqr
 
@@ -85,7 +111,9 @@ def test_time_optimal_mpc_keeps_the_torque_limits_and_plans_a_feasible_arrival(f
     assert np.all(np.abs(torques) <= limits * (1 + 1e-12))
     summary = mpc.summary["controller"]  # (solve times are benchmark figures: docs/control.md)
     assert summary["arrival_feasible"]
-    assert mpc.metrics["settling_time"] + 0.1 >= summary["arrival_time_s"]  # inside the band once planned
+    assert (
+        mpc.metrics["settling_time"] + 0.1 >= summary["arrival_time_s"]
+    )  # inside the band once planned
 
 
 def test_release_lifts_only_the_arrival_rows_of_the_released_stages():
@@ -94,7 +122,10 @@ def test_release_lifts_only_the_arrival_rows_of_the_released_stages():
     release = np.array([True, True, False, False])
     _g, lba, uba, _lbx, _ubx = qp.vectors(np.array([-0.1, 0.0]), release=release)
     _g, lba0, uba0, _lbx, _ubx = qp.vectors(np.array([-0.1, 0.0]))
-    upper, lower = qp.soft_rows[:, 0], qp.soft_rows[:, 1]  # one (arrival) row per stage: upper, lower
+    upper, lower = (
+        qp.soft_rows[:, 0],
+        qp.soft_rows[:, 1],
+    )  # one (arrival) row per stage: upper, lower
     assert np.all(np.isinf(uba[upper[release]])) and np.all(np.isinf(lba[lower[release]]))
     np.testing.assert_array_equal(uba[upper[~release]], uba0[upper[~release]])
     np.testing.assert_array_equal(lba[lower[~release]], lba0[lower[~release]])

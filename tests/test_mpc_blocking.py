@@ -31,13 +31,15 @@ def blocked_closed_form(Ad, Bd, Q, R, P, blocks, dx0):
     """Minimise the horizon cost over held block moves by solving the normal equations in the block moves."""
     n, m = Bd.shape
     N = sum(blocks)
-    owner = np.repeat(np.arange(len(blocks)), blocks)  # the block of every stage, built here, not by the code
+    owner = np.repeat(
+        np.arange(len(blocks)), blocks
+    )  # the block of every stage, built here, not by the code
     T = np.kron(np.eye(len(blocks))[owner], np.eye(m))
     Phi = np.vstack([np.linalg.matrix_power(Ad, k + 1) for k in range(N)])
     Gam = np.zeros((N * n, N * m))
     for k in range(N):
         for j in range(k + 1):
-            Gam[k * n:(k + 1) * n, j * m:(j + 1) * m] = np.linalg.matrix_power(Ad, k - j) @ Bd
+            Gam[k * n : (k + 1) * n, j * m : (j + 1) * m] = np.linalg.matrix_power(Ad, k - j) @ Bd
     W = np.kron(np.eye(N), Q)
     W[-n:, -n:] = P
     G = Gam @ T
@@ -47,8 +49,14 @@ def blocked_closed_form(Ad, Bd, Q, R, P, blocks, dx0):
 
 
 def test_blocked_unconstrained_plan_is_the_closed_form_and_held_over_its_blocks(arm, op):
-    settings = MPCSettings(horizon=sum(BLOCKS), blocks=BLOCKS, soft="none", formulation="condensed", osqp=TIGHT,
-                           scaling="none")
+    settings = MPCSettings(
+        horizon=sum(BLOCKS),
+        blocks=BLOCKS,
+        soft="none",
+        formulation="condensed",
+        osqp=TIGHT,
+        scaling="none",
+    )
     ctrl = design(arm, op, settings)
     ctrl.reset()
     dx = np.zeros(arm.n_x)
@@ -60,7 +68,9 @@ def test_blocked_unconstrained_plan_is_the_closed_form_and_held_over_its_blocks(
     np.testing.assert_allclose(plan, expected, rtol=1e-5, atol=1e-6 * np.max(np.abs(expected)))
     start = 0
     for length in BLOCKS:  # one move per block
-        np.testing.assert_array_equal(plan[start:start + length], np.repeat(plan[start:start + 1], length, axis=0))
+        np.testing.assert_array_equal(
+            plan[start : start + length], np.repeat(plan[start : start + 1], length, axis=0)
+        )
         start += length
 
 
@@ -68,7 +78,9 @@ def test_blocking_matrix_holds_each_block_move():
     from flexctrl.control.mpc.qp import blocking_matrix
 
     T = blocking_matrix((1, 2), 2)
-    np.testing.assert_array_equal(T @ np.array([1.0, 2.0, 3.0, 4.0]), [1.0, 2.0, 3.0, 4.0, 3.0, 4.0])
+    np.testing.assert_array_equal(
+        T @ np.array([1.0, 2.0, 3.0, 4.0]), [1.0, 2.0, 3.0, 4.0, 3.0, 4.0]
+    )
 
 
 def test_blocks_of_one_are_the_unblocked_problem(arm, op):
@@ -76,7 +88,9 @@ def test_blocks_of_one_are_the_unblocked_problem(arm, op):
     dx[:3] = np.radians([0.4, 0.1, -0.2])
     plans = []
     for blocks in ((), (1,) * 12):
-        ctrl = design(arm, op, MPCSettings(horizon=12, blocks=blocks, formulation="condensed", osqp=TIGHT))
+        ctrl = design(
+            arm, op, MPCSettings(horizon=12, blocks=blocks, formulation="condensed", osqp=TIGHT)
+        )
         ctrl.reset()
         ctrl.step(0.0, op.x + dx)
         plans.append(ctrl.plan())
@@ -88,9 +102,20 @@ def test_thinned_soft_rows_bound_the_checked_states_by_limit_plus_slack(arm, op)
     dx = np.zeros(arm.n_x)
     dx[0] = np.radians(10.0)
     stages = [3, 7, 11, 15, 19]
-    ctrl = design(arm, op, MPCSettings(horizon=20, blocks=(1, 1, 2, 4, 4, 8), soft="deflection",
-                                       deflection_limit=limit, constraint_stride=4, formulation="condensed",
-                                       osqp=TIGHT, scaling="none"))
+    ctrl = design(
+        arm,
+        op,
+        MPCSettings(
+            horizon=20,
+            blocks=(1, 1, 2, 4, 4, 8),
+            soft="deflection",
+            deflection_limit=limit,
+            constraint_stride=4,
+            formulation="condensed",
+            osqp=TIGHT,
+            scaling="none",
+        ),
+    )
     assert ctrl.qp.soft_steps.tolist() == stages
     ctrl.reset()
     ctrl.step(0.0, op.x + dx)
@@ -108,20 +133,25 @@ def test_thinned_soft_rows_bound_the_checked_states_by_limit_plus_slack(arm, op)
             row += 1
 
 
-@pytest.mark.parametrize("kwargs, key", [
-    ({"horizon": 10, "blocks": (2, 2, 2), "formulation": "condensed"}, "blocks"),
-    ({"horizon": 6, "blocks": (2, 2, 2), "formulation": "sparse"}, "formulation"),
-    ({"horizon": 6, "blocks": (2, 0, 4), "formulation": "condensed"}, "blocks"),
-    ({"horizon": 6, "constraint_stride": 2, "formulation": "sparse"}, "formulation"),
-    ({"horizon": 6, "constraint_stride": 7, "formulation": "condensed"}, "constraint_stride"),
-])
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        ({"horizon": 10, "blocks": (2, 2, 2), "formulation": "condensed"}, "blocks"),
+        ({"horizon": 6, "blocks": (2, 2, 2), "formulation": "sparse"}, "formulation"),
+        ({"horizon": 6, "blocks": (2, 0, 4), "formulation": "condensed"}, "blocks"),
+        ({"horizon": 6, "constraint_stride": 2, "formulation": "sparse"}, "formulation"),
+        ({"horizon": 6, "constraint_stride": 7, "formulation": "condensed"}, "constraint_stride"),
+    ],
+)
 def test_bad_blocking_settings_name_the_key(kwargs, key):
     with pytest.raises(SpecError, match=f"key '{key}'"):
         MPCSettings(**kwargs)
 
 
 def test_a_held_block_respects_the_tightest_bound_of_the_stages_it_covers(arm, op):
-    ctrl = design(arm, op, MPCSettings(horizon=6, blocks=(1, 2, 3), soft="none", formulation="condensed"))
+    ctrl = design(
+        arm, op, MPCSettings(horizon=6, blocks=(1, 2, 3), soft="none", formulation="condensed")
+    )
     qp = ctrl.qp
     dv = np.zeros((6, arm.n_u))
     dv[:, 0] = [0.0, 0.5, 0.0, 0.0, 0.0, 0.9]
@@ -134,8 +164,13 @@ def test_a_held_block_respects_the_tightest_bound_of_the_stages_it_covers(arm, o
 
 def test_the_blocked_mpcs_linear_law_is_its_own_unconstrained_first_move(arm, op):
     """With move blocking the first move is not the LQR move; the linear verdict must use the MPC's own."""
-    ctrl = design(arm, op, MPCSettings(horizon=sum(BLOCKS), blocks=BLOCKS, soft="none", formulation="condensed",
-                                       osqp=TIGHT))
+    ctrl = design(
+        arm,
+        op,
+        MPCSettings(
+            horizon=sum(BLOCKS), blocks=BLOCKS, soft="none", formulation="condensed", osqp=TIGHT
+        ),
+    )
     K = ctrl.unconstrained_gain()
     assert np.max(np.abs(K - ctrl.K)) > 1e-3 * np.max(np.abs(ctrl.K))
     dx = np.zeros(arm.n_x)

@@ -8,8 +8,13 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from flexctrl.beam.elements import assemble_beam
-from flexctrl.dynamics.fem.newmark_dae import (ConstraintViolationError, DAEProblem, NewtonConvergenceError,
-                                               casadi_problem, simulate)
+from flexctrl.dynamics.fem.newmark_dae import (
+    ConstraintViolationError,
+    DAEProblem,
+    NewtonConvergenceError,
+    casadi_problem,
+    simulate,
+)
 
 MASS, G, LEN = 1.3, 9.81, 0.8
 TH0 = 1.0
@@ -18,26 +23,45 @@ Q0 = np.array([LEN * np.sin(TH0), -LEN * np.cos(TH0)])
 
 def pendulum(tangents: bool = True) -> DAEProblem:
     """Point mass on a rigid massless rod, Cartesian q = (x, y), Phi = x^2 + y^2 - L^2."""
-    extra = dict(force_q=lambda q, qd, t: np.zeros((2, 2)), force_qd=lambda q, qd, t: np.zeros((2, 2)),
-                 h_q=lambda q, qd, t: np.zeros((1, 2)), h_qd=lambda q, qd, t: -4.0 * qd[None, :])
+    extra = dict(
+        force_q=lambda q, qd, t: np.zeros((2, 2)),
+        force_qd=lambda q, qd, t: np.zeros((2, 2)),
+        h_q=lambda q, qd, t: np.zeros((1, 2)),
+        h_qd=lambda q, qd, t: -4.0 * qd[None, :],
+    )
     return DAEProblem(
-        n_q=2, n_c=1, mass=lambda q, t: MASS * np.eye(2), force=lambda q, qd, t: np.array([0.0, -MASS * G]),
-        phi=lambda q, t: np.array([q @ q - LEN**2]), phi_q=lambda q, t: 2.0 * q[None, :],
-        phi_t=lambda q, t: np.zeros(1), h=lambda q, qd, t: np.array([-2.0 * qd @ qd]),
-        **(extra if tangents else {}))
+        n_q=2,
+        n_c=1,
+        mass=lambda q, t: MASS * np.eye(2),
+        force=lambda q, qd, t: np.array([0.0, -MASS * G]),
+        phi=lambda q, t: np.array([q @ q - LEN**2]),
+        phi_q=lambda q, t: 2.0 * q[None, :],
+        phi_t=lambda q, t: np.zeros(1),
+        h=lambda q, qd, t: np.array([-2.0 * qd @ qd]),
+        **(extra if tangents else {}),
+    )
 
 
 @pytest.fixture(scope="module")
 def pendulum_reference():
     """Angle ODE theta'' = -(g/L) sin theta, solved to 1e-13."""
-    return solve_ivp(lambda t, y: [y[1], -G / LEN * np.sin(y[0])], (0.0, 2.0), [TH0, 0.0],
-                     method="DOP853", rtol=1e-13, atol=1e-13, dense_output=True).sol
+    return solve_ivp(
+        lambda t, y: [y[1], -G / LEN * np.sin(y[0])],
+        (0.0, 2.0),
+        [TH0, 0.0],
+        method="DOP853",
+        rtol=1e-13,
+        atol=1e-13,
+        dense_output=True,
+    ).sol
 
 
 def pendulum_errors(res, sol):
     th, om = sol(res.t)
     pos = np.abs(res.q - np.c_[LEN * np.sin(th), -LEN * np.cos(th)]).max()
-    tension = MASS * (G * np.cos(th) + LEN * om**2)  # rod force; Phi_q^T lam = 2 lam q => T = 2 lam L
+    tension = MASS * (
+        G * np.cos(th) + LEN * om**2
+    )  # rod force; Phi_q^T lam = 2 lam q => T = 2 lam L
     return pos, np.abs(2.0 * LEN * res.lam[:, 0] - tension).max()
 
 
@@ -68,8 +92,9 @@ def test_fd_jacobian_and_casadi_backend_agree_with_hand_tangents():
     fd = simulate(pendulum(tangents=False), Q0, [0.0, 0.0], 1.0, 0.01)
     np.testing.assert_allclose(fd.q, ref.q, atol=1e-10)
     q, qd, t = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("t")
-    prob = casadi_problem(q, qd, t, MASS * ca.SX.eye(2), ca.vertcat(0, -MASS * G),
-                          ca.dot(q, q) - LEN**2)
+    prob = casadi_problem(
+        q, qd, t, MASS * ca.SX.eye(2), ca.vertcat(0, -MASS * G), ca.dot(q, q) - LEN**2
+    )
     res = simulate(prob, Q0, [0.0, 0.0], 1.0, 0.01)
     np.testing.assert_allclose(res.q, ref.q, atol=1e-12)
     np.testing.assert_allclose(res.lam, ref.lam, atol=1e-10)
@@ -79,24 +104,45 @@ def test_casadi_time_dependent_constraint_derives_h():
     """Bead on a rod moving as y = x tan(w t): h from AD must match the hand derivation via the motion."""
     q, qd, t = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("t")
     w = 0.7
-    prob = casadi_problem(q, qd, t, ca.SX.eye(2), ca.vertcat(0, -1.0),
-                          q[1] * ca.cos(w * t) - q[0] * ca.sin(w * t))
-    res = simulate(prob, [1.0, 0.0], [0.0, w], 1.0, 1e-3, max_violation=1e-6)  # consistent Phidot = 0
+    prob = casadi_problem(
+        q, qd, t, ca.SX.eye(2), ca.vertcat(0, -1.0), q[1] * ca.cos(w * t) - q[0] * ca.sin(w * t)
+    )
+    res = simulate(
+        prob, [1.0, 0.0], [0.0, w], 1.0, 1e-3, max_violation=1e-6
+    )  # consistent Phidot = 0
     assert res.phi_violation.max() < 1e-7
     # independent: r'' - r w^2 = -sin(w t) along the rod (gravity g = 1 in -y), r(0) = 1, r'(0) = 0
-    sol = solve_ivp(lambda s, y: [y[1], y[0] * w**2 - np.sin(w * s)], (0, 1), [1.0, 0.0],
-                    rtol=1e-12, atol=1e-12, dense_output=True).sol
+    sol = solve_ivp(
+        lambda s, y: [y[1], y[0] * w**2 - np.sin(w * s)],
+        (0, 1),
+        [1.0, 0.0],
+        rtol=1e-12,
+        atol=1e-12,
+        dense_output=True,
+    ).sol
     r = sol(res.t)[0]
-    np.testing.assert_allclose(res.q, np.c_[r * np.cos(w * res.t), r * np.sin(w * res.t)], atol=5e-7)
+    np.testing.assert_allclose(
+        res.q, np.c_[r * np.cos(w * res.t), r * np.sin(w * res.t)], atol=5e-7
+    )
 
 
 def oscillator(k: float = 4.0, m: float = 1.0) -> DAEProblem:
     K = np.array([[k]])
     return DAEProblem(
-        n_q=1, n_c=0, mass=lambda q, t: np.array([[m]]), force=lambda q, qd, t: -K @ q,
-        phi=lambda q, t: np.zeros(0), phi_q=lambda q, t: np.zeros((0, 1)), phi_t=lambda q, t: np.zeros(0),
-        h=lambda q, qd, t: np.zeros(0), force_q=lambda q, qd, t: -K, force_qd=lambda q, qd, t: np.zeros((1, 1)),
-        h_q=lambda q, qd, t: np.zeros((0, 1)), h_qd=lambda q, qd, t: np.zeros((0, 1)), linear=True)
+        n_q=1,
+        n_c=0,
+        mass=lambda q, t: np.array([[m]]),
+        force=lambda q, qd, t: -K @ q,
+        phi=lambda q, t: np.zeros(0),
+        phi_q=lambda q, t: np.zeros((0, 1)),
+        phi_t=lambda q, t: np.zeros(0),
+        h=lambda q, qd, t: np.zeros(0),
+        force_q=lambda q, qd, t: -K,
+        force_qd=lambda q, qd, t: np.zeros((1, 1)),
+        h_q=lambda q, qd, t: np.zeros((0, 1)),
+        h_qd=lambda q, qd, t: np.zeros((0, 1)),
+        linear=True,
+    )
 
 
 def test_unconstrained_oscillator_second_order():
@@ -115,10 +161,20 @@ def locked_cantilever(n: int = 6) -> tuple[DAEProblem, np.ndarray, np.ndarray]:
     A[0, 0] = A[1, 1] = 1.0
     z = np.zeros((b.M.shape[0],) * 2)
     prob = DAEProblem(
-        n_q=b.M.shape[0], n_c=2, mass=lambda q, t: b.M, force=lambda q, qd, t: -b.K @ q,
-        phi=lambda q, t: A @ q, phi_q=lambda q, t: A, phi_t=lambda q, t: np.zeros(2),
-        h=lambda q, qd, t: np.zeros(2), force_q=lambda q, qd, t: -b.K, force_qd=lambda q, qd, t: z,
-        h_q=lambda q, qd, t: np.zeros_like(A), h_qd=lambda q, qd, t: np.zeros_like(A), linear=True)
+        n_q=b.M.shape[0],
+        n_c=2,
+        mass=lambda q, t: b.M,
+        force=lambda q, qd, t: -b.K @ q,
+        phi=lambda q, t: A @ q,
+        phi_q=lambda q, t: A,
+        phi_t=lambda q, t: np.zeros(2),
+        h=lambda q, qd, t: np.zeros(2),
+        force_q=lambda q, qd, t: -b.K,
+        force_qd=lambda q, qd, t: z,
+        h_q=lambda q, qd, t: np.zeros_like(A),
+        h_qd=lambda q, qd, t: np.zeros_like(A),
+        linear=True,
+    )
     x = b.node_x
     q0 = np.zeros(b.M.shape[0])
     q0[0::2], q0[1::2] = 0.01 * x**2 * (3 - x) / 2, 0.01 * (6 * x - 3 * x**2) / 2  # tip-load shape
@@ -126,7 +182,9 @@ def locked_cantilever(n: int = 6) -> tuple[DAEProblem, np.ndarray, np.ndarray]:
 
 
 def energy(res, b):
-    return 0.5 * np.einsum("ki,ij,kj->k", res.qd, b.M, res.qd) + 0.5 * np.einsum("ki,ij,kj->k", res.q, b.K, res.q)
+    return 0.5 * np.einsum("ki,ij,kj->k", res.qd, b.M, res.qd) + 0.5 * np.einsum(
+        "ki,ij,kj->k", res.q, b.K, res.q
+    )
 
 
 def test_energy_conserved_by_trapezoidal_rule_and_dissipated_by_damped_newmark():
@@ -144,7 +202,9 @@ def test_printed_eq54_sign_diverges_and_eq49_sign_damps():
     q_bad = Q0 * 1.001  # initial position violation of 2e-3 L^2
     res = simulate(pendulum(), q_bad, [0.0, 0.0], 5.0, 1e-3)
     assert res.phi_violation[-1] < 0.01 * res.phi_violation[0]
-    with pytest.raises(ConstraintViolationError, match=r"t = .* s, dt = 0.01 s, gamma = 5, beta = 5.*eq54"):
+    with pytest.raises(
+        ConstraintViolationError, match=r"t = .* s, dt = 0.01 s, gamma = 5, beta = 5.*eq54"
+    ):
         simulate(pendulum(), q_bad, [0.0, 0.0], 5.0, 0.01, baumgarte_form="eq54_printed")
 
 
@@ -153,7 +213,9 @@ def test_absurd_baumgarte_gains_at_large_step_raise():
     with pytest.raises(ConstraintViolationError, match=r"gamma = 1000, beta = 1000.*max\|Phi\|"):
         simulate(pendulum(), q_bad, [0.0, 0.0], 1.0, 0.01, gamma=1e3, beta=1e3)
     # the implicit variant of the same feedback is stable
-    res = simulate(pendulum(), q_bad, [0.0, 0.0], 1.0, 0.01, gamma=1e3, beta=1e3, feedback="implicit")
+    res = simulate(
+        pendulum(), q_bad, [0.0, 0.0], 1.0, 0.01, gamma=1e3, beta=1e3, feedback="implicit"
+    )
     assert res.phi_violation[-1] < 1e-5
 
 

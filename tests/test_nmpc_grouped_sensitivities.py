@@ -31,7 +31,9 @@ def test_each_group_is_served_by_its_middle_interval():
 
 
 @pytest.mark.parametrize("stages", [3, 10])
-def test_grouped_linearisation_has_every_shooting_end_and_the_centres_sensitivities(onelink, stages):
+def test_grouped_linearisation_has_every_shooting_end_and_the_centres_sensitivities(
+    onelink, stages
+):
     model, op = onelink
     settings = NMPCSettings(**SMALL)
     per_interval = design_nmpc(model, op, settings)
@@ -46,9 +48,11 @@ def test_grouped_linearisation_has_every_shooting_end_and_the_centres_sensitivit
     centres = group_centres(lay.N, stages)
     for k in range(lay.N):
         c = centres[k // stages]
-        np.testing.assert_array_equal(A2[:, k * n:(k + 1) * n], A1[:, c * n:(c + 1) * n])
-        np.testing.assert_array_equal(B2[:, k * m:(k + 1) * m], B1[:, c * m:(c + 1) * m])
-    assert not np.allclose(A1[:, :n], A1[:, (lay.N - 1) * n:])  # the intervals' own Jacobians differ
+        np.testing.assert_array_equal(A2[:, k * n : (k + 1) * n], A1[:, c * n : (c + 1) * n])
+        np.testing.assert_array_equal(B2[:, k * m : (k + 1) * m], B1[:, c * m : (c + 1) * m])
+    assert not np.allclose(
+        A1[:, :n], A1[:, (lay.N - 1) * n :]
+    )  # the intervals' own Jacobians differ
 
 
 def test_a_loop_on_grouped_sensitivities_settles_where_the_per_interval_one_does(onelink):
@@ -72,6 +76,11 @@ def test_a_loop_on_grouped_sensitivities_settles_where_the_per_interval_one_does
 
 
 def test_stages_per_jacobian_is_read_and_checked():
-    assert controller_from_document({"kind": "nmpc", "stages_per_jacobian": 4}, "nmpc.toml").stages_per_jacobian == 4
+    assert (
+        controller_from_document(
+            {"kind": "nmpc", "stages_per_jacobian": 4}, "nmpc.toml"
+        ).stages_per_jacobian
+        == 4
+    )
     with pytest.raises(SpecError, match="nmpc_bad.toml.*stages_per_jacobian"):
         controller_from_document({"kind": "nmpc", "stages_per_jacobian": 0}, "nmpc_bad.toml")

@@ -33,8 +33,10 @@ def _modes(mass, a_lin):
 
 @pytest.fixture(scope="module")
 def reduced_setups():
-    return {mp: _setup("prediction_modes=1", f"prediction_basis={basis}", f"prediction_map={mp}")
-            for mp, basis in (("modal", "coupled"), ("select", "assumed"))}
+    return {
+        mp: _setup("prediction_modes=1", f"prediction_basis={basis}", f"prediction_map={mp}")
+        for mp, basis in (("modal", "coupled"), ("select", "assumed"))
+    }
 
 
 def _gain_on_design_state(ctrl):
@@ -51,7 +53,10 @@ def test_coupled_basis_keeps_the_slowest_frequencies_the_assumed_modes_do_not(re
     # proportional to the coupled modes, so the damped eigenvalues differ by ~0.2 %)
     def frequencies(ctrl, model, x_op):
         n = model.n_q
-        return _modes(np.asarray(model.functions["M"](x_op[:n]), dtype=float), np.asarray(ctrl.sys.A, dtype=float))[0]
+        return _modes(
+            np.asarray(model.functions["M"](x_op[:n]), dtype=float),
+            np.asarray(ctrl.sys.A, dtype=float),
+        )[0]
 
     setup = reduced_setups["modal"]
     c = setup.controller
@@ -87,7 +92,9 @@ def test_modal_map_is_what_keeps_the_tuned_reduced_loop_stable(reduced_setups):
     radius = {}
     for name, setup in reduced_setups.items():
         c = setup.controller
-        radius[name] = float(np.max(np.abs(np.linalg.eigvals(c.plant.Ad - c.plant.Bd @ _gain_on_design_state(c)))))
+        radius[name] = float(
+            np.max(np.abs(np.linalg.eigvals(c.plant.Ad - c.plant.Bd @ _gain_on_design_state(c))))
+        )
     assert radius["modal"] < 0.99 < 1.0 < radius["select"]
 
 
@@ -123,8 +130,12 @@ def test_frozen_sensitivities_over_k_steps_are_exact_at_rest_and_coarser_in_moti
     x[3:9] += 1e-3 * rng.standard_normal(6)
     u = op.u + 0.5 * L.torque_limits(model) * np.array([1.0, -1.0, 1.0])
     eps = 1e-6
-    A_fd = np.column_stack([(np.asarray(F(x + eps * e, u)) - np.asarray(F(x - eps * e, u))).ravel() / (2 * eps)
-                            for e in np.eye(18)])
+    A_fd = np.column_stack(
+        [
+            (np.asarray(F(x + eps * e, u)) - np.asarray(F(x - eps * e, u))).ravel() / (2 * eps)
+            for e in np.eye(18)
+        ]
+    )
     _, A_ex, _ = (np.asarray(a, dtype=float) for a in exact(x, u))
     assert np.linalg.norm(A_ex - A_fd, 2) < 1e-6 * np.linalg.norm(A_fd, 2)
     errors = {}
@@ -150,8 +161,14 @@ def test_reduced_prediction_settings_are_checked():
         controller_from_document({"kind": "nmpc", "prediction_map": "coupled"}, "nmpc_bad.toml")
     with pytest.raises(SpecError, match="nmpc_bad.toml.*jacobian_every"):
         controller_from_document({"kind": "nmpc", "jacobian_every": 0}, "nmpc_bad.toml")
-    settings = controller_from_document({"kind": "nmpc", "prediction_modes": 1, "jacobian_every": 3}, "nmpc.toml")
-    assert (settings.prediction_basis, settings.prediction_map, settings.jacobian_every) == ("coupled", "modal", 3)
+    settings = controller_from_document(
+        {"kind": "nmpc", "prediction_modes": 1, "jacobian_every": 3}, "nmpc.toml"
+    )
+    assert (settings.prediction_basis, settings.prediction_map, settings.jacobian_every) == (
+        "coupled",
+        "modal",
+        3,
+    )
 
 
 def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_prediction():
@@ -161,8 +178,12 @@ def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_pr
 
     keys = set()
     for q in ("[0.0,0.0,0.0]", "[0.0,90.0,-90.0]"):
-        setup = build_loop(load_scene(SCENE, [f"initial.q={q}"]), "controllers/nmpc.toml", ["compile=false"],
-                           SceneCache())
+        setup = build_loop(
+            load_scene(SCENE, [f"initial.q={q}"]),
+            "controllers/nmpc.toml",
+            ["compile=false"],
+            SceneCache(),
+        )
         keys.add(cache_key(setup.controller.functions["linmap"], [], "cc"))
     assert len(keys) == 1
 
@@ -173,8 +194,12 @@ def test_a_configuration_of_the_same_structure_reuses_the_linearisation_and_gets
     from flexctrl.control.nmpc import interval as nmpc_interval
 
     def setup(q):
-        return build_loop(load_scene(SCENE, [f"initial.q={q}"]), "controllers/nmpc.toml", ["compile=false"],
-                          SceneCache()).controller
+        return build_loop(
+            load_scene(SCENE, [f"initial.q={q}"]),
+            "controllers/nmpc.toml",
+            ["compile=false"],
+            SceneCache(),
+        ).controller
 
     setup("[0.0,0.0,0.0]")
     reused = setup("[0.0,90.0,-90.0]")

@@ -10,15 +10,18 @@ from flexctrl.control.nmpc.controller import design_nmpc, interval_functions
 from flexctrl.sim.bound import BoundFunction
 from flexctrl.spec.controller_settings import NMPCSettings
 
-
-LIMIT = 0.01  # m: passed in the transient (the first 21 of 40 samples solve the whole QP), held after
+LIMIT = (
+    0.01  # m: passed in the transient (the first 21 of 40 samples solve the whole QP), held after
+)
 SMALL = dict(compile=False, horizon=15, sample_time=0.02, deflection_limit=0.02, qp_warm_start=True)
 
 
 def _transition_error(model, x, u, dt, recipe, every=1):
     _, exact = interval_functions(model, dt, 2, "exact")
     _, FJ = interval_functions(model, dt, 2, recipe, jacobian_every=every)
-    return np.linalg.norm(np.asarray(FJ(x, u)[1], dtype=float) - np.asarray(exact(x, u)[1], dtype=float), 2)
+    return np.linalg.norm(
+        np.asarray(FJ(x, u)[1], dtype=float) - np.asarray(exact(x, u)[1], dtype=float), 2
+    )
 
 
 def test_midpoint_sensitivities_are_third_order_in_the_sample_time_the_start_point_second(onelink):
@@ -69,7 +72,9 @@ def test_the_screened_qp_gives_the_whole_qps_optimum_and_declines_when_a_limit_b
     calls = ctrl._calls()
     # the deflection limit binds in the transient (whole QP) and not once the link settles
     assert 0 < calls.screened < calls.solves, (calls.screened, calls.solves)
-    np.testing.assert_allclose(screened, whole, rtol=0, atol=1e-5 * 15.0)  # measured 7e-7 N m (solver tolerance)
+    np.testing.assert_allclose(
+        screened, whole, rtol=0, atol=1e-5 * 15.0
+    )  # measured 7e-7 N m (solver tolerance)
 
 
 def test_a_bound_function_shares_arrays_and_renews_its_memory_on_request():

@@ -20,14 +20,18 @@ from pathlib import Path
 
 import pytest
 
-nbformat = pytest.importorskip("nbformat", reason="notebook tests need the 'notebooks' extra (nbformat)")
-nbclient = pytest.importorskip("nbclient", reason="notebook tests need the 'notebooks' extra (nbclient)")
+nbformat = pytest.importorskip(
+    "nbformat", reason="notebook tests need the 'notebooks' extra (nbformat)"
+)
+nbclient = pytest.importorskip(
+    "nbclient", reason="notebook tests need the 'notebooks' extra (nbclient)"
+)
 pytest.importorskip("ipykernel", reason="notebook tests need the 'notebooks' extra (ipykernel)")
 
 from jupyter_client.kernelspec import KernelSpec, KernelSpecManager  # noqa: E402  (nbclient depends on it)
 from jupyter_client.manager import AsyncKernelManager  # noqa: E402
-
 from support import DATA, ROOT
+
 NOTEBOOKS = sorted((DATA / "studies" / "notebooks").glob("*.ipynb"))
 TIMEOUT_S = 600  # per cell
 
@@ -48,8 +52,13 @@ def execute_notebook(path: Path) -> tuple[object, float]:
     """Run all cells of ``path`` in a fresh kernel; return the executed notebook and the wall time (s)."""
     nb = nbformat.read(path, as_version=4)
     km = AsyncKernelManager(kernel_name="python3", kernel_spec_manager=ThisInterpreterKernelSpecs())
-    client = nbclient.NotebookClient(nb, km=km, timeout=TIMEOUT_S, kernel_name="python3",
-                                     resources={"metadata": {"path": str(path.parent)}})
+    client = nbclient.NotebookClient(
+        nb,
+        km=km,
+        timeout=TIMEOUT_S,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(path.parent)}},
+    )
     start = time.perf_counter()
     client.execute()
     return nb, time.perf_counter() - start
@@ -63,8 +72,13 @@ def test_notebook_executes(path: Path, monkeypatch) -> None:
         nb, _elapsed = execute_notebook(path)
     except nbclient.exceptions.CellExecutionError as exc:
         pytest.fail(f"{path.relative_to(ROOT)}: a cell raised an error:\n{exc}", pytrace=False)
-    errors = [out for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", [])
-              if out.get("output_type") == "error"]
+    errors = [
+        out
+        for cell in nb.cells
+        if cell.cell_type == "code"
+        for out in cell.get("outputs", [])
+        if out.get("output_type") == "error"
+    ]
     assert not errors, f"{path.relative_to(ROOT)}: error outputs {[e.get('ename') for e in errors]}"
 
 
@@ -75,7 +89,11 @@ def test_notebooks_use_the_public_api_only() -> None:
         nb = nbformat.read(path, as_version=4)
         code = "\n".join(cell.source for cell in nb.cells if cell.cell_type == "code")
         assert "import flexctrl as fc" in code, path.name
-        deep = [line for line in code.splitlines() if "from flexctrl" in line or "import flexctrl." in line]
+        deep = [
+            line
+            for line in code.splitlines()
+            if "from flexctrl" in line or "import flexctrl." in line
+        ]
         assert not deep, f"{path.name}: deep imports {deep}"
         assert "FLEXCTRL_NOTEBOOK_QUICK" in code, f"{path.name}: no reduced mode for the tests"
 
@@ -85,6 +103,9 @@ def test_notebooks_are_saved_without_outputs() -> None:
     dirty = []
     for path in NOTEBOOKS:
         nb = nbformat.read(path, as_version=4)
-        if any(cell.cell_type == "code" and (cell.get("outputs") or cell.get("execution_count")) for cell in nb.cells):
+        if any(
+            cell.cell_type == "code" and (cell.get("outputs") or cell.get("execution_count"))
+            for cell in nb.cells
+        ):
             dirty.append(str(path.relative_to(ROOT)))
     assert not dirty, f"clear the outputs before saving: {dirty}"

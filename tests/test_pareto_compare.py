@@ -7,14 +7,36 @@ import math
 from pathlib import Path
 
 import pytest
+from support import DATA
 
-from flexctrl.analysis.pareto_compare import case_table, compare, main, markdown, merge, plot, read_pareto
+from flexctrl.analysis.pareto_compare import (
+    case_table,
+    compare,
+    main,
+    markdown,
+    merge,
+    plot,
+    read_pareto,
+)
 from flexctrl.errors import SpecError
 from flexctrl.study.executors import speed_vs_accuracy_executor as study
 
-from support import DATA, ROOT
-COLUMNS = ["scene", "method", "model", "integrator", "runs_ok", "runs_failed", "wall_per_sim_s", "tip_error_rms",
-           "tip_error_rms_worst", "tip_error_max_worst", "n_states", "omega_max", "step_s", "pareto"]
+COLUMNS = [
+    "scene",
+    "method",
+    "model",
+    "integrator",
+    "runs_ok",
+    "runs_failed",
+    "wall_per_sim_s",
+    "tip_error_rms",
+    "tip_error_rms_worst",
+    "tip_error_max_worst",
+    "n_states",
+    "omega_max",
+    "step_s",
+    "pareto",
+]
 
 
 def _write(folder: Path, rows: list[tuple]) -> Path:
@@ -23,30 +45,64 @@ def _write(folder: Path, rows: list[tuple]) -> Path:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
         for scene, method, ok, failed, cost, rms, front in rows:
-            w.writerow([scene, method, method.split("/")[0], method.split("/")[1], ok, failed, repr(cost), repr(rms),
-                        repr(2 * rms), repr(3 * rms), 6, 100.0, 1e-3, front])
+            w.writerow(
+                [
+                    scene,
+                    method,
+                    method.split("/")[0],
+                    method.split("/")[1],
+                    ok,
+                    failed,
+                    repr(cost),
+                    repr(rms),
+                    repr(2 * rms),
+                    repr(3 * rms),
+                    6,
+                    100.0,
+                    1e-3,
+                    front,
+                ]
+            )
     return folder
 
 
 @pytest.fixture
 def pair(tmp_path):
-    old = _write(tmp_path / "old", [("bb", "rigid/rk4@1ms", 4, 0, 0.01, 2e-3, True),
-                                    ("bb", "amm:2/rk4@1ms", 4, 0, 0.02, 3e-3, False),
-                                    ("bb", "amm:3/rk4@1ms", 0, 4, math.nan, math.nan, False)])
-    new = _write(tmp_path / "new", [("bb", "rigid/rk4@1ms", 4, 0, 0.011, 2e-3, True),
-                                    ("bb", "amm:2/rk4@1ms", 4, 0, 0.03, 1e-4, True),
-                                    ("bb", "amm:3/rk4@1ms", 0, 4, math.nan, math.nan, False),
-                                    ("bb", "fem:2/rk4@stable", 4, 0, 0.1, 1e-5, True)])
+    old = _write(
+        tmp_path / "old",
+        [
+            ("bb", "rigid/rk4@1ms", 4, 0, 0.01, 2e-3, True),
+            ("bb", "amm:2/rk4@1ms", 4, 0, 0.02, 3e-3, False),
+            ("bb", "amm:3/rk4@1ms", 0, 4, math.nan, math.nan, False),
+        ],
+    )
+    new = _write(
+        tmp_path / "new",
+        [
+            ("bb", "rigid/rk4@1ms", 4, 0, 0.011, 2e-3, True),
+            ("bb", "amm:2/rk4@1ms", 4, 0, 0.03, 1e-4, True),
+            ("bb", "amm:3/rk4@1ms", 0, 4, math.nan, math.nan, False),
+            ("bb", "fem:2/rk4@stable", 4, 0, 0.1, 1e-5, True),
+        ],
+    )
     return old, new
 
 
 def test_compare_pairs_rows_and_names_what_joined_the_front(pair):
     rows = compare(read_pareto(pair[0]), read_pareto(pair[1] / "pareto.csv"))
     by = {r["method"]: r for r in rows}
-    assert [r["method"] for r in rows] == ["rigid/rk4@1ms", "amm:2/rk4@1ms", "amm:3/rk4@1ms", "fem:2/rk4@stable"]
+    assert [r["method"] for r in rows] == [
+        "rigid/rk4@1ms",
+        "amm:2/rk4@1ms",
+        "amm:3/rk4@1ms",
+        "fem:2/rk4@stable",
+    ]
     assert by["amm:2/rk4@1ms"]["front"] == "joined" and by["rigid/rk4@1ms"]["front"] == ""
     assert by["fem:2/rk4@stable"]["old"] is None and by["fem:2/rk4@stable"]["front"] == "joined"
-    assert by["amm:2/rk4@1ms"]["old"]["tip_error_rms"] == 3e-3 and by["amm:2/rk4@1ms"]["new"]["tip_error_rms"] == 1e-4
+    assert (
+        by["amm:2/rk4@1ms"]["old"]["tip_error_rms"] == 3e-3
+        and by["amm:2/rk4@1ms"]["new"]["tip_error_rms"] == 1e-4
+    )
 
 
 def test_markdown_gives_both_sides_in_mm_and_a_left_front(pair):
@@ -60,9 +116,16 @@ def test_markdown_gives_both_sides_in_mm_and_a_left_front(pair):
 
 
 def test_merge_replaces_a_rerun_scene_and_drops_the_over_all_rows(tmp_path):
-    full = read_pareto(_write(tmp_path / "full", [("bb", "rigid/rk4@1ms", 4, 0, 0.01, 2e-3, True),
-                                                  ("cl", "rigid/rk4@1ms", 0, 4, math.nan, math.nan, False),
-                                                  ("all scenes", "rigid/rk4@1ms", 4, 4, 0.01, 2e-3, False)]))
+    full = read_pareto(
+        _write(
+            tmp_path / "full",
+            [
+                ("bb", "rigid/rk4@1ms", 4, 0, 0.01, 2e-3, True),
+                ("cl", "rigid/rk4@1ms", 0, 4, math.nan, math.nan, False),
+                ("all scenes", "rigid/rk4@1ms", 4, 4, 0.01, 2e-3, False),
+            ],
+        )
+    )
     rerun = read_pareto(_write(tmp_path / "cl", [("cl", "rigid/rk4@1ms", 4, 0, 0.02, 0.3, True)]))
     rows = merge(full, rerun)
     assert [(r["scene"], r["runs_ok"]) for r in rows] == [("bb", 4), ("cl", 4)]
@@ -74,17 +137,27 @@ def test_case_table_shows_each_payload_on_both_sides(tmp_path):
         (tmp_path / side).mkdir()
         with open(tmp_path / side / "results.csv", "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(["scene", "payload", "q1", "q2", "q3", "scene.method", "status", "tip_error_rms"])
+            w.writerow(
+                ["scene", "payload", "q1", "q2", "q3", "scene.method", "status", "tip_error_rms"]
+            )
             w.writerow(["bb", 0.0, 0, 0, 0, "amm:2/rk4@1ms", "ok", values[0]])
             w.writerow(["bb", 2.0, 0, 90, -45, "amm:2/rk4@1ms", "ok", values[1]])
             w.writerow(["bb", 2.0, 0, 90, -45, "amm:3/rk4@1ms", "failed", ""])
-    text = case_table([tmp_path / "off"], [tmp_path / "on"], "bb", ["amm:2/rk4@1ms", "amm:3/rk4@1ms"], ("off", "on"))
+    text = case_table(
+        [tmp_path / "off"],
+        [tmp_path / "on"],
+        "bb",
+        ["amm:2/rk4@1ms", "amm:3/rk4@1ms"],
+        ("off", "on"),
+    )
     assert "| 0 | 0, 0, 0 | 1 / 3 | - / - |" in text
     assert "| 2 | 0, 90, -45 | 2 / 0.5 | failed / failed |" in text
 
 
 def test_plot_and_command_line(pair, tmp_path, capsys):
-    path = plot(compare(read_pareto(pair[0]), read_pareto(pair[1])), tmp_path / "c.png", ("off", "on"))
+    path = plot(
+        compare(read_pareto(pair[0]), read_pareto(pair[1])), tmp_path / "c.png", ("off", "on")
+    )
     assert path.stat().st_size > 10_000
     assert main(["--old", str(pair[0]), "--new", str(pair[1]), "--labels", "off", "on"]) == 0
     assert "| `amm:2/rk4@1ms` |" in capsys.readouterr().out
@@ -99,15 +172,22 @@ def _run_settings(study_file: str, method: str, scene: str, *overrides: str) -> 
     from flexctrl.study.study_file import load_study
 
     spec = load_study(DATA / "studies" / study_file, list(overrides))
-    return next(r.settings for r in spec.runs
-                if Path(r.settings["scene"]).name == scene and f'scene.method="{method}"' in r.settings["overrides"])
+    return next(
+        r.settings
+        for r in spec.runs
+        if Path(r.settings["scene"]).name == scene
+        and f'scene.method="{method}"' in r.settings["overrides"]
+    )
 
 
 @pytest.mark.parametrize("scene", ["bangbang.toml", "move_joint1_30deg.toml"])
 def test_shortening_study_switches_the_plant_and_the_shipped_one_does_not(scene):
     from flexctrl.scenes.arm_setup import scene_arm
 
-    for study_file, expected in (("speed_vs_accuracy_shortening.toml", True), ("speed_vs_accuracy.toml", None)):
+    for study_file, expected in (
+        ("speed_vs_accuracy_shortening.toml", True),
+        ("speed_vs_accuracy.toml", None),
+    ):
         plan = study.plan_from_settings(_run_settings(study_file, "amm:2/rk4@1ms", scene))
         plant = study._plant_scene(study._scene(study._plan_scene(plan)))
         assert plant.axial_shortening is expected
@@ -118,8 +198,14 @@ def test_shortening_reaches_the_model_and_moves_the_tip():
     base = _run_settings("speed_vs_accuracy.toml", "amm:1/rk4@1ms", "bangbang.toml")
     runs = {}
     for flag in ("false", "true"):
-        settings = dict(base, overrides=[*[o for o in base["overrides"] if not o.startswith("scene.horizon")],
-                                         "scene.horizon=0.3", f"scene.axial_shortening={flag}"])
+        settings = dict(
+            base,
+            overrides=[
+                *[o for o in base["overrides"] if not o.startswith("scene.horizon")],
+                "scene.horizon=0.3",
+                f"scene.axial_shortening={flag}",
+            ],
+        )
         plan = study.plan_from_settings(settings)
         run, stepper = study.simulate_method(plan, plan.method)
         assert stepper.model.info["axial_shortening"] is (flag == "true")
@@ -140,7 +226,12 @@ def test_a_bad_shortening_value_names_the_key():
 def test_a_controller_sample_time_off_the_comparison_grid_is_refused_before_the_study_runs():
     settings = _run_settings("speed_vs_accuracy.toml", "amm:2/rk4@1ms", "move_joint1_30deg.toml")
     study.check_settings(settings)  # the shipped study pins 10 ms
-    bad = dict(settings, overrides=[o for o in settings["overrides"] if not o.startswith("controller.sample_time")]
-               + ["controller.sample_time=0.0075"])
-    with pytest.raises(SpecError, match=r"lqg.toml.*sample_time.*0.0075.*whole number of the 0.001 s"):
+    bad = dict(
+        settings,
+        overrides=[o for o in settings["overrides"] if not o.startswith("controller.sample_time")]
+        + ["controller.sample_time=0.0075"],
+    )
+    with pytest.raises(
+        SpecError, match=r"lqg.toml.*sample_time.*0.0075.*whole number of the 0.001 s"
+    ):
         study.check_settings(bad)

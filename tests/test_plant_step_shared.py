@@ -12,14 +12,19 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import pytest
+from support import MODEL
 
 from flexctrl.dynamics.build import build_model
-from flexctrl.loop.plant_step import UNROLL_LIMIT, _single_step, advance_function, output_map, plant_step_function
-from flexctrl.sim.integrator import output_function
 from flexctrl.dynamics.parametric import constants_as_parameters
+from flexctrl.loop.plant_step import (
+    UNROLL_LIMIT,
+    _single_step,
+    advance_function,
+    output_map,
+    plant_step_function,
+)
+from flexctrl.sim.integrator import output_function
 from flexctrl.spec.arm import load_arm
-
-from support import MODEL
 
 CONFIGURATIONS = ([0, 0, 0], [0, 90, -90])  # degrees: the straight arm merges coinciding constants
 
@@ -27,7 +32,9 @@ CONFIGURATIONS = ([0, 0, 0], [0, 90, -90])  # degrees: the straight arm merges c
 @pytest.fixture(scope="module")
 def models():
     arm = load_arm(MODEL).with_payload(2.0)
-    return [build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in CONFIGURATIONS]
+    return [
+        build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q)) for q in CONFIGURATIONS
+    ]
 
 
 def code(fun: ca.Function) -> str:
@@ -48,7 +55,9 @@ def test_output_constants_per_use_give_one_structure_where_per_node_do_not(model
     for f, (fp, c) in zip(outputs, per_use):
         X = rng.normal(0, 0.3, (f.size1_in(0), 7))
         a, b = np.array(f.map(7)(X)), np.array(fp.map(7)(X, c))
-        assert np.array_equal(a, b)  # same operations in the same order: bit for bit in the virtual machine
+        assert np.array_equal(
+            a, b
+        )  # same operations in the same order: bit for bit in the virtual machine
 
 
 def test_long_substep_step_is_shared_and_matches_the_unrolled_chain(models):
@@ -92,6 +101,10 @@ def test_a_bound_function_gives_the_calls_values_as_rows_and_copies():
         xv, uv = rng.standard_normal(3), rng.standard_normal(2)
         got.append(bound(xv, uv))
         wanted.append(fun(xv, uv))
-    for (block, square), want in zip(got, wanted):  # earlier results are the caller's: later calls leave them
-        np.testing.assert_array_equal(block, np.asarray(want[0]).T)  # (3 x 2) comes back as 2 rows of 3
+    for (block, square), want in zip(
+        got, wanted
+    ):  # earlier results are the caller's: later calls leave them
+        np.testing.assert_array_equal(
+            block, np.asarray(want[0]).T
+        )  # (3 x 2) comes back as 2 rows of 3
         assert block.shape == (2, 3) and square.item() == float(want[1])

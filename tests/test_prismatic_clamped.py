@@ -5,18 +5,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from full_coupling_checks import check_rigid_limit
+from support import DATA
 
 from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.rp_arm_full import simulate_rp_arm_full
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import load_rp_arm
 
-from support import DATA, ROOT
 SPEC = load_rp_arm(DATA / "models" / "rp_arm_clamped.toml")
 MOTION = RPMotion(C1=0.2, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
@@ -52,7 +51,10 @@ def test_static_deflection_off_nodes_converges():
     the error falls with refinement (8 -> 64 elements)."""
     W, P = 0.3, 2.0
     tip, _ = _closed_form(W, P, SPEC.EI, SPEC.length)
-    errors = [abs(RPArmModel(SPEC, RPMotion(C1=W, C2=0.0, T=1.0), n).static(P)[0][-2] - tip) / tip for n in (8, 64)]
+    errors = [
+        abs(RPArmModel(SPEC, RPMotion(C1=W, C2=0.0, T=1.0), n).static(P)[0][-2] - tip) / tip
+        for n in (8, 64)
+    ]
     assert errors[0] < 2e-2 and errors[1] < errors[0] / 10, errors
 
 
@@ -73,7 +75,9 @@ def test_prescribed_motion_holds_the_clamp_and_matches_full_coupling(motion_run)
     assert np.abs(full.tip_y - part.tip_y).max() < 1e-4 * peak
     np.testing.assert_allclose(full.lam, part.lam, rtol=0, atol=1e-4 * np.abs(part.lam).max())
     # the clamped link bends differently from the two-support link under the same motion
-    other = simulate_rp_arm(dataclasses.replace(SPEC, joint="supports"), MOTION, 4, dt=1e-3, duration=0.8)
+    other = simulate_rp_arm(
+        dataclasses.replace(SPEC, joint="supports"), MOTION, 4, dt=1e-3, duration=0.8
+    )
     assert np.abs(other.tip_y - part.tip_y).max() > 0.1 * peak
 
 
@@ -88,10 +92,14 @@ def test_clamped_joint_is_driven_at_E_and_read_from_the_file(tmp_path):
     with pytest.raises(SpecError, match="driven_end"):
         RPArmModel(SPEC, MOTION, 4, driven_end="H")
     bad = tmp_path / "bad.toml"
-    bad.write_text((DATA / "models" / "rp_arm_clamped.toml").read_text().replace('"clamped"', '"clampd"'))
+    bad.write_text(
+        (DATA / "models" / "rp_arm_clamped.toml").read_text().replace('"clamped"', '"clampd"')
+    )
     with pytest.raises(SpecError, match="joint.*did you mean 'clamped'"):
         load_rp_arm(bad)
-    assert SPEC.joint == "clamped" and load_rp_arm(DATA / "models" / "rp_arm.toml").joint == "supports"
+    assert (
+        SPEC.joint == "clamped" and load_rp_arm(DATA / "models" / "rp_arm.toml").joint == "supports"
+    )
 
 
 def test_scene_with_the_clamped_joint(tmp_path):

@@ -5,17 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
-from flexctrl.spec.reference import JointReference
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
 from flexctrl.linear import equilibrium
+from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 from flexctrl.spec.arm import load_arm
+from flexctrl.spec.reference import JointReference
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"
-START, TARGET = (0.1, -0.2, 0.3), tuple(np.radians([30.0, 20.0, -10.0]) + np.array([0.1, -0.2, 0.3]))
+START, TARGET = (
+    (0.1, -0.2, 0.3),
+    tuple(np.radians([30.0, 20.0, -10.0]) + np.array([0.1, -0.2, 0.3])),
+)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +56,9 @@ def test_quintic_derivatives_match_finite_differences_and_the_end_conditions():
     _, qd, qdd = path.derivatives(dense)
     delta = np.array(TARGET) - np.array(START)
     np.testing.assert_allclose(np.max(np.abs(qd), axis=0), 1.875 * np.abs(delta) / 1.3, rtol=1e-6)
-    np.testing.assert_allclose(np.max(np.abs(qdd), axis=0), 10 / np.sqrt(3) * np.abs(delta) / 1.3**2, rtol=1e-4)
+    np.testing.assert_allclose(
+        np.max(np.abs(qdd), axis=0), 10 / np.sqrt(3) * np.abs(delta) / 1.3**2, rtol=1e-4
+    )
 
 
 def test_step_profile_and_its_validation():
@@ -74,10 +79,10 @@ def test_reference_state_is_consistent_with_the_model(request, model_name):
     ref = ReferenceTrajectory(model, path)
     t = np.linspace(0.0, 1.8, 61)
     X, U, Us = ref.evaluate(t)
-    acc = np.array(model.functions["f"].map(t.size)(X.T, U.T), dtype=float).T[:, model.n_q:]
+    acc = np.array(model.functions["f"].map(t.size)(X.T, U.T), dtype=float).T[:, model.n_q :]
     _q, _qd, qdd = path.derivatives(t)
     np.testing.assert_allclose(acc[:, : model.n_u], qdd, atol=1e-7 * np.max(np.abs(qdd)))
-    assert np.max(np.abs(acc[:, model.n_u:])) < 1e-6 * np.max(np.abs(qdd))
+    assert np.max(np.abs(acc[:, model.n_u :])) < 1e-6 * np.max(np.abs(qdd))
     # u_static is the holding torque of the static equilibrium at q_ref (equilibrium() independently)
     for i in (0, 30, 60):
         op = equilibrium(model, X[i, : model.n_u])
@@ -90,15 +95,17 @@ def test_reference_state_is_consistent_with_the_model(request, model_name):
 
 def test_quasi_static_rates_match_finite_differences_of_the_deflection(horizontal):
     ref = ReferenceTrajectory(horizontal, JointReference(START, TARGET, "quintic", move_time=1.5))
-    t = np.linspace(0.05, 1.45, 57)  # inside the move: q_f* has kinks where the jerk jumps (t = 0, 1.5 s)
+    t = np.linspace(
+        0.05, 1.45, 57
+    )  # inside the move: q_f* has kinks where the jerk jumps (t = 0, 1.5 s)
     h = 1e-5
     n, N = horizontal.n_u, horizontal.n_q
     X = ref.evaluate(t)[0]
     fd = (ref.evaluate(t + h)[0] - ref.evaluate(t - h)[0]) / (2 * h)
     # qd_f* is the implicit-function derivative with the elastic accelerations neglected in the
     # rates' own time derivative (the quasi-static assumption): 1e-3 of its scale bounds that term here
-    np.testing.assert_allclose(fd[:, n:N], X[:, N + n:], atol=1e-3 * np.max(np.abs(X[:, N + n:])))
-    np.testing.assert_allclose(fd[:, :n], X[:, N:N + n], atol=1e-7)
+    np.testing.assert_allclose(fd[:, n:N], X[:, N + n :], atol=1e-3 * np.max(np.abs(X[:, N + n :])))
+    np.testing.assert_allclose(fd[:, :n], X[:, N : N + n], atol=1e-7)
 
 
 def test_a_step_reference_is_the_target_equilibrium(horizontal):
@@ -114,9 +121,13 @@ def test_a_step_reference_is_the_target_equilibrium(horizontal):
 def test_scene_reference_keys_are_validated():
     with pytest.raises(SpecError, match="target.move_time"):
         load_scene(SCENE, ["target.move_time=-1.0"])
-    with pytest.raises(SpecError, match="target.profile.*'step', 'quintic'.*did you mean 'quintic'"):
+    with pytest.raises(
+        SpecError, match="target.profile.*'step', 'quintic'.*did you mean 'quintic'"
+    ):
         load_scene(SCENE, ['target.profile="quintc"'])
-    step = load_scene(SCENE, ['target.profile="step"'])  # a study may switch profiles; the step ignores move_time
+    step = load_scene(
+        SCENE, ['target.profile="step"']
+    )  # a study may switch profiles; the step ignores move_time
     assert step.t_arrive == 0.0 and step.move_time == 0.0
     with pytest.raises(SpecError, match="target.deflection.*'quasi_static', 'static'"):
         load_scene(SCENE, ['target.deflection="zero"'])
@@ -133,6 +144,6 @@ def _pd_residual(overrides):
 def test_pd_leaves_less_residual_with_the_quintic_than_with_the_step():
     """Same PD, same window (from 4 s on), 2 kg: the smooth reference leaves less tip error behind."""
     quintic = _pd_residual(["metrics.settle_allowance=2.5", "duration=6.0"])
-    step = _pd_residual(["metrics.settle_allowance=4.0", "target.profile=\"step\"", "duration=6.0"])
+    step = _pd_residual(["metrics.settle_allowance=4.0", 'target.profile="step"', "duration=6.0"])
     assert quintic["tip_residual_rms"] < 0.5 * step["tip_residual_rms"]
     assert quintic["tip_residual_peak"] < step["tip_residual_peak"]

@@ -25,13 +25,23 @@ def reproduction(tmp_path_factory):
 @pytest.mark.slow  # about a minute on a quiet 2-vCPU machine
 def test_every_figure_of_the_paper_is_an_item_in_order(reproduction):
     out, sections, document = reproduction
-    numbers = [int(m.group(1)) for it in document["items"] if (m := re.match(r"Fig (\d+),", it["item"]))]
+    numbers = [
+        int(m.group(1)) for it in document["items"] if (m := re.match(r"Fig (\d+),", it["item"]))
+    ]
     assert sorted(set(numbers)) == list(range(1, 10))  # every figure is there ...
     assert numbers == sorted(numbers)  # ... in the paper's order
     assert any(it["item"].startswith("Sec. 4, efficiency") for it in document["items"])
     loaded = json.loads((out / "reproduction.json").read_text())
-    assert loaded == document and set(loaded["items"][0]) == {"item", "paper", "flexctrl", "agrees", "note"}
-    assert all(isinstance(it["agrees"], bool) and it["paper"] and it["flexctrl"] for it in loaded["items"])
+    assert loaded == document and set(loaded["items"][0]) == {
+        "item",
+        "paper",
+        "flexctrl",
+        "agrees",
+        "note",
+    }
+    assert all(
+        isinstance(it["agrees"], bool) and it["paper"] and it["flexctrl"] for it in loaded["items"]
+    )
 
 
 @pytest.mark.slow

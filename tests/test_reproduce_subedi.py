@@ -38,12 +38,16 @@ def test_reproduction_lists_every_numbered_table_and_figure_of_the_paper(reduced
     for figure in figures:
         assert (out / figure).stat().st_size > 10_000
     assert document["reduced"] is True
-    assert all(set(item) == {"item", "paper", "flexctrl", "agrees", "note"} for item in document["items"])
+    assert all(
+        set(item) == {"item", "paper", "flexctrl", "agrees", "note"} for item in document["items"]
+    )
 
 
 def test_fig14_peaks_agree_with_the_paper_within_the_fft_resolution(reduced):
     _out, document = reduced
-    rows = {item["item"]: item for item in document["items"] if item["item"].startswith("Fig 14, link")}
+    rows = {
+        item["item"]: item for item in document["items"] if item["item"].startswith("Fig 14, link")
+    }
     assert len(rows) == 6
     for link, printed in enumerate(SUBEDI_FIG14_PEAKS_HZ, start=1):
         for order, paper in zip(("first", "second"), printed):

@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from full_coupling_checks import check_constraint_derivatives, check_rigid_limit
 from scipy.linalg import eigh, null_space
+from support import DATA
 
 from flexctrl.beam.elements import hermite_shape, locate
 from flexctrl.dynamics.fem.rp_arm import RPArmModel, RPMotion, simulate_rp_arm
 from flexctrl.dynamics.fem.rp_arm_full import RPArmFullModel, RPForces, simulate_rp_arm_full
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import load_rp_arm
-from full_coupling_checks import check_constraint_derivatives, check_rigid_limit
 
-from support import DATA, ROOT
 SPEC = load_rp_arm(DATA / "models" / "rp_arm.toml")
 MOTION = RPMotion(C1=0.3, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
@@ -36,7 +35,9 @@ def test_motion_drive_is_the_partial_coupling_model(motion_run):
     part = simulate_rp_arm(SPEC, MOTION, 4, dt=1e-3, duration=0.8)
     peak = np.abs(part.tip_y).max()
     assert peak > 5e-4
-    joint_err = max(np.abs(full.theta - MOTION.theta(full.t)).max(), np.abs(full.W - MOTION.W(full.t)).max())
+    joint_err = max(
+        np.abs(full.theta - MOTION.theta(full.t)).max(), np.abs(full.W - MOTION.W(full.t)).max()
+    )
     assert joint_err < 1e-5
     assert np.abs(full.tip_y - part.tip_y).max() < 1e-4 * peak
     np.testing.assert_allclose(full.lam, part.lam, rtol=0, atol=1e-4 * np.abs(part.lam).max())
@@ -56,7 +57,9 @@ def test_recorded_torque_and_force_reproduce_the_motion(motion_run):
     assert np.abs(same.theta - ref.theta).max() < 1e-9 and np.abs(same.W - ref.W).max() < 1e-9
     assert np.abs(same.tip_y - ref.tip_y).max() < 1e-9
     half = simulate_rp_arm_full(SPEC, forces, 4, dt=5e-4, duration=0.8)
-    tracking = max(np.abs(ref.theta - MOTION.theta(ref.t)).max(), np.abs(ref.W - MOTION.W(ref.t)).max())
+    tracking = max(
+        np.abs(ref.theta - MOTION.theta(ref.t)).max(), np.abs(ref.W - MOTION.W(ref.t)).max()
+    )
     assert np.abs(half.theta - MOTION.theta(half.t)).max() < 3 * tracking
     assert np.abs(half.W - MOTION.W(half.t)).max() < 3 * tracking
     assert np.abs(half.tip_y[::2] - ref.tip_y).max() < 1e-3 * np.abs(ref.tip_y).max()
@@ -73,7 +76,7 @@ def _independent_momentum_energy(model, z, zd):
     """Angular momentum about joint 1 and kinetic energy from the material velocities, by 5-point
     Gauss quadrature per element, with the exact axial shortening s(x) = 1/2 int_0^x w'^2."""
     s, L, n, le = model.spec, model.spec.length, model.n, model.le
-    q, qd, th_d, W, Wd = z[:model.ne], zd[:model.ne], zd[model.ith], z[model.iW], zd[model.iW]
+    q, qd, th_d, W, Wd = z[: model.ne], zd[: model.ne], zd[model.ith], z[model.iW], zd[model.iW]
     rE = s.support_outer - L + W
     gx, gw = np.polynomial.legendre.leggauss(5)
     H = (s.hub_inertia + s.carriage_mass * rE**2) * th_d
@@ -87,8 +90,12 @@ def _independent_momentum_energy(model, z, zd):
         # s(x) within the element by cumulative quadrature on a fine sub-grid
         fine = np.linspace(0, le, 401)
         d_f, dt_f = hermite_shape(fine, le, 1) @ q[idx], hermite_shape(fine, le, 1) @ qd[idx]
-        s_f = sh + np.concatenate([[0], np.cumsum(0.25 * (d_f[1:] ** 2 + d_f[:-1] ** 2) * np.diff(fine))])
-        st_f = sh_d + np.concatenate([[0], np.cumsum(0.5 * (d_f[1:] * dt_f[1:] + d_f[:-1] * dt_f[:-1]) * np.diff(fine))])
+        s_f = sh + np.concatenate(
+            [[0], np.cumsum(0.25 * (d_f[1:] ** 2 + d_f[:-1] ** 2) * np.diff(fine))]
+        )
+        st_f = sh_d + np.concatenate(
+            [[0], np.cumsum(0.5 * (d_f[1:] * dt_f[1:] + d_f[:-1] * dt_f[:-1]) * np.diff(fine))]
+        )
         sg, stg = np.interp(zeta, fine, s_f), np.interp(zeta, fine, st_f)
         x = j * le + zeta
         px, py = rE + x - sg, w
@@ -125,7 +132,9 @@ def test_free_motion_conserves_angular_momentum_and_energy():
     is O(dt^2) with the phase error of the first mode, ~ (omega_1 dt)^2 / 12 per unit energy; the
     bound is (omega_1 dt)^2 / 4 and halving dt must cut the drift ~4x."""
     spec = dataclasses.replace(SPEC, payload_mass=0.2)
-    forces = RPForces(torque=lambda t: 0.0, force=lambda t: 0.0, theta0=0.0, W0=0.3, thetad0=2.0, Wd0=0.1)
+    forces = RPForces(
+        torque=lambda t: 0.0, force=lambda t: 0.0, theta0=0.0, W0=0.3, thetad0=2.0, Wd0=0.1
+    )
     shape, omega1 = _first_mode(RPArmModel(spec, RPMotion(0.3, 0.0, 1.0), 4), 2e-3)
     drift = {}
     for dt in (1e-3, 5e-4):
@@ -156,7 +165,9 @@ def test_constraint_derivatives_match_finite_differences():
     z = np.r_[np.zeros(model.ne), 0.4, 0.33]
     prob = model.problem()
     j, _ = locate(SPEC.length - 0.33, 4, SPEC.length)
-    assert np.flatnonzero(prob.phi_q(z, 0)[1, :model.ne]).min() == 2 * j  # the row sits in the support's element
+    assert (
+        np.flatnonzero(prob.phi_q(z, 0)[1, : model.ne]).min() == 2 * j
+    )  # the row sits in the support's element
 
 
 def test_errors():
@@ -179,14 +190,22 @@ def test_scenes_with_a_drive_table(tmp_path):
     summary = run_fem_scene(doc, str(force_scene), tmp_path, None)
     data = np.genfromtxt(tmp_path / "trajectory.csv", delimiter=",", names=True)
     assert data.dtype.names[-2:] == ("torque", "force")
-    assert data["torque"][50] == pytest.approx(doc["drive"]["torque_amplitude"] * math.sin(2 * math.pi * 0.05))
+    assert data["torque"][50] == pytest.approx(
+        doc["drive"]["torque_amplitude"] * math.sin(2 * math.pi * 0.05)
+    )
     assert data["theta"][-1] > 0 and summary["max_phi_violation_m"] < 1e-6
     motion_scene = DATA / "studies" / "scenes" / "rp_extend_rotate.toml"
-    doc = apply_overrides(read_toml(motion_scene), ["duration=0.2", "drive.coupling='full'", "n_elements=4"])
+    doc = apply_overrides(
+        read_toml(motion_scene), ["duration=0.2", "drive.coupling='full'", "n_elements=4"]
+    )
     run_fem_scene(doc, str(motion_scene), tmp_path / "m", None)
     data = np.genfromtxt(tmp_path / "m" / "trajectory.csv", delimiter=",", names=True)
     assert np.abs(data["torque"]).max() > 0.1
-    for override, key in (("C2=0.2", "C2"), ("rotation=10.0", "rotation"), ("drive.torque=1.0", "drive.torque")):
+    for override, key in (
+        ("C2=0.2", "C2"),
+        ("rotation=10.0", "rotation"),
+        ("drive.torque=1.0", "drive.torque"),
+    ):
         bad = apply_overrides(read_toml(force_scene), [override])
         with pytest.raises(SpecError, match=f"rp_torque_force.toml: key '{key}'"):
             run_fem_scene(bad, str(force_scene), None, None)

@@ -14,7 +14,8 @@ from flexctrl.cli import main
 from flexctrl.errors import SpecError
 from flexctrl.scenes import run_scene
 from flexctrl.spec.arm_scene import INTEGRATOR_NAMES, InputSpec
-from flexctrl.spec.scene import SCENE_READERS as SCENE_KINDS, load_scene
+from flexctrl.spec.scene import SCENE_READERS as SCENE_KINDS
+from flexctrl.spec.scene import load_scene
 
 PAPER_SCENES = ("free_vibration", "free_vibration_damped", "bangbang", "bangbang_damped")
 
@@ -27,7 +28,6 @@ duration = 0.05
 
 
 def _scene(tmp_path, body: str = "", model=None, name="scene.toml"):
-    from pathlib import Path
 
     model = model or str(MODEL)
     path = tmp_path / name
@@ -37,53 +37,125 @@ def _scene(tmp_path, body: str = "", model=None, name="scene.toml"):
 
 def test_paper_scenes_hold_the_papers_settings(root):
     fv = load_scene(root / "studies/scenes/free_vibration.toml")
-    assert fv.payload == 2.0 and fv.dt == 1e-3 and fv.integrator == "rk4" and str(fv.fidelity) == "amm:2"
+    assert (
+        fv.payload == 2.0
+        and fv.dt == 1e-3
+        and fv.integrator == "rk4"
+        and str(fv.fidelity) == "amm:2"
+    )
     assert fv.qf0 == {"qf31": 0.1, "qf32": 0.002} and fv.q0 == (0.0, 0.0, 0.0) and fv.zeta == 0.0
     assert fv.gravity == (0.0, -9.81) and fv.input.kind == "none"
     damped = load_scene(root / "studies/scenes/free_vibration_damped.toml")
     assert damped.zeta == 0.005 and damped.qf0 == fv.qf0 and damped.friction == (0.0,)
     bb = load_scene(root / "studies/scenes/bangbang.toml")
     assert bb.gravity == (0.0, 0.0) and bb.qf0 == {} and bb.zeta == 0.0
-    assert (bb.input.kind, bb.input.joint, bb.input.amplitude, bb.input.t_accel, bb.input.t_decel) == ("bangbang", 3, 50.0, 0.1, 0.1)
+    assert (
+        bb.input.kind,
+        bb.input.joint,
+        bb.input.amplitude,
+        bb.input.t_accel,
+        bb.input.t_decel,
+    ) == ("bangbang", 3, 50.0, 0.1, 0.1)
     assert load_scene(root / "studies/scenes/bangbang_damped.toml").zeta == 0.005
 
 
 def test_bangbang_samples_are_symmetric():
     spec = InputSpec("bangbang", joint=2, amplitude=50.0, t_accel=0.1, t_decel=0.1)
     u = spec.samples(300, 1e-3, 3)
-    assert np.all(u[:100, 1] == 50.0) and np.all(u[100:200, 1] == -50.0) and np.all(u[200:, 1] == 0.0)
+    assert (
+        np.all(u[:100, 1] == 50.0) and np.all(u[100:200, 1] == -50.0) and np.all(u[200:, 1] == 0.0)
+    )
     assert np.all(u[:, [0, 2]] == 0.0) and u[:, 1].sum() == 0.0
 
 
 @pytest.mark.parametrize("name", PAPER_SCENES)
 def test_paper_scene_runs_through_the_cli(name, root, tmp_path, capsys):
     out = tmp_path / name
-    status = main(["simulate", str(root / f"studies/scenes/{name}.toml"), "--out", str(out), "--set", "duration=0.2"])
+    status = main(
+        [
+            "simulate",
+            str(root / f"studies/scenes/{name}.toml"),
+            "--out",
+            str(out),
+            "--set",
+            "duration=0.2",
+        ]
+    )
     assert status == 0
-    for fname in ("trajectory.csv", "summary.json", "joints.png", "deflections.png", "tip.png", "energies.png"):
+    for fname in (
+        "trajectory.csv",
+        "summary.json",
+        "joints.png",
+        "deflections.png",
+        "tip.png",
+        "energies.png",
+    ):
         assert (out / fname).is_file(), fname
     header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
-    assert header[:16] == ["t", "q1", "q2", "q3", "qf11", "qf12", "qf21", "qf22", "qf31", "qf32",
-                           "tip_x", "tip_y", "E_kin", "E_el", "E_grav", "E_total"]
+    assert header[:16] == [
+        "t",
+        "q1",
+        "q2",
+        "q3",
+        "qf11",
+        "qf12",
+        "qf21",
+        "qf22",
+        "qf31",
+        "qf32",
+        "tip_x",
+        "tip_y",
+        "E_kin",
+        "E_el",
+        "E_grav",
+        "E_total",
+    ]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scene"]["name"] == name and summary["n_steps"] == 200
-    assert summary["realtime_factor"] == pytest.approx(0.2 / summary["wall_time_s"], rel=1e-12)  # simulated / wall
+    assert summary["realtime_factor"] == pytest.approx(
+        0.2 / summary["wall_time_s"], rel=1e-12
+    )  # simulated / wall
     assert set(summary["dominant_frequencies_hz"]) == {"w1", "w2", "w3"}
     assert "drift_rel" in summary["energy"]
     assert name in capsys.readouterr().out
 
 
 def test_cli_fidelity_override_and_json(root, tmp_path, capsys):
-    status = main(["simulate", str(root / "studies/scenes/bangbang.toml"), "--out", str(tmp_path), "--fidelity", "amm:1",
-                   "--set", "duration=0.02", "--no-plots", "--json"])
+    status = main(
+        [
+            "simulate",
+            str(root / "studies/scenes/bangbang.toml"),
+            "--out",
+            str(tmp_path),
+            "--fidelity",
+            "amm:1",
+            "--set",
+            "duration=0.02",
+            "--no-plots",
+            "--json",
+        ]
+    )
     assert status == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["fidelity"] == "amm:1" and summary["model_info"]["coordinates"][3:] == ["qf11", "qf21", "qf31"]
+    assert summary["fidelity"] == "amm:1" and summary["model_info"]["coordinates"][3:] == [
+        "qf11",
+        "qf21",
+        "qf31",
+    ]
     assert not list(tmp_path.glob("*.png"))
 
 
 def test_cli_bad_input_is_one_line_and_exit_2(root, tmp_path, capsys):
-    status = main(["simulate", str(root / "studies/scenes/bangbang.toml"), "--out", str(tmp_path), "--set", "dt=-1e-3"])
+    status = main(
+        [
+            "simulate",
+            str(root / "studies/scenes/bangbang.toml"),
+            "--out",
+            str(tmp_path),
+            "--set",
+            "dt=-1e-3",
+        ]
+    )
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and "key 'dt'" in err and "> 0" in err
 
@@ -102,19 +174,25 @@ def test_misspelt_key_gets_a_suggestion(tmp_path):
         load_scene(_scene(tmp_path, body))
 
 
-@pytest.mark.parametrize("override, pattern", [
-    ("dt=-1e-3", r"key 'dt'.*-0.001.*allowed: a finite number > 0"),
-    ("integrator='rk5'", r"key 'integrator'.*'rk5'.*allowed: 'rk4', 'cvodes', 'idas', 'scipy'.*did you mean 'rk4'"),
-    ("modes='moving'", r"key 'modes'.*allowed: 'frozen', 'scheduled'"),
-    ("fidelity='amm:9'", r"key 'fidelity'.*'amm:9'"),
-    ("fidelity='auto'", r"key 'tolerance'.*fidelity = 'auto' needs it"),
-    ("dt=1.0", r"key 'dt'.*longer than the duration"),
-    ("solver.rtol=1e-6", r"key 'solver.rtol'.*does not apply to integrator 'rk4'"),
-    ("initial.qf.q31=0.1", r"key 'initial.qf.q31'.*allowed: qf<link><mode>"),
-    ("payload=-2", r"key 'payload'.*>= 0"),
-    ("kind='beam'", r"key 'kind'.*'beam'.*allowed: 'arm'"),
-    ("gravity=[0, 1, 2]", r"key 'gravity'.*exactly 2"),
-])
+@pytest.mark.parametrize(
+    "override, pattern",
+    [
+        ("dt=-1e-3", r"key 'dt'.*-0.001.*allowed: a finite number > 0"),
+        (
+            "integrator='rk5'",
+            r"key 'integrator'.*'rk5'.*allowed: 'rk4', 'cvodes', 'idas', 'scipy'.*did you mean 'rk4'",
+        ),
+        ("modes='moving'", r"key 'modes'.*allowed: 'frozen', 'scheduled'"),
+        ("fidelity='amm:9'", r"key 'fidelity'.*'amm:9'"),
+        ("fidelity='auto'", r"key 'tolerance'.*fidelity = 'auto' needs it"),
+        ("dt=1.0", r"key 'dt'.*longer than the duration"),
+        ("solver.rtol=1e-6", r"key 'solver.rtol'.*does not apply to integrator 'rk4'"),
+        ("initial.qf.q31=0.1", r"key 'initial.qf.q31'.*allowed: qf<link><mode>"),
+        ("payload=-2", r"key 'payload'.*>= 0"),
+        ("kind='beam'", r"key 'kind'.*'beam'.*allowed: 'arm'"),
+        ("gravity=[0, 1, 2]", r"key 'gravity'.*exactly 2"),
+    ],
+)
 def test_invalid_values_are_named(override, pattern, tmp_path):
     with pytest.raises(SpecError, match=pattern):
         load_scene(_scene(tmp_path), [override])
@@ -129,15 +207,26 @@ def test_model_coordinates_are_checked_when_built(tmp_path):
     scene = load_scene(_scene(tmp_path), ["initial.qf.qf41=0.1", "fidelity='amm:1'"])
     with pytest.raises(SpecError, match=r"key 'initial.qf.qf41'.*allowed: qf11, qf21, qf31"):
         run_scene(scene)
-    scene = load_scene(_scene(tmp_path), ["input.kind='bangbang'", "input.joint=4", "input.amplitude=1.0",
-                                          "input.t_accel=0.01"])
+    scene = load_scene(
+        _scene(tmp_path),
+        ["input.kind='bangbang'", "input.joint=4", "input.amplitude=1.0", "input.t_accel=0.01"],
+    )
     with pytest.raises(SpecError, match=r"key 'input.joint'.*allowed: 1 to 3"):
         run_scene(scene)
 
 
 def test_overrides_reach_the_model(tmp_path):
-    scene = load_scene(_scene(tmp_path), ["payload=0.5", "gravity=[0.0, 0.0]", "damping.zeta=0.02",
-                                          "initial.q=[10.0, 0.0, 0.0]", "fidelity='amm:1'", "duration=0.01"])
+    scene = load_scene(
+        _scene(tmp_path),
+        [
+            "payload=0.5",
+            "gravity=[0.0, 0.0]",
+            "damping.zeta=0.02",
+            "initial.q=[10.0, 0.0, 0.0]",
+            "fidelity='amm:1'",
+            "duration=0.01",
+        ],
+    )
     assert scene.q0[0] == pytest.approx(math.radians(10.0))
     result = run_scene(scene)
     traj = result.trajectory

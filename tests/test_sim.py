@@ -14,7 +14,16 @@ import numpy as np
 import pytest
 
 from flexctrl.errors import SimulationError, SpecError
-from flexctrl.sim import CVODES, IDAS, INTEGRATORS, RK4, Integrator, ScipyIntegrator, get_integrator, simulate
+from flexctrl.sim import (
+    CVODES,
+    IDAS,
+    INTEGRATORS,
+    RK4,
+    Integrator,
+    ScipyIntegrator,
+    get_integrator,
+    simulate,
+)
 from flexctrl.sim.compile import compile_function
 from flexctrl.sim.toymodel import spring_pendulum
 
@@ -59,7 +68,9 @@ def test_compiled_and_vm_agree(smooth, tmp_path):
     assert compiled.meta["compiled"] and not vm.meta["compiled"]
     scale = np.max(np.abs(vm.states))
     assert np.max(np.abs(compiled.states - vm.states)) <= 1e-12 * scale
-    assert np.max(np.abs(compiled.energies["E_total"] - vm.energies["E_total"])) <= 1e-12 * np.max(np.abs(vm.energies["E_kin"]))
+    assert np.max(np.abs(compiled.energies["E_total"] - vm.energies["E_total"])) <= 1e-12 * np.max(
+        np.abs(vm.energies["E_kin"])
+    )
 
 
 def test_second_build_hits_the_cache(tmp_path):
@@ -139,12 +150,15 @@ def test_divergence_detected_in_the_virtual_machine_too(stiff):
         simulate(stiff, X0, 0.5, dt=4e-3, compile=False)
 
 
-@pytest.mark.parametrize("method, options", [
-    ("cvodes", {"rtol": 1e-10, "atol": 1e-12}),
-    ("idas", {"rtol": 1e-10, "atol": 1e-12}),
-    ("scipy", {"scipy_method": "DOP853", "rtol": 1e-11, "atol": 1e-12}),
-    ("scipy", {"scipy_method": "Radau", "rtol": 1e-8, "atol": 1e-10}),
-])
+@pytest.mark.parametrize(
+    "method, options",
+    [
+        ("cvodes", {"rtol": 1e-10, "atol": 1e-12}),
+        ("idas", {"rtol": 1e-10, "atol": 1e-12}),
+        ("scipy", {"scipy_method": "DOP853", "rtol": 1e-11, "atol": 1e-12}),
+        ("scipy", {"scipy_method": "Radau", "rtol": 1e-8, "atol": 1e-10}),
+    ],
+)
 def test_other_integrators_agree_with_fine_rk4(method, options, tmp_path):
     model = spring_pendulum(k=1.0e4)
     dt, duration = 1e-3, 0.4
@@ -165,9 +179,20 @@ def test_time_function_input_matches_scipy(tmp_path):
     t = ca.SX.sym("t")
     u_fun = ca.Function("u", [t], [ca.vertcat(3.0 * ca.sin(7.0 * t), 0.5)])
     ref = simulate(model, X0, 0.3, dt=1e-4, u_function=u_fun, cache_dir=tmp_path)
-    other = simulate(model, X0, 0.3, dt=1e-3, method="scipy", scipy_method="DOP853", rtol=1e-11, atol=1e-12,
-                     u_function=u_fun)
-    cv = simulate(model, X0, 0.3, dt=1e-3, method="cvodes", rtol=1e-10, atol=1e-12, u_function=u_fun)
+    other = simulate(
+        model,
+        X0,
+        0.3,
+        dt=1e-3,
+        method="scipy",
+        scipy_method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+        u_function=u_fun,
+    )
+    cv = simulate(
+        model, X0, 0.3, dt=1e-3, method="cvodes", rtol=1e-10, atol=1e-12, u_function=u_fun
+    )
     scale = np.max(np.abs(ref.states), axis=0)
     assert np.max(np.abs(other.states - ref.states[::10]) / scale) < 1e-7
     assert np.max(np.abs(cv.states - ref.states[::10]) / scale) < 1e-6
@@ -194,10 +219,12 @@ def test_trajectory_save_header_and_pandas(smooth, tmp_path):
     header = paths["csv"].read_text().splitlines()[0].split(",")
     required = ["t", "q1", "q2", "qf21", "tip_x", "tip_y", "E_kin", "E_el", "E_grav", "E_total"]
     assert header[: len(required)] == required
-    assert header[len(required):] == ["dq1", "dq2", "dqf21", "w1", "w2", "u1", "u2"]
+    assert header[len(required) :] == ["dq1", "dq2", "dqf21", "w1", "w2", "u1", "u2"]
     data = np.loadtxt(paths["csv"], delimiter=",", skiprows=1)
     assert data.shape == (51, len(header))
-    assert np.allclose(data[:, header.index("qf21")], traj.coordinate("qf21"), rtol=1e-11, atol=1e-14)
+    assert np.allclose(
+        data[:, header.index("qf21")], traj.coordinate("qf21"), rtol=1e-11, atol=1e-14
+    )
     import json
 
     summary = json.loads(paths["summary"].read_text())
@@ -257,6 +284,9 @@ def test_integrator_chosen_by_class_is_first_order(smooth, tmp_path):
     errors = []
     for dt in (2e-3, 1e-3):
         traj = simulate(smooth, X0, 0.2, dt=dt, method=_SemiImplicitEuler)
-        assert traj.meta["integrator"] == "semi_implicit_euler" and traj.time.size == round(0.2 / dt) + 1
+        assert (
+            traj.meta["integrator"] == "semi_implicit_euler"
+            and traj.time.size == round(0.2 / dt) + 1
+        )
         errors.append(np.max(np.abs(traj.states[-1] - ref.states[-1])))
     assert 1.8 < errors[0] / errors[1] < 2.2

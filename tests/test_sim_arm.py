@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support import DATA
 
 from flexctrl.errors import SimulationError
 from flexctrl.scenes import run_scene
 from flexctrl.sim import RK4
 from flexctrl.spec.scene import load_scene
-from support import DATA
 
 SCENES = "studies/scenes"
 
@@ -47,7 +47,9 @@ def test_energy_drift_at_the_papers_step_is_rk4_damping_the_fast_free_joint_mode
     """
     coarse = _run(root, "free_vibration", "dt=1e-3", "duration=1.0")
     fine = _run(root, "free_vibration", "dt=1e-4", "duration=1.0")
-    integ = RK4(run_scene(load_scene(root / SCENES / "free_vibration.toml", ["duration=0.001"])).model, 1e-3)
+    integ = RK4(
+        run_scene(load_scene(root / SCENES / "free_vibration.toml", ["duration=0.001"])).model, 1e-3
+    )
     radius_dt = integ.jacobian_radius(coarse.states[0]) * 1e-3
     assert 1.5 < radius_dt < 2.83  # stable, but where |R(i omega h)| is well below 1
     e = coarse.energies["E_total"] - coarse.energies["E_total"][0]
@@ -62,12 +64,24 @@ def test_divergence_on_the_arm_names_omega_max_and_free_joint_frequency(root):
     with pytest.raises(SimulationError) as err:
         _run(root, "free_vibration", "dt=3e-3", "duration=0.5")
     text = str(err.value)
-    assert "dt = 0.003" in text and "omega_max =" in text and "free joints" in text and "use dt <=" in text
+    assert (
+        "dt = 0.003" in text
+        and "omega_max =" in text
+        and "free joints" in text
+        and "use dt <=" in text
+    )
 
 
 def test_cvodes_agrees_with_fine_rk4_on_the_arm(root):
     ref = _run(root, "bangbang", "dt=1e-5", "duration=0.12")
-    cv = _run(root, "bangbang", "integrator='cvodes'", "solver.rtol=1e-9", "solver.atol=1e-11", "duration=0.12")
+    cv = _run(
+        root,
+        "bangbang",
+        "integrator='cvodes'",
+        "solver.rtol=1e-9",
+        "solver.atol=1e-11",
+        "duration=0.12",
+    )
     scale = np.max(np.abs(ref.q), axis=0)
     assert np.max(np.abs(cv.q - ref.q[::100]) / scale) < 1e-6
 
@@ -76,7 +90,9 @@ def test_bangbang_energy_equals_work_of_the_torque(root):
     traj = _run(root, "bangbang", "dt=5e-5", "duration=0.3")
     work = traj.work_in
     assert work[2000] > 1.0  # +50 N m for 0.1 s, then -50 N m: positive net work by 0.1 s
-    assert np.allclose(traj.inputs[:1999, 2], 50.0) and np.allclose(traj.inputs[2000:3999, 2], -50.0)
+    assert np.allclose(traj.inputs[:1999, 2], 50.0) and np.allclose(
+        traj.inputs[2000:3999, 2], -50.0
+    )
     assert np.allclose(traj.inputs[4000:, 2], 0.0) and np.allclose(traj.inputs[:, :2], 0.0)
     assert traj.energy_figures()["balance_error_max_rel"] < 1e-4
     assert np.allclose(traj.energies["E_grav"], 0.0)  # gravity off
@@ -85,10 +101,21 @@ def test_bangbang_energy_equals_work_of_the_torque(root):
 def test_bench_sim_reports_its_figures(root):
     from flexctrl.bench.simulation_speed import bench_sim
 
-    result = bench_sim(DATA / "models" / "subedi3link.toml", duration=0.05, repeats=1, scipy_span=0.005,
-                       use_cache=True)
-    for key in ("realtime_factor_compiled", "realtime_factor_vm", "realtime_factor_scipy", "ratio_vs_scipy",
-                "compile_time_s", "repeats"):
+    result = bench_sim(
+        DATA / "models" / "subedi3link.toml",
+        duration=0.05,
+        repeats=1,
+        scipy_span=0.005,
+        use_cache=True,
+    )
+    for key in (
+        "realtime_factor_compiled",
+        "realtime_factor_vm",
+        "realtime_factor_scipy",
+        "ratio_vs_scipy",
+        "compile_time_s",
+        "repeats",
+    ):
         assert key in result
     assert result["realtime_factor_compiled"] > 0 and result["ratio_vs_scipy"] > 1
     assert result["repeats"] == 1 and result["compiled"]

@@ -7,8 +7,13 @@ import pytest
 import scipy.linalg as sl
 from scipy.interpolate import CubicHermiteSpline
 
-from flexctrl.dynamics.fem.sliding_beam import (FAST_PULL, FAST_PUSH, SLOW_PUSH, SlidingBeamModel,
-                                                simulate_sliding_beam)
+from flexctrl.dynamics.fem.sliding_beam import (
+    FAST_PULL,
+    FAST_PUSH,
+    SLOW_PUSH,
+    SlidingBeamModel,
+    simulate_sliding_beam,
+)
 
 CASES = (SLOW_PUSH, FAST_PUSH, FAST_PULL)
 
@@ -21,10 +26,15 @@ def test_prescribed_motion_eq57_and_geometry():
         assert np.all(W[t > case.T] == case.W(case.T))  # held after T
         eps = 1e-6
         tt = t[(t > eps) & (t < case.T - eps)]
-        np.testing.assert_allclose(case.Wd(tt), (case.W(tt + eps) - case.W(tt - eps)) / (2 * eps), atol=1e-7)
-        np.testing.assert_allclose(case.Wdd(tt), (case.Wd(tt + eps) - case.Wd(tt - eps)) / (2 * eps),
-                                   atol=1e-5)
-        assert abs(case.C2) / case.T * 2 == pytest.approx(np.abs(case.Wd(t)).max(), rel=1e-4)  # peak speed
+        np.testing.assert_allclose(
+            case.Wd(tt), (case.W(tt + eps) - case.W(tt - eps)) / (2 * eps), atol=1e-7
+        )
+        np.testing.assert_allclose(
+            case.Wdd(tt), (case.Wd(tt + eps) - case.Wd(tt - eps)) / (2 * eps), atol=1e-5
+        )
+        assert abs(case.C2) / case.T * 2 == pytest.approx(
+            np.abs(case.Wd(t)).max(), rel=1e-4
+        )  # peak speed
     # push: long overhang (0.725 m) at H initially; supports at x = 0.025 and 0.275 m from E
     xs, _, _ = SlidingBeamModel(FAST_PUSH).support_positions(0.0)
     np.testing.assert_allclose(xs, [0.025, 0.275])
@@ -36,7 +46,9 @@ def closed_form_static(x, xs1, xs2, L=1.0):
     """Free-free beam on two simple supports under a uniform load (EI = p = 1), by statics."""
     # EI w'' = x^2/2 - R1 <x - xs1> - R2 <x - xs2>; w''(L) = 0 and w'''(L) = 0 fix R1, R2.
     R1, R2 = np.linalg.solve([[1.0, 1.0], [L - xs1, L - xs2]], [L, L**2 / 2])
-    part = lambda z: z**4 / 24 - R1 * np.maximum(z - xs1, 0) ** 3 / 6 - R2 * np.maximum(z - xs2, 0) ** 3 / 6
+    part = lambda z: (
+        z**4 / 24 - R1 * np.maximum(z - xs1, 0) ** 3 / 6 - R2 * np.maximum(z - xs2, 0) ** 3 / 6
+    )
     c1 = -(part(xs2) - part(xs1)) / (xs2 - xs1)
     c0 = -part(xs1) - c1 * xs1
     return part(x) + c0 + c1 * x
@@ -74,8 +86,12 @@ def test_constraint_rows_switch_elements_and_h_matches_finite_differences():
         ph = lambda s: prob.phi(qs(s), s)
         pd = (ph(t + e / 100) - ph(t - e / 100)) / (2 * e / 100)
         pdd = (ph(t + e) - 2 * ph(t) + ph(t - e)) / e**2
-        np.testing.assert_allclose(prob.phi_q(q, t) @ v + prob.phi_t(q, t), pd, rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose(prob.phi_q(q, t) @ a - prob.h(q, v, t), pdd, rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(
+            prob.phi_q(q, t) @ v + prob.phi_t(q, t), pd, rtol=1e-6, atol=1e-6
+        )
+        np.testing.assert_allclose(
+            prob.phi_q(q, t) @ a - prob.h(q, v, t), pdd, rtol=1e-4, atol=1e-4
+        )
     assert set(np.flatnonzero(prob.phi_q(q, 0.0)[1])) == set(range(2, 6))  # x = 0.275: element 1
     assert set(np.flatnonzero(prob.phi_q(q, 0.7)[1])) == set(range(6, 10))  # x = 0.975: element 3
 

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 
 import pytest
 
 from flexctrl.errors import SpecError
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.arm import load_arm
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.overrides import apply_overrides, parse_value
 
 
@@ -62,10 +61,12 @@ BASE = MODEL.read_text()
         ("payload.mass=inf", "payload.mass", "finite"),
         ("gravity=[0, 1, 2]", "gravity", "exactly 2"),
         ("boundary_inertia=papr", "boundary_inertia", "did you mean 'paper'"),
-        ("links[1].EI=\"stiff\"", "links[1].EI", "not a number"),
+        ('links[1].EI="stiff"', "links[1].EI", "not a number"),
     ],
 )
-def test_bad_values_are_refused_with_file_key_value_and_allowed(model_path, override, key, fragment):
+def test_bad_values_are_refused_with_file_key_value_and_allowed(
+    model_path, override, key, fragment
+):
     with pytest.raises(SpecError) as info:
         load_arm(model_path, overrides=[override])
     message = str(info.value)
@@ -78,7 +79,9 @@ def test_bad_values_are_refused_with_file_key_value_and_allowed(model_path, over
 
 def test_misspelt_key_gets_a_suggestion(tmp_path):
     path = _write(tmp_path, BASE.replace("mass_per_length = 1.1988", "mass_per_lenght = 1.1988"))
-    with pytest.raises(SpecError, match=r"links\[2\]\.mass_per_lenght': did you mean 'mass_per_length'"):
+    with pytest.raises(
+        SpecError, match=r"links\[2\]\.mass_per_lenght': did you mean 'mass_per_length'"
+    ):
         load_arm(path)
 
 
@@ -127,7 +130,16 @@ def test_with_payload_and_configuration_checks(model_path):
     assert q.tolist() == [0.1, 0.2, math.pi]
 
 
-@pytest.mark.parametrize("text, expected", [("rigid", Fidelity("rigid")), ("amm:2", Fidelity("amm", 2)), ("FEM:16", Fidelity("fem", 16)), ("auto", Fidelity("auto")), ("amm:0", Fidelity("amm", 0))])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("rigid", Fidelity("rigid")),
+        ("amm:2", Fidelity("amm", 2)),
+        ("FEM:16", Fidelity("fem", 16)),
+        ("auto", Fidelity("auto")),
+        ("amm:0", Fidelity("amm", 0)),
+    ],
+)
 def test_fidelity_spellings(text, expected):
     assert parse_fidelity(text) == expected
     assert parse_fidelity(str(expected)) == expected

@@ -4,26 +4,40 @@ from __future__ import annotations
 
 import csv
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from support import DATA
 
-from flexctrl.study.executors import speed_vs_accuracy_executor as study
 from flexctrl.analysis.accuracy import (
-    Method, compute_reference, make_stepper, pareto_front, parse_method, run_open_loop,
+    Method,
+    compute_reference,
+    make_stepper,
+    pareto_front,
+    parse_method,
+    run_open_loop,
 )
-from flexctrl.sim.tip_error import tip_error
 from flexctrl.errors import SpecError
+from flexctrl.sim.tip_error import tip_error
+from flexctrl.study.executors import speed_vs_accuracy_executor as study
 
-from support import DATA, ROOT
 STUDY = DATA / "studies" / "speed_vs_accuracy.toml"
 
 
-def _settings(scene: str, method: str, *extra: str, payload: float = 2.0, q=(0.0, 0.0, 0.0)) -> dict:
-    return {"scene": str(DATA / "studies" / "scenes" / scene), "model": str(DATA / "models" / "subedi3link.toml"),
-            "controller": None, "payload": payload, "q0_deg": list(q), "fidelity": None,
-            "overrides": sorted([f'scene.method="{method}"', *extra]), "digests": {}, "seed": 1}
+def _settings(
+    scene: str, method: str, *extra: str, payload: float = 2.0, q=(0.0, 0.0, 0.0)
+) -> dict:
+    return {
+        "scene": str(DATA / "studies" / "scenes" / scene),
+        "model": str(DATA / "models" / "subedi3link.toml"),
+        "controller": None,
+        "payload": payload,
+        "q0_deg": list(q),
+        "fidelity": None,
+        "overrides": sorted([f'scene.method="{method}"', *extra]),
+        "digests": {},
+        "seed": 1,
+    }
 
 
 # -- tip error ---------------------------------------------------------------------------
@@ -47,23 +61,37 @@ def test_tip_error_of_identical_runs_is_zero_and_of_a_shifted_path_is_the_shift(
 # -- method spelling -----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("text", ["rigid/rk4@1ms", "amm:2/rk4@0.25ms", "amm:2+sched/rk4@1ms", "fem:4/rk4@stable",
-                                  "fem:4/rk4@stable/2", "fem:4/newmark@1ms", "amm:2/cvodes@1e-06", "fem:2/idas@1e-05",
-                                  "amm:2/scipy:DOP853@1e-06"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "rigid/rk4@1ms",
+        "amm:2/rk4@0.25ms",
+        "amm:2+sched/rk4@1ms",
+        "fem:4/rk4@stable",
+        "fem:4/rk4@stable/2",
+        "fem:4/newmark@1ms",
+        "amm:2/cvodes@1e-06",
+        "fem:2/idas@1e-05",
+        "amm:2/scipy:DOP853@1e-06",
+    ],
+)
 def test_method_spelling_round_trips(text):
     method = parse_method(text)
     assert parse_method(method.label) == method
 
 
-@pytest.mark.parametrize("text, fragment", [
-    ("amm:2/rk5@1ms", "did you mean 'rk4'"),
-    ("fem:4+sched/rk4@1ms", "assumed modes only"),
-    ("amm:2/rk4@1 parsec", "step"),
-    ("amm:2/scipy:Euler@1e-6", "allowed: RK45"),
-    ("amm:2/idas@3", "relative tolerance"),
-    ("amm:2/newmark", "needs a step"),
-    ("amm:2", "spelt"),
-])
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("amm:2/rk5@1ms", "did you mean 'rk4'"),
+        ("fem:4+sched/rk4@1ms", "assumed modes only"),
+        ("amm:2/rk4@1 parsec", "step"),
+        ("amm:2/scipy:Euler@1e-6", "allowed: RK45"),
+        ("amm:2/idas@3", "relative tolerance"),
+        ("amm:2/newmark", "needs a step"),
+        ("amm:2", "spelt"),
+    ],
+)
 def test_bad_methods_are_refused_with_what_is_allowed(text, fragment):
     with pytest.raises(SpecError, match="allowed|did you mean|needs") as info:
         parse_method(text, source="study.toml", key="scene.method")
@@ -74,10 +102,11 @@ def test_bad_executor_settings_name_the_key():
     with pytest.raises(SpecError, match="scene.repeats"):
         study.plan_from_settings(_settings("bangbang.toml", "rigid/rk4@1ms", "scene.repeats=0"))
     with pytest.raises(SpecError, match="scene.method"):
-        study.plan_from_settings(_settings("bangbang.toml", "rigid/rk4@1ms")
-                                 | {"overrides": []})
+        study.plan_from_settings(_settings("bangbang.toml", "rigid/rk4@1ms") | {"overrides": []})
     with pytest.raises(SpecError, match="finite-element reference"):
-        study.plan_from_settings(_settings("bangbang.toml", "rigid/rk4@1ms", 'scene.reference="amm:2/rk4@1ms"'))
+        study.plan_from_settings(
+            _settings("bangbang.toml", "rigid/rk4@1ms", 'scene.reference="amm:2/rk4@1ms"')
+        )
 
 
 # -- the Pareto front ----------------------------------------------------------------------
@@ -97,15 +126,33 @@ def test_pareto_front_on_hand_made_points():
 def test_summary_marks_the_front_and_excludes_methods_with_failures():
     rows = []
     for scene in ("a", "b"):
-        for method, cost, err, status in (("rigid/rk4@1ms", 0.01, 1e-2, "ok"), ("amm:2/rk4@1ms", 0.02, 1e-3, "ok"),
-                                          ("amm:3/rk4@1ms", 0.015, 1e-4, "failed" if scene == "b" else "ok"),
-                                          ("fem:4/rk4@stable", 1.0, 1e-3, "ok")):
-            rows.append({"scene": scene, study.METHOD_COLUMN: method, "status": status, "error": "diverged" if status != "ok" else "",
-                         "wall_per_sim_s": cost if status == "ok" else None, "tip_error_rms": err if status == "ok" else None,
-                         "tip_error_max": 2 * err if status == "ok" else None, "n_states": 6.0, "omega_max": 1.0, "step_s": 1e-3})
+        for method, cost, err, status in (
+            ("rigid/rk4@1ms", 0.01, 1e-2, "ok"),
+            ("amm:2/rk4@1ms", 0.02, 1e-3, "ok"),
+            ("amm:3/rk4@1ms", 0.015, 1e-4, "failed" if scene == "b" else "ok"),
+            ("fem:4/rk4@stable", 1.0, 1e-3, "ok"),
+        ):
+            rows.append(
+                {
+                    "scene": scene,
+                    study.METHOD_COLUMN: method,
+                    "status": status,
+                    "error": "diverged" if status != "ok" else "",
+                    "wall_per_sim_s": cost if status == "ok" else None,
+                    "tip_error_rms": err if status == "ok" else None,
+                    "tip_error_max": 2 * err if status == "ok" else None,
+                    "n_states": 6.0,
+                    "omega_max": 1.0,
+                    "step_s": 1e-3,
+                }
+            )
     summary = {(s["scene"], s["method"]): s for s in study.summarise(rows)}
-    assert summary[("a", "amm:3/rk4@1ms")]["pareto"] and not summary[("a", "amm:2/rk4@1ms")]["pareto"]
-    assert not summary[("b", "amm:3/rk4@1ms")]["pareto"] and summary[("b", "amm:2/rk4@1ms")]["pareto"]
+    assert (
+        summary[("a", "amm:3/rk4@1ms")]["pareto"] and not summary[("a", "amm:2/rk4@1ms")]["pareto"]
+    )
+    assert (
+        not summary[("b", "amm:3/rk4@1ms")]["pareto"] and summary[("b", "amm:2/rk4@1ms")]["pareto"]
+    )
     assert not summary[(study.ALL, "fem:4/rk4@stable")]["pareto"]
     assert summary[(study.ALL, "amm:3/rk4@1ms")]["runs_failed"] == 1
 
@@ -115,7 +162,9 @@ def test_summary_marks_the_front_and_excludes_methods_with_failures():
 
 def test_rk4_error_falls_as_h4_against_a_tight_implicit_solution():
     """amm:1, bang-bang at 0 kg for 0.05 s: RK4 at h, h/2, h/4 against CVODES at rtol 1e-11."""
-    plan = study.plan_from_settings(_settings("bangbang.toml", "amm:1/rk4@1ms", "scene.horizon=0.05", payload=0.0))
+    plan = study.plan_from_settings(
+        _settings("bangbang.toml", "amm:1/rk4@1ms", "scene.horizon=0.05", payload=0.0)
+    )
     tight, _ = study.simulate_method(plan, parse_method("amm:1/cvodes@1e-11"))
     errors = []
     for step in ("1ms", "0.5ms", "0.25ms"):
@@ -128,9 +177,17 @@ def test_rk4_error_falls_as_h4_against_a_tight_implicit_solution():
 def test_reference_converges_with_mesh_and_step(monkeypatch):
     """Reduced check (0.1 s of the bang-bang scene): halving the step changes the reference far less than the
     mesh does, and the finer mesh pair (fem:4 vs fem:2 -> fem:3 vs fem:4) differs less."""
-    monkeypatch.setenv("FLEXCTRL_NO_COMPILE", "1")  # the virtual machine: no compile time for a short run
-    plan = study.plan_from_settings(_settings("bangbang.toml", "rigid/rk4@1ms", "scene.horizon=0.1", payload=0.5))
-    ref = compute_reference(lambda m: study.simulate_method(plan, m)[0], parse_method("fem:4/rk4@stable"), ["fem:2", "fem:3"])
+    monkeypatch.setenv(
+        "FLEXCTRL_NO_COMPILE", "1"
+    )  # the virtual machine: no compile time for a short run
+    plan = study.plan_from_settings(
+        _settings("bangbang.toml", "rigid/rk4@1ms", "scene.horizon=0.1", payload=0.5)
+    )
+    ref = compute_reference(
+        lambda m: study.simulate_method(plan, m)[0],
+        parse_method("fem:4/rk4@stable"),
+        ["fem:2", "fem:3"],
+    )
     step, coarse, middle = ref.checks["step/2"], ref.checks["fem:2"], ref.checks["fem:3"]
     assert middle["max"] < coarse["max"]
     assert step["max"] < 0.1 * middle["max"]  # time error an order below the mesh error
@@ -142,19 +199,25 @@ def test_open_loop_driver_matches_the_package_integrator():
     from flexctrl.scenes import run_scene
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene(DATA / "studies" / "scenes" / "bangbang.toml", ["duration=0.3", "fidelity='amm:1'"])
+    scene = load_scene(
+        DATA / "studies" / "scenes" / "bangbang.toml", ["duration=0.3", "fidelity='amm:1'"]
+    )
     direct = run_scene(scene).trajectory
-    plan = study.plan_from_settings(_settings("bangbang.toml", "amm:1/rk4@1ms", "scene.horizon=0.3"))
+    plan = study.plan_from_settings(
+        _settings("bangbang.toml", "amm:1/rk4@1ms", "scene.horizon=0.3")
+    )
     run, _ = study.simulate_method(plan, plan.method)
     assert np.max(np.abs(run.tip - direct.tip)) < 1e-10
 
 
 def test_divergence_is_an_error_not_nan():
+    from flexctrl.dynamics.build import build_model
     from flexctrl.errors import SimulationError
     from flexctrl.scenes.arm_setup import scene_arm
-    from flexctrl.dynamics.build import build_model
 
-    plan = study.plan_from_settings(_settings("bangbang.toml", "fem:2/rk4@1ms", "scene.horizon=0.3"))
+    plan = study.plan_from_settings(
+        _settings("bangbang.toml", "fem:2/rk4@1ms", "scene.horizon=0.3")
+    )
     scene = study._scene(study._plan_scene(plan))
     arm = scene_arm(scene)
     model = build_model(arm, "fem:2", reference_q=scene.q0)

@@ -13,14 +13,18 @@ from __future__ import annotations
 import csv
 import json
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
 import scipy.linalg
+from support import DATA
 
-from flexctrl.analysis.stability.probe import StabilityCriterion, StabilityProbe, largest_stable_step
+from flexctrl.analysis.stability.probe import (
+    StabilityCriterion,
+    StabilityProbe,
+    largest_stable_step,
+)
 from flexctrl.analysis.stability.theory import (
     EXPLICIT_POLYNOMIALS,
     RK4_IMAGINARY_AXIS_LIMIT,
@@ -36,7 +40,6 @@ from flexctrl.sim.newmark_model import newmark_critical_step
 from flexctrl.sim.rk4 import RK4, RK4_STABILITY_LIMIT
 from flexctrl.sim.toymodel import spring_pendulum
 
-from support import DATA, ROOT
 STUDY = DATA / "studies" / "stability_limits.toml"
 
 
@@ -72,7 +75,9 @@ def _newmark_step_matrix(alpha: float, delta: float, omega_h: float, zeta: float
 
 def _newmark_radius(alpha: float, delta: float, omega_h: float, zeta: float) -> float:
     """Spectral radius of :func:`_newmark_step_matrix`."""
-    return float(np.max(np.abs(np.linalg.eigvals(_newmark_step_matrix(alpha, delta, omega_h, zeta)))))
+    return float(
+        np.max(np.abs(np.linalg.eigvals(_newmark_step_matrix(alpha, delta, omega_h, zeta))))
+    )
 
 
 @pytest.fixture(scope="module")
@@ -101,14 +106,20 @@ def test_rk4_limits_on_both_axes_by_hand():
     y = ray_limit(EXPLICIT_POLYNOMIALS["rk4"], 1j)
     assert y == pytest.approx(math.sqrt(8.0), rel=1e-12)
     assert RK4_IMAGINARY_AXIS_LIMIT == pytest.approx(y, rel=1e-12)
-    assert abs(amplification_factor("rk4", 1j * y * (1 - 1e-6))) < 1 < abs(amplification_factor("rk4", 1j * y * (1 + 1e-6)))
+    assert (
+        abs(amplification_factor("rk4", 1j * y * (1 - 1e-6)))
+        < 1
+        < abs(amplification_factor("rk4", 1j * y * (1 + 1e-6)))
+    )
     # negative real axis: bisect |R(-x)| = 1 directly
     lo, hi = 2.0, 3.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if abs(amplification_factor("rk4", -mid)) <= 1 else (lo, mid)
     assert RK4_REAL_AXIS_LIMIT == pytest.approx(lo, rel=1e-12)
-    assert amplification_factor("rk4", -lo).real == pytest.approx(1.0, abs=1e-9)  # R = +1 there (x^3 - 4x^2 + 12x - 24 = 0)
+    assert amplification_factor("rk4", -lo).real == pytest.approx(
+        1.0, abs=1e-9
+    )  # R = +1 there (x^3 - 4x^2 + 12x - 24 = 0)
     assert np.polynomial.polynomial.polyval(lo, [-24, 12, -4, 1]) == pytest.approx(0.0, abs=1e-9)
     # the real-axis limit (the issue's 2.785) is 1.5 % below the imaginary-axis one
     assert 0.015 < 1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT < 0.016
@@ -140,10 +151,14 @@ def test_euler_theory_is_zero_undamped_and_two_zeta_over_omega_damped():
     assert theoretical_step_limit([1j * omega, -1j * omega], "euler").h == 0.0
     for zeta in (0.01, 0.1, 0.5):
         lam = omega * (-zeta + 1j * math.sqrt(1 - zeta**2))
-        assert theoretical_step_limit([lam, np.conj(lam)], "euler").h == pytest.approx(2 * zeta / omega, rel=1e-10)
+        assert theoretical_step_limit([lam, np.conj(lam)], "euler").h == pytest.approx(
+            2 * zeta / omega, rel=1e-10
+        )
 
 
-@pytest.mark.parametrize("alpha, delta, zeta", [(0.0, 0.5, 0.0), (0.1, 0.6, 0.0), (0.1, 0.6, 0.05), (0.2, 0.55, 0.2)])
+@pytest.mark.parametrize(
+    "alpha, delta, zeta", [(0.0, 0.5, 0.0), (0.1, 0.6, 0.0), (0.1, 0.6, 0.05), (0.2, 0.55, 0.2)]
+)
 def test_newmark_critical_step_matches_its_step_matrix(alpha, delta, zeta):
     crit = newmark_critical_step(alpha, delta, zeta)
     assert _newmark_radius(alpha, delta, crit * (1 - 1e-6), zeta) <= 1 + 1e-9
@@ -195,11 +210,16 @@ def test_newmark_integrator_matches_simulate_model_newmark(toy):
 def test_scene_accepts_the_new_integrators_and_newmark_parameters():
     from flexctrl.spec.scene import load_scene
 
-    scene = load_scene(DATA / "studies" / "scenes" / "free_vibration.toml",
-                       ["integrator='newmark'", "solver.alpha=0.3", "solver.delta=0.6"])
+    scene = load_scene(
+        DATA / "studies" / "scenes" / "free_vibration.toml",
+        ["integrator='newmark'", "solver.alpha=0.3", "solver.delta=0.6"],
+    )
     assert (scene.integrator, scene.solver) == ("newmark", {"alpha": 0.3, "delta": 0.6})
     with pytest.raises(SpecError, match="alpha.*does not apply to integrator 'euler'"):
-        load_scene(DATA / "studies" / "scenes" / "free_vibration.toml", ["integrator='euler'", "solver.alpha=0.3"])
+        load_scene(
+            DATA / "studies" / "scenes" / "free_vibration.toml",
+            ["integrator='euler'", "solver.alpha=0.3"],
+        )
 
 
 # -- measurement on the linear oscillator ----------------------------------------------
@@ -231,7 +251,12 @@ def test_euler_bisection_finds_two_zeta_over_omega_on_a_damped_oscillator():
     mass, damping = model.mass_matrix(q), np.array(model.functions["D"]()["D"], dtype=float)
     stiffness = stiffness_matrix(model, q)
     n = model.n_q
-    companion = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(mass, stiffness), -np.linalg.solve(mass, damping)]])
+    companion = np.block(
+        [
+            [np.zeros((n, n)), np.eye(n)],
+            [-np.linalg.solve(mass, stiffness), -np.linalg.solve(mass, damping)],
+        ]
+    )
     lam = np.linalg.eigvals(companion)
     lam = lam[np.abs(lam) > 1e-6 * np.abs(lam).max()]
     expected = float(np.min(-2 * lam.real / np.abs(lam) ** 2))
@@ -250,10 +275,16 @@ def test_rk4_on_amm1_within_5_percent_of_issue_and_tightly_of_theory(arm_amm1):
     result = largest_stable_step(model, "rk4", op.x, op.u)
     omega = _frequencies(model, op.q).max()
     assert result.omega_max == pytest.approx(omega, rel=1e-7)
-    assert abs(result.h_measured / (RK4_STABILITY_LIMIT / result.omega_max) - 1) < 0.05  # the issue's demand
+    assert (
+        abs(result.h_measured / (RK4_STABILITY_LIMIT / result.omega_max) - 1) < 0.05
+    )  # the issue's demand
     assert abs(result.h_measured / result.h_theory - 1) < 0.01  # the brief's demand ...
-    assert result.h_theory == pytest.approx(RK4_IMAGINARY_AXIS_LIMIT / omega, rel=1e-7)  # undamped: 2 sqrt 2 / omega
-    assert result.h_measured <= result.h_theory * (1 + 2e-6) <= result.h_unstable * (1 + 4e-6)  # ... and much tighter
+    assert result.h_theory == pytest.approx(
+        RK4_IMAGINARY_AXIS_LIMIT / omega, rel=1e-7
+    )  # undamped: 2 sqrt 2 / omega
+    assert (
+        result.h_measured <= result.h_theory * (1 + 2e-6) <= result.h_unstable * (1 + 4e-6)
+    )  # ... and much tighter
     assert result.ratio == pytest.approx(1.0, abs=1.5e-4)
 
 
@@ -264,7 +295,9 @@ def test_newmark_stable_at_100x_the_rk4_limit_where_rk4_is_not(arm_amm1):
     probe = newmark(h)
     assert probe.stable and probe.growth <= StabilityCriterion().growth
     rk4 = StabilityProbe(model, "rk4", op.x, op.u)
-    assert not rk4(1.01 * RK4_IMAGINARY_AXIS_LIMIT / rk4.omega_max).stable  # the criterion sees 1 % beyond the limit
+    assert not rk4(
+        1.01 * RK4_IMAGINARY_AXIS_LIMIT / rk4.omega_max
+    ).stable  # the criterion sees 1 % beyond the limit
     assert rk4(0.99 * RK4_IMAGINARY_AXIS_LIMIT / rk4.omega_max).stable
 
 
@@ -303,7 +336,10 @@ def test_study_refuses_adaptive_integrators():
 
     settings = load_study(STUDY, ["grid.fidelity=['amm:1']"], check_executor=False).runs[0].settings
     settings["overrides"] = ['scene.integrator="cvodes"']
-    with pytest.raises(SpecError, match=r"stability_probe.toml.*integrator.*'cvodes'.*allowed: 'rk4', 'euler', 'newmark'"):
+    with pytest.raises(
+        SpecError,
+        match=r"stability_probe.toml.*integrator.*'cvodes'.*allowed: 'rk4', 'euler', 'newmark'",
+    ):
         check_settings(settings)
 
 
@@ -320,7 +356,13 @@ def test_study_writes_stability_limits_csv(tmp_path):
     path = tmp_path / "stability_limits.csv"
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        assert reader.fieldnames[:5] == ["integrator", "fidelity", "omega_max", "h_measured", "h_theory"]
+        assert reader.fieldnames[:5] == [
+            "integrator",
+            "fidelity",
+            "omega_max",
+            "h_measured",
+            "h_theory",
+        ]
         rows = {row["integrator"]: row for row in reader}
     assert set(rows) == {"rk4", "euler", "newmark"}
     for row in rows.values():
@@ -330,10 +372,15 @@ def test_study_writes_stability_limits_csv(tmp_path):
     assert abs(float(rk4["h_measured"]) * float(rk4["omega_max"]) / RK4_STABILITY_LIMIT - 1) < 0.05
     assert abs(float(rk4["h_measured"]) / float(rk4["h_theory"]) - 1) < 1e-3
     assert rows["newmark"]["h_theory"] == "inf" and rows["newmark"]["outcome"] == "stable_at_cap"
-    assert float(rows["newmark"]["h_measured"]) >= 100 * RK4_STABILITY_LIMIT / float(rows["newmark"]["omega_max"])
+    assert float(rows["newmark"]["h_measured"]) >= 100 * RK4_STABILITY_LIMIT / float(
+        rows["newmark"]["omega_max"]
+    )
     assert float(rows["euler"]["h_measured"]) == 0.0 and float(rows["euler"]["h_theory"]) == 0.0
     report = (tmp_path / "report.md").read_text()
-    assert "Largest stable step" in report and (tmp_path / "figures" / "stability_limits.png").is_file()
+    assert (
+        "Largest stable step" in report
+        and (tmp_path / "figures" / "stability_limits.png").is_file()
+    )
     # `flexctrl report DIR` redraws it from the files alone
     before = path.read_text()
     path.unlink()

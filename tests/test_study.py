@@ -14,18 +14,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import DATA as SHIPPED
 
 from flexctrl import cli
 from flexctrl.errors import SpecError
 from flexctrl.spec.overrides import parse_value
 from flexctrl.study import RunOutput, load_study, register_executor, run_study
-from flexctrl.study.executors.selftest_executor import _selftest_build, execute as run_selftest
+from flexctrl.study.executors.selftest_executor import _selftest_build
+from flexctrl.study.executors.selftest_executor import execute as run_selftest
 from flexctrl.study.hashing import canonical_json, derive_seed, identity, short_hash
 from flexctrl.study.progress import Progress
 from flexctrl.study.runner import execute_run
-from flexctrl.study.study_file import toml_literal
 from flexctrl.study.store import Table
-from support import DATA as SHIPPED
+from flexctrl.study.study_file import toml_literal
 
 TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
@@ -40,7 +41,9 @@ def study(tmp_path, root) -> Path:
     return tmp_path / "tests" / "data" / "study_selftest.toml"
 
 
-def variant(study: Path, name: str, replace: dict[str, str] | None = None, append: str = "") -> Path:
+def variant(
+    study: Path, name: str, replace: dict[str, str] | None = None, append: str = ""
+) -> Path:
     """A copy of the example study next to it, with text replaced and/or appended."""
     text = study.read_text()
     for old, new in (replace or {}).items():
@@ -70,17 +73,23 @@ def test_grid_is_the_cartesian_product_with_joint_axes_on_the_fixed_configuratio
         s = run.settings
         assert s["q0_deg"] == [0.0, run.coordinates["q2"], run.coordinates["q3"]]
         assert s["payload"] == run.coordinates["payload"]
-        assert Path(s["controller"]).stem == run.coordinates["controller"] and Path(s["controller"]).is_absolute()
+        assert (
+            Path(s["controller"]).stem == run.coordinates["controller"]
+            and Path(s["controller"]).is_absolute()
+        )
         assert set(s["digests"]) == {"scene", "model", "controller"}
     assert len({run.run_id for run in spec.runs}) == len(spec.runs)
 
 
 def test_run_ids_and_seeds_do_not_depend_on_axis_order(study):
     spec = load_study(study)
-    shuffled = variant(study, "shuffled.toml", {
-        'payload = [0.0, 2.0]\nq2 = [0, 90]\nq3 = [-90, 0, 90]\ncontroller = ["controllers/soft.toml", "controllers/stiff.toml"]':
-        'controller = ["controllers/stiff.toml", "controllers/soft.toml"]\nq3 = [90, 0, -90]\npayload = [2, 0]\nq2 = [90, 0]',
-    })
+    shuffled = variant(
+        study,
+        "shuffled.toml",
+        {
+            'payload = [0.0, 2.0]\nq2 = [0, 90]\nq3 = [-90, 0, 90]\ncontroller = ["controllers/soft.toml", "controllers/stiff.toml"]': 'controller = ["controllers/stiff.toml", "controllers/soft.toml"]\nq3 = [90, 0, -90]\npayload = [2, 0]\nq2 = [90, 0]',
+        },
+    )
     other = load_study(shuffled)
     assert [r.run_id for r in other.runs] != [r.run_id for r in spec.runs]  # another order ...
     by_id = {r.run_id: r for r in spec.runs}
@@ -113,13 +122,27 @@ def test_canonical_json_and_toml_literals():
     assert short_hash({"a": 1, "b": 2}) == short_hash({"b": 2, "a": 1})
     with pytest.raises(ValueError):
         canonical_json({"a": float("nan")})
-    for value in (1, 2.5, -3e-7, 0.1 + 0.2, "amm:2", 'say "hi"', True, [0, 90.5, "x"], {"k": [1, 2]}):
+    for value in (
+        1,
+        2.5,
+        -3e-7,
+        0.1 + 0.2,
+        "amm:2",
+        'say "hi"',
+        True,
+        [0, 90.5, "x"],
+        {"k": [1, 2]},
+    ):
         assert parse_value(toml_literal(value)) == value
 
 
 def test_overrides_and_replicates_become_axes_with_their_own_seeds(study):
-    path = variant(study, "over.toml", {"seed = 7": "seed = 7\nreplicates = 2"},
-                   '\n[set]\n"scene.noise_std" = 2e-4\n')
+    path = variant(
+        study,
+        "over.toml",
+        {"seed = 7": "seed = 7\nreplicates = 2"},
+        '\n[set]\n"scene.noise_std" = 2e-4\n',
+    )
     path.write_text(path.read_text().replace("[grid]\n", '[grid]\n"scene.duration" = [0.5, 1.0]\n'))
     spec = load_study(path)
     assert len(spec.runs) == 24 * 2 * 2
@@ -133,22 +156,72 @@ def test_overrides_and_replicates_become_axes_with_their_own_seeds(study):
 # -- broken study files ------------------------------------------------------------------------
 
 BROKEN = [
-    ("unknown_controller", {'"controllers/stiff.toml"]': '"controllers/stif.toml"]'}, "", "grid.controller[2]", "stiff.toml"),
-    ("misspelt_axis", {"payload = [0.0, 2.0]": "paylaod = [0.0, 2.0]"}, "", "grid.paylaod", "did you mean 'payload'"),
+    (
+        "unknown_controller",
+        {'"controllers/stiff.toml"]': '"controllers/stif.toml"]'},
+        "",
+        "grid.controller[2]",
+        "stiff.toml",
+    ),
+    (
+        "misspelt_axis",
+        {"payload = [0.0, 2.0]": "paylaod = [0.0, 2.0]"},
+        "",
+        "grid.paylaod",
+        "did you mean 'payload'",
+    ),
     ("misspelt_top_key", {"seed = 7": "seeed = 7"}, "", "seeed", "did you mean 'seed'"),
-    ("negative_payload", {"payload = [0.0, 2.0]": "payload = [0.0, -2.0]"}, "", "grid.payload[2]", ">= 0"),
+    (
+        "negative_payload",
+        {"payload = [0.0, 2.0]": "payload = [0.0, -2.0]"},
+        "",
+        "grid.payload[2]",
+        ">= 0",
+    ),
     ("empty_axis", {"payload = [0.0, 2.0]": "payload = []"}, "", "grid.payload", "empty"),
-    ("unknown_executor", {'executor = "_selftest"': 'executor = "_selftset"'}, "", "executor", "did you mean '_selftest'"),
-    ("short_configuration", {"configuration = [0, 0, 0]": "configuration = [0, 0]"}, "", "configuration", "3 joints"),
-    ("misspelt_override_target", {}, '\n[set]\n"sceen.duration" = 2.0\n', "set.sceen.duration", "did you mean 'scene.duration'"),
+    (
+        "unknown_executor",
+        {'executor = "_selftest"': 'executor = "_selftset"'},
+        "",
+        "executor",
+        "did you mean '_selftest'",
+    ),
+    (
+        "short_configuration",
+        {"configuration = [0, 0, 0]": "configuration = [0, 0]"},
+        "",
+        "configuration",
+        "3 joints",
+    ),
+    (
+        "misspelt_override_target",
+        {},
+        '\n[set]\n"sceen.duration" = 2.0\n',
+        "set.sceen.duration",
+        "did you mean 'scene.duration'",
+    ),
     ("misspelt_scene_key", {}, '\n[set]\n"scene.duraton" = 2.0\n', "duraton", "ring.toml"),
-    ("unknown_map_axis", {'map_axes = ["q2", "q3"]': 'map_axes = ["q2", "q9"]'}, "", "report.map_axes", "q9"),
-    ("axis_and_fixed", {"[grid]\n": "[grid]\nconfiguration = [[0, 0, 0]]\n"}, "", "grid.configuration", "both"),
+    (
+        "unknown_map_axis",
+        {'map_axes = ["q2", "q3"]': 'map_axes = ["q2", "q9"]'},
+        "",
+        "report.map_axes",
+        "q9",
+    ),
+    (
+        "axis_and_fixed",
+        {"[grid]\n": "[grid]\nconfiguration = [[0, 0, 0]]\n"},
+        "",
+        "grid.configuration",
+        "both",
+    ),
 ]
 
 
 @pytest.mark.parametrize("case, replace, append, key, detail", BROKEN, ids=[c[0] for c in BROKEN])
-def test_broken_study_is_refused_before_any_run(study, tmp_path, capsys, case, replace, append, key, detail):
+def test_broken_study_is_refused_before_any_run(
+    study, tmp_path, capsys, case, replace, append, key, detail
+):
     path = variant(study, f"{case}.toml", replace, append)
     out = tmp_path / "out"
     assert cli.main(["study", str(path), "--out", str(out), "--workers", "0"]) == 2
@@ -162,7 +235,10 @@ def test_resume_needs_a_study_and_out_must_hold_the_same_study(study, tmp_path):
     spec = load_study(study)
     with pytest.raises(SpecError, match="nothing to resume"):
         run_study(spec, tmp_path / "empty", resume=True, workers=0, progress="none")
-    other = load_study(variant(study, "renamed.toml", {'name = "selftest"': 'name = "other"'}), overrides=["grid.payload=[0.0]", "grid.q3=[0]"])
+    other = load_study(
+        variant(study, "renamed.toml", {'name = "selftest"': 'name = "other"'}),
+        overrides=["grid.payload=[0.0]", "grid.q3=[0]"],
+    )
     run_study(other, tmp_path / "out", workers=0, progress="none", report=False)
     with pytest.raises(SpecError, match="holds the results of study 'other'"):
         run_study(spec, tmp_path / "out", workers=0, progress="none")
@@ -181,7 +257,9 @@ def test_same_study_gives_the_same_table_and_a_rerun_skips_recorded_runs(study, 
     assert stable(again.table()) == stable(first.table())
     study_json = json.loads((tmp_path / "a" / "study.json").read_text())
     assert len(study_json["sessions"]) == 2 and study_json["end"]
-    assert {"flexctrl", "numpy", "scipy", "casadi", "control", "osqp"} <= set(study_json["versions"])
+    assert {"flexctrl", "numpy", "scipy", "casadi", "control", "osqp"} <= set(
+        study_json["versions"]
+    )
     assert study_json["machine"]["cpu_count"] >= 1 and study_json["study"]["name"] == "selftest"
 
 
@@ -190,8 +268,17 @@ def test_records_are_plain_data_with_decimated_trajectories(study, tmp_path):
     result = run_study(spec, tmp_path / "out", workers=0, progress="none", report=False)
     table = result.table()
     assert table.columns[:6] == ["run_id", "payload", "q2", "q3", "controller", "seed"]
-    assert {"tip_residual_rms", "tip_peak", "settling_time", "frequency_hz", "status", "error",
-            "wall_time_s", "peak_memory_mb", "bytes_written"} <= set(table.columns)
+    assert {
+        "tip_residual_rms",
+        "tip_peak",
+        "settling_time",
+        "frequency_hz",
+        "status",
+        "error",
+        "wall_time_s",
+        "peak_memory_mb",
+        "bytes_written",
+    } <= set(table.columns)
     for row in table.rows:
         record = json.loads((tmp_path / "out" / "runs" / f"{row['run_id']}.json").read_text())
         assert record["metrics"]["tip_peak"] == row["tip_peak"] and record["status"] == "ok"
@@ -205,15 +292,22 @@ def test_records_are_plain_data_with_decimated_trajectories(study, tmp_path):
     # the physics of the oscillator: a payload lowers the frequency, the stiff controller damps faster
     rows = {(r["payload"], r["q2"], r["controller"]): r for r in table.rows}
     assert rows[(2.0, 0.0, "soft")]["frequency_hz"] < rows[(0.0, 0.0, "soft")]["frequency_hz"]
-    assert rows[(0.0, 0.0, "stiff")]["tip_residual_rms"] < rows[(0.0, 0.0, "soft")]["tip_residual_rms"]
+    assert (
+        rows[(0.0, 0.0, "stiff")]["tip_residual_rms"] < rows[(0.0, 0.0, "soft")]["tip_residual_rms"]
+    )
     assert not list((tmp_path / "out").rglob("*.tmp"))
 
 
 def test_failing_runs_are_recorded_the_study_goes_on_and_the_report_lists_them(study, tmp_path):
-    path = variant(study, "failing.toml", {
-        '"controllers/stiff.toml"]': '"controllers/stiff.toml", "controllers/unstable.toml"]',
-        "q3 = [-90, 0, 90]": "q3 = [0]",
-    }, '\n[set]\n"scene.fail_payload" = 2.0\n')
+    path = variant(
+        study,
+        "failing.toml",
+        {
+            '"controllers/stiff.toml"]': '"controllers/stiff.toml", "controllers/unstable.toml"]',
+            "q3 = [-90, 0, 90]": "q3 = [0]",
+        },
+        '\n[set]\n"scene.fail_payload" = 2.0\n',
+    )
     spec = load_study(path)
     result = run_study(spec, tmp_path / "out", workers=0, progress="none")
     table = result.table()
@@ -223,9 +317,13 @@ def test_failing_runs_are_recorded_the_study_goes_on_and_the_report_lists_them(s
     assert len(table) == 12 and len(failed) == 8 and len(ok) == 4
     for row in failed:
         if row["payload"] == 2.0:
-            assert row["error"].startswith("RuntimeError: selftest failure requested for payload 2 kg")
+            assert row["error"].startswith(
+                "RuntimeError: selftest failure requested for payload 2 kg"
+            )
         else:
-            assert row["controller"] == "unstable" and row["error"].startswith("SimulationError: diverged")
+            assert row["controller"] == "unstable" and row["error"].startswith(
+                "SimulationError: diverged"
+            )
         assert row["tip_residual_rms"] is None
     report = result.report.read_text()
     section = report.split("## Failed runs")[1]
@@ -255,7 +353,9 @@ def test_report_is_redrawn_from_the_result_folder_alone(study, tmp_path, capsys)
     for section in ("## Maps", "## Ranking", "## Worst cases", "## Timing", "## Failed runs"):
         assert section in original
     # options override the study's [report] table; an unknown metric is refused
-    assert cli.main(["report", str(out), "--metric", "tip_peak", "--map-axes", "payload", "q3"]) == 0
+    assert (
+        cli.main(["report", str(out), "--metric", "tip_peak", "--map-axes", "payload", "q3"]) == 0
+    )
     assert "map_tip_peak.png" in {p.name for p in (out / "figures").glob("*.png")}
     assert cli.main(["report", str(out), "--metric", "tip_rms"]) == 2
     assert "key '--metric'" in capsys.readouterr().err
@@ -300,7 +400,9 @@ def test_executor_outputs_are_checked():
 def test_progress_lines_count_runs_and_estimate_the_time_left():
     now = [0.0]
     stream = io.StringIO()
-    bar = Progress(10, skipped=2, label="s", mode="lines", stream=stream, interval=5.0, clock=lambda: now[0])
+    bar = Progress(
+        10, skipped=2, label="s", mode="lines", stream=stream, interval=5.0, clock=lambda: now[0]
+    )
     for k in range(4):
         now[0] += 2.0
         bar.update(ok=k != 1)
@@ -327,7 +429,13 @@ def test_quoted_override_key_reaches_a_quoted_axis_beside_a_file_axis(root):
     """grid.scene (files) and grid."scene.method" cannot both nest; --set must still reach the latter."""
     path = SHIPPED / "studies" / "speed_vs_accuracy.toml"
     methods = ["amm:2/rk4@0.25ms", "amm:2+sched/rk4@1ms"]
-    spec = load_study(path, ['grid.scene=["scenes/free_vibration.toml"]', f"grid.\"scene.method\"={methods!r}".replace("'", '"')])
+    spec = load_study(
+        path,
+        [
+            'grid.scene=["scenes/free_vibration.toml"]',
+            f'grid."scene.method"={methods!r}'.replace("'", '"'),
+        ],
+    )
     axes = {a.key: a.values for a in spec.axes}
     assert axes["scene.method"] == tuple(methods)
     assert len(spec.runs) == 1 * 2 * 2 * 2  # scene x payload x configuration x method
@@ -340,7 +448,10 @@ def test_quoted_override_key_names_the_same_setting_as_the_nested_one(study):
 
 
 def test_same_setting_spelt_quoted_and_nested_is_refused(study):
-    text = study.read_text().replace("[grid]\n", '[grid]\n"scene.duration" = [1.0]\n') + "\n[grid.scene]\nduration = [2.0]\n"
+    text = (
+        study.read_text().replace("[grid]\n", '[grid]\n"scene.duration" = [1.0]\n')
+        + "\n[grid.scene]\nduration = [2.0]\n"
+    )
     path = study.with_name("twice.toml")
     path.write_text(text)
     with pytest.raises(SpecError, match="given twice"):
@@ -348,6 +459,8 @@ def test_same_setting_spelt_quoted_and_nested_is_refused(study):
 
 
 def test_executors_without_a_model_need_no_model_key(root):
-    spec = load_study(SHIPPED / "studies" / "baumgarte_sweep.toml", ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]",
-                                                                 "grid.scene.feedback=['explicit']"])
+    spec = load_study(
+        SHIPPED / "studies" / "baumgarte_sweep.toml",
+        ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]", "grid.scene.feedback=['explicit']"],
+    )
     assert len(spec.runs) == 1 and spec.runs[0].settings["model"] is None

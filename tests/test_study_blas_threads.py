@@ -11,12 +11,19 @@ import pytest
 
 from flexctrl.errors import SpecError
 from flexctrl.study import load_study, run_study
-from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget, parse_blas_threads, usable_cpus
+from flexctrl.study.blas_threads import (
+    THREAD_VARIABLES,
+    blas_thread_budget,
+    parse_blas_threads,
+    usable_cpus,
+)
 from flexctrl.study.runner import LocalPoolBackend, pool_context
 
 #: Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report every thread count.
-PROBE = ("(__import__('scipy.linalg'), "
-         "__import__('flexctrl.study.blas_threads', fromlist=['blas_threads_now']).blas_threads_now())[1]")
+PROBE = (
+    "(__import__('scipy.linalg'), "
+    "__import__('flexctrl.study.blas_threads', fromlist=['blas_threads_now']).blas_threads_now())[1]"
+)
 
 
 def worker_threads(blas_threads) -> list[int]:
@@ -36,7 +43,11 @@ def test_the_budget_shares_the_cpus_between_the_workers():
 def test_a_bad_option_names_the_option_the_value_and_what_is_allowed(bad):
     with pytest.raises(SpecError, match=r"--blas-threads.*allowed: auto, or a whole number"):
         parse_blas_threads(bad)
-    assert parse_blas_threads(" auto ") == "auto" and parse_blas_threads("0") == 0 and parse_blas_threads("3") == 3
+    assert (
+        parse_blas_threads(" auto ") == "auto"
+        and parse_blas_threads("0") == 0
+        and parse_blas_threads("3") == 3
+    )
 
 
 @pytest.mark.parametrize("bad", [-1, 1.5, "2", True])
@@ -72,8 +83,14 @@ print(json.dumps([plain, zero]))
 def test_zero_leaves_the_libraries_as_they_start():
     """``--blas-threads 0`` (the old path) passes no limit: the worker's counts are those of a plain worker."""
     env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
-    done = subprocess.run([sys.executable, "-c", ZERO_AGAINST_PLAIN], env=env, capture_output=True, text=True,
-                          timeout=300, check=True)
+    done = subprocess.run(
+        [sys.executable, "-c", ZERO_AGAINST_PLAIN],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
     plain, zero = json.loads(done.stdout.strip().splitlines()[-1])
     assert zero == plain
     assert max(plain) >= 2, plain  # the libraries started more than one thread: nothing held them
@@ -81,19 +98,44 @@ def test_zero_leaves_the_libraries_as_they_start():
 
 def test_the_budget_is_named_in_the_backend_and_the_table_does_not_move(selftest_study, tmp_path):
     spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q3=[0]"])  # 4 runs
-    limited = run_study(spec, tmp_path / "one", workers=2, progress="none", report=False, blas_threads=1)
-    library = run_study(spec, tmp_path / "two", workers=2, progress="none", report=False, blas_threads=2)
+    limited = run_study(
+        spec, tmp_path / "one", workers=2, progress="none", report=False, blas_threads=1
+    )
+    library = run_study(
+        spec, tmp_path / "two", workers=2, progress="none", report=False, blas_threads=2
+    )
     assert "2 workers" in limited.backend and "1 BLAS thread per worker" in limited.backend
     assert "2 BLAS threads per worker" in library.backend  # set, whatever the environment says
-    assert "BLAS threads as the libraries start them" in LocalPoolBackend(2, blas_threads=0).description
+    assert (
+        "BLAS threads as the libraries start them"
+        in LocalPoolBackend(2, blas_threads=0).description
+    )
     volatile = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
-    strip = lambda table: [{k: v for k, v in row.items() if k not in volatile} for row in table.rows]  # noqa: E731
+    strip = lambda table: [
+        {k: v for k, v in row.items() if k not in volatile} for row in table.rows
+    ]  # noqa: E731
     assert strip(limited.table()) == strip(library.table())
 
 
 def test_the_command_refuses_a_bad_count_before_anything_runs(selftest_study, tmp_path):
-    out = subprocess.run([sys.executable, "-m", "flexctrl.cli", "study", str(selftest_study), "--out",
-                          str(tmp_path / "out"), "--blas-threads", "many"], capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flexctrl.cli",
+            "study",
+            str(selftest_study),
+            "--out",
+            str(tmp_path / "out"),
+            "--blas-threads",
+            "many",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 2
-    assert "--blas-threads" in out.stderr and "'many'" in out.stderr and "allowed: auto" in out.stderr
+    assert (
+        "--blas-threads" in out.stderr and "'many'" in out.stderr and "allowed: auto" in out.stderr
+    )
     assert not (tmp_path / "out").exists()

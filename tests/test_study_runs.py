@@ -35,10 +35,28 @@ def stable(table: Table) -> list[dict]:
 def test_killed_study_loses_no_finished_run_and_resumes_to_the_same_table(study, tmp_path, root):
     # 16 runs of 0.3 s each on 2 workers
     slow = study.with_name("slow.toml")
-    slow.write_text(study.read_text().replace("q3 = [-90, 0, 90]", "q3 = [-90, 90]").replace("[grid]", '[set]\n"scene.sleep_s" = 0.3\n\n[grid]'))
+    slow.write_text(
+        study.read_text()
+        .replace("q3 = [-90, 0, 90]", "q3 = [-90, 90]")
+        .replace("[grid]", '[set]\n"scene.sleep_s" = 0.3\n\n[grid]')
+    )
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "flexctrl.cli", "study", str(slow), "--out", str(out), "--workers", "2", "--progress", "lines"]
-    proc = subprocess.Popen(cmd, cwd=root, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    cmd = [
+        sys.executable,
+        "-m",
+        "flexctrl.cli",
+        "study",
+        str(slow),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--progress",
+        "lines",
+    ]
+    proc = subprocess.Popen(
+        cmd, cwd=root, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
     deadline = time.monotonic() + 60
     try:
         while len(list((out / "runs").glob("*.json"))) < 4:
@@ -79,7 +97,19 @@ def test_sigterm_stops_a_study_like_ctrl_c_and_records_the_session(study, tmp_pa
     slow = study.with_name("slow.toml")
     slow.write_text(study.read_text().replace("[grid]", '[set]\n"scene.sleep_s" = 0.3\n\n[grid]'))
     out = tmp_path / "terminated"
-    cmd = [sys.executable, "-m", "flexctrl.cli", "study", str(slow), "--out", str(out), "--workers", "2", "--progress", "none"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "flexctrl.cli",
+        "study",
+        str(slow),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--progress",
+        "none",
+    ]
     proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     try:
@@ -87,14 +117,18 @@ def test_sigterm_stops_a_study_like_ctrl_c_and_records_the_session(study, tmp_pa
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "no run finished within 60 s"
             time.sleep(0.02)
-        proc.send_signal(signal.SIGTERM)  # the parent only, as `kill PID` or a batch system's time limit
+        proc.send_signal(
+            signal.SIGTERM
+        )  # the parent only, as `kill PID` or a batch system's time limit
         proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:  # pragma: no cover
             proc.kill()
     assert proc.returncode == 130
     session = json.loads((out / "study.json").read_text())["sessions"][-1]
-    assert session["interrupted"] is True and session["elapsed_s"] > 0 and session["end"] is not None
+    assert (
+        session["interrupted"] is True and session["elapsed_s"] > 0 and session["end"] is not None
+    )
     assert (out / "results.csv").exists()
 
 
@@ -102,8 +136,16 @@ def test_local_pool_and_dask_give_identical_tables(study, tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = load_study(study)
     pool = run_study(spec, tmp_path / "pool", workers=2, progress="none", report=False)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
-        dask = run_study(spec, tmp_path / "dask", scheduler=cluster.scheduler_address, progress="none", report=False)
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+    ) as cluster:
+        dask = run_study(
+            spec,
+            tmp_path / "dask",
+            scheduler=cluster.scheduler_address,
+            progress="none",
+            report=False,
+        )
     assert pool.counts["ok"] == dask.counts["ok"] == 24
     assert "local process pool, 2 workers" in pool.backend and "dask scheduler" in dask.backend
     assert stable(pool.table()) == stable(dask.table())
@@ -115,12 +157,22 @@ def test_dask_is_optional(monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(FlexctrlError, match=r"pip install 'flexctrl\[dask\]'"):
         DaskBackend("tcp://127.0.0.1:1")
-    assert cli.main(["study", "nowhere.toml", "--scheduler", "tcp://x:1"]) == 2  # the file is checked first
+    assert (
+        cli.main(["study", "nowhere.toml", "--scheduler", "tcp://x:1"]) == 2
+    )  # the file is checked first
 
 
 def test_a_run_that_kills_its_worker_is_failed_alone_and_the_others_complete(study, tmp_path):
-    spec = load_study(study, overrides=['set.scene.crash_payload=1.0', "grid.payload=[0.0, 1.0, 2.0, 3.0]",
-                                        "grid.q3=[0]", "grid.q2=[0]", 'grid.controller=["controllers/soft.toml"]'])
+    spec = load_study(
+        study,
+        overrides=[
+            "set.scene.crash_payload=1.0",
+            "grid.payload=[0.0, 1.0, 2.0, 3.0]",
+            "grid.q3=[0]",
+            "grid.q2=[0]",
+            'grid.controller=["controllers/soft.toml"]',
+        ],
+    )
     result = run_study(spec, tmp_path / "out", workers=2, progress="none", report=False)
     rows = {row["payload"]: row for row in result.table().rows}
     assert [rows[p]["status"] for p in (0.0, 1.0, 2.0, 3.0)] == ["ok", "failed", "ok", "ok"]

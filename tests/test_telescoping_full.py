@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from full_coupling_checks import check_constraint_derivatives
+from support import DATA
 
 from flexctrl.dynamics.fem.full_coupling import RPForces
 from flexctrl.dynamics.fem.moving_frame import RPMotion
@@ -14,9 +15,7 @@ from flexctrl.dynamics.fem.telescoping import simulate_telescoping
 from flexctrl.dynamics.fem.telescoping_full import TelescopingFullModel, simulate_telescoping_full
 from flexctrl.errors import SimulationError
 from flexctrl.spec.fem_models import load_telescoping
-from full_coupling_checks import check_constraint_derivatives
 
-from support import DATA, ROOT
 SPEC = load_telescoping(DATA / "models" / "telescoping.toml")
 MOTION = RPMotion(C1=0.1, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 
@@ -24,7 +23,10 @@ MOTION = RPMotion(C1=0.1, C2=-0.4, T=0.6, theta0=0.0, dtheta=math.radians(60.0))
 @pytest.fixture(scope="module")
 def runs():
     part = simulate_telescoping(SPEC, MOTION, 4, 4, dt=1e-3, duration=0.8)
-    full = {dt: simulate_telescoping_full(SPEC, MOTION, 4, 4, dt=dt, duration=0.8) for dt in (1e-3, 5e-4)}
+    full = {
+        dt: simulate_telescoping_full(SPEC, MOTION, 4, 4, dt=dt, duration=0.8)
+        for dt in (1e-3, 5e-4)
+    }
     return part, full
 
 
@@ -43,9 +45,13 @@ def test_fed_the_same_motion_it_reproduces_the_motion_driven_model(runs):
     assert max(np.abs(f.theta - MOTION.theta(f.t)).max(), np.abs(f.W - MOTION.W(f.t)).max()) < 1e-5
     part_half = simulate_telescoping(SPEC, MOTION, 4, 4, dt=5e-4, duration=0.8)
     assert gap / np.abs(full[5e-4].tip_y - part_half.tip_y).max() > 2.5
-    assert np.abs(f.torque).max() > 1.0 and np.abs(f.force).max() > 1.0  # the motion needs real inputs
+    assert (
+        np.abs(f.torque).max() > 1.0 and np.abs(f.force).max() > 1.0
+    )  # the motion needs real inputs
     # without the shortening in T the nodal rows lose K_g: the check can fail
-    plain = simulate_telescoping_full(SPEC, MOTION, 4, 4, dt=1e-3, duration=0.8, axial_shortening=False)
+    plain = simulate_telescoping_full(
+        SPEC, MOTION, 4, 4, dt=1e-3, duration=0.8, axial_shortening=False
+    )
     assert np.abs(plain.tip_y - part.tip_y).max() > 100 * gap
 
 

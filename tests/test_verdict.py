@@ -4,21 +4,25 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support import DATA
 
 import flexctrl as fc
 from flexctrl.linear import Linearizer, discretize
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.verdict import closed_loop_matrix, linear_closed_loop_radius
 
-from support import DATA, ROOT
-
 MODEL = DATA / "models" / "subedi3link.toml"
 TARGET = np.radians([30.0, 0.0, 0.0])
 
 
 def _model(payload: float):
-    return fc.load_model(MODEL, payload=payload, fidelity="amm:2", gravity=[0.0, 0.0],
-                         overrides={f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)})
+    return fc.load_model(
+        MODEL,
+        payload=payload,
+        fidelity="amm:2",
+        gravity=[0.0, 0.0],
+        overrides={f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +35,11 @@ def test_full_state_radius_is_the_spectral_radius_of_ad_minus_bd_k(nominal):
     import control
 
     model, op = nominal
-    lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml",
-                                                  ["sensors.outputs=['state']"]))
+    lqr = fc.design(
+        model,
+        op,
+        fc.load_controller(DATA / "controllers" / "lqr.toml", ["sensors.outputs=['state']"]),
+    )
     A, B, _C, _D = Linearizer(model, ("joints",)).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), lqr.sample_time)
     direct = np.max(np.abs(np.linalg.eigvals(np.asarray(sysd.A) - np.asarray(sysd.B) @ lqr.K)))
@@ -65,9 +72,13 @@ def test_pd_radius_predicts_the_decay_rate_of_the_nonlinear_run():
     res = fc.closed_loop(model, pd, fc.Move(start=TARGET, target=target, time=0.3), duration=8.0)
     assert res.metrics["closed_loop_radius"] == radius
     t, error = res.trajectory.time, np.abs(res.trajectory.states[:, 0] - target[0])
-    blocks = [(t[i], error[i:i + 200].max()) for i in np.flatnonzero((t >= 4.0) & (t < 7.8))[::200]]
+    blocks = [
+        (t[i], error[i : i + 200].max()) for i in np.flatnonzero((t >= 4.0) & (t < 7.8))[::200]
+    ]
     times, envelope = np.array(blocks).T
-    measured = np.polyfit(times, np.log(envelope), 1)[0]  # 1/s, measured -1.546 against -1.549 predicted
+    measured = np.polyfit(times, np.log(envelope), 1)[
+        0
+    ]  # 1/s, measured -1.546 against -1.549 predicted
     assert measured == pytest.approx(np.log(radius) / pd.sample_time, rel=0.03)
 
 
@@ -89,4 +100,5 @@ def test_nmpc_has_no_linear_verdict(nominal):
 
     class Nonlinear:  # a controller without a linear law
         sensors = None
+
     assert linear_closed_loop_radius(model, Nonlinear(), TARGET) is None

@@ -14,7 +14,7 @@ import argparse
 import importlib
 import sys
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 from flexctrl.errors import FlexctrlError, SpecError, SpecWarning
 
@@ -55,7 +55,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     previous = warnings.formatwarning  # (catch_warnings does not restore it)
-    warnings.formatwarning = _one_line_warning(args.command)  # recording, e.g. by pytest.warns, still works
+    warnings.formatwarning = _one_line_warning(
+        args.command
+    )  # recording, e.g. by pytest.warns, still works
     try:
         return _run(args)
     finally:

@@ -51,7 +51,9 @@ class SpecWarning(UserWarning):
     """
 
 
-def warn_spec(message: str, *, source: str | None = None, key: str | None = None, stacklevel: int = 3) -> None:
+def warn_spec(
+    message: str, *, source: str | None = None, key: str | None = None, stacklevel: int = 3
+) -> None:
     """Issue a :class:`SpecWarning` located like a :class:`SpecError` (file, then key)."""
     import warnings
 

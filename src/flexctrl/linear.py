@@ -32,8 +32,9 @@ Examples
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Sequence
+from typing import Literal
 
 import casadi as ca
 import control
@@ -43,9 +44,8 @@ from flexctrl.dynamics.amm import locked_spectrum
 from flexctrl.dynamics.jacobians import jacobian_function
 from flexctrl.dynamics.model import derived
 from flexctrl.errors import SolverError, SpecError
+from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
 from flexctrl.spec.units import warn_if_degrees
-
-from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
 
 
 # --------------------------------------------------------------------------------------
@@ -155,7 +155,10 @@ def operating_point(model, x, u) -> OperatingPoint:
     x = np.asarray(x, dtype=float).ravel()
     u = np.asarray(u, dtype=float).ravel()
     if x.size != model.n_x:
-        raise SpecError(f"state has {x.size} entries; expected {model.n_x} (q then qd: {', '.join(state_names(model))})", key="x")
+        raise SpecError(
+            f"state has {x.size} entries; expected {model.n_x} (q then qd: {', '.join(state_names(model))})",
+            key="x",
+        )
     if u.size != model.n_u:
         raise SpecError(f"input has {u.size} entries; expected {model.n_u} joint torques", key="u")
     return OperatingPoint(x, u, "given", float(np.max(np.abs(_xdot(model, x, u)), initial=0.0)), 0)
@@ -171,7 +174,9 @@ def _static_functions(model) -> ca.Function:
     K = stiffness_matrix(model, q)
     static = g + ca.mtimes(K, q)  # = B tau at rest
     r_f = static[n:]
-    return ca.Function("static", [qr, qf], [r_f, ca.jacobian(r_f, qf), static[:n]], ["qr", "qf"], ["r", "J", "tau"])
+    return ca.Function(
+        "static", [qr, qf], [r_f, ca.jacobian(r_f, qf), static[:n]], ["qr", "qf"], ["r", "J", "tau"]
+    )
 
 
 def equilibrium(
@@ -227,8 +232,10 @@ def equilibrium(
             if np.max(np.abs(step)) <= tol * (1.0 + np.max(np.abs(qf))):
                 break
         else:
-            raise SolverError(f"equilibrium at joints {qr.tolist()} rad: Newton on the elastic coordinates did not "
-                              f"converge in {max_iter} iterations (last step {np.max(np.abs(step)):.3g})")
+            raise SolverError(
+                f"equilibrium at joints {qr.tolist()} rad: Newton on the elastic coordinates did not "
+                f"converge in {max_iter} iterations (last step {np.max(np.abs(step)):.3g})"
+            )
     tau = np.array(fun(qr, qf)[2], dtype=float).ravel()
     x = np.concatenate([qr, qf, np.zeros(N)])
     residual = float(np.max(np.abs(_xdot(model, x, tau))))
@@ -256,20 +263,29 @@ def root_curvature_coefficients(model, q_joints: Sequence[float] | None = None) 
         return [np.asarray(c, dtype=float).ravel() for c in info["root_curvature"]]
     spec = getattr(model, "spec", None)
     if spec is None or "n_modes" not in info:
-        raise SpecError(f"model '{model.name}' gives no root curvature of its modes (info['root_curvature']) and "
-                        "no arm description to compute it from; strain sensors need phi''(0) per mode", key="sensors")
+        raise SpecError(
+            f"model '{model.name}' gives no root curvature of its modes (info['root_curvature']) and "
+            "no arm description to compute it from; strain sensors need phi''(0) per mode",
+            key="sensors",
+        )
     from flexctrl.modal.arm_modes import link_modes
 
     if info.get("modes") == "scheduled" and q_joints is not None:
         q_ref = np.asarray(q_joints, dtype=float)
     else:
-        q_ref = np.asarray(info.get("reference_q", spec.configuration_or_default(None)), dtype=float)
+        q_ref = np.asarray(
+            info.get("reference_q", spec.configuration_or_default(None)), dtype=float
+        )
     out = []
     for i, nf in enumerate(info["n_modes"]):
         if nf == 0:
             out.append(np.zeros(0))
         else:
-            out.append(np.asarray(link_modes(spec, q_ref, i, nf).shape(0.0, derivative=2), dtype=float).ravel())
+            out.append(
+                np.asarray(
+                    link_modes(spec, q_ref, i, nf).shape(0.0, derivative=2), dtype=float
+                ).ravel()
+            )
     return out
 
 
@@ -301,8 +317,12 @@ class Sensors:
     function: ca.Function = field(repr=False)
 
     @staticmethod
-    def build(model, kinds: Sequence[str] = ("joints",), noise: dict[str, float] | None = None,
-              q_joints: Sequence[float] | None = None) -> "Sensors":
+    def build(
+        model,
+        kinds: Sequence[str] = ("joints",),
+        noise: dict[str, float] | None = None,
+        q_joints: Sequence[float] | None = None,
+    ) -> Sensors:
         """Sensors of ``kinds`` on ``model`` with noise standard deviations ``noise`` (per kind).
 
         ``q_joints`` (rad) is the configuration used for the strain-gauge modal
@@ -310,10 +330,16 @@ class Sensors:
         """
         kinds = tuple(kinds)
         if not kinds:
-            raise SpecError("no sensors given; allowed: one or more of " + ", ".join(map(repr, SENSOR_KINDS)), key="sensors.outputs")
+            raise SpecError(
+                "no sensors given; allowed: one or more of " + ", ".join(map(repr, SENSOR_KINDS)),
+                key="sensors.outputs",
+            )
         for k in kinds:
             if k not in SENSOR_KINDS:
-                raise SpecError(f"value {k!r} is not a sensor; allowed: {', '.join(map(repr, SENSOR_KINDS))}", key="sensors.outputs")
+                raise SpecError(
+                    f"value {k!r} is not a sensor; allowed: {', '.join(map(repr, SENSOR_KINDS))}",
+                    key="sensors.outputs",
+                )
         if len(set(kinds)) != len(kinds):
             raise SpecError(f"value {list(kinds)!r} repeats a sensor", key="sensors.outputs")
         kinds = tuple(k for k in SENSOR_KINDS if k in kinds)  # canonical order
@@ -343,7 +369,10 @@ class Sensors:
                         rows.append(ca.dot(ca.DM(c), q[int(offsets[i]) : int(offsets[i + 1])]))
                         labels.append(f"kappa{i + 1}")
                 if not rows:
-                    raise SpecError(f"model '{model.name}' has no elastic coordinates to put strain gauges on", key="sensors.outputs")
+                    raise SpecError(
+                        f"model '{model.name}' has no elastic coordinates to put strain gauges on",
+                        key="sensors.outputs",
+                    )
                 add(ca.vertcat(*rows), labels, noise[kind])
             elif kind == "tip":
                 p, _v = model.functions["tip"](q, qd)
@@ -400,12 +429,27 @@ class Linearizer:
     part is built once per model structure (``shared=True``: the same values).
     """
 
-    def __init__(self, model, outputs: Sequence[str] | Sensors = ("joints",), *, q_joints: Sequence[float] | None = None):
+    def __init__(
+        self,
+        model,
+        outputs: Sequence[str] | Sensors = ("joints",),
+        *,
+        q_joints: Sequence[float] | None = None,
+    ):
         self.model = model
-        self.sensors = outputs if isinstance(outputs, Sensors) else Sensors.build(model, outputs, q_joints=q_joints)
+        self.sensors = (
+            outputs
+            if isinstance(outputs, Sensors)
+            else Sensors.build(model, outputs, q_joints=q_joints)
+        )
         # kept per model and sensor Function (building the AD graph costs more than a linearisation)
-        self.function = derived(model, ("jacobians", self.sensors.function.serialize()),
-                                lambda: jacobian_function(model, inputs=True, outputs=self.sensors.function, shared=True))
+        self.function = derived(
+            model,
+            ("jacobians", self.sensors.function.serialize()),
+            lambda: jacobian_function(
+                model, inputs=True, outputs=self.sensors.function, shared=True
+            ),
+        )
 
     def matrices(self, op: OperatingPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(A, B, C, D)`` at ``op``."""
@@ -414,11 +458,25 @@ class Linearizer:
     def __call__(self, op: OperatingPoint, *, name: str | None = None) -> control.StateSpace:
         """The linearisation at ``op`` (see :func:`linearize`)."""
         A, B, C, D = self.matrices(op)
-        return control.ss(A, B, C, D, states=list(state_names(self.model)), inputs=list(input_names(self.model)),
-                          outputs=list(self.sensors.names), name=_system_name(name or f"{self.model.name} linearised"))
+        return control.ss(
+            A,
+            B,
+            C,
+            D,
+            states=list(state_names(self.model)),
+            inputs=list(input_names(self.model)),
+            outputs=list(self.sensors.names),
+            name=_system_name(name or f"{self.model.name} linearised"),
+        )
 
 
-def linearize(model, op: OperatingPoint, outputs: Sequence[str] | Sensors = ("joints",), *, name: str | None = None) -> control.StateSpace:
+def linearize(
+    model,
+    op: OperatingPoint,
+    outputs: Sequence[str] | Sensors = ("joints",),
+    *,
+    name: str | None = None,
+) -> control.StateSpace:
     """The linearisation of ``model`` at ``op`` as a continuous ``control.StateSpace``.
 
     Parameters
@@ -463,7 +521,9 @@ def discretize(sys: control.StateSpace, dt: float, method: str = "zoh") -> contr
         The discrete system, ``sys.dt == dt``.
     """
     if not (dt > 0 and math.isfinite(dt)):
-        raise SpecError(f"value {dt!r} is not allowed; allowed: a sample time > 0 s", key="sample_time")
+        raise SpecError(
+            f"value {dt!r} is not allowed; allowed: a sample time > 0 s", key="sample_time"
+        )
     return control.sample_system(sys, dt, method=method, name=_system_name(f"{sys.name} sampled"))
 
 
@@ -498,8 +558,15 @@ class ModalSummary:
 
     def rows(self) -> list[dict[str, float]]:
         """One dict per entry: ``frequency_hz``, ``damping``, ``real``, ``imag``."""
-        return [{"frequency_hz": float(f), "damping": float(z), "real": float(s.real), "imag": float(s.imag)}
-                for s, f, z in zip(self.eigenvalues, self.frequency_hz, self.damping)]
+        return [
+            {
+                "frequency_hz": float(f),
+                "damping": float(z),
+                "real": float(s.real),
+                "imag": float(s.imag),
+            }
+            for s, f, z in zip(self.eigenvalues, self.frequency_hz, self.damping)
+        ]
 
 
 def holding_torque_excess(model, op: OperatingPoint) -> str:
@@ -517,14 +584,20 @@ def holding_torque_excess(model, op: OperatingPoint) -> str:
     str
         One line naming the joint angles (deg), the torques and the limits (N m), or ``""``.
     """
-    limits = np.array([getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float)
+    limits = np.array(
+        [getattr(j, "torque_limit", np.inf) for j in getattr(model.spec, "joints", ())], dtype=float
+    )
     u = np.asarray(op.u, dtype=float).ravel()
     if limits.size != u.size or not np.any(np.abs(u) > limits):
         return ""
-    over = ", ".join(f"joint {i + 1}: |{u[i]:.4g}| > {limits[i]:.4g}" for i in np.flatnonzero(np.abs(u) > limits))
+    over = ", ".join(
+        f"joint {i + 1}: |{u[i]:.4g}| > {limits[i]:.4g}" for i in np.flatnonzero(np.abs(u) > limits)
+    )
     q = [round(math.degrees(a), 3) for a in np.asarray(op.x, dtype=float)[: u.size]]
-    return (f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} N m beyond the "
-            f"torque limits {limits.tolist()} N m ({over}): no controller can hold the arm there")
+    return (
+        f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} N m beyond the "
+        f"torque limits {limits.tolist()} N m ({over}): no controller can hold the arm there"
+    )
 
 
 def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
@@ -558,7 +631,9 @@ def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
     return ModalSummary(s[order], mag[order] / (2 * math.pi), zeta[order])
 
 
-def locked_frequencies(model, op: OperatingPoint | None = None, *, include_gravity: bool = False) -> np.ndarray:
+def locked_frequencies(
+    model, op: OperatingPoint | None = None, *, include_gravity: bool = False
+) -> np.ndarray:
     """Undamped natural frequencies (Hz, ascending) of the structure with the joints clamped.
 
     Generalised eigenvalues of ``K_ff`` against ``M_ff`` at the configuration of
@@ -587,13 +662,29 @@ def locked_frequencies(model, op: OperatingPoint | None = None, *, include_gravi
     K = stiffness_matrix(model, q0)
     if include_gravity:
         qs = ca.SX.sym("q", N)
-        G = np.array(ca.Function("dg", [qs], [ca.jacobian(model.functions["g"](qs), qs)])(q0), dtype=float)
+        G = np.array(
+            ca.Function("dg", [qs], [ca.jacobian(model.functions["g"](qs), qs)])(q0), dtype=float
+        )
         K = K + 0.5 * (G + G.T)
     return locked_spectrum(0.5 * (M + M.T), 0.5 * (K + K.T), n) / (2 * math.pi)
 
 
 __all__ = [
-    "OperatingPoint", "Sensors", "Linearizer", "ModalSummary", "SENSOR_KINDS", "DEFAULT_NOISE", "equilibrium", "operating_point",
-    "linearize", "discretize", "modal_summary", "locked_frequencies", "state_names", "input_names",
-    "stiffness_matrix", "torque_limits", "root_curvature_coefficients",
+    "OperatingPoint",
+    "Sensors",
+    "Linearizer",
+    "ModalSummary",
+    "SENSOR_KINDS",
+    "DEFAULT_NOISE",
+    "equilibrium",
+    "operating_point",
+    "linearize",
+    "discretize",
+    "modal_summary",
+    "locked_frequencies",
+    "state_names",
+    "input_names",
+    "stiffness_matrix",
+    "torque_limits",
+    "root_curvature_coefficients",
 ]

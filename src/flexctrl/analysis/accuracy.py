@@ -58,9 +58,10 @@ import math
 import os
 import re
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +80,9 @@ DIVERGED = 1e6
 #: Bumped when the numerics of a reference change (part of the cache key).
 REFERENCE_VERSION = 1
 
-_METHOD = re.compile(r"^(?P<fid>[a-z]+(?::\d+)?)(?P<sched>\+sched)?/(?P<integ>[a-z0-9]+)(?::(?P<variant>[A-Za-z0-9]+))?(?:@(?P<value>[^@]+))?$")
+_METHOD = re.compile(
+    r"^(?P<fid>[a-z]+(?::\d+)?)(?P<sched>\+sched)?/(?P<integ>[a-z0-9]+)(?::(?P<variant>[A-Za-z0-9]+))?(?:@(?P<value>[^@]+))?$"
+)
 _STEP = re.compile(r"^(?P<num>[0-9.]+(?:e-?\d+)?)(?P<unit>s|ms|us)?$")
 
 
@@ -119,7 +122,11 @@ class Method:
         head = self.fidelity + ("+sched" if self.modes == "scheduled" else "")
         integ = self.integrator + (f":{self.variant}" if self.variant else "")
         if self.integrator in ("rk4", "newmark"):
-            value = ("stable" + (f"/{self.divide}" if self.divide > 1 else "")) if self.step is None else _step_text(self.step)
+            value = (
+                ("stable" + (f"/{self.divide}" if self.divide > 1 else ""))
+                if self.step is None
+                else _step_text(self.step)
+            )
         else:
             value = f"{self.rtol:g}"
         return f"{head}/{integ}@{value}"
@@ -139,7 +146,7 @@ class Method:
         """Absolute tolerance (m, rad, m/s, rad/s): ``1e-2 rtol``."""
         return None if self.rtol is None else 1e-2 * self.rtol
 
-    def refined(self) -> "Method":
+    def refined(self) -> Method:
         """The same model with a finer time discretisation: half the step, or rtol / 10."""
         if self.step is not None:
             return dataclasses.replace(self, step=self.step / 2)
@@ -158,11 +165,18 @@ def parse_step(text: str, *, source: str | None = None, key: str | None = None) 
     """A step written ``1ms``, ``250us``, ``0.001s`` or ``1e-3`` (s)."""
     match = _STEP.match(text.strip())
     if not match:
-        raise SpecError(f"step {text!r} is not allowed; allowed: a positive number with unit s, ms or us (e.g. 1ms, 250us, 1e-3)",
-                        source=source, key=key)
+        raise SpecError(
+            f"step {text!r} is not allowed; allowed: a positive number with unit s, ms or us (e.g. 1ms, 250us, 1e-3)",
+            source=source,
+            key=key,
+        )
     value = float(match["num"]) * {"s": 1.0, None: 1.0, "ms": 1e-3, "us": 1e-6}[match["unit"]]
     if not (0 < value <= 0.1):
-        raise SpecError(f"step {text!r} = {value:g} s is not allowed; allowed: 0 < step <= 0.1 s", source=source, key=key)
+        raise SpecError(
+            f"step {text!r} = {value:g} s is not allowed; allowed: 0 < step <= 0.1 s",
+            source=source,
+            key=key,
+        )
     return value
 
 
@@ -176,8 +190,11 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
     """
     from flexctrl.spec.fidelity import parse_fidelity
 
-    allowed = ("allowed: FIDELITY[+sched]/INTEGRATOR[:VARIANT][@VALUE], e.g. 'amm:2/rk4@1ms', 'fem:4/rk4@stable', "
-               "'fem:4/newmark@1ms', 'amm:2/cvodes@1e-6', 'amm:2/scipy:DOP853@1e-6'; integrators: " + ", ".join(INTEGRATORS))
+    allowed = (
+        "allowed: FIDELITY[+sched]/INTEGRATOR[:VARIANT][@VALUE], e.g. 'amm:2/rk4@1ms', 'fem:4/rk4@stable', "
+        "'fem:4/newmark@1ms', 'amm:2/cvodes@1e-6', 'amm:2/scipy:DOP853@1e-6'; integrators: "
+        + ", ".join(INTEGRATORS)
+    )
     if not isinstance(text, str):
         raise SpecError(f"method {text!r} is not a string; {allowed}", source=source, key=key)
     match = _METHOD.match(text.strip())
@@ -185,32 +202,56 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
         raise SpecError(f"method {text!r} is not spelt right; {allowed}", source=source, key=key)
     fid = parse_fidelity(match["fid"], source=source, key=key)
     if fid.kind not in ("rigid", "amm", "fem"):
-        raise SpecError(f"method {text!r}: fidelity '{fid}' is not allowed; allowed: rigid, amm:N, fem:N", source=source, key=key)
+        raise SpecError(
+            f"method {text!r}: fidelity '{fid}' is not allowed; allowed: rigid, amm:N, fem:N",
+            source=source,
+            key=key,
+        )
     modes = "scheduled" if match["sched"] else "frozen"
     if modes == "scheduled" and fid.kind != "amm":
-        raise SpecError(f"method {text!r}: '+sched' applies to assumed modes only; allowed: amm:N+sched", source=source, key=key)
+        raise SpecError(
+            f"method {text!r}: '+sched' applies to assumed modes only; allowed: amm:N+sched",
+            source=source,
+            key=key,
+        )
     integ, variant, value = match["integ"], match["variant"], match["value"]
     if integ not in INTEGRATORS:
         import difflib
 
         hint = difflib.get_close_matches(integ, INTEGRATORS, n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise SpecError(f"method {text!r}: integrator '{integ}' is not known{extra}; allowed: {', '.join(INTEGRATORS)}", source=source, key=key)
+        raise SpecError(
+            f"method {text!r}: integrator '{integ}' is not known{extra}; allowed: {', '.join(INTEGRATORS)}",
+            source=source,
+            key=key,
+        )
     if variant is not None and integ != "scipy":
-        raise SpecError(f"method {text!r}: ':{variant}' applies to scipy only", source=source, key=key)
+        raise SpecError(
+            f"method {text!r}: ':{variant}' applies to scipy only", source=source, key=key
+        )
     if integ == "scipy":
         variant = variant or "RK45"
         if variant not in SCIPY_METHODS:
-            raise SpecError(f"method {text!r}: scipy method '{variant}' is not allowed; allowed: {', '.join(SCIPY_METHODS)}", source=source, key=key)
+            raise SpecError(
+                f"method {text!r}: scipy method '{variant}' is not allowed; allowed: {', '.join(SCIPY_METHODS)}",
+                source=source,
+                key=key,
+            )
     if integ in ("rk4", "newmark"):
         stable = re.match(r"^stable(?:/(\d+))?$", value or "stable")
         if stable and integ == "rk4":
             divide = int(stable[1] or 1)
             if not 1 <= divide <= 64:
-                raise SpecError(f"method {text!r}: divisor {divide} is not allowed; allowed: 1 to 64", source=source, key=key)
+                raise SpecError(
+                    f"method {text!r}: divisor {divide} is not allowed; allowed: 1 to 64",
+                    source=source,
+                    key=key,
+                )
             return Method(str(fid), modes, integ, None, None, None, divide)
         if value is None:
-            raise SpecError(f"method {text!r}: newmark needs a step, e.g. newmark@1ms", source=source, key=key)
+            raise SpecError(
+                f"method {text!r}: newmark needs a step, e.g. newmark@1ms", source=source, key=key
+            )
         return Method(str(fid), modes, integ, parse_step(value, source=source, key=key), None, None)
     rtol = 1e-6 if value is None else _rtol(value, text, source, key)
     return Method(str(fid), modes, integ, None, rtol, variant)
@@ -222,8 +263,11 @@ def _rtol(value: str, text: str, source: str | None, key: str | None) -> float:
     except ValueError:
         rtol = math.nan
     if not (1e-12 <= rtol <= 1e-2):
-        raise SpecError(f"method {text!r}: tolerance {value!r} is not allowed; allowed: a relative tolerance in [1e-12, 1e-2]",
-                        source=source, key=key)
+        raise SpecError(
+            f"method {text!r}: tolerance {value!r} is not allowed; allowed: a relative tolerance in [1e-12, 1e-2]",
+            source=source,
+            key=key,
+        )
     return rtol
 
 
@@ -272,7 +316,15 @@ def stable_substeps(model, dt: float, safety: float = RK4_SAFETY) -> int:
 class RK4Stepper(Stepper):
     """RK4 with ``substeps`` steps per output sample, ``chunk`` samples per compiled call."""
 
-    def __init__(self, model, method: Method, dt: float = OUTPUT_DT, *, chunk: int = 10, compile: bool | None = None):
+    def __init__(
+        self,
+        model,
+        method: Method,
+        dt: float = OUTPUT_DT,
+        *,
+        chunk: int = 10,
+        compile: bool | None = None,
+    ):
         super().__init__(model, method, dt)
         from flexctrl.sim.compile import compile_function
         from flexctrl.sim.rk4 import held_sample_loop
@@ -283,8 +335,11 @@ class RK4Stepper(Stepper):
         else:
             substeps = max(1, int(round(dt / method.step)))
             if abs(substeps * method.step - dt) > 1e-9 * dt:
-                raise SpecError(f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s; "
-                                "allowed: dt / step a whole number", key="method")
+                raise SpecError(
+                    f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s; "
+                    "allowed: dt / step a whole number",
+                    key="method",
+                )
         self.substeps, self.chunk = substeps, chunk
         h = dt / substeps
         name = re.sub(r"[^A-Za-z0-9]+", "_", f"acc_{model.name}_{substeps}x{chunk}").strip("_")
@@ -301,11 +356,13 @@ class RK4Stepper(Stepper):
         for s in range(0, n, self.chunk):
             k = min(self.chunk, n - s)
             block = np.asarray(self._fun(x, U), dtype=float).T
-            out[s:s + k] = block[:k]
+            out[s : s + k] = block[:k]
             x = block[k - 1]
             if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > DIVERGED:
-                raise SimulationError(f"RK4 ({self.method.label}, h = {self.step_s:.3g} s) diverged by t = {t0 + (s + k) * self.dt:.4g} s: "
-                                      f"omega_max h = {float(self.model.omega_max) * self.step_s:.3g}; RK4 is stable for omega h < 2.83")
+                raise SimulationError(
+                    f"RK4 ({self.method.label}, h = {self.step_s:.3g} s) diverged by t = {t0 + (s + k) * self.dt:.4g} s: "
+                    f"omega_max h = {float(self.model.omega_max) * self.step_s:.3g}; RK4 is stable for omega h < 2.83"
+                )
         self.counters["steps"] = self.counters.get("steps", 0) + n * self.substeps
         return out
 
@@ -334,7 +391,9 @@ class SundialsStepper(Stepper):
         X, _ = self._integrator._advance(np.asarray(x, dtype=float).copy(), times, U)
         X = np.asarray(X, dtype=float).reshape(n, -1)
         if not np.all(np.isfinite(X)) or np.max(np.abs(X)) > DIVERGED:
-            raise SimulationError(f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {times[-1]:.4g} s")
+            raise SimulationError(
+                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {times[-1]:.4g} s"
+            )
         self.counters = dict(self._integrator.counters)
         return X
 
@@ -355,7 +414,10 @@ class NewmarkStepper(Stepper):
         self._problem = model_dae_problem(model, lambda t: self._u, tangent="potential")
         self.ratio = max(1, int(round(dt / method.step)))
         if abs(self.ratio * method.step - dt) > 1e-9 * dt:
-            raise SpecError(f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s", key="method")
+            raise SpecError(
+                f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s",
+                key="method",
+            )
         self.step_s = dt / self.ratio
         self.setup_s = time.perf_counter() - start
 
@@ -364,17 +426,32 @@ class NewmarkStepper(Stepper):
 
         self._u[:] = u
         n_q = self.model.n_q
-        res = simulate(self._problem, x[:n_q], x[n_q:], t0 + n * self.dt, self.step_s, t0=t0, max_violation=np.inf,
-                       newton_tol=1e-10, max_iterations=30)
+        res = simulate(
+            self._problem,
+            x[:n_q],
+            x[n_q:],
+            t0 + n * self.dt,
+            self.step_s,
+            t0=t0,
+            max_violation=np.inf,
+            newton_tol=1e-10,
+            max_iterations=30,
+        )
         rows = slice(self.ratio, None, self.ratio)
         X = np.hstack([res.q[rows], res.qd[rows]])
         if X.shape[0] != n or not np.all(np.isfinite(X)) or np.max(np.abs(X)) > DIVERGED:
-            raise SimulationError(f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {t0 + n * self.dt:.4g} s")
-        self.counters["newton_iterations"] = self.counters.get("newton_iterations", 0) + int(res.newton_iterations.sum())
+            raise SimulationError(
+                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {t0 + n * self.dt:.4g} s"
+            )
+        self.counters["newton_iterations"] = self.counters.get("newton_iterations", 0) + int(
+            res.newton_iterations.sum()
+        )
         return X
 
 
-def make_stepper(model, method: Method, dt: float = OUTPUT_DT, *, compile: bool | None = None) -> Stepper:
+def make_stepper(
+    model, method: Method, dt: float = OUTPUT_DT, *, compile: bool | None = None
+) -> Stepper:
     """The :class:`Stepper` for ``method`` on ``model``."""
     if method.integrator == "rk4":
         return RK4Stepper(model, method, dt, compile=compile)
@@ -412,7 +489,7 @@ class MethodRun:
 def tip_path(model, states: np.ndarray) -> np.ndarray:
     """Tip positions (m), shape (T, 2), of ``states`` (T, n_x)."""
     n = states.shape[0]
-    q, qd = states[:, :model.n_q].T, states[:, model.n_q:].T
+    q, qd = states[:, : model.n_q].T, states[:, model.n_q :].T
     return np.asarray(model.functions["tip"].map(n)(q, qd)[0], dtype=float).T[:, :2]
 
 
@@ -430,13 +507,15 @@ def run_open_loop(stepper: Stepper, x0: np.ndarray, torque: np.ndarray) -> Metho
         start = time.perf_counter()
         block = stepper.advance(x, torque[a], a * stepper.dt, b - a)
         wall += time.perf_counter() - start
-        X[a + 1:b + 1] = block
+        X[a + 1 : b + 1] = block
         x = block[-1]
     t = np.arange(n + 1) * stepper.dt
     return MethodRun(t, X, tip_path(stepper.model, X), wall, dict(stepper.counters))
 
 
-def run_closed_loop(stepper: Stepper, x0: np.ndarray, controller, sensors, duration: float) -> MethodRun:
+def run_closed_loop(
+    stepper: Stepper, x0: np.ndarray, controller, sensors, duration: float
+) -> MethodRun:
     """Sampled-data loop: ``u = controller.step(t, sensors(x))``, then the stepper holds ``u`` for one controller sample.
 
     The controller is reset first; measurement noise is off (deterministic runs).
@@ -446,7 +525,10 @@ def run_closed_loop(stepper: Stepper, x0: np.ndarray, controller, sensors, durat
     Ts = float(controller.sample_time)
     per = int(round(Ts / stepper.dt))
     if per < 1 or abs(per * stepper.dt - Ts) > 1e-9 * Ts:
-        raise SpecError(f"controller sample time {Ts:g} s is not a whole number of output samples of {stepper.dt:g} s", key="sample_time")
+        raise SpecError(
+            f"controller sample time {Ts:g} s is not a whole number of output samples of {stepper.dt:g} s",
+            key="sample_time",
+        )
     n_samples = int(math.ceil(duration / Ts - 1e-9))
     X = np.empty((n_samples * per + 1, x0.size))
     X[0] = x = np.asarray(x0, dtype=float)
@@ -458,7 +540,7 @@ def run_closed_loop(stepper: Stepper, x0: np.ndarray, controller, sensors, durat
         start = time.perf_counter()
         block = stepper.advance(x, u, t, per)
         wall += time.perf_counter() - start
-        X[k * per + 1:(k + 1) * per + 1] = block
+        X[k * per + 1 : (k + 1) * per + 1] = block
         x = block[-1]
     t = np.arange(X.shape[0]) * stepper.dt
     return MethodRun(t, X, tip_path(stepper.model, X), wall, dict(stepper.counters))
@@ -509,7 +591,12 @@ def cache_root() -> Path:
 
 def reference_key(description: dict[str, Any]) -> str:
     """24 hex digits of sha256 of the canonical JSON of ``description`` plus :data:`REFERENCE_VERSION`."""
-    text = json.dumps({**description, "version": REFERENCE_VERSION}, sort_keys=True, separators=(",", ":"), default=str)
+    text = json.dumps(
+        {**description, "version": REFERENCE_VERSION},
+        sort_keys=True,
+        separators=(",", ":"),
+        default=str,
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -546,14 +633,22 @@ class Reference:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: Path) -> "Reference":
+    def load(cls, path: Path) -> Reference:
         """Read what :meth:`save` wrote."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
-            return cls(np.asarray(data["time"]), np.asarray(data["tip"]), meta["method"], meta["checks"], float(meta["wall_s"]))
+            return cls(
+                np.asarray(data["time"]),
+                np.asarray(data["tip"]),
+                meta["method"],
+                meta["checks"],
+                float(meta["wall_s"]),
+            )
 
 
-def compute_reference(simulate: Callable[[Method], MethodRun], method: Method, meshes: Sequence[str] = ()) -> Reference:
+def compute_reference(
+    simulate: Callable[[Method], MethodRun], method: Method, meshes: Sequence[str] = ()
+) -> Reference:
     """Run the reference ``method`` and its convergence checks through ``simulate(method) -> MethodRun``.
 
     Checks: the same model with the step halved (``"step/2"``), and each fidelity in
@@ -564,7 +659,9 @@ def compute_reference(simulate: Callable[[Method], MethodRun], method: Method, m
 
     ref = simulate(method)
     checks: dict[str, dict[str, Any]] = {}
-    candidates = [("step/2", method.refined())] + [(m, dataclasses.replace(method, fidelity=m)) for m in meshes]
+    candidates = [("step/2", method.refined())] + [
+        (m, dataclasses.replace(method, fidelity=m)) for m in meshes
+    ]
     for name, other in candidates:
         run = simulate(other)
         err = tip_error(ref.time, ref.tip, run.time, run.tip)
@@ -572,7 +669,9 @@ def compute_reference(simulate: Callable[[Method], MethodRun], method: Method, m
     return Reference(ref.time, ref.tip, method.label, checks, ref.wall_s)
 
 
-def cached_reference(key_data: dict[str, Any], build: Callable[[], Reference], directory: Path | None = None) -> tuple[Reference, Path, bool]:
+def cached_reference(
+    key_data: dict[str, Any], build: Callable[[], Reference], directory: Path | None = None
+) -> tuple[Reference, Path, bool]:
     """The reference for ``key_data`` from the disk cache, or ``build()`` it and store it.
 
     Returns
@@ -588,5 +687,9 @@ def cached_reference(key_data: dict[str, Any], build: Callable[[], Reference], d
             pass  # unreadable (e.g. a half-written file from a killed run): recompute
     ref = build()
     ref.save(path)
-    (path.with_suffix(".json")).write_text(json.dumps({"key": key_data, "method": ref.method, "checks": ref.checks}, indent=1, default=str))
+    (path.with_suffix(".json")).write_text(
+        json.dumps(
+            {"key": key_data, "method": ref.method, "checks": ref.checks}, indent=1, default=str
+        )
+    )
     return ref, path, False

@@ -50,9 +50,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from flexctrl.dynamics.fem.newmark_dae import DAEResult, simulate
 from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, SlidingBeamModel
 from flexctrl.errors import SimulationError, SolverError
-from flexctrl.dynamics.fem.newmark_dae import DAEResult, simulate
 
 Array = NDArray[np.float64]
 Feedback = Literal["explicit", "implicit"]
@@ -65,7 +65,9 @@ EXPLICIT_LIMIT: float = 3.0 - math.sqrt(5.0)
 
 def _check_feedback(feedback: str) -> None:
     if feedback not in FEEDBACKS:
-        raise ValueError(f"feedback {feedback!r} is not allowed; allowed: {', '.join(map(repr, FEEDBACKS))}")
+        raise ValueError(
+            f"feedback {feedback!r} is not allowed; allowed: {', '.join(map(repr, FEEDBACKS))}"
+        )
 
 
 # -- discrete error dynamics ------------------------------------------------------------
@@ -83,11 +85,16 @@ def newmark_error_matrices(alpha: float = 0.25, delta: float = 0.5) -> tuple[Arr
 
 def _law(gamma_dt: float, beta_dt: float) -> Array:
     """Row ``l`` with ``h^2 e'' = l . x`` (Eq 49: ``e'' = -2 gamma e' - beta^2 e``)."""
-    return np.array([-float(beta_dt) ** 2, -2.0 * float(gamma_dt), 0.0])
+    return np.array([-(float(beta_dt) ** 2), -2.0 * float(gamma_dt), 0.0])
 
 
-def defect_gain(gamma_dt: float, beta_dt: float, feedback: Feedback = "explicit",
-                alpha: float = 0.25, delta: float = 0.5) -> Array:
+def defect_gain(
+    gamma_dt: float,
+    beta_dt: float,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+) -> Array:
     """``M`` in ``x_{i+1} = G x_i + M d_i``: identity for explicit feedback, ``(I - c l)^-1`` for implicit.
 
     With implicit feedback the new step's acceleration reacts to the defect of the same
@@ -100,8 +107,13 @@ def defect_gain(gamma_dt: float, beta_dt: float, feedback: Feedback = "explicit"
     return np.linalg.inv(np.eye(3) - np.outer(into, _law(gamma_dt, beta_dt)))
 
 
-def error_amplification(gamma_dt: float, beta_dt: float, feedback: Feedback = "explicit",
-                        alpha: float = 0.25, delta: float = 0.5) -> Array:
+def error_amplification(
+    gamma_dt: float,
+    beta_dt: float,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+) -> Array:
     """Amplification matrix ``G`` of the constraint error ``x = (e, h e', h^2 e'')`` over one step.
 
     Parameters
@@ -127,20 +139,37 @@ def error_amplification(gamma_dt: float, beta_dt: float, feedback: Feedback = "e
     return defect_gain(gamma_dt, beta_dt, feedback, alpha, delta) @ newmark
 
 
-def spectral_radius(gamma_dt: float, beta_dt: float, feedback: Feedback = "explicit",
-                    alpha: float = 0.25, delta: float = 0.5) -> float:
+def spectral_radius(
+    gamma_dt: float,
+    beta_dt: float,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+) -> float:
     """Largest ``|z|`` of :func:`error_amplification`: the per-step factor of a free violation."""
-    return float(np.max(np.abs(np.linalg.eigvals(error_amplification(gamma_dt, beta_dt, feedback, alpha, delta)))))
+    return float(
+        np.max(
+            np.abs(
+                np.linalg.eigvals(error_amplification(gamma_dt, beta_dt, feedback, alpha, delta))
+            )
+        )
+    )
 
 
-def stability_limit(beta_over_gamma: float = 1.0, feedback: Feedback = "explicit", alpha: float = 0.25,
-                    delta: float = 0.5, gamma_dt_max: float = 1e4) -> float:
+def stability_limit(
+    beta_over_gamma: float = 1.0,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    gamma_dt_max: float = 1e4,
+) -> float:
     """Smallest ``gamma h`` above which the error dynamics are unstable (``inf`` if none up to ``gamma_dt_max``).
 
     Scans ``gamma h`` on a logarithmic grid for the first unstable point and bisects
     (to 1e-12 relative) between it and the last stable one.  For ``gamma = beta``,
     explicit feedback and trapezoidal Newmark the result is :data:`EXPLICIT_LIMIT`.
     """
+
     def unstable(g: float) -> bool:
         return spectral_radius(g, beta_over_gamma * g, feedback, alpha, delta) > 1.0 + 1e-12
 
@@ -158,8 +187,12 @@ def stability_limit(beta_over_gamma: float = 1.0, feedback: Feedback = "explicit
     return 0.5 * (lo + hi)
 
 
-def fastest_decay(beta_over_gamma: float = 1.0, feedback: Feedback = "explicit", alpha: float = 0.25,
-                  delta: float = 0.5) -> tuple[float, float]:
+def fastest_decay(
+    beta_over_gamma: float = 1.0,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+) -> tuple[float, float]:
     """``(gamma h, |z|)`` where a free violation decays fastest per step: beyond it more gamma stops helping.
 
     Golden-section search of :func:`spectral_radius` over ``(0, limit)`` (limit: the
@@ -178,7 +211,9 @@ def fastest_decay(beta_over_gamma: float = 1.0, feedback: Feedback = "explicit",
     return g, rho(g)
 
 
-def steady_drift_response(gamma_dt: float, beta_dt: float, alpha: float = 0.25, delta: float = 0.5) -> Array:
+def steady_drift_response(
+    gamma_dt: float, beta_dt: float, alpha: float = 0.25, delta: float = 0.5
+) -> Array:
     """Fixed point ``(e, h e', h^2 e'')`` per unit position defect per step, for either feedback.
 
     Solves ``(I - N - c l) x = (1, 0, 0)`` (the fixed point is the same for explicit and
@@ -191,14 +226,23 @@ def steady_drift_response(gamma_dt: float, beta_dt: float, alpha: float = 0.25, 
     return np.linalg.solve(system, np.array([1.0, 0.0, 0.0]))
 
 
-def predicted_regime(gamma_dt: float, beta_over_gamma: float = 1.0, feedback: Feedback = "explicit",
-                     alpha: float = 0.25, delta: float = 0.5) -> str:
+def predicted_regime(
+    gamma_dt: float,
+    beta_over_gamma: float = 1.0,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+) -> str:
     """``"none"`` (gamma = 0), ``"helps"`` (below :func:`fastest_decay`), ``"saturated"`` or ``"unstable"``."""
     if gamma_dt <= 0.0:
         return "none"
     if gamma_dt > stability_limit(beta_over_gamma, feedback, alpha, delta):
         return "unstable"
-    return "helps" if gamma_dt <= fastest_decay(beta_over_gamma, feedback, alpha, delta)[0] else "saturated"
+    return (
+        "helps"
+        if gamma_dt <= fastest_decay(beta_over_gamma, feedback, alpha, delta)[0]
+        else "saturated"
+    )
 
 
 # -- measured side ----------------------------------------------------------------------
@@ -229,7 +273,11 @@ def step_defects(states: Array, alpha: float = 0.25, delta: float = 0.5) -> Arra
     which is taken from the states).
     """
     newmark, into = newmark_error_matrices(alpha, delta)
-    return states[1:] - np.einsum("ij,kjl->kil", newmark, states[:-1]) - into[None, :, None] * states[1:, 2:3, :]
+    return (
+        states[1:]
+        - np.einsum("ij,kjl->kil", newmark, states[:-1])
+        - into[None, :, None] * states[1:, 2:3, :]
+    )
 
 
 @dataclass(frozen=True)
@@ -244,9 +292,17 @@ class ErrorPrediction:
     exceeded: bool
 
 
-def propagate_errors(x0: Array, defects: Array, gamma_dt: float, beta_dt: float, dt: float,
-                     feedback: Feedback = "explicit", alpha: float = 0.25, delta: float = 0.5,
-                     bound: float = math.inf) -> ErrorPrediction:
+def propagate_errors(
+    x0: Array,
+    defects: Array,
+    gamma_dt: float,
+    beta_dt: float,
+    dt: float,
+    feedback: Feedback = "explicit",
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    bound: float = math.inf,
+) -> ErrorPrediction:
     """Run ``x_{k+1} = G x_k + M d_k`` from ``x0`` (shape (3, m)) until the defects end or ``|e|`` exceeds ``bound`` (m)."""
     G = error_amplification(gamma_dt, beta_dt, feedback, alpha, delta)
     gain = defect_gain(gamma_dt, beta_dt, feedback, alpha, delta)
@@ -262,8 +318,14 @@ def propagate_errors(x0: Array, defects: Array, gamma_dt: float, beta_dt: float,
         x = x_new
         steps += 1
         max_e, max_ed = max(max_e, e), max(max_ed, float(np.max(np.abs(x[1]))) / dt)
-    return ErrorPrediction(max_phi=max_e, final_phi=float(np.max(np.abs(x[0]))), max_phidot=max_ed,
-                           final_phidot=float(np.max(np.abs(x[1]))) / dt, steps_bounded=steps, exceeded=exceeded)
+    return ErrorPrediction(
+        max_phi=max_e,
+        final_phi=float(np.max(np.abs(x[0]))),
+        max_phidot=max_ed,
+        final_phidot=float(np.max(np.abs(x[1]))) / dt,
+        steps_bounded=steps,
+        exceeded=exceeded,
+    )
 
 
 @dataclass(frozen=True)
@@ -311,7 +373,7 @@ class SweepPoint:
             return None
         v = self.result.phi_violation[1:]
         n = min(window, v.size // 2)
-        tail = v[v.size - n:]
+        tail = v[v.size - n :]
         if n < 4 or np.any(tail <= 0.0):
             return None
         slope = np.polyfit(np.arange(n, dtype=float), np.log(tail), 1)[0]
@@ -330,9 +392,20 @@ def _last_time_probe(problem):
     return dataclasses.replace(problem, phi=recorded), seen
 
 
-def run_point(case: SlidingBeamCase, n_elements: int, dt: float, gamma: float, beta: float, *,
-              feedback: Feedback = "explicit", duration: float | None = None, alpha: float = 0.25,
-              delta: float = 0.5, axial_shortening: bool = True, max_violation: float = 1e-3) -> SweepPoint:
+def run_point(
+    case: SlidingBeamCase,
+    n_elements: int,
+    dt: float,
+    gamma: float,
+    beta: float,
+    *,
+    feedback: Feedback = "explicit",
+    duration: float | None = None,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    max_violation: float = 1e-3,
+) -> SweepPoint:
     """Simulate the sliding beam at one setting; an unbounded violation is recorded, not raised.
 
     Parameters
@@ -360,7 +433,14 @@ def run_point(case: SlidingBeamCase, n_elements: int, dt: float, gamma: float, b
     t_end = max(case.T, 1.0) if duration is None else float(duration)
     q0 = model.initial_shape()
     qd0 = np.zeros_like(q0)
-    common = dict(gamma=gamma, beta=beta, alpha=alpha, delta=delta, feedback=feedback, max_violation=max_violation)
+    common = dict(
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        feedback=feedback,
+        max_violation=max_violation,
+    )
     problem, seen = _last_time_probe(model.problem())
     try:
         res = simulate(problem, q0, qd0, t_end, dt, **common)
@@ -372,7 +452,11 @@ def run_point(case: SlidingBeamCase, n_elements: int, dt: float, gamma: float, b
     h = t_end / n_steps
     k = int(round(blowup / h))
     if k <= 1:
-        return SweepPoint(h, gamma, beta, feedback, False, blowup, None, np.array([q0[model.tip_dof]]), message)
+        return SweepPoint(
+            h, gamma, beta, feedback, False, blowup, None, np.array([q0[model.tip_dof]]), message
+        )
     # same step sequence, stopped before the failing step (the first k - 1 steps are identical)
     res = simulate(model.problem(), q0, qd0, (k - 1) * h, h, **common)
-    return SweepPoint(res.dt, gamma, beta, feedback, False, blowup, res, res.q[:, model.tip_dof], message)
+    return SweepPoint(
+        res.dt, gamma, beta, feedback, False, blowup, res, res.q[:, model.tip_dof], message
+    )

@@ -40,8 +40,11 @@ ROOT = data_root()
 GRID = 1e-3  # s, the comparison grid
 #: Sweep names by IDAS's highest BDF order.
 METHODS = {5: "idas", 2: "idas_order2"}
-LABELS = {"newmark": "Newmark + Baumgarte (step, s)", "idas": "IDAS, BDF order <= 5 (rtol)",
-          "idas_order2": "IDAS, BDF order <= 2 (rtol)"}
+LABELS = {
+    "newmark": "Newmark + Baumgarte (step, s)",
+    "idas": "IDAS, BDF order <= 5 (rtol)",
+    "idas_order2": "IDAS, BDF order <= 2 (rtol)",
+}
 
 
 @dataclass(frozen=True)
@@ -56,10 +59,21 @@ class Case:
 
 def beam_case() -> Case:
     """Buffinton & Kane's fast push (Pan Fig 8) as an R-P arm with the housing fixed, driven at H."""
-    spec = RPArmSpec("beam over supports", length=1.0, mass_per_length=1.0, EI=1.0, support_inner=0.75,
-                     support_outer=1.0)
+    spec = RPArmSpec(
+        "beam over supports",
+        length=1.0,
+        mass_per_length=1.0,
+        EI=1.0,
+        support_inner=0.75,
+        support_outer=1.0,
+    )
     model = RPArmModel(spec, RPMotion(C1=0.725, C2=0.7, T=0.7), 4, driven_end="H")
-    return Case("beam over supports, fast push (4 elements)", model, model.initial_shape("static_load", 0.01, "H"), 1.0)
+    return Case(
+        "beam over supports, fast push (4 elements)",
+        model,
+        model.initial_shape("static_load", 0.01, "H"),
+        1.0,
+    )
 
 
 def arm_case() -> Case:
@@ -81,12 +95,23 @@ def newmark_point(case: Case, dt: float, repeats: int = 1, gamma: float = 5.0) -
     prob = case.model.problem()
     walls = []
     for _ in range(repeats):
-        res = simulate(prob, case.q0, np.zeros_like(case.q0), case.duration, dt, gamma=gamma, beta=gamma)
+        res = simulate(
+            prob, case.q0, np.zeros_like(case.q0), case.duration, dt, gamma=gamma, beta=gamma
+        )
         walls.append(res.wall_time)
     idx, tip = _on_grid(res.t, res.q[:, case.model.tip], case.duration)
-    return {"method": "newmark", "knob": dt, "wall_s": min(walls), "idx": idx, "tip": tip,
-            "max_phi_m": float(res.phi_violation.max()), "max_phidot_m_s": float(res.phidot_violation.max()),
-            "steps": int(res.t.size - 1), "linear_solves": int(res.t.size), "factorizations": int(res.t.size)}
+    return {
+        "method": "newmark",
+        "knob": dt,
+        "wall_s": min(walls),
+        "idx": idx,
+        "tip": tip,
+        "max_phi_m": float(res.phi_violation.max()),
+        "max_phidot_m_s": float(res.phidot_violation.max()),
+        "steps": int(res.t.size - 1),
+        "linear_solves": int(res.t.size),
+        "factorizations": int(res.t.size),
+    }
 
 
 def idas_point(case: Case, rtol: float, repeats: int = 1, max_order: int = 5) -> dict:
@@ -94,11 +119,22 @@ def idas_point(case: Case, rtol: float, repeats: int = 1, max_order: int = 5) ->
     ``linear_solves`` counts its Newton iterations, ``factorizations`` its Jacobian set-ups."""
     walls = []
     for _ in range(repeats):
-        res = simulate_idas(case.model, case.q0, case.duration, GRID, rtol=rtol, max_order=max_order)
+        res = simulate_idas(
+            case.model, case.q0, case.duration, GRID, rtol=rtol, max_order=max_order
+        )
         walls.append(res.wall_time)
-    return {"method": METHODS[max_order], "knob": rtol, "factorizations": int(res.stats.get("nlinsetups", -1)), "wall_s": min(walls), "idx": np.arange(res.t.size), "tip": res.tip_y,
-            "max_phi_m": float(res.phi_violation.max()), "max_phidot_m_s": float(res.phidot_violation.max()),
-            "steps": int(res.stats.get("nsteps", -1)), "linear_solves": int(res.stats.get("nniters", -1))}
+    return {
+        "method": METHODS[max_order],
+        "knob": rtol,
+        "factorizations": int(res.stats.get("nlinsetups", -1)),
+        "wall_s": min(walls),
+        "idx": np.arange(res.t.size),
+        "tip": res.tip_y,
+        "max_phi_m": float(res.phi_violation.max()),
+        "max_phidot_m_s": float(res.phidot_violation.max()),
+        "steps": int(res.stats.get("nsteps", -1)),
+        "linear_solves": int(res.stats.get("nniters", -1)),
+    }
 
 
 def interpolate_wall(points: list[dict], target: float) -> float:
@@ -107,7 +143,11 @@ def interpolate_wall(points: list[dict], target: float) -> float:
     pts = sorted((p["error_m"], p["wall_s"]) for p in points if p["error_m"] > 0)
     for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
         if e1 <= target <= e2:
-            s = (math.log(target) - math.log(e1)) / (math.log(e2) - math.log(e1)) if e2 > e1 else 0.0
+            s = (
+                (math.log(target) - math.log(e1)) / (math.log(e2) - math.log(e1))
+                if e2 > e1
+                else 0.0
+            )
             return math.exp(math.log(w1) + s * (math.log(w2) - math.log(w1)))
     return math.nan
 
@@ -120,32 +160,58 @@ def targets_in_overlap(errors_a: list[float], errors_b: list[float], count: int 
     return list(np.geomspace(lo, hi, count + 2)[1:-1])
 
 
-def compare(case: Case, dts: list[float], rtols: list[float], rtols_order2: list[float], repeats: int = 2,
-            newmark_check_dt: float | None = None, reference_rtol: float = 1e-10) -> dict:
+def compare(
+    case: Case,
+    dts: list[float],
+    rtols: list[float],
+    rtols_order2: list[float],
+    repeats: int = 2,
+    newmark_check_dt: float | None = None,
+    reference_rtol: float = 1e-10,
+) -> dict:
     """The three sweeps against the IDAS reference (``reference_rtol``, BDF order <= 2), and wall times at
     equal accuracy: for each IDAS variant, at three errors inside the range it shares with the Newmark sweep."""
     ref = idas_point(case, reference_rtol, max_order=2)
-    points = ([newmark_point(case, dt, repeats) for dt in dts] + [idas_point(case, r, repeats) for r in rtols]
-              + [idas_point(case, r, repeats, max_order=2) for r in rtols_order2])
+    points = (
+        [newmark_point(case, dt, repeats) for dt in dts]
+        + [idas_point(case, r, repeats) for r in rtols]
+        + [idas_point(case, r, repeats, max_order=2) for r in rtols_order2]
+    )
     for p in points:
         p["error_m"] = float(np.abs(p["tip"] - ref["tip"][p["idx"]]).max())
-    out = {"case": case.name, "duration_s": case.duration, "points": points,
-           "peak_tip_m": float(np.abs(ref["tip"]).max()), "reference": f"IDAS rtol {reference_rtol:g}, BDF order <= 2",
-           "reference_rtol": reference_rtol}
+    out = {
+        "case": case.name,
+        "duration_s": case.duration,
+        "points": points,
+        "peak_tip_m": float(np.abs(ref["tip"]).max()),
+        "reference": f"IDAS rtol {reference_rtol:g}, BDF order <= 2",
+        "reference_rtol": reference_rtol,
+    }
     if newmark_check_dt is not None:
         check = newmark_point(case, newmark_check_dt)
-        out["reference_check"] = {"newmark_dt_s": newmark_check_dt,
-                                  "max_difference_m": float(np.abs(check["tip"] - ref["tip"][check["idx"]]).max())}
+        out["reference_check"] = {
+            "newmark_dt_s": newmark_check_dt,
+            "max_difference_m": float(np.abs(check["tip"] - ref["tip"][check["idx"]]).max()),
+        }
     newmark = [p for p in points if p["method"] == "newmark"]
     rows = []
     for method in ("idas", "idas_order2"):
         other = [p for p in points if p["method"] == method]
         if not other:
             continue
-        for target in targets_in_overlap([p["error_m"] for p in newmark], [p["error_m"] for p in other]):
+        for target in targets_in_overlap(
+            [p["error_m"] for p in newmark], [p["error_m"] for p in other]
+        ):
             wn, wi = interpolate_wall(newmark, target), interpolate_wall(other, target)
-            rows.append({"idas": method, "target_m": target, "newmark_wall_s": wn, "idas_wall_s": wi,
-                         "newmark_over_idas": wn / wi})
+            rows.append(
+                {
+                    "idas": method,
+                    "target_m": target,
+                    "newmark_wall_s": wn,
+                    "idas_wall_s": wi,
+                    "newmark_over_idas": wn / wi,
+                }
+            )
     out["equal_accuracy"] = rows
     return out
 
@@ -159,19 +225,30 @@ def plot(results: list[dict], path: Path) -> None:
     for c, res in enumerate(results):
         for method, style in (("newmark", "o-"), ("idas", "s--"), ("idas_order2", "^:")):
             label = LABELS[method]
-            pts = sorted((p for p in res["points"] if p["method"] == method), key=lambda p: p["error_m"])
+            pts = sorted(
+                (p for p in res["points"] if p["method"] == method), key=lambda p: p["error_m"]
+            )
             if not pts:
                 continue
             err = [p["error_m"] for p in pts]
             axes[0, c].loglog(err, [p["wall_s"] for p in pts], style, label=label)
             axes[1, c].loglog(err, [p["max_phi_m"] for p in pts], style, label=label)
             for p in pts:
-                axes[0, c].annotate(f"{p['knob']:g}", (p["error_m"], p["wall_s"]), fontsize=7,
-                                    textcoords="offset points", xytext=(3, 3))
-        axes[0, c].set_title(f"{res['case']}\n(peak tip {1e3 * res['peak_tip_m']:.2f} mm)", fontsize=9)
+                axes[0, c].annotate(
+                    f"{p['knob']:g}",
+                    (p["error_m"], p["wall_s"]),
+                    fontsize=7,
+                    textcoords="offset points",
+                    xytext=(3, 3),
+                )
+        axes[0, c].set_title(
+            f"{res['case']}\n(peak tip {1e3 * res['peak_tip_m']:.2f} mm)", fontsize=9
+        )
         axes[0, c].set_ylabel("wall time (s)")
         axes[1, c].set_ylabel("max |Phi| (m)")
-        axes[1, c].set_xlabel(f"max tip error against the reference, IDAS rtol {res.get('reference_rtol', 1e-10):g} (m)")
+        axes[1, c].set_xlabel(
+            f"max tip error against the reference, IDAS rtol {res.get('reference_rtol', 1e-10):g} (m)"
+        )
         for ax in axes[:, c]:
             ax.grid(True, which="both", alpha=0.3)
             ax.legend(fontsize=8)

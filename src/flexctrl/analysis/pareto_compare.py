@@ -24,15 +24,32 @@ import argparse
 import csv
 import math
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
-__all__ = ["case_table", "compare", "error_cost_axes", "main", "markdown", "merge", "plot", "read_pareto"]
+__all__ = [
+    "case_table",
+    "compare",
+    "error_cost_axes",
+    "main",
+    "markdown",
+    "merge",
+    "plot",
+    "read_pareto",
+]
 
 #: Numeric columns of ``pareto.csv`` compared side by side.
 #: The scene label of the study report's over-all-scenes group.
 ALL_SCENES = "all scenes"
-NUMBERS = ("wall_per_sim_s", "tip_error_rms", "tip_error_rms_worst", "tip_error_max_worst", "runs_ok", "runs_failed")
+NUMBERS = (
+    "wall_per_sim_s",
+    "tip_error_rms",
+    "tip_error_rms_worst",
+    "tip_error_max_worst",
+    "runs_ok",
+    "runs_failed",
+)
 
 
 def read_pareto(path: str | Path) -> list[dict[str, Any]]:
@@ -47,11 +64,17 @@ def read_pareto(path: str | Path) -> list[dict[str, Any]]:
     if path.is_dir():
         path = path / "pareto.csv"
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no pareto.csv (a speed_vs_accuracy study writes it; 'flexctrl report DIR' redraws it)")
+        raise FileNotFoundError(
+            f"{path}: no pareto.csv (a speed_vs_accuracy study writes it; 'flexctrl report DIR' redraws it)"
+        )
     rows = []
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
-            row: dict[str, Any] = {"scene": r["scene"], "method": r["method"], "pareto": r["pareto"] == "True"}
+            row: dict[str, Any] = {
+                "scene": r["scene"],
+                "method": r["method"],
+                "pareto": r["pareto"] == "True",
+            }
             for c in NUMBERS:
                 row[c] = float(r[c]) if r.get(c) not in (None, "") else math.nan
             rows.append(row)
@@ -83,8 +106,15 @@ def compare(old: Sequence[dict[str, Any]], new: Sequence[dict[str, Any]]) -> lis
     for key in keys:
         a, b = old_by.get(key), new_by.get(key)
         was, now = bool(a and a["pareto"]), bool(b and b["pareto"])
-        out.append({"scene": key[0], "method": key[1], "old": a, "new": b,
-                    "front": "joined" if now and not was else "left" if was and not now else ""})
+        out.append(
+            {
+                "scene": key[0],
+                "method": key[1],
+                "old": a,
+                "new": b,
+                "front": "joined" if now and not was else "left" if was and not now else "",
+            }
+        )
     return out
 
 
@@ -104,12 +134,19 @@ def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "
     lines: list[str] = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
         block = [r for r in rows if r["scene"] == scene]
-        block.sort(key=lambda r: (r["old"] is None or not math.isfinite(r["old"]["wall_per_sim_s"]),
-                                  r["old"]["wall_per_sim_s"] if r["old"] else 0.0))
-        lines += [f"#### {scene}", "",
-                  f"| method | s per sim. s, {a} / {b} | tip RMS median (mm), {a} / {b} | worst RMS (mm), {a} / {b} | "
-                  f"worst max (mm), {a} / {b} | runs failed, {a} / {b} | Pareto, {a} / {b} |",
-                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        block.sort(
+            key=lambda r: (
+                r["old"] is None or not math.isfinite(r["old"]["wall_per_sim_s"]),
+                r["old"]["wall_per_sim_s"] if r["old"] else 0.0,
+            )
+        )
+        lines += [
+            f"#### {scene}",
+            "",
+            f"| method | s per sim. s, {a} / {b} | tip RMS median (mm), {a} / {b} | worst RMS (mm), {a} / {b} | "
+            f"worst max (mm), {a} / {b} | runs failed, {a} / {b} | Pareto, {a} / {b} |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+        ]
         for r in block:
             o, n = r["old"], r["new"]
             moved = f" ({r['front']})" if r["front"] else ""
@@ -119,31 +156,48 @@ def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "
                 f"| {_num(o, 'tip_error_rms_worst', 1e3)} / {_num(n, 'tip_error_rms_worst', 1e3)} "
                 f"| {_num(o, 'tip_error_max_worst', 1e3)} / {_num(n, 'tip_error_max_worst', 1e3)} "
                 f"| {'-' if o is None else int(o['runs_failed'])} / {'-' if n is None else int(n['runs_failed'])} "
-                f"| {_flag(o)} / {_flag(n)}{moved} |")
+                f"| {_flag(o)} / {_flag(n)}{moved} |"
+            )
         lines.append("")
     return "\n".join(lines)
 
 
-def case_table(old: Sequence[str | Path], new: Sequence[str | Path], scene: str, methods: Sequence[str],
-               labels: tuple[str, str] = ("old", "new")) -> str:
+def case_table(
+    old: Sequence[str | Path],
+    new: Sequence[str | Path],
+    scene: str,
+    methods: Sequence[str],
+    labels: tuple[str, str] = ("old", "new"),
+) -> str:
     """Per case (payload, configuration) of ``scene``, each method's tip RMS (mm) on both sides, from ``results.csv``.
 
     The medians of :func:`markdown` can hide a split (e.g. one payload better, the other
     worse); this shows it.  ``old``/``new`` are result folders (later ones win, as in :func:`merge`).
     """
+
     def runs(folders):
         out: dict[tuple, str] = {}
         for folder in folders:
             with open(Path(folder) / "results.csv", newline="") as fh:
                 for r in csv.DictReader(fh):
                     if r.get("scene") == scene:
-                        value = f"{1e3 * float(r['tip_error_rms']):.3g}" if r.get("status") == "ok" else r.get("status", "-")
-                        out[(r["payload"], r.get("q1"), r.get("q2"), r.get("q3"), r["scene.method"])] = value
+                        value = (
+                            f"{1e3 * float(r['tip_error_rms']):.3g}"
+                            if r.get("status") == "ok"
+                            else r.get("status", "-")
+                        )
+                        out[
+                            (r["payload"], r.get("q1"), r.get("q2"), r.get("q3"), r["scene.method"])
+                        ] = value
         return out
 
     a, b = runs(old), runs(new)
     cases = list(dict.fromkeys(k[:4] for k in [*a, *b]))
-    head = "| payload (kg) | q1, q2, q3 (deg) | " + " | ".join(f"`{m}` {labels[0]} / {labels[1]}" for m in methods) + " |"
+    head = (
+        "| payload (kg) | q1, q2, q3 (deg) | "
+        + " | ".join(f"`{m}` {labels[0]} / {labels[1]}" for m in methods)
+        + " |"
+    )
     lines = [head, "| --- | --- |" + " --- |" * len(methods)]
     for case in cases:
         cells = [f"{a.get((*case, m), '-')} / {b.get((*case, m), '-')}" for m in methods]
@@ -162,8 +216,13 @@ def error_cost_axes(ax, title: str) -> None:
     ax.grid(True, which="both", alpha=0.25)
 
 
-def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, str] = ("old", "new"),
-         title: str = "", dpi: int = 90) -> Path:
+def plot(
+    rows: Sequence[dict[str, Any]],
+    path: str | Path,
+    labels: tuple[str, str] = ("old", "new"),
+    title: str = "",
+    dpi: int = 90,
+) -> Path:
     """Per scene, median tip error RMS (mm) against median cost (s/s), old hollow, new filled, an arrow where it moved."""
     from matplotlib.figure import Figure
 
@@ -175,7 +234,11 @@ def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, st
     colours = {"rigid": "tab:gray", "amm": "tab:blue", "fem": "tab:red"}
 
     def point(row):
-        if row is None or row["runs_failed"] > 0 or not (math.isfinite(row["wall_per_sim_s"]) and math.isfinite(row["tip_error_rms"])):
+        if (
+            row is None
+            or row["runs_failed"] > 0
+            or not (math.isfinite(row["wall_per_sim_s"]) and math.isfinite(row["tip_error_rms"]))
+        ):
             return None
         return row["wall_per_sim_s"], 1e3 * max(row["tip_error_rms"], 1e-12)
 
@@ -184,24 +247,46 @@ def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, st
             colour = colours.get(r["method"].split(":")[0].split("/")[0], "k")
             p, q = point(r["old"]), point(r["new"])
             if p:
-                ax.scatter(*p, facecolors="none", edgecolors=colour, s=60 if r["old"]["pareto"] else 26, lw=1.6 if r["old"]["pareto"] else 0.9, zorder=3)
+                ax.scatter(
+                    *p,
+                    facecolors="none",
+                    edgecolors=colour,
+                    s=60 if r["old"]["pareto"] else 26,
+                    lw=1.6 if r["old"]["pareto"] else 0.9,
+                    zorder=3,
+                )
             if q:
-                ax.scatter(*q, c=colour, s=60 if r["new"]["pareto"] else 26, edgecolors="k" if r["new"]["pareto"] else "none", zorder=4)
+                ax.scatter(
+                    *q,
+                    c=colour,
+                    s=60 if r["new"]["pareto"] else 26,
+                    edgecolors="k" if r["new"]["pareto"] else "none",
+                    zorder=4,
+                )
             if p and q and (abs(math.log(q[1] / p[1])) > 0.05):
-                ax.annotate("", q, p, arrowprops={"arrowstyle": "->", "color": colour, "lw": 0.8}, zorder=2)
+                ax.annotate(
+                    "", q, p, arrowprops={"arrowstyle": "->", "color": colour, "lw": 0.8}, zorder=2
+                )
             if p or q:
-                ax.annotate(r["method"], q or p, fontsize=6, xytext=(3, 3), textcoords="offset points")
+                ax.annotate(
+                    r["method"], q or p, fontsize=6, xytext=(3, 3), textcoords="offset points"
+                )
         for side, face in ((labels[0], "none"), (labels[1], "0.5")):
             ax.scatter([], [], facecolors=face, edgecolors="0.5", s=26, label=side)
         for family, colour in colours.items():
             ax.scatter([], [], c=colour, s=26, label=family)
-        ax.scatter([], [], facecolors="none", edgecolors="k", s=60, lw=1.6, label="large: Pareto-optimal")
+        ax.scatter(
+            [], [], facecolors="none", edgecolors="k", s=60, lw=1.6, label="large: Pareto-optimal"
+        )
         ax.legend(fontsize=7, loc="lower left", ncol=2)
         error_cost_axes(ax, scene)
-    for ax in axes[len(scenes):]:
+    for ax in axes[len(scenes) :]:
         ax.set_visible(False)
-    fig.suptitle(title or f"speed against accuracy: {labels[0]} (hollow) and {labels[1]} (filled); methods with failed runs left out",
-                 fontsize=9)
+    fig.suptitle(
+        title
+        or f"speed against accuracy: {labels[0]} (hollow) and {labels[1]} (filled); methods with failed runs left out",
+        fontsize=9,
+    )
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
@@ -212,12 +297,28 @@ def plot(rows: Sequence[dict[str, Any]], path: str | Path, labels: tuple[str, st
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--old", nargs="+", required=True, metavar="DIR", help="result folders (or pareto.csv) of the first side")
-    parser.add_argument("--new", nargs="+", required=True, metavar="DIR", help="result folders (or pareto.csv) of the second side")
+    parser.add_argument(
+        "--old",
+        nargs="+",
+        required=True,
+        metavar="DIR",
+        help="result folders (or pareto.csv) of the first side",
+    )
+    parser.add_argument(
+        "--new",
+        nargs="+",
+        required=True,
+        metavar="DIR",
+        help="result folders (or pareto.csv) of the second side",
+    )
     parser.add_argument("--labels", nargs=2, default=("old", "new"), metavar=("OLD", "NEW"))
     parser.add_argument("--figure", help="also draw error against cost to this PNG")
-    parser.add_argument("--cases", nargs="+", metavar=("SCENE", "METHOD"),
-                        help="instead: per case tip RMS (mm) of these methods in SCENE, from results.csv")
+    parser.add_argument(
+        "--cases",
+        nargs="+",
+        metavar=("SCENE", "METHOD"),
+        help="instead: per case tip RMS (mm) of these methods in SCENE, from results.csv",
+    )
     args = parser.parse_args(argv)
     if args.cases:
         print(case_table(args.old, args.new, args.cases[0], args.cases[1:], tuple(args.labels)))

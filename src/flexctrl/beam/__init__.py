@@ -8,4 +8,10 @@ from flexctrl.beam.clamped_mass import (
     frequency_determinant,
 )
 
-__all__ = ["MAX_MODES", "ClampedMassModes", "IndefiniteTipInertiaWarning", "clamped_mass_modes", "frequency_determinant"]
+__all__ = [
+    "MAX_MODES",
+    "ClampedMassModes",
+    "IndefiniteTipInertiaWarning",
+    "clamped_mass_modes",
+    "frequency_determinant",
+]

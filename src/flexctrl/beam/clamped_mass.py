@@ -64,8 +64,13 @@ from scipy.optimize import brentq
 
 from flexctrl.errors import SolverError
 
-__all__ = ["ClampedMassModes", "IndefiniteTipInertiaWarning", "MAX_MODES",
-           "clamped_mass_modes", "frequency_determinant"]
+__all__ = [
+    "ClampedMassModes",
+    "IndefiniteTipInertiaWarning",
+    "MAX_MODES",
+    "clamped_mass_modes",
+    "frequency_determinant",
+]
 
 Array = NDArray[np.float64]
 MAX_MODES = 6
@@ -93,14 +98,21 @@ def _combos(lam: float) -> tuple[float, float, float, float, float]:
             for k in range(1, _NT):
                 omc += t * _INV_FACT[4 * k]
                 t *= u
-        return ((1.0 + sums[0]) / ch, -4.0 * lam**3 * sums[3] / ch, 2.0 * lam * sums[1] / ch,
-                2.0 * lam**2 * sums[2] / ch, omc / ch)
+        return (
+            (1.0 + sums[0]) / ch,
+            -4.0 * lam**3 * sums[3] / ch,
+            2.0 * lam * sums[1] / ch,
+            2.0 * lam**2 * sums[2] / ch,
+            omc / ch,
+        )
     c, s, th, e = math.cos(lam), math.sin(lam), math.tanh(lam), math.exp(-lam)
     sech = 2.0 * e / (1.0 + e * e)
     return sech + c, c * th - s, c * th + s, s * th, sech - c
 
 
-def _delta_parts(lam: float, mu: float, eta: float, kappa: float) -> tuple[float, float, float, float]:
+def _delta_parts(
+    lam: float, mu: float, eta: float, kappa: float
+) -> tuple[float, float, float, float]:
     e1, e2, e3, e4, e5 = _combos(lam)
     d, l2 = mu * eta - kappa * kappa, lam * lam
     num = e1 + mu * lam * e2 - eta * lam * l2 * e3 - 2.0 * kappa * l2 * e4 + d * l2 * l2 * e5
@@ -204,8 +216,12 @@ def _phi(lam: float, c1: float, c2: float, tail: float, xi: Array, d: int) -> Ar
         return a * _kfun(lam, xi, 2 - d) + b * _kfun(lam, xi, 3 - d)
     s = c1 + tail * math.exp(-lam)
     ts, tc = [(c1, c2), (-c2, c1), (-c1, -c2), (c2, -c1)][d]
-    return lam**d * (ts * np.sin(lam * xi) + tc * np.cos(lam * xi)
-                     + tail * np.exp(lam * (xi - 1.0)) + (-1) ** d * s * np.exp(-lam * xi))
+    return lam**d * (
+        ts * np.sin(lam * xi)
+        + tc * np.cos(lam * xi)
+        + tail * np.exp(lam * (xi - 1.0))
+        + (-1) ** d * s * np.exp(-lam * xi)
+    )
 
 
 def _ends(lam: float, c1: float, c2: float, tail: float) -> Array:
@@ -235,15 +251,25 @@ def _raw_mode(lam: float, mu: float, eta: float, kappa: float) -> tuple[float, f
     l4 = lam**4
     if lam < _SERIES_MAX:  # phi'' and phi''' residuals over (A, B), phi = A K2 + B K3
         k0, k1, k2, k3 = (float(_kfun(lam, np.ones(1), m)[0]) for m in range(4))
-        rows = np.array([[k0 - l4 * (eta * k1 + kappa * k2), k1 - l4 * (eta * k2 + kappa * k3)],
-                         [l4 * (k3 + mu * k2 + kappa * k1), k0 + l4 * (mu * k3 + kappa * k2)]])
+        rows = np.array(
+            [
+                [k0 - l4 * (eta * k1 + kappa * k2), k1 - l4 * (eta * k2 + kappa * k3)],
+                [l4 * (k3 + mu * k2 + kappa * k1), k0 + l4 * (mu * k3 + kappa * k2)],
+            ]
+        )
         a, b = _null(rows, (1.0, 1.0), weight)
         c1, c2 = -b / (2.0 * lam**3), -a / (2.0 * lam**2)
         return c1, c2, -0.5 * (c1 + c2) * math.exp(lam)
     c, s, e = math.cos(lam), math.sin(lam), math.exp(-lam)
     # (phi, phi'/lam, phi''/lam^2, phi'''/lam^3) at xi = 1 over (c1, tail)
-    p = np.array([[s - c + e, 1 - 2 * e * c + e * e], [c + s - e, 1 + 2 * e * s - e * e],
-                  [c - s + e, 1 + 2 * e * c + e * e], [-c - s - e, 1 - 2 * e * s - e * e]])
+    p = np.array(
+        [
+            [s - c + e, 1 - 2 * e * c + e * e],
+            [c + s - e, 1 + 2 * e * s - e * e],
+            [c - s + e, 1 + 2 * e * c + e * e],
+            [-c - s - e, 1 - 2 * e * s - e * e],
+        ]
+    )
     g1, g2 = eta * lam**3, kappa * lam**2
     rows = np.array([p[2] - g1 * p[1] - g2 * p[0], p[3] + mu * lam * p[0] + g2 * p[1]])
     c1, tail = _null(rows, (lam**2, lam**3), weight)
@@ -265,8 +291,11 @@ def _integrals(lam: float, c1: float, c2: float, tail: float) -> tuple[float, fl
     """``int phi``, ``int xi phi`` and ``int phi^2`` over ``0 <= xi <= 1``."""
     if lam < _SERIES_MAX:
         a, b = _krylov(lam, c1, c2)
-        return (a * _ksum(lam, 2) + b * _ksum(lam, 3), a * _ksum(lam, 2, 1) + b * _ksum(lam, 3, 1),
-                _pair_series(lam, (a, b), lam, (a, b)))
+        return (
+            a * _ksum(lam, 2) + b * _ksum(lam, 3),
+            a * _ksum(lam, 2, 1) + b * _ksum(lam, 3, 1),
+            _pair_series(lam, (a, b), lam, (a, b)),
+        )
     (_, _, f2, f3), (g0, g1, g2, g3) = _ends(lam, c1, c2, tail)
     l4 = lam**4
     sq = (3 * g0 * g3 - g1 * g2 + l4 * g0 * g0 - 2 * g1 * g3 + g2 * g2) / (4 * l4)
@@ -342,8 +371,17 @@ class ClampedMassModes:
 
     def _modes(self) -> list[tuple[float, tuple[float, float, float]]]:
         lam = self.beta * self.length
-        return [(float(lam[j]), (float(self.coefficients[j, 0]), float(self.coefficients[j, 1]),
-                                 float(self.tail[j]))) for j in range(self.n_modes)]
+        return [
+            (
+                float(lam[j]),
+                (
+                    float(self.coefficients[j, 0]),
+                    float(self.coefficients[j, 1]),
+                    float(self.tail[j]),
+                ),
+            )
+            for j in range(self.n_modes)
+        ]
 
     def shape(self, x: ArrayLike, derivative: int = 0) -> Array:
         """Mode shapes or their derivatives.
@@ -364,8 +402,10 @@ class ClampedMassModes:
             raise ValueError(f"derivative must be 0, 1, 2 or 3, got {derivative!r}")
         xa = np.asarray(x, dtype=float)
         if not np.all((xa >= 0.0) & (xa <= self.length * (1 + 1e-12))):
-            raise ValueError(f"x must lie in [0, length={self.length}] m, got values in "
-                             f"[{np.min(xa, initial=np.inf)}, {np.max(xa, initial=-np.inf)}]")
+            raise ValueError(
+                f"x must lie in [0, length={self.length}] m, got values in "
+                f"[{np.min(xa, initial=np.inf)}, {np.max(xa, initial=-np.inf)}]"
+            )
         xi = np.minimum(xa.ravel() / self.length, 1.0)
         out = np.empty((self.n_modes, xi.size))
         for j, (lam, m) in enumerate(self._modes()):
@@ -430,8 +470,15 @@ def _positive(name: str, value: float, allow_zero: bool) -> float:
     return v
 
 
-def clamped_mass_modes(length: float, rho: float, EI: float, n_modes: int, m_tip: float = 0.0,
-                       J_tip: float = 0.0, M_tip: float = 0.0) -> ClampedMassModes:
+def clamped_mass_modes(
+    length: float,
+    rho: float,
+    EI: float,
+    n_modes: int,
+    m_tip: float = 0.0,
+    J_tip: float = 0.0,
+    M_tip: float = 0.0,
+) -> ClampedMassModes:
     """Natural frequencies and Eq-40-orthonormal modes of a clamped beam with a tip body.
 
     Parameters
@@ -482,9 +529,13 @@ def clamped_mass_modes(length: float, rho: float, EI: float, n_modes: int, m_tip
     if not 0 <= n <= MAX_MODES:
         raise ValueError(f"n_modes must be an integer 0..{MAX_MODES}, got {n_modes!r}")
     if m_c * m_c - m_d * j_d > 1e-9 * (m_c * m_c + m_d * j_d):
-        warnings.warn(f"tip inertia [[m_tip, M_tip], [M_tip, J_tip]] = [[{m_d}, {m_c}], [{m_c}, {j_d}]] "
-                      f"is indefinite (M_tip**2 > m_tip*J_tip): unphysical body; returning the "
-                      f"positive-frequency modes", IndefiniteTipInertiaWarning, stacklevel=2)
+        warnings.warn(
+            f"tip inertia [[m_tip, M_tip], [M_tip, J_tip]] = [[{m_d}, {m_c}], [{m_c}, {j_d}]] "
+            f"is indefinite (M_tip**2 > m_tip*J_tip): unphysical body; returning the "
+            f"positive-frequency modes",
+            IndefiniteTipInertiaWarning,
+            stacklevel=2,
+        )
     ml = rho * L
     mu, eta, kappa = m_d / ml, j_d / (ml * L * L), m_c / (ml * L)
     lams = _roots(n, mu, eta, kappa)
@@ -492,7 +543,12 @@ def clamped_mass_modes(length: float, rho: float, EI: float, n_modes: int, m_tip
     for j, lam in enumerate(lams):
         c1, c2, r = _raw_mode(lam, mu, eta, kappa)
         g = _ends(lam, c1, c2, r)[1]
-        norm2 = _integrals(lam, c1, c2, r)[2] + mu * g[0] ** 2 + 2 * kappa * g[0] * g[1] + eta * g[1] ** 2
+        norm2 = (
+            _integrals(lam, c1, c2, r)[2]
+            + mu * g[0] ** 2
+            + 2 * kappa * g[0] * g[1]
+            + eta * g[1] ** 2
+        )
         if not norm2 > 0.0:
             raise SolverError(f"non-positive modal mass {norm2} for beta L = {lam}")
         pivot = g[0] if abs(g[0]) > 1e-8 * abs(g[1]) else g[1]
@@ -529,6 +585,8 @@ def frequency_determinant(lam: ArrayLike, mu: float, eta: float, kappa: float) -
     la = np.asarray(lam, dtype=float)
     if not np.all(la >= 0.0) or not np.all(np.isfinite(la)):
         raise ValueError(f"lam must be finite and >= 0, got {lam!r}")
-    f = np.vectorize(lambda x: _delta(float(x), float(mu), float(eta), float(kappa)), otypes=[float])
+    f = np.vectorize(
+        lambda x: _delta(float(x), float(mu), float(eta), float(kappa)), otypes=[float]
+    )
     out = f(la)
     return float(out) if out.ndim == 0 else out

@@ -23,8 +23,8 @@ Axial element
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -64,14 +64,21 @@ def hermite_shape(zeta: ArrayLike, l: float, derivative: int = 0) -> Array:
     xi = np.asarray(zeta, dtype=float) / l
     one = np.ones_like(xi)
     if derivative == 0:
-        cols = (1 - 3 * xi**2 + 2 * xi**3, l * (xi - 2 * xi**2 + xi**3),
-                3 * xi**2 - 2 * xi**3, l * (-xi**2 + xi**3))
+        cols = (
+            1 - 3 * xi**2 + 2 * xi**3,
+            l * (xi - 2 * xi**2 + xi**3),
+            3 * xi**2 - 2 * xi**3,
+            l * (-(xi**2) + xi**3),
+        )
     elif derivative == 1:
-        cols = ((-6 * xi + 6 * xi**2) / l, 1 - 4 * xi + 3 * xi**2,
-                (6 * xi - 6 * xi**2) / l, -2 * xi + 3 * xi**2)
+        cols = (
+            (-6 * xi + 6 * xi**2) / l,
+            1 - 4 * xi + 3 * xi**2,
+            (6 * xi - 6 * xi**2) / l,
+            -2 * xi + 3 * xi**2,
+        )
     elif derivative == 2:
-        cols = ((-6 + 12 * xi) / l**2, (-4 + 6 * xi) / l,
-                (6 - 12 * xi) / l**2, (-2 + 6 * xi) / l)
+        cols = ((-6 + 12 * xi) / l**2, (-4 + 6 * xi) / l, (6 - 12 * xi) / l**2, (-2 + 6 * xi) / l)
     elif derivative == 3:
         cols = (12 / l**3 * one, 6 / l**2 * one, -12 / l**3 * one, 6 / l**2 * one)
     else:
@@ -82,21 +89,36 @@ def hermite_shape(zeta: ArrayLike, l: float, derivative: int = 0) -> Array:
 def beam_mass(rho: float, l: float) -> Array:
     """Consistent mass of a Hermite bending element, ``rho l / 420 [...]`` (kg, kg m, kg m^2)."""
     l = _check_length(l)
-    return rho * l / 420.0 * np.array([
-        [156.0, 22 * l, 54.0, -13 * l],
-        [22 * l, 4 * l**2, 13 * l, -3 * l**2],
-        [54.0, 13 * l, 156.0, -22 * l],
-        [-13 * l, -3 * l**2, -22 * l, 4 * l**2]])
+    return (
+        rho
+        * l
+        / 420.0
+        * np.array(
+            [
+                [156.0, 22 * l, 54.0, -13 * l],
+                [22 * l, 4 * l**2, 13 * l, -3 * l**2],
+                [54.0, 13 * l, 156.0, -22 * l],
+                [-13 * l, -3 * l**2, -22 * l, 4 * l**2],
+            ]
+        )
+    )
 
 
 def beam_stiffness(EI: float, l: float) -> Array:
     """Bending stiffness ``EI / l^3 [...]`` of a Hermite element (N/m, N, N m)."""
     l = _check_length(l)
-    return EI / l**3 * np.array([
-        [12.0, 6 * l, -12.0, 6 * l],
-        [6 * l, 4 * l**2, -6 * l, 2 * l**2],
-        [-12.0, -6 * l, 12.0, -6 * l],
-        [6 * l, 2 * l**2, -6 * l, 4 * l**2]])
+    return (
+        EI
+        / l**3
+        * np.array(
+            [
+                [12.0, 6 * l, -12.0, 6 * l],
+                [6 * l, 4 * l**2, -6 * l, 2 * l**2],
+                [-12.0, -6 * l, 12.0, -6 * l],
+                [6 * l, 2 * l**2, -6 * l, 4 * l**2],
+            ]
+        )
+    )
 
 
 def geometric_stiffness_linear(F1: float, F2: float, l: float) -> Array:
@@ -106,10 +128,22 @@ def geometric_stiffness_linear(F1: float, F2: float, l: float) -> Array:
     node.  For ``F1 == F2 == P`` this is the classical ``P/(30 l) [36, 3l, ...]``.
     """
     l = _check_length(l)
-    a = np.array([[36.0, 0.0, -36.0, 6 * l], [0.0, 6 * l**2, 0.0, -l**2],
-                  [-36.0, 0.0, 36.0, -6 * l], [6 * l, -l**2, -6 * l, 2 * l**2]])
-    b = np.array([[36.0, 6 * l, -36.0, 0.0], [6 * l, 2 * l**2, -6 * l, -l**2],
-                  [-36.0, -6 * l, 36.0, 0.0], [0.0, -l**2, 0.0, 6 * l**2]])
+    a = np.array(
+        [
+            [36.0, 0.0, -36.0, 6 * l],
+            [0.0, 6 * l**2, 0.0, -(l**2)],
+            [-36.0, 0.0, 36.0, -6 * l],
+            [6 * l, -(l**2), -6 * l, 2 * l**2],
+        ]
+    )
+    b = np.array(
+        [
+            [36.0, 6 * l, -36.0, 0.0],
+            [6 * l, 2 * l**2, -6 * l, -(l**2)],
+            [-36.0, -6 * l, 36.0, 0.0],
+            [0.0, -(l**2), 0.0, 6 * l**2],
+        ]
+    )
     return (F1 * a + F2 * b) / (60.0 * l)
 
 
@@ -154,8 +188,8 @@ def mass_integrals(rho: float, l: float, x0: float = 0.0) -> tuple[Array, Array]
     first moment of transverse deflection, ``S1 @ q_e`` its moment about the origin.
     """
     l = _check_length(l)
-    s0 = rho * np.array([l / 2, l**2 / 12, l / 2, -l**2 / 12])
-    s_zeta = rho * np.array([3 * l**2 / 20, l**3 / 30, 7 * l**2 / 20, -l**3 / 20])
+    s0 = rho * np.array([l / 2, l**2 / 12, l / 2, -(l**2) / 12])
+    s_zeta = rho * np.array([3 * l**2 / 20, l**3 / 30, 7 * l**2 / 20, -(l**3) / 20])
     return s0, x0 * s0 + s_zeta
 
 
@@ -179,7 +213,7 @@ def interpolation_row(x: float, n_elements: int, length: float, derivative: int 
     """Global row ``r`` with ``w^(derivative)(x) = r @ q`` on a uniform mesh (see module doc)."""
     j, zeta = locate(x, n_elements, length)
     row = np.zeros(2 * (n_elements + 1))
-    row[2 * j:2 * j + 4] = hermite_shape(zeta, length / n_elements, derivative)
+    row[2 * j : 2 * j + 4] = hermite_shape(zeta, length / n_elements, derivative)
     return row
 
 
@@ -201,12 +235,13 @@ def _assemble(blocks: list[Array], stride: int, size: int) -> Array:
     out = np.zeros((size, size))
     k = blocks[0].shape[0]
     for j, b in enumerate(blocks):
-        out[stride * j:stride * j + k, stride * j:stride * j + k] += b
+        out[stride * j : stride * j + k, stride * j : stride * j + k] += b
     return out
 
 
-def assemble_beam(n_elements: int, length: float, rho: float, EI: float,
-                  EA: float | None = None) -> BeamMatrices:
+def assemble_beam(
+    n_elements: int, length: float, rho: float, EI: float, EA: float | None = None
+) -> BeamMatrices:
     """Assemble bending (and optionally axial) matrices of a free uniform beam.
 
     Parameters
@@ -236,18 +271,27 @@ def assemble_beam(n_elements: int, length: float, rho: float, EI: float,
     S1 = np.zeros(size)
     for j in range(n):
         s0, s1 = mass_integrals(rho, le, x0=j * le)
-        S0[2 * j:2 * j + 4] += s0
-        S1[2 * j:2 * j + 4] += s1
+        S0[2 * j : 2 * j + 4] += s0
+        S1[2 * j : 2 * j + 4] += s1
     Ma = Ka = None
     if EA is not None:
         Ma = _assemble([axial_mass(rho, le)] * n, 1, n + 1)
         Ka = _assemble([axial_stiffness(EA, le)] * n, 1, n + 1)
-    return BeamMatrices(M=M, K=K, node_x=np.linspace(0.0, float(length), n + 1),
-                        element_length=le, S0=S0, S1=S1, M_axial=Ma, K_axial=Ka)
+    return BeamMatrices(
+        M=M,
+        K=K,
+        node_x=np.linspace(0.0, float(length), n + 1),
+        element_length=le,
+        S0=S0,
+        S1=S1,
+        M_axial=Ma,
+        K_axial=Ka,
+    )
 
 
-def assemble_geometric_stiffness(n_elements: int, length: float,
-                                 force: ArrayLike | Callable[[Array], ArrayLike]) -> Array:
+def assemble_geometric_stiffness(
+    n_elements: int, length: float, force: ArrayLike | Callable[[Array], ArrayLike]
+) -> Array:
     """Global geometric stiffness ``int_0^L F(x) N'^T N' dx`` of a uniform mesh.
 
     Parameters

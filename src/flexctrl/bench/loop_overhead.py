@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from flexctrl.spec.shipped import data_root
 
 REPO = data_root()
@@ -42,8 +43,13 @@ DEFAULT_SCENE = REPO / "studies" / "scenes" / "move_joint1_30deg.toml"
 DEFAULT_CONTROLLER = REPO / "controllers" / "lqr.toml"
 TARGET_RATIO = 2.0
 #: Metrics that are wall times or their ratios (they differ between any two runs).
-TIMING_METRICS = ("controller_time_median", "controller_time_p95", "controller_time_max", "choice_time_s",
-                  "choice_cost_ratio")
+TIMING_METRICS = (
+    "controller_time_median",
+    "controller_time_p95",
+    "controller_time_max",
+    "choice_time_s",
+    "choice_cost_ratio",
+)
 
 
 #: Magnitude (SI) below which a metric is round-off, compared absolutely: ``final_tip_error`` of a
@@ -74,8 +80,12 @@ def metric_difference(a: dict, b: dict) -> float:
     return max(metric_differences(a, b).values(), default=0.0)
 
 
-def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = DEFAULT_CONTROLLER, *,
-               repeats: int = 5) -> dict[str, Any]:
+def bench_loop(
+    scene_path: str | Path = DEFAULT_SCENE,
+    controller: str | Path = DEFAULT_CONTROLLER,
+    *,
+    repeats: int = 5,
+) -> dict[str, Any]:
     """Measure what the module docstring describes; returns a JSON-serialisable dict."""
     from flexctrl.scenes.cache import SceneCache
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
@@ -85,60 +95,100 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
     scene = dataclasses.replace(load_scene(scene_path), controller=str(controller))
     cache = SceneCache()
     first = time.perf_counter()
-    results = {loop: run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop)
-               for loop in ("python", "compiled")}
+    results = {
+        loop: run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop)
+        for loop in ("python", "compiled")
+    }
     first = time.perf_counter() - first
     plant, trajectory = results["compiled"].model, results["compiled"].trajectory
     dt, duration = float(trajectory.meta["dt"]), float(scene.plant.duration)
     integrator = RK4(plant, dt, compile=scene.plant.solver.get("compile")).setup()
-    torques = trajectory.inputs[:-1]  # the loop runs whole samples: 942 x 17 steps = 8.007 s for the LQR
+    torques = trajectory.inputs[
+        :-1
+    ]  # the loop runs whole samples: 942 x 17 steps = 8.007 s for the LQR
     x0, span = trajectory.states[0], torques.shape[0] * dt
-    walls: dict[str, list[float]] = {"python": [], "compiled": [], "plant_only": [], "cold_design": [],
-                                     "cold_design_reference_vm": [], "fresh_configuration": [],
-                                     "fresh_configuration_reference_vm": []}
+    walls: dict[str, list[float]] = {
+        "python": [],
+        "compiled": [],
+        "plant_only": [],
+        "cold_design": [],
+        "cold_design_reference_vm": [],
+        "fresh_configuration": [],
+        "fresh_configuration_reference_vm": [],
+    }
     fresh_runs = {}
     for _ in range(repeats):
         for loop in ("python", "compiled"):
             start = time.perf_counter()
-            results[loop] = run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop)
+            results[loop] = run_closed_loop_scene(
+                scene, cache=cache, on_divergence="record", loop=loop
+            )
             walls[loop].append(time.perf_counter() - start)
         start = time.perf_counter()
         integrator.run(x0, span, u=torques)
         walls["plant_only"].append(time.perf_counter() - start)
         for name, reference_compile in (("", None), ("_reference_vm", False)):
             fresh = SceneCache()
-            fresh._stores["models"] = cache._stores["models"]  # models built; design, reference and verdict anew
+            fresh._stores["models"] = cache._stores[
+                "models"
+            ]  # models built; design, reference and verdict anew
             start = time.perf_counter()
-            run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled",
-                                  reference_compile=reference_compile)
+            run_closed_loop_scene(
+                scene,
+                cache=fresh,
+                on_divergence="record",
+                loop="compiled",
+                reference_compile=reference_compile,
+            )
             walls["cold_design" + name].append(time.perf_counter() - start)
             start = time.perf_counter()
-            fresh_runs[name] = run_closed_loop_scene(scene, cache=SceneCache(), on_divergence="record",
-                                                     loop="compiled", reference_compile=reference_compile)
+            fresh_runs[name] = run_closed_loop_scene(
+                scene,
+                cache=SceneCache(),
+                on_divergence="record",
+                loop="compiled",
+                reference_compile=reference_compile,
+            )
             walls["fresh_configuration" + name].append(time.perf_counter() - start)
     med = {k: statistics.median(v) for k, v in walls.items()}
     run_wall, plant_only = med["compiled"], med["plant_only"]
     return {
-        "scene": str(scene_path), "controller": str(controller), "fidelity": str(scene.plant.fidelity),
-        "dt": dt, "duration_s": duration, "simulated_s": span, "sample_time": results["compiled"].controller.sample_time,
+        "scene": str(scene_path),
+        "controller": str(controller),
+        "fidelity": str(scene.plant.fidelity),
+        "dt": dt,
+        "duration_s": duration,
+        "simulated_s": span,
+        "sample_time": results["compiled"].controller.sample_time,
         "repeats": repeats,
         "run_wall_s": run_wall,
         "plant_only_s": plant_only,
         "ratio": run_wall / plant_only,
         "python": {"run_wall_s": med["python"], "ratio": med["python"] / plant_only},
-        "cold_design": {"run_wall_s": med["cold_design"], "ratio": med["cold_design"] / plant_only,
-                        "reference_vm_run_wall_s": med["cold_design_reference_vm"],
-                        "note": "models built, but design, reference table and linear verdict computed afresh"},
+        "cold_design": {
+            "run_wall_s": med["cold_design"],
+            "ratio": med["cold_design"] / plant_only,
+            "reference_vm_run_wall_s": med["cold_design_reference_vm"],
+            "note": "models built, but design, reference table and linear verdict computed afresh",
+        },
         "fresh_configuration": {
-            "run_wall_s": med["fresh_configuration"], "ratio": med["fresh_configuration"] / plant_only,
+            "run_wall_s": med["fresh_configuration"],
+            "ratio": med["fresh_configuration"] / plant_only,
             "reference_vm_run_wall_s": med["fresh_configuration_reference_vm"],
-            "speedup_vs_reference_vm": med["fresh_configuration_reference_vm"] / med["fresh_configuration"],
-            "note": "a fresh cache: model built and everything derived from it anew; compiled libraries from disk"},
-        "reference_metric_differences": metric_differences(fresh_runs["_reference_vm"].metrics,
-                                                           fresh_runs[""].metrics),
+            "speedup_vs_reference_vm": med["fresh_configuration_reference_vm"]
+            / med["fresh_configuration"],
+            "note": "a fresh cache: model built and everything derived from it anew; compiled libraries from disk",
+        },
+        "reference_metric_differences": metric_differences(
+            fresh_runs["_reference_vm"].metrics, fresh_runs[""].metrics
+        ),
         "speedup_vs_python": med["python"] / run_wall,
-        "max_metric_relative_difference": metric_difference(results["python"].metrics, results["compiled"].metrics),
-        "metric_differences": metric_differences(results["python"].metrics, results["compiled"].metrics),
+        "max_metric_relative_difference": metric_difference(
+            results["python"].metrics, results["compiled"].metrics
+        ),
+        "metric_differences": metric_differences(
+            results["python"].metrics, results["compiled"].metrics
+        ),
         "wall_times_s": walls,
         "first_runs_s": first,
         "target_ratio": TARGET_RATIO,
@@ -152,21 +202,23 @@ def bench_loop(scene_path: str | Path = DEFAULT_SCENE, controller: str | Path = 
 
 def format_loop(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_loop`'s result."""
-    return "\n".join([
-        f"flexctrl bench loop: {Path(result['scene']).name} with {Path(result['controller']).name} "
-        f"({result['fidelity']}, dt {result['dt']:g} s, {result['duration_s']:g} s), medians of {result['repeats']} rounds",
-        f"  plant only (compiled RK4)   {result['plant_only_s'] * 1e3:8.1f} ms",
-        f"  run, compiled loop          {result['run_wall_s'] * 1e3:8.1f} ms   ratio {result['ratio']:.2f} "
-        f"(target <= {result['target_ratio']:g}: {'met' if result['met'] else 'NOT met'})",
-        f"  run, python loop            {result['python']['run_wall_s'] * 1e3:8.1f} ms   ratio {result['python']['ratio']:.2f}",
-        f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms   ratio "
-        f"{result['cold_design']['ratio']:.2f}   (reference in the VM: "
-        f"{result['cold_design']['reference_vm_run_wall_s'] * 1e3:.1f} ms)",
-        f"  run, compiled, fresh config {result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
-        f"{result['fresh_configuration']['ratio']:.2f}   (reference in the VM: "
-        f"{result['fresh_configuration']['reference_vm_run_wall_s'] * 1e3:.1f} ms, "
-        f"{result['fresh_configuration']['speedup_vs_reference_vm']:.2f}x)",
-        f"  compiled / VM reference metrics: largest relative difference "
-        f"{max(result['reference_metric_differences'].values(), default=0.0):.2g}",
-        f"  compiled / python metrics: largest relative difference {result['max_metric_relative_difference']:.2g}",
-    ])
+    return "\n".join(
+        [
+            f"flexctrl bench loop: {Path(result['scene']).name} with {Path(result['controller']).name} "
+            f"({result['fidelity']}, dt {result['dt']:g} s, {result['duration_s']:g} s), medians of {result['repeats']} rounds",
+            f"  plant only (compiled RK4)   {result['plant_only_s'] * 1e3:8.1f} ms",
+            f"  run, compiled loop          {result['run_wall_s'] * 1e3:8.1f} ms   ratio {result['ratio']:.2f} "
+            f"(target <= {result['target_ratio']:g}: {'met' if result['met'] else 'NOT met'})",
+            f"  run, python loop            {result['python']['run_wall_s'] * 1e3:8.1f} ms   ratio {result['python']['ratio']:.2f}",
+            f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms   ratio "
+            f"{result['cold_design']['ratio']:.2f}   (reference in the VM: "
+            f"{result['cold_design']['reference_vm_run_wall_s'] * 1e3:.1f} ms)",
+            f"  run, compiled, fresh config {result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
+            f"{result['fresh_configuration']['ratio']:.2f}   (reference in the VM: "
+            f"{result['fresh_configuration']['reference_vm_run_wall_s'] * 1e3:.1f} ms, "
+            f"{result['fresh_configuration']['speedup_vs_reference_vm']:.2f}x)",
+            f"  compiled / VM reference metrics: largest relative difference "
+            f"{max(result['reference_metric_differences'].values(), default=0.0):.2g}",
+            f"  compiled / python metrics: largest relative difference {result['max_metric_relative_difference']:.2g}",
+        ]
+    )

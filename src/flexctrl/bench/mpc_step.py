@@ -24,12 +24,15 @@ import dataclasses
 import math
 import os
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-COMMAND = ('python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; '
-           'print(json.dumps(mpc_benchmark(), indent=1))"')
+COMMAND = (
+    'python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; '
+    'print(json.dumps(mpc_benchmark(), indent=1))"'
+)
 
 
 def _stats(values_s: Sequence[float]) -> dict[str, float]:
@@ -37,7 +40,11 @@ def _stats(values_s: Sequence[float]) -> dict[str, float]:
     a = a[np.isfinite(a)]
     if not a.size:
         return {"median": math.nan, "p95": math.nan, "max": math.nan}
-    return {"median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+    return {
+        "median": float(np.median(a)),
+        "p95": float(np.percentile(a, 95)),
+        "max": float(a.max()),
+    }
 
 
 def default_variants() -> dict[str, dict[str, Any]]:
@@ -81,12 +88,17 @@ def _run_linear(model, op, settings, dx0: np.ndarray, steps: int) -> dict[str, A
         "first_solve_ms": float(solve[0] * 1e3),
         "solve_ms": _stats(solve[1:]),
         "step_ms": _stats(ctrl.stats.step_times[1:]),
-        "iterations": {"median": float(np.median(it)), "p95": float(np.percentile(it, 95)), "max": float(it.max())}
-        if np.all(it >= 0) else None,
+        "iterations": {
+            "median": float(np.median(it)),
+            "p95": float(np.percentile(it, 95)),
+            "max": float(it.max()),
+        }
+        if np.all(it >= 0)
+        else None,
         "status": summary["status"],
         "fallbacks": summary["fallbacks"],
         "slack_max_m": summary["slack_max"],
-        "final_joint_error_deg": float(np.degrees(np.max(np.abs(dx[:model.n_u])))),
+        "final_joint_error_deg": float(np.degrees(np.max(np.abs(dx[: model.n_u])))),
         "qp_size": {"variables": int(ctrl.qp.H.shape[0]), "rows": int(ctrl.qp.A.shape[0])},
     }
 
@@ -117,9 +129,15 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     # the same first move from our OSQP controller (tight tolerance) for the comparison
     from flexctrl.spec.controller_settings import OSQPSettings
 
-    tight = design(model, op, dataclasses.replace(settings, soft="none",
-                                                  osqp=OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000,
-                                                                    polishing=True)))
+    tight = design(
+        model,
+        op,
+        dataclasses.replace(
+            settings,
+            soft="none",
+            osqp=OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000, polishing=True),
+        ),
+    )
     tight.reset()
     u = tight.step(0.0, op.x + dx0)
     v_ours = (u - op.u) / pb.Su
@@ -180,8 +198,16 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     }
 
 
-def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time: float,
-               variants: dict[str, dict[str, Any]], block_rounds: int = 3) -> dict[str, Any]:
+def _run_nmpcs(
+    model,
+    op,
+    dx0: np.ndarray,
+    steps: int,
+    horizon: int,
+    sample_time: float,
+    variants: dict[str, dict[str, Any]],
+    block_rounds: int = 3,
+) -> dict[str, Any]:
     """Every NMPC variant against its own copy of the nonlinear plant, twice: per sample and in blocks.
 
     ``"sample"``: one sample of each variant in turn.  Interleaving puts the variants under
@@ -201,15 +227,24 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
     from flexctrl.control.nmpc.controller import auto_substeps, design_nmpc, interval_functions
     from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
-    plant_substeps = auto_substeps(linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time))
+    plant_substeps = auto_substeps(
+        linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time)
+    )
     F, _ = interval_functions(model, sample_time, plant_substeps, None)
     controllers, builds = {}, {}
     for name, overrides in variants.items():
         start = time.perf_counter()
-        settings = NMPCSettings(horizon=horizon, sample_time=sample_time,
-                                **{k: v for k, v in overrides.items() if k not in DESIGN_ARGUMENTS})
+        settings = NMPCSettings(
+            horizon=horizon,
+            sample_time=sample_time,
+            **{k: v for k, v in overrides.items() if k not in DESIGN_ARGUMENTS},
+        )
         arguments = {k: v for k, v in overrides.items() if k in DESIGN_ARGUMENTS}
-        controllers[name] = design_nmpc(model, op, settings, **arguments) if arguments else design(model, op, settings)
+        controllers[name] = (
+            design_nmpc(model, op, settings, **arguments)
+            if arguments
+            else design(model, op, settings)
+        )
         builds[name] = time.perf_counter() - start
 
     def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:
@@ -224,19 +259,32 @@ def _run_nmpcs(model, op, dx0: np.ndarray, steps: int, horizon: int, sample_time
                 u = ctrl.step(k * ctrl.sample_time, states[name])
                 cpu[name].append(time.thread_time() - start)
                 states[name] = np.array(F(states[name], u), dtype=float).ravel()
-        return {name: _nmpc_summary(ctrl, variants[name], builds[name], cpu[name], states[name], op, model.n_u)
-                for name, ctrl in controllers.items()}
+        return {
+            name: _nmpc_summary(
+                ctrl, variants[name], builds[name], cpu[name], states[name], op, model.n_u
+            )
+            for name, ctrl in controllers.items()
+        }
 
     names = list(variants)
     per_sample = [(name, range(k, k + 1)) for k in range(steps) for name in names]
     size = -(-steps // block_rounds)
-    blocks = [(names[(i + r) % len(names)], range(r * size, min(steps, (r + 1) * size)))
-              for r in range(block_rounds) for i in range(len(names))]
-    return {"sample": run(per_sample), "block": run(blocks), "plant_substeps": plant_substeps,
-            "block_rounds": block_rounds}
+    blocks = [
+        (names[(i + r) % len(names)], range(r * size, min(steps, (r + 1) * size)))
+        for r in range(block_rounds)
+        for i in range(len(names))
+    ]
+    return {
+        "sample": run(per_sample),
+        "block": run(blocks),
+        "plant_substeps": plant_substeps,
+        "block_rounds": block_rounds,
+    }
 
 
-def _nmpc_summary(ctrl, settings: dict, build_s: float, cpu: list[float], state: np.ndarray, op, n_u: int) -> dict:
+def _nmpc_summary(
+    ctrl, settings: dict, build_s: float, cpu: list[float], state: np.ndarray, op, n_u: int
+) -> dict:
     """The figures of one NMPC variant's run (the first sample, which starts from a rollout, left out)."""
     summary = ctrl.stats.summary()
     it = np.asarray(ctrl.stats.iterations[1:], dtype=float)
@@ -309,27 +357,42 @@ def mpc_benchmark(
     import osqp
 
     from flexctrl import linear as L
-    from flexctrl.spec.controller_settings import MPCSettings
     from flexctrl.scenes.model_files import load_model
+    from flexctrl.spec.controller_settings import MPCSettings
 
     model = load_model(model_path, fidelity=fidelity)
     op = L.equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))
     dx0 = np.zeros(model.n_x)
-    dx0[:model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
+    dx0[: model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
     base = MPCSettings(horizon=horizon, sample_time=sample_time)
     result: dict[str, Any] = {
-        "problem": {"model": str(model_path), "fidelity": fidelity, "states": model.n_x, "inputs": model.n_u,
-                    "horizon": horizon, "sample_time_s": sample_time, "steps": steps,
-                    "target_deg": list(target_deg), "offset_deg": list(offset_deg),
-                    "soft_constraint": f"{base.soft} <= {base.deflection_limit} m"},
-        "environment": {"cpu_count": os.cpu_count(), "load_average": list(os.getloadavg()),
-                        "osqp": osqp.__version__, "casadi": casadi.__version__, "control": control.__version__},
+        "problem": {
+            "model": str(model_path),
+            "fidelity": fidelity,
+            "states": model.n_x,
+            "inputs": model.n_u,
+            "horizon": horizon,
+            "sample_time_s": sample_time,
+            "steps": steps,
+            "target_deg": list(target_deg),
+            "offset_deg": list(offset_deg),
+            "soft_constraint": f"{base.soft} <= {base.deflection_limit} m",
+        },
+        "environment": {
+            "cpu_count": os.cpu_count(),
+            "load_average": list(os.getloadavg()),
+            "osqp": osqp.__version__,
+            "casadi": casadi.__version__,
+            "control": control.__version__,
+        },
         "variants": {},
         "command": COMMAND,
     }
     for name, overrides in (variants if variants is not None else default_variants()).items():
         try:
-            result["variants"][name] = _run_linear(model, op, dataclasses.replace(base, **overrides), dx0, steps)
+            result["variants"][name] = _run_linear(
+                model, op, dataclasses.replace(base, **overrides), dx0, steps
+            )
         except Exception as exc:  # a missing plugin must not sink the whole benchmark
             result["variants"][name] = {"error": f"{type(exc).__name__}: {exc}"}
     if python_control_solves > 0:
@@ -339,53 +402,80 @@ def mpc_benchmark(
         pc["ratio_median"] = pc["median_s"] * 1e3 / ours["solve_ms"]["median"]
         result["python_control"] = pc
     if nmpc:
-        runs = _run_nmpcs(model, op, dx0, nmpc_steps, horizon, sample_time,
-                          nmpc_variants if nmpc_variants is not None else default_nmpc_variants())
+        runs = _run_nmpcs(
+            model,
+            op,
+            dx0,
+            nmpc_steps,
+            horizon,
+            sample_time,
+            nmpc_variants if nmpc_variants is not None else default_nmpc_variants(),
+        )
         result["nmpc_plant_substeps"] = runs["plant_substeps"]
         result["nmpc"] = runs["sample"]
         result["nmpc_blocks"] = runs["block"]
         result["nmpc_block_rounds"] = runs["block_rounds"]
         if "rti_frozen" in runs["sample"] and "rti_frozen_full" in runs["sample"]:
             fast, full = runs["sample"]["rti_frozen"], runs["sample"]["rti_frozen_full"]
-            result["nmpc_speedup"] = {"against": "rti_frozen_full",
-                                      "step_median": full["step_ms"]["median"] / fast["step_ms"]["median"],
-                                      "step_cpu_median": full["step_cpu_ms"]["median"] / fast["step_cpu_ms"]["median"]}
+            result["nmpc_speedup"] = {
+                "against": "rti_frozen_full",
+                "step_median": full["step_ms"]["median"] / fast["step_ms"]["median"],
+                "step_cpu_median": full["step_cpu_ms"]["median"] / fast["step_cpu_ms"]["median"],
+            }
     return result
 
 
 def format_benchmark(result: dict[str, Any]) -> str:
     """A short text table of :func:`mpc_benchmark`'s figures."""
-    lines = [f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} inputs, "
-             f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} ms; "
-             f"load {result['environment']['load_average'][0]:.2f} on {result['environment']['cpu_count']} CPUs",
-             f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} {'iter med':>9s}  status"]
+    lines = [
+        f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} inputs, "
+        f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} ms; "
+        f"load {result['environment']['load_average'][0]:.2f} on {result['environment']['cpu_count']} CPUs",
+        f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} {'iter med':>9s}  status",
+    ]
     for name, v in result["variants"].items():
         if "error" in v:
             lines.append(f"{name:24s} {v['error']}")
             continue
         it = v["iterations"]["median"] if v["iterations"] else float("nan")
-        lines.append(f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} {v['solve_ms']['max']:8.3f} "
-                     f"{v['step_ms']['median']:9.3f} {it:9.0f}  {v['status']}")
+        lines.append(
+            f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} {v['solve_ms']['max']:8.3f} "
+            f"{v['step_ms']['median']:9.3f} {it:9.0f}  {v['status']}"
+        )
     if "python_control" in result:
         pc = result["python_control"]
-        lines.append(f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x OSQP sparse "
-                     f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)")
+        lines.append(
+            f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x OSQP sparse "
+            f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)"
+        )
     for name, v in result.get("nmpc", {}).items():
         block = result.get("nmpc_blocks", {}).get(name)
         if block:
-            lines.append(f"NMPC {name} in blocks of consecutive samples: step median {block['step_ms']['median']:.2f} ms, "
-                         f"p95 {block['step_ms']['p95']:.2f} (linearise+assemble "
-                         f"{block['linearize_and_assemble_ms']['median']:.2f}, QP {block['qp_ms']['median']:.2f})")
-        lines.append(f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
-                     f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
-                     f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
-                     f"QP {v['qp_ms']['median']:.2f}, {v['qp_iterations_median']:.0f} iterations; "
-                     f"{v['prediction_states']} states, {v['substeps']} RK4 substeps, compiled {v['compiled']})")
+            lines.append(
+                f"NMPC {name} in blocks of consecutive samples: step median {block['step_ms']['median']:.2f} ms, "
+                f"p95 {block['step_ms']['p95']:.2f} (linearise+assemble "
+                f"{block['linearize_and_assemble_ms']['median']:.2f}, QP {block['qp_ms']['median']:.2f})"
+            )
+        lines.append(
+            f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
+            f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
+            f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
+            f"QP {v['qp_ms']['median']:.2f}, {v['qp_iterations_median']:.0f} iterations; "
+            f"{v['prediction_states']} states, {v['substeps']} RK4 substeps, compiled {v['compiled']})"
+        )
     if "nmpc_speedup" in result:
         sp = result["nmpc_speedup"]
-        lines.append(f"NMPC rti_frozen against {sp['against']} (interleaved): {sp['step_median']:.2f}x "
-                     f"faster by the median step, {sp['step_cpu_median']:.2f}x by CPU time")
+        lines.append(
+            f"NMPC rti_frozen against {sp['against']} (interleaved): {sp['step_median']:.2f}x "
+            f"faster by the median step, {sp['step_cpu_median']:.2f}x by CPU time"
+        )
     return "\n".join(lines)
 
 
-__all__ = ["mpc_benchmark", "default_variants", "default_nmpc_variants", "format_benchmark", "COMMAND"]
+__all__ = [
+    "mpc_benchmark",
+    "default_variants",
+    "default_nmpc_variants",
+    "format_benchmark",
+    "COMMAND",
+]

@@ -22,8 +22,9 @@ import os
 import subprocess
 import sys
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from flexctrl.bench.loop_overhead import FLOOR, TIMING_METRICS
 
@@ -45,8 +46,14 @@ for line in sys.stdin:
 def _start(tree: Path, study: Path) -> tuple[subprocess.Popen, list]:
     """A worker on ``tree`` and the study's runs as it reads them (``[run_id, {column: value}]``)."""
     env = dict(os.environ, PYTHONPATH=str(tree))
-    proc = subprocess.Popen([sys.executable, "-c", _WORKER, str(study)], cwd=tree, env=env, stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _WORKER, str(study)],
+        cwd=tree,
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     line = proc.stdout.readline()
     if not line:
         raise RuntimeError(f"the worker on {tree} did not start (exit code {proc.wait()})")
@@ -59,17 +66,26 @@ def _ask(proc: subprocess.Popen, index: int) -> dict[str, Any]:
     return json.loads(proc.stdout.readline())
 
 
-def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "controller",
-               exclude: Sequence[str] = ()) -> dict[str, Any]:
+def bench_runs(
+    study: str | Path,
+    trees: Sequence[str | Path],
+    *,
+    by: str = "controller",
+    exclude: Sequence[str] = (),
+) -> dict[str, Any]:
     """Measure what the module docstring describes; a JSON-ready dict."""
     study = Path(study).resolve()
     trees = [Path(t).resolve() for t in trees]
     started = [_start(tree, study) for tree in trees]
     procs, listed = [p for p, _ in started], started[0][1]
     if any(other != listed for _, other in started[1:]):
-        raise RuntimeError(f"the trees expand {study} into different runs; the comparison needs the same runs")
+        raise RuntimeError(
+            f"the trees expand {study} into different runs; the comparison needs the same runs"
+        )
     drop = [tuple(item.split("=", 1)) for item in exclude]
-    runs = [i for i, (_, coords) in enumerate(listed) if not any(coords.get(k) == v for k, v in drop)]
+    runs = [
+        i for i, (_, coords) in enumerate(listed) if not any(coords.get(k) == v for k, v in drop)
+    ]
     walls: list[dict[str, float]] = [defaultdict(float) for _ in trees]
     worst = (0.0, None)
     by_metric: dict[str, float] = {}
@@ -85,34 +101,58 @@ def bench_runs(study: str | Path, trees: Sequence[str | Path], *, by: str = "con
                 if name in TIMING_METRICS or other is None or other == value:
                     continue
                 scale = max(abs(value), abs(other))
-                d = abs(value - other) / (scale if scale > FLOOR else 1.0)  # round-off below FLOOR: absolute
+                d = abs(value - other) / (
+                    scale if scale > FLOOR else 1.0
+                )  # round-off below FLOOR: absolute
                 if d > worst[0]:
-                    worst = (d, {"run_id": listed[index][0], "metric": name, "values": [value, other]})
+                    worst = (
+                        d,
+                        {"run_id": listed[index][0], "metric": name, "values": [value, other]},
+                    )
                 by_metric[name] = max(by_metric.get(name, 0.0), d)
     finally:
         for proc in procs:
             proc.stdin.close()
             proc.wait()
     totals = [sum(w.values()) for w in walls]
-    return {"study": str(study), "trees": [str(t) for t in trees], "runs": len(runs), "by": by,
-            "summed_run_wall_s": [dict(w) for w in walls], "total_s": totals,
-            "ratio_to_first": [{g: walls[0][g] / w[g] for g in w} | {"total": totals[0] / t}
-                               for w, t in zip(walls, totals)],
-            "max_metric_relative_difference": worst[0], "where": worst[1],
-            "metric_differences": dict(sorted(by_metric.items(), key=lambda item: -item[1])),
-            "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
+    return {
+        "study": str(study),
+        "trees": [str(t) for t in trees],
+        "runs": len(runs),
+        "by": by,
+        "summed_run_wall_s": [dict(w) for w in walls],
+        "total_s": totals,
+        "ratio_to_first": [
+            {g: walls[0][g] / w[g] for g in w} | {"total": totals[0] / t}
+            for w, t in zip(walls, totals)
+        ],
+        "max_metric_relative_difference": worst[0],
+        "where": worst[1],
+        "metric_differences": dict(sorted(by_metric.items(), key=lambda item: -item[1])),
+        "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+    }
 
 
 def format_runs(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_runs`."""
     trees = result["trees"]
-    lines = [f"flexctrl bench runs: {Path(result['study']).name}, {result['runs']} runs alternated between "
-             f"{len(trees)} trees (load average {result['load_average_1min']}); summed run wall (s) by {result['by']}"]
+    lines = [
+        f"flexctrl bench runs: {Path(result['study']).name}, {result['runs']} runs alternated between "
+        f"{len(trees)} trees (load average {result['load_average_1min']}); summed run wall (s) by {result['by']}"
+    ]
     for group in result["summed_run_wall_s"][0]:
         values = " -> ".join(f"{w[group]:.2f}" for w in result["summed_run_wall_s"])
         lines.append(f"  {group:12s} {values}   ({result['ratio_to_first'][-1][group]:.2f}x)")
-    lines.append(f"  {'all':12s} {' -> '.join(f'{t:.2f}' for t in result['total_s'])}   "
-                 f"({result['ratio_to_first'][-1]['total']:.2f}x)")
-    lines.append(f"  largest relative metric difference first/last tree: {result['max_metric_relative_difference']:.2g}"
-                 + (f" ({result['where']['metric']} of run {result['where']['run_id']})" if result["where"] else ""))
+    lines.append(
+        f"  {'all':12s} {' -> '.join(f'{t:.2f}' for t in result['total_s'])}   "
+        f"({result['ratio_to_first'][-1]['total']:.2f}x)"
+    )
+    lines.append(
+        f"  largest relative metric difference first/last tree: {result['max_metric_relative_difference']:.2g}"
+        + (
+            f" ({result['where']['metric']} of run {result['where']['run_id']})"
+            if result["where"]
+            else ""
+        )
+    )
     return "\n".join(lines)

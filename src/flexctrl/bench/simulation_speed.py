@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from flexctrl.spec.shipped import data_root
 
 REPO = data_root()
@@ -58,10 +59,20 @@ def free_vibration_state(model) -> np.ndarray:
     return x0
 
 
-def bench_sim(model_path: str | Path = DEFAULT_MODEL, *, fidelity: str = "amm:2", payload: float = 2.0,
-              duration: float = 10.0, dt: float = 1e-3, repeats: int = 3, scipy_span: float = 1.0,
-              scipy_method: str = "RK45", scipy_rtol: float = 1e-8, scipy_atol: float = 1e-10,
-              use_cache: bool = False) -> dict[str, Any]:
+def bench_sim(
+    model_path: str | Path = DEFAULT_MODEL,
+    *,
+    fidelity: str = "amm:2",
+    payload: float = 2.0,
+    duration: float = 10.0,
+    dt: float = 1e-3,
+    repeats: int = 3,
+    scipy_span: float = 1.0,
+    scipy_method: str = "RK45",
+    scipy_rtol: float = 1e-8,
+    scipy_atol: float = 1e-10,
+    use_cache: bool = False,
+) -> dict[str, Any]:
     """Measure the simulation speeds described in the module docstring; returns a dict."""
     from flexctrl.scenes.model_files import load_model
     from flexctrl.sim import RK4, ScipyIntegrator
@@ -87,8 +98,12 @@ def bench_sim(model_path: str | Path = DEFAULT_MODEL, *, fidelity: str = "amm:2"
         traj_sp = sp.run(x0, scipy_span)
         metas_sp.append(traj_sp.meta)
     nfev = traj_sp.meta["counters"].get("rhs_evaluations", 0)
-    walls_c, walls_vm, walls_sp = ([m["wall_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp))
-    cpus_c, cpus_vm, cpus_sp = ([m["cpu_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp))
+    walls_c, walls_vm, walls_sp = (
+        [m["wall_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)
+    )
+    cpus_c, cpus_vm, cpus_sp = (
+        [m["cpu_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)
+    )
 
     rf_c = duration / statistics.median(walls_c)
     rf_vm = duration / statistics.median(walls_vm)
@@ -122,16 +137,32 @@ def bench_sim(model_path: str | Path = DEFAULT_MODEL, *, fidelity: str = "amm:2"
         "wall_times_compiled_s": walls_c,
         "wall_times_vm_s": walls_vm,
         "wall_times_scipy_s": walls_sp,
-        "scipy": {"method": scipy_method, "rtol": scipy_rtol, "atol": scipy_atol, "span_s": scipy_span,
-                  "scaled": scipy_span != duration, "rhs_evaluations": nfev},
-        "accuracy_at_scipy_span": {
-            "max_q_error_rk4_dt_vs_rk4_dt_over_10": float(np.max(np.abs(coarse.states[-1, q] - fine.states[-1, q]))),
-            "max_q_error_scipy_vs_rk4_dt_over_10": float(np.max(np.abs(traj_sp.states[-1, q] - fine.states[-1, q]))),
+        "scipy": {
+            "method": scipy_method,
+            "rtol": scipy_rtol,
+            "atol": scipy_atol,
+            "span_s": scipy_span,
+            "scaled": scipy_span != duration,
+            "rhs_evaluations": nfev,
         },
-        "targets": {"realtime_factor_compiled": TARGET_REALTIME, "ratio_vs_scipy": TARGET_RATIO,
-                    "met": bool(rf_c >= TARGET_REALTIME and rf_c / rf_sp >= TARGET_RATIO)},
-        "host": {"machine": platform.machine(), "processor": platform.processor() or None,
-                 "python": platform.python_version()},
+        "accuracy_at_scipy_span": {
+            "max_q_error_rk4_dt_vs_rk4_dt_over_10": float(
+                np.max(np.abs(coarse.states[-1, q] - fine.states[-1, q]))
+            ),
+            "max_q_error_scipy_vs_rk4_dt_over_10": float(
+                np.max(np.abs(traj_sp.states[-1, q] - fine.states[-1, q]))
+            ),
+        },
+        "targets": {
+            "realtime_factor_compiled": TARGET_REALTIME,
+            "ratio_vs_scipy": TARGET_RATIO,
+            "met": bool(rf_c >= TARGET_REALTIME and rf_c / rf_sp >= TARGET_RATIO),
+        },
+        "host": {
+            "machine": platform.machine(),
+            "processor": platform.processor() or None,
+            "python": platform.python_version(),
+        },
         "omega_max_rad_s": float(model.omega_max),
         "omega_max_dt": float(model.omega_max) * dt if math.isfinite(model.omega_max) else None,
     }

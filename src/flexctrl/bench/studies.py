@@ -23,17 +23,29 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from flexctrl.errors import FlexctrlError
 from flexctrl.spec.shipped import data_root
 
 REPO = data_root()
-DEFAULT_STUDIES = (REPO / "studies" / "quickstart_finest.toml", REPO / "studies" / "quickstart_auto.toml")
+DEFAULT_STUDIES = (
+    REPO / "studies" / "quickstart_finest.toml",
+    REPO / "studies" / "quickstart_auto.toml",
+)
 #: Columns of results.csv that differ between any two passes (timings, memory, the worker's name).
-VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker", "choice_time_s", "controller_time_median",
-            "controller_time_p95", "controller_time_max")
+VOLATILE = (
+    "wall_time_s",
+    "peak_memory_mb",
+    "bytes_written",
+    "worker",
+    "choice_time_s",
+    "controller_time_median",
+    "controller_time_p95",
+    "controller_time_max",
+)
 
 _PASSES = """
 import json, sys, time
@@ -60,18 +72,34 @@ def stable_columns(rows: list[dict[str, str]]) -> list[tuple]:
     return [tuple((k, v) for k, v in row.items() if k not in VOLATILE) for row in rows]
 
 
-def run_passes(study: Path, passes: int, workers: int, folder: Path, overrides: Sequence[str] = ()) -> dict[str, Any]:
+def run_passes(
+    study: Path, passes: int, workers: int, folder: Path, overrides: Sequence[str] = ()
+) -> dict[str, Any]:
     """One fresh process running ``study`` (with ``overrides``, as ``flexctrl study --set``) ``passes`` times.
 
     Returns wall times, summed run times and status counts.
     """
     outs = [folder / f"pass{i + 1}" for i in range(passes)]
-    done = subprocess.run([sys.executable, "-c", _PASSES, str(study), json.dumps(list(overrides)), *map(str, outs),
-                           str(workers)],
-                          capture_output=True, text=True, check=False, env=os.environ.copy())
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            _PASSES,
+            str(study),
+            json.dumps(list(overrides)),
+            *map(str, outs),
+            str(workers),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        env=os.environ.copy(),
+    )
     if done.returncode != 0:
         last = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        raise FlexctrlError(f"the passes of study '{study}' failed (exit {done.returncode}): {last}")
+        raise FlexctrlError(
+            f"the passes of study '{study}' failed (exit {done.returncode}): {last}"
+        )
     walls = json.loads(done.stdout.strip().splitlines()[-1])
     tables = [read_table(out / "results.csv") for out in outs]
     return {
@@ -80,58 +108,99 @@ def run_passes(study: Path, passes: int, workers: int, folder: Path, overrides: 
         "ok": [sum(r["status"] == "ok" for r in t) for t in tables],
         "failed": [sum(r["status"] == "failed" for r in t) for t in tables],
         "tables_identical": all(stable_columns(t) == stable_columns(tables[0]) for t in tables[1:]),
-        "peak_memory_mb": [max((float(r["peak_memory_mb"]) for r in t if r["peak_memory_mb"]), default=None)
-                           for t in tables],
+        "peak_memory_mb": [
+            max((float(r["peak_memory_mb"]) for r in t if r["peak_memory_mb"]), default=None)
+            for t in tables
+        ],
         "folders": [str(o) for o in outs],
     }
 
 
-def bench_studies(studies: Sequence[str | Path] = DEFAULT_STUDIES, *, rounds: int = 1, passes: int = 2,
-                  workers: int = 0, keep: str | Path | None = None, overrides: Sequence[str] = ()) -> dict[str, Any]:
+def bench_studies(
+    studies: Sequence[str | Path] = DEFAULT_STUDIES,
+    *,
+    rounds: int = 1,
+    passes: int = 2,
+    workers: int = 0,
+    keep: str | Path | None = None,
+    overrides: Sequence[str] = (),
+) -> dict[str, Any]:
     """Measure what the module docstring describes; a JSON-ready dict.
 
     ``overrides`` (``KEY=VALUE``, as ``flexctrl study --set``) apply to every study (``flexctrl
     bench studies`` loads each study with them before any pass; a pass whose study does not load
     raises :class:`~flexctrl.errors.FlexctrlError` with the pass's last error line).
     """
-    folder = Path(keep) if keep is not None else Path(tempfile.mkdtemp(prefix="flexctrl-bench-studies-"))
+    folder = (
+        Path(keep) if keep is not None else Path(tempfile.mkdtemp(prefix="flexctrl-bench-studies-"))
+    )
     names = [Path(s).stem for s in studies]
     results: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
     for r in range(rounds):
         for study, name in zip(studies, names):
-            results[name].append(run_passes(Path(study), passes, workers, folder / f"round{r + 1}" / name, overrides))
+            results[name].append(
+                run_passes(Path(study), passes, workers, folder / f"round{r + 1}" / name, overrides)
+            )
     per: dict[str, Any] = {}
     for name in names:
         rows = results[name]
         per[name] = {
             "first_pass_s": statistics.median(x["wall_s"][0] for x in rows),
-            "repeated_pass_s": statistics.median(x["wall_s"][-1] for x in rows) if passes > 1 else None,
-            "first_pass_summed_run_wall_s": statistics.median(x["summed_run_wall_s"][0] for x in rows),
+            "repeated_pass_s": statistics.median(x["wall_s"][-1] for x in rows)
+            if passes > 1
+            else None,
+            "first_pass_summed_run_wall_s": statistics.median(
+                x["summed_run_wall_s"][0] for x in rows
+            ),
             "tables_identical": all(x["tables_identical"] for x in rows),
             "rounds": rows,
         }
     base = per[names[0]]
-    ratios = {name: {"first_pass": per[name]["first_pass_s"] / base["first_pass_s"],
-                     "repeated_pass": (per[name]["repeated_pass_s"] / base["repeated_pass_s"]
-                                       if passes > 1 else None),
-                     "first_pass_rounds": [x["wall_s"][0] / b["wall_s"][0]
-                                           for x, b in zip(results[name], results[names[0]])]} for name in names[1:]}
-    return {"studies": [str(s) for s in studies], "overrides": list(overrides), "rounds": rounds, "passes": passes,
-            "workers": workers,
-            "results": per, "ratio_to_first_study": ratios,
-            "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None, "folder": str(folder)}
+    ratios = {
+        name: {
+            "first_pass": per[name]["first_pass_s"] / base["first_pass_s"],
+            "repeated_pass": (
+                per[name]["repeated_pass_s"] / base["repeated_pass_s"] if passes > 1 else None
+            ),
+            "first_pass_rounds": [
+                x["wall_s"][0] / b["wall_s"][0] for x, b in zip(results[name], results[names[0]])
+            ],
+        }
+        for name in names[1:]
+    }
+    return {
+        "studies": [str(s) for s in studies],
+        "overrides": list(overrides),
+        "rounds": rounds,
+        "passes": passes,
+        "workers": workers,
+        "results": per,
+        "ratio_to_first_study": ratios,
+        "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+        "folder": str(folder),
+    }
 
 
 def format_studies(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_studies`."""
-    lines = [f"flexctrl bench studies: {result['rounds']} round(s), {result['passes']} passes per process, "
-             f"workers {result['workers']} (load average {result['load_average_1min']})"
-             + (f"; every study with --set {' --set '.join(result['overrides'])}" if result.get("overrides") else "")]
+    lines = [
+        f"flexctrl bench studies: {result['rounds']} round(s), {result['passes']} passes per process, "
+        f"workers {result['workers']} (load average {result['load_average_1min']})"
+        + (
+            f"; every study with --set {' --set '.join(result['overrides'])}"
+            if result.get("overrides")
+            else ""
+        )
+    ]
     for name, r in result["results"].items():
-        rep = "" if r["repeated_pass_s"] is None else f", repeated pass {r['repeated_pass_s']:.1f} s"
-        lines.append(f"  {name:28s} first pass {r['first_pass_s']:.1f} s (runs summed "
-                     f"{r['first_pass_summed_run_wall_s']:.1f} s){rep}; tables identical across passes: "
-                     f"{r['tables_identical']}")
+        rep = (
+            "" if r["repeated_pass_s"] is None else f", repeated pass {r['repeated_pass_s']:.1f} s"
+        )
+        lines.append(
+            f"  {name:28s} first pass {r['first_pass_s']:.1f} s (runs summed "
+            f"{r['first_pass_summed_run_wall_s']:.1f} s){rep}; tables identical across passes: "
+            f"{r['tables_identical']}"
+        )
     first = next(iter(result["results"]))
     for name, q in result["ratio_to_first_study"].items():
         rep = "" if q["repeated_pass"] is None else f", repeated pass {q['repeated_pass']:.2f}"

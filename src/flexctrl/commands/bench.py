@@ -32,36 +32,119 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "'runs': the runs of one --study under two --tree source checkouts (one worker process each), alternated run "
         "by run; prints each tree's summed per-run wall time by --by and the ratio.",
     )
-    parser.add_argument("what", choices=BENCHMARKS, metavar="WHAT", help="benchmark to run: " + ", ".join(BENCHMARKS))
+    parser.add_argument(
+        "what",
+        choices=BENCHMARKS,
+        metavar="WHAT",
+        help="benchmark to run: " + ", ".join(BENCHMARKS),
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--repeats", type=int, default=3, metavar="N", help="runs per variant; medians are reported (default 3)")
-    parser.add_argument("--model", default=None, metavar="MODEL", help="model file (default models/subedi3link.toml)")
-    parser.add_argument("--fidelity", default="amm:2", metavar="F", help="model fidelity (default amm:2)")
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S", help="simulated seconds per RK4 run (default 10)")
-    parser.add_argument("--scipy-span", type=float, default=1.0, metavar="S", help="simulated seconds per scipy run (default 1; scaled)")
-    parser.add_argument("--steps", type=int, default=300, metavar="N", help="mpc: closed-loop samples per variant (default 300)")
-    parser.add_argument("--pc-solves", type=int, default=1, metavar="N", help="mpc: python-control solves to time (0 skips; default 1)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        metavar="N",
+        help="runs per variant; medians are reported (default 3)",
+    )
+    parser.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL",
+        help="model file (default models/subedi3link.toml)",
+    )
+    parser.add_argument(
+        "--fidelity", default="amm:2", metavar="F", help="model fidelity (default amm:2)"
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="simulated seconds per RK4 run (default 10)",
+    )
+    parser.add_argument(
+        "--scipy-span",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="simulated seconds per scipy run (default 1; scaled)",
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=300,
+        metavar="N",
+        help="mpc: closed-loop samples per variant (default 300)",
+    )
+    parser.add_argument(
+        "--pc-solves",
+        type=int,
+        default=1,
+        metavar="N",
+        help="mpc: python-control solves to time (0 skips; default 1)",
+    )
     parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
-    parser.add_argument("--controller", default=None, metavar="FILE", help="loop: controller file (default controllers/lqr.toml)")
-    parser.add_argument("--study", action="append", default=None, metavar="FILE",
-                        help="studies: a study file (repeatable; the first is the baseline)")
-    parser.add_argument("--workers", type=int, default=0, metavar="N", help="studies: workers per pass (default 0: in the process)")
-    parser.add_argument("--keep", default=None, metavar="DIR", help="studies: write the passes' folders here")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="studies: override a key of every study file, as 'flexctrl study --set' (repeatable)")
-    parser.add_argument("--tree", action="append", default=None, metavar="DIR",
-                        help="runs: a source checkout (twice: the old one first, then the new one)")
-    parser.add_argument("--by", default="controller", metavar="COLUMN", help="runs: group wall times by this column")
-    parser.add_argument("--exclude", action="append", default=[], metavar="KEY=VALUE",
-                        help="runs: leave out the runs with this coordinate (repeatable), e.g. controller=nmpc")
-    parser.add_argument("--use-cache", action="store_true", help="reuse the compiled-code cache (default: compile afresh to time it)")
+    parser.add_argument(
+        "--controller",
+        default=None,
+        metavar="FILE",
+        help="loop: controller file (default controllers/lqr.toml)",
+    )
+    parser.add_argument(
+        "--study",
+        action="append",
+        default=None,
+        metavar="FILE",
+        help="studies: a study file (repeatable; the first is the baseline)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="studies: workers per pass (default 0: in the process)",
+    )
+    parser.add_argument(
+        "--keep", default=None, metavar="DIR", help="studies: write the passes' folders here"
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="studies: override a key of every study file, as 'flexctrl study --set' (repeatable)",
+    )
+    parser.add_argument(
+        "--tree",
+        action="append",
+        default=None,
+        metavar="DIR",
+        help="runs: a source checkout (twice: the old one first, then the new one)",
+    )
+    parser.add_argument(
+        "--by", default="controller", metavar="COLUMN", help="runs: group wall times by this column"
+    )
+    parser.add_argument(
+        "--exclude",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="runs: leave out the runs with this coordinate (repeatable), e.g. controller=nmpc",
+    )
+    parser.add_argument(
+        "--use-cache",
+        action="store_true",
+        help="reuse the compiled-code cache (default: compile afresh to time it)",
+    )
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
     if args.set and args.what != "studies":
-        raise SpecError(f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with 'bench studies' only",
-                        key="--set")
+        raise SpecError(
+            f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with 'bench studies' only",
+            key="--set",
+        )
     if args.what == "mpc":
         return _run_mpc(args)
     if args.what == "loop":
@@ -73,28 +156,46 @@ def run(args: argparse.Namespace) -> int:
     from flexctrl.bench.simulation_speed import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
-        raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
+        raise SpecError(
+            f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats"
+        )
     for key, value in (("--duration", args.duration), ("--scipy-span", args.scipy_span)):
         if not value > 0:
             raise SpecError(f"value {value!r} is out of range; allowed: a number > 0 (s)", key=key)
-    result = bench_sim(args.model or DEFAULT_MODEL, fidelity=args.fidelity, duration=args.duration,
-                       repeats=args.repeats, scipy_span=args.scipy_span, use_cache=args.use_cache)
+    result = bench_sim(
+        args.model or DEFAULT_MODEL,
+        fidelity=args.fidelity,
+        duration=args.duration,
+        repeats=args.repeats,
+        scipy_span=args.scipy_span,
+        use_cache=args.use_cache,
+    )
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"flexctrl bench sim: {result['model']} ({result['fidelity']}, {result['n_states']} states), "
-          f"RK4 dt = {result['dt']:g} s, medians of {result['repeats']} runs")
-    print(f"  compiled RK4   {result['realtime_factor_compiled']:9.1f}x real time "
-          f"({result['duration_s']:g} s runs; compile {result['compile_time_s']:.2f} s, flags {' '.join(result['flags'])})")
+    print(
+        f"flexctrl bench sim: {result['model']} ({result['fidelity']}, {result['n_states']} states), "
+        f"RK4 dt = {result['dt']:g} s, medians of {result['repeats']} runs"
+    )
+    print(
+        f"  compiled RK4   {result['realtime_factor_compiled']:9.1f}x real time "
+        f"({result['duration_s']:g} s runs; compile {result['compile_time_s']:.2f} s, flags {' '.join(result['flags'])})"
+    )
     print(f"  VM RK4         {result['realtime_factor_vm']:9.1f}x real time")
     sp = result["scipy"]
-    print(f"  scipy {sp['method']:8s} {result['realtime_factor_scipy']:9.4f}x real time "
-          f"(rtol {sp['rtol']:g}, {sp['span_s']:g} s runs, scaled)")
+    print(
+        f"  scipy {sp['method']:8s} {result['realtime_factor_scipy']:9.4f}x real time "
+        f"(rtol {sp['rtol']:g}, {sp['span_s']:g} s runs, scaled)"
+    )
     cpu = result["cpu_time_based"]
-    print(f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM {cpu['realtime_factor_vm']:.1f}x, "
-          f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})")
-    print(f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= {result['targets']['realtime_factor_compiled']:g}x "
-          f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}")
+    print(
+        f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM {cpu['realtime_factor_vm']:.1f}x, "
+        f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})"
+    )
+    print(
+        f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= {result['targets']['realtime_factor_compiled']:g}x "
+        f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}"
+    )
     return 0
 
 
@@ -103,9 +204,17 @@ def _run_mpc(args: argparse.Namespace) -> int:
     from flexctrl.bench.simulation_speed import DEFAULT_MODEL
 
     if args.steps < 2 or args.pc_solves < 0:
-        raise SpecError(f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, solves >= 0", key="--steps")
-    result = mpc_benchmark(str(args.model or DEFAULT_MODEL), fidelity=args.fidelity, steps=args.steps,
-                           python_control_solves=args.pc_solves, nmpc=not args.no_nmpc)
+        raise SpecError(
+            f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, solves >= 0",
+            key="--steps",
+        )
+    result = mpc_benchmark(
+        str(args.model or DEFAULT_MODEL),
+        fidelity=args.fidelity,
+        steps=args.steps,
+        python_control_solves=args.pc_solves,
+        nmpc=not args.no_nmpc,
+    )
     sparse = result["variants"].get("osqp_sparse", {})
     result["median_solve_s"] = sparse["solve_ms"]["median"] * 1e-3 if "solve_ms" in sparse else None
     result["p95_solve_s"] = sparse["solve_ms"]["p95"] * 1e-3 if "solve_ms" in sparse else None
@@ -122,7 +231,9 @@ def _run_loop(args: argparse.Namespace) -> int:
     from flexctrl.bench.loop_overhead import DEFAULT_CONTROLLER, bench_loop, format_loop
 
     if args.repeats < 1:
-        raise SpecError(f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats")
+        raise SpecError(
+            f"value {args.repeats!r} is out of range; allowed: an integer >= 1", key="--repeats"
+        )
     result = bench_loop(controller=args.controller or DEFAULT_CONTROLLER, repeats=args.repeats)
     print(json.dumps(result, indent=2) if args.json else format_loop(result))
     return 0
@@ -132,14 +243,23 @@ def _run_studies(args: argparse.Namespace) -> int:
     from flexctrl.bench.studies import DEFAULT_STUDIES, bench_studies, format_studies
 
     if args.repeats < 1 or args.workers < 0:
-        raise SpecError(f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
-                        key="--repeats")
+        raise SpecError(
+            f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
+            key="--repeats",
+        )
     from flexctrl.study.study_file import load_study
 
-    for study in args.study or DEFAULT_STUDIES:  # a bad study or override is refused before any pass runs
+    for study in (
+        args.study or DEFAULT_STUDIES
+    ):  # a bad study or override is refused before any pass runs
         load_study(study, overrides=args.set)
-    result = bench_studies(args.study or DEFAULT_STUDIES, rounds=args.repeats, workers=args.workers, keep=args.keep,
-                           overrides=args.set)
+    result = bench_studies(
+        args.study or DEFAULT_STUDIES,
+        rounds=args.repeats,
+        workers=args.workers,
+        keep=args.keep,
+        overrides=args.set,
+    )
     print(json.dumps(result, indent=2) if args.json else format_studies(result))
     return 0
 
@@ -150,16 +270,22 @@ def _run_runs(args: argparse.Namespace) -> int:
     from flexctrl.bench.runs import bench_runs, format_runs
 
     if not args.study or len(args.study) != 1 or not args.tree or len(args.tree) != 2:
-        raise SpecError(f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two --tree DIR",
-                        key="--tree")
+        raise SpecError(
+            f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two --tree DIR",
+            key="--tree",
+        )
     for tree in args.tree:
         if not (Path(tree) / "flexctrl" / "__init__.py").is_file():
-            raise SpecError(f"value {tree!r} is not a flexctrl checkout; allowed: a folder holding flexctrl/__init__.py",
-                            key="--tree")
+            raise SpecError(
+                f"value {tree!r} is not a flexctrl checkout; allowed: a folder holding flexctrl/__init__.py",
+                key="--tree",
+            )
     for item in args.exclude:
         if "=" not in item:
-            raise SpecError(f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of its values)",
-                            key="--exclude")
+            raise SpecError(
+                f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of its values)",
+                key="--exclude",
+            )
     result = bench_runs(args.study[0], args.tree, by=args.by, exclude=args.exclude)
     print(json.dumps(result, indent=2) if args.json else format_runs(result))
     return 0

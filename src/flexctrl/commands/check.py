@@ -34,7 +34,10 @@ from flexctrl.spec import shipped
 
 FILE_KINDS = ("model", "scene", "controller", "study", "tuning")
 _CONTROLLER_KEYS = ("sample_time", "weights", "sensors", "estimator", "horizon", "kp", "shaper")
-_FEM_MODEL_TABLES = {"rp_arm": ("link", "housing", "base", "carriage"), "telescoping": ("outer", "inner", "contacts")}
+_FEM_MODEL_TABLES = {
+    "rp_arm": ("link", "housing", "base", "carriage"),
+    "telescoping": ("outer", "inner", "contacts"),
+}
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -45,8 +48,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "prints 'FILE: ok (...)' or its one-line error. Exit status 0 when every file is valid, 2 otherwise. "
         "Warnings are printed as one line on stderr and do not fail the check.",
     )
-    parser.add_argument("files", nargs="+", metavar="FILE", help="TOML files, e.g. models/*.toml studies/*.toml")
-    parser.add_argument("--kind", choices=FILE_KINDS, help="read every FILE as this kind (default: told from its keys)")
+    parser.add_argument(
+        "files", nargs="+", metavar="FILE", help="TOML files, e.g. models/*.toml studies/*.toml"
+    )
+    parser.add_argument(
+        "--kind",
+        choices=FILE_KINDS,
+        help="read every FILE as this kind (default: told from its keys)",
+    )
     return parser
 
 
@@ -70,7 +79,9 @@ def file_kind(document: dict[str, Any]) -> str | None:
         return "study"
     if "model" in document and ("dt" in document or "duration" in document):
         return "scene"
-    if any(k in document for k in _CONTROLLER_KEYS):  # a controller without its kind: told so by its reader
+    if any(
+        k in document for k in _CONTROLLER_KEYS
+    ):  # a controller without its kind: told so by its reader
         return "controller"
     return None
 
@@ -90,10 +101,12 @@ def check_file(path: str | Path, kind: str | None = None) -> str:
     document = read_toml(path)
     kind = kind or file_kind(document)
     if kind is None:
-        raise SpecError("cannot tell what the file describes; allowed: a model ([[links]], [[joints]]), a scene "
-                        "(kind, model, dt, duration), a controller (kind = 'pd', 'lqr', 'mpc', 'nmpc' or 'shaped'), "
-                        "a study (scene, [grid]) or a tuning ([[parameters]], [scenarios]); or name it with --kind",
-                        source=source)
+        raise SpecError(
+            "cannot tell what the file describes; allowed: a model ([[links]], [[joints]]), a scene "
+            "(kind, model, dt, duration), a controller (kind = 'pd', 'lqr', 'mpc', 'nmpc' or 'shaped'), "
+            "a study (scene, [grid]) or a tuning ([[parameters]], [scenarios]); or name it with --kind",
+            source=source,
+        )
     return _CHECKS[kind](path, document)
 
 
@@ -142,10 +155,18 @@ def _tuning(path, document) -> str:
 
     spec = load_tuning(path)
     study = scenario_study(spec)
-    return f"tuning '{spec.name}', {len(spec.parameters)} parameters over {len(study.runs)} scenarios"
+    return (
+        f"tuning '{spec.name}', {len(spec.parameters)} parameters over {len(study.runs)} scenarios"
+    )
 
 
-_CHECKS = {"model": _model, "scene": _scene, "controller": _controller, "study": _study, "tuning": _tuning}
+_CHECKS = {
+    "model": _model,
+    "scene": _scene,
+    "controller": _controller,
+    "study": _study,
+    "tuning": _tuning,
+}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,5 +177,8 @@ def run(args: argparse.Namespace) -> int:
         except SpecError as exc:
             failed += 1
             text = str(exc).replace("\n", " ")
-            print(f"flexctrl check: error: {text if text.startswith(name) else f'{name}: {text}'}", file=sys.stderr)
+            print(
+                f"flexctrl check: error: {text if text.startswith(name) else f'{name}: {text}'}",
+                file=sys.stderr,
+            )
     return 2 if failed else 0

@@ -10,17 +10,37 @@ import threading
 
 import numpy as np
 
-from flexctrl.spec.fidelity import SPELLINGS, Fidelity, parse_fidelity
 from flexctrl.spec.arm import ArmSpec, load_arm
+from flexctrl.spec.fidelity import SPELLINGS, Fidelity, parse_fidelity
 
 
-def add_model_arguments(parser: argparse.ArgumentParser, *, fidelity_default: str | None = None) -> None:
+def add_model_arguments(
+    parser: argparse.ArgumentParser, *, fidelity_default: str | None = None
+) -> None:
     """Add MODEL, --payload, --q, --set and --fidelity."""
-    parser.add_argument("model", metavar="MODEL", help="robot description, e.g. models/subedi3link.toml")
-    parser.add_argument("--payload", type=float, metavar="KG", help="payload mass in kg (default: the model file's)")
-    parser.add_argument("--q", type=float, nargs="+", metavar="DEG", help="joint angles in degrees, one per joint (default: the model file's)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any model-file key, e.g. boundary_inertia=paper (repeatable)")
-    parser.add_argument("--fidelity", default=fidelity_default, metavar="F", help=f"model fidelity: {SPELLINGS}")
+    parser.add_argument(
+        "model", metavar="MODEL", help="robot description, e.g. models/subedi3link.toml"
+    )
+    parser.add_argument(
+        "--payload", type=float, metavar="KG", help="payload mass in kg (default: the model file's)"
+    )
+    parser.add_argument(
+        "--q",
+        type=float,
+        nargs="+",
+        metavar="DEG",
+        help="joint angles in degrees, one per joint (default: the model file's)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override any model-file key, e.g. boundary_inertia=paper (repeatable)",
+    )
+    parser.add_argument(
+        "--fidelity", default=fidelity_default, metavar="F", help=f"model fidelity: {SPELLINGS}"
+    )
 
 
 def load_arm_from_args(args: argparse.Namespace) -> tuple[ArmSpec, np.ndarray]:
@@ -63,7 +83,14 @@ def stop_signals_interrupt():
 
 def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
     """Add --workers and --scheduler: where a study's or a tuning's runs go."""
-    parser.add_argument("--workers", type=int, metavar="N",
-                        help="local worker processes (default: the usable CPUs; 0: run in this process)")
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run on a Dask cluster instead, e.g. tcp://127.0.0.1:8786 (needs flexctrl[dask])")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="local worker processes (default: the usable CPUs; 0: run in this process)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on a Dask cluster instead, e.g. tcp://127.0.0.1:8786 (needs flexctrl[dask])",
+    )

@@ -35,64 +35,125 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "by its distance to the next rung (times a safety factor), starts the walk where the torque's bandwidth "
         "says, and checks the choice against a converged reference (amm:TOP+1 at a small RK4 step). Units: m, s.",
     )
-    parser.add_argument("scene", metavar="SCENE", help="arm or closed-loop scene file, e.g. studies/scenes/bangbang.toml")
-    parser.add_argument("--controller", metavar="FILE",
-                        help="controller file for a closed-loop scene (default: the scene's 'controller')")
-    parser.add_argument("--tol", type=float, metavar="METRES",
-                        help="tolerance on the largest tip-position error (m); default: the scene's 'tolerance'")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override any scene key, e.g. duration=0.5 or payload=4.0 (repeatable)")
-    parser.add_argument("--top", type=int, default=4, metavar="N", help="highest candidate amm:N (1..5, default 4)")
-    parser.add_argument("--reference", metavar="F", help="reference model amm:R, TOP < R <= 6 (default amm:TOP+1)")
-    parser.add_argument("--safety", type=float, default=2.0, metavar="S",
-                        help="factor on the distance to the next rung that makes the error estimate (default 2)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    parser.add_argument(
+        "scene",
+        metavar="SCENE",
+        help="arm or closed-loop scene file, e.g. studies/scenes/bangbang.toml",
+    )
+    parser.add_argument(
+        "--controller",
+        metavar="FILE",
+        help="controller file for a closed-loop scene (default: the scene's 'controller')",
+    )
+    parser.add_argument(
+        "--tol",
+        type=float,
+        metavar="METRES",
+        help="tolerance on the largest tip-position error (m); default: the scene's 'tolerance'",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override any scene key, e.g. duration=0.5 or payload=4.0 (repeatable)",
+    )
+    parser.add_argument(
+        "--top", type=int, default=4, metavar="N", help="highest candidate amm:N (1..5, default 4)"
+    )
+    parser.add_argument(
+        "--reference", metavar="F", help="reference model amm:R, TOP < R <= 6 (default amm:TOP+1)"
+    )
+    parser.add_argument(
+        "--safety",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="factor on the distance to the next rung that makes the error estimate (default 2)",
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object instead of a table"
+    )
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    from flexctrl.errors import SpecError
     from flexctrl.fidelity.ladder import ToleranceUnreachable, check_tolerance
     from flexctrl.scenes.auto import choose_fidelity
-    from flexctrl.errors import SpecError
     from flexctrl.spec.fidelity import parse_fidelity
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene(args.scene, args.set)
     if scene.kind not in ("arm", "closed_loop"):
-        raise SpecError(f"scene kind '{scene.kind}' is not supported; allowed: 'arm', 'closed_loop'",
-                        source=args.scene, key="kind")
+        raise SpecError(
+            f"scene kind '{scene.kind}' is not supported; allowed: 'arm', 'closed_loop'",
+            source=args.scene,
+            key="kind",
+        )
     if args.controller is not None and scene.kind != "closed_loop":
-        raise SpecError(f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; allowed: "
-                        "--controller with a closed-loop scene only", source=args.scene, key="--controller")
+        raise SpecError(
+            f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; allowed: "
+            "--controller with a closed-loop scene only",
+            source=args.scene,
+            key="--controller",
+        )
     tolerance = scene.tolerance if scene.kind == "arm" else scene.plant.tolerance
     if args.tol is None:
         if tolerance is None:
-            raise SpecError("is missing and the scene sets no 'tolerance'; allowed: a number > 0 (m)",
-                            source=args.scene, key="--tol")
+            raise SpecError(
+                "is missing and the scene sets no 'tolerance'; allowed: a number > 0 (m)",
+                source=args.scene,
+                key="--tol",
+            )
         tol = tolerance
     else:
         tol = check_tolerance(args.tol, source=args.scene, key="--tol")
     try:
         if scene.kind == "closed_loop":
             from flexctrl.scenes.auto import choose_closed_loop_fidelity
-            from flexctrl.scenes.run_closed_loop_scene import check_auto
             from flexctrl.scenes.loop_setup import pin_design
+            from flexctrl.scenes.run_closed_loop_scene import check_auto
 
             design = scene.controller_fidelity
             if design is None and scene.plant.fidelity.kind != "auto":
                 design = scene.plant.fidelity  # the model the scene's controller is designed on
-            auto = dataclasses.replace(scene, controller_fidelity=design, plant=dataclasses.replace(
-                scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol))
+            auto = dataclasses.replace(
+                scene,
+                controller_fidelity=design,
+                plant=dataclasses.replace(
+                    scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol
+                ),
+            )
             check_auto(auto, args.controller)
-            choice = choose_closed_loop_fidelity(pin_design(auto), tol, controller=args.controller, top=args.top,
-                                                 reference=args.reference, safety=args.safety,
-                                                 walk=auto.plant.fidelity_walk, checks=auto.plant.fidelity_checks)
+            choice = choose_closed_loop_fidelity(
+                pin_design(auto),
+                tol,
+                controller=args.controller,
+                top=args.top,
+                reference=args.reference,
+                safety=args.safety,
+                walk=auto.plant.fidelity_walk,
+                checks=auto.plant.fidelity_checks,
+            )
         else:
-            choice = choose_fidelity(scene, tol, top=args.top, reference=args.reference, safety=args.safety,
-                                     checks=scene.fidelity_checks)
+            choice = choose_fidelity(
+                scene,
+                tol,
+                top=args.top,
+                reference=args.reference,
+                safety=args.safety,
+                checks=scene.fidelity_checks,
+            )
     except ToleranceUnreachable as exc:
         if args.json:
-            print(json.dumps({"choice": None, "error": str(exc), **exc.evidence}, indent=2, default=_json_default))
+            print(
+                json.dumps(
+                    {"choice": None, "error": str(exc), **exc.evidence},
+                    indent=2,
+                    default=_json_default,
+                )
+            )
         raise
     data = choice.to_dict()
     if args.json:
@@ -126,21 +187,33 @@ def format_table(data: dict) -> str:
     bw = rule["excitation_bandwidth_hz"]
     lines = [
         f"scene {data['scene']}: tolerance {data['tolerance_m']:.3g} m on the tip position",
-        (f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} Hz; modes below "
-         f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}")
-        if bw is not None else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
-        (f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): " +
-         _step_check(conv) + _rung_below(conv) + f"integration {ref['wall_time_s']:.3g} s"),
+        (
+            f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} Hz; modes below "
+            f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}"
+        )
+        if bw is not None
+        else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
+        (
+            f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): "
+            + _step_check(conv)
+            + _rung_below(conv)
+            + f"integration {ref['wall_time_s']:.3g} s"
+        ),
         "",
         f"{'rung':>7} {'dt (s)':>9} {'wall (s)':>9} {'to next (m)':>12} {'estimate (m)':>12} {'vs ref (m)':>11} {'cost':>8}",
     ]
     for c in data["candidates"]:
         mark = "  <- choice" if c["fidelity"] == data["choice"] else ""
-        lines.append(f"{c['fidelity']:>7} {c['dt_s']:9.3g} {c['wall_time_s']:9.3g} {_f(c.get('distance_to_next_m'))} "
-                     f"{_f(c.get('estimated_error_m'))} {c['reference_error_max_m']:11.2e} {c['cost_ratio']:8.3g}{mark}")
-    lines += ["", f"choice {data['choice']} ({data['integrator']}, dt {data['dt_s']:.3g} s): estimated error "
-              f"{data['estimated_error']:.2e} m, error against the reference {data['reference_error']:.2e} m, "
-              f"cost {data['cost_ratio']:.3g} x the reference's integration time"]
+        lines.append(
+            f"{c['fidelity']:>7} {c['dt_s']:9.3g} {c['wall_time_s']:9.3g} {_f(c.get('distance_to_next_m'))} "
+            f"{_f(c.get('estimated_error_m'))} {c['reference_error_max_m']:11.2e} {c['cost_ratio']:8.3g}{mark}"
+        )
+    lines += [
+        "",
+        f"choice {data['choice']} ({data['integrator']}, dt {data['dt_s']:.3g} s): estimated error "
+        f"{data['estimated_error']:.2e} m, error against the reference {data['reference_error']:.2e} m, "
+        f"cost {data['cost_ratio']:.3g} x the reference's integration time",
+    ]
     return "\n".join(lines)
 
 

@@ -22,7 +22,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "frequencies of the flexible structure with the joints clamped, ascending.",
     )
     add_model_arguments(parser, fidelity_default="amm:2")
-    parser.add_argument("--locked", action="store_true", help="joints clamped: undamped frequencies of the flexible structure")
+    parser.add_argument(
+        "--locked",
+        action="store_true",
+        help="joints clamped: undamped frequencies of the flexible structure",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
 
@@ -31,7 +35,13 @@ def run(args: argparse.Namespace) -> int:
     from flexctrl.commands.common import fidelity_from_args, load_arm_from_args
     from flexctrl.dynamics.build import build_model
     from flexctrl.errors import warn_spec
-    from flexctrl.linear import equilibrium, holding_torque_excess, linearize, locked_frequencies, modal_summary
+    from flexctrl.linear import (
+        equilibrium,
+        holding_torque_excess,
+        linearize,
+        locked_frequencies,
+        modal_summary,
+    )
 
     arm, q = load_arm_from_args(args)
     fidelity = fidelity_from_args(args)
@@ -39,8 +49,12 @@ def run(args: argparse.Namespace) -> int:
     op = equilibrium(model, q)
     excess = holding_torque_excess(model, op)
     if excess:
-        warn_spec(f"{excess} (the linearisation below is of an equilibrium the actuators cannot hold)",
-                  source=args.model, key="--q", stacklevel=2)
+        warn_spec(
+            f"{excess} (the linearisation below is of an equilibrium the actuators cannot hold)",
+            source=args.model,
+            key="--q",
+            stacklevel=2,
+        )
     result = {
         "model": arm.name,
         "fidelity": str(model.fidelity),
@@ -48,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
         "q_deg": [math.degrees(a) for a in q],
         "n_states": model.n_x,
         "equilibrium_torque_Nm": op.u.tolist(),
-        "static_tip_deflections_m": [float(v) for v in model.functions["deflection"](op.q)[0].full().ravel()],
+        "static_tip_deflections_m": [
+            float(v) for v in model.functions["deflection"](op.q)[0].full().ravel()
+        ],
     }
     if args.locked:
         result["locked"] = True
@@ -59,15 +75,24 @@ def run(args: argparse.Namespace) -> int:
         result["frequencies_hz"] = summary.frequency_hz.tolist()
         result["damping_ratios"] = [None if math.isnan(z) else float(z) for z in summary.damping]
         result["eigenvalues_real_1_s"] = [float(s.real) for s in summary.eigenvalues]
-        result["unstable"] = [bool(s.real > UNSTABLE_TOL * max(1.0, abs(s))) for s in summary.eigenvalues]
+        result["unstable"] = [
+            bool(s.real > UNSTABLE_TOL * max(1.0, abs(s))) for s in summary.eigenvalues
+        ]
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"{arm.name} ({result['fidelity']}), payload {arm.payload.mass:g} kg, q = {[round(a, 3) for a in result['q_deg']]} deg")
-    print(f"  equilibrium torques {[round(v, 3) for v in result['equilibrium_torque_Nm']]} N m, "
-          f"static link-tip deflections {[f'{v:.3e}' for v in result['static_tip_deflections_m']]} m")
+    print(
+        f"{arm.name} ({result['fidelity']}), payload {arm.payload.mass:g} kg, q = {[round(a, 3) for a in result['q_deg']]} deg"
+    )
+    print(
+        f"  equilibrium torques {[round(v, 3) for v in result['equilibrium_torque_Nm']]} N m, "
+        f"static link-tip deflections {[f'{v:.3e}' for v in result['static_tip_deflections_m']]} m"
+    )
     if args.locked:
-        print("  locked-joint natural frequencies (Hz): " + ", ".join(f"{f:.4g}" for f in result["frequencies_hz"]))
+        print(
+            "  locked-joint natural frequencies (Hz): "
+            + ", ".join(f"{f:.4g}" for f in result["frequencies_hz"])
+        )
         return 0
     print(_pole_table(summary.eigenvalues))
     return 0
@@ -75,8 +100,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _pole_table(eigenvalues) -> str:
     """One line per pole of the linearisation (of each complex pair the one with Im s > 0), UNSTABLE marked."""
-    lines = ["  poles of the linearisation (torques held at the equilibrium's; f = |s| / 2 pi, "
-             "zeta = -Re s / |s|; Re s > 0 grows):", f"    {'f (Hz)':>10}  {'zeta':>8}  {'Re s (1/s)':>11}  kind"]
+    lines = [
+        "  poles of the linearisation (torques held at the equilibrium's; f = |s| / 2 pi, "
+        "zeta = -Re s / |s|; Re s > 0 grows):",
+        f"    {'f (Hz)':>10}  {'zeta':>8}  {'Re s (1/s)':>11}  kind",
+    ]
     unstable = 0
     for s in eigenvalues:
         magnitude = abs(s)

@@ -23,8 +23,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "(Eqs 69-73). Angles in degrees, payload in kg, frequencies in Hz.",
     )
     add_model_arguments(parser)
-    parser.add_argument("--n-modes", type=int, metavar="N", help=f"modes per link, 0..{MAX_MODES} (default: the model file's, or N of --fidelity amm:N)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object: {'links': [{'frequencies_hz': [...]}, ...]}")
+    parser.add_argument(
+        "--n-modes",
+        type=int,
+        metavar="N",
+        help=f"modes per link, 0..{MAX_MODES} (default: the model file's, or N of --fidelity amm:N)",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object: {'links': [{'frequencies_hz': [...]}, ...]}",
+    )
     return parser
 
 
@@ -32,7 +41,10 @@ def _n_modes(args: argparse.Namespace) -> int | None:
     fidelity = fidelity_from_args(args)
     if args.n_modes is not None:
         if not 0 <= args.n_modes <= MAX_MODES:
-            raise SpecError(f"value {args.n_modes!r} is out of range; allowed: an integer from 0 to {MAX_MODES}", key="--n-modes")
+            raise SpecError(
+                f"value {args.n_modes!r} is out of range; allowed: an integer from 0 to {MAX_MODES}",
+                key="--n-modes",
+            )
         return args.n_modes
     if fidelity is None:
         return None
@@ -49,7 +61,14 @@ def run(args: argparse.Namespace) -> int:
 
         for i in range(arm.n_links):
             count = n_modes if n_modes is not None else arm.links[i].n_modes
-            links.append({"link": i + 1, "frequencies_hz": link_frequencies_fem(arm, q, i, count, fidelity.count).tolist()})
+            links.append(
+                {
+                    "link": i + 1,
+                    "frequencies_hz": link_frequencies_fem(
+                        arm, q, i, count, fidelity.count
+                    ).tolist(),
+                }
+            )
     else:
         from flexctrl.modal.arm_modes import link_modes
 
@@ -58,21 +77,33 @@ def run(args: argparse.Namespace) -> int:
             links.append({"link": i + 1, "frequencies_hz": modes.frequency_hz.tolist()})
     for i, entry in enumerate(links):
         bv = boundary_values(arm, q, i)
-        entry["boundary"] = {"m_D_kg": float(bv.m), "J_D_kg_m2": float(bv.J), "M_D_kg_m": float(bv.M)}
+        entry["boundary"] = {
+            "m_D_kg": float(bv.m),
+            "J_D_kg_m2": float(bv.J),
+            "M_D_kg_m": float(bv.M),
+        }
     result = {
         "model": arm.name,
         "payload_kg": arm.payload.mass,
         "q_deg": [math.degrees(a) for a in q],
         "boundary_inertia": arm.boundary_inertia,
-        "fidelity": str(fidelity) if fidelity else "amm (modes per link: " + ", ".join(str(len(e["frequencies_hz"])) for e in links) + ")",
+        "fidelity": str(fidelity)
+        if fidelity
+        else "amm (modes per link: "
+        + ", ".join(str(len(e["frequencies_hz"])) for e in links)
+        + ")",
         "links": links,
     }
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"{arm.name}: payload {arm.payload.mass:g} kg, q = {np.round(result['q_deg'], 3).tolist()} deg, boundary_inertia = {arm.boundary_inertia}")
+    print(
+        f"{arm.name}: payload {arm.payload.mass:g} kg, q = {np.round(result['q_deg'], 3).tolist()} deg, boundary_inertia = {arm.boundary_inertia}"
+    )
     for entry in links:
         freqs = ", ".join(f"{f:.4f}" for f in entry["frequencies_hz"])
         b = entry["boundary"]
-        print(f"link {entry['link']}: [{freqs}] Hz   (m_D {b['m_D_kg']:.4f} kg, J_D {b['J_D_kg_m2']:.4f} kg m^2, M_D {b['M_D_kg_m']:.4f} kg m)")
+        print(
+            f"link {entry['link']}: [{freqs}] Hz   (m_D {b['m_D_kg']:.4f} kg, J_D {b['J_D_kg_m2']:.4f} kg m^2, M_D {b['M_D_kg_m']:.4f} kg m)"
+        )
     return 0

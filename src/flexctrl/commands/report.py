@@ -15,7 +15,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.add_argument("dir", metavar="DIR", help="a folder written by 'flexctrl study'")
     parser.add_argument("--metric", metavar="NAME", help="the metric to map, rank and sort by")
-    parser.add_argument("--map-axes", nargs=2, metavar=("X", "Y"), help="the two grid columns of the maps, e.g. q2 q3")
+    parser.add_argument(
+        "--map-axes",
+        nargs=2,
+        metavar=("X", "Y"),
+        help="the two grid columns of the maps, e.g. q2 q3",
+    )
     parser.add_argument("--worst", type=int, metavar="N", help="how many worst runs to show")
     return parser
 

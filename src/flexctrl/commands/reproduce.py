@@ -18,7 +18,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.add_argument("paper", choices=PAPERS, metavar="{" + ",".join(PAPERS) + "}")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    parser.add_argument("--reduced", action="store_true", help="coarser grids and shorter runs, same code paths (CI)")
+    parser.add_argument(
+        "--reduced",
+        action="store_true",
+        help="coarser grids and shorter runs, same code paths (CI)",
+    )
     return parser
 
 
@@ -28,7 +32,9 @@ def run(args: argparse.Namespace) -> int:
     document = reproduce_paper(args.paper, args.out, args.reduced)
     items = document["items"]
     agree = sum(item["agrees"] for item in items)
-    print(f"{args.out}/report.md: {agree} of {len(items)} items agree ({document['seconds']:.0f} s)")
+    print(
+        f"{args.out}/report.md: {agree} of {len(items)} items agree ({document['seconds']:.0f} s)"
+    )
     for item in items:
         if not item["agrees"]:
             print(f"  differs: {item['item']}: paper {item['paper']}; flexctrl {item['flexctrl']}")

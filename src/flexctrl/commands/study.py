@@ -9,7 +9,6 @@ import sys
 def add_parser(subparsers) -> argparse.ArgumentParser:
     from flexctrl.commands.common import add_backend_arguments
 
-
     parser = subparsers.add_parser(
         "study",
         help="run a study file's grid of runs (local process pool or Dask) and write its table and report",
@@ -22,23 +21,54 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("study", metavar="STUDY", help="study file, e.g. studies/quickstart.toml")
     parser.add_argument("--out", metavar="DIR", help="result folder (default: out/<study name>)")
     add_backend_arguments(parser)
-    parser.add_argument("--resume", action="store_true", help="continue an interrupted study in DIR: keep every recorded run, ok or failed "
-                        "(without it, runs recorded ok are kept and failed ones rerun)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a study-file key, e.g. seed=2 or grid.payload=[0,1] (repeatable)")
-    parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto", help="progress on stderr (auto: a bar on a terminal, lines otherwise)")
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted study in DIR: keep every recorded run, ok or failed "
+        "(without it, runs recorded ok are kept and failed ones rerun)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a study-file key, e.g. seed=2 or grid.payload=[0,1] (repeatable)",
+    )
+    parser.add_argument(
+        "--progress",
+        choices=("auto", "bar", "lines", "none"),
+        default="auto",
+        help="progress on stderr (auto: a bar on a terminal, lines otherwise)",
+    )
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress and no summary")
-    parser.add_argument("--no-affinity", action="store_true",
-                        help="local pool: give each run to whichever worker is free, instead of keeping the runs that "
-                             "share a model on one worker (the slow path, for measuring side by side)")
-    parser.add_argument("--no-preload", action="store_true",
-                        help="local pool: each worker imports the executor's code in its first run, instead of the fork "
-                             "server importing it once before forking the workers (the old path: the imports land in each worker's first run)")
-    parser.add_argument("--blas-threads", default="auto", metavar="N",
-                        help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto (default): "
-                             "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 CPUs "
-                             "two workers' spinning OpenBLAS threads slow each other's runs)")
-    parser.add_argument("--no-report", action="store_true", help="skip report.md (draw it later with 'flexctrl report DIR')")
-    parser.add_argument("--strict", action="store_true", help="exit with status 1 if any run failed")
+    parser.add_argument(
+        "--no-affinity",
+        action="store_true",
+        help="local pool: give each run to whichever worker is free, instead of keeping the runs that "
+        "share a model on one worker (the slow path, for measuring side by side)",
+    )
+    parser.add_argument(
+        "--no-preload",
+        action="store_true",
+        help="local pool: each worker imports the executor's code in its first run, instead of the fork "
+        "server importing it once before forking the workers (the old path: the imports land in each worker's first run)",
+    )
+    parser.add_argument(
+        "--blas-threads",
+        default="auto",
+        metavar="N",
+        help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto (default): "
+        "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 CPUs "
+        "two workers' spinning OpenBLAS threads slow each other's runs)",
+    )
+    parser.add_argument(
+        "--no-report",
+        action="store_true",
+        help="skip report.md (draw it later with 'flexctrl report DIR')",
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit with status 1 if any run failed"
+    )
     return parser
 
 
@@ -57,14 +87,25 @@ def run(args: argparse.Namespace) -> int:
             print(f"{spec.name}: note: {note}", file=sys.stderr)
     out = Path(args.out) if args.out else Path("out") / spec.name
     with stop_signals_interrupt():
-        result = run_study(spec, out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                           progress="none" if args.quiet else args.progress, report=not args.no_report,
-                           affinity=not args.no_affinity, preload=not args.no_preload,
-                           blas_threads=blas_threads)
+        result = run_study(
+            spec,
+            out,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            resume=args.resume,
+            progress="none" if args.quiet else args.progress,
+            report=not args.no_report,
+            affinity=not args.no_affinity,
+            preload=not args.no_preload,
+            blas_threads=blas_threads,
+        )
     c = result.counts
     if not args.quiet:
-        print(f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "
-              f"in {result.elapsed_s:.1f} s; grid: {c['ok']} ok, {c['failed']} failed, {c['pending']} not run", file=sys.stderr)
+        print(
+            f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "
+            f"in {result.elapsed_s:.1f} s; grid: {c['ok']} ok, {c['failed']} failed, {c['pending']} not run",
+            file=sys.stderr,
+        )
         for note in result.warnings:
             print(f"{spec.name}: note: {note}", file=sys.stderr)
         print(result.report or result.table_path)

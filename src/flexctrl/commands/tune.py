@@ -9,7 +9,6 @@ import sys
 def add_parser(subparsers) -> argparse.ArgumentParser:
     from flexctrl.commands.common import add_backend_arguments
 
-
     parser = subparsers.add_parser(
         "tune",
         help="tune a controller file's keys over closed-loop scenarios and write the tuned file and a report",
@@ -23,8 +22,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("tuning", metavar="TUNING", help="tuning file, e.g. studies/tune_lqr.toml")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: out/<tuning name>)")
     add_backend_arguments(parser)
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a tuning-file key, e.g. optimizer.evaluations=10 (repeatable)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a tuning-file key, e.g. optimizer.evaluations=10 (repeatable)",
+    )
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress lines")
     return parser
 
@@ -40,14 +44,22 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out") / spec.name
     try:
         with stop_signals_interrupt():
-            result = tune(spec, out, workers=args.workers, scheduler=args.scheduler, progress=not args.quiet)
+            result = tune(
+                spec, out, workers=args.workers, scheduler=args.scheduler, progress=not args.quiet
+            )
     except KeyboardInterrupt:
-        print(f"flexctrl tune: interrupted; the finished runs are kept in {out / 'runs'}: run the same command to "
-              "resume", file=sys.stderr)
+        print(
+            f"flexctrl tune: interrupted; the finished runs are kept in {out / 'runs'}: run the same command to "
+            "resume",
+            file=sys.stderr,
+        )
         return 130
     s = result.summary
-    print(f"{spec.name}: {spec.objective.statistic} {spec.objective.metric} {s['initial_objective']:.6g} as shipped -> "
-          f"{s['best_objective']:.6g} tuned ({s['evaluations']} candidates, {s['feasible_evaluations']} feasible, "
-          f"{result.wall_time_s:.0f} s)", file=sys.stderr)
+    print(
+        f"{spec.name}: {spec.objective.statistic} {spec.objective.metric} {s['initial_objective']:.6g} as shipped -> "
+        f"{s['best_objective']:.6g} tuned ({s['evaluations']} candidates, {s['feasible_evaluations']} feasible, "
+        f"{result.wall_time_s:.0f} s)",
+        file=sys.stderr,
+    )
     print(out / "report.md")
     return 0

@@ -46,9 +46,12 @@ def _check_holding_torque(model, op) -> None:
 
     excess = holding_torque_excess(model, op)
     if excess:
-        raise SpecError(f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
-                        "the payload and the target)", source=getattr(model.spec, "source", None) or None,
-                        key="target")
+        raise SpecError(
+            f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
+            "the payload and the target)",
+            source=getattr(model.spec, "source", None) or None,
+            key="target",
+        )
 
 
 #: Controller kind -> ``"module:designer"`` (``designer(model, op, settings) -> Controller``).
@@ -102,8 +105,11 @@ def design(model, op, settings) -> Controller:
 
     kind = getattr(settings, "kind", None)
     if kind not in DESIGNERS:
-        raise SpecError(f"value of type {type(settings).__name__} names no controller; allowed: one of "
-                        f"{', '.join(cls.__name__ for cls in SETTINGS.values())}", key="settings")
+        raise SpecError(
+            f"value of type {type(settings).__name__} names no controller; allowed: one of "
+            f"{', '.join(cls.__name__ for cls in SETTINGS.values())}",
+            key="settings",
+        )
     _check_holding_torque(model, op)
     module, _, name = DESIGNERS[kind].partition(":")
     controller = getattr(importlib.import_module(module), name)(model, op, settings)
@@ -112,7 +118,20 @@ def design(model, op, settings) -> Controller:
 
 
 __all__ = [
-    "design", "has_linear_law", "CONTROLLER_CLASSES", "Controller", "ControllerStats", "SETTINGS", "PDSettings", "LQRSettings", "MPCSettings",
-    "NMPCSettings", "ShapedSettings", "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings",
+    "design",
+    "has_linear_law",
+    "CONTROLLER_CLASSES",
+    "Controller",
+    "ControllerStats",
+    "SETTINGS",
+    "PDSettings",
+    "LQRSettings",
+    "MPCSettings",
+    "NMPCSettings",
+    "ShapedSettings",
+    "SensorSettings",
+    "Weights",
+    "EstimatorSettings",
+    "ScheduleSettings",
     "OSQPSettings",
 ]

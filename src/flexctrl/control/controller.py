@@ -139,7 +139,15 @@ class Controller(ABC):
 
     kind: ClassVar[str] = ""
 
-    def __init__(self, settings, op: OperatingPoint, sensors: Sensors, limits: np.ndarray, *, saturate: bool = True):
+    def __init__(
+        self,
+        settings,
+        op: OperatingPoint,
+        sensors: Sensors,
+        limits: np.ndarray,
+        *,
+        saturate: bool = True,
+    ):
         self.settings = settings
         self.op = op
         self.sensors = sensors
@@ -166,8 +174,10 @@ class Controller(ABC):
         from flexctrl.control.reference_trajectory import HoldReference
 
         if reference is not None and len(reference.path.q_target) != self.n_u:
-            raise SpecError(f"the reference has {len(reference.path.q_target)} joint angles; expected {self.n_u}",
-                            key="reference")
+            raise SpecError(
+                f"the reference has {len(reference.path.q_target)} joint angles; expected {self.n_u}",
+                key="reference",
+            )
         self.reference = HoldReference(self.op) if reference is None else reference
         self._reference_changed()
 
@@ -195,14 +205,19 @@ class Controller(ABC):
         start = time.perf_counter()
         y = np.asarray(measurement, dtype=float).ravel()
         if y.size != self.sensors.n_y:
-            raise SpecError(f"measurement has {y.size} entries; expected {self.sensors.n_y} "
-                            f"({', '.join(self.sensors.names)})", key="measurement")
+            raise SpecError(
+                f"measurement has {y.size} entries; expected {self.sensors.n_y} "
+                f"({', '.join(self.sensors.names)})",
+                key="measurement",
+            )
         u = np.asarray(self._step(float(t), y), dtype=float).ravel()
         if self.saturate:
             clipped = np.clip(u, -self.limits, self.limits)
             if np.any(clipped != u):
                 self.stats.saturated += 1
-                self.stats.clipped_max = max(self.stats.clipped_max, float(np.max(np.abs(clipped - u))))
+                self.stats.clipped_max = max(
+                    self.stats.clipped_max, float(np.max(np.abs(clipped - u)))
+                )
             u = clipped
         self.u_previous = u
         self.stats.step_times.append(time.perf_counter() - start)

@@ -63,8 +63,14 @@ def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
     return scipy.linalg.expm(aug)[:n, n:]
 
 
-def process_noise(model, op: OperatingPoint, A: np.ndarray, dt: float, torque_noise: float,
-                  modal_force_noise: float) -> np.ndarray:
+def process_noise(
+    model,
+    op: OperatingPoint,
+    A: np.ndarray,
+    dt: float,
+    torque_noise: float,
+    modal_force_noise: float,
+) -> np.ndarray:
     """Discrete process-noise covariance of held generalised-force disturbances (see module docstring)."""
     N, n = model.n_q, model.n_u
     Minv = np.linalg.inv(model.mass_matrix(op.q))
@@ -75,7 +81,9 @@ def process_noise(model, op: OperatingPoint, A: np.ndarray, dt: float, torque_no
     return 0.5 * (W + W.T)
 
 
-def kalman_gain(Ad: np.ndarray, Cd: np.ndarray, W: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def kalman_gain(
+    Ad: np.ndarray, Cd: np.ndarray, W: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Current-estimate Kalman gain ``M`` and a-priori covariance ``P`` (filter DARE).
 
     The filter DARE is the dual of the control one, ``(A, B, Q, R) -> (A', C', W, R)``,
@@ -169,7 +177,9 @@ class KalmanEstimator:
         return np.linalg.eigvals((np.eye(self.A.shape[0]) - self.M @ self.C) @ self.A)
 
 
-def make_observer(model, op: OperatingPoint, sensors: Sensors, Ac: np.ndarray, sysd, estimator_settings):
+def make_observer(
+    model, op: OperatingPoint, sensors: Sensors, Ac: np.ndarray, sysd, estimator_settings
+):
     """:class:`FullState` for a full-state sensor, else the :class:`KalmanEstimator` of ``sysd``.
 
     ``Ac`` is the continuous state matrix of the linearisation (for the process noise),
@@ -177,9 +187,22 @@ def make_observer(model, op: OperatingPoint, sensors: Sensors, Ac: np.ndarray, s
     """
     if sensors.full_state:
         return FullState()
-    W = process_noise(model, op, np.asarray(Ac, dtype=float), float(sysd.dt), estimator_settings.torque_noise,
-                      estimator_settings.modal_force_noise)
+    W = process_noise(
+        model,
+        op,
+        np.asarray(Ac, dtype=float),
+        float(sysd.dt),
+        estimator_settings.torque_noise,
+        estimator_settings.modal_force_noise,
+    )
     return KalmanEstimator(sysd.A, sysd.B, sysd.C, sysd.D, op, sensors, W)
 
 
-__all__ = ["FullState", "KalmanEstimator", "kalman_gain", "process_noise", "zoh_input_matrix", "make_observer"]
+__all__ = [
+    "FullState",
+    "KalmanEstimator",
+    "kalman_gain",
+    "process_noise",
+    "zoh_input_matrix",
+    "make_observer",
+]

@@ -30,9 +30,16 @@ from scipy.interpolate import RegularGridInterpolator
 from flexctrl.control.controller import Controller, SampledLaw
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.riccati import solve_dare
-from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights
 from flexctrl.errors import SpecError
-from flexctrl.linear import Linearizer, OperatingPoint, Sensors, discretize, equilibrium, torque_limits
+from flexctrl.linear import (
+    Linearizer,
+    OperatingPoint,
+    Sensors,
+    discretize,
+    equilibrium,
+    torque_limits,
+)
+from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,14 +81,18 @@ def build_sensors(model, settings: SensorSettings, op: OperatingPoint) -> Sensor
         raise SpecError(str(exc).split(": ", 1)[-1], key="sensors.outputs") from None
 
 
-def linear_plant(model, op: OperatingPoint, sensors: Sensors, dt: float, linearizer: Linearizer | None = None) -> LinearPlant:
+def linear_plant(
+    model, op: OperatingPoint, sensors: Sensors, dt: float, linearizer: Linearizer | None = None
+) -> LinearPlant:
     """Linearise at ``op`` with ``sensors`` and discretise at ``dt``."""
     lin = linearizer or Linearizer(model, sensors)
     sys = lin(op)
     return LinearPlant(sys, discretize(sys, dt), op, sensors)
 
 
-def weight_matrices(model, weights: Weights, limits: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def weight_matrices(
+    model, weights: Weights, limits: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Bryson's-rule ``Q`` (2N x 2N) and ``R`` (n x n) from acceptable magnitudes.
 
     Torque magnitudes are ``weights.torque`` times the joint torque limits (1 N m where
@@ -90,12 +101,18 @@ def weight_matrices(model, weights: Weights, limits: np.ndarray | None = None) -
     n, N = model.n_u, model.n_q
     limits = torque_limits(model) if limits is None else np.asarray(limits, dtype=float)
     scale = np.where(np.isfinite(limits), limits, 1.0)
-    xmax = np.r_[np.full(n, weights.joint), np.full(N - n, weights.modal), np.full(n, weights.joint_rate),
-                 np.full(N - n, weights.modal_rate)]
+    xmax = np.r_[
+        np.full(n, weights.joint),
+        np.full(N - n, weights.modal),
+        np.full(n, weights.joint_rate),
+        np.full(N - n, weights.modal_rate),
+    ]
     return np.diag(1.0 / xmax**2), np.diag(1.0 / (weights.torque * scale) ** 2)
 
 
-def lqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lqr_gain(
+    Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S``.
 
     The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`, checked
@@ -110,12 +127,16 @@ def lqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray) -> tu
 class GainSchedule:
     """Gains on a grid of scheduling joint angles, interpolated multilinearly (clamped at the edges)."""
 
-    def __init__(self, joints: tuple[int, ...], grid: tuple[tuple[float, ...], ...], gains: np.ndarray):
+    def __init__(
+        self, joints: tuple[int, ...], grid: tuple[tuple[float, ...], ...], gains: np.ndarray
+    ):
         self.joints = np.asarray(joints, dtype=int) - 1  # 0-based indices into the state
         self.grid = tuple(np.asarray(g, dtype=float) for g in grid)
         self.gains = gains  # grid shape + (n_u, n_x)
         self._shape = gains.shape[-2:]
-        self._interp = RegularGridInterpolator(self.grid, gains.reshape(gains.shape[:-2] + (-1,)), method="linear")
+        self._interp = RegularGridInterpolator(
+            self.grid, gains.reshape(gains.shape[:-2] + (-1,)), method="linear"
+        )
         self._low = np.array([g[0] for g in self.grid])
         self._high = np.array([g[-1] for g in self.grid])
 
@@ -129,8 +150,16 @@ class LQRController(Controller):
 
     kind = "lqr"
 
-    def __init__(self, settings: LQRSettings, plant: LinearPlant, limits: np.ndarray, K: np.ndarray, S: np.ndarray,
-                 observer, schedule: GainSchedule | None = None):
+    def __init__(
+        self,
+        settings: LQRSettings,
+        plant: LinearPlant,
+        limits: np.ndarray,
+        K: np.ndarray,
+        S: np.ndarray,
+        observer,
+        schedule: GainSchedule | None = None,
+    ):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=settings.saturate)
         self.plant = plant
         self.K = K
@@ -180,7 +209,13 @@ class LQRController(Controller):
         xi_next, x = self.observer.symbolic(xi, y, u_prev)
         x_ref, u_ref = r[: self.op.x.size], r[self.op.x.size :]
         u = u_ref - ca.mtimes(ca.DM(self.K), x - x_ref)
-        function = ca.Function("lqr_law", [xi, y, u_prev, r], [xi_next, u], ["xi", "y", "u_prev", "r"], ["xi_next", "u"])
+        function = ca.Function(
+            "lqr_law",
+            [xi, y, u_prev, r],
+            [xi_next, u],
+            ["xi", "y", "u_prev", "r"],
+            ["xi_next", "u"],
+        )
 
         def references(times: np.ndarray) -> np.ndarray:
             X, U, _ = self.reference.window(float(times[0]), self.sample_time, len(times))
@@ -208,8 +243,11 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
     if settings.schedule is not None:
         sched = settings.schedule
         if max(sched.joints) > model.n_u:
-            raise SpecError(f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
-                            f"allowed: q1..q{model.n_u}", key="schedule")
+            raise SpecError(
+                f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
+                f"allowed: q1..q{model.n_u}",
+                key="schedule",
+            )
         state_lin = Linearizer(model, ("joints",))
         gains = np.empty(tuple(len(g) for g in sched.grid) + K.shape)
         for index in itertools.product(*(range(len(g)) for g in sched.grid)):
@@ -224,5 +262,13 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
     return LQRController(settings, plant, limits, K, S, observer, schedule)
 
 
-__all__ = ["LQRController", "LinearPlant", "GainSchedule", "design_lqr", "linear_plant", "weight_matrices",
-           "lqr_gain", "build_sensors"]
+__all__ = [
+    "LQRController",
+    "LinearPlant",
+    "GainSchedule",
+    "design_lqr",
+    "linear_plant",
+    "weight_matrices",
+    "lqr_gain",
+    "build_sensors",
+]

@@ -43,9 +43,9 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.controller import Controller, SampledLaw
-from flexctrl.spec.controller_settings import PDSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits
+from flexctrl.spec.controller_settings import PDSettings
 
 
 def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarray, np.ndarray]:
@@ -53,8 +53,10 @@ def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarra
     n = model.n_u
     if settings.kp:
         if len(settings.kp) != n:
-            raise SpecError(f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one per joint)",
-                            key="kp")
+            raise SpecError(
+                f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one per joint)",
+                key="kp",
+            )
         return np.asarray(settings.kp, dtype=float), np.asarray(settings.kd, dtype=float)
     inertia = np.diag(model.mass_matrix(op.q))[:n]
     w = 2 * math.pi * settings.bandwidth
@@ -74,8 +76,16 @@ class PDController(Controller):
 
     kind = "pd"
 
-    def __init__(self, settings: PDSettings, op: OperatingPoint, sensors: Sensors, limits: np.ndarray,
-                 kp: np.ndarray, kd: np.ndarray, gravity: ca.Function | None):
+    def __init__(
+        self,
+        settings: PDSettings,
+        op: OperatingPoint,
+        sensors: Sensors,
+        limits: np.ndarray,
+        kp: np.ndarray,
+        kd: np.ndarray,
+        gravity: ca.Function | None,
+    ):
         super().__init__(settings, op, sensors, limits, saturate=settings.saturate)
         self.pd_settings = settings
         self.kp, self.kd = kp, kd
@@ -96,16 +106,23 @@ class PDController(Controller):
         gains = getattr(settings, "strain_rate_gain", ())
         if gains:
             if len(gains) != n:
-                raise SpecError(f"value {list(gains)!r} has {len(gains)} gains; expected {n} (one per joint)",
-                                key="strain_rate_gain")
+                raise SpecError(
+                    f"value {list(gains)!r} has {len(gains)} gains; expected {n} (one per joint)",
+                    key="strain_rate_gain",
+                )
             missing = [f"kappa{i + 1}" for i in range(n) if f"kappa{i + 1}" not in names]
             if missing:
-                raise SpecError(f"the sensors give no {', '.join(missing)} (links without modes have no strain "
-                                "gauge); allowed: strain_rate_gain only on a flexible model", key="strain_rate_gain")
+                raise SpecError(
+                    f"the sensors give no {', '.join(missing)} (links without modes have no strain "
+                    "gauge); allowed: strain_rate_gain only on a flexible model",
+                    key="strain_rate_gain",
+                )
             self.strain_gain = np.asarray(gains, dtype=float)
             self._ik = np.array([names.index(f"kappa{i + 1}") for i in range(n)])
             corner = settings.strain_rate_filter
-            self.strain_pole = math.exp(-2 * math.pi * corner * settings.sample_time) if corner > 0 else 0.0
+            self.strain_pole = (
+                math.exp(-2 * math.pi * corner * settings.sample_time) if corner > 0 else 0.0
+            )
         self._kappa = None
         self._rate = np.zeros(n)
 
@@ -119,7 +136,9 @@ class PDController(Controller):
         if not self.strain_gain.size:
             return 0.0
         kappa = y[self._ik]
-        raw = np.zeros(self.n_u) if self._kappa is None else (kappa - self._kappa) / self.sample_time
+        raw = (
+            np.zeros(self.n_u) if self._kappa is None else (kappa - self._kappa) / self.sample_time
+        )
         self._kappa = kappa
         b = self.strain_pole
         self._rate = b * self._rate + (1.0 - b) * raw
@@ -156,7 +175,9 @@ class PDController(Controller):
         H = np.hstack([I, Z, -np.diag(self.strain_gain)])
         return E, F3, np.zeros((3 * n, n)), H, J
 
-    def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def reference_terms(
+        self, t: float, q: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(q_ref, qd_ref, u_ref, u_static)`` at time ``t`` (s); ``q`` are the measured joints.
 
         From the reference's table on the sample grid with the static deflection
@@ -168,7 +189,9 @@ class PDController(Controller):
 
     def reference_table(self, times: np.ndarray) -> np.ndarray:
         """Rows ``(q_ref, qd_ref, u_ref, u_static)`` of :meth:`reference_terms` at the sample ``times`` (s), from now on."""
-        X, U, Us = self.reference.window(float(times[0]), self.sample_time, len(times), elastic=False)
+        X, U, Us = self.reference.window(
+            float(times[0]), self.sample_time, len(times), elastic=False
+        )
         N = X.shape[1] // 2
         return np.hstack([X[:, : self.n_u], X[:, N : N + self.n_u], U, Us])
 
@@ -189,11 +212,15 @@ class PDController(Controller):
         u_prev, r = ca.MX.sym("u_prev", n), ca.MX.sym("r", 4 * n)
         q, qd = y[self._iq.tolist()], y[self._iqd.tolist()]
         q_ref, qd_ref, u_ref, u_static = (r[i * n : (i + 1) * n] for i in range(4))
-        tau_g = {"target": u_static, "measured": self.gravity(q) if self.gravity is not None else 0.0}.get(
-            self.gravity_mode, 0.0)
+        tau_g = {
+            "target": u_static,
+            "measured": self.gravity(q) if self.gravity is not None else 0.0,
+        }.get(self.gravity_mode, 0.0)
         tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0
         a = self.filter_pole
-        filtered = a * xi[:n] + (1.0 - a) * (ca.DM(self.kp) * (q_ref - q) + ca.DM(self.kd) * (qd_ref - qd))
+        filtered = a * xi[:n] + (1.0 - a) * (
+            ca.DM(self.kp) * (q_ref - q) + ca.DM(self.kd) * (qd_ref - qd)
+        )
         u = tau_g + tau_ff + filtered
         parts = [filtered]
         if strain:
@@ -202,8 +229,13 @@ class PDController(Controller):
             rate = b * xi[2 * n :] + (1.0 - b) * ((kappa - xi[n : 2 * n]) / self.sample_time)
             u = u + (-ca.DM(self.strain_gain)) * rate
             parts += [kappa, rate]
-        function = ca.Function(f"{self.kind}_law", [xi, y, u_prev, r], [ca.vertcat(*parts), u],
-                               ["xi", "y", "u_prev", "r"], ["xi_next", "u"])
+        function = ca.Function(
+            f"{self.kind}_law",
+            [xi, y, u_prev, r],
+            [ca.vertcat(*parts), u],
+            ["xi", "y", "u_prev", "r"],
+            ["xi_next", "u"],
+        )
 
         def restore(values: np.ndarray) -> None:
             values = np.array(values, dtype=float)
@@ -225,7 +257,9 @@ class PDController(Controller):
         tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0
         self.record("ok")
         a = self.filter_pole
-        self._filtered = a * self._filtered + (1.0 - a) * (self.kp * (q_ref - q) + self.kd * (qd_ref - qd))
+        self._filtered = a * self._filtered + (1.0 - a) * (
+            self.kp * (q_ref - q) + self.kd * (qd_ref - qd)
+        )
         return tau_g + tau_ff + self._filtered + self._strain_damping(y)
 
 
@@ -235,7 +269,9 @@ def pd_parts(model, op: OperatingPoint, settings: PDSettings):
 
     sensors = build_sensors(model, settings.sensors, op)
     kp, kd = pd_gains(model, op, settings)
-    gravity = static_torque_function(model, op.q[model.n_u:]) if settings.gravity == "measured" else None
+    gravity = (
+        static_torque_function(model, op.q[model.n_u :]) if settings.gravity == "measured" else None
+    )
     return sensors, torque_limits(model), kp, kd, gravity
 
 

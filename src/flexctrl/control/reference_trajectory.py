@@ -43,15 +43,15 @@ sample time.
 from __future__ import annotations
 
 import math
+
 import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.model import derived
+from flexctrl.dynamics.parametric import parametric
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
 from flexctrl.sim.compile import QUICK_FLAGS, compile_for
-from flexctrl.dynamics.parametric import parametric
-
 from flexctrl.spec.reference import DEFLECTIONS, JointReference
 
 
@@ -93,8 +93,12 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
     qd = ca.vertcat(qdr, qdf)
     qdd = ca.vertcat(qddr, qddf)
     static = model.functions["g"](q) + ca.mtimes(stiffness_matrix(model, q), q)
-    force = (ca.mtimes(model.functions["M"](q), qdd) + model.functions["c"](q, qd) + static
-             + ca.mtimes(_damping_matrix(model, q), qd))
+    force = (
+        ca.mtimes(model.functions["M"](q), qdd)
+        + model.functions["c"](q, qd)
+        + static
+        + ca.mtimes(_damping_matrix(model, q), qd)
+    )
     if compile is False:
         return _functions(args, names, _outputs(force, static, qr, qdr, qddr, qf, n))
     forces = ca.Function("reference_forces", args, [force, static], names, ["force", "static"])
@@ -105,8 +109,13 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
     def one() -> ca.Function:
         c = ca.SX.sym("c", constants.size)
         outs = _outputs(*fp(*args, c), qr, qdr, qddr, qf, n)
-        return ca.Function(f"reference_p_{n}_{N}_{constants.size}", [*args, c], outs, [*names, "c"],
-                           ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"])
+        return ca.Function(
+            f"reference_p_{n}_{N}_{constants.size}",
+            [*args, c],
+            outs,
+            [*names, "c"],
+            ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"],
+        )
 
     # kept with the lifted forces: a later configuration of the model shape skips the Jacobians and the load
     compiled = compile_for(fp, "reference", one, enabled=compile, flags=QUICK_FLAGS)
@@ -119,15 +128,26 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
 def _outputs(force, static, qr, qdr, qddr, qf, n: int) -> list:
     """``[r_f, J_qf, J_qr, J_qdr, J_qddr, tau, tau_static]`` of the generalised forces (module docstring)."""
     r = force[n:]
-    return [r, ca.jacobian(r, qf), ca.jacobian(r, qr), ca.jacobian(r, qdr), ca.jacobian(r, qddr), force[:n],
-            static[:n]]
+    return [
+        r,
+        ca.jacobian(r, qf),
+        ca.jacobian(r, qr),
+        ca.jacobian(r, qdr),
+        ca.jacobian(r, qddr),
+        force[:n],
+        static[:n],
+    ]
 
 
 def _functions(args, names, outs) -> dict[str, ca.Function]:
     """``rj``, ``all`` and ``tau`` (:func:`path_functions`) of the outputs of :func:`_outputs` at ``args``."""
-    return {"rj": ca.Function("reference_rj", args, outs[:2], names, ["r", "J_qf"]),
-            "all": ca.Function("reference_all", args, outs[:5], names, ["r", "J_qf", "J_qr", "J_qdr", "J_qddr"]),
-            "tau": ca.Function("reference_tau", args, outs[5:], names, ["tau", "tau_static"])}
+    return {
+        "rj": ca.Function("reference_rj", args, outs[:2], names, ["r", "J_qf"]),
+        "all": ca.Function(
+            "reference_all", args, outs[:5], names, ["r", "J_qf", "J_qr", "J_qdr", "J_qddr"]
+        ),
+        "tau": ca.Function("reference_tau", args, outs[5:], names, ["tau", "tau_static"]),
+    }
 
 
 class ReferenceTrajectory:
@@ -149,13 +169,26 @@ class ReferenceTrajectory:
         virtual machine's in the last digits.
     """
 
-    def __init__(self, model, path: JointReference, deflection: str = "quasi_static", *, tol: float = 1e-10,
-                 max_iter: int = 30, compile: bool | None = False):
+    def __init__(
+        self,
+        model,
+        path: JointReference,
+        deflection: str = "quasi_static",
+        *,
+        tol: float = 1e-10,
+        max_iter: int = 30,
+        compile: bool | None = False,
+    ):
         if deflection not in DEFLECTIONS:
-            raise SpecError(f"value {deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
-                            key="deflection")
+            raise SpecError(
+                f"value {deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                key="deflection",
+            )
         if len(path.q_target) != model.n_u:
-            raise SpecError(f"the reference has {len(path.q_target)} joint angles; expected {model.n_u}", key="target")
+            raise SpecError(
+                f"the reference has {len(path.q_target)} joint angles; expected {model.n_u}",
+                key="target",
+            )
         self.model = model
         self.path = path
         self.deflection = deflection
@@ -173,8 +206,9 @@ class ReferenceTrajectory:
     def _fun(self) -> dict[str, ca.Function]:
         return path_functions(self.model, self.compile)
 
-    def _elastic(self, derivs, moving: bool, elastic: bool, qddf: np.ndarray, qf: np.ndarray,
-                 qdf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _elastic(
+        self, derivs, moving: bool, elastic: bool, qddf: np.ndarray, qf: np.ndarray, qdf: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``(q_f, qd_f)`` at the path points ``derivs = (q, qd, qdd, qddd)`` (T, n) for given elastic accelerations."""
         q, qd, qdd, qddd = derivs
         T, n = q.shape
@@ -200,12 +234,19 @@ class ReferenceTrajectory:
                 J_qr, J_qdr, J_qddr = (blocks(v, n) for v in out[2:5])
                 rate = J_qr @ qd[:, :, None] + J_qdr @ mqdd[:, :, None] + J_qddr @ mqddd[:, :, None]
                 qdf_new = -np.linalg.solve(J_qf, rate)[:, :, 0]
-                change = float(np.max(np.abs(qdf_new - qdf))) / (1.0 + float(np.max(np.abs(qdf_new))))
+                change = float(np.max(np.abs(qdf_new - qdf))) / (
+                    1.0 + float(np.max(np.abs(qdf_new)))
+                )
                 qdf = qdf_new
-            if max(float(np.max(np.abs(step))) / (1.0 + float(np.max(np.abs(qf)))), change) <= self.tol:
+            if (
+                max(float(np.max(np.abs(step))) / (1.0 + float(np.max(np.abs(qf)))), change)
+                <= self.tol
+            ):
                 return qf, qdf
-        raise SolverError(f"reference: Newton on the elastic coordinates did not converge in {self.max_iter} "
-                          f"passes (last step {np.max(np.abs(step)):.3g})")
+        raise SolverError(
+            f"reference: Newton on the elastic coordinates did not converge in {self.max_iter} "
+            f"passes (last step {np.max(np.abs(step)):.3g})"
+        )
 
     def evaluate(self, t, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(x_ref (T, 2N), u_ref (T, n), u_static (T, n))`` at the times ``t`` (s).
@@ -233,10 +274,14 @@ class ReferenceTrajectory:
         ftau = self._fun["tau"].map(T)
         out = ftau(q.T, qd.T, qdd.T, qf.T, qdf.T, qddf.T)
         tau, tau_static = np.array(out[0], dtype=float).T, np.array(out[1], dtype=float).T
-        if moving and nf:  # the holding torque belongs to the static deflection, not the quasi-static one
+        if (
+            moving and nf
+        ):  # the holding torque belongs to the static deflection, not the quasi-static one
             zero = np.zeros((T, nf))
             qf_static, _ = self._elastic(derivs, False, False, zero, qf, zero)
-            tau_static = np.array(ftau(q.T, 0 * qd.T, 0 * qdd.T, qf_static.T, zero.T, zero.T)[1], dtype=float).T
+            tau_static = np.array(
+                ftau(q.T, 0 * qd.T, 0 * qdd.T, qf_static.T, zero.T, zero.T)[1], dtype=float
+            ).T
         return np.hstack([q, qf, qd, qdf]), tau, tau_static
 
     def _table(self, Ts: float, elastic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -248,8 +293,9 @@ class ReferenceTrajectory:
             self._tables[key] = table
         return table
 
-    def window(self, t: float, Ts: float, count: int, *, elastic: bool = True
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def window(
+        self, t: float, Ts: float, count: int, *, elastic: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``count`` samples ``t, t + Ts, ...``: ``(x_ref (count, 2N), u_ref (count, n), u_static (count, n))``.
 
         On the grid ``k Ts`` the values come from a table computed once (up to the end
@@ -262,7 +308,9 @@ class ReferenceTrajectory:
         idx = np.minimum(k0 + np.arange(count), X.shape[0] - 1)
         return X[idx], U[idx], Us[idx]
 
-    def at(self, t: float, Ts: float, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def at(
+        self, t: float, Ts: float, *, elastic: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(x_ref, u_ref, u_static)`` at ``t`` (s), from the table of sample time ``Ts`` when ``t`` is on its grid."""
         X, U, Us = self.window(t, Ts, 1, elastic=elastic)
         return X[0], U[0], Us[0]
@@ -281,11 +329,18 @@ class HoldReference:
     def t_arrive(self) -> float:
         return 0.0
 
-    def window(self, t: float, Ts: float, count: int, *, elastic: bool = True
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return (np.tile(self.op.x, (count, 1)), np.tile(self.op.u, (count, 1)), np.tile(self.op.u, (count, 1)))
+    def window(
+        self, t: float, Ts: float, count: int, *, elastic: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return (
+            np.tile(self.op.x, (count, 1)),
+            np.tile(self.op.u, (count, 1)),
+            np.tile(self.op.u, (count, 1)),
+        )
 
-    def at(self, t: float, Ts: float, *, elastic: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def at(
+        self, t: float, Ts: float, *, elastic: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.op.x, self.op.u, self.op.u
 
 

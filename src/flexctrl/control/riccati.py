@@ -40,8 +40,15 @@ from flexctrl.errors import SolverError
 RESIDUAL_TOL = 1e-8
 
 
-def _doubling(Ak: np.ndarray, Gk: np.ndarray, Hk: np.ndarray, eye: np.ndarray, tol: float, max_iter: int,
-              what: str) -> np.ndarray:
+def _doubling(
+    Ak: np.ndarray,
+    Gk: np.ndarray,
+    Hk: np.ndarray,
+    eye: np.ndarray,
+    tol: float,
+    max_iter: int,
+    what: str,
+) -> np.ndarray:
     """The SDA iteration from ``(A_0, G_0, H_0)``; returns the converged ``H``."""
     for _ in range(max_iter):
         W = eye + Gk @ Hk
@@ -49,14 +56,18 @@ def _doubling(Ak: np.ndarray, Gk: np.ndarray, Hk: np.ndarray, eye: np.ndarray, t
             V_A = np.linalg.solve(W, Ak)
             V_G = np.linalg.solve(W, Gk)
         except np.linalg.LinAlgError as exc:
-            raise SolverError(f"{what}: the doubling iteration met a singular matrix ({exc})") from exc
+            raise SolverError(
+                f"{what}: the doubling iteration met a singular matrix ({exc})"
+            ) from exc
         H_next = Hk + V_A.T @ Hk @ Ak
         G_next = Gk + Ak @ V_G @ Ak.T
         Ak = Ak @ V_A
         H_next = 0.5 * (H_next + H_next.T)
         if not np.all(np.isfinite(H_next)):
-            raise SolverError(f"{what}: the doubling iteration diverged (no stabilising solution: "
-                              "an uncontrollable/unobservable mode on or outside the unit circle?)")
+            raise SolverError(
+                f"{what}: the doubling iteration diverged (no stabilising solution: "
+                "an uncontrollable/unobservable mode on or outside the unit circle?)"
+            )
         change = np.linalg.norm(H_next - Hk, 1)
         Hk, Gk = H_next, 0.5 * (G_next + G_next.T)
         if change <= tol * max(1.0, np.linalg.norm(Hk, 1)):
@@ -64,8 +75,16 @@ def _doubling(Ak: np.ndarray, Gk: np.ndarray, Hk: np.ndarray, eye: np.ndarray, t
     raise SolverError(f"{what}: the doubling iteration did not converge in {max_iter} steps")
 
 
-def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, *, tol: float = 1e-14,
-               max_iter: int = 200, what: str = "DARE") -> np.ndarray:
+def solve_dare(
+    A: np.ndarray,
+    B: np.ndarray,
+    Q: np.ndarray,
+    R: np.ndarray,
+    *,
+    tol: float = 1e-14,
+    max_iter: int = 200,
+    what: str = "DARE",
+) -> np.ndarray:
     """Stabilising solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA, see module docstring).
 
     Parameters
@@ -96,7 +115,9 @@ def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, *, to
     Gk = B @ np.linalg.solve(0.5 * (R + R.T), B.T)
     Gk = 0.5 * (Gk + Gk.T)
     Hk = 0.5 * (Q + Q.T)
-    with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected below, as non-finite H_k
+    with np.errstate(
+        over="ignore", invalid="ignore"
+    ):  # divergence is detected below, as non-finite H_k
         Hk = _doubling(Ak, Gk, Hk, eye, tol, max_iter, what)
     X = Hk
     S = R + B.T @ X @ B
@@ -107,7 +128,9 @@ def solve_dare(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, *, to
     K = np.linalg.solve(S, B.T @ X @ A)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
     if not rho < 1.0:
-        raise SolverError(f"{what}: the Riccati solution does not stabilise (closed-loop spectral radius {rho:.6g})")
+        raise SolverError(
+            f"{what}: the Riccati solution does not stabilise (closed-loop spectral radius {rho:.6g})"
+        )
     return X
 
 

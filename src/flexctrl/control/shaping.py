@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctrl.control.pd import PDController, pd_parts
-from flexctrl.spec.controller_settings import ShapedSettings
 from flexctrl.errors import SpecError
 from flexctrl.linear import Linearizer, OperatingPoint, locked_frequencies, modal_summary
+from flexctrl.spec.controller_settings import ShapedSettings
 
 #: Damping ratio below which a complex pair of the closed loop counts as vibration.
 VIBRATION_DAMPING = 0.3
@@ -50,7 +50,7 @@ class Shaper:
         """Time of the last impulse, s (the delay the shaper adds)."""
         return float(self.times[-1]) if self.times.size else 0.0
 
-    def convolve(self, other: "Shaper") -> "Shaper":
+    def convolve(self, other: Shaper) -> Shaper:
         """The shaper of both (impulse times added, amplitudes multiplied, coincident impulses merged)."""
         t = (self.times[:, None] + other.times[None, :]).ravel()
         a = (self.amplitudes[:, None] * other.amplitudes[None, :]).ravel()
@@ -67,14 +67,20 @@ class Shaper:
 
     def apply(self, signal, t: np.ndarray | float) -> np.ndarray:
         """``sum A_i signal(t - t_i)`` for a callable ``signal`` of time (zero before 0 is the caller's business)."""
-        return sum(a * np.asarray(signal(np.asarray(t) - ti)) for a, ti in zip(self.amplitudes, self.times))
+        return sum(
+            a * np.asarray(signal(np.asarray(t) - ti)) for a, ti in zip(self.amplitudes, self.times)
+        )
 
 
 def _check(frequency_hz: float, zeta: float) -> tuple[float, float]:
     if not (frequency_hz > 0 and math.isfinite(frequency_hz)):
-        raise SpecError(f"value {frequency_hz!r} is not allowed; allowed: a frequency > 0 Hz", key="frequency")
+        raise SpecError(
+            f"value {frequency_hz!r} is not allowed; allowed: a frequency > 0 Hz", key="frequency"
+        )
     if not 0 <= zeta < 1:
-        raise SpecError(f"value {zeta!r} is not allowed; allowed: a damping ratio in [0, 1)", key="damping")
+        raise SpecError(
+            f"value {zeta!r} is not allowed; allowed: a damping ratio in [0, 1)", key="damping"
+        )
     return float(frequency_hz), float(zeta)
 
 
@@ -108,15 +114,24 @@ def residual_vibration(shaper: Shaper, frequency_hz: float, zeta: float = 0.0) -
     wd = w * math.sqrt(1 - zeta * zeta)
     tn = shaper.duration
     decay = shaper.amplitudes * np.exp(-zeta * w * (tn - shaper.times))
-    return float(math.hypot(np.sum(decay * np.cos(wd * shaper.times)), np.sum(decay * np.sin(wd * shaper.times))))
+    return float(
+        math.hypot(
+            np.sum(decay * np.cos(wd * shaper.times)), np.sum(decay * np.sin(wd * shaper.times))
+        )
+    )
 
 
-def shaping_modes(model, op: OperatingPoint, settings: ShapedSettings, kp: np.ndarray, kd: np.ndarray) -> list[tuple[float, float]]:
+def shaping_modes(
+    model, op: OperatingPoint, settings: ShapedSettings, kp: np.ndarray, kd: np.ndarray
+) -> list[tuple[float, float]]:
     """``(frequency_hz, zeta)`` of the modes to shape (see the module docstring)."""
     if settings.frequency_source == "locked":
         freqs = locked_frequencies(model, op)
         if freqs.size < settings.modes:
-            raise SpecError(f"value {settings.modes} is not allowed; the model has {freqs.size} locked modes", key="modes")
+            raise SpecError(
+                f"value {settings.modes} is not allowed; the model has {freqs.size} locked modes",
+                key="modes",
+            )
         return [(float(f), 0.0) for f in freqs[: settings.modes]]
     A, B, _C, _D = Linearizer(model, ("joints",)).matrices(op)
     n, N = model.n_u, model.n_q
@@ -130,12 +145,20 @@ def shaping_modes(model, op: OperatingPoint, settings: ShapedSettings, kp: np.nd
         Acl = A - B @ gain
     import control
 
-    summary = modal_summary(control.ss(Acl, np.zeros((Acl.shape[0], 1)), np.zeros((1, Acl.shape[0])), 0))
-    picks = [(float(f), float(z)) for f, z, osc in zip(summary.frequency_hz, summary.damping, summary.oscillatory)
-             if osc and 0 <= z < VIBRATION_DAMPING]
+    summary = modal_summary(
+        control.ss(Acl, np.zeros((Acl.shape[0], 1)), np.zeros((1, Acl.shape[0])), 0)
+    )
+    picks = [
+        (float(f), float(z))
+        for f, z, osc in zip(summary.frequency_hz, summary.damping, summary.oscillatory)
+        if osc and 0 <= z < VIBRATION_DAMPING
+    ]
     if len(picks) < settings.modes:
-        raise SpecError(f"value {settings.modes} is not allowed; the PD loop has {len(picks)} vibration modes "
-                        f"(complex pairs with damping < {VIBRATION_DAMPING})", key="modes")
+        raise SpecError(
+            f"value {settings.modes} is not allowed; the PD loop has {len(picks)} vibration modes "
+            f"(complex pairs with damping < {VIBRATION_DAMPING})",
+            key="modes",
+        )
     return picks[: settings.modes]
 
 
@@ -163,8 +186,18 @@ class ShapedController(PDController):
 
     kind = "shaped"
 
-    def __init__(self, settings: ShapedSettings, op, sensors, limits, kp, kd, gravity, shaper: Shaper,
-                 modes: list[tuple[float, float]]):
+    def __init__(
+        self,
+        settings: ShapedSettings,
+        op,
+        sensors,
+        limits,
+        kp,
+        kd,
+        gravity,
+        shaper: Shaper,
+        modes: list[tuple[float, float]],
+    ):
         super().__init__(settings.pd, op, sensors, limits, kp, kd, gravity)
         self.settings = settings
         self.pd_settings = settings.pd
@@ -187,7 +220,9 @@ class ShapedController(PDController):
         """Whether the controller's reference is a smooth path (shaped as given) rather than a step."""
         return self.reference.path.profile != "step"
 
-    def reference_terms(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def reference_terms(
+        self, t: float, q: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if not self.shapes_reference and self._start is None:
             self._start = (t, np.array(q, dtype=float))
         row = self.reference_table(np.array([t], dtype=float))[0]
@@ -204,15 +239,30 @@ class ShapedController(PDController):
         A = self.shaper.amplitudes
         shifted = times[:, None] - self.shaper.times[None, :]
         if self.shapes_reference:
-            q_all, qd_all = (v.reshape(shifted.shape + (-1,)) for v in
-                             self.reference.path.derivatives(shifted.ravel(), order=1))
-            u_ref, u_static = (np.einsum("m,tmn->tn", A, self._torques(shifted, which)) for which in (1, 2))
-            return np.hstack([np.einsum("m,tmn->tn", A, q_all), np.einsum("m,tmn->tn", A, qd_all), u_ref, u_static])
+            q_all, qd_all = (
+                v.reshape(shifted.shape + (-1,))
+                for v in self.reference.path.derivatives(shifted.ravel(), order=1)
+            )
+            u_ref, u_static = (
+                np.einsum("m,tmn->tn", A, self._torques(shifted, which)) for which in (1, 2)
+            )
+            return np.hstack(
+                [
+                    np.einsum("m,tmn->tn", A, q_all),
+                    np.einsum("m,tmn->tn", A, qd_all),
+                    u_ref,
+                    u_static,
+                ]
+            )
         t0, q0 = self._start
         pos, vel = self._profile((times[:, None] - t0) - self.shaper.times[None, :])
         delta = np.asarray(self.reference.path.q_target) - q0
-        _x, _u, u_static = self.reference.window(float(times[0]), self.sample_time, times.size, elastic=False)
-        return np.hstack([q0 + (pos @ A)[:, None] * delta, (vel @ A)[:, None] * delta, u_static, u_static])
+        _x, _u, u_static = self.reference.window(
+            float(times[0]), self.sample_time, times.size, elastic=False
+        )
+        return np.hstack(
+            [q0 + (pos @ A)[:, None] * delta, (vel @ A)[:, None] * delta, u_static, u_static]
+        )
 
     def _torques(self, times: np.ndarray, which: int) -> np.ndarray:
         """Reference torques (u_ref: 1, u_static: 2) at ``times`` (any shape), linearly interpolated on the sample grid."""
@@ -228,8 +278,19 @@ def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> Shaped
     """Build the shaped-reference PD controller moving ``model`` to ``op``."""
     sensors, limits, kp, kd, gravity = pd_parts(model, op, settings.pd)
     modes = [] if settings.shaper == "none" else shaping_modes(model, op, settings, kp, kd)
-    return ShapedController(settings, op, sensors, limits, kp, kd, gravity, design_shaper(modes, settings.shaper), modes)
+    return ShapedController(
+        settings, op, sensors, limits, kp, kd, gravity, design_shaper(modes, settings.shaper), modes
+    )
 
 
-__all__ = ["Shaper", "zv", "zvd", "identity_shaper", "residual_vibration", "design_shaper", "shaping_modes",
-           "ShapedController", "design_shaped"]
+__all__ = [
+    "Shaper",
+    "zv",
+    "zvd",
+    "identity_shaper",
+    "residual_vibration",
+    "design_shaper",
+    "shaping_modes",
+    "ShapedController",
+    "design_shaped",
+]

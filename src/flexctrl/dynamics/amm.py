@@ -67,7 +67,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Literal, Sequence
+from collections.abc import Sequence
+from typing import Literal
 
 import casadi as ca
 import numpy as np
@@ -83,8 +84,8 @@ from flexctrl.dynamics.amm_kinematics import (
 )
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import SpecError
-from flexctrl.spec.fidelity import Fidelity
 from flexctrl.spec.arm import DAMPING_FORMS, ArmSpec
+from flexctrl.spec.fidelity import Fidelity
 
 MODES = ("frozen", "scheduled")
 DAMPING = DAMPING_FORMS
@@ -106,7 +107,11 @@ def ldl_solve(A, b):
     inv_d = [None] * n
 
     def dot(row_a, row_l, stop):
-        terms = [row_a[m] * row_l[m] for m in range(stop) if row_a[m] is not None and row_l[m] is not None]
+        terms = [
+            row_a[m] * row_l[m]
+            for m in range(stop)
+            if row_a[m] is not None and row_l[m] is not None
+        ]
         return sum(terms[1:], terms[0]) if terms else None
 
     def minus(x, y):
@@ -147,8 +152,11 @@ def natural_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
     """
     lam = scipy.linalg.eigh(K, M, eigvals_only=True)
     if np.any(lam < -1e-9 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))):
-        warnings.warn(f"the structure has negative stiffness eigenvalues {lam[lam < 0]}; clipped to 0",
-                      RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"the structure has negative stiffness eigenvalues {lam[lam < 0]}; clipped to 0",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     return np.sqrt(np.clip(lam, 0.0, None))
 
 
@@ -167,11 +175,16 @@ def locked_spectrum(M: np.ndarray, K: np.ndarray, n_joints: int) -> np.ndarray:
 
 def _check_choice(value: str, allowed: tuple[str, ...], key: str) -> str:
     if value not in allowed:
-        raise SpecError(f"value {value!r} is not allowed; allowed: {', '.join(repr(a) for a in allowed)}", key=key)
+        raise SpecError(
+            f"value {value!r} is not allowed; allowed: {', '.join(repr(a) for a in allowed)}",
+            key=key,
+        )
     return value
 
 
-def _frozen_modal(arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int], correct: Sequence[bool] = ()):
+def _frozen_modal(
+    arm: ArmSpec, q_ref: np.ndarray, n_modes: Sequence[int], correct: Sequence[bool] = ()
+):
     """Frozen modal constants per link; links flagged in ``correct`` get the tip-moment correction shape last."""
     from flexctrl.modal.arm_modes import link_modes
     from flexctrl.modal.static_correction import CorrectedModes
@@ -202,7 +215,9 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
     if lookups is None:
         from flexctrl.modal.lookup import modal_lookup
 
-        lookups = [modal_lookup(arm, i, nf).function if nf else None for i, nf in enumerate(n_modes)]
+        lookups = [
+            modal_lookup(arm, i, nf).function if nf else None for i, nf in enumerate(n_modes)
+        ]
     n = arm.n_links
     q0 = ca.SX.sym("q_expansion", n)
     step = q[:n] - q0
@@ -220,7 +235,11 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
         jac = ca.jacobian(value, point)
         hess = ca.jacobian(ca.vec(jac), point)  # row i + m k: d^2 value_i / dq_k dq
         derivatives = ca.Function(f"modal_expansion_link{i + 1}", [point], [value, jac, hess])
-        a, B, C = ca.SX.sym(f"a{i + 1}", m), ca.SX.sym(f"B{i + 1}", m, n), ca.SX.sym(f"C{i + 1}", m * n, n)
+        a, B, C = (
+            ca.SX.sym(f"a{i + 1}", m),
+            ca.SX.sym(f"B{i + 1}", m, n),
+            ca.SX.sym(f"C{i + 1}", m * n, n),
+        )
         local = a + ca.mtimes(B, step) + 0.5 * ca.mtimes(ca.reshape(ca.mtimes(C, step), m, n), step)
         symbols += [a, B, C]
         values += [ca.densify(v) for v in derivatives(q[:n])]
@@ -323,29 +342,40 @@ def build_amm(
     _check_choice(solver, SOLVERS, "solver")
     _check_choice(coriolis, CORIOLIS, "coriolis")
     if axial_shortening is None:
-        axial_shortening = AMM_AXIAL_SHORTENING if arm.axial_shortening is None else arm.axial_shortening
+        axial_shortening = (
+            AMM_AXIAL_SHORTENING if arm.axial_shortening is None else arm.axial_shortening
+        )
     shortening = bool(axial_shortening)
-    rotation = _check_choice(tip_rotation or ("exact" if shortening else "linearised"), TIP_ROTATIONS, "tip_rotation")
+    rotation = _check_choice(
+        tip_rotation or ("exact" if shortening else "linearised"), TIP_ROTATIONS, "tip_rotation"
+    )
     n = arm.n_links
     n_modes = [int(n_modes)] * n if np.isscalar(n_modes) else [int(k) for k in n_modes]
     if len(n_modes) != n or any(not 0 <= k <= 6 for k in n_modes):
-        raise SpecError(f"n_modes {n_modes!r} is not allowed; allowed: one count 0..6 or one per link ({n} links)", key="n_modes")
+        raise SpecError(
+            f"n_modes {n_modes!r} is not allowed; allowed: one count 0..6 or one per link ({n} links)",
+            key="n_modes",
+        )
     q_ref = arm.configuration_or_default(reference_q)
     if fidelity is None:
         fidelity = Fidelity("amm", n_modes[0]) if len(set(n_modes)) == 1 else Fidelity("amm")
     correction = AMM_STATIC_CORRECTION if static_correction is None else bool(static_correction)
     corrected = [correction and i < n - 1 and nf > 0 for i, nf in enumerate(n_modes)]
     if any(corrected) and modes == "scheduled":
-        raise SpecError("value True is not allowed with modes='scheduled'; allowed: static_correction with frozen modes",
-                        key="static_correction")
+        raise SpecError(
+            "value True is not allowed with modes='scheduled'; allowed: static_correction with frozen modes",
+            key="static_correction",
+        )
     frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes, corrected)
     n_modes = [md.n_modes for md in frozen_modal]
     if axial_stretch is None:
         axial_stretch = AMM_AXIAL_STRETCH if arm.axial_stretch is None else arm.axial_stretch
     stretch = bool(axial_stretch)
     if stretch and modes == "scheduled":
-        raise SpecError("value True is not allowed with modes='scheduled'; allowed: axial_stretch with frozen modes",
-                        key="axial_stretch")
+        raise SpecError(
+            "value True is not allowed with modes='scheduled'; allowed: axial_stretch with frozen modes",
+            key="axial_stretch",
+        )
     stretched = stretched_links(n_modes) if stretch else []
     names = coordinate_names(n, n_modes) + tuple(f"e{i + 1}" for i in stretched)
     N = len(names)
@@ -356,11 +386,20 @@ def build_amm(
     scheduled = modes == "scheduled" and N > n
     if scheduled:
         modal, expansion = _scheduled_modal(arm, q, n_modes, lookups)
-        ex = arm_expressions(arm, modal, q, shape_rates=True, axial_shortening=shortening, tip_rotation=rotation)
+        ex = arm_expressions(
+            arm, modal, q, shape_rates=True, axial_shortening=shortening, tip_rotation=rotation
+        )
     else:
         modal = frozen_modal
-        ex = arm_expressions(arm, modal, q, qd if coriolis == "bodies" else None, axial_shortening=shortening,
-                             tip_rotation=rotation, axial_stretch=stretch)
+        ex = arm_expressions(
+            arm,
+            modal,
+            q,
+            qd if coriolis == "bodies" else None,
+            axial_shortening=shortening,
+            tip_rotation=rotation,
+            axial_stretch=stretch,
+        )
 
     # stiffness and damping (Eqs 65-68)
     stiffness, damp = [ca.SX(0)] * n, [ca.SX(arm.joints[i].friction) for i in range(n)]
@@ -368,13 +407,17 @@ def build_amm(
         for j in range(n_modes[i]):
             omega = md.omega[j]
             stiffness.append(link.mass * omega**2)
-            if damping == "stiffness":  # the finite elements' (2 zeta / omega_1) K on the modal stiffness
+            if (
+                damping == "stiffness"
+            ):  # the finite elements' (2 zeta / omega_1) K on the modal stiffness
                 damp.append(2.0 * link.damping_ratio(0) / float(md.omega[0]) * link.mass * omega**2)
             else:
                 scale = link.mass if damping == "ratio" else 1.0
                 damp.append(2.0 * link.damping_ratio(j) * omega * scale)
     E_el = ex.elastic_energy
-    if stretch:  # elongations e_i: strain energy 1/2 (EA / L) e^2, damped as the finite elements' links
+    if (
+        stretch
+    ):  # elongations e_i: strain energy 1/2 (EA / L) e^2, damped as the finite elements' links
         for i in stretched:
             link, md = arm.links[i], modal[i]
             k_axial = link.axial_stiffness() / link.length
@@ -404,9 +447,20 @@ def build_amm(
     opts = {"cse": True}
     tip = ex.positions[:, n]
     expr = {
-        "M": M, "c": c, "g": g, "K": K, "D": D, "xdot": ca.vertcat(qd, qdd), "E_kin": E_kin, "E_el": E_el,
-        "E_grav": ex.gravity_energy, "tip": tip, "tip_v": ca.jtimes(tip, q, qd), "hubs": ex.positions,
-        "w": ex.tip_deflection, "dw": ex.tip_slope,
+        "M": M,
+        "c": c,
+        "g": g,
+        "K": K,
+        "D": D,
+        "xdot": ca.vertcat(qd, qdd),
+        "E_kin": E_kin,
+        "E_el": E_el,
+        "E_grav": ex.gravity_energy,
+        "tip": tip,
+        "tip_v": ca.jtimes(tip, q, qd),
+        "hubs": ex.positions,
+        "w": ex.tip_deflection,
+        "dw": ex.tip_slope,
     }
     if scheduled:  # the tables' expansion point is the current configuration (see _scheduled_modal)
         expr = dict(zip(expr, ca.substitute(list(expr.values()), *expansion)))
@@ -414,15 +468,28 @@ def build_amm(
         "M": ca.Function("M", [q], [expr["M"]], ["q"], ["M"], opts),
         "c": ca.Function("c", [q, qd], [expr["c"]], ["q", "qd"], ["c"], opts),
         "g": ca.Function("g", [q], [expr["g"]], ["q"], ["g"], opts),
-        "K": ca.Function("K", [q], [expr["K"]], ["q"], ["K"], opts) if scheduled else ca.Function("K", [], [K], [], ["K"]),
-        "D": ca.Function("D", [q], [expr["D"]], ["q"], ["D"], opts) if scheduled else ca.Function("D", [], [D], [], ["D"]),
+        "K": ca.Function("K", [q], [expr["K"]], ["q"], ["K"], opts)
+        if scheduled
+        else ca.Function("K", [], [K], [], ["K"]),
+        "D": ca.Function("D", [q], [expr["D"]], ["q"], ["D"], opts)
+        if scheduled
+        else ca.Function("D", [], [D], [], ["D"]),
         "f": ca.Function("f", [x, u], [expr["xdot"]], ["x", "u"], ["xdot"], opts),
         "energies": ca.Function(
-            "energies", [q, qd], [expr["E_kin"], expr["E_el"], expr["E_grav"]], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+            "energies",
+            [q, qd],
+            [expr["E_kin"], expr["E_el"], expr["E_grav"]],
+            ["q", "qd"],
+            ["E_kin", "E_el", "E_grav"],
+            opts,
         ),
-        "tip": ca.Function("tip", [q, qd], [expr["tip"], expr["tip_v"]], ["q", "qd"], ["p", "v"], opts),
+        "tip": ca.Function(
+            "tip", [q, qd], [expr["tip"], expr["tip_v"]], ["q", "qd"], ["p", "v"], opts
+        ),
         "hubs": ca.Function("hubs", [q], [expr["hubs"]], ["q"], ["p"], opts),
-        "deflection": ca.Function("deflection", [q], [expr["w"], expr["dw"]], ["q"], ["w", "dw"], opts),
+        "deflection": ca.Function(
+            "deflection", [q], [expr["w"], expr["dw"]], ["q"], ["w", "dw"], opts
+        ),
     }
 
     # locked-joint linearisation at the reference configuration (joints clamped, q_f = 0, qd = 0)
@@ -451,7 +518,8 @@ def build_amm(
         "axial_shortening": shortening,
         "axial_stretch": stretch,
         "static_correction": [bool(c) for c in corrected],
-        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)" if rotation == "linearised"
+        "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)"
+        if rotation == "linearised"
         else "exact rotation by the tip slope w'_ie",
         "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
         "input_matrix": "tau acts on q1..qn",
@@ -459,7 +527,7 @@ def build_amm(
     }
     return Model(
         name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}{' static-correction' if any(corrected) else ''}{' axial-stretch' if stretch else ''}"
-             f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
+        f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,
         coordinate_names=names,

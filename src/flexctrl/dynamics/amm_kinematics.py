@@ -53,8 +53,8 @@ Shapes that move with the configuration (``shape_rates=True``)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -108,7 +108,7 @@ class LinkModal:
         return self.sh_v is not None and self.n_modes > 0
 
     @staticmethod
-    def from_modes(modes, n_modes: int) -> "LinkModal":
+    def from_modes(modes, n_modes: int) -> LinkModal:
         """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None if n_f = 0),
         with the axial-shortening integrals of :func:`flexctrl.modal.shortening.link_shortening`."""
         from flexctrl.modal.shortening import link_shortening
@@ -116,8 +116,15 @@ class LinkModal:
         if n_modes == 0:
             empty = ca.DM.zeros(0, 1)
             return LinkModal(empty, empty, empty, empty, empty, ca.DM.zeros(0, 0))
-        fields = {name: ca.DM(np.reshape(np.asarray(getattr(modes, name), dtype=float), (n_modes, n_modes) if name == "z" else (n_modes, 1)))
-                  for name in MODAL_FIELDS}
+        fields = {
+            name: ca.DM(
+                np.reshape(
+                    np.asarray(getattr(modes, name), dtype=float),
+                    (n_modes, n_modes) if name == "z" else (n_modes, 1),
+                )
+            )
+            for name in MODAL_FIELDS
+        }
         short = link_shortening(modes)
         for name, value in short.items():
             fields[name] = ca.DM(value.reshape(-1, 1) if value.ndim == 1 else value)
@@ -215,10 +222,12 @@ class _Inertia:
         if mass != 0.0:
             self.add(P, mass * ca.DM.eye(P.shape[0]))
 
-    def add_moving_shapes(self, P, gram, md: "LinkModal", qf, frame_y) -> None:
+    def add_moving_shapes(self, P, gram, md: LinkModal, qf, frame_y) -> None:
         """Add the link's Gram form over the pieces ``(P, E)`` (see the module docstring)."""
         if self.c is not None:
-            raise ValueError("moving shapes need the Lagrange form of the Coriolis vector (qd=None)")
+            raise ValueError(
+                "moving shapes need the Lagrange form of the Coriolis vector (qd=None)"
+            )
         N, nf = self.q.shape[0], qf.shape[0]
         n_rate = md.shape_gram.shape[0] // nf  # joints (columns r n_f + j)
         rows, cross = [], []
@@ -237,9 +246,18 @@ class _Inertia:
         G = ca.blockcat([[gram, H], [H.T, 0.5 * (md.shape_gram + md.shape_gram.T)]])
         self.M = self.M + ca.mtimes(jac.T, ca.mtimes(ca.kron(G, ca.DM.eye(2)), jac))
 
-def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, shape_rates: bool = False,
-                    axial_shortening: bool = False, tip_rotation: str = "linearised",
-                    axial_stretch: bool = False) -> ArmExpressions:
+
+def arm_expressions(
+    arm: ArmSpec,
+    modal: Sequence[LinkModal],
+    q,
+    qd=None,
+    *,
+    shape_rates: bool = False,
+    axial_shortening: bool = False,
+    tip_rotation: str = "linearised",
+    axial_stretch: bool = False,
+) -> ArmExpressions:
     """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
 
     Parameters
@@ -300,13 +318,17 @@ def arm_expressions(arm: ArmSpec, modal: Sequence[LinkModal], q, qd=None, *, sha
         # uniform strain: the point at x sits at x (1 + e / L) along the link (flexible links only)
         stretch = 1 + q[stretch_index[i]] / length if i in stretch_index else 1
         pieces = [r, frame_x * stretch] + [frame_y * qf[j] for j in range(nf)]
-        rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
+        rigid = ca.DM(
+            [[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]]
+        )
         moments = sym(ca.horzcat(md.v, md.w))
         gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
         shortening = axial_shortening and nf > 0
         if shortening:  # s(x) = sum_p N_p(x) q_j q_k along -W e_1: pieces W e_1 sigma_p
             if not md.has_shortening:
-                raise ValueError("axial_shortening needs the modes' shortening integrals (LinkModal.sh_*)")
+                raise ValueError(
+                    "axial_shortening needs the modes' shortening integrals (LinkModal.sh_*)"
+                )
             sigma = [qf[j] * qf[k] for j, k in mode_pairs(nf)]
             pieces += [frame_x * s_p for s_p in sigma]
             edge = sym(ca.vertcat(md.sh_v.T, md.sh_w.T, md.sh_y))

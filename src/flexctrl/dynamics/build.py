@@ -9,12 +9,13 @@
 
 from __future__ import annotations
 
-from typing import Literal, Sequence
+from collections.abc import Sequence
+from typing import Literal
 
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import FlexctrlError, SpecError
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.arm import ArmSpec
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 
 
 class ModelFamilyUnavailable(FlexctrlError, NotImplementedError):
@@ -61,26 +62,45 @@ def build_model(
     from flexctrl.dynamics.amm import build_amm
 
     if fidelity is None:
-        return build_amm(arm, [link.n_modes for link in arm.links], modes=modes, reference_q=reference_q, damping=damping)
+        return build_amm(
+            arm,
+            [link.n_modes for link in arm.links],
+            modes=modes,
+            reference_q=reference_q,
+            damping=damping,
+        )
     fid = parse_fidelity(fidelity)
     if fid.kind == "fem":
         from flexctrl.dynamics.fem.fem_arm import build_fem_model
 
         if modes != "frozen":
-            raise ModelFamilyUnavailable(f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option")
+            raise ModelFamilyUnavailable(
+                f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option"
+            )
         if (arm.damping_form if damping is None else damping) == "paper":
-            raise ModelFamilyUnavailable("damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
-                                         "modes only; a finite-element model takes its damping from damping_ratio "
-                                         "stiffness-proportionally, (2 zeta / omega_1) K (use damping form 'ratio' or "
-                                         "'stiffness', or an 'amm:N' fidelity)")
+            raise ModelFamilyUnavailable(
+                "damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
+                "modes only; a finite-element model takes its damping from damping_ratio "
+                "stiffness-proportionally, (2 zeta / omega_1) K (use damping form 'ratio' or "
+                "'stiffness', or an 'amm:N' fidelity)"
+            )
         if arm.axial_stretch is False:
-            raise SpecError("axial_stretch = false is not allowed with a finite-element fidelity: its links are always "
-                            "axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity", key="axial_stretch")
-        shortening = True if arm.axial_shortening is None else arm.axial_shortening  # membrane strain, validated
+            raise SpecError(
+                "axial_stretch = false is not allowed with a finite-element fidelity: its links are always "
+                "axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity",
+                key="axial_stretch",
+            )
+        shortening = (
+            True if arm.axial_shortening is None else arm.axial_shortening
+        )  # membrane strain, validated
         return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=shortening)
     if fid.kind == "auto":
-        raise ModelFamilyUnavailable("fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
-                                     "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "
-                                     "--tol METRES` or flexctrl.scenes.auto.choose_fidelity; here give 'rigid', "
-                                     "'amm:N' or 'fem:N'")
-    return build_amm(arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid)
+        raise ModelFamilyUnavailable(
+            "fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
+            "run the scene (fidelity = 'auto' with tolerance = METRES), `flexctrl fidelity SCENE "
+            "--tol METRES` or flexctrl.scenes.auto.choose_fidelity; here give 'rigid', "
+            "'amm:N' or 'fem:N'"
+        )
+    return build_amm(
+        arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid
+    )

@@ -37,9 +37,15 @@ from flexctrl.dynamics.parametric import FROM_LIFTED, Memo, parametric
 SHARED = Memo(8)
 
 
-def jacobian_function(model, *, value: bool = False, inputs: bool = False,
-                      outputs: ca.Function | None = None, shared: bool = False,
-                      graph: str = "sx") -> ca.Function:
+def jacobian_function(
+    model,
+    *,
+    value: bool = False,
+    inputs: bool = False,
+    outputs: ca.Function | None = None,
+    shared: bool = False,
+    graph: str = "sx",
+) -> ca.Function:
     """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
 
     The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`, with
@@ -94,7 +100,9 @@ def _dynamics_jacobians(f: ca.Function, x, u, value: bool, inputs: bool, *extra)
     return [xdot] * value + [ca.jacobian(xdot, x)] + [ca.jacobian(xdot, u)] * inputs
 
 
-def _shared_dynamics(model, value: bool, inputs: bool, graph: str = "sx") -> tuple[ca.Function, object] | None:
+def _shared_dynamics(
+    model, value: bool, inputs: bool, graph: str = "sx"
+) -> tuple[ca.Function, object] | None:
     """``(J(x, u, c), c)``: the kept Jacobian Function of the model's lifted ``f`` and its constants, or None."""
     # per use: a reduced model's constants coincide by value at some configurations, and a lift
     # per node would then give each configuration a structure (and a Jacobian) of its own
@@ -107,18 +115,28 @@ def _shared_dynamics(model, value: bool, inputs: bool, graph: str = "sx") -> tup
     def build() -> ca.Function:
         x, u = symbol.sym("x", model.n_x), symbol.sym("u", model.n_u)
         c = symbol.sym("c", constants.size)
-        return ca.Function("jacobians_lifted", [x, u, c], _dynamics_jacobians(lifted, x, u, value, inputs, c))
+        return ca.Function(
+            "jacobians_lifted", [x, u, c], _dynamics_jacobians(lifted, x, u, value, inputs, c)
+        )
 
-    def by_content() -> ca.Function:  # a lift made again (its kept object forgotten) finds it by its serialized form
-        return SHARED.get(content_key(lifted, value, inputs) + f"|graph={symbol.__name__}", build)[0]
+    def by_content() -> (
+        ca.Function
+    ):  # a lift made again (its kept object forgotten) finds it by its serialized form
+        return SHARED.get(content_key(lifted, value, inputs) + f"|graph={symbol.__name__}", build)[
+            0
+        ]
 
     # the lift kept for the structure is the same object for every model of it: no serializing per model
-    return FROM_LIFTED.get(lifted, ("jacobians", value, inputs, symbol.__name__), by_content), constants
+    return FROM_LIFTED.get(
+        lifted, ("jacobians", value, inputs, symbol.__name__), by_content
+    ), constants
 
 
 def content_key(lifted: ca.Function, value: bool, inputs: bool) -> str:
     """The key of :data:`SHARED`: a hash of the lifted Function's serialized form and the outputs asked for."""
-    return hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
+    return (
+        hashlib.sha256(lifted.serialize().encode()).hexdigest() + f"|value={value}|inputs={inputs}"
+    )
 
 
 __all__ = ["jacobian_function", "SHARED"]

@@ -17,7 +17,8 @@ import bisect
 import hashlib
 import threading
 from collections import OrderedDict
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -124,7 +125,11 @@ def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Func
     output-map length and reference table of one model lifts its constants once (the lift
     walks the whole expression graph in Python).
     """
-    return derived(model, ("parametric", name, per_use), lambda: constants_as_parameters(fun(), per_use=per_use))
+    return derived(
+        model,
+        ("parametric", name, per_use),
+        lambda: constants_as_parameters(fun(), per_use=per_use),
+    )
 
 
 #: Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used beyond 16.
@@ -141,7 +146,9 @@ def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
     constants whose values coincide, so their count moves with the configuration while the
     lifted Function does not.
     """
-    if per_use:  # constants as operands, not nodes: how many nodes hold them does not change the lift
+    if (
+        per_use
+    ):  # constants as operands, not nodes: how many nodes hold them does not change the lift
         ops = [op for op in ops if op != ca.OP_CONST]
     h = hashlib.sha256(np.asarray(ops, dtype=np.int64).tobytes())
     for i in range(f.n_in()):
@@ -152,8 +159,9 @@ def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
     return h.hexdigest()
 
 
-def constants_as_parameters(fun: ca.Function, *, per_use: bool = False,
-                            reuse: bool = True) -> tuple[ca.Function, np.ndarray]:
+def constants_as_parameters(
+    fun: ca.Function, *, per_use: bool = False, reuse: bool = True
+) -> tuple[ca.Function, np.ndarray]:
     """``fun`` rebuilt with every numeric constant of its expression graph turned into an input.
 
     A frozen-modes model bakes its modal constants (which depend on the payload and on
@@ -218,7 +226,9 @@ def _constants(f: ca.Function, sources: list[int]) -> np.ndarray:
     return np.array([f.instruction_constant(k) for k in sources], dtype=float)
 
 
-def _constants_per_use(f: ca.Function, ops: list[int], uses: list[tuple[int, int]]) -> np.ndarray | None:
+def _constants_per_use(
+    f: ca.Function, ops: list[int], uses: list[tuple[int, int]]
+) -> np.ndarray | None:
     """``c`` of a per-use lift from its ``uses`` (the ``j``-th non-constant instruction's operand
     ``pos``), reading only the constant instructions and the operands that are constants.
 
@@ -241,12 +251,21 @@ def _constants_per_use(f: ca.Function, ops: list[int], uses: list[tuple[int, int
     return np.array(values, dtype=float)
 
 
-def _lift(f: ca.Function, ops: list[int], per_use: bool) -> tuple[ca.Function, list[int], list] | None:
+def _lift(
+    f: ca.Function, ops: list[int], per_use: bool
+) -> tuple[ca.Function, list[int], list] | None:
     """``(fp, sources, uses)``: ``f`` rebuilt with its constants as the last input, the constant
     instruction that gives each entry of ``c`` and, per use, where each entry is read (the
     ``j``-th non-constant instruction's operand ``pos``); None when an instruction cannot be rebuilt."""
-    n_const = (sum(len(f.instruction_input(k)) for k, op in enumerate(ops) if op not in (ca.OP_INPUT, ca.OP_CONST))
-               if per_use else ops.count(ca.OP_CONST))
+    n_const = (
+        sum(
+            len(f.instruction_input(k))
+            for k, op in enumerate(ops)
+            if op not in (ca.OP_INPUT, ca.OP_CONST)
+        )
+        if per_use
+        else ops.count(ca.OP_CONST)
+    )
     ins = [ca.SX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
     c = ca.SX.sym("c", n_const)
     outs = [[ca.SX(0)] * f.nnz_out(i) for i in range(f.n_out())]
@@ -279,12 +298,17 @@ def _lift(f: ca.Function, ops: list[int], per_use: bool) -> tuple[ca.Function, l
             sources.append(k)
         elif len(arg) in (1, 2) and op not in (ca.OP_CALL, ca.OP_PARAMETER):
             operands = [read(a, pos) for pos, a in enumerate(arg)]
-            work[res[0]] = ca.SX.unary(op, *operands) if len(arg) == 1 else ca.SX.binary(op, *operands)
+            work[res[0]] = (
+                ca.SX.unary(op, *operands) if len(arg) == 1 else ca.SX.binary(op, *operands)
+            )
             constant.pop(res[0], None)
         else:
             return None
     c = c[: len(sources)]
-    out = [ca.SX(f.sparsity_out(i), ca.vertcat(*outs[i]) if outs[i] else ca.SX(0, 1)) for i in range(f.n_out())]
+    out = [
+        ca.SX(f.sparsity_out(i), ca.vertcat(*outs[i]) if outs[i] else ca.SX(0, 1))
+        for i in range(f.n_out())
+    ]
     fp = ca.Function(f"{f.name()}_p", [*ins, c], out, [*f.name_in(), "c"], f.name_out())
     return fp, sources, uses
 
@@ -295,8 +319,13 @@ def _reproduces(f: ca.Function, fp: ca.Function, const: np.ndarray) -> bool:
     args = [rng.uniform(-0.5, 0.5, f.sparsity_in(i).shape) for i in range(f.n_in())]
     if fp.n_in() != f.n_in() + 1 or fp.nnz_in(f.n_in()) != const.size:
         return False
-    for a, b in zip(f(*args) if f.n_out() > 1 else [f(*args)], fp(*args, const) if f.n_out() > 1 else [fp(*args, const)]):
+    for a, b in zip(
+        f(*args) if f.n_out() > 1 else [f(*args)],
+        fp(*args, const) if f.n_out() > 1 else [fp(*args, const)],
+    ):
         a, b = np.array(a, dtype=float), np.array(b, dtype=float)
-        if not np.allclose(a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))):
+        if not np.allclose(
+            a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))
+        ):
             return False
     return True

@@ -62,7 +62,6 @@ Examples
 'rigid'
 """
 
-
 from __future__ import annotations
 
 import math
@@ -76,8 +75,6 @@ import numpy as np
 from flexctrl.errors import FlexctrlError, SimulationError, SpecError
 from flexctrl.sim.tip_error import TipError, tip_error
 from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, parse_fidelity
-
-
 
 IMPLICIT = ("cvodes", "idas", "scipy")
 
@@ -130,9 +127,15 @@ class RunRecord:
 
     def facts(self) -> dict[str, Any]:
         """JSON-ready settings and timings."""
-        facts = {"fidelity": self.fidelity, "integrator": self.integrator, "dt_s": self.dt,
-                 "omega_max_rad_s": self.omega_max, "omega_max_dt": self.omega_max * self.dt,
-                 "wall_time_s": self.wall_time_s, "build_time_s": self.build_time_s}
+        facts = {
+            "fidelity": self.fidelity,
+            "integrator": self.integrator,
+            "dt_s": self.dt,
+            "omega_max_rad_s": self.omega_max,
+            "omega_max_dt": self.omega_max * self.dt,
+            "wall_time_s": self.wall_time_s,
+            "build_time_s": self.build_time_s,
+        }
         if self.diverged_at is not None:
             facts["diverged_at_s"] = self.diverged_at
         return facts
@@ -177,9 +180,15 @@ class FidelityChoice:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the four headline keys first, then the evidence."""
         return {
-            "choice": str(self.choice), "tolerance_m": self.tolerance, "estimated_error": self.estimated_error,
-            "reference_error": self.reference_error, "reference_error_rms": self.reference_error_rms,
-            "cost_ratio": self.cost_ratio, "integrator": self.integrator, "dt_s": self.dt, **self.evidence,
+            "choice": str(self.choice),
+            "tolerance_m": self.tolerance,
+            "estimated_error": self.estimated_error,
+            "reference_error": self.reference_error,
+            "reference_error_rms": self.reference_error_rms,
+            "cost_ratio": self.cost_ratio,
+            "integrator": self.integrator,
+            "dt_s": self.dt,
+            **self.evidence,
         }
 
 
@@ -218,7 +227,9 @@ def excitation_bandwidth(scene, n_joints: int, *, energy_fraction: float = 0.99)
 
 
 # -- closed-loop scenes -------------------------------------------------------------------------
-def sampled_bandwidth(torque: np.ndarray, h: float, *, energy_fraction: float = 0.99) -> float | None:
+def sampled_bandwidth(
+    torque: np.ndarray, h: float, *, energy_fraction: float = 0.99
+) -> float | None:
     """Frequency (Hz) below which ``energy_fraction`` of sampled torques' energy lies.
 
     Parameters
@@ -271,8 +282,10 @@ def tip_distance(a: RunRecord, b: RunRecord):
 
 
 # -- the method -------------------------------------------------------------------------------
-METHOD = ("lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference model) <= "
-          "tolerance; walk from the bandwidth rule's start")
+METHOD = (
+    "lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference model) <= "
+    "tolerance; walk from the bandwidth rule's start"
+)
 
 
 #: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds ``LINEAR_FACTOR``
@@ -281,22 +294,34 @@ METHOD = ("lowest rung whose safety * (largest tip distance to the next two rung
 LINEAR_FACTOR = 3.0
 #: The walks of the closed-loop chooser (:data:`flexctrl.spec.fidelity.FIDELITY_WALKS`).
 WALKS = FIDELITY_WALKS
-METHOD_ESTIMATE = ("linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 step), then "
-                   "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * (largest "
-                   "tip distance to the next two rungs, up to the reference model) <= tolerance, walking up")
+METHOD_ESTIMATE = (
+    "linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 step), then "
+    "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * (largest "
+    "tip distance to the next two rungs, up to the reference model) <= tolerance, walking up"
+)
 
 
-METHOD_FROM_TOP = ("nonlinear runs from the top rung down (the controller steps in Python: a linear run would cost as much "
-                   "as a nonlinear one): the lowest rung of the unbroken run from the top whose safety * (largest tip "
-                   "distance to the next two rungs, up to the reference model) <= tolerance")
+METHOD_FROM_TOP = (
+    "nonlinear runs from the top rung down (the controller steps in Python: a linear run would cost as much "
+    "as a nonlinear one): the lowest rung of the unbroken run from the top whose safety * (largest tip "
+    "distance to the next two rungs, up to the reference model) <= tolerance"
+)
 
 
 def _method(linear, from_top: bool) -> str:
     return METHOD_FROM_TOP if from_top else METHOD if linear is None else METHOD_ESTIMATE
 
 
-def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int, safety: float,
-                     factor: float = LINEAR_FACTOR) -> tuple[int | None, dict[str, Any]]:
+def linear_candidate(
+    linear_rung,
+    *,
+    tol: float,
+    low: int,
+    top: int,
+    ref_n: int,
+    safety: float,
+    factor: float = LINEAR_FACTOR,
+) -> tuple[int | None, dict[str, Any]]:
     """The lowest rung whose linear estimate is within ``factor`` of the tolerance, and the evidence.
 
     The linear estimate of rung ``m`` is the walk's formula (``safety`` times the largest
@@ -346,9 +371,15 @@ def linear_candidate(linear_rung, *, tol: float, low: int, top: int, ref_n: int,
         if m in estimates:
             item["estimated_error_m"] = estimates[m]
         rungs.append(item)
-    evidence = {"factor": factor, "threshold_m": factor * tol, "candidate": None if n is None else rung_name(n),
-                "rungs": rungs, "wall_time_s": sum(r.wall_time_s + r.build_time_s for r in runs.values()
-                                                   if not isinstance(r, str))}
+    evidence = {
+        "factor": factor,
+        "threshold_m": factor * tol,
+        "candidate": None if n is None else rung_name(n),
+        "rungs": rungs,
+        "wall_time_s": sum(
+            r.wall_time_s + r.build_time_s for r in runs.values() if not isinstance(r, str)
+        ),
+    }
     return n, evidence
 
 
@@ -380,32 +411,71 @@ def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict
 def check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt):
     """Validate the chooser's options (shared by the arm and closed-loop choosers); returns the reference fidelity."""
     if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
-        raise SpecError(f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)", key="top")
+        raise SpecError(
+            f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)",
+            key="top",
+        )
     ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
     if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
-        raise SpecError(f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
-                        key="reference")
-    for name, value, low, high in (("safety", safety, 1.0, 100.0), ("energy_fraction", energy_fraction, 0.0, 1.0),
-                                   ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
-                                   ("reference_omega_dt", reference_omega_dt, 0.0, 2.5)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or value == 0:
-            raise SpecError(f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]", key=name)
+        raise SpecError(
+            f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
+            key="reference",
+        )
+    for name, value, low, high in (
+        ("safety", safety, 1.0, 100.0),
+        ("energy_fraction", energy_fraction, 0.0, 1.0),
+        ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
+        ("reference_omega_dt", reference_omega_dt, 0.0, 2.5),
+    ):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not low <= value <= high
+            or value == 0
+        ):
+            raise SpecError(
+                f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]",
+                key=name,
+            )
     return ref
 
 
 def check_tolerance(tol: Any, *, source: str | None = None, key: str = "tolerance") -> float:
     """``tol`` as a float if it is a finite number > 0 (m), else :class:`SpecError`."""
-    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or tol <= 0:
-        raise SpecError(f"value {tol!r} is not allowed; allowed: a finite number > 0 (m, tip-position tolerance)",
-                        source=source, key=key)
+    if (
+        isinstance(tol, bool)
+        or not isinstance(tol, (int, float))
+        or not math.isfinite(tol)
+        or tol <= 0
+    ):
+        raise SpecError(
+            f"value {tol!r} is not allowed; allowed: a finite number > 0 (m, tip-position tolerance)",
+            source=source,
+            key=key,
+        )
     return float(tol)
 
 
-def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, reference: str, safety: float,
-                    rule: dict[str, Any], run_rung, run_reference, reference_dt: float,
-                    runs: dict[int, RunRecord] | None = None, extra: dict[str, Any] | None = None,
-                    linear=None, factor: float = LINEAR_FACTOR, from_top: bool = False,
-                    checks: str = "full") -> FidelityChoice:
+def walk_and_judge(
+    *,
+    name: str,
+    tol: float,
+    low: int,
+    start: int,
+    top: int,
+    reference: str,
+    safety: float,
+    rule: dict[str, Any],
+    run_rung,
+    run_reference,
+    reference_dt: float,
+    runs: dict[int, RunRecord] | None = None,
+    extra: dict[str, Any] | None = None,
+    linear=None,
+    factor: float = LINEAR_FACTOR,
+    from_top: bool = False,
+    checks: str = "full",
+) -> FidelityChoice:
     """Method steps 2 and 3, shared by arm and closed-loop scenes.
 
     With ``linear`` (the estimate-first walk, :func:`linear_candidate`), the walk starts
@@ -465,7 +535,9 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
 
     def estimate(m: int) -> float:
         if m not in distances:
-            distances[m] = [tip_distance(run(k), run(m)).max for k in range(m + 1, min(m + 2, ref_n) + 1)]
+            distances[m] = [
+                tip_distance(run(k), run(m)).max for k in range(m + 1, min(m + 2, ref_n) + 1)
+            ]
         return safety * max(distances[m])
 
     linear_evidence = None
@@ -473,7 +545,12 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
         if linear is None:
             raise ValueError("from_top needs the linear runs for the reference's step check")
         n = top
-        while full and n - 1 >= low and estimate(n) <= tol and _buildable_estimate(estimate, n - 1) <= tol:
+        while (
+            full
+            and n - 1 >= low
+            and estimate(n) <= tol
+            and _buildable_estimate(estimate, n - 1) <= tol
+        ):
             n -= 1
     elif linear is None:
         n = start
@@ -484,21 +561,37 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
             while n < top and estimate(n) > tol:
                 n += 1
     else:
-        n, linear_evidence = linear_candidate(linear[0], tol=tol, low=low, top=top, ref_n=ref_n, safety=safety,
-                                              factor=factor)
+        n, linear_evidence = linear_candidate(
+            linear[0], tol=tol, low=low, top=top, ref_n=ref_n, safety=safety, factor=factor
+        )
         extra = {**(extra or {}), "linear_estimate": linear_evidence}
         if n is None:
-            best = min(linear_evidence["rungs"], key=lambda item: item.get("estimated_error_m", math.inf))
+            best = min(
+                linear_evidence["rungs"], key=lambda item: item.get("estimated_error_m", math.inf)
+            )
             raise ToleranceUnreachable(
                 f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}', predicted by the linear "
                 f"estimate: its best is {best.get('estimated_error_m', math.inf):.3g} m ({best['fidelity']}), above "
                 f"{factor:g} x the tolerance (the bound assumed on its error), so no nonlinear run was made; allowed: a "
                 f"tolerance >= {best.get('estimated_error_m', math.inf) / factor:.3g} m, a higher top rung, or "
                 "fidelity_walk = 'ladder'",
-                {"method": METHOD_ESTIMATE, "checks": checks, "safety": safety, "scene": name, "reference": None, "candidates": [],
-                 "bandwidth_rule": rule, **extra, "predicted": True,
-                 "best": {"rung": best["fidelity"], "estimated_error_m": best.get("estimated_error_m"),
-                          "from": "linear estimate"}})
+                {
+                    "method": METHOD_ESTIMATE,
+                    "checks": checks,
+                    "safety": safety,
+                    "scene": name,
+                    "reference": None,
+                    "candidates": [],
+                    "bandwidth_rule": rule,
+                    **extra,
+                    "predicted": True,
+                    "best": {
+                        "rung": best["fidelity"],
+                        "estimated_error_m": best.get("estimated_error_m"),
+                        "from": "linear estimate",
+                    },
+                },
+            )
         while n < top and estimate(n) > tol:
             n += 1
     met = estimate(n) <= tol
@@ -507,23 +600,35 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     if not met:
         best = min(distances, key=lambda m: max(distances[m]))
         best_estimate = safety * max(distances[best])
-        evidence = {"method": _method(linear, from_top), "checks": checks, "safety": safety,
-                    "ladder": [rung_name(m) for m in range(low, top + 1)],
-                    "bandwidth_rule": rule, "candidates": [{**runs[m].facts(), **_estimates(m, distances, safety)}
-                                                           for m in sorted(runs)],
-                    "scene": name, "reference": None, **(extra or {}),
-                    "best": {"rung": rung_name(best), "estimated_error_m": best_estimate}}
+        evidence = {
+            "method": _method(linear, from_top),
+            "checks": checks,
+            "safety": safety,
+            "ladder": [rung_name(m) for m in range(low, top + 1)],
+            "bandwidth_rule": rule,
+            "candidates": [
+                {**runs[m].facts(), **_estimates(m, distances, safety)} for m in sorted(runs)
+            ],
+            "scene": name,
+            "reference": None,
+            **(extra or {}),
+            "best": {"rung": rung_name(best), "estimated_error_m": best_estimate},
+        }
         if from_top:
             raise ToleranceUnreachable(
                 f"the top rung amm:{top} does not meet the tolerance {tol:.3g} m on scene '{name}': its estimate is "
                 f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); the walk from the top "
                 "tries no rung below a top that fails; allowed: a tolerance >= "
                 f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or 'ladder' (they try the "
-                "rungs below)", evidence)
+                "rungs below)",
+                evidence,
+            )
         raise ToleranceUnreachable(
             f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
             f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
-            f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung", evidence)
+            f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung",
+            evidence,
+        )
 
     # (c) the reference and its convergence
     # the reference model as a user would run it (its own step): the "always finest" cost; in the ladder walk only
@@ -536,9 +641,11 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     else:  # the estimate-first walk: the reference model at its own step, its step error estimated linearly
         ref_dt, ref_run, half = finest.dt, finest, finest
     if ref_run.diverged_at is not None or half.diverged_at is not None:
-        raise SimulationError(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
-                              f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
-                              "choice against")
+        raise SimulationError(
+            f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
+            f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
+            "choice against"
+        )
     below = run(ref_n - 1) if full or ref_n - 1 in runs else None
     model_check = 0.0 if below is None else tip_distance(ref_run, below).max
     if not full:
@@ -549,44 +656,85 @@ def walk_and_judge(*, name: str, tol: float, low: int, start: int, top: int, ref
     else:
         exact = linear[1]()
         step_check = tip_distance(exact, linear[0](ref_n)).max
-        convergence = {"step_error_linear_m": step_check,
-                       "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
-                                     "the same loop without integrator error (zero-order hold)"}
+        convergence = {
+            "step_error_linear_m": step_check,
+            "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
+            "the same loop without integrator error (zero-order hold)",
+        }
         if linear_evidence is not None:
             linear_evidence["reference_exact"] = exact.facts()
         else:
             convergence["reference_exact"] = exact.facts()
-    convergence.update({"rung_below_m": None if below is None else model_check, "rung_below": rung_name(ref_n - 1)})
+    convergence.update(
+        {"rung_below_m": None if below is None else model_check, "rung_below": rung_name(ref_n - 1)}
+    )
     if max(step_check, model_check) > 0.5 * tol:
-        moves = (f"moves by {step_check:.3g} m with {'half its step' if linear is None else 'no integrator error (linear estimate)'}"
-                 " and " if full else "")
-        warnings.warn(f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) {moves}differs by {model_check:.3g} m from "
-                      f"{rung_name(ref_n - 1)}: above half the tolerance {tol:.3g} m, so it may not be converged enough to "
-                      "judge the choice", stacklevel=3)
+        moves = (
+            f"moves by {step_check:.3g} m with {'half its step' if linear is None else 'no integrator error (linear estimate)'}"
+            " and "
+            if full
+            else ""
+        )
+        warnings.warn(
+            f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) {moves}differs by {model_check:.3g} m from "
+            f"{rung_name(ref_n - 1)}: above half the tolerance {tol:.3g} m, so it may not be converged enough to "
+            "judge the choice",
+            stacklevel=3,
+        )
 
     rungs = []
     for m in sorted(runs):
         record = runs[m]
         err = tip_distance(ref_run, record)
-        item = {**record.facts(), "reference_error_max_m": err.max, "reference_error_rms_m": err.rms,
-                "cost_ratio": record.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf}
+        item = {
+            **record.facts(),
+            "reference_error_max_m": err.max,
+            "reference_error_rms_m": err.rms,
+            "cost_ratio": record.wall_time_s / ref_run.wall_time_s
+            if ref_run.wall_time_s > 0
+            else math.inf,
+        }
         rungs.append({**item, **_estimates(m, distances, safety)})
 
     evidence = {
-        "method": _method(linear, from_top), "checks": checks,
-        "safety": safety, "ladder": [rung_name(m) for m in range(low, top + 1)], "bandwidth_rule": rule,
-        "reference": {**ref_run.facts(), "convergence": convergence,
-                      "role": ("the reference model at omega_max * dt <= reference_omega_dt" if linear is None else
-                               "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')")},
-        "candidates": rungs, "scene": name, **(extra or {}),
+        "method": _method(linear, from_top),
+        "checks": checks,
+        "safety": safety,
+        "ladder": [rung_name(m) for m in range(low, top + 1)],
+        "bandwidth_rule": rule,
+        "reference": {
+            **ref_run.facts(),
+            "convergence": convergence,
+            "role": (
+                "the reference model at omega_max * dt <= reference_omega_dt"
+                if linear is None
+                else "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')"
+            ),
+        },
+        "candidates": rungs,
+        "scene": name,
+        **(extra or {}),
     }
     chosen = run(n)
     err = tip_distance(ref_run, chosen)
-    evidence["cost_ratio_vs_finest"] = (None if finest is None else
-                                        chosen.wall_time_s / finest.wall_time_s if finest.wall_time_s > 0 else math.inf)
+    evidence["cost_ratio_vs_finest"] = (
+        None
+        if finest is None
+        else chosen.wall_time_s / finest.wall_time_s
+        if finest.wall_time_s > 0
+        else math.inf
+    )
     evidence["finest"] = rung_name(ref_n)
     return FidelityChoice(
-        choice=parse_fidelity(rung_name(n)), tolerance=tol, estimated_error=estimate(n), reference_error=err.max,
+        choice=parse_fidelity(rung_name(n)),
+        tolerance=tol,
+        estimated_error=estimate(n),
+        reference_error=err.max,
         reference_error_rms=err.rms,
-        cost_ratio=chosen.wall_time_s / ref_run.wall_time_s if ref_run.wall_time_s > 0 else math.inf,
-        integrator=chosen.integrator, dt=chosen.dt, evidence=evidence)
+        cost_ratio=chosen.wall_time_s / ref_run.wall_time_s
+        if ref_run.wall_time_s > 0
+        else math.inf,
+        integrator=chosen.integrator,
+        dt=chosen.dt,
+        evidence=evidence,
+    )

@@ -17,7 +17,6 @@ from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT, rk4_step
 from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference, Move
 
-
 #: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
 #: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``:
 #: 0.99979 at y = 0.5, but 0.81 at 1.65 and 0.52 at 2.05 (sim/rk4.py), so a step chosen only
@@ -27,9 +26,21 @@ from flexctrl.spec.reference import JointReference, Move
 ACCURATE_OMEGA_DT = 0.5
 
 
-def closed_loop(model, controller, reference, duration: float, *, plant=None, dt: float | None = None,
-                noise: int | np.random.Generator | None = None, x0=None, metrics: MetricSettings | None = None,
-                on_divergence: str = "raise", compile: bool | None = None, loop: str = "auto") -> ClosedLoopResult:
+def closed_loop(
+    model,
+    controller,
+    reference,
+    duration: float,
+    *,
+    plant=None,
+    dt: float | None = None,
+    noise: int | np.random.Generator | None = None,
+    x0=None,
+    metrics: MetricSettings | None = None,
+    on_divergence: str = "raise",
+    compile: bool | None = None,
+    loop: str = "auto",
+) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` seconds.
 
     The controller tracks the reference built on ``model`` (its design model: the joint
@@ -89,19 +100,34 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
     (True, True)
     """
     if on_divergence not in ("raise", "record"):
-        raise SpecError(f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'", key="on_divergence")
+        raise SpecError(
+            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
+            key="on_divergence",
+        )
     if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
-        raise SpecError(f"value of type {type(controller).__name__} is not a controller; allowed: a controller from "
-                        "flexctrl.design(model, op, settings)", key="controller")
+        raise SpecError(
+            f"value of type {type(controller).__name__} is not a controller; allowed: a controller from "
+            "flexctrl.design(model, op, settings)",
+            key="controller",
+        )
     move = _as_move(reference)
     path = move.joint_reference()
     if len(path.q_target) != model.n_u:
-        raise SpecError(f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
-                        key="reference")
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
-            or duration <= path.t_arrive:
-        raise SpecError(f"value {duration!r} is not allowed; allowed: a duration (s) longer than the move "
-                        f"({path.t_arrive:g} s)", key="duration")
+        raise SpecError(
+            f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
+            key="reference",
+        )
+    if (
+        isinstance(duration, bool)
+        or not isinstance(duration, (int, float))
+        or not math.isfinite(duration)
+        or duration <= path.t_arrive
+    ):
+        raise SpecError(
+            f"value {duration!r} is not allowed; allowed: a duration (s) longer than the move "
+            f"({path.t_arrive:g} s)",
+            key="duration",
+        )
     plant = model if plant is None else plant
     judge = MetricSettings() if metrics is None else metrics
     from flexctrl.control.reference_trajectory import ReferenceTrajectory
@@ -109,34 +135,79 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
     controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
     controller.reset()
     Ts = controller.sample_time
-    dt = rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT) if dt is None else float(dt)
-    sensors = controller.sensors if plant is model else plant_sensors(plant, controller.sensors,
-                                                                       tuple(controller.op.joints))
+    dt = (
+        rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
+        if dt is None
+        else float(dt)
+    )
+    sensors = (
+        controller.sensors
+        if plant is model
+        else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
+    )
     if x0 is None:
         x0 = np.zeros(plant.n_x)
         x0[: plant.n_u] = path.q_start
     x0 = np.asarray(x0, dtype=float)
     if x0.shape != (plant.n_x,) or not np.all(np.isfinite(x0)):
-        raise SpecError(f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0")
-    rng = noise if isinstance(noise, np.random.Generator) else (None if noise is None else np.random.default_rng(noise))
-    monitor = divergence_monitor(plant, plant.spec, path.q_start, path.q_target, judge.divergence_deflection,
-                                 judge.divergence_angle)
-    trajectory, _ = simulate_closed_loop(plant, controller, x0, float(duration), dt, sensors=sensors, rng=rng,
-                                         compile=compile, monitor=monitor, stop_on_divergence=on_divergence == "record",
-                                         loop=loop)
+        raise SpecError(
+            f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0"
+        )
+    rng = (
+        noise
+        if isinstance(noise, np.random.Generator)
+        else (None if noise is None else np.random.default_rng(noise))
+    )
+    monitor = divergence_monitor(
+        plant,
+        plant.spec,
+        path.q_start,
+        path.q_target,
+        judge.divergence_deflection,
+        judge.divergence_angle,
+    )
+    trajectory, _ = simulate_closed_loop(
+        plant,
+        controller,
+        x0,
+        float(duration),
+        dt,
+        sensors=sensors,
+        rng=rng,
+        compile=compile,
+        monitor=monitor,
+        stop_on_divergence=on_divergence == "record",
+        loop=loop,
+    )
     tip_target = tip_at_rest(plant, path.q_target)
     report = controller.stats.summary()
     limits = [getattr(j, "torque_limit", math.inf) for j in plant.spec.joints]
-    values = run_metrics(trajectory, tip_target=tip_target, reference_joints=path.joints(trajectory.time),
-                         t_arrive=path.t_arrive, settle_allowance=judge.settle_allowance, band=judge.band,
-                         stable_band=judge.stable_band, duration=float(duration), torque_limits=limits,
-                         controller_stats=report, step_times=controller.stats.step_times,
-                         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors))
+    values = run_metrics(
+        trajectory,
+        tip_target=tip_target,
+        reference_joints=path.joints(trajectory.time),
+        t_arrive=path.t_arrive,
+        settle_allowance=judge.settle_allowance,
+        band=judge.band,
+        stable_band=judge.stable_band,
+        duration=float(duration),
+        torque_limits=limits,
+        controller_stats=report,
+        step_times=controller.stats.step_times,
+        radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
+    )
     summary = {
         "controller": {"kind": controller.settings.kind, "sample_time": Ts, **report},
-        "plant": {"fidelity": str(plant.fidelity), "n_states": plant.n_x, "payload_kg": plant.spec.payload.mass},
-        "design": {"fidelity": str(model.fidelity), "payload_kg": model.spec.payload.mass,
-                   "configuration_deg": np.degrees(controller.op.joints).tolist()},
+        "plant": {
+            "fidelity": str(plant.fidelity),
+            "n_states": plant.n_x,
+            "payload_kg": plant.spec.payload.mass,
+        },
+        "design": {
+            "fidelity": str(model.fidelity),
+            "payload_kg": model.spec.payload.mass,
+            "configuration_deg": np.degrees(controller.op.joints).tolist(),
+        },
         "reference": path.settings() | {"deflection": move.deflection},
         "tip_target": tip_target.tolist(),
         "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
@@ -144,14 +215,29 @@ def closed_loop(model, controller, reference, duration: float, *, plant=None, dt
         "divergence": trajectory.meta.get("divergence"),
         "wall_time_s": trajectory.meta["wall_time_s"],
     }
-    return ClosedLoopResult(trajectory=trajectory, metrics=values, summary=summary, model=plant,
-                            controller=controller, reference=path)
+    return ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=values,
+        summary=summary,
+        model=plant,
+        controller=controller,
+        reference=path,
+    )
 
 
 def _as_move(reference) -> Move:
     if isinstance(reference, Move):
         return reference
     if isinstance(reference, JointReference):
-        return Move(reference.q_start, reference.q_target, reference.move_time, reference.profile, reference.t_start)
-    raise SpecError(f"value of type {type(reference).__name__} is not a reference; allowed: flexctrl.Move(start=, "
-                    "target=, time=) (rad, s) or a JointReference", key="reference")
+        return Move(
+            reference.q_start,
+            reference.q_target,
+            reference.move_time,
+            reference.profile,
+            reference.t_start,
+        )
+    raise SpecError(
+        f"value of type {type(reference).__name__} is not a reference; allowed: flexctrl.Move(start=, "
+        "target=, time=) (rad, s) or a JointReference",
+        key="reference",
+    )

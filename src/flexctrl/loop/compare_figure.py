@@ -9,8 +9,8 @@ look alike.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -81,8 +81,18 @@ def _curves(label: str, result) -> RunCurves:
     spec = getattr(result.model, "spec", None)
     limits = tuple(getattr(j, "torque_limit", math.inf) for j in getattr(spec, "joints", ()))
     reference = None if result.reference is None else result.reference.joints(traj.time)
-    return RunCurves(label, traj.time, result.tip_error, traj.deflections, traj.inputs, traj.states[:, :n], reference,
-                     limits, result.residual_window, result.metrics.get("tip_residual_rms"))
+    return RunCurves(
+        label,
+        traj.time,
+        result.tip_error,
+        traj.deflections,
+        traj.inputs,
+        traj.states[:, :n],
+        reference,
+        limits,
+        result.residual_window,
+        result.metrics.get("tip_residual_rms"),
+    )
 
 
 def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight: str | None = None):
@@ -98,7 +108,11 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
 
     if not runs:
         raise ValueError("nothing to draw: give at least one run")
-    panels = ["tip"] * any(r.tip_error is not None for r in runs) + ["w", "u"] + ["q"] * any(r.joints is not None for r in runs)
+    panels = (
+        ["tip"] * any(r.tip_error is not None for r in runs)
+        + ["w", "u"]
+        + ["q"] * any(r.joints is not None for r in runs)
+    )
     fig = Figure(figsize=(8.0, 2.25 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = dict(zip(panels, np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))))
@@ -109,42 +123,77 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
             ax.axvspan(*first.window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
     for index, run in enumerate(runs):
-        style = {"color": f"C{index % 10}", "lw": 1.8 if run.label == highlight else 0.9,
-                 "zorder": 1.5 if run.label == highlight else 2.0}  # the others stay visible over the worst
+        style = {
+            "color": f"C{index % 10}",
+            "lw": 1.8 if run.label == highlight else 0.9,
+            "zorder": 1.5 if run.label == highlight else 2.0,
+        }  # the others stay visible over the worst
         rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
         if "tip" in axes and run.tip_error is not None:
             axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
         for link in range(run.deflections.shape[1]):
-            axes["w"].plot(run.time, 1e3 * run.deflections[:, link], ls=_LINK_STYLES[link % 4], **style)
+            axes["w"].plot(
+                run.time, 1e3 * run.deflections[:, link], ls=_LINK_STYLES[link % 4], **style
+            )
         for joint in range(run.torques.shape[1]):
             axes["u"].plot(run.time, run.torques[:, joint], ls=_LINK_STYLES[joint % 4], **style)
             if "q" in axes and run.joints is not None:
-                axes["q"].plot(run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style)
+                axes["q"].plot(
+                    run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style
+                )
         run_handles.append(Line2D([], [], label=f"{run.label}{rms}", **style))
     for joint, limit in enumerate(first.torque_limits):
         if math.isfinite(limit):
             for sign in (1, -1):
-                axes["u"].axhline(sign * limit, color="k", ls=_LINK_STYLES[joint % 4], lw=0.6, alpha=0.7)
-            limit_handles.append(Line2D([], [], color="k", ls=_LINK_STYLES[joint % 4], lw=0.6,
-                                        label=f"limit joint {joint + 1}: ±{limit:g} N m"))
+                axes["u"].axhline(
+                    sign * limit, color="k", ls=_LINK_STYLES[joint % 4], lw=0.6, alpha=0.7
+                )
+            limit_handles.append(
+                Line2D(
+                    [],
+                    [],
+                    color="k",
+                    ls=_LINK_STYLES[joint % 4],
+                    lw=0.6,
+                    label=f"limit joint {joint + 1}: ±{limit:g} N m",
+                )
+            )
     if "q" in axes and first.reference is not None:
         for joint in range(first.reference.shape[1]):
-            axes["q"].plot(first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8)
-        axes["q"].legend(handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")], fontsize=7, loc="best")
+            axes["q"].plot(
+                first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8
+            )
+        axes["q"].legend(
+            handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")],
+            fontsize=7,
+            loc="best",
+        )
     if "tip" in axes:
         _tip_scale(axes["tip"], [r.tip_error for r in runs if r.tip_error is not None])
-    labels = {"tip": "tip error (mm)", "w": "link tip deflection (mm)", "u": "torque (N m)", "q": "joint angle (deg)"}
+    labels = {
+        "tip": "tip error (mm)",
+        "w": "link tip deflection (mm)",
+        "u": "torque (N m)",
+        "q": "joint angle (deg)",
+    }
     for key, ax in axes.items():
         ax.set_ylabel(labels[key])
     n_styles = max(run.deflections.shape[1] for run in runs)
-    styles = [Line2D([], [], color="0.3", lw=0.9, ls=_LINK_STYLES[k % 4], label=f"link / joint {k + 1}") for k in range(n_styles)]
+    styles = [
+        Line2D([], [], color="0.3", lw=0.9, ls=_LINK_STYLES[k % 4], label=f"link / joint {k + 1}")
+        for k in range(n_styles)
+    ]
     top = list(axes.values())[0]
     top.legend(handles=run_handles, fontsize=7, loc="best")
     axes["w"].legend(handles=styles, fontsize=6.5, loc="best", ncol=len(styles))
     if limit_handles:
         axes["u"].legend(handles=limit_handles, fontsize=6.5, loc="best", ncol=len(limit_handles))
     list(axes.values())[-1].set_xlabel("time (s)")
-    shaded = f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s" if first.window else ""
+    shaded = (
+        f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s"
+        if first.window
+        else ""
+    )
     list(axes.values())[0].set_title("\n".join(t for t in (title, shaded) if t), fontsize=9)
     return fig
 
@@ -158,4 +207,6 @@ def _tip_scale(ax, errors: list[np.ndarray]) -> None:
     positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
     if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
         ax.set_yscale("log")
-        ax.set_ylim(bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max())))
+        ax.set_ylim(
+            bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max()))
+        )

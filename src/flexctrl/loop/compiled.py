@@ -48,8 +48,13 @@ def sample_function(run, law) -> ca.Function:
         limits = ca.DM(controller.limits)
         u = ca.fmin(ca.fmax(v, -limits), limits)
     X = run.advance(x, u, run.dt)
-    return ca.Function("closed_loop_sample", [x, xi, u_prev, r, z], [X[:, -1], xi_next, u, X, v, y],
-                       ["x", "xi", "u_prev", "r", "z"], ["x_next", "xi_next", "u", "X", "v", "y"])
+    return ca.Function(
+        "closed_loop_sample",
+        [x, xi, u_prev, r, z],
+        [X[:, -1], xi_next, u, X, v, y],
+        ["x", "xi", "u_prev", "r", "z"],
+        ["x_next", "xi_next", "u", "X", "v", "y"],
+    )
 
 
 #: Samples per call of the chained loop (:func:`_chained`).
@@ -65,14 +70,20 @@ def run_compiled(run, law, chunk: int | None = CHUNK) -> None:
     k0, count, Ts = run.done, run.n_samples - run.done, controller.sample_time
     times = np.arange(k0, run.n_samples) * Ts
     R = np.asarray(law.references(times), dtype=float)
-    Z = run.rng.standard_normal((count, run.sensors.n_y)) if run.rng is not None else np.zeros((count, run.sensors.n_y))
+    Z = (
+        run.rng.standard_normal((count, run.sensors.n_y))
+        if run.rng is not None
+        else np.zeros((count, run.sensors.n_y))
+    )
     xi0, u0 = np.array(law.memory, dtype=float), run.u
     xis, us, states, vs, ys = _chained(sample_function(run, law), run.x, xi0, u0, R, Z, chunk)
     blocks = states.reshape(count, run.substeps, plant.n_x)
     done = _first_divergence(run, blocks, k0)
     n = count if done is None else done + 1
     per, stride = run.per, run.stride
-    run.X[k0 * per + 1 : (k0 + n) * per + 1] = blocks[:n, stride - 1 :: stride].reshape(n * per, plant.n_x)
+    run.X[k0 * per + 1 : (k0 + n) * per + 1] = blocks[:n, stride - 1 :: stride].reshape(
+        n * per, plant.n_x
+    )
     run.U[k0 * per : (k0 + n) * per] = np.repeat(us[:n], per, axis=0)
     run.x, run.u, run.done = blocks[n - 1, -1], us[n - 1], k0 + n
     if done is not None:
@@ -80,7 +91,9 @@ def run_compiled(run, law, chunk: int | None = CHUNK) -> None:
     _record(controller, law, xis, us, vs, ys, R, xi0, u0, n)
 
 
-def _chained(sample: ca.Function, x0, xi0, u0, R: np.ndarray, Z: np.ndarray, chunk: int | None) -> list[np.ndarray]:
+def _chained(
+    sample: ca.Function, x0, xi0, u0, R: np.ndarray, Z: np.ndarray, chunk: int | None
+) -> list[np.ndarray]:
     """``(xi, u, X, v, y)`` rows of ``len(R)`` chained samples: ``mapaccum`` calls of ``chunk`` samples each.
 
     Building a ``mapaccum`` costs time in proportion to its length (about 0.2 ms per sample
@@ -99,7 +112,9 @@ def _chained(sample: ca.Function, x0, xi0, u0, R: np.ndarray, Z: np.ndarray, chu
         n = min(size, count - start)
         if n not in loops:
             loops[n] = sample.mapaccum("closed_loop", n, [0, 1, 2], [0, 1, 2])
-        x_end, xis, us, states, vs, ys = evaluate(loops[n], x, xi, u, R[start:start + n], Z[start:start + n])
+        x_end, xis, us, states, vs, ys = evaluate(
+            loops[n], x, xi, u, R[start : start + n], Z[start : start + n]
+        )
         parts.append([xis, us, states, vs, ys])
         x, xi, u = x_end[-1], (xis[-1] if xis.size else xi0), us[-1]
     return [np.concatenate(column) for column in zip(*parts)]
@@ -110,7 +125,10 @@ def _first_divergence(run, blocks: np.ndarray, k0: int) -> int | None:
     plant = run.plant
     with np.errstate(invalid="ignore", over="ignore"):
         bad = ~np.all(np.isfinite(blocks), axis=(1, 2))
-        bad |= np.max(np.abs(blocks[:, :, plant.n_u : plant.n_q]), axis=(1, 2), initial=0.0) > MODAL_BOUND
+        bad |= (
+            np.max(np.abs(blocks[:, :, plant.n_u : plant.n_q]), axis=(1, 2), initial=0.0)
+            > MODAL_BOUND
+        )
         bad |= np.max(np.abs(blocks[:, :, plant.n_q :]), axis=(1, 2)) > RATE_BOUND
     ends = blocks[:, -1]
     monitor = run.monitor
@@ -135,7 +153,9 @@ def _record(controller, law, xis, us, vs, ys, R, xi0, u0, n: int) -> None:
     saturated = np.any(us[:n] != vs[:n], axis=1)
     stats.saturated += int(np.sum(saturated))
     if np.any(saturated):
-        stats.clipped_max = max(stats.clipped_max, float(np.max(np.abs(us[:n] - vs[:n])[saturated])))
+        stats.clipped_max = max(
+            stats.clipped_max, float(np.max(np.abs(us[:n] - vs[:n])[saturated]))
+        )
     stats.status[law.status] += n
     xi_prev = np.vstack([xi0[None, :], xis[: n - 1]]) if xi0.size else np.zeros((n, 0))
     u_prev = np.vstack([u0[None, :], us[: n - 1]])

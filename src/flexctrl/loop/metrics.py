@@ -30,7 +30,7 @@ residual-vibration window
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -76,7 +76,9 @@ def closed_loop_metrics(
     controller_times : s per controller step
     """
     t = np.asarray(t, dtype=float)
-    error = np.linalg.norm(np.asarray(tip, dtype=float) - np.asarray(tip_target, dtype=float)[None, :], axis=1)
+    error = np.linalg.norm(
+        np.asarray(tip, dtype=float) - np.asarray(tip_target, dtype=float)[None, :], axis=1
+    )
     window = t >= t_arrive + settle_allowance
     if not np.any(window):
         raise ValueError(
@@ -92,7 +94,9 @@ def closed_loop_metrics(
         "peak_deflection": float(np.max(np.abs(deflections))) if np.size(deflections) else 0.0,
         "peak_torque": np.max(np.abs(torques), axis=0).tolist(),
         "rms_torque": np.sqrt(np.mean(torques**2, axis=0)).tolist(),
-        "tracking_error_rms": float(np.sqrt(np.mean((np.asarray(joints) - np.asarray(joint_reference)) ** 2))),
+        "tracking_error_rms": float(
+            np.sqrt(np.mean((np.asarray(joints) - np.asarray(joint_reference)) ** 2))
+        ),
         "controller_time_median": float(np.median(times)) if times.size else 0.0,
         "controller_time_p95": float(np.percentile(times, 95)) if times.size else 0.0,
         "controller_time_max": float(np.max(times)) if times.size else 0.0,
@@ -105,9 +109,21 @@ def closed_loop_metrics(
 FINAL_WINDOW = 1.0
 
 
-def run_metrics(trajectory, *, tip_target, reference_joints: np.ndarray, t_arrive: float, settle_allowance: float,
-                band: float, stable_band: float, duration: float, torque_limits: Sequence[float],
-                controller_stats: dict, step_times: Sequence[float] = (), radius: float | None = None) -> dict:
+def run_metrics(
+    trajectory,
+    *,
+    tip_target,
+    reference_joints: np.ndarray,
+    t_arrive: float,
+    settle_allowance: float,
+    band: float,
+    stable_band: float,
+    duration: float,
+    torque_limits: Sequence[float],
+    controller_stats: dict,
+    step_times: Sequence[float] = (),
+    radius: float | None = None,
+) -> dict:
     """Every metric of one closed-loop run: :func:`closed_loop_metrics` and the verdicts.
 
     Added to :func:`closed_loop_metrics`' figures:
@@ -152,10 +168,21 @@ def run_metrics(trajectory, *, tip_target, reference_joints: np.ndarray, t_arriv
         settle_allowance = float(trajectory.time[-1]) - t_arrive - 1e-9
     status = controller_stats.get("status", {})
     metrics = closed_loop_metrics(
-        trajectory.time, trajectory.tip, tip_target, trajectory.deflections, trajectory.inputs,
-        trajectory.states[:, :n], reference_joints, t_arrive=t_arrive, settle_allowance=settle_allowance, band=band,
-        controller_times=step_times, fallbacks=controller_stats.get("fallbacks", 0),
-        solver_failures=sum(v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))),
+        trajectory.time,
+        trajectory.tip,
+        tip_target,
+        trajectory.deflections,
+        trajectory.inputs,
+        trajectory.states[:, :n],
+        reference_joints,
+        t_arrive=t_arrive,
+        settle_allowance=settle_allowance,
+        band=band,
+        controller_times=step_times,
+        fallbacks=controller_stats.get("fallbacks", 0),
+        solver_failures=sum(
+            v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))
+        ),
     )
     metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
     if not metrics["settled"]:
@@ -168,21 +195,53 @@ def run_metrics(trajectory, *, tip_target, reference_joints: np.ndarray, t_arriv
     if radius is not None:
         metrics["closed_loop_radius"] = radius
     limits = np.asarray(torque_limits, dtype=float)
-    metrics["torque_limit_exceeded"] = bool(np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9)))
+    metrics["torque_limit_exceeded"] = bool(
+        np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9))
+    )
     return metrics
 
 
 #: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists
 #: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``, ``peak_torque_2`` ...
-METRICS = ("tip_residual_rms", "tip_residual_peak", "settling_time", "peak_deflection", "tracking_error_rms",
-           "controller_time_median", "controller_time_p95", "controller_time_max", "fallbacks", "solver_failures",
-           "settled", "final_tip_error", "stable", "divergence_time", "closed_loop_radius", "torque_limit_exceeded")
+METRICS = (
+    "tip_residual_rms",
+    "tip_residual_peak",
+    "settling_time",
+    "peak_deflection",
+    "tracking_error_rms",
+    "controller_time_median",
+    "controller_time_p95",
+    "controller_time_max",
+    "fallbacks",
+    "solver_failures",
+    "settled",
+    "final_tip_error",
+    "stable",
+    "divergence_time",
+    "closed_loop_radius",
+    "torque_limit_exceeded",
+)
 #: Per-joint metrics (lists, one value per joint).
 JOINT_METRICS = ("peak_torque", "rms_torque")
 #: SI unit of every metric of :data:`METRICS` and :data:`JOINT_METRICS` ("" for counts and
 #: 0/1 verdicts, "-" for a pure number); reports convert them for reading (m -> mm, rad -> deg).
-UNITS = {"tip_residual_rms": "m", "tip_residual_peak": "m", "settling_time": "s", "peak_deflection": "m",
-         "tracking_error_rms": "rad", "controller_time_median": "s", "controller_time_p95": "s",
-         "controller_time_max": "s", "fallbacks": "", "solver_failures": "", "settled": "", "final_tip_error": "m",
-         "stable": "", "divergence_time": "s", "closed_loop_radius": "-", "torque_limit_exceeded": "",
-         "peak_torque": "N m", "rms_torque": "N m"}
+UNITS = {
+    "tip_residual_rms": "m",
+    "tip_residual_peak": "m",
+    "settling_time": "s",
+    "peak_deflection": "m",
+    "tracking_error_rms": "rad",
+    "controller_time_median": "s",
+    "controller_time_p95": "s",
+    "controller_time_max": "s",
+    "fallbacks": "",
+    "solver_failures": "",
+    "settled": "",
+    "final_tip_error": "m",
+    "stable": "",
+    "divergence_time": "s",
+    "closed_loop_radius": "-",
+    "torque_limit_exceeded": "",
+    "peak_torque": "N m",
+    "rms_torque": "N m",
+}

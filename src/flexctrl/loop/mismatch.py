@@ -34,10 +34,15 @@ def state_projection(plant, design_names) -> np.ndarray:
     for row, name in enumerate(design_names):
         if name in index:
             P[row, index[name]] = 1.0
-        elif not re.match(r"^d?qf\d+$", name) or str(getattr(plant, "fidelity", "")).startswith("fem"):
-            raise SpecError(f"the full-state controller's coordinate '{name}' has no counterpart in the plant "
-                            f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and design models "
-                            "that are both assumed-modes ('rigid' or 'amm:N') of the same arm", key="controller_fidelity")
+        elif not re.match(r"^d?qf\d+$", name) or str(getattr(plant, "fidelity", "")).startswith(
+            "fem"
+        ):
+            raise SpecError(
+                f"the full-state controller's coordinate '{name}' has no counterpart in the plant "
+                f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and design models "
+                "that are both assumed-modes ('rigid' or 'amm:N') of the same arm",
+                key="controller_fidelity",
+            )
     return P
 
 
@@ -59,7 +64,9 @@ def plant_sensors(plant, design_sensors, q_joints):
         return dataclasses.replace(design_sensors, function=function)
     built = Sensors.build(plant, design_sensors.kinds, q_joints=q_joints)
     if built.names != design_sensors.names:
-        raise SpecError(f"the plant's sensors {list(built.names)} differ from the controller's {list(design_sensors.names)}; "
-                        "strain gauges need links with modes in both models", key="controller_fidelity")
+        raise SpecError(
+            f"the plant's sensors {list(built.names)} differ from the controller's {list(design_sensors.names)}; "
+            "strain gauges need links with modes in both models",
+            key="controller_fidelity",
+        )
     return dataclasses.replace(built, noise_std=np.array(design_sensors.noise_std, dtype=float))
-

@@ -21,7 +21,10 @@ class LoopMonitor:
         self.lengths = np.array([link.length for link in arm.links], dtype=float)
         self.fraction, self.margin = float(fraction), float(margin)
         self.limit = self.fraction * self.lengths
-        self.start, self.target = np.asarray(start_q, dtype=float), np.asarray(target_q, dtype=float)
+        self.start, self.target = (
+            np.asarray(start_q, dtype=float),
+            np.asarray(target_q, dtype=float),
+        )
         self.low = np.minimum(self.start, self.target) - margin
         self.high = np.maximum(self.start, self.target) + margin
         self.deflection = plant.functions["deflection"]
@@ -33,7 +36,9 @@ class LoopMonitor:
             return np.zeros(0, dtype=bool)
         w = np.array(self.deflection.map(X.shape[0])(X[:, : self.N].T)[0], dtype=float).T
         q = X[:, : self.n]
-        return np.any(np.abs(w) > self.limit, axis=1) | np.any((q < self.low) | (q > self.high), axis=1)
+        return np.any(np.abs(w) > self.limit, axis=1) | np.any(
+            (q < self.low) | (q > self.high), axis=1
+        )
 
     def __call__(self, t: float, x: np.ndarray) -> str | None:
         return self.verdict(np.array(self.deflection(x[: self.N])[0], dtype=float).ravel(), x)
@@ -54,19 +59,25 @@ class LoopMonitor:
         over = np.flatnonzero(np.abs(w) > self.limit)
         if over.size:
             i = int(over[0])
-            return (f"link {i + 1} tip deflection {w[i]:.3g} m beyond {self.limit[i]:.3g} m "
-                    f"(divergence_deflection = {self.fraction:g} of its {self.lengths[i]:g} m length)")
+            return (
+                f"link {i + 1} tip deflection {w[i]:.3g} m beyond {self.limit[i]:.3g} m "
+                f"(divergence_deflection = {self.fraction:g} of its {self.lengths[i]:g} m length)"
+            )
         q = x[: self.n]
         out = np.flatnonzero((q < self.low) | (q > self.high))
         if out.size:
             i = int(out[0])
-            return (f"joint {i + 1} at {math.degrees(q[i]):.4g} deg, more than divergence_angle = "
-                    f"{math.degrees(self.margin):g} deg outside its move [{math.degrees(self.start[i]):.4g}, "
-                    f"{math.degrees(self.target[i]):.4g}] deg")
+            return (
+                f"joint {i + 1} at {math.degrees(q[i]):.4g} deg, more than divergence_angle = "
+                f"{math.degrees(self.margin):g} deg outside its move [{math.degrees(self.start[i]):.4g}, "
+                f"{math.degrees(self.target[i]):.4g}] deg"
+            )
         return None
 
 
-def divergence_monitor(plant, arm, start_q, target_q, fraction: float, margin: float) -> LoopMonitor:
+def divergence_monitor(
+    plant, arm, start_q, target_q, fraction: float, margin: float
+) -> LoopMonitor:
     """``monitor(t, x)`` for :func:`simulate_closed_loop`: link tip deflections and joint excursions.
 
     A link diverges when its tip deflection exceeds ``fraction`` of its length (m); a

@@ -8,18 +8,18 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.model import derived
+from flexctrl.dynamics.parametric import parametric, try_expand
 from flexctrl.sim.compile import compile_for, compile_function
-from flexctrl.dynamics.parametric import parametric
-from flexctrl.dynamics.parametric import try_expand
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
-
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
 #: (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the count).
 UNROLL_LIMIT = 32
 
 
-def plant_step_function(model, substeps: int, f: ca.Function | None = None, n_constants: int = 0) -> ca.Function:
+def plant_step_function(
+    model, substeps: int, f: ca.Function | None = None, n_constants: int = 0
+) -> ca.Function:
     """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X is (n_x, substeps).
 
     The steps are unrolled into one expression (compiled whole by :func:`advance_function`
@@ -42,7 +42,11 @@ def plant_step_function(model, substeps: int, f: ca.Function | None = None, n_co
         def advance(xs, k):
             return rk4_next(lambda s: f(s, u, c), xs, h)
 
-        inputs, names, name = [x, u, h, c], ["x", "u", "h", "c"], f"advance_p_{model.n_x}_{model.n_u}_{n_constants}_{substeps}"
+        inputs, names, name = (
+            [x, u, h, c],
+            ["x", "u", "h", "c"],
+            f"advance_p_{model.n_x}_{model.n_u}_{n_constants}_{substeps}",
+        )
     states = []
     current = x
     for k in range(substeps):
@@ -55,7 +59,9 @@ def _name(text: str) -> str:
     return re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")
 
 
-def output_map(model, count: int, compile: bool | None = None, *, energies: bool = True) -> ca.Function:
+def output_map(
+    model, count: int, compile: bool | None = None, *, energies: bool = True
+) -> ca.Function:
     """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.integrator.output_function`, compiled.
 
     The rows of ``Y`` are the energies, tip and deflections (``energies=False``: the tip and
@@ -68,6 +74,7 @@ def output_map(model, count: int, compile: bool | None = None, *, energies: bool
     from each other's (about 1e-15 m here);
     ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
     """
+
     def build():
         single = _output_point(model, compile, energies)
         X = ca.MX.sym("X", model.n_x, count)
@@ -78,6 +85,7 @@ def output_map(model, count: int, compile: bool | None = None, *, energies: bool
 
 def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
     """The compiled outputs ``y(x)`` of one state, the model's constants embedded; kept per model and rows."""
+
     def build():
         from flexctrl.sim.integrator import output_function
 
@@ -89,7 +97,9 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
         # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
         # evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
-        compiled = compile_for(fp, "itself", lambda: fp, enabled=compile)  # every model of the structure
+        compiled = compile_for(
+            fp, "itself", lambda: fp, enabled=compile
+        )  # every model of the structure
         return ca.Function(fun.name(), [x], [compiled.function(x, ca.DM(constants))])
 
     return derived(model, ("output_point", compile, energies), build)
@@ -107,7 +117,9 @@ def advance_function(model, substeps: int, compile: bool | None = None) -> tuple
     the compiled Function is kept with the lifted ``f`` (:func:`flexctrl.sim.compile.compile_for`), so a
     later configuration of the model shape wraps it with its own constants without building it again.
     """
-    return derived(model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile))
+    return derived(
+        model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile)
+    )
 
 
 def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Function, bool]:
@@ -118,18 +130,32 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
             compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
             return compiled.function, compiled.compiled
         # kept with the lifted f: a later configuration of the model shape neither builds nor loads it again
-        compiled = compile_for(fp, ("advance", substeps),
-                               lambda: plant_step_function(model, substeps, fp, constants.size), enabled=compile)
+        compiled = compile_for(
+            fp,
+            ("advance", substeps),
+            lambda: plant_step_function(model, substeps, fp, constants.size),
+            enabled=compile,
+        )
         X = compiled.function(x, u, h, ca.DM(constants))
     else:
         build = lambda: _single_step(model, fp, constants.size)  # noqa: E731
         # without constants the step reads the model's own f: one library per model, not per lift
-        compiled = (compile_for(fp, "rk4_step", build, enabled=compile) if constants.size
-                    else compile_function(build(), enabled=compile))
+        compiled = (
+            compile_for(fp, "rk4_step", build, enabled=compile)
+            if constants.size
+            else compile_function(build(), enabled=compile)
+        )
         # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
         c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
-        X = compiled.function.mapaccum(substeps)(x, ca.repmat(u, 1, substeps), ca.repmat(h, 1, substeps), *([c] if constants.size else []))
-    return ca.Function(_name(f"advance_{model.name}_{substeps}"), [x, u, h], [X], ["x", "u", "h"], ["X"]), compiled.compiled
+        X = compiled.function.mapaccum(substeps)(
+            x,
+            ca.repmat(u, 1, substeps),
+            ca.repmat(h, 1, substeps),
+            *([c] if constants.size else []),
+        )
+    return ca.Function(
+        _name(f"advance_{model.name}_{substeps}"), [x, u, h], [X], ["x", "u", "h"], ["X"]
+    ), compiled.compiled
 
 
 def _single_step(model, fp: ca.Function, n_constants: int) -> ca.Function:
@@ -141,8 +167,18 @@ def _single_step(model, fp: ca.Function, n_constants: int) -> ca.Function:
     x, u, h = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u), ca.MX.sym("h")
     if n_constants == 0:
         f = try_expand(model.functions["f"])
-        return ca.Function(_name(f"rk4x_{model.name}"), [x, u, h], [rk4_next(lambda s: f(s, u), x, h)],
-                           ["x", "u", "h"], ["x_next"])
+        return ca.Function(
+            _name(f"rk4x_{model.name}"),
+            [x, u, h],
+            [rk4_next(lambda s: f(s, u), x, h)],
+            ["x", "u", "h"],
+            ["x_next"],
+        )
     c = ca.MX.sym("c", n_constants)
-    return ca.Function(f"rk4x_p_{model.n_x}_{model.n_u}_{n_constants}", [x, u, h, c],
-                       [rk4_next(lambda s: fp(s, u, c), x, h)], ["x", "u", "h", "c"], ["x_next"])
+    return ca.Function(
+        f"rk4x_p_{model.n_x}_{model.n_u}_{n_constants}",
+        [x, u, h, c],
+        [rk4_next(lambda s: fp(s, u, c), x, h)],
+        ["x", "u", "h", "c"],
+        ["x_next"],
+    )

@@ -99,6 +99,8 @@ class ClosedLoopResult:
     def __repr__(self) -> str:
         m = self.metrics
         rms = m.get("tip_residual_rms", math.nan)
-        return (f"ClosedLoopResult(controller={self.summary.get('controller', {}).get('kind')!r}, "
-                f"tip_residual_rms={1e3 * rms:.4g} mm, stable={m.get('stable')}, "
-                f"duration={float(self.trajectory.time[-1]):.4g} s)")
+        return (
+            f"ClosedLoopResult(controller={self.summary.get('controller', {}).get('kind')!r}, "
+            f"tip_residual_rms={1e3 * rms:.4g} mm, stable={m.get('stable')}, "
+            f"duration={float(self.trajectory.time[-1]):.4g} s)"
+        )

@@ -42,7 +42,6 @@ from flexctrl.sim.bound import BoundFunction, evaluate
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 from flexctrl.sim.trajectory import LazyEnergies, Trajectory, energy_dict
 
-
 #: How the samples are run: ``"python"`` (one iteration per sample), ``"compiled"`` (one CasADi call for all but
 #: the first; an error for a controller without a :meth:`sampled_law`), ``"auto"`` (compiled when offered).
 LOOPS = ("auto", "compiled", "python")
@@ -64,8 +63,17 @@ def tip_positions(model, X: np.ndarray, compile: bool | None = None) -> np.ndarr
     return evaluate(output_map(model, X.shape[0], compile, energies=False), X)[0][:, 0:2]
 
 
-def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, meta: dict[str, Any], *,
-                           compiled: bool = False, compile: bool | None = None, energies: str = "lazy") -> Trajectory:
+def trajectory_from_states(
+    model,
+    t: np.ndarray,
+    X: np.ndarray,
+    U: np.ndarray,
+    meta: dict[str, Any],
+    *,
+    compiled: bool = False,
+    compile: bool | None = None,
+    energies: str = "lazy",
+) -> Trajectory:
     """A :class:`Trajectory` with energies, tip and deflections of the states ``X`` (rows).
 
     ``compiled``: from the compiled output maps (:func:`flexctrl.loop.plant_step.output_map`),
@@ -76,8 +84,10 @@ def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, m
     in one map (the slow path, kept to measure against).
     """
     if energies not in ENERGY_MODES:
-        raise SpecError(f"value {energies!r} is not allowed; allowed: {', '.join(map(repr, ENERGY_MODES))}",
-                        key="energies")
+        raise SpecError(
+            f"value {energies!r} is not allowed; allowed: {', '.join(map(repr, ENERGY_MODES))}",
+            key="energies",
+        )
     count = t.size
     if compiled and energies == "eager":
         Y = evaluate(output_map(model, count, compile), X)[0]
@@ -98,17 +108,38 @@ def trajectory_from_states(model, t: np.ndarray, X: np.ndarray, U: np.ndarray, m
         deflection = np.array(mapped(model, "deflection", count, q)[0], dtype=float).T
 
         def compute_vm():
-            return tuple(np.array(v, dtype=float).ravel() for v in mapped(model, "energies", count, q, qd))
+            return tuple(
+                np.array(v, dtype=float).ravel() for v in mapped(model, "energies", count, q, qd)
+            )
 
         values = LazyEnergies(compute_vm) if energies == "lazy" else energy_dict(*compute_vm())
-    return Trajectory(time=t, states=X, inputs=U, coordinate_names=model.coordinate_names, energies=values,
-                      tip=tip, deflections=deflection, meta=meta)
+    return Trajectory(
+        time=t,
+        states=X,
+        inputs=U,
+        coordinate_names=model.coordinate_names,
+        energies=values,
+        tip=tip,
+        deflections=deflection,
+        meta=meta,
+    )
 
 
-def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,
-                         sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None,
-                         monitor=None, stop_on_divergence: bool = False, loop: str = "auto",
-                         energies: str = "lazy") -> tuple[Trajectory, np.ndarray]:
+def simulate_closed_loop(
+    plant,
+    controller,
+    x0: np.ndarray,
+    duration: float,
+    dt: float,
+    *,
+    sensors=None,
+    rng: np.random.Generator | None = None,
+    compile: bool | None = None,
+    monitor=None,
+    stop_on_divergence: bool = False,
+    loop: str = "auto",
+    energies: str = "lazy",
+) -> tuple[Trajectory, np.ndarray]:
     """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
 
     Parameters
@@ -141,17 +172,39 @@ def simulate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt:
     SimulationError
         The plant diverged (unless ``stop_on_divergence``).
     """
-    t, X, U, meta, samples = integrate_closed_loop(plant, controller, x0, duration, dt, sensors=sensors, rng=rng,
-                                                   compile=compile, monitor=monitor,
-                                                   stop_on_divergence=stop_on_divergence, loop=loop)
-    return trajectory_from_states(plant, t, X, U, meta, compiled=loop != "python", compile=compile,
-                                  energies=energies), samples
+    t, X, U, meta, samples = integrate_closed_loop(
+        plant,
+        controller,
+        x0,
+        duration,
+        dt,
+        sensors=sensors,
+        rng=rng,
+        compile=compile,
+        monitor=monitor,
+        stop_on_divergence=stop_on_divergence,
+        loop=loop,
+    )
+    return trajectory_from_states(
+        plant, t, X, U, meta, compiled=loop != "python", compile=compile, energies=energies
+    ), samples
 
 
-def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt: float, *,
-                          sensors=None, rng: np.random.Generator | None = None, compile: bool | None = None,
-                          monitor=None, stop_on_divergence: bool = False, stride: int = 1, loop: str = "auto"
-                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
+def integrate_closed_loop(
+    plant,
+    controller,
+    x0: np.ndarray,
+    duration: float,
+    dt: float,
+    *,
+    sensors=None,
+    rng: np.random.Generator | None = None,
+    compile: bool | None = None,
+    monitor=None,
+    stop_on_divergence: bool = False,
+    stride: int = 1,
+    loop: str = "auto",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
     """The loop of :func:`simulate_closed_loop` without the trajectory's derived signals.
 
     Parameters
@@ -179,18 +232,37 @@ def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt
     from flexctrl.loop.compiled import run_compiled
 
     if loop not in LOOPS:
-        raise SpecError(f"value {loop!r} is not allowed; allowed: {', '.join(map(repr, LOOPS))}", key="loop")
+        raise SpecError(
+            f"value {loop!r} is not allowed; allowed: {', '.join(map(repr, LOOPS))}", key="loop"
+        )
     Ts = controller.sample_time
     substeps = int(round(Ts / dt))
     if substeps < 1 or abs(substeps * dt - Ts) > 1e-9 * Ts:
-        raise SpecError(f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: Ts/dt a whole number", key="dt")
+        raise SpecError(
+            f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: Ts/dt a whole number",
+            key="dt",
+        )
     if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1 or substeps % stride:
-        raise SpecError(f"value {stride!r} is not allowed; allowed: a whole divisor of Ts/dt = {substeps}", key="stride")
+        raise SpecError(
+            f"value {stride!r} is not allowed; allowed: a whole divisor of Ts/dt = {substeps}",
+            key="stride",
+        )
     setup = time.perf_counter()
     advance, compiled = advance_function(plant, substeps, compile)
     setup = time.perf_counter() - setup
-    run = LoopRun(plant, controller, sensors or controller.sensors, rng, monitor, dt, substeps, stride,
-                  int(math.ceil(duration / Ts - 1e-9)), advance, x0)
+    run = LoopRun(
+        plant,
+        controller,
+        sensors or controller.sensors,
+        rng,
+        monitor,
+        dt,
+        substeps,
+        stride,
+        int(math.ceil(duration / Ts - 1e-9)),
+        advance,
+        x0,
+    )
     wall = time.perf_counter()
     python_until = run.n_samples if loop == "python" else min(1, run.n_samples)
     for k in range(python_until):
@@ -200,8 +272,11 @@ def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt
     if run.divergence is None and run.done < run.n_samples:
         law = controller.sampled_law()
         if law is None and loop == "compiled":
-            raise SpecError(f"the {type(controller).__name__} has no sampled law (it optimises or schedules per "
-                            "sample); allowed: loop = 'python' or 'auto'", key="loop")
+            raise SpecError(
+                f"the {type(controller).__name__} has no sampled law (it optimises or schedules per "
+                "sample); allowed: loop = 'python' or 'auto'",
+                key="loop",
+            )
         if law is None:
             for k in range(run.done, run.n_samples):
                 if run.python_sample(k):
@@ -214,19 +289,51 @@ def integrate_closed_loop(plant, controller, x0: np.ndarray, duration: float, dt
     X, U = run.X[: run.end], run.U[: run.end]
     U[-1] = run.u
     t = np.arange(X.shape[0]) * (dt * stride)
-    meta = {"integrator": "rk4", "dt": dt, "sample_time": Ts, "wall_time_s": time.perf_counter() - wall,
-            "compiled": compiled, "divergence": run.divergence, "stride": stride, "setup_time_s": setup,
-            "loop": used}
+    meta = {
+        "integrator": "rk4",
+        "dt": dt,
+        "sample_time": Ts,
+        "wall_time_s": time.perf_counter() - wall,
+        "compiled": compiled,
+        "divergence": run.divergence,
+        "stride": stride,
+        "setup_time_s": setup,
+        "loop": used,
+    }
     return t, X, U, meta, np.arange(run.done) * Ts
 
 
 class LoopRun:
     """The state of one sampled run: the kept states and torques, the samples done, a divergence."""
 
-    def __init__(self, plant, controller, sensors, rng, monitor, dt: float, substeps: int, stride: int,
-                 n_samples: int, advance, x0):
-        self.plant, self.controller, self.sensors, self.rng, self.monitor = plant, controller, sensors, rng, monitor
-        self.dt, self.substeps, self.stride, self.n_samples, self.advance = dt, substeps, stride, n_samples, advance
+    def __init__(
+        self,
+        plant,
+        controller,
+        sensors,
+        rng,
+        monitor,
+        dt: float,
+        substeps: int,
+        stride: int,
+        n_samples: int,
+        advance,
+        x0,
+    ):
+        self.plant, self.controller, self.sensors, self.rng, self.monitor = (
+            plant,
+            controller,
+            sensors,
+            rng,
+            monitor,
+        )
+        self.dt, self.substeps, self.stride, self.n_samples, self.advance = (
+            dt,
+            substeps,
+            stride,
+            n_samples,
+            advance,
+        )
         self.per = substeps // stride
         self.X = np.empty((n_samples * self.per + 1, plant.n_x))
         self.U = np.empty((n_samples * self.per + 1, plant.n_u))
@@ -267,10 +374,12 @@ class LoopRun:
         if reason is None:
             return False
         Ts, dt = self.controller.sample_time, self.dt
-        message = (f"closed loop diverged at t = {t_end:.4g} s ({reason}; plant step {dt:g} s, controller sample "
-                   f"{Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise "
-                   f"this plant (or the plant step is too large for RK4: stable below "
-                   f"~{RK4_STABILITY_LIMIT / max(plant.omega_max, 1e-12):.3g} s for the locked-joint modes)")
+        message = (
+            f"closed loop diverged at t = {t_end:.4g} s ({reason}; plant step {dt:g} s, controller sample "
+            f"{Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise "
+            f"this plant (or the plant step is too large for RK4: stable below "
+            f"~{RK4_STABILITY_LIMIT / max(plant.omega_max, 1e-12):.3g} s for the locked-joint modes)"
+        )
         last = (k + 1) * self.per + 1
         finite = np.all(np.isfinite(self.X[:last]), axis=1)
         self.end = max(int(np.argmin(finite)) if not np.all(finite) else last, 2)

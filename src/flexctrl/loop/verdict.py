@@ -69,12 +69,16 @@ def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> floa
         return None
     sensors = controller.sensors if sensors is None else sensors
     if sensors.n_y != controller.sensors.n_y:
-        raise SpecError(f"the plant's sensors give {sensors.n_y} values, the controller reads {controller.sensors.n_y}",
-                        key="sensors")
+        raise SpecError(
+            f"the plant's sensors give {sensors.n_y} values, the controller reads {controller.sensors.n_y}",
+            key="sensors",
+        )
     q = np.asarray(target_q, dtype=float)
     op = equilibrium(plant, q)
     A, B, C, D = Linearizer(plant, sensors).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), controller.sample_time)
     Ad, Bd = np.asarray(sysd.A, dtype=float), np.asarray(sysd.B, dtype=float)
-    matrix = closed_loop_matrix(Ad, Bd, np.asarray(C, dtype=float), np.asarray(D, dtype=float), law(q))
+    matrix = closed_loop_matrix(
+        Ad, Bd, np.asarray(C, dtype=float), np.asarray(D, dtype=float), law(q)
+    )
     return float(np.max(np.abs(np.linalg.eigvals(matrix))))

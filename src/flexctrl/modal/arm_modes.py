@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from flexctrl.beam.clamped_mass import ClampedMassModes, clamped_mass_modes
-from flexctrl.modal.boundary import boundary_values
 from flexctrl.errors import SpecError
+from flexctrl.modal.boundary import boundary_values
 from flexctrl.spec.arm import ArmSpec
 
 
@@ -17,8 +17,11 @@ def _arm_spec(arm) -> ArmSpec:
     spec = getattr(arm, "spec", None)
     if isinstance(spec, ArmSpec):
         return spec
-    raise SpecError(f"value {type(arm).__name__} is not an arm; allowed: an ArmSpec (flexctrl.load_arm) or a Model "
-                    "built from one (flexctrl.load_model)", key="arm")
+    raise SpecError(
+        f"value {type(arm).__name__} is not an arm; allowed: an ArmSpec (flexctrl.load_arm) or a Model "
+        "built from one (flexctrl.load_model)",
+        key="arm",
+    )
 
 
 def link_modes(
@@ -69,8 +72,9 @@ def link_modes(
     )
 
 
-def arm_modes(arm, q: np.ndarray | None = None, n_modes: int | None = None,
-              convention: str | None = None) -> list[ClampedMassModes]:
+def arm_modes(
+    arm, q: np.ndarray | None = None, n_modes: int | None = None, convention: str | None = None
+) -> list[ClampedMassModes]:
     """Clamped-mass modes of every link, ordered from link 1 outward (see :func:`link_modes`).
 
     Parameters

@@ -54,7 +54,9 @@ class BoundaryValues:
     M: np.ndarray
 
 
-def boundary_values(arm: ArmSpec, q: np.ndarray, link: int, convention: str | None = None) -> BoundaryValues:
+def boundary_values(
+    arm: ArmSpec, q: np.ndarray, link: int, convention: str | None = None
+) -> BoundaryValues:
     """Boundary values of ``link`` (0-based) at joint angles ``q``.
 
     Parameters
@@ -75,7 +77,9 @@ def boundary_values(arm: ArmSpec, q: np.ndarray, link: int, convention: str | No
     """
     convention = convention or arm.boundary_inertia
     if convention not in ("exact", "paper"):
-        raise ValueError(f"boundary_inertia {convention!r} is not allowed; allowed: 'exact', 'paper'")
+        raise ValueError(
+            f"boundary_inertia {convention!r} is not allowed; allowed: 'exact', 'paper'"
+        )
     q = np.asarray(q, dtype=float)
     shape = q.shape[:-1]
     zeros = np.zeros(shape)
@@ -100,7 +104,12 @@ def boundary_values(arm: ArmSpec, q: np.ndarray, link: int, convention: str | No
         add(arm.joints[k].hub_mass, arm.joints[k].hub_inertia, px, py)
         theta = theta + q[..., k]
         half = 0.5 * arm.links[k].length
-        add(arm.links[k].mass, arm.links[k].inertia, px + half * np.cos(theta), py + half * np.sin(theta))
+        add(
+            arm.links[k].mass,
+            arm.links[k].inertia,
+            px + half * np.cos(theta),
+            py + half * np.sin(theta),
+        )
         px = px + arm.links[k].length * np.cos(theta)
         py = py + arm.links[k].length * np.sin(theta)
     add(arm.payload.mass, arm.payload.effective_inertia, px, py)

@@ -38,8 +38,15 @@ from flexctrl.spec.arm import ArmSpec
 __all__ = ["clamped_mass_matrices", "link_frequencies_fem"]
 
 
-def clamped_mass_matrices(length: float, rho: float, EI: float, n_elements: int, m_tip: float = 0.0,
-                          J_tip: float = 0.0, M_tip: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def clamped_mass_matrices(
+    length: float,
+    rho: float,
+    EI: float,
+    n_elements: int,
+    m_tip: float = 0.0,
+    J_tip: float = 0.0,
+    M_tip: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """Mass and stiffness of a clamped Hermite beam with a rigid tip body.
 
     Parameters
@@ -63,7 +70,9 @@ def clamped_mass_matrices(length: float, rho: float, EI: float, n_elements: int,
     return M, K
 
 
-def link_frequencies_fem(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, n_elements: int) -> np.ndarray:
+def link_frequencies_fem(
+    arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, n_elements: int
+) -> np.ndarray:
     """Lowest natural frequencies (Hz, ascending) of one clamped-mass link by finite elements.
 
     Parameters
@@ -97,28 +106,51 @@ def link_frequencies_fem(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, n
     array([14.17, 88.82])
     """
     if not 0 <= link < arm.n_links:
-        raise SpecError(f"link {link!r} is out of range; allowed: 0 to {arm.n_links - 1} (0-based)", key="link")
-    if isinstance(n_elements, bool) or not isinstance(n_elements, (int, np.integer)) or n_elements < 1:
-        raise SpecError(f"value {n_elements!r} is not allowed; allowed: an integer >= 1 (elements per link)",
-                        key="n_elements")
-    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or not 0 <= n_modes <= 2 * n_elements:
-        raise SpecError(f"value {n_modes!r} is out of range; allowed: 0 to {2 * n_elements} "
-                        f"(a mesh of {n_elements} elements has {2 * n_elements} bending dofs)", key="n_modes")
+        raise SpecError(
+            f"link {link!r} is out of range; allowed: 0 to {arm.n_links - 1} (0-based)", key="link"
+        )
+    if (
+        isinstance(n_elements, bool)
+        or not isinstance(n_elements, (int, np.integer))
+        or n_elements < 1
+    ):
+        raise SpecError(
+            f"value {n_elements!r} is not allowed; allowed: an integer >= 1 (elements per link)",
+            key="n_elements",
+        )
+    if (
+        isinstance(n_modes, bool)
+        or not isinstance(n_modes, (int, np.integer))
+        or not 0 <= n_modes <= 2 * n_elements
+    ):
+        raise SpecError(
+            f"value {n_modes!r} is out of range; allowed: 0 to {2 * n_elements} "
+            f"(a mesh of {n_elements} elements has {2 * n_elements} bending dofs)",
+            key="n_modes",
+        )
     spec = arm.links[link]
     bv = boundary_values(arm, np.asarray(q, dtype=float), link)
     m_D, J_D, M_D = float(bv.m), float(bv.J), float(bv.M)
-    M, K = clamped_mass_matrices(spec.length, spec.mass_per_length, spec.EI, int(n_elements), m_D, J_D, M_D)
+    M, K = clamped_mass_matrices(
+        spec.length, spec.mass_per_length, spec.EI, int(n_elements), m_D, J_D, M_D
+    )
     if n_modes == 0:
         return np.zeros(0)
     if M_D * M_D <= m_D * J_D:
         lam = scipy.linalg.eigh(K, M, eigvals_only=True, subset_by_index=[0, n_modes - 1])
         return np.sqrt(np.clip(lam, 0.0, None)) / (2.0 * math.pi)
-    warnings.warn(f"link {link + 1}: tip inertia [[m_D, M_D], [M_D, J_D]] = [[{m_D:.4g}, {M_D:.4g}], "
-                  f"[{M_D:.4g}, {J_D:.4g}]] is not positive semidefinite; the negative eigenvalue is dropped",
-                  IndefiniteTipInertiaWarning, stacklevel=2)
+    warnings.warn(
+        f"link {link + 1}: tip inertia [[m_D, M_D], [M_D, J_D]] = [[{m_D:.4g}, {M_D:.4g}], "
+        f"[{M_D:.4g}, {J_D:.4g}]] is not positive semidefinite; the negative eigenvalue is dropped",
+        IndefiniteTipInertiaWarning,
+        stacklevel=2,
+    )
     mu = scipy.linalg.eigh(M, K, eigvals_only=True)
     mu = np.sort(mu[mu > 0.0])[::-1]
     if mu.size < n_modes:
-        raise SpecError(f"only {mu.size} positive frequencies exist for link {link + 1} with an indefinite tip "
-                        f"inertia; asked for {n_modes}", key="n_modes")
+        raise SpecError(
+            f"only {mu.size} positive frequencies exist for link {link + 1} with an indefinite tip "
+            f"inertia; asked for {n_modes}",
+            key="n_modes",
+        )
     return np.sqrt(1.0 / mu[:n_modes]) / (2.0 * math.pi)

@@ -49,7 +49,9 @@ def _with_hub_masses(arm: ArmSpec, masses: dict[int, float]) -> ArmSpec:
     return dataclasses.replace(arm, joints=tuple(joints))
 
 
-def table3_residuals(arm: ArmSpec, links: tuple[int, ...] = (1, 2, 3)) -> list[tuple[float, int, int, float, float, float]]:
+def table3_residuals(
+    arm: ArmSpec, links: tuple[int, ...] = (1, 2, 3)
+) -> list[tuple[float, int, int, float, float, float]]:
     """Model-minus-table residuals of Table 3 for ``links`` (1-based) at q = 0."""
     rows = []
     q = np.zeros(arm.n_links)
@@ -59,11 +61,15 @@ def table3_residuals(arm: ArmSpec, links: tuple[int, ...] = (1, 2, 3)) -> list[t
             freqs = link_modes(loaded, q, link - 1, n_modes=2).frequency_hz
             for mode in range(2):
                 ref = table[link - 1][mode]
-                rows.append((payload, link, mode + 1, ref, float(freqs[mode]), float(freqs[mode] - ref)))
+                rows.append(
+                    (payload, link, mode + 1, ref, float(freqs[mode]), float(freqs[mode] - ref))
+                )
     return rows
 
 
-def identify_hub_masses(arm: ArmSpec, joints: tuple[int, ...] = (2, 3), start: float = 5.0) -> HubFit:
+def identify_hub_masses(
+    arm: ArmSpec, joints: tuple[int, ...] = (2, 3), start: float = 5.0
+) -> HubFit:
     """Least-squares fit of the hub masses of ``joints`` (1-based) to Table 3.
 
     Parameters
@@ -85,7 +91,14 @@ def identify_hub_masses(arm: ArmSpec, joints: tuple[int, ...] = (2, 3), start: f
         trial = _with_hub_masses(arm, dict(zip(joints, x)))
         return np.array([r[-1] for r in table3_residuals(trial, links=(1, 2))])
 
-    result = least_squares(residuals, x0=np.full(len(joints), start), bounds=(0.0, np.inf), x_scale=10.0, xtol=1e-12, ftol=1e-12)
+    result = least_squares(
+        residuals,
+        x0=np.full(len(joints), start),
+        bounds=(0.0, np.inf),
+        x_scale=10.0,
+        xtol=1e-12,
+        ftol=1e-12,
+    )
     if not result.success:
         raise SolverError(f"hub-mass identification did not converge: {result.message}")
     masses = dict(zip(joints, (float(v) for v in result.x)))

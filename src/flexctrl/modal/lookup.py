@@ -41,7 +41,13 @@ import numpy as np
 
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.modal.boundary import scheduling_joints
-from flexctrl.modal.shortening import GAUSS_POINTS, SHORTENING_FIELDS, axial_shapes, gauss_nodes, shortening_integrals
+from flexctrl.modal.shortening import (
+    GAUSS_POINTS,
+    SHORTENING_FIELDS,
+    axial_shapes,
+    gauss_nodes,
+    shortening_integrals,
+)
 from flexctrl.spec.arm import ArmSpec
 from flexctrl.user_cache import cache_directory
 
@@ -110,14 +116,22 @@ class ModalLookup:
         nf, n = self.n_modes, self.n_joints
         names = FIELDS + SHAPE_RATE_FIELDS + SHORT_FIELDS
         P = nf * (nf + 1) // 2
-        outputs = {"y": ca.SX.zeros(nf, nf * n), "s": ca.SX.zeros(nf * n, nf * n), "sh_psi": ca.SX.zeros(nf * n, P)}
+        outputs = {
+            "y": ca.SX.zeros(nf, nf * n),
+            "s": ca.SX.zeros(nf * n, nf * n),
+            "sh_psi": ca.SX.zeros(nf * n, P),
+        }
         if not self.joints:
             for name in FIELDS + SHORTENING_FIELDS:
                 outputs[name] = ca.SX(ca.DM(self.values[name]))
-            return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
+            return ca.Function(
+                f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names)
+            )
         grid = [np.radians(self.grid_deg)] * len(self.joints)
         dims = len(self.joints)
-        arrays = [self.values[name].reshape(self.values[name].shape[:dims] + (-1,)) for name in names]
+        arrays = [
+            self.values[name].reshape(self.values[name].shape[:dims] + (-1,)) for name in names
+        ]
         stacked = np.concatenate(arrays, axis=-1)  # grid..., m
         m = stacked.shape[-1]
         flat = np.moveaxis(stacked, -1, 0).reshape(m, -1, order="F").ravel(order="F")
@@ -126,7 +140,9 @@ class ModalLookup:
         offset = 0
         for name in names:
             shape = self.values[name].shape[dims:]
-            index = offset + np.arange(int(np.prod(shape))).reshape(shape)  # C order, as flattened above
+            index = offset + np.arange(int(np.prod(shape))).reshape(
+                shape
+            )  # C order, as flattened above
             offset += index.size
             if name == "z":
                 outputs[name] = ca.reshape(out[index.ravel()], nf, nf)  # symmetric
@@ -135,7 +151,9 @@ class ModalLookup:
                     outputs["y"][k, self.joints[rl] * nf + j] = out[int(index[k, j, rl])]
             elif name == "s":  # s[j, r_local, k, t_local]
                 for j, rl, k, tl in np.ndindex(*shape):
-                    outputs["s"][self.joints[rl] * nf + j, self.joints[tl] * nf + k] = out[int(index[j, rl, k, tl])]
+                    outputs["s"][self.joints[rl] * nf + j, self.joints[tl] * nf + k] = out[
+                        int(index[j, rl, k, tl])
+                    ]
             elif name == "sh_psi":  # sh_psi[j, r_local, p]
                 for j, rl, p in np.ndindex(*shape):
                     outputs["sh_psi"][self.joints[rl] * nf + j, p] = out[int(index[j, rl, p])]
@@ -143,13 +161,19 @@ class ModalLookup:
                 outputs[name] = ca.reshape(out[index.ravel()], shape[1], shape[0]).T
             else:
                 outputs[name] = out[index.ravel()]
-        return ca.Function(f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names))
+        return ca.Function(
+            f"modal_link{self.link + 1}", [q], [outputs[k] for k in names], ["q"], list(names)
+        )
 
     def evaluate(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Interpolated fields at joint angles ``q`` (rad), as numpy arrays."""
         result = self.function(q=np.asarray(q, dtype=float))
-        return {k: np.array(v, dtype=float) if k in ("z", "y", "s", "sh_y", "sh_z", "sh_psi") else np.array(v, dtype=float).squeeze(axis=-1)
-                for k, v in result.items()}
+        return {
+            k: np.array(v, dtype=float)
+            if k in ("z", "y", "s", "sh_y", "sh_z", "sh_psi")
+            else np.array(v, dtype=float).squeeze(axis=-1)
+            for k, v in result.items()
+        }
 
 
 def _key(arm: ArmSpec, link: int, n_modes: int, step_deg: float) -> str:
@@ -177,14 +201,24 @@ def _modal_fields(modes) -> dict[str, np.ndarray]:
     }
 
 
-def _aligned_shapes(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, x: np.ndarray, like: np.ndarray) -> np.ndarray:
+def _aligned_shapes(
+    arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, x: np.ndarray, like: np.ndarray
+) -> np.ndarray:
     """Shapes at ``x`` of the modes at ``q``, each signed to overlap positively with ``like``."""
     shapes = link_modes(arm, q, link, n_modes).shape(x)
     return shapes * np.where(np.sum(shapes * like, axis=1) < 0.0, -1.0, 1.0)[:, None]
 
 
-def _shape_rate_integrals(arm: ArmSpec, q: np.ndarray, link: int, n_modes: int, joints: tuple[int, ...],
-                          shapes: np.ndarray, x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _shape_rate_integrals(
+    arm: ArmSpec,
+    q: np.ndarray,
+    link: int,
+    n_modes: int,
+    joints: tuple[int, ...],
+    shapes: np.ndarray,
+    x: np.ndarray,
+    weights: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``y[k, j, r]``, ``s[j, r, k, t]`` and the shape rates ``psi[j, r, x]`` at ``q`` (``shapes``: the modes at ``q`` on the nodes ``x``)."""
     psi = np.zeros((n_modes, len(joints), x.size))
     for rl, joint in enumerate(joints):
@@ -210,7 +244,9 @@ def _shortening_fields(modes, signs: np.ndarray, psi: np.ndarray | None) -> dict
     return out
 
 
-def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], grid_deg: np.ndarray) -> dict[str, np.ndarray]:
+def _tabulate(
+    arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], grid_deg: np.ndarray
+) -> dict[str, np.ndarray]:
     shape = (grid_deg.size,) * len(joints)
     table: dict[str, np.ndarray] = {}
     shapes_ref: dict[tuple[int, ...], np.ndarray] = {}
@@ -235,7 +271,9 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
         else:
             signs = np.where(modes.tip_deflection < 0.0, -1.0, 1.0)
         shapes_ref[index] = shapes * signs[:, None]
-        y, s, psi = _shape_rate_integrals(arm, q, link, n_modes, joints, modes.shape(x_gauss) * signs[:, None], x_gauss, weights)
+        y, s, psi = _shape_rate_integrals(
+            arm, q, link, n_modes, joints, modes.shape(x_gauss) * signs[:, None], x_gauss, weights
+        )
         fields = _modal_fields(modes)
         fields = {
             "omega": fields["omega"],
@@ -255,7 +293,14 @@ def _tabulate(arm: ArmSpec, link: int, n_modes: int, joints: tuple[int, ...], gr
     return table
 
 
-def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_deg: float = 10.0, use_cache: bool = True) -> ModalLookup:
+def modal_lookup(
+    arm: ArmSpec,
+    link: int,
+    n_modes: int | None = None,
+    *,
+    step_deg: float = 10.0,
+    use_cache: bool = True,
+) -> ModalLookup:
     """Build (or read from the cache) the modal table of ``link`` (0-based).
 
     Parameters
@@ -273,14 +318,25 @@ def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_de
     """
     n_modes = arm.links[link].n_modes if n_modes is None else n_modes
     if not (0 < step_deg <= 90 and abs(360.0 / step_deg - round(360.0 / step_deg)) < 1e-9):
-        raise ValueError(f"step_deg {step_deg!r} is not allowed; allowed: a divisor of 360 in (0, 90]")
+        raise ValueError(
+            f"step_deg {step_deg!r} is not allowed; allowed: a divisor of 360 in (0, 90]"
+        )
     joints = scheduling_joints(arm, link)
     overlap = 2 * step_deg
-    grid_deg = np.arange(-180.0 - overlap, 180.0 + overlap + step_deg / 2, step_deg) if joints else np.zeros(1)
+    grid_deg = (
+        np.arange(-180.0 - overlap, 180.0 + overlap + step_deg / 2, step_deg)
+        if joints
+        else np.zeros(1)
+    )
     path = cache_dir() / "modal" / f"link{link + 1}-{_key(arm, link, n_modes, step_deg)}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
-            values = {name: data[name] for name in FIELDS + SHORTENING_FIELDS + (SHAPE_RATE_FIELDS + ("sh_psi",) if joints else ())}
+            values = {
+                name: data[name]
+                for name in FIELDS
+                + SHORTENING_FIELDS
+                + (SHAPE_RATE_FIELDS + ("sh_psi",) if joints else ())
+            }
         return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, 0.0)
     start = time.perf_counter()
     if joints:
@@ -298,7 +354,9 @@ def modal_lookup(arm: ArmSpec, link: int, n_modes: int | None = None, *, step_de
     return ModalLookup(link, n_modes, arm.n_links, joints, grid_deg, values, elapsed)
 
 
-def interpolation_error_hz(arm: ArmSpec, lookup: ModalLookup, samples: int = 200, seed: int = 0) -> float:
+def interpolation_error_hz(
+    arm: ArmSpec, lookup: ModalLookup, samples: int = 200, seed: int = 0
+) -> float:
     """Worst |interpolated - exact| natural frequency (Hz) at random configurations."""
     if not lookup.joints:
         return 0.0

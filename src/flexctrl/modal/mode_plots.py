@@ -21,9 +21,13 @@ from flexctrl.modal.boundary import boundary_values  # noqa: E402
 from flexctrl.spec.arm import ArmSpec  # noqa: E402
 
 
-def plot_mode_shapes(arm: ArmSpec, payloads: tuple[float, ...], path: Path, n_modes: int = 2) -> Path:
+def plot_mode_shapes(
+    arm: ArmSpec, payloads: tuple[float, ...], path: Path, n_modes: int = 2
+) -> Path:
     """Mode shapes phi_ij(x) of every link at the arm's configuration, one row per payload."""
-    fig, axes = plt.subplots(len(payloads), arm.n_links, figsize=(4 * arm.n_links, 3 * len(payloads)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(payloads), arm.n_links, figsize=(4 * arm.n_links, 3 * len(payloads)), squeeze=False
+    )
     q = np.array(arm.configuration)
     for row, payload in enumerate(payloads):
         for link, modes in enumerate(arm_modes(arm.with_payload(payload), q, n_modes)):
@@ -56,7 +60,11 @@ def plot_boundary_values(arm: ArmSpec, path: Path, step_deg: float = 10.0) -> Pa
     exact = boundary_values(arm, q, 0, "exact")
     paper = boundary_values(arm, q, 0, "paper")
     fig, axes = plt.subplots(1, 4, figsize=(18, 4))
-    for ax, data, title in ((axes[0], exact.J, "J_D1 exact (kg m^2)"), (axes[1], paper.J, "J_D1 paper Eq 70 (kg m^2)"), (axes[2], exact.M, "M_D1 (kg m)")):
+    for ax, data, title in (
+        (axes[0], exact.J, "J_D1 exact (kg m^2)"),
+        (axes[1], paper.J, "J_D1 paper Eq 70 (kg m^2)"),
+        (axes[2], exact.M, "M_D1 (kg m)"),
+    ):
         mesh = ax.pcolormesh(Q2, Q3, data, shading="auto")
         fig.colorbar(mesh, ax=ax)
         ax.set_title(title)
@@ -76,7 +84,9 @@ def plot_boundary_values(arm: ArmSpec, path: Path, step_deg: float = 10.0) -> Pa
     return path
 
 
-def frequency_maps(arm: ArmSpec, step_deg: float = 15.0, convention: str | None = None) -> dict[str, np.ndarray]:
+def frequency_maps(
+    arm: ArmSpec, step_deg: float = 15.0, convention: str | None = None
+) -> dict[str, np.ndarray]:
     """f11, f12 over (q2, q3) and f21, f22 over q3 (Hz), by exact solves on a grid."""
     grid = configuration_grid(step_deg)
     f1 = np.zeros((grid.size, grid.size, 2))
@@ -98,7 +108,9 @@ def plot_frequency_maps(arm: ArmSpec, path: Path, step_deg: float = 15.0) -> tup
     Q2, Q3 = np.meshgrid(grid, grid, indexing="ij")
     fig, axes = plt.subplots(2, 4, figsize=(19, 8))
     for mode in range(2):
-        for col, (data, title) in enumerate(((exact["link1"][..., mode], "exact"), (paper["link1"][..., mode], "paper Eq 70"))):
+        for col, (data, title) in enumerate(
+            ((exact["link1"][..., mode], "exact"), (paper["link1"][..., mode], "paper Eq 70"))
+        ):
             ax = axes[mode, col]
             mesh = ax.pcolormesh(Q2, Q3, data, shading="auto")
             fig.colorbar(mesh, ax=ax, label="Hz")

@@ -37,6 +37,10 @@ SUBEDI_TABLE2_GRAVITY = (0.0, -9.81)
 # Subedi et al. (2021), Section 4.4 (Fig 14): the frequency components (Hz) of the tip
 # deflection w_ie of links 1-3 (damped free vibration under gravity, 2 kg, q_f31(0) = 0.1 m,
 # q_f32(0) = 0.002 m), from N_s = 2000 samples at 1 ms, as printed.
-SUBEDI_FIG14_PEAKS_HZ: tuple[tuple[float, float], ...] = ((0.4883, 1.465), (0.883, 42.48), (0.9766, 42.48))
+SUBEDI_FIG14_PEAKS_HZ: tuple[tuple[float, float], ...] = (
+    (0.4883, 1.465),
+    (0.883, 42.48),
+    (0.9766, 42.48),
+)
 SUBEDI_FIG14_SAMPLES = 2000
 SUBEDI_FIG14_DT_S = 1e-3

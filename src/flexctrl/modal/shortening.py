@@ -19,7 +19,7 @@ the same rule on ``[0, x]``).  See ``docs/amm.md`` section 10 for the derivation
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -34,25 +34,34 @@ def mode_pairs(n_modes: int) -> list[tuple[int, int]]:
     return [(j, k) for j in range(n_modes) for k in range(j, n_modes)]
 
 
-def gauss_nodes(length: float, rho: float, points: int = GAUSS_POINTS) -> tuple[np.ndarray, np.ndarray]:
+def gauss_nodes(
+    length: float, rho: float, points: int = GAUSS_POINTS
+) -> tuple[np.ndarray, np.ndarray]:
     """Nodes (m) and mass weights (kg) of the Gauss-Legendre rule on ``[0, length]``."""
     t, wt = np.polynomial.legendre.leggauss(points)
     return 0.5 * length * (t + 1.0), 0.5 * length * wt * rho
 
 
-def axial_shapes(slope: Callable[[np.ndarray], np.ndarray], x: np.ndarray, n_modes: int,
-                 points: int = GAUSS_POINTS) -> np.ndarray:
+def axial_shapes(
+    slope: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    n_modes: int,
+    points: int = GAUSS_POINTS,
+) -> np.ndarray:
     """``N_p(x)`` (1/m), shape ``(n_pairs, len(x))``; ``slope(xs)`` returns ``phi'`` (n_modes, len(xs)), 1/m."""
     t, wt = np.polynomial.legendre.leggauss(points)
     x = np.asarray(x, dtype=float)
     sub = 0.5 * x[:, None] * (t[None, :] + 1.0)  # (len(x), points) nodes on [0, x]
     d = np.asarray(slope(sub.ravel()), dtype=float).reshape(n_modes, x.size, points)
     S = np.einsum("jgt,kgt,t,g->jkg", d, d, wt, 0.5 * x)  # int_0^x phi_j' phi_k'
-    return np.array([-(0.5 if j == k else 1.0) * S[j, k] for j, k in mode_pairs(n_modes)]).reshape(-1, x.size)
+    return np.array([-(0.5 if j == k else 1.0) * S[j, k] for j, k in mode_pairs(n_modes)]).reshape(
+        -1, x.size
+    )
 
 
-def shortening_integrals(shape: Callable[[np.ndarray, int], np.ndarray], length: float, rho: float,
-                         n_modes: int) -> dict[str, np.ndarray]:
+def shortening_integrals(
+    shape: Callable[[np.ndarray, int], np.ndarray], length: float, rho: float, n_modes: int
+) -> dict[str, np.ndarray]:
     """The integrals of the module docstring for shapes ``shape(x, derivative)`` -> (n_modes, len(x)).
 
     Returns ``{"sh_tip", "sh_v", "sh_w", "sh_y", "sh_z"}`` with shapes ``(P,)``, ``(P,)``,

@@ -108,7 +108,9 @@ class CorrectedModes:
         phi, psi = b.shape(x), self._raw(x, 0)
         phi_tip = np.vstack([b.tip_deflection, b.tip_slope])  # (2, N)
         psi_tip = np.vstack([self._raw(end, 0)[:, 0], self._raw(end, 1)[:, 0]])  # (2, k)
-        C = ((b.rho * psi * wt) @ phi.T + psi_tip.T @ T @ phi_tip) / b.link_mass  # (k, N): <psi_i, phi_j> / m_l
+        C = (
+            (b.rho * psi * wt) @ phi.T + psi_tip.T @ T @ phi_tip
+        ) / b.link_mass  # (k, N): <psi_i, phi_j> / m_l
         res, res_tip = psi - C @ phi, psi_tip - phi_tip @ C.T
         mass = b.rho * (res * wt) @ res.T + res_tip.T @ T @ res_tip
         curv = self._raw(x, 2) - C @ b.shape(x, 2)
@@ -124,7 +126,9 @@ class CorrectedModes:
         """Shapes (``n_modes`` rows, the corrections last) or their derivatives at ``x`` (m)."""
         xa = np.asarray(x, dtype=float)
         base = self.base.shape(xa, derivative).reshape(self.base.n_modes, -1)
-        return np.vstack([base, self._correction(xa.ravel(), derivative)]).reshape((self.n_modes,) + xa.shape)
+        return np.vstack([base, self._correction(xa.ravel(), derivative)]).reshape(
+            (self.n_modes,) + xa.shape
+        )
 
     @cached_property
     def _tip(self) -> np.ndarray:
@@ -195,7 +199,7 @@ def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PAN
     keep = np.arange(1, M.shape[0])  # w(0) = 0
     lam, V = scipy.linalg.eigh(K[np.ix_(keep, keep)], M[np.ix_(keep, keep)])
     modes = np.zeros((M.shape[0], count))
-    modes[keep] = V[:, 1:count + 1]  # skip the rotation about the pin
+    modes[keep] = V[:, 1 : count + 1]  # skip the rotation about the pin
     le = L / n_elements
 
     def shapes(x, d):
@@ -203,9 +207,13 @@ def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PAN
         out = np.empty((count, x.size))
         for i, xi in enumerate(x):
             j, zeta = locate(min(xi, L), n_elements, L)
-            out[:, i] = hermite_shape(zeta, le, d) @ modes[2 * j:2 * j + 4]
+            out[:, i] = hermite_shape(zeta, le, d) @ modes[2 * j : 2 * j + 4]
         rot = modes[1]  # W_k'(0)
-        return out - rot[:, None] * (x if d == 0 else (np.ones_like(x) if d == 1 else np.zeros_like(x)))[None, :]
+        return (
+            out
+            - rot[:, None]
+            * (x if d == 0 else (np.ones_like(x) if d == 1 else np.zeros_like(x)))[None, :]
+        )
 
-    shapes.frequencies = np.sqrt(np.abs(lam[1:count + 1]))
+    shapes.frequencies = np.sqrt(np.abs(lam[1 : count + 1]))
     return shapes

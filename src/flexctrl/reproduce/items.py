@@ -78,8 +78,13 @@ def _table(items: list[Item]) -> list[str]:
     return lines
 
 
-def write_reproduction(out_dir: Path, title: str, sections: list[Section], preamble: str = "",
-                       extra: dict | None = None) -> dict:
+def write_reproduction(
+    out_dir: Path,
+    title: str,
+    sections: list[Section],
+    preamble: str = "",
+    extra: dict | None = None,
+) -> dict:
     """Write ``out_dir/report.md`` and ``out_dir/reproduction.json``; return the JSON document.
 
     Parameters

@@ -19,8 +19,10 @@ from pathlib import Path
 
 from flexctrl.reproduce.items import Section
 
-TITLE = ("Pan, Scott and Ulsoy 1990, Dynamic Modeling and Simulation of Flexible Robots With Prismatic Joints, "
-         "ASME J. Mech. Design 112, 307-314")
+TITLE = (
+    "Pan, Scott and Ulsoy 1990, Dynamic Modeling and Simulation of Flexible Robots With Prismatic Joints, "
+    "ASME J. Mech. Design 112, 307-314"
+)
 
 
 def run(out_dir: Path, reduced: bool) -> list[Section]:
@@ -35,8 +37,11 @@ def run(out_dir: Path, reduced: bool) -> list[Section]:
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    sections = pan_joints.sections(out_dir, reduced) + pan_beam.sections(out_dir, reduced) \
+    sections = (
+        pan_joints.sections(out_dir, reduced)
+        + pan_beam.sections(out_dir, reduced)
         + pan_numerics.sections(out_dir, reduced)
+    )
     for s in sections:  # verdicts computed with numpy are numpy booleans: JSON wants bool
         s.items = [dataclasses.replace(it, agrees=bool(it.agrees)) for it in s.items]
     return sections

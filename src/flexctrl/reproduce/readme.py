@@ -25,15 +25,23 @@ def table(documents: list[dict]) -> str:
     for doc in documents:
         authors = doc["paper"].split(" (")[0]
         year = re.search(r"\(\d{4}\)", doc["paper"])
-        short = authors.split(",")[0] + (" et al." if "," in authors else "") + (f" {year.group(0)}" if year else "")
+        short = (
+            authors.split(",")[0]
+            + (" et al." if "," in authors else "")
+            + (f" {year.group(0)}" if year else "")
+        )
         groups: dict[str, list[dict]] = {}
         for item in doc["items"]:
             match = _NUMBER.match(item["item"])
             groups.setdefault(match.group(1) if match else item["item"], []).append(item)
         for name, items in groups.items():
             agree = sum(it["agrees"] for it in items)
-            differs = "; ".join(f"{it['item']}: {it['flexctrl']}" for it in items if not it["agrees"])
-            lines.append(f"| {short} | {name} | {agree} of {len(items)} | {differs.replace('|', '/')} |")
+            differs = "; ".join(
+                f"{it['item']}: {it['flexctrl']}" for it in items if not it["agrees"]
+            )
+            lines.append(
+                f"| {short} | {name} | {agree} of {len(items)} | {differs.replace('|', '/')} |"
+            )
     return "\n".join(lines)
 
 
@@ -41,7 +49,9 @@ def rewrite(readme: Path, sources: list[Path]) -> str:
     """The README text with its block replaced by the table of ``sources``."""
     text = readme.read_text()
     if BEGIN not in text or END not in text:
-        raise ValueError(f"{readme}: the markers of the reproduction table are missing; add the lines\n{BEGIN}\n{END}")
+        raise ValueError(
+            f"{readme}: the markers of the reproduction table are missing; add the lines\n{BEGIN}\n{END}"
+        )
     documents = [json.loads(Path(s).read_text()) for s in sources]
     head, rest = text.split(BEGIN, 1)
     _old, tail = rest.split(END, 1)
@@ -52,7 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m flexctrl.reproduce.readme README.md FILE.json ...``."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) < 2:
-        print("usage: python -m flexctrl.reproduce.readme README.md reproduction.json [...]", file=sys.stderr)
+        print(
+            "usage: python -m flexctrl.reproduce.readme README.md reproduction.json [...]",
+            file=sys.stderr,
+        )
         return 2
     readme = Path(args[0])
     readme.write_text(rewrite(readme, [Path(a) for a in args[1:]]))

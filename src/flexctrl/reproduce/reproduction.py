@@ -21,16 +21,23 @@ PAPERS = ("subedi", "pan")
 
 def _paper_module(paper: str):
     if paper not in PAPERS:
-        raise SpecError(f"value {paper!r} is not allowed; allowed: {', '.join(map(repr, PAPERS))}", key="paper")
+        raise SpecError(
+            f"value {paper!r} is not allowed; allowed: {', '.join(map(repr, PAPERS))}", key="paper"
+        )
     name = f"flexctrl.reproduce.{paper}"
     try:
         return importlib.import_module(name)
     except ModuleNotFoundError as exc:
         if exc.name != name:
             raise
-        available = [p for p in PAPERS if importlib.util.find_spec(f"flexctrl.reproduce.{p}") is not None]
-        raise SpecError(f"the reproduction of '{paper}' is not available in this version ({name} is missing); "
-                        f"available: {', '.join(available) or 'none'}", key="paper") from None
+        available = [
+            p for p in PAPERS if importlib.util.find_spec(f"flexctrl.reproduce.{p}") is not None
+        ]
+        raise SpecError(
+            f"the reproduction of '{paper}' is not available in this version ({name} is missing); "
+            f"available: {', '.join(available) or 'none'}",
+            key="paper",
+        ) from None
 
 
 def reproduce_paper(paper: str, out_dir: str | Path, reduced: bool = False) -> dict:
@@ -64,8 +71,15 @@ def reproduce_paper(paper: str, out_dir: str | Path, reduced: bool = False) -> d
     seconds = time.perf_counter() - start
     title = getattr(module, "TITLE", paper)
     form = "reduced form (coarser grids, shorter runs, same code paths)" if reduced else "full form"
-    preamble = (f"`flexctrl reproduce {paper} --out DIR{' --reduced' if reduced else ''}`: {form}, "
-                f"{seconds:.0f} s on this machine. Each item sets a number the paper prints, or a behaviour its text "
-                "states, beside flexctrl's, with a verdict and the reason.")
-    return write_reproduction(out_dir, title, sections, preamble,
-                              extra={"reduced": bool(reduced), "seconds": round(seconds, 1)})
+    preamble = (
+        f"`flexctrl reproduce {paper} --out DIR{' --reduced' if reduced else ''}`: {form}, "
+        f"{seconds:.0f} s on this machine. Each item sets a number the paper prints, or a behaviour its text "
+        "states, beside flexctrl's, with a verdict and the reason."
+    )
+    return write_reproduction(
+        out_dir,
+        title,
+        sections,
+        preamble,
+        extra={"reduced": bool(reduced), "seconds": round(seconds, 1)},
+    )

@@ -25,12 +25,31 @@ import numpy as np
 from flexctrl.reproduce.items import Section
 from flexctrl.spec.shipped import data_root
 
-TITLE = ("Subedi, Tyapin, Hovland (2021), \"Dynamic Modeling of Planar Multi-Link Flexible Manipulators\", "
-         "Robotics 10, 70")
+TITLE = (
+    'Subedi, Tyapin, Hovland (2021), "Dynamic Modeling of Planar Multi-Link Flexible Manipulators", '
+    "Robotics 10, 70"
+)
 MODEL = data_root() / "models" / "subedi3link.toml"
 #: The paper's numbered tables and figures, in its order (the reproduction covers each).
-NUMBERED = ("Fig 1", "Table 1", "Table 2", "Table 3", "Fig 2", "Fig 3", "Fig 4", "Fig 5", "Fig 6", "Fig 7",
-            "Fig 8", "Fig 9", "Fig 10", "Fig 11", "Fig 12", "Fig 13", "Fig 14")
+NUMBERED = (
+    "Fig 1",
+    "Table 1",
+    "Table 2",
+    "Table 3",
+    "Fig 2",
+    "Fig 3",
+    "Fig 4",
+    "Fig 5",
+    "Fig 6",
+    "Fig 7",
+    "Fig 8",
+    "Fig 9",
+    "Fig 10",
+    "Fig 11",
+    "Fig 12",
+    "Fig 13",
+    "Fig 14",
+)
 
 
 def run(out_dir: Path, reduced: bool = False) -> list[Section]:
@@ -61,17 +80,32 @@ def run(out_dir: Path, reduced: bool = False) -> list[Section]:
     fit = identify_hub_masses(arm)
     model = build_model(arm, "amm:2", reference_q=np.zeros(arm.n_links))
     family, slices, maps = (90.0, 45.0, 45.0) if reduced else (30.0, 5.0, 10.0)
-    sections = [subedi_tables.fig1(arm, model, out_dir), subedi_tables.table1(arm), subedi_tables.table2(arm, fit),
-                subedi_tables.table3(arm), subedi_modes.fig2(arm, out_dir), subedi_modes.fig3(arm, out_dir),
-                subedi_modes.fig4(arm, out_dir, family), subedi_modes.fig5(arm, out_dir),
-                subedi_modes.fig6(arm, out_dir, slices), subedi_modes.fig7(arm, out_dir, maps)]
+    sections = [
+        subedi_tables.fig1(arm, model, out_dir),
+        subedi_tables.table1(arm),
+        subedi_tables.table2(arm, fit),
+        subedi_tables.table3(arm),
+        subedi_modes.fig2(arm, out_dir),
+        subedi_modes.fig3(arm, out_dir),
+        subedi_modes.fig4(arm, out_dir, family),
+        subedi_modes.fig5(arm, out_dir),
+        subedi_modes.fig6(arm, out_dir, slices),
+        subedi_modes.fig7(arm, out_dir, maps),
+    ]
     modal_seconds = time.perf_counter() - start
     runs = Runs(reduced)
     sections += subedi_time.fig8_9(runs, out_dir)
     sections += subedi_time.fig10_11(runs, out_dir)
     sections += subedi_time.fig12_13(runs, out_dir)
     sections.append(subedi_fft.fig14(runs, out_dir))
-    timing = ", ".join(f"{key} {variant} {seconds:.1f} s" for (key, variant), seconds in runs.seconds.items())
-    sections.append(Section("Runs", f"Modal analysis (Tables 1-3, Figs 1-7) {modal_seconds:.1f} s. Simulations (build, "
-                            f"compile or cached library, run): {timing}."))
+    timing = ", ".join(
+        f"{key} {variant} {seconds:.1f} s" for (key, variant), seconds in runs.seconds.items()
+    )
+    sections.append(
+        Section(
+            "Runs",
+            f"Modal analysis (Tables 1-3, Figs 1-7) {modal_seconds:.1f} s. Simulations (build, "
+            f"compile or cached library, run): {timing}.",
+        )
+    )
     return sections

@@ -63,7 +63,11 @@ def readings(runs: Runs) -> list[tuple[str, list[list[float]]]]:
 
 def matched(found: list[list[float]], tol: float = 0.01) -> int:
     """How many of the six printed peaks ``found`` holds to ``tol`` Hz (the printed digits)."""
-    return sum(any(abs(f - p) <= tol for f in found[k]) for k, row in enumerate(SUBEDI_FIG14_PEAKS_HZ) for p in row)
+    return sum(
+        any(abs(f - p) <= tol for f in found[k])
+        for k, row in enumerate(SUBEDI_FIG14_PEAKS_HZ)
+        for p in row
+    )
 
 
 def fig14(runs: Runs, out_dir: Path) -> Section:
@@ -74,47 +78,89 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
     fig, axes = figure(3, 2, 5.2, 2.6)
     for link in range(3):
         ours, ours_2000 = peaks(w[:, link]), peaks(w[:, link], None)
-        for k, (paper, mine, mine_2000) in enumerate(zip(SUBEDI_FIG14_PEAKS_HZ[link], ours, ours_2000)):
+        for k, (paper, mine, mine_2000) in enumerate(
+            zip(SUBEDI_FIG14_PEAKS_HZ[link], ours, ours_2000)
+        ):
             note = f"one 2048-point bin is {RESOLUTION_HZ:.4f} Hz; without padding {mine_2000:.2f} Hz (0.5 Hz bins)"
             if link == 1 and k == 0:
-                note = (f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own 2048-point grid "
-                        "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' dropped); "
-                        "within one bin either way (see the text)")
-            items.append(Item(f"Fig 14, link {link + 1}, {('first', 'second')[k]} peak", f"{paper} Hz", f"{mine:.4f} Hz",
-                              abs(mine - paper) <= RESOLUTION_HZ * (1 + 1e-9), note))
+                note = (
+                    f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own 2048-point grid "
+                    "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' dropped); "
+                    "within one bin either way (see the text)"
+                )
+            items.append(
+                Item(
+                    f"Fig 14, link {link + 1}, {('first', 'second')[k]} peak",
+                    f"{paper} Hz",
+                    f"{mine:.4f} Hz",
+                    abs(mine - paper) <= RESOLUTION_HZ * (1 + 1e-9),
+                    note,
+                )
+            )
         axes[link, 0].plot(t, 1e3 * w[:, link], lw=0.7)
-        axes[link, 0].set(xlabel="t (s)", ylabel=f"w{link + 1}e (mm)", title=f"({'ace'[link]}) tip deflection of link {link + 1}")
+        axes[link, 0].set(
+            xlabel="t (s)",
+            ylabel=f"w{link + 1}e (mm)",
+            title=f"({'ace'[link]}) tip deflection of link {link + 1}",
+        )
         freq, amp = amplitude_spectrum(w[:, link], SUBEDI_FIG14_DT_S, N_FFT)
         ax = axes[link, 1]
         ax.semilogy(freq, 1e3 * np.maximum(amp, 1e-12), lw=0.7, label="flexctrl (2048-point)")
         for j, paper in enumerate(SUBEDI_FIG14_PEAKS_HZ[link]):
             ax.axvline(paper, color="r", ls=":", lw=1, label="paper's peaks" if j == 0 else None)
-        ax.plot(ours, [1e3 * amp[int(round(f / RESOLUTION_HZ))] for f in ours], "kv", label="flexctrl's peaks")
-        ax.set(xlim=(0, 60), ylim=(1e-4, None), xlabel="f (Hz)", ylabel=f"|W{link + 1}e(f)| (mm)",
-               title=f"({'bdf'[link]}) spectrum of link {link + 1}")
+        ax.plot(
+            ours,
+            [1e3 * amp[int(round(f / RESOLUTION_HZ))] for f in ours],
+            "kv",
+            label="flexctrl's peaks",
+        )
+        ax.set(
+            xlim=(0, 60),
+            ylim=(1e-4, None),
+            xlabel="f (Hz)",
+            ylabel=f"|W{link + 1}e(f)| (mm)",
+            title=f"({'bdf'[link]}) spectrum of link {link + 1}",
+        )
         ax.legend(fontsize=6)
     printed = [f for row in SUBEDI_FIG14_PEAKS_HZ for f in row]
     off = [f for f in printed if on_grid(f) > 0.05]
-    items.append(Item("Fig 14, the paper's frequency grid", f"N_s = {SUBEDI_FIG14_SAMPLES} samples at 1 ms",
-                      f"{len(printed) - len(off)} of {len(printed)} printed peaks are multiples of 1000/2048 Hz "
-                      f"(within 0.05 bin: {', '.join(f'{f / RESOLUTION_HZ:.2f}' for f in printed)} bins); off the grid: "
-                      f"{', '.join(map(str, off)) or 'none'}", len(off) == 1 and off[0] == SUBEDI_FIG14_PEAKS_HZ[1][0],
-                      "so the paper zero-padded its 2000 samples to 2048, and 0.883 is the one value that does not fit"))
+    items.append(
+        Item(
+            "Fig 14, the paper's frequency grid",
+            f"N_s = {SUBEDI_FIG14_SAMPLES} samples at 1 ms",
+            f"{len(printed) - len(off)} of {len(printed)} printed peaks are multiples of 1000/2048 Hz "
+            f"(within 0.05 bin: {', '.join(f'{f / RESOLUTION_HZ:.2f}' for f in printed)} bins); off the grid: "
+            f"{', '.join(map(str, off)) or 'none'}",
+            len(off) == 1 and off[0] == SUBEDI_FIG14_PEAKS_HZ[1][0],
+            "so the paper zero-padded its 2000 samples to 2048, and 0.883 is the one value that does not fit",
+        )
+    )
     found = readings(runs)
-    rows = "\n".join(f"| {name} | " + " | ".join(", ".join(f"{f:.4f}" for f in link) for link in per_link) +
-                     f" | {matched(per_link)} of 6 |" for name, per_link in found)
+    rows = "\n".join(
+        f"| {name} | "
+        + " | ".join(", ".join(f"{f:.4f}" for f in link) for link in per_link)
+        + f" | {matched(per_link)} of 6 |"
+        for name, per_link in found
+    )
     best = max(found, key=lambda case: matched(case[1]))
-    text = ("Damped free vibration under gravity (Fig 9's run, frozen modes), the first 2000 samples of w_ie at 1 ms "
-            "(the tip deflection of link i in its own frame, Eq 2), mean removed, amplitude spectrum zero-padded to "
-            "2048 points as the printed digits show the paper did. Verdict per peak: within one bin (0.488 Hz).\n\n"
-            "Link 2's low peak, 0.883 Hz in the paper against 0.4883 Hz here. Every reading tried, with the two "
-            "strongest peaks of each link (Hz) and how many of the six printed peaks it gives to their printed "
-            "digits (0.01 Hz):\n\n| reading | link 1 | link 2 | link 3 | printed peaks reproduced |\n"
-            "|---|---|---|---|---|\n" + rows + "\n\n"
-            f"The best reading is '{best[0]}' ({matched(best[1])} of 6). A Hann window moves link 2's low peak to "
-            "0.9766 Hz (bin 2, nearer 0.883) but loses link 1's printed 1.465 Hz, so it is not the paper's reading. "
-            "No reading can give 0.883 Hz, which lies between two bins of the grid all the other printed values sit "
-            "on; the slow content of w_2e is the whole arm's swing under gravity (0.49 Hz in all three links), not a "
-            "mode of link 2. Neither the window, the sampling, the transformed coordinate, the modes (frozen or "
-            "scheduled) nor Eq 68's form explains it; the explanation left is a misprint of 0.4883.")
-    return Section("Fig 14: tip deflections and their spectra", text, items, [save(fig, out_dir, "fig14_fft.png")])
+    text = (
+        "Damped free vibration under gravity (Fig 9's run, frozen modes), the first 2000 samples of w_ie at 1 ms "
+        "(the tip deflection of link i in its own frame, Eq 2), mean removed, amplitude spectrum zero-padded to "
+        "2048 points as the printed digits show the paper did. Verdict per peak: within one bin (0.488 Hz).\n\n"
+        "Link 2's low peak, 0.883 Hz in the paper against 0.4883 Hz here. Every reading tried, with the two "
+        "strongest peaks of each link (Hz) and how many of the six printed peaks it gives to their printed "
+        "digits (0.01 Hz):\n\n| reading | link 1 | link 2 | link 3 | printed peaks reproduced |\n"
+        "|---|---|---|---|---|\n" + rows + "\n\n"
+        f"The best reading is '{best[0]}' ({matched(best[1])} of 6). A Hann window moves link 2's low peak to "
+        "0.9766 Hz (bin 2, nearer 0.883) but loses link 1's printed 1.465 Hz, so it is not the paper's reading. "
+        "No reading can give 0.883 Hz, which lies between two bins of the grid all the other printed values sit "
+        "on; the slow content of w_2e is the whole arm's swing under gravity (0.49 Hz in all three links), not a "
+        "mode of link 2. Neither the window, the sampling, the transformed coordinate, the modes (frozen or "
+        "scheduled) nor Eq 68's form explains it; the explanation left is a misprint of 0.4883."
+    )
+    return Section(
+        "Fig 14: tip deflections and their spectra",
+        text,
+        items,
+        [save(fig, out_dir, "fig14_fft.png")],
+    )

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -49,14 +48,21 @@ class Runs:
             elif variant == "eq68":
                 sets.append("damping.form='paper'")
             elif variant == "fine":
-                sets += [f"dt={FINE_DT}", f"duration={min(duration, 1.0 if self.reduced else duration)}"]
+                sets += [
+                    f"dt={FINE_DT}",
+                    f"duration={min(duration, 1.0 if self.reduced else duration)}",
+                ]
             elif variant != "frozen":
-                raise ValueError(f"variant {variant!r} is not allowed; allowed: frozen, scheduled, eq68, fine")
+                raise ValueError(
+                    f"variant {variant!r} is not allowed; allowed: frozen, scheduled, eq68, fine"
+                )
             # reduced: the scheduled runs in CasADi's virtual machine, where compiling their step (one library per
             # scene: the scheduled model's constants are not lifted) takes 30-50 s against the VM's 12-24 s
             options = {"compile": False} if self.reduced and variant == "scheduled" else {}
             start = time.perf_counter()
-            trajectory, _model, _arm = simulate_arm_scene(load_scene(SCENES / name, sets), **options)
+            trajectory, _model, _arm = simulate_arm_scene(
+                load_scene(SCENES / name, sets), **options
+            )
             self.seconds[(key, variant)] = time.perf_counter() - start
             self.runs[(key, variant)] = trajectory
         return self.runs[(key, variant)]
@@ -85,6 +91,9 @@ def max_tip_difference(a: Trajectory, b: Trajectory) -> float:
 
 def energy_loss(traj: Trajectory, t: float, start: float = 0.0) -> float:
     """``E_total(start) + work - E_total(t)`` (J): energy not accounted for between ``start`` and ``t``."""
-    i0, i1 = int(np.searchsorted(traj.time, start - 1e-12)), int(np.searchsorted(traj.time, t - 1e-12))
+    i0, i1 = (
+        int(np.searchsorted(traj.time, start - 1e-12)),
+        int(np.searchsorted(traj.time, t - 1e-12)),
+    )
     e, work = traj.energies["E_total"], traj.work_in
     return float(e[i0] + (work[i1] - work[i0]) - e[i1])

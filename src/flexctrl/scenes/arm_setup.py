@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.spec.arm import ArmSpec, load_arm
 from flexctrl.sim.trajectory import Trajectory
+from flexctrl.spec.arm import ArmSpec, load_arm
 from flexctrl.spec.arm_scene import ArmScene
 
 
@@ -58,15 +58,24 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
     if scene.axial_stretch is not None:
         arm = dataclasses.replace(arm, axial_stretch=scene.axial_stretch)
     if scene.zeta is not None:
-        arm = dataclasses.replace(arm, links=tuple(dataclasses.replace(l, damping_ratios=(scene.zeta,)) for l in arm.links))
+        arm = dataclasses.replace(
+            arm,
+            links=tuple(dataclasses.replace(l, damping_ratios=(scene.zeta,)) for l in arm.links),
+        )
     if scene.damping_form is not None:
         arm = dataclasses.replace(arm, damping_form=scene.damping_form)
     if scene.friction is not None:
         friction = scene.friction * arm.n_links if len(scene.friction) == 1 else scene.friction
         if len(friction) != arm.n_links:
-            raise SpecError(f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or one per joint",
-                            source=scene.source, key="damping.friction")
-        arm = dataclasses.replace(arm, joints=tuple(dataclasses.replace(j, friction=b) for j, b in zip(arm.joints, friction)))
+            raise SpecError(
+                f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or one per joint",
+                source=scene.source,
+                key="damping.friction",
+            )
+        arm = dataclasses.replace(
+            arm,
+            joints=tuple(dataclasses.replace(j, friction=b) for j, b in zip(arm.joints, friction)),
+        )
     return arm
 
 
@@ -78,7 +87,11 @@ def initial_state(scene: ArmScene, model, arm: ArmSpec) -> np.ndarray:
         if values is None:
             continue
         if len(values) != n:
-            raise SpecError(f"has {len(values)} values; expected {n} (one per joint)", source=scene.source, key=key)
+            raise SpecError(
+                f"has {len(values)} values; expected {n} (one per joint)",
+                source=scene.source,
+                key=key,
+            )
         x0[offset : offset + n] = values
     if scene.q0 is None:
         x0[:n] = arm.configuration
@@ -89,9 +102,12 @@ def initial_state(scene: ArmScene, model, arm: ArmSpec) -> np.ndarray:
 
             hint = difflib.get_close_matches(name, names[n:], n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise SpecError(f"is not a coordinate of the model at fidelity '{model.fidelity}'; "
-                            f"allowed: {', '.join(names[n:]) or 'none (rigid model)'}{extra}",
-                            source=scene.source, key=f"initial.qf.{name}")
+            raise SpecError(
+                f"is not a coordinate of the model at fidelity '{model.fidelity}'; "
+                f"allowed: {', '.join(names[n:]) or 'none (rigid model)'}{extra}",
+                source=scene.source,
+                key=f"initial.qf.{name}",
+            )
         x0[names.index(name)] = value
     return x0
 
@@ -120,14 +136,20 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     arm = scene_arm(scene)
     reference_q = scene.q0 if scene.q0 is not None else None
     if reference_q is not None and len(reference_q) != arm.n_links:
-        raise SpecError(f"has {len(reference_q)} values; expected {arm.n_links} (one per joint)",
-                        source=scene.source, key="initial.q")
+        raise SpecError(
+            f"has {len(reference_q)} values; expected {arm.n_links} (one per joint)",
+            source=scene.source,
+            key="initial.q",
+        )
     if model is None:
         model = build_model(arm, scene.fidelity, modes=scene.modes, reference_q=reference_q)
     x0 = initial_state(scene, model, arm)
     if scene.input.kind != "none" and scene.input.joint > model.n_joints:
-        raise SpecError(f"value {scene.input.joint} is out of range; allowed: 1 to {model.n_joints}",
-                        source=scene.source, key="input.joint")
+        raise SpecError(
+            f"value {scene.input.joint} is out of range; allowed: 1 to {model.n_joints}",
+            source=scene.source,
+            key="input.joint",
+        )
     n_steps = max(1, int(math.ceil(scene.duration / scene.dt - 1e-9)))
     u = scene.input.samples(n_steps, scene.dt, model.n_joints)
     if integrator is None:
@@ -140,7 +162,11 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
 
 def model_facts(model) -> dict[str, Any]:
     info = model.info or {}
-    facts = {"name": model.name, "coordinates": list(model.coordinate_names), "omega_max_rad_s": float(model.omega_max)}
+    facts = {
+        "name": model.name,
+        "coordinates": list(model.coordinate_names),
+        "omega_max_rad_s": float(model.omega_max),
+    }
     for key in ("build_time_s", "modes", "locked_frequencies_rad_s", "link_frequencies_rad_s"):
         if key in info:
             value = info[key]

@@ -23,9 +23,20 @@ from pathlib import Path
 from typing import Any
 
 from flexctrl.errors import SpecError
-from flexctrl.fidelity.ladder import (IMPLICIT, LINEAR_FACTOR, WALKS, FidelityChoice, RunRecord, check_ladder,
-                                      check_tolerance, excitation_bandwidth, required_modes, rung_name,
-                                      sampled_bandwidth, walk_and_judge)
+from flexctrl.fidelity.ladder import (
+    IMPLICIT,
+    LINEAR_FACTOR,
+    WALKS,
+    FidelityChoice,
+    RunRecord,
+    check_ladder,
+    check_tolerance,
+    excitation_bandwidth,
+    required_modes,
+    rung_name,
+    sampled_bandwidth,
+    walk_and_judge,
+)
 from flexctrl.scenes.arm_setup import scene_arm, simulate_arm_scene
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, closed_loop_tip_path
@@ -36,8 +47,16 @@ from flexctrl.spec.fidelity import FIDELITY_CHECKS, Fidelity, parse_fidelity
 def scene_key(scene) -> str:
     """A canonical string of everything in an arm scene that changes its simulation (not its fidelity)."""
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "fidelity_walk", "fidelity_checks", "name", "source", "fft_span",
-                 "fft_peaks"):
+    for name in (
+        "fidelity",
+        "tolerance_m",
+        "fidelity_walk",
+        "fidelity_checks",
+        "name",
+        "source",
+        "fft_span",
+        "fft_peaks",
+    ):
         settings.pop(name, None)
     path = Path(scene.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
@@ -57,8 +76,14 @@ def model_for(scene, fidelity: str, cache: SceneCache):
     return cache.model(scene_arm(scene), fidelity, scene.modes, scene.q0)
 
 
-def simulate_rung(scene, fidelity: str, integrator: str | None = None, dt: float | None = None, *,
-                  cache: SceneCache | None = None) -> RunRecord:
+def simulate_rung(
+    scene,
+    fidelity: str,
+    integrator: str | None = None,
+    dt: float | None = None,
+    *,
+    cache: SceneCache | None = None,
+) -> RunRecord:
     """Simulate ``scene`` at ``fidelity``; the integrator and step default to method step 4.
 
     Raises
@@ -71,21 +96,42 @@ def simulate_rung(scene, fidelity: str, integrator: str | None = None, dt: float
     if integrator is None or dt is None:
         integrator, dt = _run_settings(scene, model)
     key = (scene_key(scene), fidelity, integrator, float(dt))
-    return cache.get("runs", key, lambda: _simulate_rung(scene, fidelity, integrator, float(dt), cache))
+    return cache.get(
+        "runs", key, lambda: _simulate_rung(scene, fidelity, integrator, float(dt), cache)
+    )
 
 
-def _simulate_rung(scene, fidelity: str, integrator: str, dt: float, cache: SceneCache) -> RunRecord:
+def _simulate_rung(
+    scene, fidelity: str, integrator: str, dt: float, cache: SceneCache
+) -> RunRecord:
     start = time.perf_counter()
     model = model_for(scene, fidelity, cache)
     solver = {k: v for k, v in scene.solver.items() if integrator == scene.integrator}
-    built, _setup = cache.integrator(scene_arm(scene), fidelity, scene.modes, scene.q0, integrator, dt,
-                                     tuple(sorted(solver.items())))
+    built, _setup = cache.integrator(
+        scene_arm(scene),
+        fidelity,
+        scene.modes,
+        scene.q0,
+        integrator,
+        dt,
+        tuple(sorted(solver.items())),
+    )
     build = time.perf_counter() - start
-    run_scene = dataclasses.replace(scene, fidelity=parse_fidelity(fidelity), integrator=integrator, dt=dt)
+    run_scene = dataclasses.replace(
+        scene, fidelity=parse_fidelity(fidelity), integrator=integrator, dt=dt
+    )
     trajectory, model, _arm = simulate_arm_scene(run_scene, model=model, integrator=built)
     times, tip = read_only(trajectory.time.copy(), trajectory.tip.copy())
-    return RunRecord(fidelity=fidelity, integrator=integrator, dt=dt, omega_max=float(model.omega_max),
-                     wall_time_s=float(trajectory.meta["wall_time_s"]), build_time_s=build, time=times, tip=tip)
+    return RunRecord(
+        fidelity=fidelity,
+        integrator=integrator,
+        dt=dt,
+        omega_max=float(model.omega_max),
+        wall_time_s=float(trajectory.meta["wall_time_s"]),
+        build_time_s=build,
+        time=times,
+        tip=tip,
+    )
 
 
 def prepared(scene, cache: SceneCache) -> tuple[Any, Any]:
@@ -94,8 +140,15 @@ def prepared(scene, cache: SceneCache) -> tuple[Any, Any]:
     Used to run a scene that ``fidelity = "auto"`` resolved: the chooser has built both already.
     """
     solver = tuple(sorted(scene.solver.items()))
-    integrator, _setup = cache.integrator(scene_arm(scene), str(scene.fidelity), scene.modes, scene.q0,
-                                          scene.integrator, float(scene.dt), solver)
+    integrator, _setup = cache.integrator(
+        scene_arm(scene),
+        str(scene.fidelity),
+        scene.modes,
+        scene.q0,
+        scene.integrator,
+        float(scene.dt),
+        solver,
+    )
     return integrator.model, integrator
 
 
@@ -152,36 +205,71 @@ def choose_fidelity(
     """
     tol = check_tolerance(tol, key="tolerance")
     if getattr(scene, "kind", None) != "arm":
-        raise SpecError(f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; allowed: a kind = \"arm\" scene",
-                        source=getattr(scene, "source", None), key="kind")
-    ref = check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
+        raise SpecError(
+            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; allowed: a kind = \"arm\" scene",
+            source=getattr(scene, "source", None),
+            key="kind",
+        )
+    ref = check_ladder(
+        top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt
+    )
     check_checks(checks, scene.source)
     cache = SceneCache() if cache is None else cache
-    options = (tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
-               float(reference_omega_dt), checks)
-    return cache.get("choices", (scene_key(scene), options), lambda: _choose(scene, cache, *options))
+    options = (
+        tol,
+        top,
+        str(ref),
+        float(safety),
+        float(energy_fraction),
+        float(bandwidth_factor),
+        float(reference_omega_dt),
+        checks,
+    )
+    return cache.get(
+        "choices", (scene_key(scene), options), lambda: _choose(scene, cache, *options)
+    )
 
 
 def check_checks(checks, source) -> None:
     """:class:`SpecError` unless ``checks`` is one of ``FIDELITY_CHECKS`` (the scene key ``fidelity_checks``)."""
     if checks not in FIDELITY_CHECKS:
-        raise SpecError(f"value {checks!r} is not allowed; allowed: {', '.join(map(repr, FIDELITY_CHECKS))}",
-                        source=source, key="fidelity_checks")
+        raise SpecError(
+            f"value {checks!r} is not allowed; allowed: {', '.join(map(repr, FIDELITY_CHECKS))}",
+            source=source,
+            key="fidelity_checks",
+        )
 
 
-def _choose(scene, cache: SceneCache, tol: float, top: int, reference: str, safety: float, energy_fraction: float,
-            bandwidth_factor: float, reference_omega_dt: float, checks: str) -> FidelityChoice:
+def _choose(
+    scene,
+    cache: SceneCache,
+    tol: float,
+    top: int,
+    reference: str,
+    safety: float,
+    energy_fraction: float,
+    bandwidth_factor: float,
+    reference_omega_dt: float,
+    checks: str,
+) -> FidelityChoice:
     ref_n = parse_fidelity(reference).count
     low = required_modes(scene)
     if low > top:
-        raise SpecError(f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
-                        f"allowed: top >= {low}", source=scene.source, key="initial.qf")
+        raise SpecError(
+            f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
+            f"allowed: top >= {low}",
+            source=scene.source,
+            key="initial.qf",
+        )
 
     # (a) the modal-bandwidth rule, on the finest model's per-link mode frequencies
     top_model = model_for(scene, reference, cache)
     n_joints = top_model.n_joints
     bandwidth = excitation_bandwidth(scene, n_joints, energy_fraction=energy_fraction)
-    link_hz = [[w / (2 * math.pi) for w in link] for link in top_model.info.get("link_frequencies_rad_s", [])]
+    link_hz = [
+        [w / (2 * math.pi) for w in link]
+        for link in top_model.info.get("link_frequencies_rad_s", [])
+    ]
     if bandwidth is None:
         start = low
         kept = None
@@ -189,18 +277,35 @@ def _choose(scene, cache: SceneCache, tol: float, top: int, reference: str, safe
         limit = bandwidth_factor * bandwidth
         kept = [sum(1 for f in link if f <= limit) for link in link_hz]
         start = min(max([low, *kept]), top)
-    rule = {"excitation_bandwidth_hz": bandwidth, "energy_fraction": energy_fraction, "factor": bandwidth_factor,
-            "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
-            "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept, "start": rung_name(start),
-            "lowest_rung_for_initial_state": rung_name(low)}
+    rule = {
+        "excitation_bandwidth_hz": bandwidth,
+        "energy_fraction": energy_fraction,
+        "factor": bandwidth_factor,
+        "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
+        "link_mode_frequencies_hz": link_hz,
+        "modes_kept_per_link": kept,
+        "start": rung_name(start),
+        "lowest_rung_for_initial_state": rung_name(low),
+    }
 
     ref_model = model_for(scene, reference, cache)
-    ref_dt = scene.dt / max(1, math.ceil(scene.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
+    ref_dt = scene.dt / max(
+        1, math.ceil(scene.dt * ref_model.omega_max / reference_omega_dt - 1e-12)
+    )
     return walk_and_judge(
-        name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+        name=scene.name,
+        tol=tol,
+        low=low,
+        start=start,
+        top=top,
+        reference=reference,
+        safety=safety,
+        rule=rule,
         run_rung=lambda m: simulate_rung(scene, rung_name(m), cache=cache),
-        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt, cache=cache), reference_dt=ref_dt,
-        checks=checks)
+        run_reference=lambda dt: simulate_rung(scene, reference, "rk4", dt, cache=cache),
+        reference_dt=ref_dt,
+        checks=checks,
+    )
 
 
 def controller_digest(path: str | Path) -> str:
@@ -210,7 +315,9 @@ def controller_digest(path: str | Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def closed_loop_key(scene, controller: str | Path | None = None, overrides: tuple[str, ...] = ()) -> str:
+def closed_loop_key(
+    scene, controller: str | Path | None = None, overrides: tuple[str, ...] = ()
+) -> str:
     """A canonical string of everything that changes a closed loop's simulation except the plant fidelity.
 
     The scene's settings (plant, payload, initial configuration, target, reference,
@@ -218,20 +325,38 @@ def closed_loop_key(scene, controller: str | Path | None = None, overrides: tupl
     model file's modification time, the controller file's path, sha256 and overrides.
     """
     settings = scene.settings()
-    for name in ("fidelity", "tolerance_m", "fidelity_walk", "fidelity_checks", "name", "source", "fft_span",
-                 "fft_peaks", "controller"):
+    for name in (
+        "fidelity",
+        "tolerance_m",
+        "fidelity_walk",
+        "fidelity_checks",
+        "name",
+        "source",
+        "fft_span",
+        "fft_peaks",
+        "controller",
+    ):
         settings.pop(name, None)
     path = Path(scene.plant.model)
     settings["model_mtime_ns"] = path.stat().st_mtime_ns if path.is_file() else None
     ctrl = controller or scene.controller
     settings["controller_file"] = None if ctrl is None else str(Path(ctrl).resolve())
-    settings["controller_sha256"] = None if ctrl is None or not Path(ctrl).is_file() else controller_digest(ctrl)
+    settings["controller_sha256"] = (
+        None if ctrl is None or not Path(ctrl).is_file() else controller_digest(ctrl)
+    )
     settings["controller_overrides"] = list(overrides)
     return json.dumps(settings, sort_keys=True, default=str)
 
 
-def simulate_closed_rung(scene, fidelity: str, dt: float | None = None, *, controller: str | Path | None = None,
-                         overrides: tuple[str, ...] = (), cache: SceneCache | None = None) -> RunRecord:
+def simulate_closed_rung(
+    scene,
+    fidelity: str,
+    dt: float | None = None,
+    *,
+    controller: str | Path | None = None,
+    overrides: tuple[str, ...] = (),
+    cache: SceneCache | None = None,
+) -> RunRecord:
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4).
 
     The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
@@ -248,14 +373,31 @@ def simulate_closed_rung(scene, fidelity: str, dt: float | None = None, *, contr
 
     def run() -> RunRecord:
         stride = int(round(scene.plant.dt / dt))
-        result = closed_loop_tip_path(scene, fidelity, dt, controller=controller, overrides=overrides, stride=stride,
-                                      cache=cache, keep=own)
+        result = closed_loop_tip_path(
+            scene,
+            fidelity,
+            dt,
+            controller=controller,
+            overrides=overrides,
+            stride=stride,
+            cache=cache,
+            keep=own,
+        )
         if own:
             cache.keep(WHOLE_RUNS, key, result["run"], limit=WHOLE_RUNS_KEPT)
         times, tip, torque = read_only(result["time"], result["tip"], result["torque"])
-        return RunRecord(fidelity=fidelity, integrator="rk4", dt=dt, omega_max=result["omega_max"],
-                         wall_time_s=result["wall_time_s"], build_time_s=result["build_time_s"], time=times,
-                         tip=tip, diverged_at=result["diverged_at"], torque=torque)
+        return RunRecord(
+            fidelity=fidelity,
+            integrator="rk4",
+            dt=dt,
+            omega_max=result["omega_max"],
+            wall_time_s=result["wall_time_s"],
+            build_time_s=result["build_time_s"],
+            time=times,
+            tip=tip,
+            diverged_at=result["diverged_at"],
+            torque=torque,
+        )
 
     return cache.get("closed_runs", key, run)
 
@@ -264,7 +406,9 @@ def simulate_closed_rung(scene, fidelity: str, dt: float | None = None, *, contr
 WHOLE_RUNS, WHOLE_RUNS_KEPT = "whole_closed_runs", 8
 
 
-def whole_run_key(scene, fidelity: str, dt: float, controller=None, overrides: tuple[str, ...] = ()) -> tuple:
+def whole_run_key(
+    scene, fidelity: str, dt: float, controller=None, overrides: tuple[str, ...] = ()
+) -> tuple:
     """The key of :data:`WHOLE_RUNS`: the chooser's scene (design pinned), the rung and its RK4 step (s)."""
     return (closed_loop_key(scene, controller, tuple(overrides)), str(fidelity), float(dt))
 
@@ -279,15 +423,25 @@ def check_closed_loop_auto(scene, controller=None) -> None:
         (``controller_fidelity`` not ``auto``) or a missing controller.
     """
     if scene.plant.integrator != "rk4":
-        raise SpecError(f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed loop; "
-                        "allowed: 'rk4' (the loop integrates the plant with RK4)", source=scene.source, key="integrator")
+        raise SpecError(
+            f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed loop; "
+            "allowed: 'rk4' (the loop integrates the plant with RK4)",
+            source=scene.source,
+            key="integrator",
+        )
     if scene.controller_fidelity is not None and scene.controller_fidelity.kind == "auto":
-        raise SpecError("value 'auto' is not allowed for the design model; allowed: 'rigid', 'amm:N' or 'fem:N' "
-                        f"(default {AUTO_DESIGN_FIDELITY!r} when the plant is auto)", source=scene.source,
-                        key="controller_fidelity")
+        raise SpecError(
+            "value 'auto' is not allowed for the design model; allowed: 'rigid', 'amm:N' or 'fem:N' "
+            f"(default {AUTO_DESIGN_FIDELITY!r} when the plant is auto)",
+            source=scene.source,
+            key="controller_fidelity",
+        )
     if (controller or scene.controller) is None:
-        raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source,
-                        key="controller")
+        raise SpecError(
+            "no controller: give --controller FILE or the scene key 'controller'",
+            source=scene.source,
+            key="controller",
+        )
 
 
 def choose_closed_loop_fidelity(
@@ -375,42 +529,84 @@ def choose_closed_loop_fidelity(
     """
     tol = check_tolerance(tol, key="tolerance")
     if getattr(scene, "kind", None) != "closed_loop":
-        raise SpecError(f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported here; allowed: "
-                        "a kind = \"closed_loop\" scene (choose_fidelity takes arm scenes)",
-                        source=getattr(scene, "source", None), key="kind")
+        raise SpecError(
+            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported here; allowed: "
+            'a kind = "closed_loop" scene (choose_fidelity takes arm scenes)',
+            source=getattr(scene, "source", None),
+            key="kind",
+        )
     if scene.controller_fidelity is None:
-        raise SpecError("value None is not allowed when the plant is chosen; allowed: a concrete design model, e.g. "
-                        f"{AUTO_DESIGN_FIDELITY!r} (flexctrl.scenes.loop_setup.pin_design sets the default)",
-                        source=scene.source, key="controller_fidelity")
+        raise SpecError(
+            "value None is not allowed when the plant is chosen; allowed: a concrete design model, e.g. "
+            f"{AUTO_DESIGN_FIDELITY!r} (flexctrl.scenes.loop_setup.pin_design sets the default)",
+            source=scene.source,
+            key="controller_fidelity",
+        )
     check_closed_loop_auto(scene, controller)
     if walk not in WALKS:
-        raise SpecError(f"value {walk!r} is not allowed; allowed: {', '.join(map(repr, WALKS))}", source=scene.source,
-                        key="fidelity_walk")
-    ref = check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt)
+        raise SpecError(
+            f"value {walk!r} is not allowed; allowed: {', '.join(map(repr, WALKS))}",
+            source=scene.source,
+            key="fidelity_walk",
+        )
+    ref = check_ladder(
+        top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt
+    )
     check_checks(checks, scene.source)
     cache = SceneCache() if cache is None else cache
     overrides = tuple(overrides)
-    options = (tol, top, str(ref), float(safety), float(energy_fraction), float(bandwidth_factor),
-               float(reference_omega_dt), walk, checks)
+    options = (
+        tol,
+        top,
+        str(ref),
+        float(safety),
+        float(energy_fraction),
+        float(bandwidth_factor),
+        float(reference_omega_dt),
+        walk,
+        checks,
+    )
     key = (closed_loop_key(scene, controller, overrides), options)
-    return cache.get("closed_choices", key, lambda: _choose_closed(scene, controller, overrides, cache, *options))
+    return cache.get(
+        "closed_choices", key, lambda: _choose_closed(scene, controller, overrides, cache, *options)
+    )
 
 
-def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCache, tol: float, top: int,
-                   reference: str, safety: float, energy_fraction: float, bandwidth_factor: float,
-                   reference_omega_dt: float, walk: str, checks: str) -> FidelityChoice:
+def _choose_closed(
+    scene,
+    controller,
+    overrides: tuple[str, ...],
+    cache: SceneCache,
+    tol: float,
+    top: int,
+    reference: str,
+    safety: float,
+    energy_fraction: float,
+    bandwidth_factor: float,
+    reference_omega_dt: float,
+    walk: str,
+    checks: str,
+) -> FidelityChoice:
     started = time.perf_counter()
     plant = scene.plant
     low = required_modes(plant)
     if low > top:
-        raise SpecError(f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
-                        f"allowed: top >= {low}", source=scene.source, key="initial.qf")
+        raise SpecError(
+            f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
+            f"allowed: top >= {low}",
+            source=scene.source,
+            key="initial.qf",
+        )
     design = scene.controller_fidelity
 
     def rung(m: int) -> RunRecord:
-        return simulate_closed_rung(scene, rung_name(m), controller=controller, overrides=overrides, cache=cache)
+        return simulate_closed_rung(
+            scene, rung_name(m), controller=controller, overrides=overrides, cache=cache
+        )
 
-    design_rung = 0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
+    design_rung = (
+        0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
+    )
     first = min(max(low, design_rung), top)
     linear, from_top = None, False
     if walk in ("estimate", "linear"):
@@ -418,63 +614,118 @@ def _choose_closed(scene, controller, overrides: tuple[str, ...], cache: SceneCa
 
         def linear_rung(m: int) -> RunRecord:
             h = rk4_step(model_for(plant, rung_name(m), cache).omega_max, plant.dt)
-            return cache.get("linear_runs", (closed_loop_key(scene, controller, overrides), rung_name(m), h),
-                             lambda: linear_closed_rung(scene, rung_name(m), h, controller=controller,
-                                                        overrides=overrides, cache=cache))
+            return cache.get(
+                "linear_runs",
+                (closed_loop_key(scene, controller, overrides), rung_name(m), h),
+                lambda: linear_closed_rung(
+                    scene, rung_name(m), h, controller=controller, overrides=overrides, cache=cache
+                ),
+            )
 
-        linear = (linear_rung, lambda: linear_closed_rung(scene, reference, None, controller=controller,
-                                                          overrides=overrides, cache=cache))
+        linear = (
+            linear_rung,
+            lambda: linear_closed_rung(
+                scene, reference, None, controller=controller, overrides=overrides, cache=cache
+            ),
+        )
         # a controller stepped in Python costs as much on a linear plant as on the nonlinear one: no linear
         # estimate of the rungs, the nonlinear walk from the top down (the step check stays linear)
-        from_top = walk == "estimate" and not loop_at(scene, rung_name(first), controller, overrides,
-                                                      cache).controller.has_sampled_law()
+        from_top = (
+            walk == "estimate"
+            and not loop_at(
+                scene, rung_name(first), controller, overrides, cache
+            ).controller.has_sampled_law()
+        )
     if from_top:
         runs = {top: rung(top)}
         record = runs[top]
-    elif linear is not None:  # the linear runs give the torques: no nonlinear run before the candidate is known
+    elif (
+        linear is not None
+    ):  # the linear runs give the torques: no nonlinear run before the candidate is known
         runs, record = {}, linear[0](first)
     else:
         runs = {first: rung(first)}
         record = runs[first]
     ref_model = model_for(plant, reference, cache)
-    link_hz = [[w / (2 * math.pi) for w in link] for link in ref_model.info.get("link_frequencies_rad_s", [])]
+    link_hz = [
+        [w / (2 * math.pi) for w in link]
+        for link in ref_model.info.get("link_frequencies_rad_s", [])
+    ]
     bandwidth = None
     if record.torque is not None and record.diverged_at is None and record.time.size > 2:
-        bandwidth = sampled_bandwidth(record.torque, float(record.time[1] - record.time[0]),
-                                      energy_fraction=energy_fraction)
+        bandwidth = sampled_bandwidth(
+            record.torque, float(record.time[1] - record.time[0]), energy_fraction=energy_fraction
+        )
     if bandwidth is None:
         start, kept = first, None
     else:
         limit = bandwidth_factor * bandwidth
         kept = [sum(1 for f in link if f <= limit) for link in link_hz]
         start = min(max([low, *kept]), top)
-    rule = {"excitation_bandwidth_hz": bandwidth, "energy_fraction": energy_fraction, "factor": bandwidth_factor,
-            "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
-            "link_mode_frequencies_hz": link_hz, "modes_kept_per_link": kept,
-            "start": rung_name(top if from_top else start), "lowest_rung_for_initial_state": rung_name(low),
-            "torques_from": (f"the closed loop with the plant at {rung_name(top)} (the top rung: the walk starts there)"
-                             if from_top else f"the closed loop with the plant at {rung_name(first)} (the design "
-                             f"model's rung{', linearised' if linear is not None else ''})")}
-    ref_dt = plant.dt / max(1, math.ceil(plant.dt * ref_model.omega_max / reference_omega_dt - 1e-12))
-    extra = {"kind": "closed_loop", "controller": str(controller or scene.controller),
-             "controller_overrides": list(overrides), "design_fidelity": str(design),
-             "comparison_grid_dt_s": plant.dt}
+    rule = {
+        "excitation_bandwidth_hz": bandwidth,
+        "energy_fraction": energy_fraction,
+        "factor": bandwidth_factor,
+        "cutoff_hz": None if bandwidth is None else bandwidth_factor * bandwidth,
+        "link_mode_frequencies_hz": link_hz,
+        "modes_kept_per_link": kept,
+        "start": rung_name(top if from_top else start),
+        "lowest_rung_for_initial_state": rung_name(low),
+        "torques_from": (
+            f"the closed loop with the plant at {rung_name(top)} (the top rung: the walk starts there)"
+            if from_top
+            else f"the closed loop with the plant at {rung_name(first)} (the design "
+            f"model's rung{', linearised' if linear is not None else ''})"
+        ),
+    }
+    ref_dt = plant.dt / max(
+        1, math.ceil(plant.dt * ref_model.omega_max / reference_omega_dt - 1e-12)
+    )
+    extra = {
+        "kind": "closed_loop",
+        "controller": str(controller or scene.controller),
+        "controller_overrides": list(overrides),
+        "design_fidelity": str(design),
+        "comparison_grid_dt_s": plant.dt,
+    }
     chosen = None
     try:
         choice = walk_and_judge(
-            name=scene.name, tol=tol, low=low, start=start, top=top, reference=reference, safety=safety, rule=rule,
+            name=scene.name,
+            tol=tol,
+            low=low,
+            start=start,
+            top=top,
+            reference=reference,
+            safety=safety,
+            rule=rule,
             run_rung=lambda m: rung(m),
-            run_reference=lambda dt: simulate_closed_rung(scene, reference, dt, controller=controller,
-                                                          overrides=overrides, cache=cache),
-            reference_dt=ref_dt, runs=runs,
-            extra={**extra, "walk": walk, "linear_estimate_skipped": from_top,
-                   "walk_taken": "from_top" if from_top else "linear_first" if linear is not None else "ladder"},
-            linear=linear, factor=LINEAR_FACTOR,
-            from_top=from_top, checks=checks)
+            run_reference=lambda dt: simulate_closed_rung(
+                scene, reference, dt, controller=controller, overrides=overrides, cache=cache
+            ),
+            reference_dt=ref_dt,
+            runs=runs,
+            extra={
+                **extra,
+                "walk": walk,
+                "linear_estimate_skipped": from_top,
+                "walk_taken": "from_top"
+                if from_top
+                else "linear_first"
+                if linear is not None
+                else "ladder",
+            },
+            linear=linear,
+            factor=LINEAR_FACTOR,
+            from_top=from_top,
+            checks=checks,
+        )
         chosen = whole_run_key(scene, str(choice.choice), choice.dt, controller, overrides)
     finally:  # only the chosen rung's whole run is worth keeping: the scene's own run at the choice
         cache.drop(WHOLE_RUNS, keep=chosen)
-    choice.evidence["method"] = ("closed loop (controller designed once on the pinned design model) with the plant at "
-                                 "each rung; " + choice.evidence["method"])
+    choice.evidence["method"] = (
+        "closed loop (controller designed once on the pinned design model) with the plant at "
+        "each rung; " + choice.evidence["method"]
+    )
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
     return choice

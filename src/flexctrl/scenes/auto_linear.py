@@ -37,7 +37,9 @@ from flexctrl.scenes.loop_setup import build_loop
 LINEAR_STEPS = ("rk4", "exact")
 
 
-def grid_maps(A: np.ndarray, B: np.ndarray, grid: float, h: float | None) -> tuple[np.ndarray, np.ndarray]:
+def grid_maps(
+    A: np.ndarray, B: np.ndarray, grid: float, h: float | None
+) -> tuple[np.ndarray, np.ndarray]:
     """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step ``grid`` (s), ``du`` held.
 
     ``h`` None: the exact zero-order hold.  Otherwise ``grid / h`` (a whole number) RK4
@@ -67,8 +69,9 @@ def grid_maps(A: np.ndarray, B: np.ndarray, grid: float, h: float | None) -> tup
     return P, G
 
 
-def linear_advance(x_op: np.ndarray, u_op: np.ndarray, Phi: np.ndarray, Gamma: np.ndarray,
-                   substeps: int) -> ca.Function:
+def linear_advance(
+    x_op: np.ndarray, u_op: np.ndarray, Phi: np.ndarray, Gamma: np.ndarray, substeps: int
+) -> ca.Function:
     """``advance(x, u, dt) -> X`` (n_x, substeps): the linear plant's grid states over one held sample."""
     n = x_op.size
     P, G = [np.eye(n)], [np.zeros_like(Gamma)]
@@ -82,8 +85,15 @@ def linear_advance(x_op: np.ndarray, u_op: np.ndarray, Phi: np.ndarray, Gamma: n
     return ca.Function("linear_advance", [x, u, dt], [X], ["x", "u", "dt"], ["X"])
 
 
-def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None, overrides=(),
-                       cache: SceneCache | None = None) -> RunRecord:
+def linear_closed_rung(
+    scene,
+    fidelity: str,
+    h: float | None,
+    *,
+    controller=None,
+    overrides=(),
+    cache: SceneCache | None = None,
+) -> RunRecord:
     """The scene's closed loop on the linearised plant at ``fidelity`` (module docstring), on the scene's grid.
 
     Parameters
@@ -114,13 +124,28 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
     plant, ctrl = setup.plant, setup.controller
     build = time.perf_counter() - start
     op = equilibrium(plant, scene.target_q)
-    A, B = Linearizer(plant, setup.sensors).matrices(op)[:2]  # the loop's sensors: its verdict reuses them
+    A, B = Linearizer(plant, setup.sensors).matrices(op)[
+        :2
+    ]  # the loop's sensors: its verdict reuses them
     Phi, Gamma = grid_maps(A, B, grid, h)
     Ts = ctrl.sample_time
     substeps = int(round(Ts / grid))
-    advance = linear_advance(np.asarray(op.x, dtype=float), np.asarray(op.u, dtype=float), Phi, Gamma, substeps)
-    run = LoopRun(plant, ctrl, setup.sensors, None, None, grid, substeps, 1,
-                  int(math.ceil(scene.plant.duration / Ts - 1e-9)), advance, setup.x0)
+    advance = linear_advance(
+        np.asarray(op.x, dtype=float), np.asarray(op.u, dtype=float), Phi, Gamma, substeps
+    )
+    run = LoopRun(
+        plant,
+        ctrl,
+        setup.sensors,
+        None,
+        None,
+        grid,
+        substeps,
+        1,
+        int(math.ceil(scene.plant.duration / Ts - 1e-9)),
+        advance,
+        setup.x0,
+    )
     run.python_sample(0)
     law = ctrl.sampled_law() if run.divergence is None else None
     if law is not None:
@@ -135,10 +160,18 @@ def linear_closed_rung(scene, fidelity: str, h: float | None, *, controller=None
     tip = tip_positions(plant, X, scene.plant.solver.get("compile"))
     times, tip, torque = read_only(t, tip, U.copy())
     diverged = None if run.divergence is None else float(run.divergence["time"])
-    return RunRecord(fidelity=str(fidelity), integrator="linear-exact" if h is None else "linear-rk4",
-                     dt=grid if h is None else float(h), omega_max=float(plant.omega_max),
-                     wall_time_s=time.perf_counter() - start - build, build_time_s=build, time=times, tip=tip,
-                     diverged_at=diverged, torque=torque)
+    return RunRecord(
+        fidelity=str(fidelity),
+        integrator="linear-exact" if h is None else "linear-rk4",
+        dt=grid if h is None else float(h),
+        omega_max=float(plant.omega_max),
+        wall_time_s=time.perf_counter() - start - build,
+        build_time_s=build,
+        time=times,
+        tip=tip,
+        diverged_at=diverged,
+        torque=torque,
+    )
 
 
 def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):

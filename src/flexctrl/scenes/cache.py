@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
-from typing import Any, Callable, Hashable
+from collections.abc import Callable, Hashable
+from typing import Any
 
 
 class SceneCache:
@@ -97,16 +98,34 @@ class SceneCache:
         for key in [k for k in store if k != keep]:
             del store[key]
 
-    def model(self, arm, fidelity: str, modes: str = "frozen", reference_q: tuple[float, ...] | None = None):
+    def model(
+        self,
+        arm,
+        fidelity: str,
+        modes: str = "frozen",
+        reference_q: tuple[float, ...] | None = None,
+    ):
         """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, built once here."""
         from flexctrl.dynamics.build import build_model
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
         key = (arm, str(fidelity), modes, reference_q)
-        return self.get("models", key, lambda: build_model(arm, str(fidelity), modes=modes, reference_q=reference_q))
+        return self.get(
+            "models",
+            key,
+            lambda: build_model(arm, str(fidelity), modes=modes, reference_q=reference_q),
+        )
 
-    def reference(self, arm, fidelity: str, modes: str, reference_q, path, deflection: str,
-                  compile: bool | None = False):
+    def reference(
+        self,
+        arm,
+        fidelity: str,
+        modes: str,
+        reference_q,
+        path,
+        deflection: str,
+        compile: bool | None = False,
+    ):
         """A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of ``path`` on :meth:`model`'s model, built once.
 
         Keyed on the model's description, the joint path and the deflection (plain data), so
@@ -117,11 +136,24 @@ class SceneCache:
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
         key = (arm, str(fidelity), modes, reference_q, path, deflection, compile)
-        return self.get("references", key, lambda: ReferenceTrajectory(self.model(arm, fidelity, modes, reference_q),
-                                                                      path, deflection, compile=compile))
+        return self.get(
+            "references",
+            key,
+            lambda: ReferenceTrajectory(
+                self.model(arm, fidelity, modes, reference_q), path, deflection, compile=compile
+            ),
+        )
 
-    def integrator(self, arm, fidelity: str, modes: str, reference_q, integrator: str, dt: float,
-                   solver: tuple[tuple[str, Any], ...] = ()):
+    def integrator(
+        self,
+        arm,
+        fidelity: str,
+        modes: str,
+        reference_q,
+        integrator: str,
+        dt: float,
+        solver: tuple[tuple[str, Any], ...] = (),
+    ):
         """A set-up integrator on :meth:`model`'s model and its setup time (s)."""
         from flexctrl.sim import get_integrator
 
@@ -131,8 +163,15 @@ class SceneCache:
             built = get_integrator(integrator)(model, dt, **dict(solver)).setup()
             return built, time.perf_counter() - start
 
-        key = (arm, str(fidelity), modes, None if reference_q is None else tuple(reference_q), integrator, float(dt),
-               tuple(solver))
+        key = (
+            arm,
+            str(fidelity),
+            modes,
+            None if reference_q is None else tuple(reference_q),
+            integrator,
+            float(dt),
+            tuple(solver),
+        )
         return self.get("integrators", key, build)
 
     def clear(self) -> None:
@@ -144,8 +183,14 @@ class SceneCache:
     def stats(self) -> dict[str, dict[str, int]]:
         """Entries, hits and misses per kind."""
         kinds = sorted(set(self._stores) | set(self._misses))
-        return {k: {"entries": len(self._stores.get(k, ())), "hits": self._hits.get(k, 0),
-                    "misses": self._misses.get(k, 0)} for k in kinds}
+        return {
+            k: {
+                "entries": len(self._stores.get(k, ())),
+                "hits": self._hits.get(k, 0),
+                "misses": self._misses.get(k, 0),
+            }
+            for k in kinds
+        }
 
 
 def read_only(*arrays):

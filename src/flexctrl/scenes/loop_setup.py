@@ -27,7 +27,6 @@ from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
 from flexctrl.scenes.arm_setup import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
 
-
 #: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names no
 #: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
 AUTO_DESIGN_FIDELITY = "amm:2"
@@ -92,9 +91,13 @@ def design_scene_controller(scene, design_model, settings, path: str | Path, ref
         ctrl = design(design_model, op, settings)
     except FlexctrlError:
         raise
-    except Exception as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
-        raise SolverError(f"designing the '{settings.kind}' controller ({path}) at {where} "
-                          f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}") from exc
+    except (
+        Exception
+    ) as exc:  # numerical failures inside control/scipy/osqp become a clear, recorded error
+        raise SolverError(
+            f"designing the '{settings.kind}' controller ({path}) at {where} "
+            f"{np.degrees(design_q).round(3).tolist()} deg failed: {type(exc).__name__}: {exc}"
+        ) from exc
     if reference is None:
         reference = ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection)
     ctrl.set_reference(reference)
@@ -107,8 +110,14 @@ def is_designed(controller) -> bool:
     return hasattr(controller, "step") and hasattr(controller, "sensors")
 
 
-def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None, *,
-               reference_compile: bool | None = None) -> LoopSetup:
+def build_loop(
+    scene,
+    controller=None,
+    overrides=(),
+    cache: SceneCache | None = None,
+    *,
+    reference_compile: bool | None = None,
+) -> LoopSetup:
     """Build plant and design models (kept in ``cache``), design the controller, set its reference.
 
     ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).  ``controller``
@@ -137,10 +146,18 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
     designed = is_designed(controller)
     path = None if designed else (controller or scene.controller)
     if not designed and path is None:
-        raise SpecError("no controller: give --controller FILE or the scene key 'controller'", source=scene.source, key="controller")
+        raise SpecError(
+            "no controller: give --controller FILE or the scene key 'controller'",
+            source=scene.source,
+            key="controller",
+        )
     arm = scene_arm(plant_scene)
     if len(scene.target_q) != arm.n_links:
-        raise SpecError(f"has {len(scene.target_q)} values; expected {arm.n_links} (one per joint)", source=scene.source, key="target.q")
+        raise SpecError(
+            f"has {len(scene.target_q)} values; expected {arm.n_links} (one per joint)",
+            source=scene.source,
+            key="target.q",
+        )
     plant = cache.model(arm, str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0)
     if designed:
         ctrl, settings = controller, controller.settings
@@ -148,7 +165,9 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
         design_arm, design_fidelity = design_model.spec, design_model.fidelity
         design_q = tuple(float(a) for a in ctrl.op.joints)
         same = design_model is plant
-        ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+        ctrl.set_reference(
+            ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection)
+        )
         ctrl.reset()
     else:
         settings = load_controller(path, overrides)
@@ -157,44 +176,117 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
         design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
         design_fidelity = scene.controller_fidelity or plant_scene.fidelity
         design_q = tuple(scene.design_configuration)
-        same = design_arm == arm and str(design_fidelity) == str(plant_scene.fidelity) and scene.design_q is None
-        design_model = plant if same else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
-        model_key = (design_arm, str(design_fidelity), plant_scene.modes, plant_scene.q0 if same else design_q)
-        design_key = (*model_key, design_q, settings, scene.joint_reference(), scene.deflection, reference_compile)
-        ctrl = cache.get("designs", design_key, lambda: design_scene_controller(
-            scene, design_model, settings, path,
-            cache.reference(*model_key, scene.joint_reference(), scene.deflection, reference_compile)))
+        same = (
+            design_arm == arm
+            and str(design_fidelity) == str(plant_scene.fidelity)
+            and scene.design_q is None
+        )
+        design_model = (
+            plant
+            if same
+            else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
+        )
+        model_key = (
+            design_arm,
+            str(design_fidelity),
+            plant_scene.modes,
+            plant_scene.q0 if same else design_q,
+        )
+        design_key = (
+            *model_key,
+            design_q,
+            settings,
+            scene.joint_reference(),
+            scene.deflection,
+            reference_compile,
+        )
+        ctrl = cache.get(
+            "designs",
+            design_key,
+            lambda: design_scene_controller(
+                scene,
+                design_model,
+                settings,
+                path,
+                cache.reference(
+                    *model_key, scene.joint_reference(), scene.deflection, reference_compile
+                ),
+            ),
+        )
         ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
     path_ref = scene.joint_reference()
     sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
     x0 = initial_state(plant_scene, plant, arm)
-    monitor = divergence_monitor(plant, arm, scene.start_q, scene.target_q, scene.divergence_deflection,
-                                 scene.divergence_angle)
-    return LoopSetup(scene, plant_scene, arm, plant, design_arm, design_fidelity, design_q, design_model, ctrl, settings,
-                     None if path is None else Path(path), path_ref, sensors, x0, monitor, time.perf_counter() - start,
-                     design_key)
+    monitor = divergence_monitor(
+        plant,
+        arm,
+        scene.start_q,
+        scene.target_q,
+        scene.divergence_deflection,
+        scene.divergence_angle,
+    )
+    return LoopSetup(
+        scene,
+        plant_scene,
+        arm,
+        plant,
+        design_arm,
+        design_fidelity,
+        design_q,
+        design_model,
+        ctrl,
+        settings,
+        None if path is None else Path(path),
+        path_ref,
+        sensors,
+        x0,
+        monitor,
+        time.perf_counter() - start,
+        design_key,
+    )
 
 
 def _design_model_of(ctrl, scene, overrides):
     """The model a designed controller was designed on; the scene may not ask for another design."""
-    for key, value in (("design_payload", scene.design_payload), ("controller_fidelity", scene.controller_fidelity),
-                       ("design_configuration", scene.design_q)):
+    for key, value in (
+        ("design_payload", scene.design_payload),
+        ("controller_fidelity", scene.controller_fidelity),
+        ("design_configuration", scene.design_q),
+    ):
         if value is not None:
-            raise SpecError(f"does not apply to a controller designed in Python (it keeps its own design model); "
-                            "allowed: no such key, or a controller file", source=scene.source, key=key)
+            raise SpecError(
+                "does not apply to a controller designed in Python (it keeps its own design model); "
+                "allowed: no such key, or a controller file",
+                source=scene.source,
+                key=key,
+            )
     if overrides:
-        raise SpecError(f"controller overrides {list(overrides)} do not apply to a designed controller; allowed: none",
-                        key="overrides")
+        raise SpecError(
+            f"controller overrides {list(overrides)} do not apply to a designed controller; allowed: none",
+            key="overrides",
+        )
     model = getattr(ctrl, "design_model", None)
     if model is None:
-        raise SpecError(f"the {type(ctrl).__name__} has no design_model; allowed: a controller from "
-                        "flexctrl.design(model, op, settings), or a controller file", key="controller")
+        raise SpecError(
+            f"the {type(ctrl).__name__} has no design_model; allowed: a controller from "
+            "flexctrl.design(model, op, settings), or a controller file",
+            key="controller",
+        )
     return model
 
 
-def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path | None = None, overrides=(),
-                         stride: int = 1, cache: SceneCache | None = None, keep: bool = False,
-                         loop: str = "auto") -> dict[str, Any]:
+def closed_loop_tip_path(
+    scene,
+    fidelity,
+    dt: float,
+    *,
+    controller: str | Path | None = None,
+    overrides=(),
+    stride: int = 1,
+    cache: SceneCache | None = None,
+    keep: bool = False,
+    loop: str = "auto",
+) -> dict[str, Any]:
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
 
     Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
@@ -220,18 +312,38 @@ def closed_loop_tip_path(scene, fidelity, dt: float, *, controller: str | Path |
     plant_scene = dataclasses.replace(scene.plant, fidelity=fid, dt=float(dt))
     setup = build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
     rng = np.random.default_rng(scene.seed) if scene.noise else None
-    t, X, U, meta, _ = integrate_closed_loop(setup.plant, setup.controller, setup.x0, plant_scene.duration, float(dt),
-                                             sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
-                                             monitor=setup.monitor, stop_on_divergence=True,
-                                             stride=1 if keep else stride, loop=loop)
-    whole = {"t": t, "X": X, "U": U, "meta": meta, "stats": copy.deepcopy(setup.controller.stats)} if keep else None
+    t, X, U, meta, _ = integrate_closed_loop(
+        setup.plant,
+        setup.controller,
+        setup.x0,
+        plant_scene.duration,
+        float(dt),
+        sensors=setup.sensors,
+        rng=rng,
+        compile=plant_scene.solver.get("compile"),
+        monitor=setup.monitor,
+        stop_on_divergence=True,
+        stride=1 if keep else stride,
+        loop=loop,
+    )
+    whole = (
+        {"t": t, "X": X, "U": U, "meta": meta, "stats": copy.deepcopy(setup.controller.stats)}
+        if keep
+        else None
+    )
     if keep:
         X, U = X[::stride], U[::stride]
         t = np.arange(X.shape[0]) * (float(dt) * stride)
     plant = setup.plant
     tip = tip_positions(plant, X, plant_scene.solver.get("compile"))
     divergence = meta.get("divergence")
-    return {"time": t, "tip": tip, "torque": U, "wall_time_s": float(meta["wall_time_s"]),
-            "build_time_s": setup.build_time_s + float(meta["setup_time_s"]), "omega_max": float(plant.omega_max),
-            "diverged_at": None if divergence is None else float(divergence["time"]), **({"run": whole} if keep else {})}
-
+    return {
+        "time": t,
+        "tip": tip,
+        "torque": U,
+        "wall_time_s": float(meta["wall_time_s"]),
+        "build_time_s": setup.build_time_s + float(meta["setup_time_s"]),
+        "omega_max": float(plant.omega_max),
+        "diverged_at": None if divergence is None else float(divergence["time"]),
+        **({"run": whole} if keep else {}),
+    }

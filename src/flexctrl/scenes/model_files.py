@@ -2,20 +2,28 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Literal, Mapping, Sequence
+from typing import Any, Literal
 
 from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
 from flexctrl.spec.arm import arm_from_document
 from flexctrl.spec.overrides import apply_overrides, apply_values
 from flexctrl.spec.reader import read_toml
-from flexctrl.spec import shipped
 
 
-def load_model(path: str | Path, payload: float | None = None, fidelity: str | None = "amm:2", *,
-               overrides: Mapping[str, Any] | Iterable[str] | None = None,
-               modes: Literal["frozen", "scheduled"] = "frozen", reference_q: Sequence[float] | None = None,
-               damping: Literal["ratio", "paper"] | None = None, **keys: Any):
+def load_model(
+    path: str | Path,
+    payload: float | None = None,
+    fidelity: str | None = "amm:2",
+    *,
+    overrides: Mapping[str, Any] | Iterable[str] | None = None,
+    modes: Literal["frozen", "scheduled"] = "frozen",
+    reference_q: Sequence[float] | None = None,
+    damping: Literal["ratio", "paper"] | None = None,
+    **keys: Any,
+):
     """Read a model file, change what the arguments say, validate it and build it at ``fidelity``.
 
     Parameters
@@ -70,8 +78,12 @@ def load_model(path: str | Path, payload: float | None = None, fidelity: str | N
         else:
             document = apply_overrides(document, list(overrides), source=f"{source} (--set)")
     elif overrides is not None:
-        raise SpecError(f"value {overrides!r} is not allowed; allowed: a mapping {{'links[1].EI': 2.0}} or a list of "
-                        "'KEY=VALUE' strings", source=source, key="overrides")
+        raise SpecError(
+            f"value {overrides!r} is not allowed; allowed: a mapping {{'links[1].EI': 2.0}} or a list of "
+            "'KEY=VALUE' strings",
+            source=source,
+            key="overrides",
+        )
     document = apply_values(document, values, source=f"{source} (arguments)")
     arm = arm_from_document(document, f"{source} (arguments)" if values else source)
     from flexctrl.dynamics.build import build_model

@@ -24,7 +24,9 @@ from flexctrl.sim.trajectory import jsonable
 from flexctrl.spec.arm_scene import ArmScene
 
 
-def resolve_auto(scene: ArmScene, cache: SceneCache | None = None, **options: Any) -> tuple[ArmScene, Any]:
+def resolve_auto(
+    scene: ArmScene, cache: SceneCache | None = None, **options: Any
+) -> tuple[ArmScene, Any]:
     """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step, and the choice.
 
     Runs :func:`flexctrl.scenes.auto.choose_fidelity` with the scene's
@@ -39,13 +41,22 @@ def resolve_auto(scene: ArmScene, cache: SceneCache | None = None, **options: An
     options.setdefault("checks", scene.fidelity_checks)
     choice = choose_fidelity(scene, tol, cache=cache, **options)
     solver = dict(scene.solver) if choice.integrator == scene.integrator else {}
-    chosen = dataclasses.replace(scene, fidelity=choice.choice, integrator=choice.integrator, dt=choice.dt, solver=solver)
+    chosen = dataclasses.replace(
+        scene, fidelity=choice.choice, integrator=choice.integrator, dt=choice.dt, solver=solver
+    )
     return chosen, choice
 
 
-def run_arm_scene(scene: ArmScene, out: str | Path | None = None, *, plots: bool | None = None,
-                  fidelity=None, auto_options: dict[str, Any] | None = None, cache: SceneCache | None = None,
-                  **integrator_options: Any) -> SceneResult:
+def run_arm_scene(
+    scene: ArmScene,
+    out: str | Path | None = None,
+    *,
+    plots: bool | None = None,
+    fidelity=None,
+    auto_options: dict[str, Any] | None = None,
+    cache: SceneCache | None = None,
+    **integrator_options: Any,
+) -> SceneResult:
     """Build, simulate and (with ``out``) write a ``kind = "arm"`` scene.
 
     With ``fidelity = "auto"`` (scene or override) the model, integrator and step
@@ -94,6 +105,6 @@ def run_arm_scene(scene: ArmScene, out: str | Path | None = None, *, plots: bool
         files += list(paths.values())
         if scene.plots if plots is None else plots:
             files += trajectory.plot(out)
-    return SceneResult(scene=scene, trajectory=trajectory, summary=summary, files=files, model=model)
-
-
+    return SceneResult(
+        scene=scene, trajectory=trajectory, summary=summary, files=files, model=model
+    )

@@ -34,12 +34,19 @@ from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
-from flexctrl.scenes.auto import WHOLE_RUNS, check_closed_loop_auto, choose_closed_loop_fidelity, whole_run_key
+from flexctrl.scenes.auto import (
+    WHOLE_RUNS,
+    check_closed_loop_auto,
+    choose_closed_loop_fidelity,
+    whole_run_key,
+)
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop, pin_design
 
 
-def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any):
+def resolve_auto(
+    scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any
+):
     """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step, and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
@@ -52,8 +59,9 @@ def resolve_auto(scene, controller=None, overrides=(), cache: SceneCache | None 
     tol = check_tolerance(scene.plant.tolerance, source=scene.source, key="tolerance")
     options.setdefault("walk", scene.plant.fidelity_walk)
     options.setdefault("checks", scene.plant.fidelity_checks)
-    choice = choose_closed_loop_fidelity(scene, tol, controller=controller, overrides=tuple(overrides), cache=cache,
-                                         **options)
+    choice = choose_closed_loop_fidelity(
+        scene, tol, controller=controller, overrides=tuple(overrides), cache=cache, **options
+    )
     plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=choice.dt)
     return dataclasses.replace(scene, plant=plant), choice
 
@@ -65,16 +73,31 @@ def apply_choice(scene, choice, cache: SceneCache):
     from flexctrl.sim.rk4 import rk4_step
 
     scene = pin_design(scene)
-    model = cache.model(scene_arm(scene.plant), str(choice.choice), scene.plant.modes, scene.plant.q0)
-    plant = dataclasses.replace(scene.plant, fidelity=choice.choice, dt=rk4_step(model.omega_max, scene.plant.dt))
+    model = cache.model(
+        scene_arm(scene.plant), str(choice.choice), scene.plant.modes, scene.plant.q0
+    )
+    plant = dataclasses.replace(
+        scene.plant, fidelity=choice.choice, dt=rk4_step(model.omega_max, scene.plant.dt)
+    )
     return dataclasses.replace(scene, plant=plant)
 
 
-def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=None, fidelity=None,
-                          plots: bool | None = None, overrides=(), on_divergence: str = "raise",
-                          auto_options: dict[str, Any] | None = None,
-                          cache: SceneCache | None = None, loop: str = "auto", choice=None,
-                          reference_compile: bool | None = None, energies: str = "lazy") -> ClosedLoopResult:
+def run_closed_loop_scene(
+    scene,
+    out: str | Path | None = None,
+    *,
+    controller=None,
+    fidelity=None,
+    plots: bool | None = None,
+    overrides=(),
+    on_divergence: str = "raise",
+    auto_options: dict[str, Any] | None = None,
+    cache: SceneCache | None = None,
+    loop: str = "auto",
+    choice=None,
+    reference_compile: bool | None = None,
+    energies: str = "lazy",
+) -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
@@ -142,10 +165,17 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     from flexctrl.spec.fidelity import parse_fidelity
 
     if on_divergence not in ("raise", "record"):
-        raise SpecError(f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'", key="on_divergence")
+        raise SpecError(
+            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
+            key="on_divergence",
+        )
     if fidelity is not None:
-        scene = dataclasses.replace(scene, plant=dataclasses.replace(
-            scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity")))
+        scene = dataclasses.replace(
+            scene,
+            plant=dataclasses.replace(
+                scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity")
+            ),
+        )
     cache = SceneCache() if cache is None else cache
     requested = scene
     choosing = time.perf_counter()
@@ -156,29 +186,70 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     choosing = time.perf_counter() - choosing
     setup = build_loop(scene, controller, overrides, cache, reference_compile=reference_compile)
     plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
-    whole = None if choice is None or loop != "auto" else cache.take(WHOLE_RUNS, whole_run_key(
-        pin_design(requested), str(plant_scene.fidelity), plant_scene.dt, controller, tuple(overrides)))
-    if whole is not None:  # the choice's own run of this scene at this rung and step (auto's "whole runs")
+    whole = (
+        None
+        if choice is None or loop != "auto"
+        else cache.take(
+            WHOLE_RUNS,
+            whole_run_key(
+                pin_design(requested),
+                str(plant_scene.fidelity),
+                plant_scene.dt,
+                controller,
+                tuple(overrides),
+            ),
+        )
+    )
+    if (
+        whole is not None
+    ):  # the choice's own run of this scene at this rung and step (auto's "whole runs")
         ctrl.stats = copy.deepcopy(whole["stats"])
-        meta = {**whole["meta"], "reused": "the fidelity choice's run of this scene at the chosen rung and step"}
-        trajectory = trajectory_from_states(plant, whole["t"], whole["X"].copy(), whole["U"].copy(), meta,
-                                            compiled=loop != "python", compile=plant_scene.solver.get("compile"),
-                                            energies=energies)
+        meta = {
+            **whole["meta"],
+            "reused": "the fidelity choice's run of this scene at the chosen rung and step",
+        }
+        trajectory = trajectory_from_states(
+            plant,
+            whole["t"],
+            whole["X"].copy(),
+            whole["U"].copy(),
+            meta,
+            compiled=loop != "python",
+            compile=plant_scene.solver.get("compile"),
+            energies=energies,
+        )
     else:
         rng = np.random.default_rng(scene.seed) if scene.noise else None
-        trajectory, _ = simulate_closed_loop(plant, ctrl, setup.x0, plant_scene.duration, plant_scene.dt,
-                                             sensors=setup.sensors, rng=rng, compile=plant_scene.solver.get("compile"),
-                                             monitor=setup.monitor, stop_on_divergence=on_divergence == "record",
-                                             loop=loop, energies=energies)
+        trajectory, _ = simulate_closed_loop(
+            plant,
+            ctrl,
+            setup.x0,
+            plant_scene.duration,
+            plant_scene.dt,
+            sensors=setup.sensors,
+            rng=rng,
+            compile=plant_scene.solver.get("compile"),
+            monitor=setup.monitor,
+            stop_on_divergence=on_divergence == "record",
+            loop=loop,
+            energies=energies,
+        )
     tip_target = tip_at_rest(plant, scene.target_q)
     report = ctrl.stats.summary()
     metrics = run_metrics(
-        trajectory, tip_target=tip_target, reference_joints=setup.reference.joints(trajectory.time),
-        t_arrive=scene.t_arrive, settle_allowance=scene.settle_allowance, band=scene.band,
-        stable_band=scene.stable_band, duration=plant_scene.duration,
-        torque_limits=[j.torque_limit for j in arm.joints], controller_stats=report,
+        trajectory,
+        tip_target=tip_target,
+        reference_joints=setup.reference.joints(trajectory.time),
+        t_arrive=scene.t_arrive,
+        settle_allowance=scene.settle_allowance,
+        band=scene.band,
+        stable_band=scene.stable_band,
+        duration=plant_scene.duration,
+        torque_limits=[j.torque_limit for j in arm.joints],
+        controller_stats=report,
         step_times=ctrl.stats.step_times,
-        radius=loop_radius(setup, cache))
+        radius=loop_radius(setup, cache),
+    )
     if choice is not None:
         metrics["chosen_modes"] = float(choice.choice.count or 0)
         metrics["chosen_dt"] = float(plant_scene.dt)
@@ -188,11 +259,22 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
         metrics["choice_time_s"] = float(choosing)
     summary = {
         "scene": requested.settings(),
-        "controller": {"file": None if setup.path is None else str(setup.path), "kind": setup.settings.kind,
-                       "sample_time": ctrl.sample_time, **report},
-        "plant": {"fidelity": str(plant_scene.fidelity), "n_states": plant.n_x, "payload_kg": arm.payload.mass},
-        "design": {"fidelity": str(setup.design_fidelity), "payload_kg": setup.design_arm.payload.mass,
-                   "configuration_deg": np.degrees(setup.design_q).tolist()},
+        "controller": {
+            "file": None if setup.path is None else str(setup.path),
+            "kind": setup.settings.kind,
+            "sample_time": ctrl.sample_time,
+            **report,
+        },
+        "plant": {
+            "fidelity": str(plant_scene.fidelity),
+            "n_states": plant.n_x,
+            "payload_kg": arm.payload.mass,
+        },
+        "design": {
+            "fidelity": str(setup.design_fidelity),
+            "payload_kg": setup.design_arm.payload.mass,
+            "configuration_deg": np.degrees(setup.design_q).tolist(),
+        },
         "reference": setup.reference.settings() | {"deflection": scene.deflection},
         "tip_target": tip_target.tolist(),
         "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
@@ -202,8 +284,15 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
     }
     if choice is not None:
         summary["fidelity_choice"] = choice.to_dict()
-    result = ClosedLoopResult(trajectory=trajectory, metrics=metrics, summary=summary, model=plant, controller=ctrl,
-                              reference=setup.reference, scene=scene)
+    result = ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=metrics,
+        summary=summary,
+        model=plant,
+        controller=ctrl,
+        reference=setup.reference,
+        scene=scene,
+    )
     if out is not None:
         result.save(out, plots=plant_scene.plots if plots is None else plots)
     return result
@@ -211,13 +300,23 @@ def run_closed_loop_scene(scene, out: str | Path | None = None, *, controller=No
 
 def loop_radius(setup, cache: SceneCache) -> float | None:
     """The linear verdict of a set-up loop; kept in ``cache`` ("verdicts") for a controller designed from a file."""
+
     def compute():
-        return linear_closed_loop_radius(setup.plant, setup.controller, setup.scene.target_q, setup.sensors)
+        return linear_closed_loop_radius(
+            setup.plant, setup.controller, setup.scene.target_q, setup.sensors
+        )
 
     if setup.design_key is None:
         return compute()
     plant = setup.plant_scene
-    key = (setup.design_key, setup.arm, str(plant.fidelity), plant.modes, plant.q0, tuple(setup.scene.target_q))
+    key = (
+        setup.design_key,
+        setup.arm,
+        str(plant.fidelity),
+        plant.modes,
+        plant.q0,
+        tuple(setup.scene.target_q),
+    )
     return cache.get("verdicts", key, compute)
 
 

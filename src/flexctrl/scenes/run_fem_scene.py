@@ -17,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.spec.fem_scene import FemScene, RPArmScene, SlidingBeamScene, TelescopingScene, read_fem_scene
+from flexctrl.spec.fem_scene import (
+    FemScene,
+    RPArmScene,
+    SlidingBeamScene,
+    TelescopingScene,
+    read_fem_scene,
+)
 from flexctrl.spec.fidelity import Fidelity
 
 #: The keywords :func:`run_scene` takes besides the scene and the output folder.
@@ -26,8 +32,14 @@ RUN_OPTIONS = ("plots", "fidelity")
 
 def _integration(scene: FemScene) -> dict[str, Any]:
     """The Newmark + Baumgarte keywords every simulate function takes."""
-    return dict(gamma=scene.gamma, beta=scene.beta, alpha=scene.alpha, delta=scene.delta,
-                axial_shortening=scene.axial_shortening, max_violation=scene.max_violation)
+    return dict(
+        gamma=scene.gamma,
+        beta=scene.beta,
+        alpha=scene.alpha,
+        delta=scene.delta,
+        axial_shortening=scene.axial_shortening,
+        max_violation=scene.max_violation,
+    )
 
 
 def _simulate(scene: FemScene):
@@ -38,17 +50,31 @@ def _simulate(scene: FemScene):
         return _simulate_telescoping(scene)
     if isinstance(scene, RPArmScene):
         return _simulate_rp_arm(scene)
-    raise TypeError(f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, RPArmScene, "
-                    "TelescopingScene (from read_fem_scene)")
+    raise TypeError(
+        f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, RPArmScene, "
+        "TelescopingScene (from read_fem_scene)"
+    )
 
 
 def _simulate_sliding_beam(scene: SlidingBeamScene):
     from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, simulate_sliding_beam
 
-    case = SlidingBeamCase(scene.name, C1=scene.C1, C2=scene.C2, T=scene.T, tracked_end=scene.tracked_end,
-                           driven_end=scene.driven_end, L=scene.L, rho=scene.rho, EI=scene.EI, D=scene.D,
-                           tip_deflection=scene.tip_deflection)
-    res = simulate_sliding_beam(case, scene.n_elements, dt=scene.dt, duration=scene.duration, **_integration(scene))
+    case = SlidingBeamCase(
+        scene.name,
+        C1=scene.C1,
+        C2=scene.C2,
+        T=scene.T,
+        tracked_end=scene.tracked_end,
+        driven_end=scene.driven_end,
+        L=scene.L,
+        rho=scene.rho,
+        EI=scene.EI,
+        D=scene.D,
+        tip_deflection=scene.tip_deflection,
+    )
+    res = simulate_sliding_beam(
+        case, scene.n_elements, dt=scene.dt, duration=scene.duration, **_integration(scene)
+    )
     return res, {}, {"ndof": int(res.q.shape[1])}
 
 
@@ -58,24 +84,59 @@ def _simulate_rp_arm(scene: RPArmScene):
     from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
 
     spec, drive, common = scene.model_spec, scene.drive, _integration(scene)
-    motion = RPMotion(C1=scene.C1, C2=scene.C2, T=scene.T, theta0=math.radians(scene.theta0_deg),
-                      dtheta=math.radians(scene.rotation_deg))
+    motion = RPMotion(
+        C1=scene.C1,
+        C2=scene.C2,
+        T=scene.T,
+        theta0=math.radians(scene.theta0_deg),
+        dtheta=math.radians(scene.rotation_deg),
+    )
     if drive.coupling == "partial":
-        res = simulate_rp_arm(spec, motion, scene.n_elements, dt=scene.dt, duration=scene.duration,
-                              driven_end=scene.driven_end, tracked_end=scene.tracked_end, initial=scene.initial,
-                              tip_deflection=scene.tip_deflection, **common)
+        res = simulate_rp_arm(
+            spec,
+            motion,
+            scene.n_elements,
+            dt=scene.dt,
+            duration=scene.duration,
+            driven_end=scene.driven_end,
+            tracked_end=scene.tracked_end,
+            initial=scene.initial,
+            tip_deflection=scene.tip_deflection,
+            **common,
+        )
     else:
         if drive.kind == "force":
-            motion = RPForces.sine(drive.torque_amplitude, drive.force_amplitude, scene.T,
-                                   theta0=math.radians(scene.theta0_deg), W0=scene.C1)
-        res = simulate_rp_arm_full(spec, motion, scene.n_elements, dt=scene.dt, duration=scene.duration,
-                                   tracked_end=scene.tracked_end, **common)
+            motion = RPForces.sine(
+                drive.torque_amplitude,
+                drive.force_amplitude,
+                scene.T,
+                theta0=math.radians(scene.theta0_deg),
+                W0=scene.C1,
+            )
+        res = simulate_rp_arm_full(
+            spec,
+            motion,
+            scene.n_elements,
+            dt=scene.dt,
+            duration=scene.duration,
+            tracked_end=scene.tracked_end,
+            **common,
+        )
     extra = {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1]}
     if drive.coupling == "full":
         extra.update(torque=res.torque, force=res.force)
-    facts = {"ndof": int(res.q.shape[1]), "support_inner_m": spec.support_inner, "support_outer_m": spec.support_outer,
-             "link": {"length_m": spec.length, "mass_per_length_kg_m": spec.mass_per_length, "EI_N_m2": spec.EI},
-             "payload_kg": spec.payload_mass, "gravity_m_s2": list(spec.gravity)}
+    facts = {
+        "ndof": int(res.q.shape[1]),
+        "support_inner_m": spec.support_inner,
+        "support_outer_m": spec.support_outer,
+        "link": {
+            "length_m": spec.length,
+            "mass_per_length_kg_m": spec.mass_per_length,
+            "EI_N_m2": spec.EI,
+        },
+        "payload_kg": spec.payload_mass,
+        "gravity_m_s2": list(spec.gravity),
+    }
     return res, extra, facts
 
 
@@ -84,16 +145,38 @@ def _simulate_telescoping(scene: TelescopingScene):
     from flexctrl.dynamics.fem.telescoping import simulate_telescoping
 
     spec = scene.model_spec
-    motion = RPMotion(C1=scene.C1, C2=scene.C2, T=scene.T, theta0=math.radians(scene.theta0_deg),
-                      dtheta=math.radians(scene.rotation_deg))
-    res = simulate_telescoping(spec, motion, scene.n_elements, scene.n_elements, dt=scene.dt,
-                               duration=scene.duration, tracked_end=scene.tracked_end, **_integration(scene))
-    extra = {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1],
-             "outer_tip_y": res.outer_tip_y}
-    facts = {"ndof": int(res.q.shape[1]), "hub_radius_m": spec.hub_radius,
-             "outer": dataclasses.asdict(spec.outer), "inner": dataclasses.asdict(spec.inner),
-             "contacts": [dataclasses.asdict(c) for c in spec.contacts], "payload_kg": spec.payload_mass,
-             "gravity_m_s2": list(spec.gravity)}
+    motion = RPMotion(
+        C1=scene.C1,
+        C2=scene.C2,
+        T=scene.T,
+        theta0=math.radians(scene.theta0_deg),
+        dtheta=math.radians(scene.rotation_deg),
+    )
+    res = simulate_telescoping(
+        spec,
+        motion,
+        scene.n_elements,
+        scene.n_elements,
+        dt=scene.dt,
+        duration=scene.duration,
+        tracked_end=scene.tracked_end,
+        **_integration(scene),
+    )
+    extra = {
+        "theta": res.theta,
+        "tip_X": res.tip_world[:, 0],
+        "tip_Y": res.tip_world[:, 1],
+        "outer_tip_y": res.outer_tip_y,
+    }
+    facts = {
+        "ndof": int(res.q.shape[1]),
+        "hub_radius_m": spec.hub_radius,
+        "outer": dataclasses.asdict(spec.outer),
+        "inner": dataclasses.asdict(spec.inner),
+        "contacts": [dataclasses.asdict(c) for c in spec.contacts],
+        "payload_kg": spec.payload_mass,
+        "gravity_m_s2": list(spec.gravity),
+    }
     return res, extra, facts
 
 
@@ -104,8 +187,11 @@ def _plot(path: Path, res, scene: FemScene, extra: dict[str, np.ndarray]) -> Non
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
     ax1.plot(res.t, 1e3 * res.tip_y)
     ax1.set_ylabel(f"tip_y at {scene.tracked_end} (mm)")
-    ax1.set_title(f"{scene.name}: {scene.kind}, {scene.n_elements} elements, dt = {scene.dt:g} s, "
-                  f"axial shortening {'on' if scene.axial_shortening else 'off'}", fontsize=9)
+    ax1.set_title(
+        f"{scene.name}: {scene.kind}, {scene.n_elements} elements, dt = {scene.dt:g} s, "
+        f"axial shortening {'on' if scene.axial_shortening else 'off'}",
+        fontsize=9,
+    )
     if "outer_tip_y" in extra:
         ax1.plot(res.t, 1e3 * extra["outer_tip_y"], label="outer link mouth")
         ax1.lines[0].set_label(f"inner link {scene.tracked_end}")
@@ -155,8 +241,14 @@ def _run(scene: FemScene, out_dir: Path | None) -> dict:
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        columns = {"t": res.t, "W": res.W, "tip_y": res.tip_y, "phi_max": res.phi_violation,
-                   "phidot_max": res.phidot_violation, **extra}
+        columns = {
+            "t": res.t,
+            "W": res.W,
+            "tip_y": res.tip_y,
+            "phi_max": res.phi_violation,
+            "phidot_max": res.phidot_violation,
+            **extra,
+        }
         data = np.column_stack(list(columns.values()))
         csv = out / "trajectory.csv"
         np.savetxt(csv, data, delimiter=",", header=",".join(columns), comments="", fmt="%.12g")
@@ -170,7 +262,9 @@ def _run(scene: FemScene, out_dir: Path | None) -> dict:
     return summary
 
 
-def run_fem_scene(document: dict, source: str, out_dir: Path | None, fidelity: Fidelity | str | None = None) -> dict:
+def run_fem_scene(
+    document: dict, source: str, out_dir: Path | None, fidelity: Fidelity | str | None = None
+) -> dict:
     """Read, simulate and (with ``out_dir``) write a finite-element scene document.
 
     Parameters
@@ -210,8 +304,14 @@ class FemSceneResult:
     files: list[Path]
 
 
-def run_scene(scene: FemScene, out: str | Path | None = None, *, plots: bool | None = None,
-              fidelity: Fidelity | str | None = None, **unknown: Any) -> FemSceneResult:
+def run_scene(
+    scene: FemScene,
+    out: str | Path | None = None,
+    *,
+    plots: bool | None = None,
+    fidelity: Fidelity | str | None = None,
+    **unknown: Any,
+) -> FemSceneResult:
     """Run a finite-element scene; the runner of :data:`flexctrl.scenes.SCENE_RUNNERS`.
 
     Parameters
@@ -234,9 +334,11 @@ def run_scene(scene: FemScene, out: str | Path | None = None, *, plots: bool | N
         For a fidelity other than ``fem:N``, naming the key ``fidelity``.
     """
     if unknown:
-        raise TypeError(f"run_scene() of a '{scene.kind}' scene got the option(s) "
-                        f"{', '.join(repr(k) for k in sorted(unknown))}; allowed: "
-                        f"{', '.join(repr(k) for k in RUN_OPTIONS)}")
+        raise TypeError(
+            f"run_scene() of a '{scene.kind}' scene got the option(s) "
+            f"{', '.join(repr(k) for k in sorted(unknown))}; allowed: "
+            f"{', '.join(repr(k) for k in RUN_OPTIONS)}"
+        )
     scene = scene.with_fidelity(fidelity)
     if plots is not None:
         scene = dataclasses.replace(scene, plots=bool(plots))

@@ -26,9 +26,9 @@ from __future__ import annotations
 from typing import Any
 
 from flexctrl.errors import SpecError
-from flexctrl.sim.integrator import Integrator
 from flexctrl.sim.euler import Euler
 from flexctrl.sim.implicit import CVODES, IDAS
+from flexctrl.sim.integrator import Integrator
 from flexctrl.sim.newmark_model import Newmark
 from flexctrl.sim.rk4 import RK4
 from flexctrl.sim.scipy_adapter import ScipyIntegrator
@@ -50,12 +50,23 @@ def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
 
     hint = difflib.get_close_matches(str(method), list(INTEGRATORS), n=1)
     extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-    raise SpecError(f"integrator {method!r} is not known; allowed: {', '.join(map(repr, INTEGRATORS))} "
-                    f"or an Integrator subclass{extra}", key="integrator")
+    raise SpecError(
+        f"integrator {method!r} is not known; allowed: {', '.join(map(repr, INTEGRATORS))} "
+        f"or an Integrator subclass{extra}",
+        key="integrator",
+    )
 
 
-def simulate(model, x0, duration: float, *, dt: float, method: str | type[Integrator] = "rk4", u=None,
-             **options: Any) -> Trajectory:
+def simulate(
+    model,
+    x0,
+    duration: float,
+    *,
+    dt: float,
+    method: str | type[Integrator] = "rk4",
+    u=None,
+    **options: Any,
+) -> Trajectory:
     """Integrate ``model`` from ``x0`` for ``duration`` seconds and return the :class:`Trajectory`.
 
     Parameters
@@ -81,5 +92,16 @@ def simulate(model, x0, duration: float, *, dt: float, method: str | type[Integr
     return cls(model, dt, **options).run(x0, duration, u=u)
 
 
-__all__ = ["Integrator", "RK4", "CVODES", "IDAS", "ScipyIntegrator", "Euler", "Newmark", "Trajectory", "INTEGRATORS",
-           "get_integrator", "simulate"]
+__all__ = [
+    "Integrator",
+    "RK4",
+    "CVODES",
+    "IDAS",
+    "ScipyIntegrator",
+    "Euler",
+    "Newmark",
+    "Trajectory",
+    "INTEGRATORS",
+    "get_integrator",
+    "simulate",
+]

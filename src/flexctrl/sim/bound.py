@@ -10,7 +10,7 @@ as rows, get results as rows.
 
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import casadi as ca
 import numpy as np
@@ -19,8 +19,12 @@ import numpy as np
 def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
     """``fun(*args)`` through a buffer bound to numpy arrays for this one call (results as rows)."""
     buffer, trigger = fun.buffer()
-    inputs = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float).reshape(-1), (fun.nnz_in(i),)))
-              for i, a in enumerate(args)]
+    inputs = [
+        np.ascontiguousarray(
+            np.broadcast_to(np.asarray(a, dtype=float).reshape(-1), (fun.nnz_in(i),))
+        )
+        for i, a in enumerate(args)
+    ]
     outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
     for i, a in enumerate(inputs):
         buffer.set_arg(i, memoryview(a))
@@ -52,20 +56,38 @@ class BoundFunction:
     iterates from the second sample on), where an ordinary call starts them afresh.
     """
 
-    def __init__(self, fun: ca.Function, shared: Mapping[str, np.ndarray] | None = None, renew: bool = False):
+    def __init__(
+        self, fun: ca.Function, shared: Mapping[str, np.ndarray] | None = None, renew: bool = False
+    ):
         self.function = fun
         self.renew = renew
         shared = dict(shared or {})
         unknown = set(shared) - set(fun.name_in()) - set(fun.name_out())
         if unknown:
-            raise ValueError(f"Function {fun.name()!r} has no input or output {sorted(unknown)}; "
-                             f"allowed: {fun.name_in() + fun.name_out()}")
+            raise ValueError(
+                f"Function {fun.name()!r} has no input or output {sorted(unknown)}; "
+                f"allowed: {fun.name_in() + fun.name_out()}"
+            )
         self._buffer, self._trigger = fun.buffer()
-        self._inputs = [self._bind(shared, fun.name_in(i), fun.nnz_in(i), (fun.nnz_in(i),)) for i in range(fun.n_in())]
-        self._outputs = [self._bind(shared, fun.name_out(i), fun.nnz_out(i), (fun.size2_out(i), fun.size1_out(i))
-                                    if fun.nnz_out(i) == fun.numel_out(i) else (fun.nnz_out(i),))
-                         for i in range(fun.n_out())]
-        self._views = ([memoryview(a) for a in self._inputs], [memoryview(r) for r in self._outputs])
+        self._inputs = [
+            self._bind(shared, fun.name_in(i), fun.nnz_in(i), (fun.nnz_in(i),))
+            for i in range(fun.n_in())
+        ]
+        self._outputs = [
+            self._bind(
+                shared,
+                fun.name_out(i),
+                fun.nnz_out(i),
+                (fun.size2_out(i), fun.size1_out(i))
+                if fun.nnz_out(i) == fun.numel_out(i)
+                else (fun.nnz_out(i),),
+            )
+            for i in range(fun.n_out())
+        ]
+        self._views = (
+            [memoryview(a) for a in self._inputs],
+            [memoryview(r) for r in self._outputs],
+        )
         self._bind_buffer()
         self.arrays = dict(zip(fun.name_in() + fun.name_out(), self._inputs + self._outputs))
 
@@ -75,13 +97,17 @@ class BoundFunction:
         for i, r in enumerate(self._views[1]):
             self._buffer.set_res(i, r)
 
-    def _bind(self, shared: Mapping[str, np.ndarray], name: str, nnz: int, shape: tuple) -> np.ndarray:
+    def _bind(
+        self, shared: Mapping[str, np.ndarray], name: str, nnz: int, shape: tuple
+    ) -> np.ndarray:
         if name not in shared:
             return np.zeros(shape)
         a = shared[name]
         if a.dtype != np.float64 or not a.flags.c_contiguous or a.size != nnz:
-            raise ValueError(f"Function {self.function.name()!r}: the array bound to {name!r} must be C-ordered "
-                             f"float64 with {nnz} entries; got {a.dtype} {a.shape}")
+            raise ValueError(
+                f"Function {self.function.name()!r}: the array bound to {name!r} must be C-ordered "
+                f"float64 with {nnz} entries; got {a.dtype} {a.shape}"
+            )
         return a
 
     def __call__(self, *args) -> list[np.ndarray]:

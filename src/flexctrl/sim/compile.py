@@ -57,9 +57,10 @@ import tempfile
 import time
 import uuid
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import casadi as ca
 
@@ -144,18 +145,24 @@ def private_directory(directory: Path) -> Path:
     return _fallback_directory(str(directory))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fallback_directory(untrusted: str) -> Path:
     try:
         info = os.lstat(untrusted)
-        why = (f"owned by uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}" if not stat.S_ISLNK(info.st_mode)
-               else "a symbolic link")
+        why = (
+            f"owned by uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}"
+            if not stat.S_ISLNK(info.st_mode)
+            else "a symbolic link"
+        )
     except OSError as exc:
         why = str(exc)
     fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
-    warnings.warn(f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries that others "
-                  f"could write are never loaded: compiling into the private folder '{fallback}' for this process "
-                  f"instead (set ${ENV_CACHE} to a folder only you can write)", stacklevel=3)
+    warnings.warn(
+        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries that others "
+        f"could write are never loaded: compiling into the private folder '{fallback}' for this process "
+        f"instead (set ${ENV_CACHE} to a folder only you can write)",
+        stacklevel=3,
+    )
     return fallback
 
 
@@ -174,7 +181,9 @@ def find_compiler() -> str | None:
 def compiler_identity(compiler: str) -> str:
     """First line of ``compiler --version`` (part of the cache key)."""
     try:
-        out = subprocess.run([compiler, "--version"], capture_output=True, text=True, timeout=30, check=False)
+        out = subprocess.run(
+            [compiler, "--version"], capture_output=True, text=True, timeout=30, check=False
+        )
         return (out.stdout.splitlines() or [""])[0].strip() + f" @ {compiler}"
     except (OSError, subprocess.SubprocessError):
         return compiler
@@ -220,7 +229,9 @@ def library_key(what: str, flags: Sequence[str], compiler: str) -> str:
     ``-march=native`` is among the flags.
     """
     host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    return content_key(what, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[:24]
+    return content_key(what, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[
+        :24
+    ]
 
 
 def compile_function(
@@ -257,7 +268,9 @@ def compile_function(
         return CompiledFunction(fun, compiled=False, reason="no C compiler found ($CC, gcc, cc)")
     flags = tuple(flags)
     directory = private_directory(cache_directory(cache_dir))
-    portable = tuple(f for f in flags if f not in NATIVE)  # a compiler without -march=native gets a second try
+    portable = tuple(
+        f for f in flags if f not in NATIVE
+    )  # a compiler without -march=native gets a second try
     attempts = [flags] + ([portable] if portable != flags else [])
     failure = ""
     for attempt in attempts:
@@ -270,9 +283,16 @@ def compile_function(
     return CompiledFunction(fun, compiled=False, reason=message)
 
 
-def compile_by_recipe(name: str, recipe: str, build: Callable[[], ca.Function], *, enabled: bool | None = None,
-                      cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
-                      check: Callable[[ca.Function], bool] | None = None) -> CompiledFunction:
+def compile_by_recipe(
+    name: str,
+    recipe: str,
+    build: Callable[[], ca.Function],
+    *,
+    enabled: bool | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    flags: Sequence[str] = DEFAULT_FLAGS,
+    check: Callable[[ca.Function], bool] | None = None,
+) -> CompiledFunction:
     """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it exists.
 
     Parameters
@@ -340,8 +360,11 @@ def _load_link(name: str, link: Path, flags: tuple[str, ...], check) -> Compiled
         why = ""
     if passed:
         return CompiledFunction(function, compiled=True, cache_hit=True, path=link, flags=flags)
-    warnings.warn(f"the library {link} found by its recipe does not reproduce what it should{why}; "
-                  f"removed and built again", stacklevel=3)
+    warnings.warn(
+        f"the library {link} found by its recipe does not reproduce what it should{why}; "
+        f"removed and built again",
+        stacklevel=3,
+    )
     link.unlink(missing_ok=True)
     return None
 
@@ -359,12 +382,20 @@ def _link(library: Path, link: Path) -> None:
             shutil.copy2(library, temporary)
         os.replace(temporary, link)
     except OSError as exc:
-        log.warning("could not link %s as %s (%s); the next process builds it again", library, link, exc)
+        log.warning(
+            "could not link %s as %s (%s); the next process builds it again", library, link, exc
+        )
         temporary.unlink(missing_ok=True)
 
 
-def compile_for(owner: Any, tag: Any, build: Callable[[], ca.Function], *, enabled: bool | None = None,
-                flags: Sequence[str] = DEFAULT_FLAGS) -> CompiledFunction:
+def compile_for(
+    owner: Any,
+    tag: Any,
+    build: Callable[[], ca.Function],
+    *,
+    enabled: bool | None = None,
+    flags: Sequence[str] = DEFAULT_FLAGS,
+) -> CompiledFunction:
     """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function) and ``tag``.
 
     For a Function built from ``owner`` alone (a plant step of the lifted ``f``, say): the
@@ -380,8 +411,14 @@ def compile_for(owner: Any, tag: Any, build: Callable[[], ca.Function], *, enabl
 
     if enabled is None:
         enabled = not compile_disabled_by_env()
-    settings = ("compiled", tag, bool(enabled), str(cache_directory()) if enabled else "",
-                find_compiler() if enabled else "", tuple(flags))
+    settings = (
+        "compiled",
+        tag,
+        bool(enabled),
+        str(cache_directory()) if enabled else "",
+        find_compiler() if enabled else "",
+        tuple(flags),
+    )
     kept = FROM_LIFTED.lookup(owner, settings)
     if kept is not None:
         return kept
@@ -391,16 +428,27 @@ def compile_for(owner: Any, tag: Any, build: Callable[[], ca.Function], *, enabl
     return result
 
 
-def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]) -> CompiledFunction | str:
+def _compile_or_load(
+    fun: ca.Function, directory: Path, compiler: str, flags: tuple[str, ...]
+) -> CompiledFunction | str:
     """The cached or freshly compiled library, or the reason it failed."""
     name = fun.name()
     library = directory / f"{name}_{cache_key(fun, flags, compiler)}.so"
     if library.is_file() and not trusted_file(library):
-        log.warning("cached library %s is not the user's alone (owner or write permission of others); rebuilding "
-                    "it instead of loading it", library)
+        log.warning(
+            "cached library %s is not the user's alone (owner or write permission of others); rebuilding "
+            "it instead of loading it",
+            library,
+        )
     elif library.is_file():
         try:
-            return CompiledFunction(ca.external(name, str(library)), compiled=True, cache_hit=True, path=library, flags=flags)
+            return CompiledFunction(
+                ca.external(name, str(library)),
+                compiled=True,
+                cache_hit=True,
+                path=library,
+                flags=flags,
+            )
         except RuntimeError as exc:  # unreadable library: rebuild it
             log.warning("cached library %s could not be loaded (%s); recompiling", library, exc)
     start = time.perf_counter()
@@ -411,7 +459,9 @@ def _compile_or_load(fun: ca.Function, directory: Path, compiler: str, flags: tu
         return f"flags {' '.join(flags)}: {str(exc).strip()[:300]}"
     seconds = time.perf_counter() - start
     log.info("compiled %s in %.2f s -> %s", name, seconds, library)
-    return CompiledFunction(external, compiled=True, cache_hit=False, path=library, compile_seconds=seconds, flags=flags)
+    return CompiledFunction(
+        external, compiled=True, cache_hit=False, path=library, compile_seconds=seconds, flags=flags
+    )
 
 
 def _build(fun: ca.Function, library: Path, compiler: str, flags: tuple[str, ...]) -> None:
@@ -423,7 +473,16 @@ def _build(fun: ca.Function, library: Path, compiler: str, flags: tuple[str, ...
         generator.generate(tmp + os.sep)
         target = Path(tmp) / library.name
         result = subprocess.run(
-            [compiler, *flags, "-shared", "-fPIC", "-o", str(target), str(Path(tmp) / source_name), "-lm"],
+            [
+                compiler,
+                *flags,
+                "-shared",
+                "-fPIC",
+                "-o",
+                str(target),
+                str(Path(tmp) / source_name),
+                "-lm",
+            ],
             capture_output=True,
             text=True,
             timeout=COMPILE_TIMEOUT_S,

@@ -27,7 +27,7 @@ class DivergenceMonitor:
 
     FLOOR_J = 1e-6
 
-    def __init__(self, integrator: "Integrator", x0: np.ndarray, y0: np.ndarray):
+    def __init__(self, integrator: Integrator, x0: np.ndarray, y0: np.ndarray):
         self.integrator = integrator
         self.x0 = x0
         self.reference = abs(y0[0]) + abs(y0[1])
@@ -36,7 +36,9 @@ class DivergenceMonitor:
 
     def check(self, times: np.ndarray, X: np.ndarray, Y: np.ndarray, U: np.ndarray) -> None:
         """``X`` holds the chunk's start state then its k states; ``Y`` and ``times`` the k new samples."""
-        with np.errstate(over="ignore", invalid="ignore"):  # huge but finite states are what we look for
+        with np.errstate(
+            over="ignore", invalid="ignore"
+        ):  # huge but finite states are what we look for
             self._check(times, X, Y, U)
 
     def _check(self, times: np.ndarray, X: np.ndarray, Y: np.ndarray, U: np.ndarray) -> None:
@@ -57,12 +59,17 @@ class DivergenceMonitor:
         over = energy > self.integrator.energy_factor * available
         if over.any():
             i = int(np.argmax(over))
-            self._fail(times[i], f"kinetic plus elastic energy grew to {energy[i]:.3g} J, more than "
-                                 f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can account for")
+            self._fail(
+                times[i],
+                f"kinetic plus elastic energy grew to {energy[i]:.3g} J, more than "
+                f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can account for",
+            )
         if bad.any():
             self._fail(times[first_bad], "the state became non-finite (NaN or inf)")
 
     def _fail(self, t: float, what: str) -> None:
         it = self.integrator
-        raise SimulationError(f"simulation diverged at t = {t:.6g} s with {it.name} step dt = {it.dt:g} s: {what}. "
-                              + it.stability_advice((self.x0,)))
+        raise SimulationError(
+            f"simulation diverged at t = {t:.6g} s with {it.name} step dt = {it.dt:g} s: {what}. "
+            + it.stability_advice((self.x0,))
+        )

@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import math
 import os
-from typing import ClassVar, Sequence
+from collections.abc import Sequence
+from typing import ClassVar
 
 import casadi as ca
 
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.integrator import output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS
+from flexctrl.sim.integrator import output_function
 from flexctrl.sim.rk4 import RK4
 
 
@@ -44,7 +45,13 @@ def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Func
     h = ca.MX.sym("h")
     torque = u if u_function is None else u + ca.vec(u_function(t))
     x_next = x + h * f(x, torque)
-    return ca.Function("euler_step", [x, t, u, h], [x_next, outputs(x_next)], ["x", "t", "u", "h"], ["x_next", "y_next"])
+    return ca.Function(
+        "euler_step",
+        [x, t, u, h],
+        [x_next, outputs(x_next)],
+        ["x", "t", "u", "h"],
+        ["x_next", "y_next"],
+    )
 
 
 class Euler(RK4):
@@ -65,12 +72,30 @@ class Euler(RK4):
     #: Largest stable ``omega * dt`` on the imaginary axis: none (undamped modes always grow).
     stability_limit: ClassVar[float] = 0.0
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0, compile: bool | None = None,
-                 cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
-                 expand: bool = False):
-        super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor,
-                         compile=compile, cache_dir=cache_dir, flags=flags, expand=expand)
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+        compile: bool | None = None,
+        cache_dir: str | os.PathLike | None = None,
+        flags: Sequence[str] = DEFAULT_FLAGS,
+        expand: bool = False,
+    ):
+        super().__init__(
+            model,
+            dt,
+            u_function=u_function,
+            chunk=chunk,
+            energy_factor=energy_factor,
+            compile=compile,
+            cache_dir=cache_dir,
+            flags=flags,
+            expand=expand,
+        )
 
     def step_function(self) -> ca.Function:
         """The explicit Euler step, chained and compiled by :meth:`RK4._setup`."""
@@ -81,8 +106,10 @@ class Euler(RK4):
         w = float(self.model.omega_max)
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w, *radii])
-        return (f"Explicit Euler amplifies every undamped mode at every step (|1 + i omega dt| > 1); the fastest mode "
-                f"here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = {0.5 * (w * self.dt) ** 2:.3g} per step "
-                f"at dt = {self.dt:g} s. A mode with damping ratio zeta is stable only for omega dt <= 2 zeta. "
-                "Use 'rk4' (stable for omega dt < 2.83), 'newmark' (unconditionally stable) or an implicit "
-                "integrator ('idas', 'cvodes').")
+        return (
+            f"Explicit Euler amplifies every undamped mode at every step (|1 + i omega dt| > 1); the fastest mode "
+            f"here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = {0.5 * (w * self.dt) ** 2:.3g} per step "
+            f"at dt = {self.dt:g} s. A mode with damping ratio zeta is stable only for omega dt <= 2 zeta. "
+            "Use 'rk4' (stable for omega dt < 2.83), 'newmark' (unconditionally stable) or an implicit "
+            "integrator ('idas', 'cvodes')."
+        )

@@ -10,7 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def amplitude_spectrum(signal: np.ndarray, dt: float, n_fft: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def amplitude_spectrum(
+    signal: np.ndarray, dt: float, n_fft: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """One-sided amplitude spectrum of ``signal`` (mean removed).
 
     Parameters
@@ -35,13 +37,16 @@ def amplitude_spectrum(signal: np.ndarray, dt: float, n_fft: int | None = None) 
     n = signal.size
     n_fft = n if n_fft is None else int(n_fft)
     if n_fft < n:
-        raise ValueError(f"n_fft {n_fft} is shorter than the signal ({n} samples); allowed: n_fft >= {n}")
+        raise ValueError(
+            f"n_fft {n_fft} is shorter than the signal ({n} samples); allowed: n_fft >= {n}"
+        )
     amplitude = np.abs(np.fft.rfft(signal - signal.mean(), n_fft)) * 2.0 / max(n, 1)
     return np.fft.rfftfreq(n_fft, dt), amplitude
 
 
-def dominant_frequencies(signal: np.ndarray, dt: float, count: int = 2, *, floor: float = 1e-3,
-                         n_fft: int | None = None) -> list[float]:
+def dominant_frequencies(
+    signal: np.ndarray, dt: float, count: int = 2, *, floor: float = 1e-3, n_fft: int | None = None
+) -> list[float]:
     """The ``count`` strongest spectral peaks of ``signal`` (Hz), strongest first.
 
     A peak is a bin larger than both neighbours (the zero-frequency bin is left

@@ -22,8 +22,8 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
-from flexctrl.errors import SimulationError, SpecError
 from flexctrl.dynamics.parametric import try_expand
+from flexctrl.errors import SimulationError, SpecError
 from flexctrl.sim.integrator import Integrator
 
 
@@ -45,20 +45,37 @@ class Sundials(Integrator):
     name: ClassVar[str] = "cvodes"
     solver: ClassVar[str] = "cvodes"
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0, rtol: float = 1e-8, atol: float = 1e-10,
-                 max_num_steps: int = 100000, options: dict[str, Any] | None = None):
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+        rtol: float = 1e-8,
+        atol: float = 1e-10,
+        max_num_steps: int = 100000,
+        options: dict[str, Any] | None = None,
+    ):
         super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor)
         for key, value in (("rtol", rtol), ("atol", atol)):
             if not (isinstance(value, (int, float)) and 0 < value < 1):
-                raise SpecError(f"{key} = {value!r} is not allowed; allowed: a number in (0, 1)", key=key)
+                raise SpecError(
+                    f"{key} = {value!r} is not allowed; allowed: a number in (0, 1)", key=key
+                )
         self.rtol, self.atol, self.max_num_steps = float(rtol), float(atol), int(max_num_steps)
         self.options = dict(options or {})
         self._integrators: dict[int, ca.Function] = {}
 
     def settings(self) -> dict[str, Any]:
         """Integrator settings plus tolerances."""
-        return {**super().settings(), "rtol": self.rtol, "atol": self.atol, "max_num_steps": self.max_num_steps}
+        return {
+            **super().settings(),
+            "rtol": self.rtol,
+            "atol": self.atol,
+            "max_num_steps": self.max_num_steps,
+        }
 
     def _setup(self) -> None:
         f = try_expand(self.model.functions["f"])
@@ -71,9 +88,16 @@ class Sundials(Integrator):
 
     def _integrator(self, k: int) -> ca.Function:
         if k not in self._integrators:
-            opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_num_steps, **self.options}
+            opts = {
+                "abstol": self.atol,
+                "reltol": self.rtol,
+                "max_num_steps": self.max_num_steps,
+                **self.options,
+            }
             grid = self.dt * np.arange(1, k + 1)
-            self._integrators[k] = ca.integrator(f"{self.solver}_{k}", self.solver, self._dae, 0.0, grid, opts)
+            self._integrators[k] = ca.integrator(
+                f"{self.solver}_{k}", self.solver, self._dae, 0.0, grid, opts
+            )
         return self._integrators[k]
 
     def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, None]:
@@ -87,11 +111,17 @@ class Sundials(Integrator):
             try:
                 res = integ(x0=x, p=np.concatenate([[times[a]], U[a]]))
             except RuntimeError as exc:
-                raise SimulationError(f"{self.name} failed between t = {times[a]:.6g} s and {times[b]:.6g} s: "
-                                      f"{str(exc).strip().splitlines()[-1]}. " + self.stability_advice((x0,))) from None
+                raise SimulationError(
+                    f"{self.name} failed between t = {times[a]:.6g} s and {times[b]:.6g} s: "
+                    f"{str(exc).strip().splitlines()[-1]}. " + self.stability_advice((x0,))
+                ) from None
             stats = integ.stats()
-            self.counters["rhs_evaluations"] = self.counters.get("rhs_evaluations", 0) + int(stats.get("nfevals", 0))
-            self.counters["internal_steps"] = self.counters.get("internal_steps", 0) + int(stats.get("nsteps", 0))
+            self.counters["rhs_evaluations"] = self.counters.get("rhs_evaluations", 0) + int(
+                stats.get("nfevals", 0)
+            )
+            self.counters["internal_steps"] = self.counters.get("internal_steps", 0) + int(
+                stats.get("nsteps", 0)
+            )
             out[a:b] = np.asarray(res["xf"], dtype=float).T
             x = out[b - 1]
         return out, None

@@ -66,7 +66,10 @@ def check_input_function(fun: ca.Function | None, n_u: int) -> ca.Function | Non
     if fun is None:
         return None
     if not isinstance(fun, ca.Function):
-        raise SpecError(f"u_function must be a casadi.Function of time, got {type(fun).__name__}", key="u_function")
+        raise SpecError(
+            f"u_function must be a casadi.Function of time, got {type(fun).__name__}",
+            key="u_function",
+        )
     if fun.n_in() != 1 or fun.numel_in(0) != 1 or fun.n_out() < 1 or fun.numel_out(0) != n_u:
         raise SpecError(
             f"u_function has signature {fun}; expected one scalar input t and a first output of {n_u} torques",
@@ -97,14 +100,33 @@ class Integrator:
     #: Largest stable ``omega * dt`` on the imaginary axis (explicit methods).
     stability_limit: ClassVar[float] = math.inf
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0):
-        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
-            raise SpecError(f"step dt = {dt!r} is not allowed; allowed: a finite number > 0 (s)", key="dt")
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+    ):
+        if (
+            isinstance(dt, bool)
+            or not isinstance(dt, (int, float))
+            or not math.isfinite(dt)
+            or dt <= 0
+        ):
+            raise SpecError(
+                f"step dt = {dt!r} is not allowed; allowed: a finite number > 0 (s)", key="dt"
+            )
         if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
-            raise SpecError(f"chunk = {chunk!r} is not allowed; allowed: an integer >= 1 (steps)", key="chunk")
+            raise SpecError(
+                f"chunk = {chunk!r} is not allowed; allowed: an integer >= 1 (steps)", key="chunk"
+            )
         if not (isinstance(energy_factor, (int, float)) and energy_factor > 1):
-            raise SpecError(f"energy_factor = {energy_factor!r} is not allowed; allowed: a number > 1", key="energy_factor")
+            raise SpecError(
+                f"energy_factor = {energy_factor!r} is not allowed; allowed: a number > 1",
+                key="energy_factor",
+            )
         self.model = model
         self.dt = float(dt)
         self.chunk = chunk
@@ -120,7 +142,7 @@ class Integrator:
         """The options that define this integrator (recorded in results)."""
         return {"integrator": self.name, "dt": self.dt, "chunk": self.chunk}
 
-    def setup(self) -> "Integrator":
+    def setup(self) -> Integrator:
         """Build (and compile) once; later calls do nothing."""
         if not self._ready:
             start = time.perf_counter()
@@ -153,10 +175,21 @@ class Integrator:
         model = self.model
         x0 = np.asarray(x0, dtype=float).ravel()
         if x0.shape != (model.n_x,) or not np.all(np.isfinite(x0)):
-            raise SpecError(f"initial state has shape {x0.shape} (finite: {bool(np.all(np.isfinite(x0)))}); "
-                            f"expected {model.n_x} finite values (q, qd)", key="x0")
-        if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) or duration <= 0:
-            raise SpecError(f"duration {duration!r} is not allowed; allowed: a finite number > 0 (s)", key="duration")
+            raise SpecError(
+                f"initial state has shape {x0.shape} (finite: {bool(np.all(np.isfinite(x0)))}); "
+                f"expected {model.n_x} finite values (q, qd)",
+                key="x0",
+            )
+        if (
+            isinstance(duration, bool)
+            or not isinstance(duration, (int, float))
+            or not math.isfinite(duration)
+            or duration <= 0
+        ):
+            raise SpecError(
+                f"duration {duration!r} is not allowed; allowed: a finite number > 0 (s)",
+                key="duration",
+            )
         n = max(1, int(math.ceil(duration / self.dt - 1e-9)))
         samples = self._samples(u, n)
         self.setup()
@@ -181,10 +214,17 @@ class Integrator:
             X[s + 1 : s + k + 1] = Xc
             Y[s + 1 : s + k + 1] = Yc
             self.counters["chunks"] += 1
-            monitor.check(times[s + 1 : s + k + 1], X[s : s + k + 1], Y[s + 1 : s + k + 1], samples[s : s + k])
+            monitor.check(
+                times[s + 1 : s + k + 1], X[s : s + k + 1], Y[s + 1 : s + k + 1], samples[s : s + k]
+            )
         applied = np.vstack([samples, samples[-1:]])
         if self.u_function is not None:
-            applied = applied + np.asarray(self.u_function.map(n + 1)(times[None, :]), dtype=float).reshape(model.n_u, -1).T
+            applied = (
+                applied
+                + np.asarray(self.u_function.map(n + 1)(times[None, :]), dtype=float)
+                .reshape(model.n_u, -1)
+                .T
+            )
         wall, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         traj = self._trajectory(times, X, Y, applied, wall)
         traj.meta["cpu_time_s"] = cpu
@@ -194,7 +234,9 @@ class Integrator:
     def _setup(self) -> None:
         """Build and compile what the method needs (called once)."""
 
-    def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    def _advance(
+        self, x0: np.ndarray, times: np.ndarray, U: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         """States after each of ``len(U)`` steps from ``x0`` at ``times[0]``; outputs or None."""
         out = np.empty((U.shape[0], x0.size))
         x = x0
@@ -224,8 +266,11 @@ class Integrator:
         if arr.shape == (n_u,):
             arr = np.tile(arr, (n, 1))
         if arr.shape != (n, n_u):
-            raise SpecError(f"torque samples have shape {arr.shape}; expected ({n}, {n_u}) "
-                            f"(one row per step of {self.dt:g} s) or ({n_u},)", key="u")
+            raise SpecError(
+                f"torque samples have shape {arr.shape}; expected ({n}, {n_u}) "
+                f"(one row per step of {self.dt:g} s) or ({n_u},)",
+                key="u",
+            )
         if not np.all(np.isfinite(arr)):
             raise SpecError("torque samples contain non-finite values", key="u")
         return arr
@@ -250,19 +295,27 @@ class Integrator:
         w_model = float(self.model.omega_max)
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w_model, *radii])
-        facts = (f"The model's highest natural frequency (linearised, free joints) is omega_max = {w_model:.4g} rad/s "
-                 f"({w_model / (2 * math.pi):.4g} Hz), omega_max*dt = {w_model * self.dt:.3g}")
+        facts = (
+            f"The model's highest natural frequency (linearised, free joints) is omega_max = {w_model:.4g} rad/s "
+            f"({w_model / (2 * math.pi):.4g} Hz), omega_max*dt = {w_model * self.dt:.3g}"
+        )
         if radii:
-            facts += (f"; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = {max(radii):.4g} rad/s "
-                      f"({max(radii) / (2 * math.pi):.4g} Hz), |lambda|*dt = {max(radii) * self.dt:.3g}")
+            facts += (
+                f"; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = {max(radii):.4g} rad/s "
+                f"({max(radii) / (2 * math.pi):.4g} Hz), |lambda|*dt = {max(radii) * self.dt:.3g}"
+            )
         facts += "."
         if math.isfinite(self.stability_limit) and w > 0:
             stable = 0.9 * self.stability_limit / w
             if w * self.dt > self.stability_limit:
-                return (f"{facts} {self.name} is stable only for omega*dt < {self.stability_limit:g}: use dt <= {stable:.3g} s, "
-                        "or an implicit integrator ('idas', 'cvodes', or 'scipy' with method 'Radau' or 'BDF').")
-            return (f"{facts} That is inside {self.name}'s limit omega*dt < {self.stability_limit:g}; "
-                    f"try dt <= {0.5 * stable:.3g} s or an implicit integrator ('idas', 'cvodes').")
+                return (
+                    f"{facts} {self.name} is stable only for omega*dt < {self.stability_limit:g}: use dt <= {stable:.3g} s, "
+                    "or an implicit integrator ('idas', 'cvodes', or 'scipy' with method 'Radau' or 'BDF')."
+                )
+            return (
+                f"{facts} That is inside {self.name}'s limit omega*dt < {self.stability_limit:g}; "
+                f"try dt <= {0.5 * stable:.3g} s or an implicit integrator ('idas', 'cvodes')."
+            )
         return f"{facts} Try tighter tolerances (rtol, atol) or a smaller dt, and check the model and initial state."
 
     def _trajectory(self, times, X, Y, applied, wall) -> Trajectory:
@@ -283,5 +336,13 @@ class Integrator:
             "counters": dict(self.counters),
             "status": "ok",
         }
-        return Trajectory(time=times, states=X, inputs=applied, coordinate_names=tuple(model.coordinate_names),
-                          energies=energies, tip=Y[:, 3:5], deflections=Y[:, 5:], meta=meta)
+        return Trajectory(
+            time=times,
+            states=X,
+            inputs=applied,
+            coordinate_names=tuple(model.coordinate_names),
+            energies=energies,
+            tip=Y[:, 3:5],
+            deflections=Y[:, 5:],
+            meta=meta,
+        )

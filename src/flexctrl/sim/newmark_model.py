@@ -113,19 +113,54 @@ class Newmark(Integrator):
     name: ClassVar[str] = "newmark"
     stability_limit: ClassVar[float] = math.inf
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0, alpha: float = 0.25, delta: float = 0.5,
-                 tangent: Tangent = "potential", newton_tol: float = 1e-10, max_iterations: int = 30):
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+        alpha: float = 0.25,
+        delta: float = 0.5,
+        tangent: Tangent = "potential",
+        newton_tol: float = 1e-10,
+        max_iterations: int = 30,
+    ):
         super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor)
         for key, value, low, high in (("alpha", alpha, 0.0, 0.5), ("delta", delta, 0.5, 1.0)):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-                raise SpecError(f"{key} = {value!r} is not allowed; allowed: a number in [{low:g}, {high:g}]", key=key)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not low <= value <= high
+            ):
+                raise SpecError(
+                    f"{key} = {value!r} is not allowed; allowed: a number in [{low:g}, {high:g}]",
+                    key=key,
+                )
         if tangent not in TANGENTS:
-            raise SpecError(f"tangent = {tangent!r} is not allowed; allowed: {', '.join(map(repr, TANGENTS))}", key="tangent")
-        if isinstance(newton_tol, bool) or not isinstance(newton_tol, (int, float)) or not 0 < newton_tol < 1e-2:
-            raise SpecError(f"newton_tol = {newton_tol!r} is not allowed; allowed: a number in (0, 1e-2)", key="newton_tol")
-        if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
-            raise SpecError(f"max_iterations = {max_iterations!r} is not allowed; allowed: an integer >= 1", key="max_iterations")
+            raise SpecError(
+                f"tangent = {tangent!r} is not allowed; allowed: {', '.join(map(repr, TANGENTS))}",
+                key="tangent",
+            )
+        if (
+            isinstance(newton_tol, bool)
+            or not isinstance(newton_tol, (int, float))
+            or not 0 < newton_tol < 1e-2
+        ):
+            raise SpecError(
+                f"newton_tol = {newton_tol!r} is not allowed; allowed: a number in (0, 1e-2)",
+                key="newton_tol",
+            )
+        if (
+            isinstance(max_iterations, bool)
+            or not isinstance(max_iterations, int)
+            or max_iterations < 1
+        ):
+            raise SpecError(
+                f"max_iterations = {max_iterations!r} is not allowed; allowed: an integer >= 1",
+                key="max_iterations",
+            )
         self.alpha, self.delta = float(alpha), float(delta)
         self.tangent = tangent
         self.newton_tol = float(newton_tol)
@@ -138,8 +173,15 @@ class Newmark(Integrator):
     def settings(self) -> dict[str, Any]:
         """Integrator settings plus the Newmark parameters and Newton options."""
         out = super().settings()
-        out.update({"alpha": self.alpha, "delta": self.delta, "tangent": self.tangent,
-                    "newton_tol": self.newton_tol, "max_iterations": self.max_iterations})
+        out.update(
+            {
+                "alpha": self.alpha,
+                "delta": self.delta,
+                "tangent": self.tangent,
+                "newton_tol": self.newton_tol,
+                "max_iterations": self.max_iterations,
+            }
+        )
         return out
 
     def _torque(self, t: float) -> np.ndarray:
@@ -162,16 +204,30 @@ class Newmark(Integrator):
         k = U.shape[0]
         n = self.model.n_q
         self._held, self._t0 = U, float(times[0])
-        result = simulate(self._problem, x0[:n], x0[n:], float(times[k]), self.dt, t0=float(times[0]),
-                          alpha=self.alpha, delta=self.delta, newton_tol=self.newton_tol,
-                          max_iterations=self.max_iterations, max_violation=np.inf)
-        self.counters["newton_iterations"] = self.counters.get("newton_iterations", 0) + int(result.newton_iterations.sum())
+        result = simulate(
+            self._problem,
+            x0[:n],
+            x0[n:],
+            float(times[k]),
+            self.dt,
+            t0=float(times[0]),
+            alpha=self.alpha,
+            delta=self.delta,
+            newton_tol=self.newton_tol,
+            max_iterations=self.max_iterations,
+            max_violation=np.inf,
+        )
+        self.counters["newton_iterations"] = self.counters.get("newton_iterations", 0) + int(
+            result.newton_iterations.sum()
+        )
         return np.hstack([result.q[1:], result.qd[1:]]), None
 
     def stability_advice(self, states=()) -> str:
         """Newmark-specific advice (see module docstring)."""
         if math.isinf(self.stability_limit):
-            return (f"Newmark with alpha = {self.alpha:g}, delta = {self.delta:g} is unconditionally stable on linear modes, "
-                    "so this is not a step-size instability of the method: check the model, the initial state and the "
-                    "torques, or reduce dt so Newton converges on the nonlinear terms.")
+            return (
+                f"Newmark with alpha = {self.alpha:g}, delta = {self.delta:g} is unconditionally stable on linear modes, "
+                "so this is not a step-size instability of the method: check the model, the initial state and the "
+                "torques, or reduce dt so Newton converges on the nonlinear terms."
+            )
         return super().stability_advice(states)

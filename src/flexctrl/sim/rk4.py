@@ -42,14 +42,15 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Callable, ClassVar, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.parametric import try_expand
-from flexctrl.sim.integrator import Integrator, output_function
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
+from flexctrl.sim.integrator import Integrator, output_function
 
 
 def _axpy(x, a, k):
@@ -103,7 +104,9 @@ def rk4_next(f: Callable, x, h, t=None, *, k1=None):
     return _rk4_combine(x, h, k1, k2, k3, k4)
 
 
-def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: bool = False) -> ca.Function:
+def rk4_step_function(
+    model, u_function: ca.Function | None = None, *, expand: bool = False
+) -> ca.Function:
     """``rk4_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`output_function`)."""
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
@@ -117,7 +120,13 @@ def rk4_step_function(model, u_function: ca.Function | None = None, *, expand: b
         return f(xs, torque)
 
     x_next = rk4_next(rhs, x, h, t)
-    step = ca.Function("rk4_step", [x, t, u, h], [x_next, outputs(x_next)], ["x", "t", "u", "h"], ["x_next", "y_next"])
+    step = ca.Function(
+        "rk4_step",
+        [x, t, u, h],
+        [x_next, outputs(x_next)],
+        ["x", "t", "u", "h"],
+        ["x_next", "y_next"],
+    )
     return step.expand() if expand else step
 
 
@@ -137,7 +146,9 @@ def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
     return loop_function(step, n_steps, "rk4_loop")
 
 
-def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "held_rk4") -> ca.Function:
+def held_sample_loop(
+    model, h: float, substeps: int, chunk: int, name: str = "held_rk4"
+) -> ca.Function:
     """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h`` (s), torque held.
 
     The sample-level building block of the FEM timing report and the speed/accuracy
@@ -147,7 +158,9 @@ def held_sample_loop(model, h: float, substeps: int, chunk: int, name: str = "he
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
     step = ca.Function("rk4", [x, u], [rk4_next(lambda s: f(s, u), x, h)])
     xs = ca.MX.sym("x", model.n_x)
-    sample = ca.Function("sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]])
+    sample = ca.Function(
+        "sample", [xs, u], [step.mapaccum(substeps)(xs, ca.repmat(u, 1, substeps))[:, -1]]
+    )
     loop = sample.mapaccum(chunk)
     args = loop.mx_in()
     return ca.Function(name, args, loop.call(args))
@@ -195,10 +208,19 @@ class RK4(Integrator):
     name: ClassVar[str] = "rk4"
     stability_limit: ClassVar[float] = RK4_STABILITY_LIMIT
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0, compile: bool | None = None,
-                 cache_dir: str | os.PathLike | None = None, flags: Sequence[str] = DEFAULT_FLAGS,
-                 expand: bool = False):
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+        compile: bool | None = None,
+        cache_dir: str | os.PathLike | None = None,
+        flags: Sequence[str] = DEFAULT_FLAGS,
+        expand: bool = False,
+    ):
         super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor)
         self.compile = compile
         self.cache_dir = cache_dir
@@ -210,14 +232,16 @@ class RK4(Integrator):
         """Integrator settings plus how the loop is evaluated."""
         out = super().settings()
         c = self.compiled
-        out.update({
-            "compiled": bool(c and c.compiled),
-            "cache_hit": bool(c and c.cache_hit),
-            "compile_time_s": c.compile_seconds if c else 0.0,
-            "library": str(c.path) if c and c.path else None,
-            "flags": list(c.flags) if c and c.compiled else [],
-            "vm_reason": c.reason if c else "",
-        })
+        out.update(
+            {
+                "compiled": bool(c and c.compiled),
+                "cache_hit": bool(c and c.cache_hit),
+                "compile_time_s": c.compile_seconds if c else 0.0,
+                "library": str(c.path) if c and c.path else None,
+                "flags": list(c.flags) if c and c.compiled else [],
+                "vm_reason": c.reason if c else "",
+            }
+        )
         return out
 
     def step_function(self) -> ca.Function:
@@ -226,11 +250,18 @@ class RK4(Integrator):
 
     def _setup(self) -> None:
         loop = loop_function(self.step_function(), self.chunk, f"{self.name}_loop")
-        self.compiled = compile_function(loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags)
+        self.compiled = compile_function(
+            loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags
+        )
         # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per chunk.
         # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows) array.
         n = self.chunk
-        self._args = [np.zeros(self.model.n_x), np.zeros(n), np.zeros((n, self.model.n_u)), np.array([self.dt])]
+        self._args = [
+            np.zeros(self.model.n_x),
+            np.zeros(n),
+            np.zeros((n, self.model.n_u)),
+            np.array([self.dt]),
+        ]
         self._res = [np.zeros((n, self.model.n_x)), np.zeros((n, loop.size1_out(1)))]
         self._buffer, self._evaluate = self.compiled.function.buffer()
         for i, a in enumerate(self._args):
@@ -238,7 +269,9 @@ class RK4(Integrator):
         for i, r in enumerate(self._res):
             self._buffer.set_res(i, memoryview(r))
 
-    def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _advance(
+        self, x0: np.ndarray, times: np.ndarray, U: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         k = U.shape[0]
         x_arg, t_arg, u_arg, _h = self._args
         x_arg[:] = x0

@@ -16,8 +16,8 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from flexctrl.errors import SimulationError, SpecError
 from flexctrl.dynamics.parametric import try_expand
+from flexctrl.errors import SimulationError, SpecError
 from flexctrl.sim.integrator import Integrator
 
 METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
@@ -39,14 +39,28 @@ class ScipyIntegrator(Integrator):
 
     name: ClassVar[str] = "scipy"
 
-    def __init__(self, model, dt: float, *, u_function: ca.Function | None = None, chunk: int = 1000,
-                 energy_factor: float = 100.0, method: str = "RK45", rtol: float = 1e-8, atol: float = 1e-10):
+    def __init__(
+        self,
+        model,
+        dt: float,
+        *,
+        u_function: ca.Function | None = None,
+        chunk: int = 1000,
+        energy_factor: float = 100.0,
+        method: str = "RK45",
+        rtol: float = 1e-8,
+        atol: float = 1e-10,
+    ):
         super().__init__(model, dt, u_function=u_function, chunk=chunk, energy_factor=energy_factor)
         if method not in METHODS:
-            raise SpecError(f"method {method!r} is not allowed; allowed: {', '.join(METHODS)}", key="method")
+            raise SpecError(
+                f"method {method!r} is not allowed; allowed: {', '.join(METHODS)}", key="method"
+            )
         for key, value in (("rtol", rtol), ("atol", atol)):
             if not (isinstance(value, (int, float)) and 0 < value < 1):
-                raise SpecError(f"{key} = {value!r} is not allowed; allowed: a number in (0, 1)", key=key)
+                raise SpecError(
+                    f"{key} = {value!r} is not allowed; allowed: a number in (0, 1)", key=key
+                )
         self.method, self.rtol, self.atol = method, float(rtol), float(atol)
 
     def settings(self) -> dict[str, Any]:
@@ -76,13 +90,27 @@ class ScipyIntegrator(Integrator):
             extra = {}
             if self.method in _USES_JACOBIAN:
                 extra["jac"] = lambda t, y, u=u: jac(t, y, u).full()
-            res = solve_ivp(fun, (times[a], times[b]), x, method=self.method, t_eval=times[a + 1 : b + 1],
-                            rtol=self.rtol, atol=self.atol, **extra)
-            self.counters["rhs_evaluations"] = self.counters.get("rhs_evaluations", 0) + int(res.nfev)
-            self.counters["jacobian_evaluations"] = self.counters.get("jacobian_evaluations", 0) + int(res.njev)
+            res = solve_ivp(
+                fun,
+                (times[a], times[b]),
+                x,
+                method=self.method,
+                t_eval=times[a + 1 : b + 1],
+                rtol=self.rtol,
+                atol=self.atol,
+                **extra,
+            )
+            self.counters["rhs_evaluations"] = self.counters.get("rhs_evaluations", 0) + int(
+                res.nfev
+            )
+            self.counters["jacobian_evaluations"] = self.counters.get(
+                "jacobian_evaluations", 0
+            ) + int(res.njev)
             if res.status != 0 or res.y.shape[1] != b - a:
-                raise SimulationError(f"scipy {self.method} failed between t = {times[a]:.6g} s and {times[b]:.6g} s: "
-                                      f"{res.message}. " + self.stability_advice())
+                raise SimulationError(
+                    f"scipy {self.method} failed between t = {times[a]:.6g} s and {times[b]:.6g} s: "
+                    f"{res.message}. " + self.stability_advice()
+                )
             out[a:b] = res.y.T
             x = out[b - 1]
             if not np.all(np.isfinite(x)):

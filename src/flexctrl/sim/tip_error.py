@@ -33,7 +33,9 @@ class TipError:
     max: float
 
 
-def tip_error(reference_time: np.ndarray, reference_tip: np.ndarray, time: np.ndarray, tip: np.ndarray) -> TipError:
+def tip_error(
+    reference_time: np.ndarray, reference_tip: np.ndarray, time: np.ndarray, tip: np.ndarray
+) -> TipError:
     """Distance between two tip paths, on the reference's samples.
 
     Parameters
@@ -53,11 +55,15 @@ def tip_error(reference_time: np.ndarray, reference_tip: np.ndarray, time: np.nd
     reference_tip = np.asarray(reference_tip, dtype=float).reshape(reference_time.size, -1)
     tip = np.asarray(tip, dtype=float).reshape(time.size, -1)
     if not (np.all(np.isfinite(reference_tip)) and np.all(np.isfinite(tip))):
-        raise SimulationError("a tip path holds non-finite values (a diverged run); its error is undefined")
+        raise SimulationError(
+            "a tip path holds non-finite values (a diverged run); its error is undefined"
+        )
     end = min(reference_time[-1], time[-1])
     inside = reference_time <= end + 1e-12
     if inside.sum() < 2:
-        raise SimulationError(f"the runs share no time span (reference ends at {reference_time[-1]} s, candidate at {time[-1]} s)")
+        raise SimulationError(
+            f"the runs share no time span (reference ends at {reference_time[-1]} s, candidate at {time[-1]} s)"
+        )
     t = reference_time[inside]
     moved = np.column_stack([np.interp(t, time, tip[:, k]) for k in range(tip.shape[1])])
     distance = np.linalg.norm(moved - reference_tip[inside], axis=1)

@@ -98,10 +98,14 @@ def spring_pendulum(
         "K": ca.Function("K", [], [stiffness], [], ["K"]),
         "D": ca.Function("D", [], [damping], [], ["D"]),
         "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"]),
-        "energies": ca.Function("energies", [q, qd], [kin, elastic, grav], ["q", "qd"], ["E_kin", "E_el", "E_grav"]),
+        "energies": ca.Function(
+            "energies", [q, qd], [kin, elastic, grav], ["q", "qd"], ["E_kin", "E_el", "E_grav"]
+        ),
         "tip": ca.Function("tip", [q, qd], [tip_p, tip_v], ["q", "qd"], ["p", "v"]),
         "hubs": ca.Function("hubs", [q], [hubs], ["q"], ["p"]),
-        "deflection": ca.Function("deflection", [q], [ca.vertcat(0, q[2]), ca.DM.zeros(2, 1)], ["q"], ["w", "dw"]),
+        "deflection": ca.Function(
+            "deflection", [q], [ca.vertcat(0, q[2]), ca.DM.zeros(2, 1)], ["q"], ["w", "dw"]
+        ),
     }
     return Model(
         name="spring_pendulum",

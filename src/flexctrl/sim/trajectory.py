@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -166,7 +167,9 @@ class Trajectory:
         e = self.energies
         work = self.work_in
         grav = e["E_grav"]
-        scale = float(np.max(e["E_kin"] + e["E_el"]) + (np.max(grav) - np.min(grav)) + np.max(np.abs(work)))
+        scale = float(
+            np.max(e["E_kin"] + e["E_el"]) + (np.max(grav) - np.min(grav)) + np.max(np.abs(work))
+        )
         scale = max(scale, 1e-300)
         change = e["E_total"] - e["E_total"][0]
         balance = change - work
@@ -210,7 +213,9 @@ class Trajectory:
             + [f"u{i + 1}" for i in range(self.inputs.shape[1])]
         )
         energies = np.column_stack([self.energies[k] for k in ENERGY_NAMES])
-        matrix = np.column_stack([self.time, self.q, self.tip, energies, self.qd, self.deflections, self.inputs])
+        matrix = np.column_stack(
+            [self.time, self.q, self.tip, energies, self.qd, self.deflections, self.inputs]
+        )
         return names, matrix
 
     def to_pandas(self):
@@ -222,8 +227,14 @@ class Trajectory:
         names, matrix = self.columns()
         return pd.DataFrame(matrix, columns=names).set_index("t", drop=False)
 
-    def save(self, directory: str | Path, extra: dict[str, Any] | None = None, *, fft_count: int = 2,
-             fft_span: float = 2.0) -> dict[str, Path]:
+    def save(
+        self,
+        directory: str | Path,
+        extra: dict[str, Any] | None = None,
+        *,
+        fft_count: int = 2,
+        fft_span: float = 2.0,
+    ) -> dict[str, Path]:
         """Write ``trajectory.csv`` and ``summary.json`` (``extra`` merged into the summary).
 
         ``fft_count`` and ``fft_span`` (s) set the dominant-frequency figures
@@ -238,7 +249,9 @@ class Trajectory:
         directory.mkdir(parents=True, exist_ok=True)
         names, matrix = self.columns()
         csv_path = directory / "trajectory.csv"
-        np.savetxt(csv_path, matrix, delimiter=",", header=",".join(names), comments="", fmt="%.12g")
+        np.savetxt(
+            csv_path, matrix, delimiter=",", header=",".join(names), comments="", fmt="%.12g"
+        )
         summary = self.summary(fft_count, fft_span)
         if extra:
             summary.update(jsonable(extra))

@@ -27,7 +27,7 @@ def _figure(rows: int = 1, cols: int = 1, height: float = 3.0):
     return fig, axes
 
 
-def plot_trajectory(traj: "Trajectory", directory: Path, prefix: str = "") -> list[Path]:
+def plot_trajectory(traj: Trajectory, directory: Path, prefix: str = "") -> list[Path]:
     """Write the four PNGs into ``directory``; returns their paths."""
     directory.mkdir(parents=True, exist_ok=True)
     t = traj.time

@@ -5,6 +5,14 @@ from flexctrl.spec.overrides import apply_overrides, parse_value
 from flexctrl.spec.reader import TableReader, read_toml
 
 __all__ = [
-    "ArmSpec", "JointSpec", "LinkSpec", "PayloadSpec", "SectionSpec", "load_arm",
-    "apply_overrides", "parse_value", "TableReader", "read_toml",
+    "ArmSpec",
+    "JointSpec",
+    "LinkSpec",
+    "PayloadSpec",
+    "SectionSpec",
+    "load_arm",
+    "apply_overrides",
+    "parse_value",
+    "TableReader",
+    "read_toml",
 ]

@@ -38,16 +38,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Literal
+from typing import Literal
 
 import numpy as np
 
 from flexctrl.errors import SpecError, warn_spec
+from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
 
 MAX_MODES = 6
 #: A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length * length**3 / 12``
@@ -254,17 +255,26 @@ class ArmSpec:
         """Number of links."""
         return len(self.links)
 
-    def with_payload(self, mass: float) -> "ArmSpec":
+    def with_payload(self, mass: float) -> ArmSpec:
         """A copy carrying a payload of ``mass`` kg (the inertia is kept)."""
         if not (math.isfinite(mass) and mass >= 0.0):
-            raise SpecError(f"payload mass {mass!r} is not allowed; allowed: a finite number >= 0 (kg)", key="payload.mass")
-        return dataclasses.replace(self, payload=dataclasses.replace(self.payload, mass=float(mass)))
+            raise SpecError(
+                f"payload mass {mass!r} is not allowed; allowed: a finite number >= 0 (kg)",
+                key="payload.mass",
+            )
+        return dataclasses.replace(
+            self, payload=dataclasses.replace(self.payload, mass=float(mass))
+        )
 
-    def with_modes(self, n_modes: int) -> "ArmSpec":
+    def with_modes(self, n_modes: int) -> ArmSpec:
         """A copy with ``n_modes`` assumed modes on every link."""
         if not 0 <= n_modes <= MAX_MODES:
-            raise SpecError(f"mode count {n_modes!r} is not allowed; allowed: 0 to {MAX_MODES}", key="n_modes")
-        return dataclasses.replace(self, links=tuple(dataclasses.replace(l, n_modes=n_modes) for l in self.links))
+            raise SpecError(
+                f"mode count {n_modes!r} is not allowed; allowed: 0 to {MAX_MODES}", key="n_modes"
+            )
+        return dataclasses.replace(
+            self, links=tuple(dataclasses.replace(l, n_modes=n_modes) for l in self.links)
+        )
 
     def configuration_or_default(self, q: Iterable[float] | None) -> np.ndarray:
         """Joint angles (rad) as an array: ``q`` if given (checked), else the file's default."""
@@ -272,7 +282,10 @@ class ArmSpec:
             return np.array(self.configuration, dtype=float)
         arr = np.asarray(list(q), dtype=float)
         if arr.shape != (self.n_links,):
-            raise SpecError(f"configuration has {arr.size} angles; expected {self.n_links} (one per joint)", key="q")
+            raise SpecError(
+                f"configuration has {arr.size} angles; expected {self.n_links} (one per joint)",
+                key="q",
+            )
         if not np.all(np.isfinite(arr)):
             raise SpecError(f"configuration {arr.tolist()} is not finite", key="q")
         return arr
@@ -282,10 +295,17 @@ def _read_link(r: TableReader) -> LinkSpec:
     section = None
     if r.has("section"):
         s = r.table_of("section")
-        section = SectionSpec(s.positive("width", unit="m"), s.positive("height", unit="m"), s.positive("thickness", unit="m"))
+        section = SectionSpec(
+            s.positive("width", unit="m"),
+            s.positive("height", unit="m"),
+            s.positive("thickness", unit="m"),
+        )
         s.finish()
         if 2 * section.thickness >= min(section.width, section.height):
-            raise r.error("section.thickness", f"value {section.thickness!r} leaves no hollow; allowed: < half the width and height")
+            raise r.error(
+                "section.thickness",
+                f"value {section.thickness!r} leaves no hollow; allowed: < half the width and height",
+            )
     damping = r.raw("damping_ratio", 0.0)
     if isinstance(damping, list):
         ratios = r.numbers("damping_ratio", low=0.0, high=10.0)
@@ -305,7 +325,10 @@ def _read_link(r: TableReader) -> LinkSpec:
         source=r.string("source", ""),
     )
     if len(ratios) > 1 and len(ratios) < link.n_modes:
-        raise r.error("damping_ratio", f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per mode")
+        raise r.error(
+            "damping_ratio",
+            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per mode",
+        )
     r.finish()
     return link
 
@@ -318,10 +341,14 @@ def _link_inertia(r: TableReader) -> float:
         return uniform
     value = r.nonnegative("inertia", unit="kg m^2")
     if not uniform / INERTIA_FACTOR <= value <= uniform * INERTIA_FACTOR:
-        warn_spec(f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / 12 = "
-                  f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within a factor "
-                  f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
-                  source=r.source, key=r.key("inertia"), stacklevel=4)
+        warn_spec(
+            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / 12 = "
+            f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within a factor "
+            f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
+            source=r.source,
+            key=r.key("inertia"),
+            stacklevel=4,
+        )
     return value
 
 
@@ -357,9 +384,16 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
     links = tuple(_read_link(t) for t in r.tables("links", min_count=1))
     joints = tuple(_read_joint(t) for t in r.tables("joints", min_count=1))
     if len(joints) != len(links):
-        raise r.error("joints", f"has {len(joints)} entries for {len(links)} links; allowed: one joint per link")
+        raise r.error(
+            "joints",
+            f"has {len(joints)} entries for {len(links)} links; allowed: one joint per link",
+        )
     p = r.table_of("payload", {})
-    payload = PayloadSpec(p.nonnegative("mass", 0.0, unit="kg"), p.nonnegative("inertia", 0.0, unit="kg m^2"), p.string("source", ""))
+    payload = PayloadSpec(
+        p.nonnegative("mass", 0.0, unit="kg"),
+        p.nonnegative("inertia", 0.0, unit="kg m^2"),
+        p.string("source", ""),
+    )
     p.finish()
     gravity = r.numbers("gravity", [0.0, -9.81], length=2, unit="m/s^2")
     config_deg = r.degrees("configuration", [0.0] * len(links), length=len(links))

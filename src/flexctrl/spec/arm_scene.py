@@ -46,11 +46,11 @@ from typing import Any, Literal
 
 import numpy as np
 
+from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
 from flexctrl.spec.arm import DAMPING_FORMS
 from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
-from flexctrl.errors import SpecError
-from flexctrl.spec import shipped
 
 MODES = ("frozen", "scheduled")
 INPUT_KINDS = ("none", "bangbang")
@@ -140,18 +140,39 @@ class ArmScene:
     def settings(self) -> dict[str, Any]:
         """The scene as plain, JSON-ready data (angles in degrees, as in the file)."""
         return {
-            "kind": self.kind, "name": self.name, "source": self.source, "model": str(self.model),
-            "fidelity": str(self.fidelity), "modes": self.modes, "axial_shortening": self.axial_shortening,
-            "axial_stretch": self.axial_stretch, "payload_kg": self.payload,
+            "kind": self.kind,
+            "name": self.name,
+            "source": self.source,
+            "model": str(self.model),
+            "fidelity": str(self.fidelity),
+            "modes": self.modes,
+            "axial_shortening": self.axial_shortening,
+            "axial_stretch": self.axial_stretch,
+            "payload_kg": self.payload,
             "gravity": list(self.gravity) if self.gravity else None,
             "q0_deg": [math.degrees(a) for a in self.q0] if self.q0 else None,
             "qd0_deg_s": [math.degrees(a) for a in self.qd0] if self.qd0 else None,
-            "qf0_m": dict(self.qf0), "zeta": self.zeta, "damping_form": self.damping_form, "friction": list(self.friction) if self.friction else None,
-            "input": {"kind": self.input.kind, "joint": self.input.joint, "amplitude": self.input.amplitude,
-                      "t_accel": self.input.t_accel, "t_decel": self.input.t_decel, "t_start": self.input.t_start},
-            "integrator": self.integrator, "dt": self.dt, "duration": self.duration, "solver": dict(self.solver),
-            "fft_span": self.fft_span, "fft_peaks": self.fft_peaks, "tolerance_m": self.tolerance,
-            "fidelity_walk": self.fidelity_walk, "fidelity_checks": self.fidelity_checks,
+            "qf0_m": dict(self.qf0),
+            "zeta": self.zeta,
+            "damping_form": self.damping_form,
+            "friction": list(self.friction) if self.friction else None,
+            "input": {
+                "kind": self.input.kind,
+                "joint": self.input.joint,
+                "amplitude": self.input.amplitude,
+                "t_accel": self.input.t_accel,
+                "t_decel": self.input.t_decel,
+                "t_start": self.input.t_start,
+            },
+            "integrator": self.integrator,
+            "dt": self.dt,
+            "duration": self.duration,
+            "solver": dict(self.solver),
+            "fft_span": self.fft_span,
+            "fft_peaks": self.fft_peaks,
+            "tolerance_m": self.tolerance,
+            "fidelity_walk": self.fidelity_walk,
+            "fidelity_checks": self.fidelity_checks,
         }
 
 
@@ -163,8 +184,14 @@ def resolve_model_path(name: str, base_dir: Path, r: TableReader) -> Path:
         raise r.error("model", f"file {name!r} not found ({exc.message})") from None
 
 
-def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kind: str = "arm",
-                   accept: tuple[str, ...] = ()) -> ArmScene:
+def read_arm_scene(
+    document: dict[str, Any],
+    source: str,
+    base_dir: Path,
+    *,
+    kind: str = "arm",
+    accept: tuple[str, ...] = (),
+) -> ArmScene:
     """Validate a ``kind = "arm"`` scene document (see module docstring).
 
     ``kind`` and ``accept`` serve scenes built on this one (``kind = "closed_loop"``): the
@@ -176,22 +203,35 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
     r.accept(*accept)
     model = resolve_model_path(r.string("model"), base_dir, r)
     fidelity = parse_fidelity(r.raw("fidelity", "amm:2"), source=source, key="fidelity")
-    tolerance = r.number("tolerance", low=0.0, low_open=True, high=1.0, unit="m") if r.has("tolerance") else None
+    tolerance = (
+        r.number("tolerance", low=0.0, low_open=True, high=1.0, unit="m")
+        if r.has("tolerance")
+        else None
+    )
     if fidelity.kind == "auto" and tolerance is None:
-        raise r.error("tolerance", "is missing; fidelity = 'auto' needs it; allowed: a number > 0 (m, tip-position "
-                      "tolerance), e.g. tolerance = 1e-3")
+        raise r.error(
+            "tolerance",
+            "is missing; fidelity = 'auto' needs it; allowed: a number > 0 (m, tip-position "
+            "tolerance), e.g. tolerance = 1e-3",
+        )
     integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
     gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
 
     ini = r.table_of("initial", {})
     q0 = tuple(math.radians(a) for a in ini.degrees("q")) if ini.has("q") else None
-    qd0 = tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s")) if ini.has("qd") else None
+    qd0 = (
+        tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s"))
+        if ini.has("qd")
+        else None
+    )
     qf0: dict[str, float] = {}
     if ini.has("qf"):
         qf = ini.table_of("qf")
         for name in list(qf.table):
             if not _QF_NAME.match(name):
-                raise qf.error(name, "is not an elastic coordinate name; allowed: qf<link><mode>, e.g. qf31")
+                raise qf.error(
+                    name, "is not an elastic coordinate name; allowed: qf<link><mode>, e.g. qf31"
+                )
             qf0[name] = qf.number(name, unit="m")
         qf.finish()
     ini.finish()
@@ -201,8 +241,11 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
     friction = None
     if dmp.has("friction"):
         raw = dmp.raw("friction")
-        friction = dmp.numbers("friction", low=0.0, unit="N m s/rad") if isinstance(raw, list) else (
-            dmp.nonnegative("friction", unit="N m s/rad"),)
+        friction = (
+            dmp.numbers("friction", low=0.0, unit="N m s/rad")
+            if isinstance(raw, list)
+            else (dmp.nonnegative("friction", unit="N m s/rad"),)
+        )
     damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
     dmp.finish()
 
@@ -210,9 +253,14 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
     kind = inp.string("kind", "none", choices=INPUT_KINDS)
     if kind == "bangbang":
         t_accel = inp.positive("t_accel", unit="s")
-        spec = InputSpec(kind, joint=inp.integer("joint", low=1), amplitude=inp.number("amplitude", unit="N m"),
-                         t_accel=t_accel, t_decel=inp.nonnegative("t_decel", t_accel, unit="s"),
-                         t_start=inp.nonnegative("t_start", 0.0, unit="s"))
+        spec = InputSpec(
+            kind,
+            joint=inp.integer("joint", low=1),
+            amplitude=inp.number("amplitude", unit="N m"),
+            t_accel=t_accel,
+            t_decel=inp.nonnegative("t_decel", t_accel, unit="s"),
+            t_start=inp.nonnegative("t_start", 0.0, unit="s"),
+        )
     else:
         spec = InputSpec("none")
     inp.finish()
@@ -221,7 +269,10 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
     solver: dict[str, Any] = {}
     for key in list(sol.table):
         if key in SOLVER_KEYS and integrator not in SOLVER_KEYS[key]:
-            raise sol.error(key, f"does not apply to integrator '{integrator}'; it applies to: {', '.join(SOLVER_KEYS[key])}")
+            raise sol.error(
+                key,
+                f"does not apply to integrator '{integrator}'; it applies to: {', '.join(SOLVER_KEYS[key])}",
+            )
     if sol.has("rtol"):
         solver["rtol"] = sol.number("rtol", low=0.0, low_open=True, high=0.1)
     if sol.has("atol"):
@@ -247,9 +298,15 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
     dt = r.positive("dt", unit="s")
     duration = r.positive("duration", unit="s")
     if dt > duration:
-        raise r.error("dt", f"value {dt!r} is longer than the duration {duration!r}; allowed: 0 < dt <= duration")
+        raise r.error(
+            "dt",
+            f"value {dt!r} is longer than the duration {duration!r}; allowed: 0 < dt <= duration",
+        )
     if duration / dt > 5e7:
-        raise r.error("duration", f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most 5e7 steps")
+        raise r.error(
+            "duration",
+            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most 5e7 steps",
+        )
     scene = ArmScene(
         name=r.string("name", Path(source).stem),
         description=r.string("description", ""),
@@ -261,8 +318,19 @@ def read_arm_scene(document: dict[str, Any], source: str, base_dir: Path, *, kin
         integrator=integrator,
         dt=dt,
         duration=duration,
-        q0=q0, qd0=qd0, qf0=qf0, zeta=zeta, friction=friction, damping_form=damping_form, input=spec, solver=solver,
-        fft_span=fft_span, fft_peaks=fft_peaks, plots=plots, source=source, tolerance=tolerance,
+        q0=q0,
+        qd0=qd0,
+        qf0=qf0,
+        zeta=zeta,
+        friction=friction,
+        damping_form=damping_form,
+        input=spec,
+        solver=solver,
+        fft_span=fft_span,
+        fft_peaks=fft_peaks,
+        plots=plots,
+        source=source,
+        tolerance=tolerance,
         fidelity_walk=r.string("fidelity_walk", "estimate", choices=FIDELITY_WALKS),
         fidelity_checks=r.string("fidelity_checks", "full", choices=FIDELITY_CHECKS),
         axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,

@@ -37,10 +37,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
-from flexctrl.spec.reader import TableReader
 from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
+from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.reader import TableReader
+
 
 @dataclass(frozen=True)
 class MetricSettings:
@@ -67,8 +68,15 @@ class MetricSettings:
     stable_band: float = 0.01
 
 
-_EXTRA_KEYS = ("controller", "design_payload", "controller_fidelity", "design_configuration", "target", "noise",
-               "metrics")
+_EXTRA_KEYS = (
+    "controller",
+    "design_payload",
+    "controller_fidelity",
+    "design_configuration",
+    "target",
+    "noise",
+    "metrics",
+)
 
 
 @dataclass(frozen=True)
@@ -134,7 +142,9 @@ class ClosedLoopScene:
             "design_configuration_deg": [math.degrees(a) for a in self.design_configuration],
             "controller": str(self.controller) if self.controller else None,
             "design_payload_kg": self.design_payload,
-            "controller_fidelity": str(self.controller_fidelity) if self.controller_fidelity else None,
+            "controller_fidelity": str(self.controller_fidelity)
+            if self.controller_fidelity
+            else None,
             "noise": self.noise,
             "seed": self.seed,
             "settle_allowance_s": self.settle_allowance,
@@ -145,7 +155,9 @@ class ClosedLoopScene:
         }
 
 
-def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path) -> ClosedLoopScene:
+def read_closed_loop_scene(
+    document: dict[str, Any], source: str, base_dir: Path
+) -> ClosedLoopScene:
     """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
     plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
     r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
@@ -157,26 +169,39 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
         except SpecError as exc:
             raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
     design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
-    cf = parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity") if r.has("controller_fidelity") else None
+    cf = (
+        parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity")
+        if r.has("controller_fidelity")
+        else None
+    )
     target = r.table_of("target")
     if target.has("q") == target.has("move"):
         given = "both are given" if target.has("q") else "missing required key"
-        raise target.error("q", f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
-                                "to initial.q), degrees")
+        raise target.error(
+            "q",
+            f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
+            "to initial.q), degrees",
+        )
     if target.has("q"):
         target_q = tuple(math.radians(a) for a in target.degrees("q"))
     else:
         move = target.degrees("move")
         start = plant.q0 if plant.q0 is not None else (0.0,) * len(move)
         if len(move) != len(start):
-            raise target.error("move", f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint")
+            raise target.error(
+                "move",
+                f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint",
+            )
         target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
     from flexctrl.spec.reference import DEFLECTIONS, PROFILES
 
     profile = target.string("profile", "step", choices=PROFILES)
     if profile == "quintic":
         if not target.has("move_time"):
-            raise target.error("move_time", "is missing; allowed: a move time > 0 s, required with profile = \"quintic\"")
+            raise target.error(
+                "move_time",
+                'is missing; allowed: a move time > 0 s, required with profile = "quintic"',
+            )
         move_time = target.positive("move_time", unit="s")
     else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch profiles
         move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
@@ -186,8 +211,11 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     if r.has("design_configuration"):
         values = r.degrees("design_configuration")
         if len(values) != len(target_q):
-            raise r.error("design_configuration", f"has {len(values)} values for {len(target_q)} joints; "
-                                                  "allowed: one angle per joint (degrees)")
+            raise r.error(
+                "design_configuration",
+                f"has {len(values)} values for {len(target_q)} joints; "
+                "allowed: one angle per joint (degrees)",
+            )
         design_q = tuple(math.radians(a) for a in values)
     noise = r.table_of("noise", {})
     enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
@@ -197,16 +225,36 @@ def read_closed_loop_scene(document: dict[str, Any], source: str, base_dir: Path
     settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
     band = metrics.positive("band", default.band, unit="m")
     div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
-    div_angle = math.radians(metrics.positive("divergence_angle", math.degrees(default.divergence_angle),
-                                              unit="degrees"))
+    div_angle = math.radians(
+        metrics.positive("divergence_angle", math.degrees(default.divergence_angle), unit="degrees")
+    )
     stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
     metrics.finish()
     r.finish()
     t_arrive = move_time if profile == "quintic" else 0.0
     move_time = move_time if profile == "quintic" else 0.0
     if t_arrive + settle >= plant.duration:
-        raise r.error("metrics.settle_allowance", f"value {settle!r} leaves no residual window after the move "
-                                                  f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
-                                                  f"({plant.duration - t_arrive:g} s)")
-    return ClosedLoopScene(plant, target_q, controller, design_payload, cf, enabled, seed, settle, band, profile,
-                           move_time, deflection, design_q, div_deflection, div_angle, stable_band)
+        raise r.error(
+            "metrics.settle_allowance",
+            f"value {settle!r} leaves no residual window after the move "
+            f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
+            f"({plant.duration - t_arrive:g} s)",
+        )
+    return ClosedLoopScene(
+        plant,
+        target_q,
+        controller,
+        design_payload,
+        cf,
+        enabled,
+        seed,
+        settle,
+        band,
+        profile,
+        move_time,
+        deflection,
+        design_q,
+        div_deflection,
+        div_angle,
+        stable_band,
+    )

@@ -19,9 +19,13 @@ the value and what is allowed; unknown keys are rejected with a "did you mean".
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable, get_args
+from typing import Any, get_args
 
+from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
+from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import (
     SETTINGS,
     ControllerSettings,
@@ -36,12 +40,9 @@ from flexctrl.spec.controller_settings import (
     ShapedSettings,
     Weights,
 )
-from flexctrl.errors import SpecError
-from flexctrl.spec.arrival import ArrivalSettings
-from flexctrl.spec.sensors import SENSOR_KINDS
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
+from flexctrl.spec.sensors import SENSOR_KINDS
 
 _DEG = math.pi / 180.0
 
@@ -70,8 +71,11 @@ def _refuse_renamed(reader: TableReader, renamed: dict[str, str]) -> None:
     """Refuse a key of the old spelling, naming the key that replaced it."""
     for old, new in renamed.items():
         if reader.has(old):
-            raise reader.error(old, f"was renamed '{new}' (value {reader.table[old]!r}): angles in the files are "
-                                    f"degrees and their keys say so; allowed: {new}")
+            raise reader.error(
+                old,
+                f"was renamed '{new}' (value {reader.table[old]!r}): angles in the files are "
+                f"degrees and their keys say so; allowed: {new}",
+            )
 
 
 def _free_text(reader: TableReader) -> None:
@@ -89,22 +93,33 @@ def _sensors(reader: TableReader, default: SensorSettings) -> SensorSettings:
     if r.has("outputs"):
         outputs = r.raw("outputs")
         if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
-            raise r.error("outputs", f"value {outputs!r} is not a list of strings; allowed: a list of "
-                                     f"{', '.join(map(repr, SENSOR_KINDS))}")
+            raise r.error(
+                "outputs",
+                f"value {outputs!r} is not a list of strings; allowed: a list of "
+                f"{', '.join(map(repr, SENSOR_KINDS))}",
+            )
         for i, o in enumerate(outputs):
             if o not in SENSOR_KINDS:
                 import difflib
 
                 hint = difflib.get_close_matches(o, SENSOR_KINDS, n=1)
                 extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-                raise r.error(f"outputs[{i}]", f"value {o!r} is not a sensor; allowed: "
-                                               f"{', '.join(map(repr, SENSOR_KINDS))}{extra}")
+                raise r.error(
+                    f"outputs[{i}]",
+                    f"value {o!r} is not a sensor; allowed: "
+                    f"{', '.join(map(repr, SENSOR_KINDS))}{extra}",
+                )
         values["outputs"] = tuple(outputs)
     else:
         values["outputs"] = default.outputs
-    units = {"joints": ("joints_deg", "deg", _DEG), "joint_rates": ("joint_rates_deg_s", "deg/s", _DEG),
-             "strain": ("strain", "1/m", 1.0), "tip": ("tip", "m", 1.0), "tip_acc": ("tip_acc", "m/s^2", 1.0),
-             "deflection": ("deflection", "m", 1.0)}
+    units = {
+        "joints": ("joints_deg", "deg", _DEG),
+        "joint_rates": ("joint_rates_deg_s", "deg/s", _DEG),
+        "strain": ("strain", "1/m", 1.0),
+        "tip": ("tip", "m", 1.0),
+        "tip_acc": ("tip_acc", "m/s^2", 1.0),
+        "deflection": ("deflection", "m", 1.0),
+    }
     noise = r.table_of("noise", {})
     _refuse_renamed(noise, {"joints": "joints_deg", "joint_rates": "joint_rates_deg_s"})
     for kind, (key, unit, factor) in units.items():
@@ -120,7 +135,8 @@ def _weights(reader: TableReader) -> Weights:
     values = {
         "joint": r.positive("joint_deg", math.degrees(d.joint), unit="deg") * _DEG,
         "modal": r.positive("modal", d.modal, unit="m"),
-        "joint_rate": r.positive("joint_rate_deg_s", math.degrees(d.joint_rate), unit="deg/s") * _DEG,
+        "joint_rate": r.positive("joint_rate_deg_s", math.degrees(d.joint_rate), unit="deg/s")
+        * _DEG,
         "modal_rate": r.positive("modal_rate", d.modal_rate, unit="m/s"),
         "torque": r.positive("torque", d.torque, unit="fraction of the torque limit"),
     }
@@ -151,16 +167,22 @@ def _schedule(reader: TableReader) -> ScheduleSettings | None:
         number = key[1:-4] if key.endswith("_deg") else key[1:]
         if not (key.startswith("q") and number.isdigit() and int(number) >= 1):
             r.raw(key)
-            raise r.error(key, f"unknown key (value {r.table[key]!r}); allowed: joints 'q1_deg', 'q2_deg', ... each "
-                               "with a list of angles (deg)")
+            raise r.error(
+                key,
+                f"unknown key (value {r.table[key]!r}); allowed: joints 'q1_deg', 'q2_deg', ... each "
+                "with a list of angles (deg)",
+            )
         if not key.endswith("_deg"):
             _refuse_renamed(r, {key: f"{key}_deg"})
         joints.append(int(number))
         grid.append(tuple(v * _DEG for v in r.degrees(key)))
     order = sorted(range(len(joints)), key=lambda i: joints[i])
     try:
-        return _build(r, ScheduleSettings, {"joints": tuple(joints[i] for i in order),
-                                            "grid": tuple(grid[i] for i in order)})
+        return _build(
+            r,
+            ScheduleSettings,
+            {"joints": tuple(joints[i] for i in order), "grid": tuple(grid[i] for i in order)},
+        )
     except SpecError as exc:  # the settings name a joint's grid q2 (rad); the file's key is q2_deg
         name = (exc.key or "").rsplit(".", 1)[-1]
         if name.startswith("q") and name[1:].isdigit():
@@ -190,7 +212,9 @@ def _osqp(reader: TableReader) -> OSQPSettings:
         "alpha": r.number("alpha", d.alpha, low=0.0, high=2.0, low_open=True),
         "adaptive_rho": r.boolean("adaptive_rho", d.adaptive_rho),
         "adaptive_rho_interval": r.integer("adaptive_rho_interval", d.adaptive_rho_interval, low=0),
-        "adaptive_rho_tolerance": r.number("adaptive_rho_tolerance", d.adaptive_rho_tolerance, low=1.0),
+        "adaptive_rho_tolerance": r.number(
+            "adaptive_rho_tolerance", d.adaptive_rho_tolerance, low=1.0
+        ),
         "polishing": r.boolean("polishing", d.polishing),
         "max_iter": r.integer("max_iter", d.max_iter, low=1),
         "time_limit": r.nonnegative("time_limit", d.time_limit, unit="s"),
@@ -211,7 +235,9 @@ def _pd_values(r: TableReader, d: PDSettings) -> dict[str, Any]:
         "gravity": _literal(r, "gravity", d.gravity, _field_type(PDSettings, "gravity")),
         "saturate": r.boolean("saturate", d.saturate),
         "feedforward": r.boolean("feedforward", d.feedforward),
-        "strain_rate_gain": r.numbers("strain_rate_gain", d.strain_rate_gain, unit="N m per 1/(m s)"),
+        "strain_rate_gain": r.numbers(
+            "strain_rate_gain", d.strain_rate_gain, unit="N m per 1/(m s)"
+        ),
         "strain_rate_filter": r.nonnegative("strain_rate_filter", d.strain_rate_filter, unit="Hz"),
         "sensors": _sensors(r, d.sensors),
     }
@@ -248,7 +274,9 @@ def _soft_values(r: TableReader, cls: type, d) -> dict[str, Any]:
 def _whole_numbers(r: TableReader, name: str, default: tuple[int, ...]) -> tuple[int, ...]:
     values = r.numbers(name, default, low=1.0, unit="samples")
     if any(v != int(v) for v in values):
-        raise r.error(name, f"value {list(values)!r} is not allowed; allowed: whole numbers >= 1 (samples)")
+        raise r.error(
+            name, f"value {list(values)!r} is not allowed; allowed: whole numbers >= 1 (samples)"
+        )
     return tuple(int(v) for v in values)
 
 
@@ -261,10 +289,14 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "weights": _weights(r),
         "terminal": _literal(r, "terminal", d.terminal, _field_type(MPCSettings, "terminal")),
         **_soft_values(r, MPCSettings, d),
-        "formulation": _literal(r, "formulation", d.formulation, _field_type(MPCSettings, "formulation")),
+        "formulation": _literal(
+            r, "formulation", d.formulation, _field_type(MPCSettings, "formulation")
+        ),
         "backend": _literal(r, "backend", d.backend, _field_type(MPCSettings, "backend")),
         "scaling": _literal(r, "scaling", d.scaling, _field_type(MPCSettings, "scaling")),
-        "warm_start": _literal(r, "warm_start", d.warm_start, _field_type(MPCSettings, "warm_start")),
+        "warm_start": _literal(
+            r, "warm_start", d.warm_start, _field_type(MPCSettings, "warm_start")
+        ),
         "fallback": _literal(r, "fallback", d.fallback, _field_type(MPCSettings, "fallback")),
         "accept_inaccurate": r.boolean("accept_inaccurate", d.accept_inaccurate),
         "blocks": _whole_numbers(r, "blocks", d.blocks),
@@ -284,21 +316,30 @@ def _read_nmpc(r: TableReader) -> NMPCSettings:
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
         "horizon": r.integer("horizon", d.horizon, low=1, high=1000),
         "substeps": r.integer("substeps", d.substeps, low=0, high=200),
-        "sensitivities": _literal(r, "sensitivities", d.sensitivities, _field_type(NMPCSettings, "sensitivities")),
+        "sensitivities": _literal(
+            r, "sensitivities", d.sensitivities, _field_type(NMPCSettings, "sensitivities")
+        ),
         "weights": _weights(r),
         "mode": _literal(r, "mode", d.mode, _field_type(NMPCSettings, "mode")),
-        "nlp_solver": _literal(r, "nlp_solver", d.nlp_solver, _field_type(NMPCSettings, "nlp_solver")),
+        "nlp_solver": _literal(
+            r, "nlp_solver", d.nlp_solver, _field_type(NMPCSettings, "nlp_solver")
+        ),
         "qp_solver": _literal(r, "qp_solver", d.qp_solver, _field_type(NMPCSettings, "qp_solver")),
         "max_iter": r.integer("max_iter", d.max_iter, low=1),
         "init_iter": r.integer("init_iter", d.init_iter, low=0),
         **_soft_values(r, NMPCSettings, d),
         "compile": r.boolean("compile", d.compile),
         "prediction_modes": r.integer("prediction_modes", d.prediction_modes, low=0, high=6),
-        "prediction_basis": _literal(r, "prediction_basis", d.prediction_basis,
-                                     _field_type(NMPCSettings, "prediction_basis")),
-        "prediction_map": _literal(r, "prediction_map", d.prediction_map, _field_type(NMPCSettings, "prediction_map")),
+        "prediction_basis": _literal(
+            r, "prediction_basis", d.prediction_basis, _field_type(NMPCSettings, "prediction_basis")
+        ),
+        "prediction_map": _literal(
+            r, "prediction_map", d.prediction_map, _field_type(NMPCSettings, "prediction_map")
+        ),
         "jacobian_every": r.integer("jacobian_every", d.jacobian_every, low=1, high=200),
-        "stages_per_jacobian": r.integer("stages_per_jacobian", d.stages_per_jacobian, low=1, high=1000),
+        "stages_per_jacobian": r.integer(
+            "stages_per_jacobian", d.stages_per_jacobian, low=1, high=1000
+        ),
         "qp_warm_start": r.boolean("qp_warm_start", d.qp_warm_start),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
@@ -315,8 +356,12 @@ def _read_shaped(r: TableReader) -> ShapedSettings:
         "kind": "shaped",
         "shaper": _literal(r, "shaper", d.shaper, _field_type(ShapedSettings, "shaper")),
         "modes": r.integer("modes", d.modes, low=1, high=12),
-        "frequency_source": _literal(r, "frequency_source", d.frequency_source,
-                                     _field_type(ShapedSettings, "frequency_source")),
+        "frequency_source": _literal(
+            r,
+            "frequency_source",
+            d.frequency_source,
+            _field_type(ShapedSettings, "frequency_source"),
+        ),
         "move_time": r.nonnegative("move_time", d.move_time, unit="s"),
         "pd": pd,
     }

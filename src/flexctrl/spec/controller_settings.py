@@ -18,11 +18,33 @@ from typing import Literal, Union
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
-from flexctrl.spec.field_checks import boolean_field, choice_field, integer_field, number_field, numbers_field
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
-    ControllerKind, GravityCompensation, SoftConstraint, Formulation, QPBackend, Scaling, WarmStart,
-    Fallback, NMPCMode, NLPSolver, PredictionMap, PredictionBasis, RTIQPSolver, Sensitivities, Shaper,
-    FrequencySource, SensorSettings, Weights, EstimatorSettings,
+    ControllerKind,
+    EstimatorSettings,
+    Fallback,
+    Formulation,
+    FrequencySource,
+    GravityCompensation,
+    NLPSolver,
+    NMPCMode,
+    PredictionBasis,
+    PredictionMap,
+    QPBackend,
+    RTIQPSolver,
+    Scaling,
+    Sensitivities,
+    SensorSettings,
+    Shaper,
+    SoftConstraint,
+    WarmStart,
+    Weights,
+)
+from flexctrl.spec.field_checks import (
+    boolean_field,
+    choice_field,
+    integer_field,
+    number_field,
+    numbers_field,
 )
 
 
@@ -44,15 +66,24 @@ class ScheduleSettings:
 
     def __post_init__(self) -> None:
         if not self.joints:
-            raise SpecError("no scheduling joints given; allowed: at least one joint q1..qn with its grid", key="joints")
+            raise SpecError(
+                "no scheduling joints given; allowed: at least one joint q1..qn with its grid",
+                key="joints",
+            )
         if len(self.grid) != len(self.joints):
-            raise SpecError(f"value {self.grid!r} has {len(self.grid)} grids for {len(self.joints)} joints", key="grid")
+            raise SpecError(
+                f"value {self.grid!r} has {len(self.grid)} grids for {len(self.joints)} joints",
+                key="grid",
+            )
         for j, (joint, values) in enumerate(zip(self.joints, self.grid)):
             integer_field(f"joints[{j}]", joint, low=1)
             numbers_field(f"q{joint}", values)
             if len(values) < 2 or any(b <= a for a, b in zip(values, values[1:])):
-                raise SpecError(f"value {[round(math.degrees(v), 6) for v in values]!r} (deg) is not allowed; "
-                                "allowed: at least 2 strictly increasing angles", key=f"q{joint}")
+                raise SpecError(
+                    f"value {[round(math.degrees(v), 6) for v in values]!r} (deg) is not allowed; "
+                    "allowed: at least 2 strictly increasing angles",
+                    key=f"q{joint}",
+                )
 
 
 # --------------------------------------------------------------------------------------
@@ -109,7 +140,9 @@ class PDSettings:
     feedforward: bool = True
     strain_rate_gain: tuple[float, ...] = ()
     strain_rate_filter: float = 0.0
-    sensors: SensorSettings = field(default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates")))
+    sensors: SensorSettings = field(
+        default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates"))
+    )
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["pd"])
@@ -117,7 +150,10 @@ class PDSettings:
         numbers_field("kp", self.kp, low=0.0)
         numbers_field("kd", self.kd, low=0.0)
         if len(self.kp) != len(self.kd):
-            raise SpecError(f"value {list(self.kd)!r} has {len(self.kd)} gains but kp has {len(self.kp)}", key="kd")
+            raise SpecError(
+                f"value {list(self.kd)!r} has {len(self.kd)} gains but kp has {len(self.kp)}",
+                key="kd",
+            )
         number_field("bandwidth", self.bandwidth, low=0.0, low_open=True, unit="Hz")
         number_field("damping", self.damping, low=0.0, low_open=True)
         number_field("torque_filter", self.torque_filter, low=0.0, unit="Hz")
@@ -126,13 +162,19 @@ class PDSettings:
         boolean_field("feedforward", self.feedforward)
         missing = {"joints", "joint_rates"} - set(self.sensors.outputs)
         if missing and not self.sensors.full_state:
-            raise SpecError(f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
-                            "(or 'state')", key="sensors.outputs")
+            raise SpecError(
+                f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
+                "(or 'state')",
+                key="sensors.outputs",
+            )
         numbers_field("strain_rate_gain", self.strain_rate_gain)
         number_field("strain_rate_filter", self.strain_rate_filter, low=0.0, unit="Hz")
         if self.strain_rate_gain and "strain" not in self.sensors.outputs:
-            raise SpecError(f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' among "
-                            f"sensors.outputs (now {list(self.sensors.outputs)!r})", key="strain_rate_gain")
+            raise SpecError(
+                f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' among "
+                f"sensors.outputs (now {list(self.sensors.outputs)!r})",
+                key="strain_rate_gain",
+            )
 
 
 @dataclass(frozen=True)
@@ -300,25 +342,42 @@ class MPCSettings:
         choice_field("fallback", self.fallback, Fallback)
         boolean_field("accept_inaccurate", self.accept_inaccurate)
         if self.backend == "hpipm" and self.formulation != "sparse":
-            raise SpecError(f"value {self.formulation!r} is not allowed with backend 'hpipm'; allowed: 'sparse'",
-                            key="formulation")
-        if not isinstance(self.blocks, tuple) or not all(isinstance(b, int) and not isinstance(b, bool) and b >= 1
-                                                          for b in self.blocks):
-            raise SpecError(f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 (samples "
-                            "per block)", key="blocks")
+            raise SpecError(
+                f"value {self.formulation!r} is not allowed with backend 'hpipm'; allowed: 'sparse'",
+                key="formulation",
+            )
+        if not isinstance(self.blocks, tuple) or not all(
+            isinstance(b, int) and not isinstance(b, bool) and b >= 1 for b in self.blocks
+        ):
+            raise SpecError(
+                f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 (samples "
+                "per block)",
+                key="blocks",
+            )
         if self.blocks and sum(self.blocks) != self.horizon:
-            raise SpecError(f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks that "
-                            f"add up to the horizon ({self.horizon})", key="blocks")
+            raise SpecError(
+                f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks that "
+                f"add up to the horizon ({self.horizon})",
+                key="blocks",
+            )
         if self.blocks and self.formulation != "condensed":
-            raise SpecError(f"value {self.formulation!r} is not allowed with move blocking; allowed: 'condensed'",
-                            key="formulation")
+            raise SpecError(
+                f"value {self.formulation!r} is not allowed with move blocking; allowed: 'condensed'",
+                key="formulation",
+            )
         integer_field("constraint_stride", self.constraint_stride, low=1, high=self.horizon)
         if self.constraint_stride > 1 and self.formulation != "condensed":
-            raise SpecError(f"value {self.formulation!r} is not allowed with constraint_stride > 1; allowed: "
-                            "'condensed'", key="formulation")
+            raise SpecError(
+                f"value {self.formulation!r} is not allowed with constraint_stride > 1; allowed: "
+                "'condensed'",
+                key="formulation",
+            )
         if self.arrival.enabled and self.formulation != "condensed":
-            raise SpecError(f"value {self.formulation!r} is not allowed with a minimum-time arrival; allowed: "
-                            "'condensed'", key="formulation")
+            raise SpecError(
+                f"value {self.formulation!r} is not allowed with a minimum-time arrival; allowed: "
+                "'condensed'",
+                key="formulation",
+            )
 
 
 @dataclass(frozen=True)
@@ -504,7 +563,17 @@ SETTINGS: dict[str, type] = {
 }
 
 __all__ = [
-    "SensorSettings", "Weights", "EstimatorSettings", "ScheduleSettings", "PDSettings", "LQRSettings",
-    "OSQPSettings", "MPCSettings", "NMPCSettings", "ShapedSettings", "ControllerSettings", "SETTINGS",
+    "SensorSettings",
+    "Weights",
+    "EstimatorSettings",
+    "ScheduleSettings",
+    "PDSettings",
+    "LQRSettings",
+    "OSQPSettings",
+    "MPCSettings",
+    "NMPCSettings",
+    "ShapedSettings",
+    "ControllerSettings",
+    "SETTINGS",
     "ControllerKind",
 ]

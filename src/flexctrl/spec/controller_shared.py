@@ -60,22 +60,30 @@ class SensorSettings:
 
     def __post_init__(self) -> None:
         if not isinstance(self.outputs, tuple) or not self.outputs:
-            raise SpecError(f"value {self.outputs!r} is not allowed; allowed: a non-empty list of "
-                            f"{', '.join(map(repr, SENSOR_KINDS))}", key="outputs")
+            raise SpecError(
+                f"value {self.outputs!r} is not allowed; allowed: a non-empty list of "
+                f"{', '.join(map(repr, SENSOR_KINDS))}",
+                key="outputs",
+            )
         for i, kind in enumerate(self.outputs):
             if kind not in SENSOR_KINDS:
                 choice_field(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
         if len(set(self.outputs)) != len(self.outputs):
             raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
         if "state" in self.outputs and len(self.outputs) > 1:
-            raise SpecError(f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
-                            key="outputs")
+            raise SpecError(
+                f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
+                key="outputs",
+            )
         for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection"):
             number_field(name, getattr(self, name), low=0.0)
 
     def noise(self) -> dict[str, float]:
         """Noise standard deviation per sensor kind."""
-        return {name: getattr(self, name) for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection")}
+        return {
+            name: getattr(self, name)
+            for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection")
+        }
 
     @property
     def full_state(self) -> bool:

@@ -8,17 +8,18 @@ Neither is an :class:`~flexctrl.spec.arm.ArmSpec`.  SI units throughout.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
 
 Array = NDArray[np.float64]
 #: The two links of a telescoping pair, in the order of the model file.
@@ -108,17 +109,33 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
     housing.string("source", "")
     joint = housing.string("joint", "supports", choices=JOINTS)
     if not r2 > r1:
-        raise housing.error("support_outer", f"value {r2!r} is not beyond support_inner = {r1!r}; allowed: > {r1} m")
+        raise housing.error(
+            "support_outer", f"value {r2!r} is not beyond support_inner = {r1!r}; allowed: > {r1} m"
+        )
     if r2 - r1 >= length:
-        raise housing.error("support_outer", f"support spacing {r2 - r1:g} m leaves no stroke on a {length:g} m link; "
-                                             f"allowed: spacing < {length} m")
+        raise housing.error(
+            "support_outer",
+            f"support spacing {r2 - r1:g} m leaves no stroke on a {length:g} m link; "
+            f"allowed: spacing < {length} m",
+        )
     housing.finish()
     hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
-    spec = RPArmSpec(name=r.string("name", Path(source).stem), length=length, mass_per_length=rho, EI=EI,
-                     support_inner=r1, support_outer=r2, payload_mass=m_t, gravity=(gravity[0], gravity[1]),
-                     hub_inertia=hub_inertia, carriage_mass=carriage_mass, joint=joint,
-                     source=source, notes=r.string("notes", ""))
+    spec = RPArmSpec(
+        name=r.string("name", Path(source).stem),
+        length=length,
+        mass_per_length=rho,
+        EI=EI,
+        support_inner=r1,
+        support_outer=r2,
+        payload_mass=m_t,
+        gravity=(gravity[0], gravity[1]),
+        hub_inertia=hub_inertia,
+        carriage_mass=carriage_mass,
+        joint=joint,
+        source=source,
+        notes=r.string("notes", ""),
+    )
     r.finish()
     return spec
 
@@ -126,7 +143,11 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
 def _drive_masses(r: TableReader) -> tuple[float, float, float]:
     """The optional ``[base] hub_inertia`` (kg m^2), ``[carriage] mass`` and ``[payload] mass`` (kg)."""
     values = []
-    for table, key, unit in (("base", "hub_inertia", "kg m^2"), ("carriage", "mass", "kg"), ("payload", "mass", "kg")):
+    for table, key, unit in (
+        ("base", "hub_inertia", "kg m^2"),
+        ("carriage", "mass", "kg"),
+        ("payload", "mass", "kg"),
+    ):
         t = r.table_of(table, {})
         values.append(t.nonnegative(key, 0.0, unit=unit))
         t.string("source", "")
@@ -225,7 +246,10 @@ class TelescopingSpec:
                         f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact {k + 1} "
                         f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; allowed: "
                         f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on both links, "
-                        "off the clamped root)", source=self.source or None, key=key)
+                        "off the clamped root)",
+                        source=self.source or None,
+                        key=key,
+                    )
 
 
 def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
@@ -241,29 +265,49 @@ def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
     links = {}
     for side in SIDES:
         t = r.table_of(side)
-        links[side] = LinkProps(t.positive("length", unit="m"), t.positive("mass_per_length", unit="kg/m"),
-                                t.positive("EI", unit="N m^2"))
+        links[side] = LinkProps(
+            t.positive("length", unit="m"),
+            t.positive("mass_per_length", unit="kg/m"),
+            t.positive("EI", unit="N m^2"),
+        )
         t.string("source", "")
         t.finish()
     contacts = []
     for t in r.tables("contacts", min_count=1):
         on = t.string("on", choices=SIDES)
         limit = links[on].length
-        contacts.append(Contact(on, t.number("at", low=0.0, high=limit, unit=f"m along the {on} link"),
-                                t.boolean("slope", False)))
+        contacts.append(
+            Contact(
+                on,
+                t.number("at", low=0.0, high=limit, unit=f"m along the {on} link"),
+                t.boolean("slope", False),
+            )
+        )
         t.finish()
     rows = sum(1 + c.slope for c in contacts)
     if rows < 2:
-        raise r.error("contacts", f"{len(contacts)} contact(s) give {rows} constraint(s); allowed: at least two "
-                                  "contacts, or one with slope = true (Eqs 26-28), to hold the inner link")
+        raise r.error(
+            "contacts",
+            f"{len(contacts)} contact(s) give {rows} constraint(s); allowed: at least two "
+            "contacts, or one with slope = true (Eqs 26-28), to hold the inner link",
+        )
     if len(set(contacts)) != len(contacts):
         raise r.error("contacts", "two contacts are identical; allowed: distinct contacts")
     hub_inertia, carriage_mass, m_t = _drive_masses(r)
     gravity = r.numbers("gravity", [0.0, 0.0], length=2, unit="m/s^2")
-    spec = TelescopingSpec(name=r.string("name", Path(source).stem), outer=links["outer"], inner=links["inner"],
-                           contacts=tuple(contacts), hub_radius=r.nonnegative("hub_radius", 0.0, unit="m"),
-                           payload_mass=m_t, gravity=(gravity[0], gravity[1]), hub_inertia=hub_inertia,
-                           carriage_mass=carriage_mass, source=source, notes=r.string("notes", ""))
+    spec = TelescopingSpec(
+        name=r.string("name", Path(source).stem),
+        outer=links["outer"],
+        inner=links["inner"],
+        contacts=tuple(contacts),
+        hub_radius=r.nonnegative("hub_radius", 0.0, unit="m"),
+        payload_mass=m_t,
+        gravity=(gravity[0], gravity[1]),
+        hub_inertia=hub_inertia,
+        carriage_mass=carriage_mass,
+        source=source,
+        notes=r.string("notes", ""),
+    )
     r.finish()
     return spec
 

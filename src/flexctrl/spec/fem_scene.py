@@ -156,7 +156,9 @@ class FemScene:
                 out[f.name] = _plain(getattr(self, f.name))
         return out
 
-    def with_fidelity(self, fidelity: Fidelity | str | None, *, source: str = "--fidelity") -> FemScene:
+    def with_fidelity(
+        self, fidelity: Fidelity | str | None, *, source: str = "--fidelity"
+    ) -> FemScene:
         """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes nothing.
 
         Raises
@@ -297,7 +299,9 @@ class TelescopingScene(_ModelFileScene):
 
 #: Any finite-element scene.
 AnyFemScene = Union[SlidingBeamScene, RPArmScene, TelescopingScene]
-SCENE_CLASSES: dict[str, type[FemScene]] = {c.KIND: c for c in (SlidingBeamScene, RPArmScene, TelescopingScene)}
+SCENE_CLASSES: dict[str, type[FemScene]] = {
+    c.KIND: c for c in (SlidingBeamScene, RPArmScene, TelescopingScene)
+}
 
 
 def _plain(value: Any) -> Any:
@@ -311,33 +315,50 @@ def _plain(value: Any) -> Any:
 def _fem_elements(value: Any, kind: str, origin: str) -> int:
     fid = parse_fidelity(value, source=origin, key="fidelity")
     if fid.kind != "fem":
-        raise SpecError(f"value '{fid}' does not apply to '{kind}' scenes; allowed: 'fem:N' (N elements)",
-                        source=origin, key="fidelity")
+        raise SpecError(
+            f"value '{fid}' does not apply to '{kind}' scenes; allowed: 'fem:N' (N elements)",
+            source=origin,
+            key="fidelity",
+        )
     return int(fid.count)
 
 
 def _common(r: TableReader, kind: str, force_drive: bool = False) -> dict[str, Any]:
-    s: dict[str, Any] = {"name": r.string("name", Path(r.source).stem), "description": r.string("description", "")}
+    s: dict[str, Any] = {
+        "name": r.string("name", Path(r.source).stem),
+        "description": r.string("description", ""),
+    }
     s["C1"] = r.number("C1", unit="m")
     s["C2"] = r.number("C2", 0.0, unit="m") if force_drive else r.number("C2", unit="m")
     if force_drive and s["C2"] != 0.0:
-        raise r.error("C2", f"value {s['C2']!r} does not apply to a force drive (W follows the force); allowed: 0 "
-                            "or no key")
+        raise r.error(
+            "C2",
+            f"value {s['C2']!r} does not apply to a force drive (W follows the force); allowed: 0 "
+            "or no key",
+        )
     s["T"] = r.positive("T", unit="s")
     s["tracked_end"] = r.string("tracked_end", "H", choices=ENDS)
     s["driven_end"] = r.string("driven_end", "H" if kind == "sliding_beam" else "E", choices=ENDS)
     s["n_elements"] = r.integer("n_elements", 4, low=1, high=256)
-    fidelity = r.raw("fidelity", None)  # as `flexctrl simulate --fidelity` writes it into the document
+    fidelity = r.raw(
+        "fidelity", None
+    )  # as `flexctrl simulate --fidelity` writes it into the document
     if fidelity is not None:
         s["n_elements"] = _fem_elements(fidelity, kind, r.source)
     s["dt"] = r.positive("dt", 1e-3, unit="s")
     s["duration"] = r.positive("duration", max(s["T"], 1.0), unit="s")
     if s["dt"] > s["duration"]:
-        raise r.error("dt", f"value {s['dt']!r} is longer than the duration {s['duration']!r}; "
-                            "allowed: 0 < dt <= duration")
+        raise r.error(
+            "dt",
+            f"value {s['dt']!r} is longer than the duration {s['duration']!r}; "
+            "allowed: 0 < dt <= duration",
+        )
     if s["duration"] / s["dt"] > MAX_STEPS:
-        raise r.error("duration", f"value {s['duration']!r} needs {s['duration'] / s['dt']:.3g} steps of "
-                                  f"{s['dt']!r} s; allowed: at most {MAX_STEPS:g} steps")
+        raise r.error(
+            "duration",
+            f"value {s['duration']!r} needs {s['duration'] / s['dt']:.3g} steps of "
+            f"{s['dt']!r} s; allowed: at most {MAX_STEPS:g} steps",
+        )
     s["gamma"] = r.positive("gamma", 5.0, unit="1/s")
     s["beta"] = r.positive("beta", 5.0, unit="1/s")
     s["alpha"] = r.positive("alpha", 0.25)
@@ -348,7 +369,9 @@ def _common(r: TableReader, kind: str, force_drive: bool = False) -> dict[str, A
     return s
 
 
-def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None = None) -> AnyFemScene:
+def read_fem_scene(
+    document: dict[str, Any], source: str, base_dir: Path | None = None
+) -> AnyFemScene:
     """Validate a finite-element scene document (see the module docstring) into its description.
 
     The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of :data:`FEM_SCENE_KINDS`:
@@ -376,16 +399,27 @@ def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None 
     drive_kind = drive.string("kind", "motion", choices=DRIVE_KINDS) if drive else "motion"
     s = _common(r, kind, force_drive=drive_kind == "force")
     if kind == "telescoping" and s["driven_end"] != "E":
-        raise r.error("driven_end", f"value {s['driven_end']!r} is not allowed for telescoping scenes; allowed: 'E' "
-                                    "(the drive, anchored at the hub, pushes the inner link's root)")
+        raise r.error(
+            "driven_end",
+            f"value {s['driven_end']!r} is not allowed for telescoping scenes; allowed: 'E' "
+            "(the drive, anchored at the hub, pushes the inner link's root)",
+        )
     if kind == "sliding_beam":
-        for key, default, unit in (("L", 1.0, "m"), ("rho", 1.0, "kg/m"), ("EI", 1.0, "N m^2"), ("D", 0.25, "m")):
+        for key, default, unit in (
+            ("L", 1.0, "m"),
+            ("rho", 1.0, "kg/m"),
+            ("EI", 1.0, "N m^2"),
+            ("D", 0.25, "m"),
+        ):
             s[key] = r.positive(key, default, unit=unit)
         s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
         lo, hi = sorted((s["C1"], s["C1"] - s["C2"]))
         if not (lo >= 0.0 and hi <= s["L"] - s["D"]):
-            raise r.error("C1", f"with C2 = {s['C2']!r} the overhang W runs over [{lo:g}, {hi:g}] m; allowed: "
-                                f"within [0, L - D] = [0, {s['L'] - s['D']:g}] m (both supports on the beam)")
+            raise r.error(
+                "C1",
+                f"with C2 = {s['C2']!r} the overhang W runs over [{lo:g}, {hi:g}] m; allowed: "
+                f"within [0, L - D] = [0, {s['L'] - s['D']:g}] m (both supports on the beam)",
+            )
         r.finish()
         return SlidingBeamScene(**s, source=source)
     from flexctrl.spec.arm_scene import resolve_model_path
@@ -402,8 +436,11 @@ def read_fem_scene(document: dict[str, Any], source: str, base_dir: Path | None 
         s["drive"] = _read_drive(r, drive, drive_kind, s)
         spec = load_rp_arm(s["model"])
         if spec.joint == "clamped" and s["driven_end"] != "E":
-            raise r.error("driven_end", f"value {s['driven_end']!r} is not allowed with the model's joint = 'clamped' "
-                                        f"({s['model']}); allowed: 'E' (the link is clamped in the carriage)")
+            raise r.error(
+                "driven_end",
+                f"value {s['driven_end']!r} is not allowed with the model's joint = 'clamped' "
+                f"({s['model']}); allowed: 'E' (the link is clamped in the carriage)",
+            )
         r.finish()
         return RPArmScene(**s, model_spec=_with_overrides(spec, s), source=source)
     spec = _check_telescoping_stroke(r, s)
@@ -415,20 +452,36 @@ def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]
     if kind == "motion":
         coupling = drive.string("coupling", "partial", choices=COUPLINGS)
         if coupling == "full" and (s["driven_end"] != "E" or s["initial"] != "rest"):
-            raise drive.error("coupling", f"value 'full' needs driven_end = 'E' and initial = 'rest' (got "
-                                          f"{s['driven_end']!r}, {s['initial']!r}); allowed: 'partial' otherwise")
+            raise drive.error(
+                "coupling",
+                f"value 'full' needs driven_end = 'E' and initial = 'rest' (got "
+                f"{s['driven_end']!r}, {s['initial']!r}); allowed: 'partial' otherwise",
+            )
         out = RPDrive("motion", coupling)
     else:
         if s["rotation_deg"] != 0.0:
-            raise r.error("rotation", f"value {s['rotation_deg']!r} does not apply to a force drive (theta follows "
-                                      "the torque); allowed: 0 or no key")
+            raise r.error(
+                "rotation",
+                f"value {s['rotation_deg']!r} does not apply to a force drive (theta follows "
+                "the torque); allowed: 0 or no key",
+            )
         if s["initial"] != "rest":
-            raise r.error("initial", f"value {s['initial']!r} is not available with a force drive; allowed: 'rest'")
+            raise r.error(
+                "initial",
+                f"value {s['initial']!r} is not available with a force drive; allowed: 'rest'",
+            )
         if s["driven_end"] != "E":
-            raise r.error("driven_end", f"value {s['driven_end']!r} is not available with a force drive; allowed: "
-                                        "'E' (the carriage)")
-        out = RPDrive("force", "full", torque_amplitude=drive.number("torque_amplitude", 0.0, unit="N m"),
-                      force_amplitude=drive.number("force_amplitude", 0.0, unit="N"))
+            raise r.error(
+                "driven_end",
+                f"value {s['driven_end']!r} is not available with a force drive; allowed: "
+                "'E' (the carriage)",
+            )
+        out = RPDrive(
+            "force",
+            "full",
+            torque_amplitude=drive.number("torque_amplitude", 0.0, unit="N m"),
+            force_amplitude=drive.number("force_amplitude", 0.0, unit="N"),
+        )
     drive.finish()
     return out
 

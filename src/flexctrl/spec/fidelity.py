@@ -26,7 +26,9 @@ FIDELITY_WALKS = ("estimate", "linear", "ladder")
 #: its estimate needs and the reference; the choice may be higher than needed, the reference's step is not checked).
 FIDELITY_CHECKS = ("full", "tolerance")
 _LIMITS = {"amm": (0, 6), "fem": (1, 64)}
-SPELLINGS = "'rigid', 'amm:N' (N = 0..6 modes per link), 'fem:N' (N = 1..64 elements per link) or 'auto'"
+SPELLINGS = (
+    "'rigid', 'amm:N' (N = 0..6 modes per link), 'fem:N' (N = 1..64 elements per link) or 'auto'"
+)
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,9 @@ def parse_fidelity(text: str, *, source: str | None = None, key: str = "fidelity
     if isinstance(text, Fidelity):
         return text
     if not isinstance(text, str):
-        raise SpecError(f"value {text!r} is not a string; allowed: {SPELLINGS}", source=source, key=key)
+        raise SpecError(
+            f"value {text!r} is not a string; allowed: {SPELLINGS}", source=source, key=key
+        )
     raw = text.strip().lower()
     if raw in ("rigid", "auto"):
         return Fidelity(raw)  # type: ignore[arg-type]
@@ -75,4 +79,6 @@ def parse_fidelity(text: str, *, source: str | None = None, key: str = "fidelity
         n = int(count)
         if low <= n <= high:
             return Fidelity(kind, n)  # type: ignore[arg-type]
-    raise SpecError(f"value {text!r} is not a fidelity; allowed: {SPELLINGS}", source=source, key=key)
+    raise SpecError(
+        f"value {text!r} is not a fidelity; allowed: {SPELLINGS}", source=source, key=key
+    )

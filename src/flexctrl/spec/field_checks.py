@@ -15,33 +15,60 @@ def choice_field(key: str, value, literal) -> None:
 
         hint = difflib.get_close_matches(str(value), [str(a) for a in allowed], n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise SpecError(f"value {value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}{extra}", key=key)
+        raise SpecError(
+            f"value {value!r} is not allowed; allowed: {', '.join(map(repr, allowed))}{extra}",
+            key=key,
+        )
 
 
-def number_field(key: str, value, *, low: float | None = None, high: float | None = None, low_open: bool = False,
-                 unit: str = "") -> None:
+def number_field(
+    key: str,
+    value,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    unit: str = "",
+) -> None:
     parts = []
     if low is not None:
         parts.append(f"{'>' if low_open else '>='} {low:g}")
     if high is not None:
         parts.append(f"<= {high:g}")
-    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "") + (f" ({unit})" if unit else "")
+    allowed = (
+        "a finite number"
+        + (" " + " and ".join(parts) if parts else "")
+        + (f" ({unit})" if unit else "")
+    )
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SpecError(f"value {value!r} is not a number; allowed: {allowed}", key=key)
-    bad = (not math.isfinite(value) or (low is not None and (value <= low if low_open else value < low))
-           or (high is not None and value > high))
+    bad = (
+        not math.isfinite(value)
+        or (low is not None and (value <= low if low_open else value < low))
+        or (high is not None and value > high)
+    )
     if bad:
         raise SpecError(f"value {value!r} is out of range; allowed: {allowed}", key=key)
 
 
 def integer_field(key: str, value, *, low: int | None = None, high: int | None = None) -> None:
-    allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
-    if isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low) or (
-            high is not None and value > high):
+    allowed = (
+        "an integer"
+        + (f" from {low}" if low is not None else "")
+        + (f" to {high}" if high is not None else "")
+    )
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or (low is not None and value < low)
+        or (high is not None and value > high)
+    ):
         raise SpecError(f"value {value!r} is not allowed; allowed: {allowed}", key=key)
 
 
-def numbers_field(key: str, value, *, low: float | None = None, low_open: bool = False, unit: str = "") -> None:
+def numbers_field(
+    key: str, value, *, low: float | None = None, low_open: bool = False, unit: str = ""
+) -> None:
     if not isinstance(value, tuple):
         raise SpecError(f"value {value!r} is not a tuple of numbers", key=key)
     for i, v in enumerate(value):

@@ -13,7 +13,8 @@ from __future__ import annotations
 import copy
 import re
 import tomllib
-from typing import Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 from flexctrl.errors import SpecError
 
@@ -40,8 +41,10 @@ def _pieces(key: str, source: str) -> list[tuple[str, bool]]:
         else:
             current += char
     if inside:
-        raise SpecError(f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, e.g. grid.\"scene.dt\"",
-                        source=source)
+        raise SpecError(
+            f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, e.g. grid.\"scene.dt\"",
+            source=source,
+        )
     pieces.append((current, quoted))
     return pieces
 
@@ -64,7 +67,9 @@ def _split_key(key: str, source: str = "--set") -> list[str | int]:
     return parts
 
 
-def apply_overrides(document: dict[str, Any], assignments: Iterable[str], source: str = "--set") -> dict[str, Any]:
+def apply_overrides(
+    document: dict[str, Any], assignments: Iterable[str], source: str = "--set"
+) -> dict[str, Any]:
     """Return a copy of ``document`` with ``KEY=VALUE`` assignments applied.
 
     Parameters
@@ -90,7 +95,9 @@ def apply_overrides(document: dict[str, Any], assignments: Iterable[str], source
     return result
 
 
-def apply_values(document: dict[str, Any], values: Mapping[str, Any], source: str = "overrides") -> dict[str, Any]:
+def apply_values(
+    document: dict[str, Any], values: Mapping[str, Any], source: str = "overrides"
+) -> dict[str, Any]:
     """Return a copy of ``document`` with ``{KEY: value}`` set, keys spelled as for :func:`apply_overrides`.
 
     The values are used as given (Python numbers, lists, strings), not parsed, so the
@@ -105,8 +112,10 @@ def apply_values(document: dict[str, Any], values: Mapping[str, Any], source: st
     result = copy.deepcopy(document)
     for key, value in values.items():
         if not isinstance(key, str) or not key.strip():
-            raise SpecError(f"override key {key!r} is not allowed; allowed: a dotted key such as 'links[1].EI'",
-                            source=source)
+            raise SpecError(
+                f"override key {key!r} is not allowed; allowed: a dotted key such as 'links[1].EI'",
+                source=source,
+            )
         _assign(result, key.strip(), copy.deepcopy(value), source)
     return result
 

@@ -12,8 +12,9 @@ from __future__ import annotations
 import difflib
 import math
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
@@ -94,9 +95,14 @@ class TableReader:
         self._seen.add(name)
         if name not in self.table:
             if default is _MISSING:
-                close = difflib.get_close_matches(name, [k for k in self.table if k not in self._seen], n=1)
+                close = difflib.get_close_matches(
+                    name, [k for k in self.table if k not in self._seen], n=1
+                )
                 hint = f" (found '{self.key(close[0])}': did you mean '{name}'?)" if close else ""
-                raise self.error(name, f"missing required key{hint}" + (f"; allowed: {allowed}" if allowed else ""))
+                raise self.error(
+                    name,
+                    f"missing required key{hint}" + (f"; allowed: {allowed}" if allowed else ""),
+                )
             return default
         return self.table[name]
 
@@ -112,7 +118,11 @@ class TableReader:
         unit: str = "",
     ) -> float:
         """A finite float within ``[low, high]`` (``(low, high]`` if ``low_open``)."""
-        value = self.raw(name, default, allowed=_describe_bounds(low, high, low_open) + (f" ({unit})" if unit else ""))
+        value = self.raw(
+            name,
+            default,
+            allowed=_describe_bounds(low, high, low_open) + (f" ({unit})" if unit else ""),
+        )
         return self.check_number(name, value, low=low, high=high, low_open=low_open, unit=unit)
 
     def check_number(
@@ -147,9 +157,15 @@ class TableReader:
         """A finite number >= 0."""
         return self.number(name, default, low=0.0, unit=unit)
 
-    def integer(self, name: str, default: Any = _MISSING, *, low: int | None = None, high: int | None = None) -> int:
+    def integer(
+        self, name: str, default: Any = _MISSING, *, low: int | None = None, high: int | None = None
+    ) -> int:
         """An integer within ``[low, high]``."""
-        allowed = "an integer" + (f" from {low}" if low is not None else "") + (f" to {high}" if high is not None else "")
+        allowed = (
+            "an integer"
+            + (f" from {low}" if low is not None else "")
+            + (f" to {high}" if high is not None else "")
+        )
         value = self.raw(name, default, allowed=allowed)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"value {value!r} is not an integer; allowed: {allowed}")
@@ -164,7 +180,9 @@ class TableReader:
             raise self.error(name, f"value {value!r} is not a boolean; allowed: true or false")
         return value
 
-    def string(self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None) -> str:
+    def string(
+        self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None
+    ) -> str:
         """A string, optionally one of ``choices``."""
         allowed = ", ".join(map(repr, choices)) if choices is not None else "a string"
         value = self.raw(name, default, allowed=allowed)
@@ -173,7 +191,10 @@ class TableReader:
         if choices is not None and value not in choices:
             hint = difflib.get_close_matches(value, list(choices), n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise self.error(name, f"value {value!r} is not allowed; allowed: {', '.join(map(repr, choices))}{extra}")
+            raise self.error(
+                name,
+                f"value {value!r} is not allowed; allowed: {', '.join(map(repr, choices))}{extra}",
+            )
         return value
 
     def numbers(
@@ -188,19 +209,27 @@ class TableReader:
         unit: str = "",
     ) -> tuple[float, ...]:
         """A list of finite numbers, each within bounds, optionally of fixed length."""
-        allowed = (f"a list of {length}" if length is not None else "a list of") + " " + \
-            _describe_bounds(low, high, low_open).replace("a finite number", "finite numbers") + (f" ({unit})" if unit else "")
+        allowed = (
+            (f"a list of {length}" if length is not None else "a list of")
+            + " "
+            + _describe_bounds(low, high, low_open).replace("a finite number", "finite numbers")
+            + (f" ({unit})" if unit else "")
+        )
         value = self.raw(name, default, allowed=allowed)
         if not isinstance(value, (list, tuple)):
             raise self.error(name, f"value {value!r} is not a list of numbers; allowed: {allowed}")
         if length is not None and len(value) != length:
-            raise self.error(name, f"value {value!r} has {len(value)} entries; allowed: exactly {length}")
+            raise self.error(
+                name, f"value {value!r} has {len(value)} entries; allowed: exactly {length}"
+            )
         return tuple(
             self.check_number(f"{name}[{i}]", v, low=low, high=high, low_open=low_open, unit=unit)
             for i, v in enumerate(value)
         )
 
-    def degrees(self, name: str, default: Any = _MISSING, *, length: int | None = None) -> tuple[float, ...]:
+    def degrees(
+        self, name: str, default: Any = _MISSING, *, length: int | None = None
+    ) -> tuple[float, ...]:
         """Joint angles in degrees (a list); warns when they look like radians (:mod:`flexctrl.spec.units`)."""
         values = self.numbers(name, default, length=length, unit="degrees")
         if self.has(name):
@@ -214,19 +243,21 @@ class TableReader:
             warn_if_radians([value], source=self.source, key=self.key(name))
         return value
 
-    def table_of(self, name: str, default: Any = _MISSING) -> "TableReader":
+    def table_of(self, name: str, default: Any = _MISSING) -> TableReader:
         """The sub-table ``name`` as a reader."""
         value = self.raw(name, default, allowed=f"a table [{self.key(name)}]")
         return TableReader(value, self.source, self.key(name))
 
-    def tables(self, name: str, *, min_count: int = 0) -> list["TableReader"]:
+    def tables(self, name: str, *, min_count: int = 0) -> list[TableReader]:
         """An array of tables (``[[name]]``) as readers."""
         value = self.raw(name, allowed=f"one or more [[{self.key(name)}]] tables")
         if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
             raise self.error(name, f"expected an array of tables ([[{name}]]), got {value!r}")
         if len(value) < min_count:
             raise self.error(name, f"has {len(value)} entries; allowed: at least {min_count}")
-        return [TableReader(v, self.source, f"{self.key(name)}[{i + 1}]") for i, v in enumerate(value)]
+        return [
+            TableReader(v, self.source, f"{self.key(name)}[{i + 1}]") for i, v in enumerate(value)
+        ]
 
     def finish(self) -> None:
         """Reject every key of the table that was not read, with a suggestion."""
@@ -237,4 +268,7 @@ class TableReader:
             hint = difflib.get_close_matches(name, names, n=1)
             extra = f"; did you mean '{hint[0]}'?" if hint else ""
             known = ", ".join(names)
-            raise self.error(name, f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: {known}")
+            raise self.error(
+                name,
+                f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: {known}",
+            )

@@ -54,16 +54,26 @@ class JointReference:
         object.__setattr__(self, "q_start", tuple(float(a) for a in self.q_start))
         object.__setattr__(self, "q_target", tuple(float(a) for a in self.q_target))
         if self.profile not in PROFILES:
-            raise SpecError(f"value {self.profile!r} is not allowed; allowed: {', '.join(map(repr, PROFILES))}",
-                            key="profile")
+            raise SpecError(
+                f"value {self.profile!r} is not allowed; allowed: {', '.join(map(repr, PROFILES))}",
+                key="profile",
+            )
         if len(self.q_start) != len(self.q_target):
-            raise SpecError(f"q_start has {len(self.q_start)} angles and q_target {len(self.q_target)}; "
-                            "allowed: one per joint in both", key="q_target")
+            raise SpecError(
+                f"q_start has {len(self.q_start)} angles and q_target {len(self.q_target)}; "
+                "allowed: one per joint in both",
+                key="q_target",
+            )
         if self.profile == "quintic" and not (math.isfinite(self.move_time) and self.move_time > 0):
-            raise SpecError(f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
-                            key="move_time")
+            raise SpecError(
+                f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
+                key="move_time",
+            )
         if not (math.isfinite(self.t_start) and self.t_start >= 0):
-            raise SpecError(f"value {self.t_start!r} is not allowed; allowed: a start time >= 0 s", key="t_start")
+            raise SpecError(
+                f"value {self.t_start!r} is not allowed; allowed: a start time >= 0 s",
+                key="t_start",
+            )
 
     @property
     def t_arrive(self) -> float:
@@ -88,7 +98,9 @@ class JointReference:
         dds = inside * 60 * tau * (1 - tau) * (1 - 2 * tau) / T**2
         ddds = inside * 60 * (1 - 6 * tau + 6 * tau**2) / T**3
         factors = (s, ds, dds, ddds)[: order + 1]
-        return tuple(q0[None, :] * (k == 0) + f[:, None] * delta[None, :] for k, f in enumerate(factors))
+        return tuple(
+            q0[None, :] * (k == 0) + f[:, None] * delta[None, :] for k, f in enumerate(factors)
+        )
 
     def joints(self, t) -> np.ndarray:
         """Joint angles (T, n), rad, at the times ``t`` (s)."""
@@ -96,9 +108,14 @@ class JointReference:
 
     def settings(self) -> dict:
         """Plain data (angles in degrees)."""
-        return {"profile": self.profile, "move_time_s": self.move_time, "t_start_s": self.t_start,
-                "q_start_deg": [math.degrees(a) for a in self.q_start],
-                "q_target_deg": [math.degrees(a) for a in self.q_target], "t_arrive_s": self.t_arrive}
+        return {
+            "profile": self.profile,
+            "move_time_s": self.move_time,
+            "t_start_s": self.t_start,
+            "q_start_deg": [math.degrees(a) for a in self.q_start],
+            "q_target_deg": [math.degrees(a) for a in self.q_target],
+            "t_arrive_s": self.t_arrive,
+        }
 
 
 @dataclass(frozen=True)
@@ -141,13 +158,17 @@ class Move:
         object.__setattr__(self, "start", _angles(self.start, "start"))
         object.__setattr__(self, "target", _angles(self.target, "target"))
         if self.deflection not in DEFLECTIONS:
-            raise SpecError(f"value {self.deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
-                            key="deflection")
+            raise SpecError(
+                f"value {self.deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                key="deflection",
+            )
         self.joint_reference()  # validates profile, lengths and times
 
     def joint_reference(self) -> JointReference:
         """The joint path as a :class:`JointReference` (rad, s)."""
-        return JointReference(self.start, self.target, self.profile, float(self.time), float(self.t_start))
+        return JointReference(
+            self.start, self.target, self.profile, float(self.time), float(self.t_start)
+        )
 
     @property
     def t_arrive(self) -> float:
@@ -159,8 +180,12 @@ def _angles(values, key: str) -> tuple[float, ...]:
     try:
         angles = tuple(float(a) for a in np.atleast_1d(np.asarray(values, dtype=float)))
     except (TypeError, ValueError):
-        raise SpecError(f"value {values!r} is not a list of numbers; allowed: joint angles in rad", key=key) from None
+        raise SpecError(
+            f"value {values!r} is not a list of numbers; allowed: joint angles in rad", key=key
+        ) from None
     if not all(math.isfinite(a) for a in angles):
-        raise SpecError(f"value {list(angles)!r} is not finite; allowed: finite joint angles in rad", key=key)
+        raise SpecError(
+            f"value {list(angles)!r} is not finite; allowed: finite joint angles in rad", key=key
+        )
     warn_if_degrees(angles, key=key)
     return angles

@@ -21,13 +21,14 @@ validation, so an override is checked exactly like the file.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
+from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, InputSpec, resolve_model_path  # noqa: F401  (the scene types' home)
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
 
 #: Scene kinds: kind -> ``"module:reader"``; readers take ``(document, source, base_dir)`` and return a scene.
 SCENE_READERS: dict[str, str] = {

@@ -89,7 +89,9 @@ def find(path: str | Path, kind: str | None, base_dir: Path | None = None) -> Pa
     if kind is not None and kind not in FOLDERS:
         raise ValueError(f"unknown file kind {kind!r}; allowed: {', '.join(FOLDERS)}")
     given = Path(path)
-    candidates = [given] if given.is_absolute() else [(base_dir or Path.cwd()) / given, Path.cwd() / given]
+    candidates = (
+        [given] if given.is_absolute() else [(base_dir or Path.cwd()) / given, Path.cwd() / given]
+    )
     if not given.is_absolute():
         candidates.append(data_root() / given)
     for candidate in candidates:

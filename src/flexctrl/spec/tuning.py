@@ -48,14 +48,15 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
 
 SCALES = ("log", "linear")
 STATISTICS = ("median", "max", "mean")
@@ -97,11 +98,14 @@ class ParameterSpec:
     def from_unit(self, coordinate: float) -> float:
         """The key's value for an optimiser coordinate: clipped to the bounds, to 6 significant digits
         (what a file shows; the runs use exactly the value written), whole for integers."""
-        value = 10.0 ** coordinate if self.scale == "log" else float(coordinate)
+        value = 10.0**coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)
         quantum = 1.0 if self.integer else self.step
         if quantum is not None:  # the nearest multiple inside the bounds
-            lowest, highest = math.ceil(self.low / quantum - 1e-9), math.floor(self.high / quantum + 1e-9)
+            lowest, highest = (
+                math.ceil(self.low / quantum - 1e-9),
+                math.floor(self.high / quantum + 1e-9),
+            )
             value = float(f"{min(max(round(value / quantum), lowest), highest) * quantum:.12g}")
         return value
 
@@ -151,15 +155,34 @@ class TuningSpec:
     def settings(self) -> dict[str, Any]:
         """Plain JSON-ready data."""
         return {
-            "name": self.name, "source": self.source, "controller": str(self.controller),
-            "parameters": [{"key": p.key, "low": p.low, "high": p.high, "scale": p.scale, "integer": p.integer,
-                            "step": p.step, "initial": p.initial} for p in self.parameters],
+            "name": self.name,
+            "source": self.source,
+            "controller": str(self.controller),
+            "parameters": [
+                {
+                    "key": p.key,
+                    "low": p.low,
+                    "high": p.high,
+                    "scale": p.scale,
+                    "integer": p.integer,
+                    "step": p.step,
+                    "initial": p.initial,
+                }
+                for p in self.parameters
+            ],
             "objective": {"metric": self.objective.metric, "statistic": self.objective.statistic},
-            "constraints": {"stable": self.constraints.stable, "torque_limits": self.constraints.torque_limits,
-                            "closed_loop_radius": self.constraints.closed_loop_radius,
-                            "real_time": self.constraints.real_time},
-            "optimizer": {"method": self.optimizer.method, "evaluations": self.optimizer.evaluations,
-                          "population": self.optimizer.population, "seed": self.optimizer.seed},
+            "constraints": {
+                "stable": self.constraints.stable,
+                "torque_limits": self.constraints.torque_limits,
+                "closed_loop_radius": self.constraints.closed_loop_radius,
+                "real_time": self.constraints.real_time,
+            },
+            "optimizer": {
+                "method": self.optimizer.method,
+                "evaluations": self.optimizer.evaluations,
+                "population": self.optimizer.population,
+                "seed": self.optimizer.seed,
+            },
         }
 
 
@@ -193,12 +216,17 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
     controller_name = r.string("controller")
     controller = (base / controller_name).resolve()
     if not controller.is_file():
-        raise r.error("controller", f"file {controller_name!r} not found (looked at '{controller}')")
+        raise r.error(
+            "controller", f"file {controller_name!r} not found (looked at '{controller}')"
+        )
     controller_document = read_toml(controller)
     raw = r.raw("parameters", None)
     if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
-        raise r.error("parameters", f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
-                                    "with key, low, high")
+        raise r.error(
+            "parameters",
+            f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
+            "with key, low, high",
+        )
     parameters = []
     for i, table in enumerate(raw):
         p = TableReader(table, source, prefix=f"parameters[{i + 1}]")
@@ -209,27 +237,46 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         raise r.error("parameters", f"tunes a key twice ({keys}); allowed: each key once")
     scenarios = r.raw("scenarios", None)
     if not isinstance(scenarios, dict) or not scenarios:
-        raise r.error("scenarios", f"value {scenarios!r} is not allowed; allowed: a [scenarios] table in the study "
-                                   "file syntax (scene, model, payload, [scenarios.grid] ...)")
+        raise r.error(
+            "scenarios",
+            f"value {scenarios!r} is not allowed; allowed: a [scenarios] table in the study "
+            "file syntax (scene, model, payload, [scenarios.grid] ...)",
+        )
     o = r.table_of("objective", {})
-    objective = ObjectiveSpec(o.string("metric", "tip_residual_rms"),
-                              o.string("statistic", "median", choices=STATISTICS))
+    objective = ObjectiveSpec(
+        o.string("metric", "tip_residual_rms"), o.string("statistic", "median", choices=STATISTICS)
+    )
     o.finish()
     c = r.table_of("constraints", {})
     constraints = ConstraintSpec(
-        stable=c.boolean("stable", True), torque_limits=c.boolean("torque_limits", True),
-        closed_loop_radius=c.positive("closed_loop_radius", unit="spectral radius") if c.has("closed_loop_radius")
+        stable=c.boolean("stable", True),
+        torque_limits=c.boolean("torque_limits", True),
+        closed_loop_radius=c.positive("closed_loop_radius", unit="spectral radius")
+        if c.has("closed_loop_radius")
         else None,
-        real_time=c.boolean("real_time", False))
+        real_time=c.boolean("real_time", False),
+    )
     c.finish()
     m = r.table_of("optimizer", {})
-    optimizer = OptimizerSpec(m.string("method", "differential_evolution", choices=METHODS),
-                              m.integer("evaluations", 60, low=1, high=100_000),
-                              m.integer("population", 8, low=2, high=1000), m.integer("seed", 0, low=0))
+    optimizer = OptimizerSpec(
+        m.string("method", "differential_evolution", choices=METHODS),
+        m.integer("evaluations", 60, low=1, high=100_000),
+        m.integer("population", 8, low=2, high=1000),
+        m.integer("seed", 0, low=0),
+    )
     m.finish()
     r.finish()
-    return TuningSpec(name, source, base, controller, tuple(parameters), copy.deepcopy(scenarios), objective,
-                      constraints, optimizer)
+    return TuningSpec(
+        name,
+        source,
+        base,
+        controller,
+        tuple(parameters),
+        copy.deepcopy(scenarios),
+        objective,
+        constraints,
+        optimizer,
+    )
 
 
 def _parameter(p: TableReader, controller: Path, controller_document: dict) -> ParameterSpec:
@@ -241,20 +288,31 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
         raise p.error("high", f"value {high!r} is not above low = {low!r}; allowed: low < high")
     step = p.positive("step") if p.has("step") else None
     if step is not None and (math.ceil(low / step - 1e-9) * step > high + 1e-12 * abs(high)):
-        raise p.error("step", f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller step")
+        raise p.error(
+            "step",
+            f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller step",
+        )
     if scale == "log" and low <= 0:
-        raise p.error("low", f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = 'linear'")
+        raise p.error(
+            "low",
+            f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = 'linear'",
+        )
     initial = _file_value(controller_document, key)
     if initial is not None and (isinstance(initial, bool) or not isinstance(initial, (int, float))):
-        raise p.error("key", f"value {key!r} names a {type(initial).__name__} in '{controller}' "
-                             f"({initial!r}); allowed: a numeric key")
+        raise p.error(
+            "key",
+            f"value {key!r} names a {type(initial).__name__} in '{controller}' "
+            f"({initial!r}); allowed: a numeric key",
+        )
     from flexctrl.spec.controller import load_controller
 
     probe = low if scale == "linear" else math.sqrt(low * high)
     try:  # the key must exist for this controller kind and accept a value in the bounds
         load_controller(controller, [f"{key}={round(probe) if integer else probe!r}"])
     except SpecError as exc:
-        raise p.error("key", f"value {key!r} is not a key the controller file '{controller}' accepts: {exc}") from None
+        raise p.error(
+            "key", f"value {key!r} is not a key the controller file '{controller}' accepts: {exc}"
+        ) from None
     if initial is not None:
         initial = min(max(float(initial), low), high)
     return ParameterSpec(key, float(low), float(high), scale, integer, initial, step)

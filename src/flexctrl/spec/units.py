@@ -24,7 +24,7 @@ and are not checked.
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 from flexctrl.errors import warn_spec
 
@@ -34,7 +34,9 @@ TWO_PI = 2.0 * math.pi
 def looks_like_radians(degrees: Iterable[float]) -> bool:
     """Whether angles meant as degrees look like radians (see the module docstring)."""
     nonzero = [abs(float(v)) for v in degrees if v != 0]
-    return bool(nonzero) and all(v < TWO_PI for v in nonzero) and any(v != round(v) for v in nonzero)
+    return (
+        bool(nonzero) and all(v < TWO_PI for v in nonzero) and any(v != round(v) for v in nonzero)
+    )
 
 
 def looks_like_degrees(radians: Iterable[float]) -> bool:
@@ -48,14 +50,23 @@ def warn_if_radians(degrees: Iterable[float], *, source: str | None, key: str) -
     if looks_like_radians(values):
         shown = values[0] if len(values) == 1 else values
         in_degrees = [round(math.degrees(v), 3) for v in values]
-        warn_spec(f"value {shown!r} looks like radians; the unit expected is degrees (in degrees that would be "
-                  f"{in_degrees[0] if len(values) == 1 else in_degrees!r})", source=source, key=key, stacklevel=4)
+        warn_spec(
+            f"value {shown!r} looks like radians; the unit expected is degrees (in degrees that would be "
+            f"{in_degrees[0] if len(values) == 1 else in_degrees!r})",
+            source=source,
+            key=key,
+            stacklevel=4,
+        )
 
 
 def warn_if_degrees(radians: Iterable[float], *, key: str, source: str | None = None) -> None:
     """A :class:`~flexctrl.errors.SpecWarning` when a radian argument looks like degrees."""
     values = [float(v) for v in radians]
     if looks_like_degrees(values):
-        warn_spec(f"value {values!r} looks like degrees (above 2 pi); the unit expected is radians (as radians "
-                  f"{[round(math.radians(v), 4) for v in values]!r}, e.g. numpy.radians)", source=source, key=key,
-                  stacklevel=4)
+        warn_spec(
+            f"value {values!r} looks like degrees (above 2 pi); the unit expected is radians (as radians "
+            f"{[round(math.radians(v), 4) for v in values]!r}, e.g. numpy.radians)",
+            source=source,
+            key=key,
+            stacklevel=4,
+        )

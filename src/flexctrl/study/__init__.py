@@ -14,11 +14,23 @@ from flexctrl.study.outputs import RunOutput, per_worker_cache
 from flexctrl.study.registry import executor_names, get_executor, register_executor
 from flexctrl.study.report import write_report
 from flexctrl.study.runner import StudyResult, execute_run, run_study
-from flexctrl.study.study_file import ReportSpec, RunSpec, StudySpec, load_study
 from flexctrl.study.store import ResultStore, Table
+from flexctrl.study.study_file import ReportSpec, RunSpec, StudySpec, load_study
 
 __all__ = [
-    "RunOutput", "executor_names", "get_executor", "per_worker_cache", "register_executor",
-    "write_report", "StudyResult", "execute_run", "run_study",
-    "ReportSpec", "RunSpec", "StudySpec", "load_study", "ResultStore", "Table",
+    "RunOutput",
+    "executor_names",
+    "get_executor",
+    "per_worker_cache",
+    "register_executor",
+    "write_report",
+    "StudyResult",
+    "execute_run",
+    "run_study",
+    "ReportSpec",
+    "RunSpec",
+    "StudySpec",
+    "load_study",
+    "ResultStore",
+    "Table",
 ]

@@ -28,7 +28,8 @@ from __future__ import annotations
 import concurrent.futures as cf
 import json
 from collections import OrderedDict, deque
-from typing import Any, Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
 
 #: Settings that name or tune the controller alone (the model a worker builds does not depend on them).
 CONTROLLER_KEYS = ("controller", "seed", "replicate")
@@ -93,8 +94,12 @@ class AffinityQueue:
 DIED = "its worker process died (killed, out of memory, or a crash in compiled code)"
 
 
-def outcome(future: cf.Future, isolated: bool, failed: Callable[[str], dict],
-            describe: Callable[[BaseException], str]) -> tuple[dict | None, bool]:
+def outcome(
+    future: cf.Future,
+    isolated: bool,
+    failed: Callable[[str], dict],
+    describe: Callable[[BaseException], str],
+) -> tuple[dict | None, bool]:
     """``(record, broken)`` of a finished run: its result, or None when it must be rerun alone.
 
     ``broken``: its worker process died.  A run that was alone in its process when that
@@ -111,10 +116,16 @@ def outcome(future: cf.Future, isolated: bool, failed: Callable[[str], dict],
         return failed(describe(exc)), False
 
 
-def run_pinned(runs: Iterable[Any], workers: int, submit: Callable[[cf.Executor, Any], cf.Future],
-               make_pool: Callable[[], cf.Executor], key: Callable[[Any], str],
-               failed: Callable[[str], dict], describe: Callable[[BaseException], str],
-               window: int = 2) -> Iterator[tuple[Any, dict]]:
+def run_pinned(
+    runs: Iterable[Any],
+    workers: int,
+    submit: Callable[[cf.Executor, Any], cf.Future],
+    make_pool: Callable[[], cf.Executor],
+    key: Callable[[Any], str],
+    failed: Callable[[str], dict],
+    describe: Callable[[BaseException], str],
+    window: int = 2,
+) -> Iterator[tuple[Any, dict]]:
     """Run ``runs`` on ``workers`` one-process pools with affinity (the module docstring); yields ``(run, result)``.
 
     ``submit(pool, run)`` starts a run, ``make_pool()`` makes a one-process pool, ``failed(text)``
@@ -151,7 +162,11 @@ def run_pinned(runs: Iterable[Any], workers: int, submit: Callable[[cf.Executor,
                 if died:
                     broken.add(worker)
                     # the runs still queued on that process went down with it
-                    finished += [(f, *inflight.pop(f)) for f, (_, w, _) in list(inflight.items()) if w == worker]
+                    finished += [
+                        (f, *inflight.pop(f))
+                        for f, (_, w, _) in list(inflight.items())
+                        if w == worker
+                    ]
                 if result is None:
                     suspects.append(run)
                 else:

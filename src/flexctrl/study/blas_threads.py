@@ -71,9 +71,11 @@ def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None
     if setting == "auto":
         return max(1, (usable_cpus() if cpus is None else cpus) // max(1, workers))
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 0:
-        raise SpecError(f"value {setting!r} is not allowed; allowed: 'auto' (usable CPUs // workers, at least 1), "
-                        "a whole number of BLAS threads per worker, or 0 (the libraries' own default)",
-                        key="--blas-threads")
+        raise SpecError(
+            f"value {setting!r} is not allowed; allowed: 'auto' (usable CPUs // workers, at least 1), "
+            "a whole number of BLAS threads per worker, or 0 (the libraries' own default)",
+            key="--blas-threads",
+        )
     return setting
 
 
@@ -93,8 +95,11 @@ def parse_blas_threads(text: str) -> int | str:
     except ValueError:
         value = None
     if value is None or value < 0:
-        raise SpecError(f"value {text!r} is not allowed; allowed: auto, or a whole number of BLAS threads per "
-                        "worker (0: the libraries' own default)", key="--blas-threads")
+        raise SpecError(
+            f"value {text!r} is not allowed; allowed: auto, or a whole number of BLAS threads per "
+            "worker (0: the libraries' own default)",
+            key="--blas-threads",
+        )
     return value
 
 
@@ -125,5 +130,12 @@ def blas_threads_now() -> list[int]:
     return [int(info["num_threads"]) for info in threadpool_info()]
 
 
-__all__ = ["THREAD_VARIABLES", "blas_thread_budget", "blas_threads_now", "limit_blas_threads", "parse_blas_threads",
-           "thread_environment", "usable_cpus"]
+__all__ = [
+    "THREAD_VARIABLES",
+    "blas_thread_budget",
+    "blas_threads_now",
+    "limit_blas_threads",
+    "parse_blas_threads",
+    "thread_environment",
+    "usable_cpus",
+]

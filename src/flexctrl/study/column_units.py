@@ -15,19 +15,46 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from flexctrl.loop.metrics import JOINT_METRICS, UNITS as LOOP_UNITS
+from flexctrl.loop.metrics import JOINT_METRICS
+from flexctrl.loop.metrics import UNITS as LOOP_UNITS
 
 #: SI units of grid coordinates and of the other shipped executors' metrics (their docstrings).
 OTHER_UNITS = {
-    "payload": "kg", "replicate": "",
-    "tip_error_rms": "m", "tip_error_max": "m", "wall_per_sim_s": "s/s", "wall_per_sim_s_spread": "s/s",
-    "setup_s": "s", "omega_max": "rad/s", "omega_max_model": "rad/s", "tip_travel": "m",
-    "ref_wall_per_sim_s": "s/s", "ref_step2_rms": "m", "ref_step2_max": "m", "ref_fem4_rms": "m",
-    "ref_fem4_max": "m", "h_measured": "s", "h_cap": "s", "h_floor": "s", "omega_h_measured": "-",
+    "payload": "kg",
+    "replicate": "",
+    "tip_error_rms": "m",
+    "tip_error_max": "m",
+    "wall_per_sim_s": "s/s",
+    "wall_per_sim_s_spread": "s/s",
+    "setup_s": "s",
+    "omega_max": "rad/s",
+    "omega_max_model": "rad/s",
+    "tip_travel": "m",
+    "ref_wall_per_sim_s": "s/s",
+    "ref_step2_rms": "m",
+    "ref_step2_max": "m",
+    "ref_fem4_rms": "m",
+    "ref_fem4_max": "m",
+    "h_measured": "s",
+    "h_cap": "s",
+    "h_floor": "s",
+    "omega_h_measured": "-",
     # stored trajectories: the closed loop's (t, e, tip_x, tip_y, q1.., u1.., w1..) and the selftest's
-    "t": "s", "e": "m", "tip_x": "m", "tip_y": "m", "q": "rad", "u": "N m", "w": "m", "w_measured": "m",
+    "t": "s",
+    "e": "m",
+    "tip_x": "m",
+    "tip_y": "m",
+    "q": "rad",
+    "u": "N m",
+    "w": "m",
+    "w_measured": "m",
     "w_dot": "m/s",
-    "frequency_hz": "Hz", "wall_time_s": "s", "peak_memory_mb": "MB", "bytes_written": "B", "window_start": "s", "torque_limit": "N m",
+    "frequency_hz": "Hz",
+    "wall_time_s": "s",
+    "peak_memory_mb": "MB",
+    "bytes_written": "B",
+    "window_start": "s",
+    "torque_limit": "N m",
 }
 
 #: SI unit -> (shown unit, factor from SI to it).
@@ -36,9 +63,12 @@ _JOINT = re.compile(r"^q[1-9][0-9]?$")
 _PER_JOINT = re.compile(r"^(.*?)_?([1-9][0-9]?)$")
 _WORDS = {"rms": "RMS", "p95": "95th percentile"}
 #: Names whose words alone would mislead: 0/1 verdicts say which value is which.
-_NAMES = {"stable": "stable (1 = yes, 0 = no)", "settled": "settled (1 = yes, 0 = no)",
-          "closed_loop_radius": "closed-loop spectral radius (< 1: stable)",
-          "torque_limit_exceeded": "torque limit exceeded (1 = yes)"}
+_NAMES = {
+    "stable": "stable (1 = yes, 0 = no)",
+    "settled": "settled (1 = yes, 0 = no)",
+    "closed_loop_radius": "closed-loop spectral radius (< 1: stable)",
+    "torque_limit_exceeded": "torque limit exceeded (1 = yes)",
+}
 #: Trailing words of a name that spell its unit (``wall_time_s``), left out of the label.
 _UNIT_WORDS = ("s", "hz", "mb", "kg")
 
@@ -113,4 +143,6 @@ def with_unit(column: str, value) -> str:
     shown = display(column)
     number = shown.value(value)
     text = f"{number:g}" if isinstance(number, float) else str(number)
-    return f"{column} = {text}" + (f" {shown.unit}" if shown.unit and isinstance(number, (int, float)) else "")
+    return f"{column} = {text}" + (
+        f" {shown.unit}" if shown.unit and isinstance(number, (int, float)) else ""
+    )

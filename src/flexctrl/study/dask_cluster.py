@@ -29,8 +29,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import flexctrl
 from flexctrl.errors import FlexctrlError
@@ -74,8 +74,15 @@ class LocalhostCluster:
     worker ``Popen`` objects (``kill_worker(i)`` sends SIGKILL to one).
     """
 
-    def __init__(self, workers: int = 1, threads: int = 1, *, nanny: bool = False,
-                 directory: str | os.PathLike | None = None, blas_threads: int | str = "auto"):
+    def __init__(
+        self,
+        workers: int = 1,
+        threads: int = 1,
+        *,
+        nanny: bool = False,
+        directory: str | os.PathLike | None = None,
+        blas_threads: int | str = "auto",
+    ):
         self.n_workers, self.threads, self.nanny = int(workers), int(threads), nanny
         self.blas_threads = blas_thread_budget(blas_threads, self.n_workers)
         self._tmp = None if directory else tempfile.TemporaryDirectory(prefix="flexctrl-dask-")
@@ -89,20 +96,35 @@ class LocalhostCluster:
         env = dict(os.environ)
         # the workers import the same flexctrl as this process: the folder that holds the package
         root = str(Path(flexctrl.__path__[0]).resolve().parent)
-        env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+        env["PYTHONPATH"] = os.pathsep.join(
+            [root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+        )
         return env
 
     def _worker_env(self) -> dict:
         return {**self._env(), **thread_environment(self.blas_threads)}
 
-    def start(self) -> "LocalhostCluster":
+    def start(self) -> LocalhostCluster:
         dask = _dask_command()
         self.directory.mkdir(parents=True, exist_ok=True)
         logs = self.directory
         self.scheduler = subprocess.Popen(
-            [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(self.scheduler_file)],
-            env=self._env(), stdout=subprocess.DEVNULL, stderr=open(logs / "scheduler.log", "wb"), start_new_session=True)
+            [
+                dask,
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(self.scheduler_file),
+            ],
+            env=self._env(),
+            stdout=subprocess.DEVNULL,
+            stderr=open(logs / "scheduler.log", "wb"),
+            start_new_session=True,
+        )
         deadline = time.monotonic() + START_TIMEOUT_S
         while not self.scheduler_file.exists() or not self.scheduler_file.read_text().strip():
             if self.scheduler.poll() is not None or time.monotonic() > deadline:
@@ -111,13 +133,32 @@ class LocalhostCluster:
             time.sleep(0.1)
         self.address = json.loads(self.scheduler_file.read_text())["address"]
         for i in range(self.n_workers):
-            cmd = [dask, "worker", "--scheduler-file", str(self.scheduler_file), "--nworkers", "1",
-                   "--nthreads", str(self.threads), "--no-dashboard", "--name", f"flexctrl-{i}",
-                   "--local-directory", str(self.directory / f"worker-{i}")]
+            cmd = [
+                dask,
+                "worker",
+                "--scheduler-file",
+                str(self.scheduler_file),
+                "--nworkers",
+                "1",
+                "--nthreads",
+                str(self.threads),
+                "--no-dashboard",
+                "--name",
+                f"flexctrl-{i}",
+                "--local-directory",
+                str(self.directory / f"worker-{i}"),
+            ]
             if not self.nanny:
                 cmd.append("--no-nanny")
-            self.workers.append(subprocess.Popen(cmd, env=self._worker_env(), stdout=subprocess.DEVNULL,
-                                                 stderr=open(logs / f"worker-{i}.log", "wb"), start_new_session=True))
+            self.workers.append(
+                subprocess.Popen(
+                    cmd,
+                    env=self._worker_env(),
+                    stdout=subprocess.DEVNULL,
+                    stderr=open(logs / f"worker-{i}.log", "wb"),
+                    start_new_session=True,
+                )
+            )
         self.wait_for_workers(self.n_workers, deadline - time.monotonic())
         return self
 
@@ -130,8 +171,10 @@ class LocalhostCluster:
                 client.wait_for_workers(n, timeout=max(1.0, timeout))
             except (TimeoutError, OSError) as exc:
                 self.close()
-                raise FlexctrlError(f"{n} dask workers did not register within {timeout:.0f} s: {exc}; "
-                                    f"see {self.directory}/worker-*.log") from None
+                raise FlexctrlError(
+                    f"{n} dask workers did not register within {timeout:.0f} s: {exc}; "
+                    f"see {self.directory}/worker-*.log"
+                ) from None
 
     def kill_worker(self, i: int) -> int:
         """SIGKILL worker ``i`` (its whole process group); returns its pid."""
@@ -157,15 +200,19 @@ class LocalhostCluster:
             self._tmp.cleanup()
             self._tmp = None
 
-    def __enter__(self) -> "LocalhostCluster":
+    def __enter__(self) -> LocalhostCluster:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.close()
 
 
-def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), overrides: Sequence[str] = (),
-               blas_threads: int | str = "auto") -> dict:
+def throughput(
+    study: str | os.PathLike,
+    worker_counts: Sequence[int] = (1, 2),
+    overrides: Sequence[str] = (),
+    blas_threads: int | str = "auto",
+) -> dict:
     """Runs per minute of ``study`` on a :class:`LocalhostCluster` of each size in ``worker_counts``.
 
     Every size runs the whole study into a fresh folder with fresh workers (the compiled
@@ -177,18 +224,34 @@ def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), 
     from flexctrl.study import load_study, run_study
 
     spec = load_study(study, overrides=list(overrides))
-    result: dict = {"study": str(study), "overrides": list(overrides), "cpu_count": os.cpu_count(),
-                    "blas_threads": blas_threads, "load_average_before": list(os.getloadavg()), "sizes": {}}
+    result: dict = {
+        "study": str(study),
+        "overrides": list(overrides),
+        "cpu_count": os.cpu_count(),
+        "blas_threads": blas_threads,
+        "load_average_before": list(os.getloadavg()),
+        "sizes": {},
+    }
     for n in worker_counts:
-        with (tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out,
-              LocalhostCluster(n, blas_threads=blas_threads) as cluster):
+        with (
+            tempfile.TemporaryDirectory(prefix="flexctrl-dask-out-") as out,
+            LocalhostCluster(n, blas_threads=blas_threads) as cluster,
+        ):
             start = time.perf_counter()
-            run = run_study(spec, Path(out) / "study", scheduler=cluster.address, progress="none", report=False)
+            run = run_study(
+                spec, Path(out) / "study", scheduler=cluster.address, progress="none", report=False
+            )
             elapsed = time.perf_counter() - start
         runs = sum(run.counts.get(k, 0) for k in ("ok", "failed"))
-        result["sizes"][str(n)] = {"workers": n, "blas_threads_per_worker": cluster.blas_threads, "runs": runs,
-                                   "ok": run.counts.get("ok", 0), "elapsed_s": elapsed,
-                                   "runs_per_minute": 60.0 * runs / elapsed, "backend": run.backend}
+        result["sizes"][str(n)] = {
+            "workers": n,
+            "blas_threads_per_worker": cluster.blas_threads,
+            "runs": runs,
+            "ok": run.counts.get("ok", 0),
+            "elapsed_s": elapsed,
+            "runs_per_minute": 60.0 * runs / elapsed,
+            "backend": run.backend,
+        }
     first = result["sizes"][str(worker_counts[0])]["runs_per_minute"]
     for size in result["sizes"].values():
         size["speedup"] = size["runs_per_minute"] / first
@@ -197,14 +260,26 @@ def throughput(study: str | os.PathLike, worker_counts: Sequence[int] = (1, 2), 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m flexctrl.study.dask_cluster",
-                                     description="runs per minute of a study on a localhost Dask cluster of 1, 2, ... workers")
+    parser = argparse.ArgumentParser(
+        prog="python -m flexctrl.study.dask_cluster",
+        description="runs per minute of a study on a localhost Dask cluster of 1, 2, ... workers",
+    )
     parser.add_argument("study")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="study-file override (repeatable)")
-    parser.add_argument("--blas-threads", default="auto", metavar="N",
-                        help="BLAS threads per worker: auto (CPUs // workers, the default), a whole number, "
-                             "or 0 to leave the libraries alone")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="study-file override (repeatable)",
+    )
+    parser.add_argument(
+        "--blas-threads",
+        default="auto",
+        metavar="N",
+        help="BLAS threads per worker: auto (CPUs // workers, the default), a whole number, "
+        "or 0 to leave the libraries alone",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     try:
@@ -216,12 +291,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.json:
         print(json.dumps(result, indent=1))
     else:
-        print(f"{args.study}: load {result['load_average_before'][0]:.2f} -> {result['load_average_after'][0]:.2f} "
-              f"on {result['cpu_count']} CPUs")
+        print(
+            f"{args.study}: load {result['load_average_before'][0]:.2f} -> {result['load_average_after'][0]:.2f} "
+            f"on {result['cpu_count']} CPUs"
+        )
         for size in result["sizes"].values():
             threads = size["blas_threads_per_worker"] or "default"
-            print(f"  {size['workers']} worker(s), {threads} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) "
-                  f"in {size['elapsed_s']:.1f} s = {size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}")
+            print(
+                f"  {size['workers']} worker(s), {threads} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) "
+                f"in {size['elapsed_s']:.1f} s = {size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}"
+            )
     return 0
 
 

@@ -16,8 +16,9 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 ID_LENGTH = 16
 PATH_KEYS = ("scene", "model", "controller")
@@ -28,7 +29,9 @@ def _normalise(value: Any, where: str = "settings") -> Any:
         return value
     if isinstance(value, float):
         if not math.isfinite(value):
-            raise ValueError(f"{where}: value {value!r} is not finite; settings must be finite numbers")
+            raise ValueError(
+                f"{where}: value {value!r} is not finite; settings must be finite numbers"
+            )
         return value + 0.0  # turns -0.0 into 0.0
     if isinstance(value, Mapping):
         out = {}
@@ -39,7 +42,9 @@ def _normalise(value: Any, where: str = "settings") -> Any:
         return out
     if isinstance(value, (list, tuple)):
         return [_normalise(item, f"{where}[{i}]") for i, item in enumerate(value)]
-    raise ValueError(f"{where}: value {value!r} of type {type(value).__name__} is not plain data (JSON)")
+    raise ValueError(
+        f"{where}: value {value!r} of type {type(value).__name__} is not plain data (JSON)"
+    )
 
 
 def canonical_json(value: Any) -> str:
@@ -55,7 +60,9 @@ def canonical_json(value: Any) -> str:
     >>> canonical_json({"b": [1, -0.0], "a": "x"})
     '{"a":"x","b":[1,0.0]}'
     """
-    return json.dumps(_normalise(value), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return json.dumps(
+        _normalise(value), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
 
 
 def short_hash(value: Any, length: int = ID_LENGTH) -> str:

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import functools
 import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,9 @@ class RunOutput:
         for name, value in dict(self.metrics).items():
             if not isinstance(name, str) or not name:
                 raise TypeError(f"metric name {name!r} is not a non-empty string")
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
                 raise TypeError(f"metric '{name}' = {value!r} is not a real scalar")
             metrics[name] = float(value)
         arrays = {}
@@ -57,7 +60,9 @@ class RunOutput:
                 raise TypeError(f"trajectory name {name!r} is not an identifier")
             array = np.asarray(value)
             if array.ndim != 1 or array.dtype.kind not in "biuf":
-                raise TypeError(f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; expected a 1-D numeric array")
+                raise TypeError(
+                    f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; expected a 1-D numeric array"
+                )
             arrays[name] = array
         object.__setattr__(self, "metrics", metrics)
         object.__setattr__(self, "trajectories", arrays)
@@ -116,7 +121,9 @@ def overrides_for(settings: Mapping[str, Any], target: str) -> list[str]:
     ['duration=3.0']
     """
     prefix = target + "."
-    return [item[len(prefix):] for item in settings.get("overrides", ()) if item.startswith(prefix)]
+    return [
+        item[len(prefix) :] for item in settings.get("overrides", ()) if item.startswith(prefix)
+    ]
 
 
 def scene_overrides(settings: Mapping[str, Any], extra: tuple[str, ...] = ()) -> list[str]:
@@ -139,7 +146,6 @@ def scene_overrides(settings: Mapping[str, Any], extra: tuple[str, ...] = ()) ->
     return items + list(extra) + overrides_for(settings, "scene")
 
 
-
 @functools.lru_cache(maxsize=1)
 def worker_scene_cache():
     """This worker process's :class:`~flexctrl.scenes.cache.SceneCache`.
@@ -159,4 +165,10 @@ def worker_scene_cache():
 #: the 4032-run sweep grew to 1040 MB; with these it stays at about 400 MB from the 12th configuration on (one
 #: process, seven controllers per configuration, 36 configurations).  8 models cover an automatic-fidelity walk
 #: (rigid, amm:1..5 and the design model); a configuration's runs are consecutive in a worker (affinity).
-WORKER_CACHE_LIMITS = {"models": 8, "references": 8, "integrators": 8, "designs": 16, "verdicts": 16}
+WORKER_CACHE_LIMITS = {
+    "models": 8,
+    "references": 8,
+    "integrators": 8,
+    "designs": 16,
+    "verdicts": 16,
+}

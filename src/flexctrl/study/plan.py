@@ -6,16 +6,25 @@ import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
-
 from typing import Any
 
 SETTINGS = ("scene", "model", "controller", "payload", "configuration", "fidelity")
 FILE_SETTINGS = ("scene", "model", "controller")
 TARGETS = ("scene", "controller", "model")
 PLOTS = ("maps", "ranking", "worst", "timing", "failures")
-RESERVED_COLUMNS = ("run_id", "seed", "status", "error", "wall_time_s", "peak_memory_mb", "bytes_written", "worker")
+RESERVED_COLUMNS = (
+    "run_id",
+    "seed",
+    "status",
+    "error",
+    "wall_time_s",
+    "peak_memory_mb",
+    "bytes_written",
+    "worker",
+)
 MAX_RUNS = 1_000_000
 NO_CONTROLLER = "none"
+
 
 @dataclass(frozen=True)
 class RunSpec:
@@ -40,12 +49,14 @@ class RunSpec:
         """Grid coordinates by table column."""
         return dict(self.coords)
 
+
 @dataclass(frozen=True)
 class Axis:
     """One grid axis: the key as written and its validated values."""
 
     key: str
     values: tuple[Any, ...]
+
 
 @dataclass(frozen=True)
 class ReportSpec:
@@ -65,13 +76,18 @@ class ReportSpec:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (lists for tuples), for ``study.json``."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+        return {
+            k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()
+        }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "ReportSpec":
+    def from_dict(cls, data: dict[str, Any]) -> ReportSpec:
         """The inverse of :meth:`to_dict` (unknown keys ignored)."""
         names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names})
+        return cls(
+            **{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
+        )
+
 
 @dataclass(frozen=True)
 class StudySpec:
@@ -143,9 +159,14 @@ class StudySpec:
         counts: dict[tuple[str, str], int] = {}
         for _, metric, reason in self.unavailable:
             counts[(metric, reason)] = counts.get((metric, reason), 0) + 1
-        return [f"{metric} stays empty in {n} of {len(self.runs)} runs: {reason}" for (metric, reason), n in counts.items()]
+        return [
+            f"{metric} stays empty in {n} of {len(self.runs)} runs: {reason}"
+            for (metric, reason), n in counts.items()
+        ]
+
 
 # -- values ----------------------------------------------------------------------------
+
 
 def toml_literal(value: Any) -> str:
     """``value`` written as a TOML value, so ``parse_value(toml_literal(v)) == v``.
@@ -170,6 +191,7 @@ def toml_literal(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(toml_literal(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{json.dumps(k)} = {toml_literal(v)}" for k, v in value.items()) + "}"
+        return (
+            "{" + ", ".join(f"{json.dumps(k)} = {toml_literal(v)}" for k, v in value.items()) + "}"
+        )
     raise TypeError(f"{value!r} of type {type(value).__name__} has no TOML spelling here")
-

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Callable, TextIO
+from collections.abc import Callable
+from typing import TextIO
 
 MODES = ("auto", "bar", "lines", "none")
 
@@ -45,8 +46,17 @@ class Progress:
         Monotonic clock (s); injectable for tests.
     """
 
-    def __init__(self, total: int, *, skipped: int = 0, label: str = "", mode: str = "auto",
-                 stream: TextIO | None = None, interval: float = 5.0, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        total: int,
+        *,
+        skipped: int = 0,
+        label: str = "",
+        mode: str = "auto",
+        stream: TextIO | None = None,
+        interval: float = 5.0,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         if mode not in MODES:
             raise ValueError(f"progress mode {mode!r} is not allowed; allowed: {', '.join(MODES)}")
         self.stream = stream if stream is not None else sys.stderr

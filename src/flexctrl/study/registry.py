@@ -79,15 +79,15 @@ needs it, with ``execute(settings)`` and optionally ``check_settings(settings)``
     ``w`` (deflection, m), ``w_measured``, ``w_dot``.
 """
 
-
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from flexctrl.errors import SpecError
 from flexctrl.study.outputs import IDENTIFIER, CheckFn, ExecutorFn, RunOutput
+
 
 @dataclass(frozen=True)
 class Executor:
@@ -111,8 +111,14 @@ class Executor:
 _REGISTRY: dict[str, Executor] = {}
 
 
-def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None, summary: str = "",
-                      report: Callable[..., list[str]] | None = None) -> None:
+def register_executor(
+    name: str,
+    fn: ExecutorFn,
+    *,
+    check: CheckFn | None = None,
+    summary: str = "",
+    report: Callable[..., list[str]] | None = None,
+) -> None:
     """Register ``fn`` as the executor called ``name``.
 
     Parameters
@@ -143,7 +149,9 @@ def register_executor(name: str, fn: ExecutorFn, *, check: CheckFn | None = None
         raise ValueError(f"executor name {name!r} is not an identifier")
     existing = _REGISTRY.get(name)
     if existing is not None and existing.run is not fn:
-        raise ValueError(f"executor '{name}' is registered already (to {existing.run.__module__}.{existing.run.__qualname__})")
+        raise ValueError(
+            f"executor '{name}' is registered already (to {existing.run.__module__}.{existing.run.__qualname__})"
+        )
     _REGISTRY[name] = Executor(name, fn, check, summary, report, module=fn.__module__)
 
 
@@ -165,7 +173,11 @@ def get_executor(name: str, *, source: str | None = None, key: str = "executor")
 
         hint = difflib.get_close_matches(name, list(_REGISTRY), n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise SpecError(f"value {name!r} is not a registered executor; allowed: {', '.join(map(repr, _REGISTRY))}{extra}", source=source, key=key)
+        raise SpecError(
+            f"value {name!r} is not a registered executor; allowed: {', '.join(map(repr, _REGISTRY))}{extra}",
+            source=source,
+            key=key,
+        )
     return _REGISTRY[name]
 
 
@@ -206,19 +218,33 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
     _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model, unavailable, module)
 
 
-
 #: The shipped executors: name -> (module, one line for ``flexctrl study --help``, needs a model file).
 BUILTIN: dict[str, tuple[str, str, bool]] = {
-    "closed_loop": ("flexctrl.study.executors.closed_loop_executor",
-                    "build the model, design the controller, simulate the closed loop", True),
-    "_selftest": ("flexctrl.study.executors.selftest_executor",
-                  "a damped oscillator in numpy: checks the runner, store, report and backends", True),
-    "stability_limits": ("flexctrl.study.executors.stability_limits_executor",
-                         "largest stable step of each integrator for each model fidelity, beside theory", True),
-    "speed_vs_accuracy": ("flexctrl.study.executors.speed_vs_accuracy_executor",
-                          "tip error against a converged reference and wall time per simulated second", True),
-    "baumgarte_sweep": ("flexctrl.study.executors.baumgarte_sweep_executor",
-                        "constraint drift and stability of the beam over supports as gamma = beta sweeps", False),
+    "closed_loop": (
+        "flexctrl.study.executors.closed_loop_executor",
+        "build the model, design the controller, simulate the closed loop",
+        True,
+    ),
+    "_selftest": (
+        "flexctrl.study.executors.selftest_executor",
+        "a damped oscillator in numpy: checks the runner, store, report and backends",
+        True,
+    ),
+    "stability_limits": (
+        "flexctrl.study.executors.stability_limits_executor",
+        "largest stable step of each integrator for each model fidelity, beside theory",
+        True,
+    ),
+    "speed_vs_accuracy": (
+        "flexctrl.study.executors.speed_vs_accuracy_executor",
+        "tip error against a converged reference and wall time per simulated second",
+        True,
+    ),
+    "baumgarte_sweep": (
+        "flexctrl.study.executors.baumgarte_sweep_executor",
+        "constraint drift and stability of the beam over supports as gamma = beta sweeps",
+        False,
+    ),
 }
 for _name, (_module, _summary, _needs_model) in BUILTIN.items():
     _module_executor(_name, _module, _summary, needs_model=_needs_model)

@@ -32,17 +32,24 @@ import itertools
 import math
 import re
 import statistics
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from flexctrl.errors import SpecError
-from flexctrl.study.study_file import ReportSpec
-from flexctrl.study.report_figures import (TEXT_CELLS, draw_best_map, draw_ranking, draw_signals, draw_value_maps,
-                                           wants_log)
-from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
 from flexctrl.study.column_units import display, with_unit
+from flexctrl.study.report_figures import (
+    TEXT_CELLS,
+    draw_best_map,
+    draw_ranking,
+    draw_signals,
+    draw_value_maps,
+    wants_log,
+)
+from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
+from flexctrl.study.study_file import ReportSpec
 
 TIMING = re.compile(r"(controller|solve|solver|step|compute|cpu|qp|nlp)_?time", re.IGNORECASE)
 MAX_PANELS = 12
@@ -102,11 +109,16 @@ def _columns(table: Table) -> tuple[list[str], list[str]]:
     cols = table.columns
     first, last = cols.index(FIXED_AFTER_COORDS[0]), cols.index(FIXED_AFTER_COORDS[-1])
     tail = cols.index(FIXED_TAIL[0])
-    return cols[1:first], cols[last + 1:tail]
+    return cols[1:first], cols[last + 1 : tail]
 
 
-def write_report(directory: str | Path, *, metric: str | None = None, map_axes: Sequence[str] | None = None,
-                 worst: int | None = None) -> Path:
+def write_report(
+    directory: str | Path,
+    *,
+    metric: str | None = None,
+    map_axes: Sequence[str] | None = None,
+    worst: int | None = None,
+) -> Path:
     """Draw ``report.md`` and its figures from the files in ``directory``.
 
     Parameters
@@ -129,20 +141,30 @@ def write_report(directory: str | Path, *, metric: str | None = None, map_axes: 
     store = ResultStore(directory)
     study = store.read_study()
     if study is None:
-        raise SpecError(f"'{store.dir}' holds no study.json; allowed: a folder written by 'flexctrl study'", key="DIR")
+        raise SpecError(
+            f"'{store.dir}' holds no study.json; allowed: a folder written by 'flexctrl study'",
+            key="DIR",
+        )
     if not store.table_path.is_file():
-        store.write_table(study.get("study", {}).get("columns"), study.get("study", {}).get("metrics"))
+        store.write_table(
+            study.get("study", {}).get("columns"), study.get("study", {}).get("metrics")
+        )
     table = store.read_table()
     spec = ReportSpec.from_dict(study.get("study", {}).get("report", {}))
     coords, metrics = _columns(table)
     if metric is not None:
         if metric not in metrics:
-            raise SpecError(f"'{metric}' is not a metric of this study; allowed: {', '.join(metrics) or '(none recorded)'}", key="--metric")
+            raise SpecError(
+                f"'{metric}' is not a metric of this study; allowed: {', '.join(metrics) or '(none recorded)'}",
+                key="--metric",
+            )
         spec = dataclasses.replace(spec, metric=metric)
     if map_axes is not None:
         for axis in map_axes:
             if axis not in coords:
-                raise SpecError(f"'{axis}' is not a grid column; allowed: {', '.join(coords)}", key="--map-axes")
+                raise SpecError(
+                    f"'{axis}' is not a grid column; allowed: {', '.join(coords)}", key="--map-axes"
+                )
         spec = dataclasses.replace(spec, map_axes=tuple(map_axes))
     if worst is not None:
         spec = dataclasses.replace(spec, worst=worst)
@@ -154,7 +176,13 @@ def write_report(directory: str | Path, *, metric: str | None = None, map_axes: 
     ctx = _Context(store, table, study, spec, coords, metrics, chosen, figures)
 
     lines = _header(ctx)
-    sections = {"maps": _maps, "ranking": _ranking, "worst": _worst, "timing": _timing, "failures": _failures}
+    sections = {
+        "maps": _maps,
+        "ranking": _ranking,
+        "worst": _worst,
+        "timing": _timing,
+        "failures": _failures,
+    }
     for name in spec.plots:
         lines += ["", *sections[name](ctx)]
     if "failures" not in spec.plots:
@@ -192,8 +220,11 @@ def _header(ctx: _Context) -> list[str]:
         "",
         f"- study file: `{s.get('source', '?')}` (sha256 {s.get('sha256', '?')}), executor `{s.get('executor', '?')}`, seed {s.get('seed', '?')}",
         f"- runs: {n_plan} in the grid; {ok} ok, {failed} failed, {max(n_plan - ok - failed, 0)} not run",
-        f"- grid: " + (", ".join(f"{k} ({len(v)})" for k, v in s.get("grid", {}).items()) or "a single run"),
-        f"- report metric: `{ctx.metric}` ({'lower' if ctx.spec.lower_is_better else 'higher'} is better)" if ctx.metric else "- no metric recorded yet",
+        "- grid: "
+        + (", ".join(f"{k} ({len(v)})" for k, v in s.get("grid", {}).items()) or "a single run"),
+        f"- report metric: `{ctx.metric}` ({'lower' if ctx.spec.lower_is_better else 'higher'} is better)"
+        if ctx.metric
+        else "- no metric recorded yet",
         f"- started {ctx.study.get('start', '?')}, ended {ctx.study.get('end') or 'not yet (interrupted or running)'}; "
         f"{len(ctx.study.get('sessions', []))} session(s), last on {ctx.study.get('sessions', [{}])[-1].get('backend', '?')}",
         f"- machine: {machine.get('platform', '?')}, {machine.get('cpu_count', '?')} CPUs",
@@ -214,13 +245,17 @@ def _map_axes(ctx: _Context) -> tuple[str, str] | None:
     return (numeric[0], numeric[1]) if len(numeric) >= 2 else None
 
 
-def _cell_medians(ctx: _Context, members: Sequence[dict], xs, ys, x_axis: str, y_axis: str) -> np.ndarray:
+def _cell_medians(
+    ctx: _Context, members: Sequence[dict], xs, ys, x_axis: str, y_axis: str
+) -> np.ndarray:
     """Median metric (table units) per (y, x) cell of ``members``; NaN where no ok run has a value."""
     grid = np.full((len(ys), len(xs)), np.nan)
     cells: dict[tuple, list] = {}
     for r in members:
         if r.get(x_axis) in xs and r.get(y_axis) in ys:
-            cells.setdefault((ys.index(r[y_axis]), xs.index(r[x_axis])), []).append(r.get(ctx.metric))
+            cells.setdefault((ys.index(r[y_axis]), xs.index(r[x_axis])), []).append(
+                r.get(ctx.metric)
+            )
     for (i, j), values in cells.items():
         m = _median(values)
         grid[i, j] = np.nan if m is None else m
@@ -235,28 +270,57 @@ def _maps(ctx: _Context) -> list[str]:
     lines = ["## Maps"]
     axes = _map_axes(ctx)
     if ctx.metric is None or axes is None:
-        return lines + ["", "No map: it needs a metric and two grid columns that vary (set `[report] map_axes`)."]
+        return lines + [
+            "",
+            "No map: it needs a metric and two grid columns that vary (set `[report] map_axes`).",
+        ]
     x_axis, y_axis = axes
-    facets = list(ctx.spec.facet) if ctx.spec.facet else [c for c in ctx.coords if c not in axes and c != "replicate" and len(ctx.distinct(c)) > 1]
+    facets = (
+        list(ctx.spec.facet)
+        if ctx.spec.facet
+        else [
+            c for c in ctx.coords if c not in axes and c != "replicate" and len(ctx.distinct(c)) > 1
+        ]
+    )
     rows = ctx.ok_rows()
     xs, ys = ctx.distinct(x_axis), ctx.distinct(y_axis)
     shown = display(ctx.metric)
     panels = []
     for combo in itertools.product(*(ctx.distinct(f) for f in facets)):
         members = [r for r in rows if all(r.get(f) == v for f, v in zip(facets, combo))]
-        panels.append((_facet_title(facets, combo), shown.scale * _cell_medians(ctx, members, xs, ys, x_axis, y_axis)))
+        panels.append(
+            (
+                _facet_title(facets, combo),
+                shown.scale * _cell_medians(ctx, members, xs, ys, x_axis, y_axis),
+            )
+        )
     finite = np.concatenate([g[np.isfinite(g)] for _, g in panels]) if panels else np.array([])
     if finite.size == 0:
         return lines + ["", f"No map: no ok run has a finite `{ctx.metric}`."]
     log = wants_log(finite)
-    lines += ["", f"Median {shown.label} over ({display(x_axis).label}, {display(y_axis).label}), one panel per "
-              f"{' x '.join(f'`{f}`' for f in facets) or 'study'}; one {'logarithmic ' if log else ''}colour scale for all "
-              f"panels ({_fmt(float(finite.min()))} to {_fmt(float(finite.max()))}{' ' + shown.unit if shown.unit else ''}), grey: no ok run."]
+    lines += [
+        "",
+        f"Median {shown.label} over ({display(x_axis).label}, {display(y_axis).label}), one panel per "
+        f"{' x '.join(f'`{f}`' for f in facets) or 'study'}; one {'logarithmic ' if log else ''}colour scale for all "
+        f"panels ({_fmt(float(finite.min()))} to {_fmt(float(finite.max()))}{' ' + shown.unit if shown.unit else ''}), grey: no ok run.",
+    ]
     last = len(ctx.distinct(facets[-1])) if facets else 1
     for page in range(0, len(panels), MAX_PANELS):
-        name = f"map_{_slug(ctx.metric)}" + (f"_{page // MAX_PANELS + 1}" if len(panels) > MAX_PANELS else "") + ".png"
-        draw_value_maps(ctx.figures / name, panels[page:page + MAX_PANELS], xs, ys, x_axis, y_axis, shown.label,
-                        last if 1 < last <= 4 else 3)
+        name = (
+            f"map_{_slug(ctx.metric)}"
+            + (f"_{page // MAX_PANELS + 1}" if len(panels) > MAX_PANELS else "")
+            + ".png"
+        )
+        draw_value_maps(
+            ctx.figures / name,
+            panels[page : page + MAX_PANELS],
+            xs,
+            ys,
+            x_axis,
+            y_axis,
+            shown.label,
+            last if 1 < last <= 4 else 3,
+        )
         lines += ["", f"![map]({ctx.figures.name}/{name})"]
     return lines + _best_maps(ctx, facets, xs, ys, x_axis, y_axis)
 
@@ -273,56 +337,109 @@ def _best_maps(ctx: _Context, facets: list[str], xs, ys, x_axis: str, y_axis: st
     best_panels, ratio_panels, binary = [], [], True
     for combo in itertools.product(*(ctx.distinct(f) for f in others)):
         members = [r for r in ctx.ok_rows() if all(r.get(f) == v for f, v in zip(others, combo))]
-        grids = {c: _cell_medians(ctx, [r for r in members if r.get(rank_by) == c], xs, ys, x_axis, y_axis) for c in candidates}
+        grids = {
+            c: _cell_medians(
+                ctx, [r for r in members if r.get(rank_by) == c], xs, ys, x_axis, y_axis
+            )
+            for c in candidates
+        }
         stack = np.stack([grids[c] for c in candidates])
         binary &= bool(np.all(np.isin(stack[np.isfinite(stack)], (0.0, 1.0))))
         cells = [[None] * len(xs) for _ in ys]
         best = np.full((len(ys), len(xs)), np.nan)
         for i, j in itertools.product(range(len(ys)), range(len(xs))):
-            values = {c: stack[k, i, j] for k, c in enumerate(candidates) if np.isfinite(stack[k, i, j])}
+            values = {
+                c: stack[k, i, j] for k, c in enumerate(candidates) if np.isfinite(stack[k, i, j])
+            }
             if values:
                 best[i, j] = min(values.values(), key=lambda v: sign * v)
-                winners = [c for c, v in values.items() if math.isclose(v, best[i, j], rel_tol=1e-9, abs_tol=1e-300)]
+                winners = [
+                    c
+                    for c, v in values.items()
+                    if math.isclose(v, best[i, j], rel_tol=1e-9, abs_tol=1e-300)
+                ]
                 cells[i][j] = (winners, shown.scale * best[i, j])
         title = _facet_title(others, combo)
         best_panels.append((title, cells))
         with np.errstate(divide="ignore", invalid="ignore"):
             for c in candidates:
                 ratio = grids[c] / best if sign > 0 else best / grids[c]
-                ratio_panels.append((f"{with_unit(rank_by, c)}" + (f"; {title}" if others else ""), ratio))
+                ratio_panels.append(
+                    (f"{with_unit(rank_by, c)}" + (f"; {title}" if others else ""), ratio)
+                )
     written = len(xs) * len(ys) <= TEXT_CELLS
-    lines = ["", "### Best per cell", "",
-             f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in each cell "
-             + ("(its value written below its name; hatched: a tie, every tied name listed)." if written else
-                f"(colour: the best, named in the legend; hatched: a tie; {len(xs)} x {len(ys)} cells leave no room "
-                "for names and values, which the ranking above and the ratio maps below give).")]
+    lines = [
+        "",
+        "### Best per cell",
+        "",
+        f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in each cell "
+        + (
+            "(its value written below its name; hatched: a tie, every tied name listed)."
+            if written
+            else f"(colour: the best, named in the legend; hatched: a tie; {len(xs)} x {len(ys)} cells leave no room "
+            "for names and values, which the ranking above and the ratio maps below give)."
+        ),
+    ]
     name = f"best_{_slug(ctx.metric)}.png"
-    draw_best_map(ctx.figures / name, best_panels, candidates, xs, ys, x_axis, y_axis, shown, min(3, len(best_panels)))
+    draw_best_map(
+        ctx.figures / name,
+        best_panels,
+        candidates,
+        xs,
+        ys,
+        x_axis,
+        y_axis,
+        shown,
+        min(3, len(best_panels)),
+    )
     lines += ["", f"![best per cell]({ctx.figures.name}/{name})"]
     ratios = np.concatenate([g[np.isfinite(g)] for _, g in ratio_panels])
     if binary or ratios.size == 0:
-        return lines + ["", f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says it all."
-                        if binary else "No ratio map: no finite ratio."]
+        return lines + [
+            "",
+            f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says it all."
+            if binary
+            else "No ratio map: no finite ratio.",
+        ]
     name = f"ratio_{_slug(ctx.metric)}.png"
-    draw_value_maps(ctx.figures / name, ratio_panels, xs, ys, x_axis, y_axis,
-                    f"{shown.label} / best of the cell" if sign > 0 else f"best of the cell / {shown.label}",
-                    len(candidates) if len(candidates) <= 6 else 4, ratio=True)
-    return lines + ["", f"Each `{rank_by}`'s median against the cell's best (×1: the best; "
-                    f"{'larger is worse' if sign > 0 else 'a zero value gives no ratio'}).", "",
-                    f"![ratio to the best]({ctx.figures.name}/{name})"]
+    draw_value_maps(
+        ctx.figures / name,
+        ratio_panels,
+        xs,
+        ys,
+        x_axis,
+        y_axis,
+        f"{shown.label} / best of the cell" if sign > 0 else f"best of the cell / {shown.label}",
+        len(candidates) if len(candidates) <= 6 else 4,
+        ratio=True,
+    )
+    return lines + [
+        "",
+        f"Each `{rank_by}`'s median against the cell's best (×1: the best; "
+        f"{'larger is worse' if sign > 0 else 'a zero value gives no ratio'}).",
+        "",
+        f"![ratio to the best]({ctx.figures.name}/{name})",
+    ]
 
 
 def _ranking(ctx: _Context) -> list[str]:
     lines = ["## Ranking"]
     rank_by, group_by = ctx.spec.rank_by, ctx.spec.group_by
     if ctx.metric is None or rank_by not in ctx.coords:
-        return lines + ["", "No ranking: it needs a metric and a `rank_by` column (a controller axis by default)."]
+        return lines + [
+            "",
+            "No ranking: it needs a metric and a `rank_by` column (a controller axis by default).",
+        ]
     groups = ctx.distinct(group_by) if group_by in ctx.coords else [None]
     candidates = ctx.distinct(rank_by)
     sign = 1 if ctx.spec.lower_is_better else -1
     shown = display(ctx.metric)
-    lines += ["", f"Median {shown.label} of the ok runs per `{rank_by}`" + (f", for each `{group_by}`" if group_by in ctx.coords else "")
-              + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other grid columns (poses ...)."]
+    lines += [
+        "",
+        f"Median {shown.label} of the ok runs per `{rank_by}`"
+        + (f", for each `{group_by}`" if group_by in ctx.coords else "")
+        + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other grid columns (poses ...).",
+    ]
     values: dict[Any, dict[Any, list[float]]] = {}
     for group in groups:
         members = [r for r in ctx.table.rows if group is None or r.get(group_by) == group]
@@ -330,14 +447,41 @@ def _ranking(ctx: _Context) -> list[str]:
         values[group] = {}
         for candidate in candidates:
             mine = [r for r in members if r.get(rank_by) == candidate]
-            ok = [shown.value(r.get(ctx.metric)) for r in mine if r["status"] == "ok" and isinstance(r.get(ctx.metric), float)]
+            ok = [
+                shown.value(r.get(ctx.metric))
+                for r in mine
+                if r["status"] == "ok" and isinstance(r.get(ctx.metric), float)
+            ]
             values[group][candidate] = ok
-            entries.append((candidate, _median(ok), min(ok, default=None), max(ok, default=None), len(ok), len(mine) - len(ok)))
+            entries.append(
+                (
+                    candidate,
+                    _median(ok),
+                    min(ok, default=None),
+                    max(ok, default=None),
+                    len(ok),
+                    len(mine) - len(ok),
+                )
+            )
         entries.sort(key=lambda e: (e[1] is None, sign * e[1] if e[1] is not None else 0.0))
         u = f" ({shown.unit})" if shown.unit else ""
-        lines += ["", f"### {with_unit(group_by, group)}" if group is not None else "### all runs", ""]
-        lines += _md_table(["rank", rank_by, f"median {shown.label}", f"min{u}", f"max{u}", "ok runs", "failed runs"],
-                           [(i + 1, *entry) for i, entry in enumerate(entries)])
+        lines += [
+            "",
+            f"### {with_unit(group_by, group)}" if group is not None else "### all runs",
+            "",
+        ]
+        lines += _md_table(
+            [
+                "rank",
+                rank_by,
+                f"median {shown.label}",
+                f"min{u}",
+                f"max{u}",
+                "ok runs",
+                "failed runs",
+            ],
+            [(i + 1, *entry) for i, entry in enumerate(entries)],
+        )
     name = f"ranking_{_slug(ctx.metric)}.png"
     draw_ranking(ctx.figures / name, values, candidates, rank_by, group_by, shown)
     return lines + ["", f"![ranking]({ctx.figures.name}/{name})"]
@@ -349,18 +493,35 @@ def _worst(ctx: _Context) -> list[str]:
         return lines + ["", "None asked for." if ctx.spec.worst <= 0 else "No metric recorded."]
     rows = [r for r in ctx.ok_rows() if isinstance(r.get(ctx.metric), float)]
     rows.sort(key=lambda r: r[ctx.metric], reverse=ctx.spec.lower_is_better)
-    rows = rows[:ctx.spec.worst]
+    rows = rows[: ctx.spec.worst]
     if not rows:
         return lines + ["", "No ok run yet."]
     shown = display(ctx.metric)
     rank_by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
-    lines += ["", f"The {len(rows)} ok runs with the {'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
-              + (f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one thicker)." if rank_by else "."), ""]
-    lines += _md_table(["rank", "run_id", *(display(c).label for c in ctx.coords), shown.label],
-                       [(i + 1, r["run_id"], *(r.get(c) for c in ctx.coords), shown.value(r[ctx.metric])) for i, r in enumerate(rows)])
+    lines += [
+        "",
+        f"The {len(rows)} ok runs with the {'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
+        + (
+            f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one thicker)."
+            if rank_by
+            else "."
+        ),
+        "",
+    ]
+    lines += _md_table(
+        ["rank", "run_id", *(display(c).label for c in ctx.coords), shown.label],
+        [
+            (i + 1, r["run_id"], *(r.get(c) for c in ctx.coords), shown.value(r[ctx.metric]))
+            for i, r in enumerate(rows)
+        ],
+    )
     for i, row in enumerate(rows):
         cell = [c for c in ctx.coords if c != rank_by]
-        neighbours = [r for r in ctx.table.rows if all(r.get(c) == row.get(c) for c in cell)] if rank_by else [row]
+        neighbours = (
+            [r for r in ctx.table.rows if all(r.get(c) == row.get(c) for c in cell)]
+            if rank_by
+            else [row]
+        )
         neighbours.sort(key=lambda r: r["run_id"] != row["run_id"])
         stored = [(r, ctx.store.load_trajectories(r["run_id"])) for r in neighbours]
         stored = [(r, arrays) for r, arrays in stored if arrays]
@@ -369,8 +530,11 @@ def _worst(ctx: _Context) -> list[str]:
             continue
         name = f"worst_{i + 1}_{row['run_id']}.png"
         label = (lambda r: str(r.get(rank_by))) if rank_by else (lambda r: r["run_id"])
-        title = f"#{i + 1}: " + ", ".join(with_unit(c, row.get(c)) for c in cell) + \
-            f"; worst: {label(row)}, {shown.label} = {_fmt(shown.value(row[ctx.metric]))}"
+        title = (
+            f"#{i + 1}: "
+            + ", ".join(with_unit(c, row.get(c)) for c in cell)
+            + f"; worst: {label(row)}, {shown.label} = {_fmt(shown.value(row[ctx.metric]))}"
+        )
         _draw_cell(ctx, ctx.figures / name, stored, label, title, label(row))
         lines += ["", f"![run {row['run_id']}]({ctx.figures.name}/{name})"]
     return lines
@@ -386,7 +550,14 @@ def _draw_cell(ctx: _Context, path: Path, stored, label, title: str, highlight: 
         fig = draw_runs(curves, title=title, highlight=highlight)
         fig.savefig(path, dpi=100)
     else:
-        draw_signals(path, [(label(row), arrays) for row, arrays in stored], ctx.spec.signals, time_name, title, highlight)
+        draw_signals(
+            path,
+            [(label(row), arrays) for row, arrays in stored],
+            ctx.spec.signals,
+            time_name,
+            title,
+            highlight,
+        )
 
 
 def _run_curves(ctx: _Context, row: dict, arrays: dict[str, np.ndarray], label: str):
@@ -395,7 +566,11 @@ def _run_curves(ctx: _Context, row: dict, arrays: dict[str, np.ndarray], label: 
 
     def stack(prefix: str) -> np.ndarray:
         names = [f"{prefix}{k}" for k in range(1, 100) if f"{prefix}{k}" in arrays]
-        return np.column_stack([arrays[n] for n in names]) if names else np.zeros((len(arrays[ctx.spec.time]), 0))
+        return (
+            np.column_stack([arrays[n] for n in names])
+            if names
+            else np.zeros((len(arrays[ctx.spec.time]), 0))
+        )
 
     time = arrays[ctx.spec.time]
     record = ctx.store.read_record(row["run_id"]) or {}
@@ -403,23 +578,52 @@ def _run_curves(ctx: _Context, row: dict, arrays: dict[str, np.ndarray], label: 
     limits = [metrics.get(f"torque_limit_{k}", math.inf) for k in range(1, stack("u").shape[1] + 1)]
     start = metrics.get("window_start")
     joints = stack("q")
-    return RunCurves(label, time, arrays.get("e"), stack("w"), stack("u"), joints if joints.shape[1] else None, None,
-                     limits, None if start is None else (float(start), float(time[-1])), metrics.get("tip_residual_rms"))
+    return RunCurves(
+        label,
+        time,
+        arrays.get("e"),
+        stack("w"),
+        stack("u"),
+        joints if joints.shape[1] else None,
+        None,
+        limits,
+        None if start is None else (float(start), float(time[-1])),
+        metrics.get("tip_residual_rms"),
+    )
 
 
 def _timing(ctx: _Context) -> list[str]:
     lines = ["## Timing"]
-    timing = [m for m in (ctx.spec.timing or [m for m in ctx.metrics if TIMING.search(m)]) if m in ctx.metrics]
+    timing = [
+        m
+        for m in (ctx.spec.timing or [m for m in ctx.metrics if TIMING.search(m)])
+        if m in ctx.metrics
+    ]
     by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
     groups = ctx.distinct(by) if by else [None]
-    header = [by or "runs", "ok runs", "median wall time per run (s)", *[f"median {display(m).label}" for m in timing]]
+    header = [
+        by or "runs",
+        "ok runs",
+        "median wall time per run (s)",
+        *[f"median {display(m).label}" for m in timing],
+    ]
     rows = []
     for group in groups:
         ok = [r for r in ctx.ok_rows() if group is None or r.get(by) == group]
-        rows.append((group if group is not None else "all", len(ok), _median([r.get("wall_time_s") for r in ok]),
-                     *[display(m).value(_median([r.get(m) for r in ok])) for m in timing]))
-    lines += ["", "Wall time covers the whole run in its worker (build, design, simulation, metrics); "
-              "a worker builds its model once, so its first run is slower.", ""]
+        rows.append(
+            (
+                group if group is not None else "all",
+                len(ok),
+                _median([r.get("wall_time_s") for r in ok]),
+                *[display(m).value(_median([r.get(m) for r in ok])) for m in timing],
+            )
+        )
+    lines += [
+        "",
+        "Wall time covers the whole run in its worker (build, design, simulation, metrics); "
+        "a worker builds its model once, so its first run is slower.",
+        "",
+    ]
     return lines + _md_table(header, rows) + ["", *_resources(ctx)]
 
 
@@ -432,16 +636,47 @@ def _resources(ctx: _Context) -> list[str]:
         for number, s in enumerate(sessions, 1):
             ran = int(s.get("ok", 0)) + int(s.get("failed", 0))
             rate = 60.0 * ran / s["elapsed_s"] if s["elapsed_s"] > 0 else None
-            rows.append((number, s.get("backend", "?"), ran, s["elapsed_s"], rate, s.get("parent_peak_memory_mb")))
-        lines += _md_table(["session", "backend", "runs", "wall time (s)", "runs per minute", "parent peak memory (MB)"], rows) + [""]
-    memory = [r.get("peak_memory_mb") for r in ctx.table.rows if isinstance(r.get("peak_memory_mb"), (int, float))]
-    disk = [r.get("bytes_written") for r in ctx.table.rows if isinstance(r.get("bytes_written"), (int, float))]
+            rows.append(
+                (
+                    number,
+                    s.get("backend", "?"),
+                    ran,
+                    s["elapsed_s"],
+                    rate,
+                    s.get("parent_peak_memory_mb"),
+                )
+            )
+        lines += _md_table(
+            [
+                "session",
+                "backend",
+                "runs",
+                "wall time (s)",
+                "runs per minute",
+                "parent peak memory (MB)",
+            ],
+            rows,
+        ) + [""]
+    memory = [
+        r.get("peak_memory_mb")
+        for r in ctx.table.rows
+        if isinstance(r.get("peak_memory_mb"), (int, float))
+    ]
+    disk = [
+        r.get("bytes_written")
+        for r in ctx.table.rows
+        if isinstance(r.get("bytes_written"), (int, float))
+    ]
     if memory:
-        lines.append(f"- worker peak resident memory when a run ended: median {_fmt(_median(memory))} MB, max {_fmt(max(memory))} MB "
-                     "(a worker's high-water mark, so it bounds every run it did)")
+        lines.append(
+            f"- worker peak resident memory when a run ended: median {_fmt(_median(memory))} MB, max {_fmt(max(memory))} MB "
+            "(a worker's high-water mark, so it bounds every run it did)"
+        )
     if disk:
-        lines.append(f"- disk written per run (record and trajectory): median {_fmt(_median(disk) / 1024)} KiB, "
-                     f"max {_fmt(max(disk) / 1024)} KiB, total {_fmt(sum(disk) / 2**20)} MiB over {len(disk)} runs")
+        lines.append(
+            f"- disk written per run (record and trajectory): median {_fmt(_median(disk) / 1024)} KiB, "
+            f"max {_fmt(max(disk) / 1024)} KiB, total {_fmt(sum(disk) / 2**20)} MiB over {len(disk)} runs"
+        )
     return lines
 
 
@@ -452,10 +687,19 @@ def _failures(ctx: _Context) -> list[str]:
         lines += ["", "None."]
     else:
         lines += ["", f"{len(failed)} run(s) failed; the others went on.", ""]
-        lines += _md_table(["run_id", *ctx.coords, "error"], [(r["run_id"], *(r.get(c) for c in ctx.coords), (r["error"] or "")[:300]) for r in failed])
+        lines += _md_table(
+            ["run_id", *ctx.coords, "error"],
+            [
+                (r["run_id"], *(r.get(c) for c in ctx.coords), (r["error"] or "")[:300])
+                for r in failed
+            ],
+        )
     recorded = {r["run_id"] for r in ctx.table.rows}
     pending = [p for p in ctx.store.iter_plan() if p["run_id"] not in recorded]
     if pending:
-        lines += ["", f"{len(pending)} run(s) of the grid have no record yet (interrupted study): "
-                  "run `flexctrl study STUDY --out DIR --resume` to complete it."]
+        lines += [
+            "",
+            f"{len(pending)} run(s) of the grid have no record yet (interrupted study): "
+            "run `flexctrl study STUDY --out DIR --resume` to complete it.",
+        ]
     return lines

@@ -55,19 +55,30 @@ import time
 import traceback
 import uuid
 from collections import deque
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any
 
 import numpy as np
 
 from flexctrl.errors import FlexctrlError, SpecError
-from flexctrl.study.study_file import RESERVED_COLUMNS, RunSpec, StudySpec
 from flexctrl.study.store import ResultStore, Table, now_iso
+from flexctrl.study.study_file import RESERVED_COLUMNS, RunSpec, StudySpec
 
 STUDY_FORMAT = 1
-VERSIONED = ("flexctrl", "numpy", "scipy", "casadi", "control", "osqp", "matplotlib", "dask", "distributed")
+VERSIONED = (
+    "flexctrl",
+    "numpy",
+    "scipy",
+    "casadi",
+    "control",
+    "osqp",
+    "matplotlib",
+    "dask",
+    "distributed",
+)
 
 
 # -- worker side ---------------------------------------------------------------------
@@ -127,23 +138,39 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         unavailable = get_executor(executor).unavailable_metrics(dict(settings))
         output = get_executor(executor).run(dict(settings))
         if not isinstance(output, RunOutput):
-            raise TypeError(f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput")
+            raise TypeError(
+                f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput"
+            )
         metrics = dict(output.metrics)
         clash = sorted(set(metrics) & set(RESERVED_COLUMNS))
         if clash:
-            raise ValueError(f"executor '{executor}' returned metrics named like table columns: {', '.join(clash)}")
+            raise ValueError(
+                f"executor '{executor}' returned metrics named like table columns: {', '.join(clash)}"
+            )
         if options.get("keep_trajectories", True):
             step = int(options.get("decimation", 1))
-            arrays = {name: np.ascontiguousarray(array[::step]) for name, array in output.trajectories.items()}
-        missing = [m for m in options.get("metrics") or () if m not in metrics and m not in unavailable]
+            arrays = {
+                name: np.ascontiguousarray(array[::step])
+                for name, array in output.trajectories.items()
+            }
+        missing = [
+            m for m in options.get("metrics") or () if m not in metrics and m not in unavailable
+        ]
         if unavailable and not missing:
             error = unavailable_note(unavailable)
         bad = {k: v for k, v in metrics.items() if not math.isfinite(v)}
         if missing:
-            status, error = "failed", f"the executor returned no metric {', '.join(map(repr, missing))}; it returned: {', '.join(metrics) or 'none'}"
+            status, error = (
+                "failed",
+                f"the executor returned no metric {', '.join(map(repr, missing))}; it returned: {', '.join(metrics) or 'none'}",
+            )
         elif bad:
             status = "failed"
-            error = "non-finite metric " + ", ".join(f"{k} = {v}" for k, v in bad.items()) + ": the run diverged or the metric is undefined"
+            error = (
+                "non-finite metric "
+                + ", ".join(f"{k} = {v}" for k, v in bad.items())
+                + ": the run diverged or the metric is undefined"
+            )
     except Exception as exc:  # noqa: BLE001 - every failure of a run becomes its record
         status, error = "failed", describe_exception(exc)
     return {
@@ -164,7 +191,15 @@ def unavailable_note(unavailable: dict[str, str]) -> str:
 
 
 def _failed(error: str) -> dict[str, Any]:
-    return {"status": "failed", "error": error, "metrics": {}, "trajectories": {}, "wall_time_s": None, "peak_memory_mb": None, "worker": ""}
+    return {
+        "status": "failed",
+        "error": error,
+        "metrics": {},
+        "trajectories": {},
+        "wall_time_s": None,
+        "peak_memory_mb": None,
+        "worker": "",
+    }
 
 
 # -- backends --------------------------------------------------------------------------
@@ -182,7 +217,9 @@ class InProcessBackend:
     def close(self) -> None:
         """Nothing to close."""
 
-    def run(self, runs: Iterable[RunSpec], executor: str, options: dict) -> Iterator[tuple[RunSpec, dict]]:
+    def run(
+        self, runs: Iterable[RunSpec], executor: str, options: dict
+    ) -> Iterator[tuple[RunSpec, dict]]:
         for run in runs:
             yield run, execute_run(executor, run.settings, options)
 
@@ -218,7 +255,13 @@ def pool_context(preload: str | None = None):
 class LocalPoolBackend:
     """A process pool on this machine (see the module docstring)."""
 
-    def __init__(self, workers: int, affinity: bool = True, preload: bool = True, blas_threads: int | str = "auto"):
+    def __init__(
+        self,
+        workers: int,
+        affinity: bool = True,
+        preload: bool = True,
+        blas_threads: int | str = "auto",
+    ):
         from flexctrl.study.blas_threads import blas_thread_budget
 
         self.workers = workers
@@ -229,17 +272,24 @@ class LocalPoolBackend:
         #: as asked (``"auto"``, a count, 0); :attr:`threads` is the count each worker holds its BLAS to (0: no limit)
         self.blas_threads = blas_threads
         self.threads = blas_thread_budget(blas_threads, workers)
-        self.description = (f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
-                            + (", runs grouped by model per worker" if self.affinity else "")
-                            + ("" if preload else ", imports in each worker")
-                            + (f", {self.threads} BLAS thread{'s' if self.threads != 1 else ''} per worker"
-                               if self.threads else ", BLAS threads as the libraries start them"))
+        self.description = (
+            f"local process pool, {workers} worker{'s' if workers != 1 else ''}"
+            + (", runs grouped by model per worker" if self.affinity else "")
+            + ("" if preload else ", imports in each worker")
+            + (
+                f", {self.threads} BLAS thread{'s' if self.threads != 1 else ''} per worker"
+                if self.threads
+                else ", BLAS threads as the libraries start them"
+            )
+        )
 
     def pool(self, size: int, context) -> cf.ProcessPoolExecutor:
         """A process pool of ``size`` workers, each holding its BLAS libraries to :attr:`threads` threads."""
         from flexctrl.study.blas_threads import limit_blas_threads
 
-        return cf.ProcessPoolExecutor(size, mp_context=context, initializer=limit_blas_threads, initargs=(self.threads,))
+        return cf.ProcessPoolExecutor(
+            size, mp_context=context, initializer=limit_blas_threads, initargs=(self.threads,)
+        )
 
     def start(self) -> None:
         """The pool starts with the first run."""
@@ -247,16 +297,23 @@ class LocalPoolBackend:
     def close(self) -> None:
         """The pool closes with the last run."""
 
-    def run(self, runs: Iterable[RunSpec], executor: str, options: dict) -> Iterator[tuple[RunSpec, dict]]:
+    def run(
+        self, runs: Iterable[RunSpec], executor: str, options: dict
+    ) -> Iterator[tuple[RunSpec, dict]]:
         from flexctrl.study.affinity import affinity_key, outcome, run_pinned
         from flexctrl.study.registry import get_executor
 
         context = pool_context(get_executor(executor).module if self.preload else None)
         if self.affinity:
-            yield from run_pinned(runs, self.workers,
-                                  lambda pool, run: pool.submit(execute_run, executor, run.settings, options),
-                                  lambda: self.pool(1, context),
-                                  lambda run: affinity_key(run.settings), _failed, describe_exception)
+            yield from run_pinned(
+                runs,
+                self.workers,
+                lambda pool, run: pool.submit(execute_run, executor, run.settings, options),
+                lambda: self.pool(1, context),
+                lambda run: affinity_key(run.settings),
+                _failed,
+                describe_exception,
+            )
             return
         pending = deque(runs)
         suspects: deque[RunSpec] = deque()
@@ -270,11 +327,17 @@ class LocalPoolBackend:
                 if suspects:
                     if not inflight:
                         run = suspects.popleft()
-                        inflight[pool.submit(execute_run, executor, run.settings, options)] = (run, True)
+                        inflight[pool.submit(execute_run, executor, run.settings, options)] = (
+                            run,
+                            True,
+                        )
                 else:
                     while pending and len(inflight) < window:
                         run = pending.popleft()
-                        inflight[pool.submit(execute_run, executor, run.settings, options)] = (run, False)
+                        inflight[pool.submit(execute_run, executor, run.settings, options)] = (
+                            run,
+                            False,
+                        )
                 done, _ = cf.wait(list(inflight), return_when=cf.FIRST_COMPLETED)
                 broken = False
                 for future in done:
@@ -316,7 +379,9 @@ class DaskBackend:
         try:
             import distributed  # noqa: F401
         except ImportError:
-            raise FlexctrlError("a Dask scheduler needs dask.distributed, an optional dependency: pip install 'flexctrl[dask]'") from None
+            raise FlexctrlError(
+                "a Dask scheduler needs dask.distributed, an optional dependency: pip install 'flexctrl[dask]'"
+            ) from None
         self.address = address
         self.client = client
         self._own = False
@@ -337,14 +402,18 @@ class DaskBackend:
             try:
                 self.client = Client(self.address, timeout="20s", set_as_default=False)
             except (OSError, TimeoutError, ValueError) as exc:
-                raise FlexctrlError(f"could not reach the Dask scheduler at {self.address!r}: {exc}") from None
+                raise FlexctrlError(
+                    f"could not reach the Dask scheduler at {self.address!r}: {exc}"
+                ) from None
             self._own = True
         nthreads = self.client.nthreads()
         self.workers = sum(nthreads.values())
         self.description = f"dask scheduler {self.client.scheduler.address}, {len(nthreads)} workers, {self.workers} threads"
         if not self.workers:
             self.close()
-            raise FlexctrlError(f"the Dask scheduler at {self.address or 'the client'} has no workers")
+            raise FlexctrlError(
+                f"the Dask scheduler at {self.address or 'the client'} has no workers"
+            )
 
     def close(self) -> None:
         """Close the client if this backend opened it."""
@@ -353,7 +422,9 @@ class DaskBackend:
             self.client = None
             self._own = False
 
-    def run(self, runs: Iterable[RunSpec], executor: str, options: dict) -> Iterator[tuple[RunSpec, dict]]:
+    def run(
+        self, runs: Iterable[RunSpec], executor: str, options: dict
+    ) -> Iterator[tuple[RunSpec, dict]]:
         from distributed import as_completed
 
         client = self.client
@@ -365,7 +436,9 @@ class DaskBackend:
 
             def submit(run: RunSpec) -> None:
                 key = f"flexctrl-run-{run.run_id}-{uuid.uuid4().hex[:8]}"
-                future = client.submit(execute_run, executor, run.settings, options, key=key, pure=False)
+                future = client.submit(
+                    execute_run, executor, run.settings, options, key=key, pure=False
+                )
                 futures[future.key] = run
                 completed.add(future)
 
@@ -412,7 +485,9 @@ def machine() -> dict[str, Any]:
         "usable_cpus": default_workers(),
     }
     try:
-        info["memory_gb"] = round(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2**30, 2)
+        info["memory_gb"] = round(
+            os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / 2**30, 2
+        )
     except (AttributeError, ValueError, OSError):  # pragma: no cover
         pass
     return info
@@ -458,8 +533,14 @@ class StudyResult:
         return self.table().to_pandas()
 
 
-def make_backend(workers: int | None = None, scheduler: str | None = None, client: Any = None, affinity: bool = True,
-                 preload: bool = True, blas_threads: int | str = "auto"):
+def make_backend(
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    affinity: bool = True,
+    preload: bool = True,
+    blas_threads: int | str = "auto",
+):
     """The backend for the given options (see the module docstring); call its ``start()`` and ``close()``.
 
     ``affinity``: the local pool sends the runs that share a model to one worker (:mod:`flexctrl.study.affinity`);
@@ -468,19 +549,38 @@ def make_backend(workers: int | None = None, scheduler: str | None = None, clien
     """
     if scheduler is not None or client is not None:
         if workers is not None:
-            raise SpecError("--workers sizes the local pool; with --scheduler the cluster's workers run the study", key="--workers")
+            raise SpecError(
+                "--workers sizes the local pool; with --scheduler the cluster's workers run the study",
+                key="--workers",
+            )
         return DaskBackend(scheduler, client)
     if workers is not None and workers < 0:
-        raise SpecError(f"value {workers} is not allowed; allowed: 0 (in this process) or more workers", key="--workers")
+        raise SpecError(
+            f"value {workers} is not allowed; allowed: 0 (in this process) or more workers",
+            key="--workers",
+        )
     if workers == 0:
         return InProcessBackend()
-    return LocalPoolBackend(workers if workers is not None else default_workers(), affinity, preload, blas_threads)
+    return LocalPoolBackend(
+        workers if workers is not None else default_workers(), affinity, preload, blas_threads
+    )
 
 
-def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = None, scheduler: str | None = None,
-              client: Any = None, resume: bool = False, progress: str = "auto", stream=None,
-              report: bool = True, affinity: bool = True, preload: bool = True,
-              blas_threads: int | str = "auto") -> StudyResult:
+def run_study(
+    spec: StudySpec,
+    out: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    resume: bool = False,
+    progress: str = "auto",
+    stream=None,
+    report: bool = True,
+    affinity: bool = True,
+    preload: bool = True,
+    blas_threads: int | str = "auto",
+) -> StudyResult:
     """Run every run of ``spec`` not yet recorded in ``out``; write the table and the report.
 
     Parameters
@@ -528,20 +628,38 @@ def run_study(spec: StudySpec, out: str | os.PathLike, *, workers: int | None = 
     if resume and previous is None:
         raise SpecError(f"nothing to resume: '{store.dir}' holds no study.json", key="--resume")
     if previous is not None and previous.get("study", {}).get("name") != spec.name:
-        raise SpecError(f"'{store.dir}' holds the results of study '{previous.get('study', {}).get('name')}', "
-                        f"not '{spec.name}'; choose another --out", key="--out")
-    options = {"metrics": None if spec.metrics is None else list(spec.metrics),
-               "keep_trajectories": spec.keep_trajectories, "decimation": spec.decimation}
+        raise SpecError(
+            f"'{store.dir}' holds the results of study '{previous.get('study', {}).get('name')}', "
+            f"not '{spec.name}'; choose another --out",
+            key="--out",
+        )
+    options = {
+        "metrics": None if spec.metrics is None else list(spec.metrics),
+        "keep_trajectories": spec.keep_trajectories,
+        "decimation": spec.decimation,
+    }
     backend = make_backend(workers, scheduler, client, affinity, preload, blas_threads)
     backend.start()
     try:
-        return _run(spec, store, previous, backend, options, resume, progress, stream, report, start)
+        return _run(
+            spec, store, previous, backend, options, resume, progress, stream, report, start
+        )
     finally:
         backend.close()
 
 
-def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: Any, options: dict, resume: bool,
-         progress: str, stream: Any, report: bool, start: float) -> StudyResult:
+def _run(
+    spec: StudySpec,
+    store: ResultStore,
+    previous: dict | None,
+    backend: Any,
+    options: dict,
+    resume: bool,
+    progress: str,
+    stream: Any,
+    report: bool,
+    start: float,
+) -> StudyResult:
     from flexctrl.study.progress import Progress
 
     with store:
@@ -550,13 +668,28 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
         skip = {run.run_id for run in spec.runs if recorded.get(run.run_id) in keep}
         todo = [run for run in spec.runs if run.run_id not in skip]
         if isinstance(backend, LocalPoolBackend) and backend.workers > max(1, len(todo)):
-            backend = LocalPoolBackend(max(1, len(todo)), backend.affinity, backend.preload,  # no idle processes for a short resume
-                                       backend.blas_threads)
+            backend = LocalPoolBackend(
+                max(1, len(todo)),
+                backend.affinity,
+                backend.preload,  # no idle processes for a short resume
+                backend.blas_threads,
+            )
         store.write_plan(spec.runs)
         document = previous or {"format": STUDY_FORMAT, "start": now_iso(), "sessions": []}
-        session: dict[str, Any] = {"start": now_iso(), "end": None, "backend": backend.description, "resume": resume,
-                                   "to_run": len(todo), "skipped": len(skip), "ok": 0, "failed": 0, "interrupted": False}
-        document.update({"study": spec.to_dict(), "versions": versions(), "machine": machine(), "end": None})
+        session: dict[str, Any] = {
+            "start": now_iso(),
+            "end": None,
+            "backend": backend.description,
+            "resume": resume,
+            "to_run": len(todo),
+            "skipped": len(skip),
+            "ok": 0,
+            "failed": 0,
+            "interrupted": False,
+        }
+        document.update(
+            {"study": spec.to_dict(), "versions": versions(), "machine": machine(), "end": None}
+        )
         document["sessions"].append(session)
         store.write_study(document)
 
@@ -576,9 +709,20 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
             if any("choice_from" in run.settings for run in spec.runs[:1]):
                 from flexctrl.study.shared_choice import write_choices
 
-                write_choices(store.dir, spec.runs, {run.run_id: store.read_record(run.run_id) for run in spec.runs})
-            session.update({"end": now_iso(), "interrupted": interrupted, "backend": backend.description,
-                            "elapsed_s": round(time.monotonic() - start, 3), "parent_peak_memory_mb": peak_memory_mb()})
+                write_choices(
+                    store.dir,
+                    spec.runs,
+                    {run.run_id: store.read_record(run.run_id) for run in spec.runs},
+                )
+            session.update(
+                {
+                    "end": now_iso(),
+                    "interrupted": interrupted,
+                    "backend": backend.description,
+                    "elapsed_s": round(time.monotonic() - start, 3),
+                    "parent_peak_memory_mb": peak_memory_mb(),
+                }
+            )
             document["end"] = session["end"]
             store.write_study(document)
         report_path = None
@@ -587,5 +731,19 @@ def _run(spec: StudySpec, store: ResultStore, previous: dict | None, backend: An
 
             report_path = write_report(store.dir)
     counts.update({"ran": session["ok"] + session["failed"], "skipped": len(skip)})
-    notes = [f"{counts['extra']} record(s) in runs/ belong to no run of this study (left out of results.csv)"] if counts.get("extra") else []
-    return StudyResult(store.dir, counts, time.monotonic() - start, interrupted, report_path, backend.description, notes)
+    notes = (
+        [
+            f"{counts['extra']} record(s) in runs/ belong to no run of this study (left out of results.csv)"
+        ]
+        if counts.get("extra")
+        else []
+    )
+    return StudyResult(
+        store.dir,
+        counts,
+        time.monotonic() - start,
+        interrupted,
+        report_path,
+        backend.description,
+        notes,
+    )

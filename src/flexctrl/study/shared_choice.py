@@ -27,23 +27,38 @@ folder lists every group, its representative, its choice and its members
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 #: File in the study's folder that lists the shared choices.
 CHOICES_FILE = "fidelity_choices.json"
 
 
-def representative_combo(combo: Sequence[Any], axis_keys: Sequence[str], share: Sequence[str],
-                         first: dict[str, Any]) -> tuple[Any, ...]:
+def representative_combo(
+    combo: Sequence[Any], axis_keys: Sequence[str], share: Sequence[str], first: dict[str, Any]
+) -> tuple[Any, ...]:
     """The grid point of ``combo``'s group representative: every shared axis at its first value."""
     return tuple(first[key] if key in share else value for key, value in zip(axis_keys, combo))
 
 
 def choice_settings(settings: dict[str, Any]) -> dict[str, Any]:
     """What of a run's settings makes its choice (the representative's, carried by every member)."""
-    return {k: settings[k] for k in ("scene", "model", "controller", "payload", "q0_deg", "fidelity", "overrides",
-                                     "seed", "digests") if k in settings}
+    return {
+        k: settings[k]
+        for k in (
+            "scene",
+            "model",
+            "controller",
+            "payload",
+            "q0_deg",
+            "fidelity",
+            "overrides",
+            "seed",
+            "digests",
+        )
+        if k in settings
+    }
 
 
 def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]]) -> Path | None:
@@ -63,7 +78,11 @@ def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]
         group = groups.setdefault(key, {"representative": None, "choice": None, "members": []})
         record = records.get(run.run_id) or {}
         metrics = record.get("metrics") or {}
-        entry = {"run_id": run.run_id, **dict(run.coords), "status": record.get("status", "pending")}
+        entry = {
+            "run_id": run.run_id,
+            **dict(run.coords),
+            "status": record.get("status", "pending"),
+        }
         if "chosen_modes" in metrics:
             entry["chosen_dt_s"] = metrics.get("chosen_dt")
         if record.get("status") == "failed":
@@ -73,17 +92,21 @@ def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]
             group["representative"] = entry["run_id"]
             if "chosen_modes" in metrics:
                 modes = int(metrics["chosen_modes"])
-                group["choice"] = {"fidelity": "rigid" if modes == 0 else f"amm:{modes}",
-                                   "estimated_error_m": metrics.get("estimated_error"),
-                                   "reference_error_m": metrics.get("reference_error"),
-                                   "choice_time_s": metrics.get("choice_time_s")}
+                group["choice"] = {
+                    "fidelity": "rigid" if modes == 0 else f"amm:{modes}",
+                    "estimated_error_m": metrics.get("estimated_error"),
+                    "reference_error_m": metrics.get("reference_error"),
+                    "choice_time_s": metrics.get("choice_time_s"),
+                }
             elif record.get("status") == "failed":
                 group["choice"] = {"fidelity": None, "error": record.get("error")}
     if not groups:
         return None
     path = Path(directory) / CHOICES_FILE
-    document = {"note": "fidelity = 'auto' with [auto] share: one choice per group, made on its representative "
-                        "(first run in grid order) and used by every member (docs/auto_fidelity.md)",
-                "groups": list(groups.values())}
+    document = {
+        "note": "fidelity = 'auto' with [auto] share: one choice per group, made on its representative "
+        "(first run in grid order) and used by every member (docs/auto_fidelity.md)",
+        "groups": list(groups.values()),
+    }
     path.write_text(json.dumps(document, indent=2, default=str) + "\n")
     return path

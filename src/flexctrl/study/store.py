@@ -40,9 +40,10 @@ import math
 import os
 import warnings
 import zipfile
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import suppress
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -60,7 +61,9 @@ def now_iso() -> str:
     return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
 
 
-def atomic_write(path: Path, write: Callable[[io.BufferedWriter], None] | bytes, *, fsync: bool = True) -> int:
+def atomic_write(
+    path: Path, write: Callable[[io.BufferedWriter], None] | bytes, *, fsync: bool = True
+) -> int:
     """Write ``path`` atomically (temporary file + ``os.replace``); returns the bytes written.
 
     ``fsync`` also forces the data to disk before the rename (durable across a
@@ -130,7 +133,7 @@ class Table:
         return pd.DataFrame(self.rows, columns=self.columns)
 
     @classmethod
-    def read(cls, path: Path) -> "Table":
+    def read(cls, path: Path) -> Table:
         """Read a ``results.csv``."""
         with open(path, newline="") as fh:
             reader = csv.reader(fh)
@@ -148,7 +151,13 @@ class Table:
                 typed[name] = int if name == "seed" else float
             except ValueError:
                 typed[name] = str
-        rows = [{name: (typed[name](row[name]) if row.get(name, "") != "" else None) for name in columns} for row in raw]
+        rows = [
+            {
+                name: (typed[name](row[name]) if row.get(name, "") != "" else None)
+                for name in columns
+            }
+            for row in raw
+        ]
         for row in rows:
             row["error"] = row.get("error") or ""
         return cls(columns, rows)
@@ -188,7 +197,7 @@ class ResultStore:
         return self.runs_dir / f"{run_id}.npz"
 
     # -- writing session -------------------------------------------------------------
-    def open(self) -> "ResultStore":
+    def open(self) -> ResultStore:
         """Create the folders, take the lock and remove temporary files left by a killed writer.
 
         Raises
@@ -208,7 +217,9 @@ class ResultStore:
             except OSError:
                 self._lock_fh.close()
                 self._lock_fh = None
-                raise FlexctrlError(f"another flexctrl study is writing into '{self.dir}'; wait for it or choose another --out") from None
+                raise FlexctrlError(
+                    f"another flexctrl study is writing into '{self.dir}'; wait for it or choose another --out"
+                ) from None
         for folder in (self.dir, self.runs_dir):
             for stale in folder.glob(".*.tmp"):
                 with suppress(OSError):
@@ -221,7 +232,7 @@ class ResultStore:
             self._lock_fh.close()
             self._lock_fh = None
 
-    def __enter__(self) -> "ResultStore":
+    def __enter__(self) -> ResultStore:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -239,10 +250,17 @@ class ResultStore:
 
     def write_plan(self, runs: Iterable[Any]) -> None:
         """Write ``plan.jsonl`` from :class:`~flexctrl.study.study_file.RunSpec` objects."""
+
         def write(fh):
             for run in runs:
-                line = {"run_id": run.run_id, "index": run.index, "coords": run.coordinates, "settings": run.settings}
+                line = {
+                    "run_id": run.run_id,
+                    "index": run.index,
+                    "coords": run.coordinates,
+                    "settings": run.settings,
+                }
                 fh.write((json.dumps(line, separators=(",", ":")) + "\n").encode())
+
         atomic_write(self.plan_path, write)
 
     def iter_plan(self) -> Iterator[dict[str, Any]]:
@@ -283,7 +301,11 @@ class ResultStore:
         arrays = result.get("trajectories") or {}
         npz_bytes = 0
         if arrays:
-            npz_bytes = atomic_write(self.trajectory_path(run.run_id), lambda fh: np.savez_compressed(fh, **arrays), fsync=False)
+            npz_bytes = atomic_write(
+                self.trajectory_path(run.run_id),
+                lambda fh: np.savez_compressed(fh, **arrays),
+                fsync=False,
+            )
         else:
             with suppress(FileNotFoundError):
                 self.trajectory_path(run.run_id).unlink()
@@ -326,7 +348,9 @@ class ResultStore:
             return {}
 
     # -- the table ---------------------------------------------------------------------
-    def write_table(self, columns: Iterable[str] | None = None, metrics: Iterable[str] | None = None) -> tuple[Path, dict[str, int]]:
+    def write_table(
+        self, columns: Iterable[str] | None = None, metrics: Iterable[str] | None = None
+    ) -> tuple[Path, dict[str, int]]:
         """Rebuild ``results.csv`` from the records of the plan's runs, in grid order.
 
         Parameters
@@ -355,7 +379,13 @@ class ResultStore:
                 record = self.read_record(rid)
                 if record is not None:
                     metric_columns.update(dict.fromkeys(record.get("metrics") or {}))
-        header = list(FIXED_BEFORE) + list(coord_columns) + list(FIXED_AFTER_COORDS) + list(metric_columns) + list(FIXED_TAIL)
+        header = (
+            list(FIXED_BEFORE)
+            + list(coord_columns)
+            + list(FIXED_AFTER_COORDS)
+            + list(metric_columns)
+            + list(FIXED_TAIL)
+        )
 
         def write(fh):
             text = io.TextIOWrapper(fh, newline="", encoding="utf-8")
@@ -370,10 +400,18 @@ class ResultStore:
                 coords = record.get("coords", {})
                 values = record.get("metrics") or {}
                 row = [rid] + [cell(coords.get(c)) for c in coord_columns]
-                row += [cell(record["settings"].get("seed")), record["status"], cell(record.get("error", ""))]
+                row += [
+                    cell(record["settings"].get("seed")),
+                    record["status"],
+                    cell(record.get("error", "")),
+                ]
                 row += [cell(values.get(m)) for m in metric_columns]
-                row += [cell(_round(record.get("wall_time_s"), 6)), cell(_round(record.get("peak_memory_mb"), 1)),
-                        cell(record.get("bytes_written")), cell(record.get("worker", ""))]
+                row += [
+                    cell(_round(record.get("wall_time_s"), 6)),
+                    cell(_round(record.get("peak_memory_mb"), 1)),
+                    cell(record.get("bytes_written")),
+                    cell(record.get("worker", "")),
+                ]
                 out.writerow(row)
             text.flush()
             text.detach()

@@ -70,19 +70,32 @@ import itertools
 import math
 import os
 import re
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 from flexctrl.errors import SpecError
+from flexctrl.spec import shipped
 from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
-from flexctrl.spec import shipped
 from flexctrl.spec.units import warn_if_radians
-from flexctrl.study.hashing import canonical_json, derive_seed, file_digest, run_id as _run_id
-
-from flexctrl.study.plan import (FILE_SETTINGS, MAX_RUNS, NO_CONTROLLER, PLOTS, RESERVED_COLUMNS, SETTINGS, TARGETS,
-                                 Axis, ReportSpec, RunSpec, StudySpec, toml_literal)
+from flexctrl.study.hashing import canonical_json, derive_seed, file_digest
+from flexctrl.study.hashing import run_id as _run_id
+from flexctrl.study.plan import (
+    FILE_SETTINGS,
+    MAX_RUNS,
+    NO_CONTROLLER,
+    PLOTS,
+    RESERVED_COLUMNS,
+    SETTINGS,
+    TARGETS,
+    Axis,
+    ReportSpec,
+    RunSpec,
+    StudySpec,
+    toml_literal,
+)
 
 _JOINT = re.compile(r"^q([1-9][0-9]?)$")
 
@@ -105,18 +118,27 @@ class _Context:
         if role == "controller" and value == NO_CONTROLLER:
             return None
         if not isinstance(value, str) or not value:
-            raise self.error(key, f"value {value!r} is not a file path; allowed: a path to a {role} TOML file relative to the study file"
-                             + (" or 'none'" if role == "controller" else ""))
+            raise self.error(
+                key,
+                f"value {value!r} is not a file path; allowed: a path to a {role} TOML file relative to the study file"
+                + (" or 'none'" if role == "controller" else ""),
+            )
         path = (self.root / value).resolve()
         if not path.is_file():
             try:
-                path = shipped.find(value, role if role in shipped.FOLDERS else None, self.root).resolve()
+                path = shipped.find(
+                    value, role if role in shipped.FOLDERS else None, self.root
+                ).resolve()
             except SpecError:
                 near = ""
                 if path.parent.is_dir():
-                    hint = difflib.get_close_matches(path.name, [p.name for p in path.parent.glob("*.toml")], n=1)
+                    hint = difflib.get_close_matches(
+                        path.name, [p.name for p in path.parent.glob("*.toml")], n=1
+                    )
                     near = f" (did you mean '{hint[0]}'?)" if hint else ""
-                raise self.error(key, f"{role} file {value!r} not found (looked at '{path}'){near}") from None
+                raise self.error(
+                    key, f"{role} file {value!r} not found (looked at '{path}'){near}"
+                ) from None
         if str(path) not in self._docs:
             try:
                 read_toml(path)
@@ -151,12 +173,22 @@ def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
     if name in FILE_SETTINGS:
         return ctx.file(key, value, name)
     if name == "payload":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise ctx.error(key, f"value {value!r} is not allowed; allowed: a finite number >= 0 (kg)")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not math.isfinite(value)
+            or value < 0
+        ):
+            raise ctx.error(
+                key, f"value {value!r} is not allowed; allowed: a finite number >= 0 (kg)"
+            )
         return float(value) + 0.0
     if name == "configuration":
         if not isinstance(value, list) or not value:
-            raise ctx.error(key, f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]")
+            raise ctx.error(
+                key,
+                f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]",
+            )
         angles = [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
         warn_if_radians(angles, source=ctx.source, key=key)
         return angles
@@ -167,7 +199,10 @@ def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
     try:
         canonical_json(value)
     except ValueError:
-        raise ctx.error(key, f"value {value!r} is not plain data; allowed: numbers, strings, booleans, lists, tables") from None
+        raise ctx.error(
+            key,
+            f"value {value!r} is not plain data; allowed: numbers, strings, booleans, lists, tables",
+        ) from None
     return value
 
 
@@ -182,9 +217,14 @@ def _check_override_key(ctx: _Context, key: str, name: str) -> None:
     if target not in TARGETS:
         hint = difflib.get_close_matches(target, TARGETS, n=1)
         extra = f" (did you mean '{hint[0]}.{rest}'?)" if hint else ""
-        raise ctx.error(key, f"'{target}' is not a file to override{extra}; allowed: {', '.join(t + '.KEY' for t in TARGETS)}")
+        raise ctx.error(
+            key,
+            f"'{target}' is not a file to override{extra}; allowed: {', '.join(t + '.KEY' for t in TARGETS)}",
+        )
     if not rest or any(not part for part in rest.split(".")):
-        raise ctx.error(key, "override key has an empty part; allowed: scene.KEY, controller.KEY, model.KEY")
+        raise ctx.error(
+            key, "override key has an empty part; allowed: scene.KEY, controller.KEY, model.KEY"
+        )
 
 
 def _flatten(table: dict, prefix: str = "") -> Iterable[tuple[str, Any]]:
@@ -199,10 +239,15 @@ def _unknown_axis(ctx: _Context, key: str, name: str) -> SpecError:
     known = list(SETTINGS) + ["q1", "q2", "q3"]
     hint = difflib.get_close_matches(name, known, n=1)
     extra = f"; did you mean '{hint[0]}'?" if hint else ""
-    return ctx.error(key, f"unknown setting{extra} Allowed: {', '.join(SETTINGS)}, q1..qN (one joint, degrees), scene.KEY, controller.KEY, model.KEY")
+    return ctx.error(
+        key,
+        f"unknown setting{extra} Allowed: {', '.join(SETTINGS)}, q1..qN (one joint, degrees), scene.KEY, controller.KEY, model.KEY",
+    )
 
 
-def _string_list(r: TableReader, name: str, allowed: Sequence[str] | None = None) -> tuple[str, ...]:
+def _string_list(
+    r: TableReader, name: str, allowed: Sequence[str] | None = None
+) -> tuple[str, ...]:
     value = r.raw(name)
     if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
         raise r.error(name, f"value {value!r} is not a list of names")
@@ -213,14 +258,19 @@ def _string_list(r: TableReader, name: str, allowed: Sequence[str] | None = None
             if item not in allowed:
                 hint = difflib.get_close_matches(item, list(allowed), n=1)
                 extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-                raise r.error(name, f"'{item}' is not allowed{extra}; allowed: {', '.join(allowed) or '(none)'}")
+                raise r.error(
+                    name,
+                    f"'{item}' is not allowed{extra}; allowed: {', '.join(allowed) or '(none)'}",
+                )
     return tuple(value)
 
 
 # -- loading ---------------------------------------------------------------------------
 
 
-def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_executor: bool = True) -> StudySpec:
+def load_study(
+    path: str | os.PathLike, overrides: Sequence[str] = (), *, check_executor: bool = True
+) -> StudySpec:
     """Load, validate and expand a study file.
 
     Parameters
@@ -246,13 +296,28 @@ def load_study(path: str | os.PathLike, overrides: Sequence[str] = (), *, check_
     path = shipped.find(path, "study")
     source = str(path)
     document = nest_dotted_keys(read_toml(path), source)
-    document = apply_overrides(document, [_spell_like_file(document, o) for o in overrides], source=f"{source} (--set)")
-    return study_from_document(document, source, path.resolve().parent, file_digest(path), path.stem,
-                               check_executor=check_executor)
+    document = apply_overrides(
+        document, [_spell_like_file(document, o) for o in overrides], source=f"{source} (--set)"
+    )
+    return study_from_document(
+        document,
+        source,
+        path.resolve().parent,
+        file_digest(path),
+        path.stem,
+        check_executor=check_executor,
+    )
 
 
-def study_from_document(document: dict[str, Any], source: str, base_dir: Path, sha256: str, default_name: str, *,
-                        check_executor: bool = True) -> StudySpec:
+def study_from_document(
+    document: dict[str, Any],
+    source: str,
+    base_dir: Path,
+    sha256: str,
+    default_name: str,
+    *,
+    check_executor: bool = True,
+) -> StudySpec:
     """Validate and expand a parsed study document (:func:`load_study` without the file).
 
     Parameters
@@ -275,17 +340,24 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
 
     name = r.string("name", default_name)
     if not name or "/" in name or "\\" in name or name in (".", ".."):
-        raise r.error("name", f"value {name!r} is not allowed; allowed: a non-empty name without slashes")
+        raise r.error(
+            "name", f"value {name!r} is not allowed; allowed: a non-empty name without slashes"
+        )
     executor = r.string("executor", "closed_loop", choices=executor_names())
     seed = r.integer("seed", 0, low=0, high=2**63 - 1)
     replicates = r.integer("replicates", 1, low=1, high=10_000)
     metrics = _string_list(r, "metrics") if r.has("metrics") else None
     if metrics is not None:
         if not metrics:
-            raise r.error("metrics", "empty list; allowed: metric names, or leave the key out to keep every metric")
+            raise r.error(
+                "metrics",
+                "empty list; allowed: metric names, or leave the key out to keep every metric",
+            )
         for metric in metrics:
             if metric in RESERVED_COLUMNS:
-                raise r.error("metrics", f"'{metric}' is a column of the table already; allowed: other names")
+                raise r.error(
+                    "metrics", f"'{metric}' is a column of the table already; allowed: other names"
+                )
 
     # fixed settings, as named settings at the top level and KEY=VALUE in [set]
     fixed: dict[str, Any] = {}
@@ -294,7 +366,10 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
         if r.has(setting):
             value = r.raw(setting)
             if isinstance(value, dict):
-                raise r.error(setting, f"value {value!r} is a table; overrides of the {setting} file go in [set] as \"{setting}.KEY\" = VALUE")
+                raise r.error(
+                    setting,
+                    f'value {value!r} is a table; overrides of the {setting} file go in [set] as "{setting}.KEY" = VALUE',
+                )
             fixed[setting] = _setting_value(ctx, setting, setting, value)
             origin[setting] = setting
     s = r.table_of("set", {})
@@ -318,39 +393,65 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
                 raise _unknown_axis(ctx, key, name_)
             _check_override_key(ctx, key, name_)
         if not isinstance(values, list):
-            raise ctx.error(key, f"value {values!r} is not a list; allowed: a list of values, one per grid point")
+            raise ctx.error(
+                key,
+                f"value {values!r} is not a list; allowed: a list of values, one per grid point",
+            )
         if not values:
-            raise ctx.error(key, "empty list: an axis needs at least one value (an empty axis makes an empty grid)")
+            raise ctx.error(
+                key,
+                "empty list: an axis needs at least one value (an empty axis makes an empty grid)",
+            )
         if name_ in fixed:
-            raise ctx.error(key, f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two")
-        checked = tuple(_setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values))
+            raise ctx.error(
+                key,
+                f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two",
+            )
+        checked = tuple(
+            _setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values)
+        )
         if _JOINT.match(name_):
             warn_if_radians(checked, source=ctx.source, key=key)
         seen: dict[str, int] = {}
         for i, v in enumerate(checked):
             text = canonical_json(v)
             if text in seen:
-                raise ctx.error(key, f"value {values[i]!r} (entry {i + 1}) repeats entry {seen[text] + 1}; allowed: distinct values")
+                raise ctx.error(
+                    key,
+                    f"value {values[i]!r} (entry {i + 1}) repeats entry {seen[text] + 1}; allowed: distinct values",
+                )
             seen[text] = i
         axes.append(Axis(name_, checked))
         origin[name_] = key
     for raw_key in g.table:
         g.raw(raw_key)
     g.finish()
-    if "configuration" in origin and origin["configuration"].startswith("grid") and any(_JOINT.match(a.key) for a in axes):
-        raise ctx.error(origin["configuration"], "a configuration axis cannot be combined with single-joint axes (q1..qN); "
-                        "allowed: a fixed configuration with q<k> axes, or whole configurations")
+    if (
+        "configuration" in origin
+        and origin["configuration"].startswith("grid")
+        and any(_JOINT.match(a.key) for a in axes)
+    ):
+        raise ctx.error(
+            origin["configuration"],
+            "a configuration axis cannot be combined with single-joint axes (q1..qN); "
+            "allowed: a fixed configuration with q<k> axes, or whole configurations",
+        )
     needs_model = get_executor(executor, source=source).needs_model
     for required in ("scene", "model") if needs_model else ("scene",):
         if required not in origin:
-            raise r.error(required, f"missing required key; allowed: the {required} file, as a fixed setting or a grid axis")
+            raise r.error(
+                required,
+                f"missing required key; allowed: the {required} file, as a fixed setting or a grid axis",
+            )
 
     t = r.table_of("trajectories", {})
     keep = t.boolean("keep", True)
     decimation = t.integer("decimation", 1, low=1, high=1_000_000)
     t.finish()
 
-    auto = r.table_of("auto", {})  # grid axes whose values do not change a fidelity choice (study.shared_choice)
+    auto = r.table_of(
+        "auto", {}
+    )  # grid axes whose values do not change a fidelity choice (study.shared_choice)
     share = _string_list(auto, "share", [axis.key for axis in axes]) if auto.has("share") else ()
     auto.finish()
     report_reader = r.table_of("report", {})
@@ -361,12 +462,26 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
         raise r.error("grid", f"has {n_runs} runs; allowed: at most {MAX_RUNS}")
 
     _check_controller_stems(ctx, per_controller, fixed, axes)
-    runs, columns = _expand(ctx, executor, seed, replicates, fixed, origin, axes, per_controller, share)
+    runs, columns = _expand(
+        ctx, executor, seed, replicates, fixed, origin, axes, per_controller, share
+    )
     report = _read_report(report_reader, columns, metrics)
     spec = StudySpec(
-        name=name, source=source, root=str(ctx.root), sha256=sha256, executor=executor, seed=seed,
-        replicates=replicates, metrics=metrics, keep_trajectories=keep, decimation=decimation,
-        fixed=tuple(fixed.items()), axes=tuple(axes), columns=columns, report=report, runs=runs,
+        name=name,
+        source=source,
+        root=str(ctx.root),
+        sha256=sha256,
+        executor=executor,
+        seed=seed,
+        replicates=replicates,
+        metrics=metrics,
+        keep_trajectories=keep,
+        decimation=decimation,
+        fixed=tuple(fixed.items()),
+        axes=tuple(axes),
+        columns=columns,
+        report=report,
+        runs=runs,
     )
     if check_executor:
         check = get_executor(executor, source=source).check
@@ -376,11 +491,18 @@ def study_from_document(document: dict[str, Any], source: str, base_dir: Path, s
                     check(run.settings)
                 except SpecError as exc:
                     coords = ", ".join(f"{k} = {v}" for k, v in run.coords) or "the only run"
-                    raise SpecError(f"executor '{executor}' refuses run {run.index + 1} ({coords}): {exc}", source=source) from None
+                    raise SpecError(
+                        f"executor '{executor}' refuses run {run.index + 1} ({coords}): {exc}",
+                        source=source,
+                    ) from None
     if metrics is not None and check_executor:
         found = get_executor(executor, source=source)
-        unavailable = tuple((run.index, metric, reason) for run in runs
-                            for metric, reason in found.unavailable_metrics(run.settings).items() if metric in metrics)
+        unavailable = tuple(
+            (run.index, metric, reason)
+            for run in runs
+            for metric, reason in found.unavailable_metrics(run.settings).items()
+            if metric in metrics
+        )
         spec = dataclasses.replace(spec, unavailable=unavailable)
     return spec
 
@@ -397,7 +519,9 @@ def nest_dotted_keys(document: dict, source: str) -> dict:
         if not isinstance(table, dict):
             continue
         nested: dict[str, Any] = {}
-        leaves = {key for key, value in table.items() if "." not in key and not isinstance(value, dict)}
+        leaves = {
+            key for key, value in table.items() if "." not in key and not isinstance(value, dict)
+        }
         for key, value in table.items():
             parts = key.split(".")
             if len(parts) > 1 and parts[0] in leaves:
@@ -409,11 +533,18 @@ def nest_dotted_keys(document: dict, source: str) -> dict:
             for part in parts[:-1]:
                 child = node.setdefault(part, {})
                 if not isinstance(child, dict):
-                    raise SpecError(f"'{key}' clashes with the key '{part}'; allowed: one spelling per setting", source=source, key=f"{section}.{key}")
+                    raise SpecError(
+                        f"'{key}' clashes with the key '{part}'; allowed: one spelling per setting",
+                        source=source,
+                        key=f"{section}.{key}",
+                    )
                 node = child
             if parts[-1] in node:
-                raise SpecError(f"'{key}' is given twice (quoted and as a nested table); allowed: one spelling per setting",
-                                source=source, key=f"{section}.{key}")
+                raise SpecError(
+                    f"'{key}' is given twice (quoted and as a nested table); allowed: one spelling per setting",
+                    source=source,
+                    key=f"{section}.{key}",
+                )
             node[parts[-1]] = value
         document[section] = nested
     return document
@@ -432,7 +563,12 @@ def _spell_like_file(document: dict, assignment: str) -> str:
     head, _, rest = key.strip().partition(".")
     table = document.get(head)
     quoted = rest.strip('"')
-    if head in ("grid", "set") and rest.startswith('"') and isinstance(table, dict) and quoted not in table:
+    if (
+        head in ("grid", "set")
+        and rest.startswith('"')
+        and isinstance(table, dict)
+        and quoted not in table
+    ):
         return f"{head}.{quoted}={value}"
     return assignment
 
@@ -444,7 +580,11 @@ def _labels(ctx: _Context, axes: Sequence[Axis], fixed: dict[str, Any]) -> dict[
     stems = [Path(p).stem for p in paths]
     for p in paths:
         stem = Path(p).stem
-        labels[p] = stem if stems.count(stem) == 1 and stem != NO_CONTROLLER else Path(os.path.relpath(p, ctx.root)).as_posix()
+        labels[p] = (
+            stem
+            if stems.count(stem) == 1 and stem != NO_CONTROLLER
+            else Path(os.path.relpath(p, ctx.root)).as_posix()
+        )
     return labels
 
 
@@ -463,7 +603,9 @@ def _per_controller(ctx: _Context, table: TableReader) -> dict[str, dict[str, An
     return out
 
 
-def _check_controller_stems(ctx: _Context, per_controller: dict, fixed: dict[str, Any], axes: list[Axis]) -> None:
+def _check_controller_stems(
+    ctx: _Context, per_controller: dict, fixed: dict[str, Any], axes: list[Axis]
+) -> None:
     """Every ``[per_controller.STEM]`` names a controller file of the study."""
     files = [fixed.get("controller")] + [v for a in axes if a.key == "controller" for v in a.values]
     stems = sorted({Path(f).stem for f in files if f})
@@ -471,17 +613,30 @@ def _check_controller_stems(ctx: _Context, per_controller: dict, fixed: dict[str
         if stem not in stems:
             hint = difflib.get_close_matches(stem, stems, n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise ctx.error(f"per_controller.{stem}", f"'{stem}' is not a controller of the study{extra}; allowed: "
-                            f"the stem of a controller file of the study: {', '.join(stems) or '(none)'}")
+            raise ctx.error(
+                f"per_controller.{stem}",
+                f"'{stem}' is not a controller of the study{extra}; allowed: "
+                f"the stem of a controller file of the study: {', '.join(stems) or '(none)'}",
+            )
 
 
-def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dict[str, Any],
-            origin: dict[str, str], axes: list[Axis], per_controller: dict[str, dict[str, Any]] | None = None,
-            share: tuple[str, ...] = ()) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
+def _expand(
+    ctx: _Context,
+    executor: str,
+    seed: int,
+    replicates: int,
+    fixed: dict[str, Any],
+    origin: dict[str, str],
+    axes: list[Axis],
+    per_controller: dict[str, dict[str, Any]] | None = None,
+    share: tuple[str, ...] = (),
+) -> tuple[tuple[RunSpec, ...], tuple[str, ...]]:
     from flexctrl.study.shared_choice import choice_settings, representative_combo
 
     labels = _labels(ctx, axes, fixed)
-    all_axes = list(axes) + ([Axis("replicate", tuple(range(replicates)))] if replicates > 1 else [])
+    all_axes = list(axes) + (
+        [Axis("replicate", tuple(range(replicates)))] if replicates > 1 else []
+    )
     keys, first = [a.key for a in all_axes], {a.key: a.values[0] for a in all_axes}
     by_combo: dict[str, dict[str, Any]] = {}
     runs: list[RunSpec] = []
@@ -504,39 +659,71 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
                 values[f"controller.{name}"] = value
                 origin.setdefault(f"controller.{name}", f"per_controller.{stem}.{name}")
         overrides = {k: v for k, v in values.items() if "." in k}
-        model_overrides = tuple(sorted(f"{k[len('model.'):]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith("model.")))
-        if values.get("model") is None:  # an executor that needs no arm (e.g. the beam over supports)
+        model_overrides = tuple(
+            sorted(
+                f"{k[len('model.') :]}={toml_literal(v)}"
+                for k, v in overrides.items()
+                if k.startswith("model.")
+            )
+        )
+        if (
+            values.get("model") is None
+        ):  # an executor that needs no arm (e.g. the beam over supports)
             for k in values:
                 if k.startswith("model.") or _JOINT.match(k):
-                    raise ctx.error(origin[k], "needs a model file (joint angles and model overrides refer to an arm); "
-                                    "allowed: add 'model = ...' or drop this key")
+                    raise ctx.error(
+                        origin[k],
+                        "needs a model file (joint angles and model overrides refer to an arm); "
+                        "allowed: add 'model = ...' or drop this key",
+                    )
             payload = values.get("payload")
             config = list(values.get("configuration") or [])
         else:
-            model_key = origin["model"] if not model_overrides else next(origin[k] for k in overrides if k.startswith("model."))
+            model_key = (
+                origin["model"]
+                if not model_overrides
+                else next(origin[k] for k in overrides if k.startswith("model."))
+            )
             arm = ctx.arm(model_key, values["model"], model_overrides)
             payload = values.get("payload", arm.payload.mass)
             config = values.get("configuration")
             if config is None:
                 config = [math.degrees(a) + 0.0 for a in arm.configuration]
             elif len(config) != arm.n_links:
-                raise ctx.error(origin["configuration"], f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints")
+                raise ctx.error(
+                    origin["configuration"],
+                    f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints",
+                )
             config = list(config)
             for k, v in values.items():
                 match = _JOINT.match(k)
                 if match:
                     joint = int(match[1])
                     if joint > arm.n_links:
-                        raise ctx.error(origin[k], f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints")
+                        raise ctx.error(
+                            origin[k],
+                            f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints",
+                        )
                     config[joint - 1] = v
         controller = values.get("controller")
         if controller is None and any(k.startswith("controller.") for k in overrides):
             key = next(origin[k] for k in overrides if k.startswith("controller."))
-            raise ctx.error(key, "overrides a controller setting, but the run has no controller; allowed: a controller file, fixed or as an axis")
+            raise ctx.error(
+                key,
+                "overrides a controller setting, but the run has no controller; allowed: a controller file, fixed or as an axis",
+            )
         for target in ("scene", "controller"):
-            stripped = tuple(f"{k[len(target) + 1:]}={toml_literal(v)}" for k, v in overrides.items() if k.startswith(target + "."))
+            stripped = tuple(
+                f"{k[len(target) + 1 :]}={toml_literal(v)}"
+                for k, v in overrides.items()
+                if k.startswith(target + ".")
+            )
             if stripped and values.get(target):
-                ctx.apply(next(origin[k] for k in overrides if k.startswith(target + ".")), values[target], stripped)
+                ctx.apply(
+                    next(origin[k] for k in overrides if k.startswith(target + ".")),
+                    values[target],
+                    stripped,
+                )
         settings: dict[str, Any] = {
             "executor": executor,
             "scene": values["scene"],
@@ -557,7 +744,10 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
             settings["choice_from"] = by_combo[canonical_json(list(rep))]
         rid = _run_id(settings, ctx.root)
         if rid in ids:
-            raise ctx.error("grid", f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points")
+            raise ctx.error(
+                "grid",
+                f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points",
+            )
         ids[rid] = index
         for column, _ in coords:
             columns.setdefault(column, None)
@@ -565,23 +755,33 @@ def _expand(ctx: _Context, executor: str, seed: int, replicates: int, fixed: dic
     return tuple(runs), tuple(columns)
 
 
-def _read_report(r: TableReader, columns: Sequence[str], metrics: tuple[str, ...] | None) -> ReportSpec:
+def _read_report(
+    r: TableReader, columns: Sequence[str], metrics: tuple[str, ...] | None
+) -> ReportSpec:
     def column(name: str, default: str | None) -> str | None:
         if not r.has(name):
             return default if default in columns else None
         value = r.string(name)
         if value not in columns:
-            raise r.error(name, f"'{value}' is not a grid column; allowed: {', '.join(columns) or '(the study has no axes)'}")
+            raise r.error(
+                name,
+                f"'{value}' is not a grid column; allowed: {', '.join(columns) or '(the study has no axes)'}",
+            )
         return value
 
     metric = r.string("metric") if r.has("metric") else None
     if metric is not None and metrics is not None and metric not in metrics:
-        raise r.error("metric", f"'{metric}' is not one of the study's metrics; allowed: {', '.join(metrics)}")
+        raise r.error(
+            "metric", f"'{metric}' is not one of the study's metrics; allowed: {', '.join(metrics)}"
+        )
     map_axes = None
     if r.has("map_axes"):
         map_axes = _string_list(r, "map_axes", columns)
         if len(map_axes) != 2:
-            raise r.error("map_axes", f"value {list(map_axes)!r} names {len(map_axes)} columns; allowed: exactly 2")
+            raise r.error(
+                "map_axes",
+                f"value {list(map_axes)!r} names {len(map_axes)} columns; allowed: exactly 2",
+            )
     spec = ReportSpec(
         metric=metric,
         lower_is_better=r.boolean("lower_is_better", True),

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.overrides import apply_values
@@ -24,7 +25,9 @@ _HEADER = re.compile(r"^\s*\[([^\[\]]+)\]\s*(#.*)?$")
 _VALUE = r"[-+0-9.eEinfa_]+|true|false|\"[^\"]*\""
 
 
-def with_values(text: str, values: Mapping[str, Any], *, header: str = "", source: str = "controller file") -> str:
+def with_values(
+    text: str, values: Mapping[str, Any], *, header: str = "", source: str = "controller file"
+) -> str:
     """``text`` (a TOML controller file) with ``values`` set (key -> value), ``header`` comment lines first.
 
     Raises
@@ -34,7 +37,9 @@ def with_values(text: str, values: Mapping[str, Any], *, header: str = "", sourc
         the written file does not read back as intended.
     """
     lines = text.splitlines()
-    while header and lines and lines[0].startswith("# Tuned by "):  # a re-tuned file names its last tuning only
+    while (
+        header and lines and lines[0].startswith("# Tuned by ")
+    ):  # a re-tuned file names its last tuning only
         lines = lines[1:]
     for key, value in values.items():
         lines = _set(lines, key, toml_literal(value), source)
@@ -48,13 +53,18 @@ def with_values(text: str, values: Mapping[str, Any], *, header: str = "", sourc
         written = exc
     if written != expected:
         why = written if isinstance(written, Exception) else "it reads back differently"
-        raise SpecError(f"the tuned values {dict(values)!r} could not be written into the file as intended ({why}); "
-                        "allowed: keys written on their own lines or in one-line inline tables of plain [table] "
-                        "headers", source=source)
+        raise SpecError(
+            f"the tuned values {dict(values)!r} could not be written into the file as intended ({why}); "
+            "allowed: keys written on their own lines or in one-line inline tables of plain [table] "
+            "headers",
+            source=source,
+        )
     return out
 
 
-def write_controller(original: Path, values: Mapping[str, Any], destination: Path, header: str) -> Path:
+def write_controller(
+    original: Path, values: Mapping[str, Any], destination: Path, header: str
+) -> Path:
     """Write ``original`` with ``values`` set to ``destination`` (see :func:`with_values`)."""
     text = with_values(Path(original).read_text(), values, header=header, source=str(original))
     destination.parent.mkdir(parents=True, exist_ok=True)
@@ -89,19 +99,28 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
     element = re.fullmatch(r"(\w+)\[(\d+)\]", leaf)
     if element:
         return _set_element(lines, table, element.group(1), int(element.group(2)), literal, source)
-    owner, _, name = table.rpartition(".")  # the key may sit in the inline table `name` of table `owner`
+    owner, _, name = table.rpartition(
+        "."
+    )  # the key may sit in the inline table `name` of table `owner`
     owners = _line_tables(lines)
     for i, line in enumerate(lines):  # written on its own line in its table
         if owners[i] == table:
-            replaced, count = re.subn(rf"^(\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
-                                      line)
+            replaced, count = re.subn(
+                rf"^(\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal, line
+            )
             if count:
                 return _replaced(lines, i, replaced)
-    inline = [i for i, line in enumerate(lines)
-              if name and owners[i] == owner and re.match(rf"^\s*{re.escape(name)}\s*=\s*\{{", line)]
+    inline = [
+        i
+        for i, line in enumerate(lines)
+        if name and owners[i] == owner and re.match(rf"^\s*{re.escape(name)}\s*=\s*\{{", line)
+    ]
     for i in inline:  # written inside a one-line inline table
-        replaced, count = re.subn(rf"([{{,]\s*{re.escape(leaf)}\s*=\s*)({_VALUE})", lambda m: m.group(1) + literal,
-                                  lines[i])
+        replaced, count = re.subn(
+            rf"([{{,]\s*{re.escape(leaf)}\s*=\s*)({_VALUE})",
+            lambda m: m.group(1) + literal,
+            lines[i],
+        )
         if count:
             return _replaced(lines, i, replaced)
     for i in inline:  # missing from an existing inline table: added inside its braces
@@ -109,11 +128,18 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
         if found:
             inside = found.group(2).rstrip()
             sep = ", " if inside.strip() else " "
-            return _replaced(lines, i, f"{found.group(1)}{inside}{sep}{leaf} = {literal} {found.group(3)}")
+            return _replaced(
+                lines, i, f"{found.group(1)}{inside}{sep}{leaf} = {literal} {found.group(3)}"
+            )
     rows = [i for i, o in enumerate(owners) if o == table]
-    header = [i for i, line in enumerate(lines) if owners[i] is None and (m := _HEADER.match(line))
-              and m.group(1).strip() == table]
-    if table == "" or header:  # the table exists and does not write the key: add it at the table's end
+    header = [
+        i
+        for i, line in enumerate(lines)
+        if owners[i] is None and (m := _HEADER.match(line)) and m.group(1).strip() == table
+    ]
+    if (
+        table == "" or header
+    ):  # the table exists and does not write the key: add it at the table's end
         end = (rows[-1] + 1) if rows else (header[0] + 1 if header else 0)
         start = header[0] + 1 if header else 0
         while end > start and not lines[end - 1].strip():
@@ -122,7 +148,9 @@ def _set(lines: list[str], key: str, literal: str, source: str) -> list[str]:
     return lines + ["", f"[{table}]", f"{leaf} = {literal}"]
 
 
-def _set_element(lines: list[str], table: str, name: str, index: int, literal: str, source: str) -> list[str]:
+def _set_element(
+    lines: list[str], table: str, name: str, index: int, literal: str, source: str
+) -> list[str]:
     """Entry ``index`` (1-based) of the one-line array ``name = [...]`` in ``table``."""
     owners = _line_tables(lines)
     for i, line in enumerate(lines):
@@ -133,5 +161,8 @@ def _set_element(lines: list[str], table: str, name: str, index: int, literal: s
                 break
             values[index - 1] = tomllib.loads(f"v = {literal}")["v"]
             return _replaced(lines, i, found.group(1) + toml_literal(values) + found.group(3))
-    raise SpecError(f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array '{name}' with "
-                    f"that entry; allowed: write the array in the file first", source=source)
+    raise SpecError(
+        f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array '{name}' with "
+        f"that entry; allowed: write the array in the file first",
+        source=source,
+    )

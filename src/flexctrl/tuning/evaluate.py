@@ -18,8 +18,9 @@ infeasible candidate ranks below every feasible one and fewer violations rank be
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -70,21 +71,45 @@ class Evaluation:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
-        return {"number": self.number, "values": dict(self.values),
-                "objective": self.objective if math.isfinite(self.objective) else None, "feasible": self.feasible,
-                "score": self.score, "violations": list(self.violations), "scenarios": list(self.scenarios)}
+        return {
+            "number": self.number,
+            "values": dict(self.values),
+            "objective": self.objective if math.isfinite(self.objective) else None,
+            "feasible": self.feasible,
+            "score": self.score,
+            "violations": list(self.violations),
+            "scenarios": list(self.scenarios),
+        }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "Evaluation":
+    def from_dict(cls, data: dict[str, Any]) -> Evaluation:
         objective = data.get("objective")
-        return cls(int(data["number"]), dict(data["values"]), math.nan if objective is None else float(objective),
-                   bool(data["feasible"]), tuple(data.get("violations", ())), tuple(data.get("scenarios", ())))
+        return cls(
+            int(data["number"]),
+            dict(data["values"]),
+            math.nan if objective is None else float(objective),
+            bool(data["feasible"]),
+            tuple(data.get("violations", ())),
+            tuple(data.get("scenarios", ())),
+        )
 
 
 #: Metrics kept per scenario in an evaluation's record.
-_KEPT = ("tip_residual_rms", "tip_residual_peak", "settling_time", "peak_deflection", "stable", "final_tip_error",
-         "closed_loop_radius", "torque_limit_exceeded", "controller_time_p95", "controller_time_median",
-         "peak_torque_1", "peak_torque_2", "peak_torque_3")
+_KEPT = (
+    "tip_residual_rms",
+    "tip_residual_peak",
+    "settling_time",
+    "peak_deflection",
+    "stable",
+    "final_tip_error",
+    "closed_loop_radius",
+    "torque_limit_exceeded",
+    "controller_time_p95",
+    "controller_time_median",
+    "peak_torque_1",
+    "peak_torque_2",
+    "peak_torque_3",
+)
 
 
 class Evaluator:
@@ -103,7 +128,9 @@ class Evaluator:
         ``on_run(done, total)`` after every run that had to be made.
     """
 
-    def __init__(self, spec: TuningSpec, study: StudySpec, store: ResultStore, backend, on_run=None):
+    def __init__(
+        self, spec: TuningSpec, study: StudySpec, store: ResultStore, backend, on_run=None
+    ):
         self.spec, self.study, self.store, self.backend = spec, study, store, backend
         self.on_run = on_run
         self.runs_made = 0
@@ -112,7 +139,9 @@ class Evaluator:
 
     def evaluate(self, batch: Sequence[dict[str, float]], first_number: int) -> list[Evaluation]:
         """Judge every candidate of ``batch`` (tuned key -> value; ``{}`` is the file as shipped)."""
-        overrides = [candidate_overrides(self.spec.parameters, values) if values else [] for values in batch]
+        overrides = [
+            candidate_overrides(self.spec.parameters, values) if values else [] for values in batch
+        ]
         runs_per = [candidate_runs(self.study, o) for o in overrides]
         todo, seen = [], set()
         for runs in runs_per:
@@ -126,34 +155,55 @@ class Evaluator:
                 else:
                     todo.append(run)
         options = {"metrics": None, "keep_trajectories": False, "decimation": 1}
-        for done, (run, result) in enumerate(self.backend.run(todo, self.study.executor, options), start=1):
+        for done, (run, result) in enumerate(
+            self.backend.run(todo, self.study.executor, options), start=1
+        ):
             self.store.save(run, result)
             self.runs_made += 1
             if self.on_run is not None:
                 self.on_run(done, len(todo))
-        return [self._judge(number, values, o, runs)
-                for number, (values, o, runs) in enumerate(zip(batch, overrides, runs_per), start=first_number)]
+        return [
+            self._judge(number, values, o, runs)
+            for number, (values, o, runs) in enumerate(
+                zip(batch, overrides, runs_per), start=first_number
+            )
+        ]
 
     def _sample_time(self, overrides: list[str]) -> float:
         key = tuple(overrides)
         if key not in self._sample_times:
-            controller_overrides = [o[len("controller."):] for o in overrides]
-            self._sample_times[key] = float(load_controller(self.spec.controller, controller_overrides).sample_time)
+            controller_overrides = [o[len("controller.") :] for o in overrides]
+            self._sample_times[key] = float(
+                load_controller(self.spec.controller, controller_overrides).sample_time
+            )
         return self._sample_times[key]
 
-    def _judge(self, number: int, values: dict[str, float], overrides: list[str], runs) -> Evaluation:
+    def _judge(
+        self, number: int, values: dict[str, float], overrides: list[str], runs
+    ) -> Evaluation:
         c = self.spec.constraints
         metric = self.spec.objective.metric
         violations: list[str] = []
         scenarios = []
         samples = []
         for run in runs:
-            record = self.store.read_record(run.run_id) or {"status": "failed", "error": "no record", "metrics": {}}
+            record = self.store.read_record(run.run_id) or {
+                "status": "failed",
+                "error": "no record",
+                "metrics": {},
+            }
             coords = dict(run.coords)
             where = ", ".join(f"{k} = {v}" for k, v in coords.items()) or "the scenario"
             m = record.get("metrics") or {}
-            scenarios.append({"coords": coords, "run_id": run.run_id, "status": record["status"],
-                              "error": record.get("error", ""), **{k: m[k] for k in _KEPT if k in m}})
+            scenarios.append(
+                {
+                    "coords": coords,
+                    "run_id": run.run_id,
+                    "status": record["status"],
+                    "error": record.get("error", ""),
+                    **{k: m[k] for k in _KEPT if k in m},
+                }
+            )
             if record["status"] != "ok":
                 violations.append(f"{where}: the run failed ({record.get('error', '')})")
                 continue
@@ -162,16 +212,30 @@ class Evaluator:
             else:
                 violations.append(f"{where}: no metric '{metric}'")
             if c.stable and m.get("stable", 0) != 1:
-                violations.append(f"{where}: unstable (final tip error {m.get('final_tip_error', math.nan):.3g} m)")
+                violations.append(
+                    f"{where}: unstable (final tip error {m.get('final_tip_error', math.nan):.3g} m)"
+                )
             if c.torque_limits and m.get("torque_limit_exceeded", 0):
                 violations.append(f"{where}: a torque beyond its joint's limit")
             radius = m.get("closed_loop_radius")
-            if c.closed_loop_radius is not None and radius is not None and not radius < c.closed_loop_radius:
-                violations.append(f"{where}: linear closed-loop radius {radius:.6g} >= {c.closed_loop_radius:g}")
+            if (
+                c.closed_loop_radius is not None
+                and radius is not None
+                and not radius < c.closed_loop_radius
+            ):
+                violations.append(
+                    f"{where}: linear closed-loop radius {radius:.6g} >= {c.closed_loop_radius:g}"
+                )
             if c.real_time and m.get("controller_time_p95", 0.0) >= self._sample_time(overrides):
-                violations.append(f"{where}: controller p95 {1e3 * m['controller_time_p95']:.3g} ms not below the "
-                                  f"sample time {1e3 * self._sample_time(overrides):.3g} ms")
-        objective = float(_STATISTICS[self.spec.objective.statistic](samples)) if len(samples) == len(runs) \
+                violations.append(
+                    f"{where}: controller p95 {1e3 * m['controller_time_p95']:.3g} ms not below the "
+                    f"sample time {1e3 * self._sample_time(overrides):.3g} ms"
+                )
+        objective = (
+            float(_STATISTICS[self.spec.objective.statistic](samples))
+            if len(samples) == len(runs)
             else math.nan
-        return Evaluation(number, dict(values), objective, not violations, tuple(violations), tuple(scenarios))
-
+        )
+        return Evaluation(
+            number, dict(values), objective, not violations, tuple(violations), tuple(scenarios)
+        )

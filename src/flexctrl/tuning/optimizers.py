@@ -25,7 +25,7 @@ finds their runs in the store.
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -38,7 +38,9 @@ class BudgetSpent(Exception):
     """Raised by a batch evaluator when the tuning's evaluation budget is used up."""
 
 
-def minimize(method: str, evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int) -> None:
+def minimize(
+    method: str, evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int
+) -> None:
     """Run ``method`` on the unit box from ``x0`` until ``budget`` candidates were evaluated (or it converged).
 
     Parameters
@@ -54,9 +56,16 @@ def minimize(method: str, evaluate: Evaluate, x0: np.ndarray, budget: int, popul
         Candidates per generation (batch size) for the population methods.
     seed : int
     """
-    runners = {"differential_evolution": _differential_evolution, "cma": _cma, "nelder_mead": _nelder_mead}
+    runners = {
+        "differential_evolution": _differential_evolution,
+        "cma": _cma,
+        "nelder_mead": _nelder_mead,
+    }
     if method not in runners:
-        raise SpecError(f"value {method!r} is not allowed; allowed: {', '.join(map(repr, runners))}", key="method")
+        raise SpecError(
+            f"value {method!r} is not allowed; allowed: {', '.join(map(repr, runners))}",
+            key="method",
+        )
     x0 = np.clip(np.asarray(x0, dtype=float), 0.0, 1.0)
     try:
         runners[method](evaluate, x0, budget, population, seed)
@@ -64,11 +73,15 @@ def minimize(method: str, evaluate: Evaluate, x0: np.ndarray, budget: int, popul
         pass
 
 
-def _differential_evolution(evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int) -> None:
+def _differential_evolution(
+    evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int
+) -> None:
     from scipy.optimize import differential_evolution
 
     d = x0.size
-    multiplier = max(1, math.ceil(population / d))  # scipy's population is multiplier x d, at least 5
+    multiplier = max(
+        1, math.ceil(population / d)
+    )  # scipy's population is multiplier x d, at least 5
     size = max(5, multiplier * d)
     generations = max(0, math.ceil(budget / size) - 1)
 
@@ -77,19 +90,40 @@ def _differential_evolution(evaluate: Evaluate, x0: np.ndarray, budget: int, pop
     def batch_map(_function, points):
         return evaluate([np.asarray(p, dtype=float) for p in points])
 
-    differential_evolution(lambda x: 0.0, [(0.0, 1.0)] * d, popsize=multiplier, maxiter=generations, seed=seed,
-                           polish=False, tol=0.0, atol=-1.0, init="latinhypercube", x0=x0, updating="deferred",
-                           workers=batch_map)
+    differential_evolution(
+        lambda x: 0.0,
+        [(0.0, 1.0)] * d,
+        popsize=multiplier,
+        maxiter=generations,
+        seed=seed,
+        polish=False,
+        tol=0.0,
+        atol=-1.0,
+        init="latinhypercube",
+        x0=x0,
+        updating="deferred",
+        workers=batch_map,
+    )
 
 
 def _cma(evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int) -> None:
     try:
         import cma
     except ImportError as exc:  # pragma: no cover - a dependency of the package
-        raise SpecError("method 'cma' needs the cma package (pip install cma)", key="method") from exc
+        raise SpecError(
+            "method 'cma' needs the cma package (pip install cma)", key="method"
+        ) from exc
 
-    options = {"bounds": [0.0, 1.0], "popsize": max(2, population), "seed": seed + 1, "verbose": -9,
-               "maxfevals": budget, "tolx": 1e-6, "tolfun": 0.0, "tolflatfitness": 10 ** 9}
+    options = {
+        "bounds": [0.0, 1.0],
+        "popsize": max(2, population),
+        "seed": seed + 1,
+        "verbose": -9,
+        "maxfevals": budget,
+        "tolx": 1e-6,
+        "tolfun": 0.0,
+        "tolflatfitness": 10**9,
+    }
     es = cma.CMAEvolutionStrategy(list(x0), 0.3, options)
     used = 0
     while not es.stop() and used + es.popsize <= budget:  # whole generations only (tell needs them)
@@ -99,8 +133,15 @@ def _cma(evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed:
         es.tell(points, scores)
 
 
-def _nelder_mead(evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int) -> None:
+def _nelder_mead(
+    evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int
+) -> None:
     from scipy.optimize import minimize as scipy_minimize
 
-    scipy_minimize(lambda x: evaluate([np.asarray(x, dtype=float)])[0], x0, method="Nelder-Mead",
-                   bounds=[(0.0, 1.0)] * x0.size, options={"maxfev": budget, "xatol": 1e-4, "fatol": 0.0})
+    scipy_minimize(
+        lambda x: evaluate([np.asarray(x, dtype=float)])[0],
+        x0,
+        method="Nelder-Mead",
+        bounds=[(0.0, 1.0)] * x0.size,
+        options={"maxfev": budget, "xatol": 1e-4, "fatol": 0.0},
+    )

@@ -26,35 +26,54 @@ def scenario_study(spec: TuningSpec) -> StudySpec:
     """
     source = f"{spec.source} [scenarios]"
     document = nest_dotted_keys(copy.deepcopy(spec.scenarios), source)
-    for key, allowed in (("controller", "no key: the controller is the tuning's 'controller'"),
-                         ("executor", "no key, or 'closed_loop'")):
+    for key, allowed in (
+        ("controller", "no key: the controller is the tuning's 'controller'"),
+        ("executor", "no key, or 'closed_loop'"),
+    ):
         value = document.get(key)
         if value is not None and not (key == "executor" and value == "closed_loop"):
-            raise SpecError(f"value {value!r} is not allowed; allowed: {allowed}", source=spec.source,
-                            key=f"scenarios.{key}")
+            raise SpecError(
+                f"value {value!r} is not allowed; allowed: {allowed}",
+                source=spec.source,
+                key=f"scenarios.{key}",
+            )
     grid = document.get("grid", {})
     if isinstance(grid, dict) and "controller" in grid:
-        raise SpecError("a controller axis is not allowed; allowed: one controller, the tuning's 'controller'",
-                        source=spec.source, key="scenarios.grid.controller")
+        raise SpecError(
+            "a controller axis is not allowed; allowed: one controller, the tuning's 'controller'",
+            source=spec.source,
+            key="scenarios.grid.controller",
+        )
     metric = spec.objective.metric
     if metric not in METRICS and not _JOINT_METRIC.match(metric):
         import difflib
 
         hint = difflib.get_close_matches(metric, METRICS, n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-        raise SpecError(f"value {metric!r} is not a closed-loop metric; allowed: {', '.join(METRICS)}, or "
-                        f"{'/'.join(JOINT_METRICS)}_<joint>{extra}", source=spec.source, key="objective.metric")
+        raise SpecError(
+            f"value {metric!r} is not a closed-loop metric; allowed: {', '.join(METRICS)}, or "
+            f"{'/'.join(JOINT_METRICS)}_<joint>{extra}",
+            source=spec.source,
+            key="objective.metric",
+        )
     document["executor"] = "closed_loop"
     document["controller"] = str(spec.controller)
     document.setdefault("trajectories", {"keep": False})
-    study = study_from_document(document, source, spec.base_dir, file_digest(spec.source), spec.name)
+    study = study_from_document(
+        document, source, spec.base_dir, file_digest(spec.source), spec.name
+    )
     if not study.runs:
-        raise SpecError("the scenario set is empty; allowed: at least one scenario", source=spec.source,
-                        key="scenarios")
+        raise SpecError(
+            "the scenario set is empty; allowed: at least one scenario",
+            source=spec.source,
+            key="scenarios",
+        )
     return study
 
 
-def candidate_overrides(parameters: tuple[ParameterSpec, ...], values: dict[str, float]) -> list[str]:
+def candidate_overrides(
+    parameters: tuple[ParameterSpec, ...], values: dict[str, float]
+) -> list[str]:
     """The ``controller.KEY=VALUE`` overrides that make a candidate (integers written as integers)."""
     out = []
     for p in parameters:
@@ -72,7 +91,11 @@ def candidate_runs(study: StudySpec, overrides: list[str]) -> list[RunSpec]:
     runs = []
     for run in study.runs:
         settings = run.settings
-        kept = [item for item in settings.get("overrides", []) if item.split("=", 1)[0] not in tuned]
+        kept = [
+            item for item in settings.get("overrides", []) if item.split("=", 1)[0] not in tuned
+        ]
         settings["overrides"] = sorted(set(kept) | set(overrides))
-        runs.append(RunSpec(run.index, run_id(settings, study.root), run.coords, canonical_json(settings)))
+        runs.append(
+            RunSpec(run.index, run_id(settings, study.root), run.coords, canonical_json(settings))
+        )
     return runs

@@ -19,9 +19,10 @@ import json
 import math
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -80,17 +81,30 @@ class TuningResult:
             "best_parameters": None if best is None else dict(best.values),
             "initial_parameters": {p.key: p.initial for p in self.spec.parameters},
             "per_scenario": [
-                {"coords": before["coords"], "before": _scenario_figures(before),
-                 "after": None if best is None else _scenario_figures(after)}
-                for before, after in zip(self.initial.scenarios, (best or self.initial).scenarios)],
+                {
+                    "coords": before["coords"],
+                    "before": _scenario_figures(before),
+                    "after": None if best is None else _scenario_figures(after),
+                }
+                for before, after in zip(self.initial.scenarios, (best or self.initial).scenarios)
+            ],
             "wall_time_s": self.wall_time_s,
             "runs_made": self.runs_made,
             "runs_reused": self.runs_reused,
         }
 
 
-def tune(tuning: str | Path | TuningSpec, out: str | Path, *, overrides: Iterable[str] = (), workers: int | None = None,
-         scheduler: str | None = None, client: Any = None, progress: bool = True, stream=None) -> TuningResult:
+def tune(
+    tuning: str | Path | TuningSpec,
+    out: str | Path,
+    *,
+    overrides: Iterable[str] = (),
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    progress: bool = True,
+    stream=None,
+) -> TuningResult:
     """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tuning.tuner` for the files written).
 
     Parameters
@@ -141,22 +155,49 @@ def tune(tuning: str | Path | TuningSpec, out: str | Path, *, overrides: Iterabl
         best = min(feasible, key=lambda e: e.score) if feasible else None
         if evaluations[0].feasible and (best is None or evaluations[0].score <= best.score):
             best = evaluations[0]  # nothing found beats the file as shipped
-        result = TuningResult(spec, evaluations[0], best, evaluations, out, time.perf_counter() - started,
-                              evaluator.runs_made, evaluator.runs_reused)
+        result = TuningResult(
+            spec,
+            evaluations[0],
+            best,
+            evaluations,
+            out,
+            time.perf_counter() - started,
+            evaluator.runs_made,
+            evaluator.runs_reused,
+        )
         _write(result)
     if best is None:
-        raise FlexctrlError(f"no feasible candidate in {len(evaluations) - 1} evaluations of '{spec.name}' "
-                            f"(see {out / 'report.md'}): widen the bounds, relax the constraints or raise the budget")
+        raise FlexctrlError(
+            f"no feasible candidate in {len(evaluations) - 1} evaluations of '{spec.name}' "
+            f"(see {out / 'report.md'}): widen the bounds, relax the constraints or raise the budget"
+        )
     return result
 
 
-def _search(spec: TuningSpec, evaluator: Evaluator, evaluations: list[Evaluation], out: Path, stream, progress: bool,
-            started: float) -> None:
+def _search(
+    spec: TuningSpec,
+    evaluator: Evaluator,
+    evaluations: list[Evaluation],
+    out: Path,
+    stream,
+    progress: bool,
+    started: float,
+) -> None:
     params = spec.parameters
     lows = np.array([p.to_unit(p.low) for p in params])
     highs = np.array([p.to_unit(p.high) for p in params])
-    start = np.array([p.to_unit(p.initial if p.initial is not None else math.sqrt(p.low * p.high)
-                                if p.scale == "log" else 0.5 * (p.low + p.high)) for p in params])
+    start = np.array(
+        [
+            p.to_unit(
+                p.initial
+                if p.initial is not None
+                else math.sqrt(p.low * p.high)
+                if p.scale == "log"
+                else 0.5 * (p.low + p.high)
+            )
+            for p in params
+        ]
+    )
     x0 = (start - lows) / (highs - lows)
     budget = spec.optimizer.evaluations
 
@@ -165,8 +206,13 @@ def _search(spec: TuningSpec, evaluator: Evaluator, evaluations: list[Evaluation
         remaining = budget - (len(evaluations) - 1)
         if remaining <= 0:
             raise BudgetSpent
-        batch = [{p.key: p.from_unit(lo + float(z) * (hi - lo)) for p, lo, hi, z in zip(params, lows, highs, point)}
-                 for point in points[:remaining]]
+        batch = [
+            {
+                p.key: p.from_unit(lo + float(z) * (hi - lo))
+                for p, lo, hi, z in zip(params, lows, highs, point)
+            }
+            for point in points[:remaining]
+        ]
         judged = evaluator.evaluate(batch, len(evaluations))
         evaluations.extend(judged)
         _save_evaluations(out, evaluations)
@@ -174,7 +220,9 @@ def _search(spec: TuningSpec, evaluator: Evaluator, evaluations: list[Evaluation
         # beyond the budget a generation's members are not run: they score worst, and the next call stops
         return [e.score for e in judged] + [math.inf] * (len(points) - len(judged))
 
-    minimize(spec.optimizer.method, evaluate, x0, budget, spec.optimizer.population, spec.optimizer.seed)
+    minimize(
+        spec.optimizer.method, evaluate, x0, budget, spec.optimizer.population, spec.optimizer.seed
+    )
 
 
 def _check_folder(out: Path, spec: TuningSpec) -> None:
@@ -182,7 +230,10 @@ def _check_folder(out: Path, spec: TuningSpec) -> None:
     if path.is_file():
         previous = json.loads(path.read_text()).get("tuning", {}).get("name")
         if previous != spec.name:
-            raise SpecError(f"'{out}' holds the tuning '{previous}', not '{spec.name}'; choose another --out", key="--out")
+            raise SpecError(
+                f"'{out}' holds the tuning '{previous}', not '{spec.name}'; choose another --out",
+                key="--out",
+            )
 
 
 def _save_evaluations(out: Path, evaluations: list[Evaluation]) -> None:
@@ -190,15 +241,25 @@ def _save_evaluations(out: Path, evaluations: list[Evaluation]) -> None:
     atomic_write(out / "evaluations.jsonl", text.encode(), fsync=False)
 
 
-def _log(stream, progress: bool, spec: TuningSpec, evaluations: list[Evaluation], evaluator: Evaluator,
-         started: float) -> None:
+def _log(
+    stream,
+    progress: bool,
+    spec: TuningSpec,
+    evaluations: list[Evaluation],
+    evaluator: Evaluator,
+    started: float,
+) -> None:
     if not progress:
         return
     feasible = [e for e in evaluations[1:] if e.feasible]
     best = min((e.score for e in feasible), default=math.nan)
-    print(f"{spec.name}: {len(evaluations) - 1}/{spec.optimizer.evaluations} candidates, {len(feasible)} feasible, "
-          f"best {spec.objective.statistic} {spec.objective.metric} {best:.4g}, runs made {evaluator.runs_made}, "
-          f"reused {evaluator.runs_reused}, {time.perf_counter() - started:.0f} s", file=stream, flush=True)
+    print(
+        f"{spec.name}: {len(evaluations) - 1}/{spec.optimizer.evaluations} candidates, {len(feasible)} feasible, "
+        f"best {spec.objective.statistic} {spec.objective.metric} {best:.4g}, runs made {evaluator.runs_made}, "
+        f"reused {evaluator.runs_reused}, {time.perf_counter() - started:.0f} s",
+        file=stream,
+        flush=True,
+    )
 
 
 def _write(result: TuningResult) -> None:
@@ -211,14 +272,18 @@ def _write(result: TuningResult) -> None:
     if result.best is not None:
         spec = result.spec
         unit, factor = metric_unit(spec.objective.metric)
-        header = (f"Tuned by `flexctrl tune {spec.source} --out {out}` from {spec.controller.name}: "
-                  f"{spec.objective.statistic} {spec.objective.metric} over {len(result.initial.scenarios)} scenarios "
-                  f"{_fmt(factor * result.initial.objective)} -> {_fmt(factor * result.best.objective)} {unit} "
-                  f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method}).")
+        header = (
+            f"Tuned by `flexctrl tune {spec.source} --out {out}` from {spec.controller.name}: "
+            f"{spec.objective.statistic} {spec.objective.metric} over {len(result.initial.scenarios)} scenarios "
+            f"{_fmt(factor * result.initial.objective)} -> {_fmt(factor * result.best.objective)} {unit} "
+            f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method})."
+        )
         integers = {p.key for p in spec.parameters if p.integer}
         values = {k: int(v) if k in integers else v for k, v in result.best.values.items()}
         files.append(write_controller(spec.controller, values, out / "controller.toml", header))
-    atomic_write(out / "tuning.json", (json.dumps(result.summary, indent=2, allow_nan=False) + "\n").encode())
+    atomic_write(
+        out / "tuning.json", (json.dumps(result.summary, indent=2, allow_nan=False) + "\n").encode()
+    )
     files.append(out / "tuning.json")
     files += write_report(result)
     result.files = files

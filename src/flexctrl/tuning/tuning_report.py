@@ -47,10 +47,14 @@ def convergence_figure(result, path: Path) -> Path:
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     numbers = np.array([e.number for e in result.evaluations[1:]])
-    values = np.array([factor * e.objective if e.feasible else np.nan for e in result.evaluations[1:]])
+    values = np.array(
+        [factor * e.objective if e.feasible else np.nan for e in result.evaluations[1:]]
+    )
     feasible = np.isfinite(values)
     if np.any(feasible):
-        ax.plot(numbers[feasible], values[feasible], "o", ms=3.5, color="C0", label="feasible candidate")
+        ax.plot(
+            numbers[feasible], values[feasible], "o", ms=3.5, color="C0", label="feasible candidate"
+        )
         best = np.fmin.accumulate(np.where(feasible, values, np.inf))
         shown = np.isfinite(best)
         ax.step(numbers[shown], best[shown], where="post", color="C1", lw=1.5, label="best so far")
@@ -59,18 +63,35 @@ def convergence_figure(result, path: Path) -> Path:
         top = 1.0
     if math.isfinite(result.initial.objective):
         start = factor * result.initial.objective
-        ax.axhline(start, color="k", ls="--", lw=1,
-                   label=f"as shipped: {start:.3g} {unit}" + ("" if result.initial.feasible else " (infeasible)"))
+        ax.axhline(
+            start,
+            color="k",
+            ls="--",
+            lw=1,
+            label=f"as shipped: {start:.3g} {unit}"
+            + ("" if result.initial.feasible else " (infeasible)"),
+        )
         top = max(top, start)
     if np.any(~feasible):
-        ax.plot(numbers[~feasible], np.full(int(np.sum(~feasible)), top * 1.3), "x", color="C3", ms=4,
-                label=f"infeasible ({int(np.sum(~feasible))})")
+        ax.plot(
+            numbers[~feasible],
+            np.full(int(np.sum(~feasible)), top * 1.3),
+            "x",
+            color="C3",
+            ms=4,
+            label=f"infeasible ({int(np.sum(~feasible))})",
+        )
     finite = [v for v in list(values[feasible]) + [top] if v > 0]
     if finite and max(finite) / min(finite) > 20:
         ax.set_yscale("log")
     ax.set_xlabel("candidate")
-    ax.set_ylabel(f"{spec.objective.statistic} {spec.objective.metric}" + (f" ({unit})" if unit else ""))
-    ax.set_title(f"{spec.name}: {spec.optimizer.method}, {len(result.evaluations) - 1} candidates", fontsize=9)
+    ax.set_ylabel(
+        f"{spec.objective.statistic} {spec.objective.metric}" + (f" ({unit})" if unit else "")
+    )
+    ax.set_title(
+        f"{spec.name}: {spec.optimizer.method}, {len(result.evaluations) - 1} candidates",
+        fontsize=9,
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -89,18 +110,34 @@ def write_report(result) -> list[Path]:
     def fmt(value) -> str:
         return "n/a" if value is None or not math.isfinite(value) else f"{factor * value:.4g}"
 
-    lines = [f"# Tuning `{spec.name}`", "",
-             f"`flexctrl tune {spec.source} --out {out}`: {spec.objective.statistic} of `{spec.objective.metric}`"
-             f"{f' ({unit})' if unit else ''} over {len(result.initial.scenarios)} scenarios, starting from "
-             f"`{spec.controller}`, {spec.optimizer.method} with {spec.optimizer.evaluations} candidates "
-             f"(population {spec.optimizer.population}, seed {spec.optimizer.seed}).", ""]
+    lines = [
+        f"# Tuning `{spec.name}`",
+        "",
+        f"`flexctrl tune {spec.source} --out {out}`: {spec.objective.statistic} of `{spec.objective.metric}`"
+        f"{f' ({unit})' if unit else ''} over {len(result.initial.scenarios)} scenarios, starting from "
+        f"`{spec.controller}`, {spec.optimizer.method} with {spec.optimizer.evaluations} candidates "
+        f"(population {spec.optimizer.population}, seed {spec.optimizer.seed}).",
+        "",
+    ]
     c = spec.constraints
-    rules = [name for name, on in (("stable in every scenario", c.stable), ("torques within the limits", c.torque_limits),
-                                   ("real-time controller (p95 below the sample time)", c.real_time)) if on]
+    rules = [
+        name
+        for name, on in (
+            ("stable in every scenario", c.stable),
+            ("torques within the limits", c.torque_limits),
+            ("real-time controller (p95 below the sample time)", c.real_time),
+        )
+        if on
+    ]
     if c.closed_loop_radius is not None:
-        rules.append(f"linear closed-loop radius below {c.closed_loop_radius:g} where the controller has a gain")
+        rules.append(
+            f"linear closed-loop radius below {c.closed_loop_radius:g} where the controller has a gain"
+        )
     lines += ["Constraints: " + ("; ".join(rules) if rules else "none") + ".", ""]
-    lines += ["| key | low | high | scale | as shipped | tuned |", "| --- | --- | --- | --- | --- | --- |"]
+    lines += [
+        "| key | low | high | scale | as shipped | tuned |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for p in spec.parameters:
         value = None if best is None else best.values.get(p.key, p.initial)
         tuned = "n/a" if best is None else ("default" if value is None else f"{value:.6g}")
@@ -109,26 +146,57 @@ def write_report(result) -> list[Path]:
     lines += ["", "## Result", ""]
     n = len(result.evaluations) - 1
     feasible = sum(e.feasible for e in result.evaluations[1:])
-    lines.append(f"- as shipped: {fmt(result.initial.objective)} {unit}" +
-                 ("" if result.initial.feasible else f" (infeasible: {'; '.join(result.initial.violations[:3])})"))
+    lines.append(
+        f"- as shipped: {fmt(result.initial.objective)} {unit}"
+        + (
+            ""
+            if result.initial.feasible
+            else f" (infeasible: {'; '.join(result.initial.violations[:3])})"
+        )
+    )
     if best is None:
         lines.append(f"- **no feasible candidate** in {n} ({feasible} feasible)")
     else:
         ratio = best.objective / result.initial.objective if result.initial.objective else math.nan
-        lines.append(f"- tuned: **{fmt(best.objective)} {unit}** (candidate {best.number}; {ratio:.3g} x as shipped)")
+        lines.append(
+            f"- tuned: **{fmt(best.objective)} {unit}** (candidate {best.number}; {ratio:.3g} x as shipped)"
+        )
         lines.append(f"- written to `{out / 'controller.toml'}`")
-    lines.append(f"- {n} candidates, {feasible} feasible; {result.runs_made} closed-loop runs made and "
-                 f"{result.runs_reused} reused from the store in {result.wall_time_s:.0f} s")
-    lines += ["", f"![convergence]({figure.relative_to(out)})", "", "## Before and after, per scenario", ""]
+    lines.append(
+        f"- {n} candidates, {feasible} feasible; {result.runs_made} closed-loop runs made and "
+        f"{result.runs_reused} reused from the store in {result.wall_time_s:.0f} s"
+    )
+    lines += [
+        "",
+        f"![convergence]({figure.relative_to(out)})",
+        "",
+        "## Before and after, per scenario",
+        "",
+    ]
     coords = list(result.initial.scenarios[0]["coords"]) if result.initial.scenarios else []
-    lines.append("| " + " | ".join([_coordinate_header(k) for k in coords] + [f"{spec.objective.metric} before ({unit})", f"after ({unit})",
-                                               "stable before", "stable after"]) + " |")
+    lines.append(
+        "| "
+        + " | ".join(
+            [_coordinate_header(k) for k in coords]
+            + [
+                f"{spec.objective.metric} before ({unit})",
+                f"after ({unit})",
+                "stable before",
+                "stable after",
+            ]
+        )
+        + " |"
+    )
     lines.append("|" + " --- |" * (len(coords) + 4))
     after_rows = (best or result.initial).scenarios
     for before, after in zip(result.initial.scenarios, after_rows):
         cells = [str(before["coords"].get(k, "")) for k in coords]
-        cells += [fmt(before.get(spec.objective.metric)), fmt(after.get(spec.objective.metric)),
-                  _flag(before.get("stable")), _flag(after.get("stable"))]
+        cells += [
+            fmt(before.get(spec.objective.metric)),
+            fmt(after.get(spec.objective.metric)),
+            _flag(before.get("stable")),
+            _flag(after.get("stable")),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     infeasible = [e for e in result.evaluations[1:] if not e.feasible]
     if infeasible:

@@ -78,8 +78,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal, Mapping, Sequence
+from typing import Any, Literal
 
 import casadi as ca
 import numpy as np
@@ -93,8 +94,8 @@ from flexctrl.analysis.stability.theory import (
     theoretical_step_limit,
 )
 from flexctrl.dynamics.jacobians import jacobian_function
-from flexctrl.errors import SimulationError, SolverError, SpecError
 from flexctrl.dynamics.parametric import try_expand
+from flexctrl.errors import SimulationError, SolverError, SpecError
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 
 Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
@@ -111,7 +112,9 @@ def linearisation_function(model) -> ca.Function:
     return try_expand(jacobian_function(model, value=True))
 
 
-def linearise(model, x0: np.ndarray, u0: np.ndarray, function: ca.Function | None = None) -> tuple[np.ndarray, np.ndarray]:
+def linearise(
+    model, x0: np.ndarray, u0: np.ndarray, function: ca.Function | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``(f(x0, u0), A = df/dx(x0, u0))``; pass ``function`` (:func:`linearisation_function`) to reuse it."""
     f, A = (function or linearisation_function(model))(x0, u0)
     return np.asarray(f, dtype=float).ravel(), np.asarray(A, dtype=float)
@@ -140,12 +143,33 @@ class StabilityCriterion:
     amplitude: float = 1e-9
 
     def __post_init__(self) -> None:
-        if isinstance(self.steps, bool) or not isinstance(self.steps, int) or not 10 <= self.steps <= 10_000_000:
-            raise SpecError(f"steps = {self.steps!r} is not allowed; allowed: an integer in [10, 1e7]", key="steps")
-        if isinstance(self.growth, bool) or not isinstance(self.growth, (int, float)) or not 1.0 < self.growth <= 1e6:
-            raise SpecError(f"growth = {self.growth!r} is not allowed; allowed: a number in (1, 1e6]", key="growth")
-        if isinstance(self.amplitude, bool) or not isinstance(self.amplitude, (int, float)) or not 0.0 < self.amplitude <= 0.1:
-            raise SpecError(f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, 0.1] (m or rad)", key="amplitude")
+        if (
+            isinstance(self.steps, bool)
+            or not isinstance(self.steps, int)
+            or not 10 <= self.steps <= 10_000_000
+        ):
+            raise SpecError(
+                f"steps = {self.steps!r} is not allowed; allowed: an integer in [10, 1e7]",
+                key="steps",
+            )
+        if (
+            isinstance(self.growth, bool)
+            or not isinstance(self.growth, (int, float))
+            or not 1.0 < self.growth <= 1e6
+        ):
+            raise SpecError(
+                f"growth = {self.growth!r} is not allowed; allowed: a number in (1, 1e6]",
+                key="growth",
+            )
+        if (
+            isinstance(self.amplitude, bool)
+            or not isinstance(self.amplitude, (int, float))
+            or not 0.0 < self.amplitude <= 0.1
+        ):
+            raise SpecError(
+                f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, 0.1] (m or rad)",
+                key="amplitude",
+            )
 
     @property
     def rate_tolerance(self) -> float:
@@ -247,20 +271,36 @@ class StabilityResult:
         """One sentence on what was found."""
         w = self.omega_max
         if self.outcome == "stable_at_cap":
-            return (f"stable at every tested step, up to the cap h = {self.h_cap:.4g} s "
-                    f"(omega_max h = {w * self.h_cap:.4g}); h_measured is that cap, a lower bound")
+            return (
+                f"stable at every tested step, up to the cap h = {self.h_cap:.4g} s "
+                f"(omega_max h = {w * self.h_cap:.4g}); h_measured is that cap, a lower bound"
+            )
         if self.outcome == "unstable_at_floor":
-            return (f"unstable at every tested step, down to h = {self.h_floor:.4g} s "
-                    f"(omega_max h = {w * self.h_floor:.4g}); h_measured = 0")
+            return (
+                f"unstable at every tested step, down to h = {self.h_floor:.4g} s "
+                f"(omega_max h = {w * self.h_floor:.4g}); h_measured = 0"
+            )
         failure = self.first_failure
-        why = {"growth": "a mode grows", "diverged": "the run diverges",
-               "solver": "the method's solver fails"}.get(failure.kind if failure else "", "")
-        return (f"stable at h = {self.h_measured:.6g} s, unstable at {self.h_unstable:.6g} s "
-                f"(omega_max h = {w * self.h_measured:.5f}){': ' + why if why else ''}")
+        why = {
+            "growth": "a mode grows",
+            "diverged": "the run diverges",
+            "solver": "the method's solver fails",
+        }.get(failure.kind if failure else "", "")
+        return (
+            f"stable at h = {self.h_measured:.6g} s, unstable at {self.h_unstable:.6g} s "
+            f"(omega_max h = {w * self.h_measured:.5f}){': ' + why if why else ''}"
+        )
 
 
-def refine_equilibrium(model, x0: np.ndarray, u0: np.ndarray, *, tolerance: float, max_iterations: int = 8,
-                       function: ca.Function | None = None) -> tuple[np.ndarray, float]:
+def refine_equilibrium(
+    model,
+    x0: np.ndarray,
+    u0: np.ndarray,
+    *,
+    tolerance: float,
+    max_iterations: int = 8,
+    function: ca.Function | None = None,
+) -> tuple[np.ndarray, float]:
     """Newton on ``f(x, u0) = 0`` from ``x0`` (least squares where ``A`` is singular); returns ``(x, max|f|)``.
 
     Parameters
@@ -290,9 +330,12 @@ def refine_equilibrium(model, x0: np.ndarray, u0: np.ndarray, *, tolerance: floa
     residual = float(np.max(np.abs(f), initial=0.0))
     moved = float(np.max(np.abs(x - x0)))
     if moved > 1e-2 * (1.0 + float(np.max(np.abs(x0)))) or step_size > tolerance:
-        raise SpecError(f"the state is not an equilibrium: max |f(x0, u0)| = {start:.3g}; Newton moved it by {moved:.3g} "
-                        f"and its last step is {step_size:.3g} (allowed: {tolerance:.3g}); allowed: a static equilibrium "
-                        "with its holding torques, e.g. flexctrl.linear.equilibrium(model, q_joints)", key="x0")
+        raise SpecError(
+            f"the state is not an equilibrium: max |f(x0, u0)| = {start:.3g}; Newton moved it by {moved:.3g} "
+            f"and its last step is {step_size:.3g} (allowed: {tolerance:.3g}); allowed: a static equilibrium "
+            "with its holding torques, e.g. flexctrl.linear.equilibrium(model, q_joints)",
+            key="x0",
+        )
     return x, residual
 
 
@@ -303,7 +346,11 @@ def _quiet_class(cls: type) -> type:
     def stability_advice(self, states=()) -> str:
         return "(stability probe)"
 
-    return type(f"{cls.__name__}Probe", (cls,), {"stability_advice": stability_advice, "__module__": __name__})
+    return type(
+        f"{cls.__name__}Probe",
+        (cls,),
+        {"stability_advice": stability_advice, "__module__": __name__},
+    )
 
 
 def _modal_basis(A: np.ndarray, n_q: int, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -376,8 +423,16 @@ class StabilityProbe:
     (True, False)
     """
 
-    def __init__(self, model, integrator: str | type, x0: Sequence[float], u0: Sequence[float] | None = None, *,
-                 criterion: StabilityCriterion | None = None, integrator_options: Mapping[str, Any] | None = None):
+    def __init__(
+        self,
+        model,
+        integrator: str | type,
+        x0: Sequence[float],
+        u0: Sequence[float] | None = None,
+        *,
+        criterion: StabilityCriterion | None = None,
+        integrator_options: Mapping[str, Any] | None = None,
+    ):
         from flexctrl.sim import get_integrator
 
         self.model = model
@@ -386,29 +441,48 @@ class StabilityProbe:
         self.options = dict(integrator_options or {})
         for key in ("chunk", "u_function"):
             if key in self.options:
-                raise SpecError(f"integrator option '{key}' is set by the probe; allowed: other options of {self.cls.name}", key=key)
+                raise SpecError(
+                    f"integrator option '{key}' is set by the probe; allowed: other options of {self.cls.name}",
+                    key=key,
+                )
         x0 = np.asarray(x0, dtype=float).ravel()
         u0 = np.zeros(model.n_u) if u0 is None else np.asarray(u0, dtype=float).ravel()
-        if x0.shape != (model.n_x,) or u0.shape != (model.n_u,) or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(u0))):
-            raise SpecError(f"x0 has shape {x0.shape}, u0 {u0.shape}; expected {model.n_x} and {model.n_u} finite values", key="x0")
+        if (
+            x0.shape != (model.n_x,)
+            or u0.shape != (model.n_u,)
+            or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(u0)))
+        ):
+            raise SpecError(
+                f"x0 has shape {x0.shape}, u0 {u0.shape}; expected {model.n_x} and {model.n_u} finite values",
+                key="x0",
+            )
         self.u0 = u0
         function = linearisation_function(model)
-        self.x_eq, self.residual = refine_equilibrium(model, x0, u0, tolerance=1e-2 * self.criterion.amplitude, function=function)
+        self.x_eq, self.residual = refine_equilibrium(
+            model, x0, u0, tolerance=1e-2 * self.criterion.amplitude, function=function
+        )
         _f, A = linearise(model, self.x_eq, u0, function)
         self.eigenvalues = np.linalg.eigvals(A)
         self.omega_max = float(np.max(np.abs(self.eigenvalues), initial=0.0))
         if not self.omega_max > 0:
-            raise SimulationError(f"the linearisation of '{model.name}' at this state has no vibration mode (omega_max = 0), "
-                                  "so there is no step scale to search; use a flexible fidelity or a configuration under load")
+            raise SimulationError(
+                f"the linearisation of '{model.name}' at this state has no vibration mode (omega_max = 0), "
+                "so there is no step scale to search; use a flexible fidelity or a configuration under load"
+            )
         kind, _snapped, _w = classify_eigenvalues(self.eigenvalues)
         if np.any(kind == "growing"):
             rates = np.sort(self.eigenvalues.real[kind == "growing"])[::-1]
-            raise SpecError(f"the equilibrium is unstable: {rates.size} eigenvalues of df/dx grow physically (rates up to "
-                            f"{rates[0]:.4g} 1/s), and over a probe they would swamp the modes being watched; allowed: a "
-                            "stable equilibrium (e.g. hanging, or joints held where gravity does not tip the arm over)", key="x0")
+            raise SpecError(
+                f"the equilibrium is unstable: {rates.size} eigenvalues of df/dx grow physically (rates up to "
+                f"{rates[0]:.4g} 1/s), and over a probe they would swamp the modes being watched; allowed: a "
+                "stable equilibrium (e.g. hanging, or joints held where gravity does not tip the arm over)",
+                key="x0",
+            )
         lam, vectors, rows = _modal_basis(A, model.n_q, EIGENVALUE_TOL)
         if rows.size == 0:
-            raise SimulationError(f"the linearisation of '{model.name}' has no mode that is neither zero nor growing; nothing to probe")
+            raise SimulationError(
+                f"the linearisation of '{model.name}' has no mode that is neither zero nor growing; nothing to probe"
+            )
         shape = vectors.real.sum(axis=1)
         self.d0 = self.criterion.amplitude * shape / np.max(np.abs(shape[: model.n_q]))
         c0 = np.abs(rows @ self.d0)
@@ -419,9 +493,12 @@ class StabilityProbe:
         offset = np.linalg.lstsq(A, -_f, rcond=None)[0]
         self.offset = float(np.max(np.abs(self._rows @ offset) / self._c0))
         if self.offset > 1e-3:
-            raise SpecError(f"the equilibrium is not accurate enough for a probe of amplitude {self.criterion.amplitude:g}: "
-                            f"its remaining offset is {self.offset:.3g} of a mode's initial amplitude (max |f| = "
-                            f"{self.residual:.3g}); allowed: at most 1e-3 (a larger amplitude, or a better equilibrium)", key="x0")
+            raise SpecError(
+                f"the equilibrium is not accurate enough for a probe of amplitude {self.criterion.amplitude:g}: "
+                f"its remaining offset is {self.offset:.3g} of a mode's initial amplitude (max |f| = "
+                f"{self.residual:.3g}); allowed: at most 1e-3 (a larger amplitude, or a better equilibrium)",
+                key="x0",
+            )
         self.settings: dict[str, Any] = {}
 
     def watched(self, h: float) -> np.ndarray:
@@ -445,22 +522,37 @@ class StabilityProbe:
         """:func:`theoretical_step_limit` for this integrator (None without a theory)."""
         if self.cls.name not in THEORY_METHODS:
             return None
-        return theoretical_step_limit(self.eigenvalues, self.cls.name, alpha=float(self.options.get("alpha", 0.25)),
-                                      delta=float(self.options.get("delta", 0.5)))
+        return theoretical_step_limit(
+            self.eigenvalues,
+            self.cls.name,
+            alpha=float(self.options.get("alpha", 0.25)),
+            delta=float(self.options.get("delta", 0.5)),
+        )
 
     def amplitudes(self, states: np.ndarray, h: float | None = None) -> np.ndarray:
         """Modal amplitudes of state rows relative to their initial values (rows: samples; columns: the
         modes watched at step ``h``, or every excited mode)."""
         keep = slice(None) if h is None else self.watched(h)
-        return np.abs((np.asarray(states, dtype=float) - self.x_eq) @ self._rows[keep].T) / self._c0[keep]
+        return (
+            np.abs((np.asarray(states, dtype=float) - self.x_eq) @ self._rows[keep].T)
+            / self._c0[keep]
+        )
 
     def __call__(self, h: float) -> Probe:
         """Run ``criterion.steps`` steps of length ``h`` (s) and classify (module docstring)."""
-        if isinstance(h, bool) or not isinstance(h, (int, float)) or not (math.isfinite(h) and h > 0):
-            raise SpecError(f"step h = {h!r} is not allowed; allowed: a finite number > 0 (s)", key="h")
+        if (
+            isinstance(h, bool)
+            or not isinstance(h, (int, float))
+            or not (math.isfinite(h) and h > 0)
+        ):
+            raise SpecError(
+                f"step h = {h!r} is not allowed; allowed: a finite number > 0 (s)", key="h"
+            )
         steps = self.criterion.steps
         try:
-            sim = _quiet_class(self.cls)(self.model, float(h), chunk=min(steps, 500), **self.options)
+            sim = _quiet_class(self.cls)(
+                self.model, float(h), chunk=min(steps, 500), **self.options
+            )
             self.settings = sim.settings()
             with np.errstate(over="ignore", invalid="ignore"):
                 plus = sim.run(self.x_eq + self.d0, steps * float(h), u=self.u0).states
@@ -468,18 +560,32 @@ class StabilityProbe:
                 ratios = self.amplitudes(self.x_eq + 0.5 * (plus - minus), float(h))
             growth = float(np.max(ratios, initial=1.0)) if np.all(np.isfinite(ratios)) else math.inf
             stable = growth <= self.criterion.growth
-            return Probe(float(h), stable, growth, "" if stable else f"a modal amplitude grew {growth:.4g}-fold",
-                         "" if stable else "growth")
+            return Probe(
+                float(h),
+                stable,
+                growth,
+                "" if stable else f"a modal amplitude grew {growth:.4g}-fold",
+                "" if stable else "growth",
+            )
         except (SimulationError, SolverError) as exc:
             kind = "solver" if isinstance(exc, SolverError) else "diverged"
             return Probe(float(h), False, math.inf, str(exc).splitlines()[0][:300], kind)
 
 
-def largest_stable_step(model, integrator: str | type, x0: Sequence[float], u0: Sequence[float] | None = None, *,
-                        criterion: StabilityCriterion | None = None, rel_tol: float = 1e-4,
-                        omega_h_start: float = 1.0, omega_h_floor: float = 0.01,
-                        omega_h_cap: float = 1000.0 * RK4_STABILITY_LIMIT, expansion: float = 4.0,
-                        integrator_options: Mapping[str, Any] | None = None) -> StabilityResult:
+def largest_stable_step(
+    model,
+    integrator: str | type,
+    x0: Sequence[float],
+    u0: Sequence[float] | None = None,
+    *,
+    criterion: StabilityCriterion | None = None,
+    rel_tol: float = 1e-4,
+    omega_h_start: float = 1.0,
+    omega_h_floor: float = 0.01,
+    omega_h_cap: float = 1000.0 * RK4_STABILITY_LIMIT,
+    expansion: float = 4.0,
+    integrator_options: Mapping[str, Any] | None = None,
+) -> StabilityResult:
     """Largest stable step of ``integrator`` on ``model`` about the equilibrium ``(x0, u0)``, by bisection.
 
     Parameters
@@ -505,13 +611,23 @@ def largest_stable_step(model, integrator: str | type, x0: Sequence[float], u0: 
         If the linearisation has no vibration mode (``omega_max = 0``), so there is no step scale.
     """
     if not (isinstance(expansion, (int, float)) and 1.0 < expansion <= 1e3):
-        raise SpecError(f"expansion = {expansion!r} is not allowed; allowed: a number in (1, 1000]", key="expansion")
+        raise SpecError(
+            f"expansion = {expansion!r} is not allowed; allowed: a number in (1, 1000]",
+            key="expansion",
+        )
     if not (0 < rel_tol < 1):
-        raise SpecError(f"rel_tol = {rel_tol!r} is not allowed; allowed: a number in (0, 1)", key="rel_tol")
+        raise SpecError(
+            f"rel_tol = {rel_tol!r} is not allowed; allowed: a number in (0, 1)", key="rel_tol"
+        )
     if not (0 < omega_h_floor <= omega_h_start <= omega_h_cap and math.isfinite(omega_h_cap)):
-        raise SpecError(f"omega_h_floor = {omega_h_floor!r}, omega_h_start = {omega_h_start!r}, omega_h_cap = {omega_h_cap!r} "
-                        "are not allowed; allowed: 0 < floor <= start <= cap < inf", key="omega_h_start")
-    probe = StabilityProbe(model, integrator, x0, u0, criterion=criterion, integrator_options=integrator_options)
+        raise SpecError(
+            f"omega_h_floor = {omega_h_floor!r}, omega_h_start = {omega_h_start!r}, omega_h_cap = {omega_h_cap!r} "
+            "are not allowed; allowed: 0 < floor <= start <= cap < inf",
+            key="omega_h_start",
+        )
+    probe = StabilityProbe(
+        model, integrator, x0, u0, criterion=criterion, integrator_options=integrator_options
+    )
     omega_max = probe.omega_max
     probes: list[Probe] = []
 
@@ -522,10 +638,19 @@ def largest_stable_step(model, integrator: str | type, x0: Sequence[float], u0: 
 
     def result(y_measured: float, y_unstable: float, outcome: Outcome) -> StabilityResult:
         return StabilityResult(
-            integrator=probe.name, h_measured=y_measured / omega_max, h_unstable=y_unstable / omega_max, outcome=outcome,
-            omega_max=omega_max, h_floor=omega_h_floor / omega_max, h_cap=omega_h_cap / omega_max, theory=probe.theory(),
-            probes=tuple(probes), criterion=probe.criterion, n_modes=probe.n_modes,
-            equilibrium_residual=probe.residual, settings=dict(probe.settings),
+            integrator=probe.name,
+            h_measured=y_measured / omega_max,
+            h_unstable=y_unstable / omega_max,
+            outcome=outcome,
+            omega_max=omega_max,
+            h_floor=omega_h_floor / omega_max,
+            h_cap=omega_h_cap / omega_max,
+            theory=probe.theory(),
+            probes=tuple(probes),
+            criterion=probe.criterion,
+            n_modes=probe.n_modes,
+            equilibrium_residual=probe.residual,
+            settings=dict(probe.settings),
         )
 
     y = omega_h_start
@@ -557,6 +682,12 @@ def largest_stable_step(model, integrator: str | type, x0: Sequence[float], u0: 
 
 
 __all__ = [
-    "Probe", "StabilityCriterion", "StabilityProbe", "StabilityResult", "largest_stable_step", "linearisation_function",
-    "linearise", "refine_equilibrium",
+    "Probe",
+    "StabilityCriterion",
+    "StabilityProbe",
+    "StabilityResult",
+    "largest_stable_step",
+    "linearisation_function",
+    "linearise",
+    "refine_equilibrium",
 ]

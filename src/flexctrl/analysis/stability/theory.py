@@ -42,8 +42,8 @@ Units: SI throughout (s, rad/s).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -60,7 +60,9 @@ THEORY_METHODS = ("rk4", "euler", "newmark")
 EIGENVALUE_TOL = 1e-8
 
 
-def amplification_factor(method: str, z: complex | np.ndarray, *, alpha: float = 0.25, delta: float = 0.5) -> np.ndarray:
+def amplification_factor(
+    method: str, z: complex | np.ndarray, *, alpha: float = 0.25, delta: float = 0.5
+) -> np.ndarray:
     """``R(z)``, ``z = lambda h``, of ``"euler"``, ``"rk4"`` or ``"newmark"`` (trapezoidal parameters only).
 
     Raises
@@ -74,8 +76,11 @@ def amplification_factor(method: str, z: complex | np.ndarray, *, alpha: float =
         return np.polynomial.polynomial.polyval(z, EXPLICIT_POLYNOMIALS[method])
     if method == "newmark" and alpha == 0.25 and delta == 0.5:
         return (1 + z / 2) / (1 - z / 2)
-    raise SpecError(f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification factor here; "
-                    "allowed: 'euler', 'rk4', 'newmark' with alpha = 0.25, delta = 0.5", key="method")
+    raise SpecError(
+        f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification factor here; "
+        "allowed: 'euler', 'rk4', 'newmark' with alpha = 0.25, delta = 0.5",
+        key="method",
+    )
 
 
 def ray_limit(coefficients: Sequence[float], direction: complex) -> float:
@@ -171,7 +176,9 @@ class TheoryLimit:
         return self.omega_max * self.h if self.h > 0 else 0.0
 
 
-def classify_eigenvalues(eigenvalues: np.ndarray, tol: float = EIGENVALUE_TOL) -> tuple[np.ndarray, np.ndarray, float]:
+def classify_eigenvalues(
+    eigenvalues: np.ndarray, tol: float = EIGENVALUE_TOL
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Split eigenvalues (rad/s) into kinds; returns ``(kind, snapped, omega_max)``.
 
     ``kind`` is ``"zero"``, ``"undamped"``, ``"damped"`` or ``"growing"`` per
@@ -192,8 +199,14 @@ def classify_eigenvalues(eigenvalues: np.ndarray, tol: float = EIGENVALUE_TOL) -
     return kind, snapped, omega_max
 
 
-def theoretical_step_limit(eigenvalues: np.ndarray, method: str, *, alpha: float = 0.25, delta: float = 0.5,
-                           tol: float = EIGENVALUE_TOL) -> TheoryLimit:
+def theoretical_step_limit(
+    eigenvalues: np.ndarray,
+    method: str,
+    *,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    tol: float = EIGENVALUE_TOL,
+) -> TheoryLimit:
     """Largest ``h`` (s) with ``|R(lambda_i h)| <= 1`` for every eigenvalue ``lambda_i`` (rad/s).
 
     Parameters
@@ -223,7 +236,10 @@ def theoretical_step_limit(eigenvalues: np.ndarray, method: str, *, alpha: float
     from flexctrl.sim.newmark_model import newmark_critical_step
 
     if method not in THEORY_METHODS:
-        raise SpecError(f"method {method!r} has no stability theory here; allowed: {', '.join(map(repr, THEORY_METHODS))}", key="method")
+        raise SpecError(
+            f"method {method!r} has no stability theory here; allowed: {', '.join(map(repr, THEORY_METHODS))}",
+            key="method",
+        )
     kind, snapped, omega_max = classify_eigenvalues(eigenvalues, tol)
     best, limiting = math.inf, None
     for lam, k in zip(snapped, kind):
@@ -238,9 +254,27 @@ def theoretical_step_limit(eigenvalues: np.ndarray, method: str, *, alpha: float
         if h < best:
             best, limiting = h, complex(lam)
     counts = {name: int(np.sum(kind == name)) for name in ("zero", "undamped", "damped", "growing")}
-    return TheoryLimit(method, best, omega_max, limiting, counts["zero"], counts["undamped"], counts["damped"], counts["growing"])
+    return TheoryLimit(
+        method,
+        best,
+        omega_max,
+        limiting,
+        counts["zero"],
+        counts["undamped"],
+        counts["damped"],
+        counts["growing"],
+    )
+
 
 __all__ = [
-    "EIGENVALUE_TOL", "EXPLICIT_POLYNOMIALS", "RK4_IMAGINARY_AXIS_LIMIT", "RK4_REAL_AXIS_LIMIT", "THEORY_METHODS",
-    "TheoryLimit", "amplification_factor", "classify_eigenvalues", "ray_limit", "theoretical_step_limit",
+    "EIGENVALUE_TOL",
+    "EXPLICIT_POLYNOMIALS",
+    "RK4_IMAGINARY_AXIS_LIMIT",
+    "RK4_REAL_AXIS_LIMIT",
+    "THEORY_METHODS",
+    "TheoryLimit",
+    "amplification_factor",
+    "classify_eigenvalues",
+    "ray_limit",
+    "theoretical_step_limit",
 ]

@@ -44,8 +44,9 @@ def _rows(qp: QP, lba: np.ndarray, uba: np.ndarray) -> tuple[np.ndarray, np.ndar
     return dense[upper_rows], lba[lower_rows], uba[upper_rows]
 
 
-def shortest_arrival(qp: QP, z: np.ndarray, dv: np.ndarray | None = None,
-                     dc: np.ndarray | None = None) -> int | None:
+def shortest_arrival(
+    qp: QP, z: np.ndarray, dv: np.ndarray | None = None, dc: np.ndarray | None = None
+) -> int | None:
     """Index of the first constrained stage from which the band can be held, or None.
 
     Parameters
@@ -76,7 +77,7 @@ def shortest_arrival(qp: QP, z: np.ndarray, dv: np.ndarray | None = None,
 
     def feasible(first: int) -> bool:
         keep = np.ones((S, ns), bool)
-        keep[:first, ns - na:] = False
+        keep[:first, ns - na :] = False
         hi, lo = keep & np.isfinite(upper), keep & np.isfinite(lower)
         A_ub = np.vstack([G[hi], -G[lo]])
         b_ub = np.r_[upper[hi], -lower[lo]]

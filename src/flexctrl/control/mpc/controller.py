@@ -82,8 +82,16 @@ class MPCController(Controller):
 
     kind = "mpc"
 
-    def __init__(self, settings: MPCSettings, plant: LinearPlant, limits: np.ndarray, problem: ScaledProblem,
-                 qp: QP, backend, observer):
+    def __init__(
+        self,
+        settings: MPCSettings,
+        plant: LinearPlant,
+        limits: np.ndarray,
+        problem: ScaledProblem,
+        qp: QP,
+        backend,
+        observer,
+    ):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
         self.plant = plant
         self.problem = problem
@@ -94,7 +102,9 @@ class MPCController(Controller):
         self._plan: np.ndarray | None = None  # (N, m) scaled moves of the last solution
         self._plan_u: np.ndarray | None = None  # (N, m) planned torques, N m
         self._age = 0
-        self._arrival: float | None = None  # absolute time (s) from which the predictions must be in the band
+        self._arrival: float | None = (
+            None  # absolute time (s) from which the predictions must be in the band
+        )
         self.last: Solution | None = None
 
     @property
@@ -136,7 +146,9 @@ class MPCController(Controller):
     def _reference_changed(self) -> None:
         self._arrival = None
 
-    def arrival_release(self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray) -> np.ndarray | None:
+    def arrival_release(
+        self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray
+    ) -> np.ndarray | None:
         """Which constrained stages have their arrival rows released at ``t`` (None: no arrival rows).
 
         The first call after a reset or a new reference plans the arrival time
@@ -151,8 +163,13 @@ class MPCController(Controller):
             start = time.perf_counter()
             first = shortest_arrival(self.qp, z, dv, dc)
             self._arrival = float(times[-1] if first is None else times[first] + arrival.margin)
-            self.stats.notes.update({"arrival_time_s": self._arrival, "arrival_feasible": first is not None,
-                                     "arrival_search_ms": 1e3 * (time.perf_counter() - start)})
+            self.stats.notes.update(
+                {
+                    "arrival_time_s": self._arrival,
+                    "arrival_feasible": first is not None,
+                    "arrival_search_ms": 1e3 * (time.perf_counter() - start),
+                }
+            )
         return times < self._arrival - 1e-9 * max(1.0, abs(self._arrival))
 
     def plan(self) -> np.ndarray | None:
@@ -187,7 +204,9 @@ class MPCController(Controller):
         r, u_ref, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
         release = self.arrival_release(t, z, dv, dc)
-        sol = self.backend.solve(z, self._w if self.settings.warm_start != "none" else None, dv, dc, release)
+        sol = self.backend.solve(
+            z, self._w if self.settings.warm_start != "none" else None, dv, dc, release
+        )
         self.last = sol
         self.stats.iterations.append(sol.iterations)
         if sol.ok:
@@ -197,7 +216,9 @@ class MPCController(Controller):
             self._plan_u = u_ref + self._plan * self.problem.Su
             self._age = 0
             if self.qp.slack.size:
-                self.stats.slack_max = max(self.stats.slack_max, float(np.max(sol.w[self.qp.slack])) * self.problem.h)
+                self.stats.slack_max = max(
+                    self.stats.slack_max, float(np.max(sol.w[self.qp.slack])) * self.problem.h
+                )
             return self._plan_u[0].copy()
         self._age += 1
         fb = self.settings.fallback

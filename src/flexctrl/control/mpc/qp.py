@@ -75,8 +75,15 @@ class ScaledProblem:
         return self.C.shape[0]
 
 
-def state_scales(plant: LinearPlant, K: np.ndarray, Q: np.ndarray, n_u: int, kind: str, joint_error: float,
-                 duration: float = 5.0) -> np.ndarray:
+def state_scales(
+    plant: LinearPlant,
+    K: np.ndarray,
+    Q: np.ndarray,
+    n_u: int,
+    kind: str,
+    joint_error: float,
+    duration: float = 5.0,
+) -> np.ndarray:
     """State scales ``S_x`` (see the module docstring)."""
     nx = plant.Ad.shape[0]
     if kind == "none":
@@ -97,11 +104,15 @@ def state_scales(plant: LinearPlant, K: np.ndarray, Q: np.ndarray, n_u: int, kin
     groups = [np.arange(n_u), np.arange(n_u, N), N + np.arange(n_u), np.arange(N + n_u, nx)]
     for g in groups:
         if g.size:
-            peak[g] = np.maximum(peak[g], 1e-2 * np.max(peak[g]) if np.max(peak[g]) > 0 else bryson[g])
+            peak[g] = np.maximum(
+                peak[g], 1e-2 * np.max(peak[g]) if np.max(peak[g]) > 0 else bryson[g]
+            )
     return peak
 
 
-def soft_rows(model, op: OperatingPoint, settings) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def soft_rows(
+    model, op: OperatingPoint, settings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Physical soft rows ``C_s`` (on the state), their values at ``op`` and the limits (m), and the row scale."""
     N = model.n_q
     q = ca.SX.sym("q", N)
@@ -117,7 +128,9 @@ def soft_rows(model, op: OperatingPoint, settings) -> tuple[np.ndarray, np.ndarr
     value, jac = (np.array(v, dtype=float) for v in fun(op.q))
     value = value.ravel()
     rows = np.hstack([jac, np.zeros_like(jac)])
-    keep = np.any(rows != 0, axis=1) if settings.soft == "deflection" else np.ones(rows.shape[0], bool)
+    keep = (
+        np.any(rows != 0, axis=1) if settings.soft == "deflection" else np.ones(rows.shape[0], bool)
+    )
     if settings.soft == "tip":
         value = np.zeros_like(value)  # the error from the target tip position
     scale = limit if limit > 0 else settings.weights.modal
@@ -136,7 +149,7 @@ def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
     tip = model.functions["tip"](q, ca.SX.zeros(N))[0]
     jac = np.array(ca.Function("tip_jacobian", [q], [ca.jacobian(tip, q)])(op.q), dtype=float)
     joints = np.zeros((model.n_u, 2 * N))
-    joints[np.arange(model.n_u), np.arange(model.n_u)] = np.linalg.norm(jac[:, :model.n_u], axis=0)
+    joints[np.arange(model.n_u), np.arange(model.n_u)] = np.linalg.norm(jac[:, : model.n_u], axis=0)
     return np.vstack([np.hstack([jac, np.zeros_like(jac)]), joints])
 
 
@@ -145,7 +158,9 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     Q, R = weight_matrices(model, settings.weights, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     scale_u = np.where(np.isfinite(limits), limits, 1.0) * settings.weights.torque
-    Sx = state_scales(plant, K, Q, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint)
+    Sx = state_scales(
+        plant, K, Q, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
+    )
     Sxi = 1.0 / Sx
     A = Sxi[:, None] * plant.Ad * Sx[None, :]
     B = Sxi[:, None] * plant.Bd * scale_u[None, :]
@@ -160,14 +175,37 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     rows, value, limit, h = soft_rows(model, plant.op, settings)
     arrival = getattr(settings, "arrival", None)
     n_arrival = 0
-    if arrival is not None and arrival.enabled:  # the arrival rows after the soft rows, error from the target
+    if (
+        arrival is not None and arrival.enabled
+    ):  # the arrival rows after the soft rows, error from the target
         extra = arrival_rows(model, plant.op)
         n_arrival = extra.shape[0]
-        rows, value, limit = np.vstack([rows, extra]), np.r_[value, np.zeros(n_arrival)], np.r_[limit, np.full(n_arrival, arrival.band)]
+        rows, value, limit = (
+            np.vstack([rows, extra]),
+            np.r_[value, np.zeros(n_arrival)],
+            np.r_[limit, np.full(n_arrival, arrival.band)],
+        )
     C = rows * Sx[None, :] / h
-    return ScaledProblem(A, B, Qs, Rs, 0.5 * (Ps + Ps.T), Ks, Sx, scale_u, v_lo, v_hi, C, (-limit - value) / h,
-                         (limit - value) / h, h, settings.slack_l1 * h, settings.slack_l2 * h * h, settings.horizon,
-                         n_arrival)
+    return ScaledProblem(
+        A,
+        B,
+        Qs,
+        Rs,
+        0.5 * (Ps + Ps.T),
+        Ks,
+        Sx,
+        scale_u,
+        v_lo,
+        v_hi,
+        C,
+        (-limit - value) / h,
+        (limit - value) / h,
+        h,
+        settings.slack_l1 * h,
+        settings.slack_l2 * h * h,
+        settings.horizon,
+        n_arrival,
+    )
 
 
 # --------------------------------------------------------------------------------------
@@ -200,9 +238,15 @@ class QP:
     shift_a: np.ndarray
     stages: dict  # structure for HPIPM (N, nx, nu, ng) or {}
     n_state: int
-    soft_rows: np.ndarray  # (S, 2 ns): the general rows of the soft constraints of each constrained stage
-    soft_steps: np.ndarray | None = None  # the stages (0-based, of z_1..z_N) with soft rows; None: all
-    block_starts: np.ndarray | None = None  # move blocking: first stage of every block; None: no blocking
+    soft_rows: (
+        np.ndarray
+    )  # (S, 2 ns): the general rows of the soft constraints of each constrained stage
+    soft_steps: np.ndarray | None = (
+        None  # the stages (0-based, of z_1..z_N) with soft rows; None: all
+    )
+    block_starts: np.ndarray | None = (
+        None  # move blocking: first stage of every block; None: no blocking
+    )
     n_arrival: int = 0  # the last n_arrival soft rows of every constrained stage are arrival rows
 
     @property
@@ -210,8 +254,13 @@ class QP:
         """Number of move variables (the first entries of ``w`` in the condensed form)."""
         return int(self.moves.max()) + 1
 
-    def vectors(self, z: np.ndarray, dv: np.ndarray | None = None, dc: np.ndarray | None = None,
-                release: np.ndarray | None = None):
+    def vectors(
+        self,
+        z: np.ndarray,
+        dv: np.ndarray | None = None,
+        dc: np.ndarray | None = None,
+        release: np.ndarray | None = None,
+    ):
         """``(g, lba, uba, lbx, ubx)`` for the current scaled state ``z``.
 
         ``dv`` (N, m) and ``dc`` (N, ns) shift the input bounds and the soft-row bounds of
@@ -235,8 +284,12 @@ class QP:
             ubx[self.moves] -= dv
         elif dv is not None:  # a held block must respect the bound of every stage it covers
             blocks = self.moves[self.block_starts]
-            lbx[blocks] -= np.minimum.reduceat(dv, self.block_starts, axis=0)  # lo - dv_k for every k: lo - min dv
-            ubx[blocks] -= np.maximum.reduceat(dv, self.block_starts, axis=0)  # hi - dv_k for every k: hi - max dv
+            lbx[blocks] -= np.minimum.reduceat(
+                dv, self.block_starts, axis=0
+            )  # lo - dv_k for every k: lo - min dv
+            ubx[blocks] -= np.maximum.reduceat(
+                dv, self.block_starts, axis=0
+            )  # hi - dv_k for every k: hi - max dv
         if dc is not None and self.soft_rows.size:
             if self.soft_steps is not None:
                 dc = dc[self.soft_steps]
@@ -248,8 +301,8 @@ class QP:
             ns, na = self.soft_rows.shape[1] // 2, self.n_arrival
             lba, uba = lba.copy(), uba.copy()
             free = self.soft_rows[np.asarray(release, bool)]
-            uba[free[:, ns - na:ns]] = np.inf  # the upper rows of the arrival constraints
-            lba[free[:, 2 * ns - na:]] = -np.inf  # and the lower ones
+            uba[free[:, ns - na : ns]] = np.inf  # the upper rows of the arrival constraints
+            lba[free[:, 2 * ns - na :]] = -np.inf  # and the lower ones
         return g, lba, uba, lbx, ubx
 
 
@@ -311,10 +364,29 @@ def sparse_qp(pb: ScaledProblem, soft_on_next: bool = False) -> QP:
     shift_w = _shift_blocks(0, blk, N, zN)
     shift_a = _shift_blocks(0, rblk, N, np.zeros(0, int))
     stages = {"N": N, "nx": [n] * (N + 1), "nu": [m + ns] * N + [0], "ng": [2 * ns] * N + [0]}
-    soft = np.array([k * rblk + n + np.arange(2 * ns) for k in range(N)], dtype=int).reshape(N, 2 * ns)
-    return QP(sp.csc_matrix(H), g0, sp.csc_matrix(A), lba, uba, lbx, ubx, None, None, zi(0), vi(0),
-              np.array([vi(k) for k in range(N)]), np.concatenate([si(k) for k in range(N)]) if ns else np.zeros(0, int),
-              shift_w, shift_a, stages, n, soft)
+    soft = np.array([k * rblk + n + np.arange(2 * ns) for k in range(N)], dtype=int).reshape(
+        N, 2 * ns
+    )
+    return QP(
+        sp.csc_matrix(H),
+        g0,
+        sp.csc_matrix(A),
+        lba,
+        uba,
+        lbx,
+        ubx,
+        None,
+        None,
+        zi(0),
+        vi(0),
+        np.array([vi(k) for k in range(N)]),
+        np.concatenate([si(k) for k in range(N)]) if ns else np.zeros(0, int),
+        shift_w,
+        shift_a,
+        stages,
+        n,
+        soft,
+    )
 
 
 def prediction_matrices(pb: ScaledProblem) -> tuple[np.ndarray, np.ndarray]:
@@ -327,10 +399,10 @@ def prediction_matrices(pb: ScaledProblem) -> tuple[np.ndarray, np.ndarray]:
     for k in range(N):
         powers.append(Ak)
         Ak = pb.A @ Ak
-        Phi[k * n:(k + 1) * n] = Ak
+        Phi[k * n : (k + 1) * n] = Ak
     for k in range(N):
         for j in range(k + 1):
-            Gam[k * n:(k + 1) * n, j * m:(j + 1) * m] = powers[k - j] @ pb.B
+            Gam[k * n : (k + 1) * n, j * m : (j + 1) * m] = powers[k - j] @ pb.B
     return Phi, Gam
 
 
@@ -341,7 +413,7 @@ def blocking_matrix(blocks: tuple[int, ...], m: int) -> np.ndarray:
     k = 0
     for b, length in enumerate(blocks):
         for _ in range(length):
-            T[k * m:(k + 1) * m, b * m:(b + 1) * m] = np.eye(m)
+            T[k * m : (k + 1) * m, b * m : (b + 1) * m] = np.eye(m)
             k += 1
     return T
 
@@ -357,8 +429,8 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
     Phi, Gam = prediction_matrices(pb)
     Qt = np.zeros((N * n, N * n))
     for k in range(N - 1):
-        Qt[k * n:(k + 1) * n, k * n:(k + 1) * n] = pb.Q
-    Qt[(N - 1) * n:, (N - 1) * n:] = pb.P
+        Qt[k * n : (k + 1) * n, k * n : (k + 1) * n] = pb.Q
+    Qt[(N - 1) * n :, (N - 1) * n :] = pb.P
     if blocks:
         T = blocking_matrix(blocks, m)
         Gam = Gam @ T
@@ -371,7 +443,9 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
         nv = N * m
         starts, block_of = None, np.arange(N)
     Fv = Gam.T @ Qt @ Phi
-    steps = np.arange(N) if stride == 1 else np.unique(np.r_[np.arange(stride - 1, N, stride), N - 1])
+    steps = (
+        np.arange(N) if stride == 1 else np.unique(np.r_[np.arange(stride - 1, N, stride), N - 1])
+    )
     S = steps.size
     nsl = S * ns
     nw = nv + nsl
@@ -394,22 +468,62 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
     else:
         A, lba0, uba0, Lz = np.zeros((0, nw)), np.zeros(0), np.zeros(0), None
     moves = (block_of[:, None] * m + np.arange(m)[None, :]).astype(int)
-    if blocks or stride > 1:  # a blocked or thinned plan does not shift by one stage: warm start from the last
+    if (
+        blocks or stride > 1
+    ):  # a blocked or thinned plan does not shift by one stage: warm start from the last
         shift_w, shift_a = np.arange(nw), np.arange(A.shape[0])
     else:
         shift_v = _shift_blocks(0, m, N, np.zeros(0, int))
         shift_s = nv + _shift_blocks(0, ns, N, np.zeros(0, int)) if ns else np.zeros(0, int)
         shift_w = np.r_[shift_v, shift_s].astype(int)
-        shift_a = np.r_[_shift_blocks(0, ns, N, np.zeros(0, int)),
-                        nsl + _shift_blocks(0, ns, N, np.zeros(0, int))].astype(int) if ns else np.zeros(0, int)
-    soft = np.array([np.r_[k * ns + np.arange(ns), nsl + k * ns + np.arange(ns)] for k in range(S)],
-                    dtype=int).reshape(S, 2 * ns)
-    return QP(sp.csc_matrix(H), g0, sp.csc_matrix(A), lba0, uba0, lbx, ubx, Gz, Lz, np.zeros(0, int), moves[0], moves,
-              nv + np.arange(nsl), shift_w, shift_a, {}, n, soft, None if stride == 1 else steps, starts, pb.n_arrival)
+        shift_a = (
+            np.r_[
+                _shift_blocks(0, ns, N, np.zeros(0, int)),
+                nsl + _shift_blocks(0, ns, N, np.zeros(0, int)),
+            ].astype(int)
+            if ns
+            else np.zeros(0, int)
+        )
+    soft = np.array(
+        [np.r_[k * ns + np.arange(ns), nsl + k * ns + np.arange(ns)] for k in range(S)], dtype=int
+    ).reshape(S, 2 * ns)
+    return QP(
+        sp.csc_matrix(H),
+        g0,
+        sp.csc_matrix(A),
+        lba0,
+        uba0,
+        lbx,
+        ubx,
+        Gz,
+        Lz,
+        np.zeros(0, int),
+        moves[0],
+        moves,
+        nv + np.arange(nsl),
+        shift_w,
+        shift_a,
+        {},
+        n,
+        soft,
+        None if stride == 1 else steps,
+        starts,
+        pb.n_arrival,
+    )
 
 
 # --------------------------------------------------------------------------------------
 
 
-__all__ = ["ScaledProblem", "QP", "state_scales", "soft_rows", "arrival_rows", "scaled_problem", "sparse_qp", "prediction_matrices",
-           "blocking_matrix", "condensed_qp"]
+__all__ = [
+    "ScaledProblem",
+    "QP",
+    "state_scales",
+    "soft_rows",
+    "arrival_rows",
+    "scaled_problem",
+    "sparse_qp",
+    "prediction_matrices",
+    "blocking_matrix",
+    "condensed_qp",
+]

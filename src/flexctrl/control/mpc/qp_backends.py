@@ -30,7 +30,6 @@ class OSQPBackend:
     name = "osqp"
 
     def __init__(self, qp: QP, settings, accept_inaccurate: bool, warm_start: str):
-        import osqp
 
         self.qp = qp
         nw = qp.H.shape[0]
@@ -38,19 +37,31 @@ class OSQPBackend:
         has_bound[qp.ix0] = True  # the initial state is fixed by its bounds
         bounded = np.flatnonzero(has_bound)
         self.bounded = bounded
-        box = sp.csc_matrix((np.ones(bounded.size), (np.arange(bounded.size), bounded)), shape=(bounded.size, nw))
+        box = sp.csc_matrix(
+            (np.ones(bounded.size), (np.arange(bounded.size), bounded)), shape=(bounded.size, nw)
+        )
         self.A = sp.vstack([qp.A, box], format="csc")
         self.n_rows = qp.A.shape[0]
         inv_pos = np.full(nw, -1)
         inv_pos[bounded] = np.arange(bounded.size)
         # dual shift: general rows by shift_a, box rows follow their variables
         box_shift = inv_pos[qp.shift_w[bounded]]
-        self.shift_y = np.r_[qp.shift_a, self.n_rows + np.where(box_shift >= 0, box_shift, np.arange(bounded.size))].astype(int)
+        self.shift_y = np.r_[
+            qp.shift_a, self.n_rows + np.where(box_shift >= 0, box_shift, np.arange(bounded.size))
+        ].astype(int)
         self.accept = {1} | ({2} if accept_inaccurate else set())
         self.warm = warm_start
         g, lba, uba, lbx, ubx = qp.vectors(np.zeros(qp.n_state))
-        self._setup = ((sp.triu(qp.H, format="csc"), g, self.A, np.r_[lba, lbx[bounded]], np.r_[uba, ubx[bounded]]),
-                       dict(verbose=False, warm_starting=warm_start != "none", **settings.as_dict()))
+        self._setup = (
+            (
+                sp.triu(qp.H, format="csc"),
+                g,
+                self.A,
+                np.r_[lba, lbx[bounded]],
+                np.r_[uba, ubx[bounded]],
+            ),
+            dict(verbose=False, warm_starting=warm_start != "none", **settings.as_dict()),
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -67,8 +78,14 @@ class OSQPBackend:
         self.solver.setup(*args, **opts)
         self.y = None
 
-    def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
-              dc: np.ndarray | None = None, release: np.ndarray | None = None) -> Solution:
+    def solve(
+        self,
+        z: np.ndarray,
+        w_prev: np.ndarray | None,
+        dv: np.ndarray | None = None,
+        dc: np.ndarray | None = None,
+        release: np.ndarray | None = None,
+    ) -> Solution:
         g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
         self.solver.update(q=g, l=np.r_[lba, lbx[self.bounded]], u=np.r_[uba, ubx[self.bounded]])
         if self.warm == "shift" and w_prev is not None and self.y is not None:
@@ -89,8 +106,17 @@ class ConicBackend:
         opts = dict(options or {})
         if name == "hpipm":
             opts.update({key: qp.stages[key] for key in ("N", "nx", "nu", "ng")})
-            opts.setdefault("hpipm", {"mode": "speed", "iter_max": 30, "res_g_max": 1e-5, "res_b_max": 1e-6,
-                                      "res_d_max": 1e-6, "res_m_max": 1e-6})
+            opts.setdefault(
+                "hpipm",
+                {
+                    "mode": "speed",
+                    "iter_max": 30,
+                    "res_g_max": 1e-5,
+                    "res_b_max": 1e-6,
+                    "res_d_max": 1e-6,
+                    "res_m_max": 1e-6,
+                },
+            )
         elif name == "qpoases":
             opts.setdefault("printLevel", "none")
             opts.setdefault("sparse", False)
@@ -104,10 +130,18 @@ class ConicBackend:
 
     def reset(self) -> None:
         """A new solver instance: qpOASES, for one, hot-starts from the working set of its last call."""
-        self.solver = ca.conic("mpc_qp", self.name, {"h": self.H.sparsity(), "a": self.Am.sparsity()}, self.options)
+        self.solver = ca.conic(
+            "mpc_qp", self.name, {"h": self.H.sparsity(), "a": self.Am.sparsity()}, self.options
+        )
 
-    def solve(self, z: np.ndarray, w_prev: np.ndarray | None, dv: np.ndarray | None = None,
-              dc: np.ndarray | None = None, release: np.ndarray | None = None) -> Solution:
+    def solve(
+        self,
+        z: np.ndarray,
+        w_prev: np.ndarray | None,
+        dv: np.ndarray | None = None,
+        dc: np.ndarray | None = None,
+        release: np.ndarray | None = None,
+    ) -> Solution:
         g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
         args = {"h": self.H, "g": g, "a": self.Am, "lba": lba, "uba": uba, "lbx": lbx, "ubx": ubx}
         if w_prev is not None:
@@ -116,9 +150,18 @@ class ConicBackend:
         stats = self.solver.stats()
         w = np.array(out["x"], dtype=float).ravel()
         ok = bool(stats.get("success", False)) and np.all(np.isfinite(w))
-        status = "solved" if ok else str(stats.get("unified_return_status", stats.get("return_status", "failed")))
-        return Solution(ok, status, w, int(stats.get("iter_count", -1) or -1),
-                        float(stats.get("t_wall_solver", stats.get("t_wall_total", math.nan))))
+        status = (
+            "solved"
+            if ok
+            else str(stats.get("unified_return_status", stats.get("return_status", "failed")))
+        )
+        return Solution(
+            ok,
+            status,
+            w,
+            int(stats.get("iter_count", -1) or -1),
+            float(stats.get("t_wall_solver", stats.get("t_wall_total", math.nan))),
+        )
 
 
 def make_backend(qp: QP, settings: MPCSettings):
@@ -126,8 +169,6 @@ def make_backend(qp: QP, settings: MPCSettings):
     if settings.backend == "osqp":
         return OSQPBackend(qp, settings.osqp, settings.accept_inaccurate, settings.warm_start)
     return ConicBackend(qp, settings.backend)
-
-
 
 
 __all__ = ["Solution", "OSQPBackend", "ConicBackend", "make_backend"]

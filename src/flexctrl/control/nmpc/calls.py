@@ -26,23 +26,31 @@ from flexctrl.sim.bound import BoundFunction
 class BoundRTICalls:
     """``prepare`` and ``qp`` bound to shared arrays (see the module docstring); one per controller."""
 
-    def __init__(self, prepare: ca.Function, qp: ca.Function, H: ca.DM, screen: ScreenedQP | None = None):
+    def __init__(
+        self, prepare: ca.Function, qp: ca.Function, H: ca.DM, screen: ScreenedQP | None = None
+    ):
         #: the QP without its soft rows, tried first (:mod:`flexctrl.control.nmpc.screened_qp`); samples it served
         self.screen, self.screened, self.solves = screen, 0, 0
         if qp.sparsity_in("a") != prepare.sparsity_out("a") or qp.sparsity_in("h") != H.sparsity():
-            raise ValueError("the QP solver's sparsity differs from its data's: build them together (nmpc._build)")
+            raise ValueError(
+                "the QP solver's sparsity differs from its data's: build them together (nmpc._build)"
+            )
         self._w = np.zeros(prepare.nnz_in("w"))
         self._a = np.zeros(prepare.nnz_out("a"))
         self._lba, self._uba = np.zeros(prepare.nnz_out("lba")), np.zeros(prepare.nnz_out("uba"))
         data = {"a": self._a, "lba": self._lba, "uba": self._uba}
         self._prepare = BoundFunction(prepare, {"w": self._w, **data})
         # renewed per solve: HPIPM would otherwise warm-start its multipliers from the last solve's work memory
-        self._qp = BoundFunction(qp, {"h": np.array(H.nonzeros(), dtype=float), "x0": self._w, **data}, renew=True)
+        self._qp = BoundFunction(
+            qp, {"h": np.array(H.nonzeros(), dtype=float), "x0": self._w, **data}, renew=True
+        )
         self._z0 = self._prepare.arrays["z0"]
         self._g, self._lbx, self._ubx = (self._qp.arrays[k] for k in ("g", "lbx", "ubx"))
         self._x = self._qp.arrays["x"].reshape(-1)
 
-    def linearise(self, z0: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def linearise(
+        self, z0: np.ndarray, w0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(a, lba, uba)`` along ``w0`` from ``z0``: the bound arrays themselves (valid until the next call)."""
         self._z0[:] = z0
         self._w[:] = w0

@@ -95,22 +95,29 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.controller import Controller
-from flexctrl.dynamics.parametric import try_expand as _expanded
-from flexctrl.sim.compile import content_key
-from flexctrl.dynamics.parametric import constants_as_parameters
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc.qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.mpc.qp_backends import Solution
 from flexctrl.control.nmpc.calls import BoundRTICalls, DMRTICalls
-from flexctrl.control.nmpc.screened_qp import ScreenedQP, hpipm_options
-from flexctrl.control.nmpc.interval import (RK4_BOUND, auto_substeps, horizon_linearisation, interval_core,
-                                           interval_functions, memoised)
-from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
-from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
+from flexctrl.control.nmpc.interval import (
+    RK4_BOUND,
+    auto_substeps,
+    horizon_linearisation,
+    interval_core,
+    interval_functions,
+    memoised,
+)
 from flexctrl.control.nmpc.jacobian import factored_dynamics
-from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
+from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
+from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
+from flexctrl.control.nmpc.screened_qp import ScreenedQP, hpipm_options
+from flexctrl.dynamics.parametric import constants_as_parameters
+from flexctrl.dynamics.parametric import try_expand as _expanded
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
+from flexctrl.sim.compile import content_key
+from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
+
 
 class _Layout:
     """Index bookkeeping of ``w = [z_0, v_0, s_0, ..., z_N]``."""
@@ -119,7 +126,9 @@ class _Layout:
         self.n, self.m, self.ns, self.N = n, m, ns, N
         self.blk = n + m + ns
         self.nw = N * self.blk + n
-        self.z = np.array([k * self.blk + np.arange(n) for k in range(N)] + [N * self.blk + np.arange(n)])
+        self.z = np.array(
+            [k * self.blk + np.arange(n) for k in range(N)] + [N * self.blk + np.arange(n)]
+        )
         self.v = np.array([k * self.blk + n + np.arange(m) for k in range(N)])
         self.s = np.array([k * self.blk + n + m + np.arange(ns) for k in range(N)]).reshape(N, ns)
         self.shift = _shift_blocks(0, self.blk, N, N * self.blk + np.arange(n))
@@ -127,8 +136,8 @@ class _Layout:
     def split(self, w):
         """(Z (n x N+1), V (m x N), S (ns x N)) of a symbolic or numeric ``w``."""
         head = ca.reshape(w[: self.N * self.blk], self.blk, self.N)
-        Z = ca.horzcat(head[: self.n, :], w[self.N * self.blk:])
-        return Z, head[self.n:self.n + self.m, :], head[self.n + self.m:, :]
+        Z = ca.horzcat(head[: self.n, :], w[self.N * self.blk :])
+        return Z, head[self.n : self.n + self.m, :], head[self.n + self.m :, :]
 
 
 class NMPCController(Controller):
@@ -136,10 +145,23 @@ class NMPCController(Controller):
 
     kind = "nmpc"
 
-    def __init__(self, settings: NMPCSettings, plant: LinearPlant, limits: np.ndarray, problem: ScaledProblem,
-                 observer, functions: dict, layout: _Layout, substeps: int, compiled: bool,
-                 prediction: Prediction | None = None, prediction_plant: LinearPlant | None = None,
-                 bound_calls: bool = True, screen: bool = True, direct_qp: bool = True):
+    def __init__(
+        self,
+        settings: NMPCSettings,
+        plant: LinearPlant,
+        limits: np.ndarray,
+        problem: ScaledProblem,
+        observer,
+        functions: dict,
+        layout: _Layout,
+        substeps: int,
+        compiled: bool,
+        prediction: Prediction | None = None,
+        prediction_plant: LinearPlant | None = None,
+        bound_calls: bool = True,
+        screen: bool = True,
+        direct_qp: bool = True,
+    ):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
         self.plant = plant
         #: the model predicted with and the selection ``x[keep]`` of the design state it sees
@@ -174,7 +196,10 @@ class NMPCController(Controller):
         self._rti_calls = None
 
     def __getstate__(self) -> dict:
-        return {**self.__dict__, "_rti_calls": None}  # buffers bound to this process's memory stay behind
+        return {
+            **self.__dict__,
+            "_rti_calls": None,
+        }  # buffers bound to this process's memory stay behind
 
     def _calls(self):
         if self._rti_calls is None:
@@ -182,8 +207,20 @@ class NMPCController(Controller):
             if not self.bound_calls:
                 self._rti_calls = DMRTICalls(fn["prepare"], fn["qp"], fn["H"])
             else:
-                screen = (ScreenedQP(self.layout, fn["Hnp"].toarray(), fn["prepare"].sparsity_out(0), pb.C, pb.c_lo,
-                                     pb.c_hi, self.settings.qp_warm_start, self.direct_qp) if self.screen else None)
+                screen = (
+                    ScreenedQP(
+                        self.layout,
+                        fn["Hnp"].toarray(),
+                        fn["prepare"].sparsity_out(0),
+                        pb.C,
+                        pb.c_lo,
+                        pb.c_hi,
+                        self.settings.qp_warm_start,
+                        self.direct_qp,
+                    )
+                    if self.screen
+                    else None
+                )
                 self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
         return self._rti_calls
 
@@ -241,13 +278,17 @@ class NMPCController(Controller):
         lay, pb = self.layout, self.problem
         X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
         window = (X.tobytes(), U.tobytes())
-        if self._cost_window is not None and self._cost_window[0] == window:  # e.g. the reference has arrived
+        if (
+            self._cost_window is not None and self._cost_window[0] == window
+        ):  # e.g. the reference has arrived
             w_ref, g = self._cost_window[1]
         else:
             # row by row, as the state is mapped in the loop (one matrix product would round differently)
             w_ref = np.zeros(lay.nw)
-            w_ref[lay.z.ravel()] = ((np.array([self.to_prediction(x) for x in X]) - self.pred_op.x) / pb.Sx).ravel()
-            w_ref[lay.v.ravel()] = ((U[:lay.N] - self.u_out) / pb.Su).ravel()
+            w_ref[lay.z.ravel()] = (
+                (np.array([self.to_prediction(x) for x in X]) - self.pred_op.x) / pb.Sx
+            ).ravel()
+            w_ref[lay.v.ravel()] = ((U[: lay.N] - self.u_out) / pb.Su).ravel()
             g = self.functions["g0"] - self.functions["Hnp"] @ w_ref
             self._cost_window = (window, (w_ref, g))
         self._reference_now = (w_ref[lay.z[0]], w_ref[lay.v[0]])
@@ -260,18 +301,34 @@ class NMPCController(Controller):
         lbx[self.layout.z[0]] = ubx[self.layout.z[0]] = z0
         return lbx, ubx
 
-    def _nlp(self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None) -> Solution:
+    def _nlp(
+        self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None
+    ) -> Solution:
         solver = self.functions["nlp"]
         lbx, ubx = self._bounds(z0)
         start = time.perf_counter()
         g = self.functions["g0"] if g is None else g
-        out = solver(x0=w0, p=np.r_[z0, g], lbx=lbx, ubx=ubx, lbg=self.functions["lbg"], ubg=self.functions["ubg"])
+        out = solver(
+            x0=w0,
+            p=np.r_[z0, g],
+            lbx=lbx,
+            ubx=ubx,
+            lbg=self.functions["lbg"],
+            ubg=self.functions["ubg"],
+        )
         stats = solver.stats()
         w = np.array(out["x"], dtype=float).ravel()
-        ok = bool(stats.get("success", False)) or (stats.get("return_status") == "Maximum_Iterations_Exceeded"
-                                                    and max_iter < self.settings.max_iter)
-        return Solution(ok and bool(np.all(np.isfinite(w))), str(stats.get("return_status", "")), w,
-                        int(stats.get("iter_count", -1)), time.perf_counter() - start)
+        ok = bool(stats.get("success", False)) or (
+            stats.get("return_status") == "Maximum_Iterations_Exceeded"
+            and max_iter < self.settings.max_iter
+        )
+        return Solution(
+            ok and bool(np.all(np.isfinite(w))),
+            str(stats.get("return_status", "")),
+            w,
+            int(stats.get("iter_count", -1)),
+            time.perf_counter() - start,
+        )
 
     def _rti(self, z0: np.ndarray, w0: np.ndarray, g: np.ndarray | None = None) -> Solution:
         """One RTI step: linearise along ``w0``, assemble and solve the QP.
@@ -290,15 +347,22 @@ class NMPCController(Controller):
         problem = qp_data_problem(w0, a, lba, uba)
         if problem:
             self.timing["qp"].append(0.0)
-            return Solution(False, f"non-finite QP data ({problem})", np.full_like(w0, np.nan), 0,
-                            time.perf_counter() - start)
+            return Solution(
+                False,
+                f"non-finite QP data ({problem})",
+                np.full_like(w0, np.nan),
+                0,
+                time.perf_counter() - start,
+            )
         try:
             w, stats = calls.solve(self.functions["g0"] if g is None else g, lbx, ubx)
         except RuntimeError as exc:  # CasADi's checks (e.g. HPIPM's ill-posed bounds) raise
             end = time.perf_counter()
             self.timing["qp"].append(end - mid)
             text = " ".join(str(exc).split())
-            return Solution(False, f"QP solver error: {text[-300:]}", np.full_like(w0, np.nan), 0, end - start)
+            return Solution(
+                False, f"QP solver error: {text[-300:]}", np.full_like(w0, np.nan), 0, end - start
+            )
         end = time.perf_counter()
         self.timing["qp"].append(end - mid)
         ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
@@ -323,7 +387,11 @@ class NMPCController(Controller):
         else:
             w0 = self._w[self.layout.shift]
             w0[self.layout.z[0]] = z0
-        return self._nlp(z0, w0, self.settings.max_iter, g) if self.settings.mode == "full" else self._rti(z0, w0, g)
+        return (
+            self._nlp(z0, w0, self.settings.max_iter, g)
+            if self.settings.mode == "full"
+            else self._rti(z0, w0, g)
+        )
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
@@ -339,7 +407,9 @@ class NMPCController(Controller):
             self._plan = sol.w[lay.v]
             self._age = 0
             if lay.ns:
-                self.stats.slack_max = max(self.stats.slack_max, float(np.max(sol.w[lay.s])) * self.problem.h)
+                self.stats.slack_max = max(
+                    self.stats.slack_max, float(np.max(sol.w[lay.s])) * self.problem.h
+                )
             v = self._plan[0]
         else:
             self._age += 1
@@ -351,7 +421,9 @@ class NMPCController(Controller):
                 used = "shift"
             else:
                 z_ref, v_ref = self._reference_now
-                v = np.clip(v_ref - self.problem.K @ (z0 - z_ref), self.problem.v_lo, self.problem.v_hi)
+                v = np.clip(
+                    v_ref - self.problem.K @ (z0 - z_ref), self.problem.v_lo, self.problem.v_hi
+                )
                 used = "lqr"
                 self._w = None
                 self._plan = None
@@ -362,7 +434,11 @@ class NMPCController(Controller):
 
 def _values(v) -> np.ndarray:
     """The entries of a vector (a DM's stored entries: one list, cheaper than its numpy conversion)."""
-    return np.array(v.nonzeros(), dtype=float) if isinstance(v, ca.DM) else np.asarray(v, dtype=float).ravel()
+    return (
+        np.array(v.nonzeros(), dtype=float)
+        if isinstance(v, ca.DM)
+        else np.asarray(v, dtype=float).ravel()
+    )
 
 
 def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
@@ -374,7 +450,9 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
     """
     if not np.all(np.isfinite(w0)):
         return "non-finite linearisation trajectory"
-    if not (a.is_regular() if isinstance(a, ca.DM) else np.all(np.isfinite(np.asarray(a, dtype=float)))):
+    if not (
+        a.is_regular() if isinstance(a, ca.DM) else np.all(np.isfinite(np.asarray(a, dtype=float)))
+    ):
         return "non-finite sensitivities"
     lo, hi = _values(lba), _values(uba)
     if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
@@ -384,8 +462,16 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
     return ""
 
 
-def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem, substeps: int,
-           jacobian: str = "symbolic", per_use: bool = False, by_recipe: bool = True):
+def _build(
+    model,
+    plant: LinearPlant,
+    settings: NMPCSettings,
+    pb: ScaledProblem,
+    substeps: int,
+    jacobian: str = "symbolic",
+    per_use: bool = False,
+    by_recipe: bool = True,
+):
     """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
 
     ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
@@ -408,14 +494,27 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     P = ca.DM(params)
     xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
     zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    Fz = ca.Function("nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d])
+    Fz = ca.Function(
+        "nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d]
+    )
     # The linearisation depends on the lifted f, its Jacobian, the sizes and the recipe alone:
     # built (and compiled) once per worker for every configuration of one model structure.
     try:
-        key = content_key(fp.serialize(), f_jac.serialize() if f_jac is not None else "", n, m, nc, N, plant.dt,
-                          substeps, settings.sensitivities, settings.jacobian_every, settings.compile,
-                          # named only when grouped: the per-interval key (and its library on disk) stays as it was
-                          *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []))
+        key = content_key(
+            fp.serialize(),
+            f_jac.serialize() if f_jac is not None else "",
+            n,
+            m,
+            nc,
+            N,
+            plant.dt,
+            substeps,
+            settings.sensitivities,
+            settings.jacobian_every,
+            settings.compile,
+            # named only when grouped: the per-interval key (and its library on disk) stays as it was
+            *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []),
+        )
     except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
         key = None
 
@@ -426,16 +525,33 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
         expected = np.array(Fz(z, v)).ravel()
         return bool(np.max(np.abs(ends - expected)) <= 1e-9 * (1.0 + np.max(np.abs(expected))))
 
-    build = lambda: horizon_linearisation(fp, f_jac, nc, n, m, N, plant.dt, substeps, settings,  # noqa: E731
-                                          recipe=key if by_recipe else None, check=reproduces_the_model)
-    linmap, compiled, compile_seconds, cache_hit, reused = (memoised(key, build) if key is not None
-                                                            else (*build(), False))
+    build = lambda: horizon_linearisation(
+        fp,
+        f_jac,
+        nc,
+        n,
+        m,
+        N,
+        plant.dt,
+        substeps,
+        settings,  # noqa: E731
+        recipe=key if by_recipe else None,
+        check=reproduces_the_model,
+    )
+    linmap, compiled, compile_seconds, cache_hit, reused = (
+        memoised(key, build) if key is not None else (*build(), False)
+    )
     # QP assembly in the virtual machine around the compiled linearisation, one Function of (z0, w).
     # (Generating it into the same C function was measured at 9 % less time for this call on
     # the three-link arm, for a second compilation per model structure: not done.)
     z0, w = ca.MX.sym("z0", n), ca.MX.sym("w", lay.nw)
-    prepare = ca.Function("nmpc_prepare", [z0, w], _assembly(linmap, lay, w, P, ca.DM(pb.C), ca.DM(pb.c_lo), ca.DM(pb.c_hi)),
-                          ["z0", "w"], ["a", "lba", "uba"])
+    prepare = ca.Function(
+        "nmpc_prepare",
+        [z0, w],
+        _assembly(linmap, lay, w, P, ca.DM(pb.C), ca.DM(pb.c_lo), ca.DM(pb.c_hi)),
+        ["z0", "w"],
+        ["a", "lba", "uba"],
+    )
     # bounds, cost
     lbx0, ubx0 = np.full(lay.nw, -np.inf), np.full(lay.nw, np.inf)
     for k in range(N):
@@ -460,7 +576,17 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     elif settings.qp_solver == "qpoases":
         opts.update({"printLevel": "none", "sparse": True})
     elif settings.qp_solver == "osqp":
-        opts.update({"osqp": {"verbose": False, "eps_abs": 1e-5, "eps_rel": 1e-5, "max_iter": 4000, "polishing": True}})
+        opts.update(
+            {
+                "osqp": {
+                    "verbose": False,
+                    "eps_abs": 1e-5,
+                    "eps_rel": 1e-5,
+                    "max_iter": 4000,
+                    "polishing": True,
+                }
+            }
+        )
     qp = ca.conic("nmpc_qp", settings.qp_solver, {"h": Hs.sparsity(), "a": a_sp}, opts)
     # rollout under saturated LQR (initial guess)
     zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
@@ -469,12 +595,25 @@ def _build(model, plant: LinearPlant, settings: NMPCSettings, pb: ScaledProblem,
     rollout = lqr_rollout(step, N, n, m)
     import scipy.sparse as sp
 
-    functions = {"prepare": prepare, "lbx0": lbx0, "ubx0": ubx0, "qp": qp, "H": Hs, "g0": g,
-                 "Hnp": sp.csr_matrix(H),
-                 "rollout": rollout,
-                 "linmap": linmap, "F": Fz, "params": params,
-                 "build": {"compile_seconds": compile_seconds, "cache_hit": cache_hit, "n_constants": nc,
-                           "reused": reused}}
+    functions = {
+        "prepare": prepare,
+        "lbx0": lbx0,
+        "ubx0": ubx0,
+        "qp": qp,
+        "H": Hs,
+        "g0": g,
+        "Hnp": sp.csr_matrix(H),
+        "rollout": rollout,
+        "linmap": linmap,
+        "F": Fz,
+        "params": params,
+        "build": {
+            "compile_seconds": compile_seconds,
+            "cache_hit": cache_hit,
+            "n_constants": nc,
+            "reused": reused,
+        },
+    }
     # full NLP (also the RTI initialisation)
     if settings.mode == "full" or settings.init_iter > 0:
         functions.update(nlp_functions(settings, pb, lay, Fz, H, g))
@@ -488,28 +627,41 @@ def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
     Fk, Ak, Bk = linmap(Z[:, :N], V, p)
     rows, lba, uba = [], [], []
     for k in range(N):
-        A_k = Ak[:, k * n:(k + 1) * n]
-        B_k = Bk[:, k * m:(k + 1) * m]
+        A_k = Ak[:, k * n : (k + 1) * n]
+        B_k = Bk[:, k * m : (k + 1) * m]
         b_k = ca.mtimes(A_k, Z[:, k]) + ca.mtimes(B_k, V[:, k]) - Fk[:, k]
         left = k * lay.blk
         right = lay.nw - left - lay.blk - n
-        rows.append(ca.horzcat(ca.MX(n, left), A_k, B_k, ca.MX(n, ns), -ca.MX.eye(n), ca.MX(n, right)))
+        rows.append(
+            ca.horzcat(ca.MX(n, left), A_k, B_k, ca.MX(n, ns), -ca.MX.eye(n), ca.MX(n, right))
+        )
         lba.append(b_k)
         uba.append(b_k)
         if ns:
             CA, CB = ca.mtimes(C, A_k), ca.mtimes(C, B_k)
             Cb = ca.mtimes(C, b_k)
             I_s = ca.MX.eye(ns)
-            for sign, lo, hi in ((-1.0, -ca.inf * ca.DM.ones(ns), c_hi + Cb), (1.0, c_lo + Cb, ca.inf * ca.DM.ones(ns))):
+            for sign, lo, hi in (
+                (-1.0, -ca.inf * ca.DM.ones(ns), c_hi + Cb),
+                (1.0, c_lo + Cb, ca.inf * ca.DM.ones(ns)),
+            ):
                 rows.append(ca.horzcat(ca.MX(ns, left), CA, CB, sign * I_s, ca.MX(ns, n + right)))
                 lba.append(lo)
                 uba.append(hi)
     return [ca.vertcat(*rows), ca.vertcat(*lba), ca.vertcat(*uba)]
 
 
-def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: str = "symbolic",
-                bound_calls: bool = True, screen: bool = True, direct_qp: bool = True,
-                library_by_recipe: bool = True) -> NMPCController:
+def design_nmpc(
+    model,
+    op: OperatingPoint,
+    settings: NMPCSettings,
+    *,
+    jacobian: str = "symbolic",
+    bound_calls: bool = True,
+    screen: bool = True,
+    direct_qp: bool = True,
+    library_by_recipe: bool = True,
+) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
 
     ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
@@ -534,25 +686,46 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings, *, jacobian: 
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)
-    prediction = prediction_model(model, settings.prediction_modes, basis=settings.prediction_basis,
-                                  mapping=settings.prediction_map,
-                                  mass=np.asarray(model.functions["M"](op.x[:model.n_q]), dtype=float),
-                                  a_lin=np.asarray(plant.sys.A, dtype=float))
+    prediction = prediction_model(
+        model,
+        settings.prediction_modes,
+        basis=settings.prediction_basis,
+        mapping=settings.prediction_map,
+        mass=np.asarray(model.functions["M"](op.x[: model.n_q]), dtype=float),
+        a_lin=np.asarray(plant.sys.A, dtype=float),
+    )
     if prediction.reduced:  # its own equilibrium at the target joints, all of its state measured
         pm = prediction.model
         pop = equilibrium(pm, op.joints)
-        pplant = linear_plant(pm, pop, build_sensors(pm, SensorSettings(), pop), settings.sample_time)
+        pplant = linear_plant(
+            pm, pop, build_sensors(pm, SensorSettings(), pop), settings.sample_time
+        )
     else:
         pm, pplant = model, plant
     problem = scaled_problem(pm, pplant, settings, limits)
     substeps = settings.substeps or auto_substeps(pplant)
     # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
     # compiled library serves every configuration of a payload (as for the design model)
-    functions, layout, compiled = _build(pm, pplant, settings, problem, substeps, jacobian, prediction.reduced,
-                                         library_by_recipe)
+    functions, layout, compiled = _build(
+        pm, pplant, settings, problem, substeps, jacobian, prediction.reduced, library_by_recipe
+    )
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
-    return NMPCController(settings, plant, limits, problem, observer, functions, layout, substeps, compiled,
-                          prediction, pplant, bound_calls, screen, direct_qp)
+    return NMPCController(
+        settings,
+        plant,
+        limits,
+        problem,
+        observer,
+        functions,
+        layout,
+        substeps,
+        compiled,
+        prediction,
+        pplant,
+        bound_calls,
+        screen,
+        direct_qp,
+    )
 
 
 __all__ = ["NMPCController", "design_nmpc", "interval_functions", "auto_substeps", "RK4_BOUND"]

@@ -37,7 +37,12 @@ MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 #: HPIPM's ``enum hpipm_status``
 STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
 #: the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their HPIPM setters
-_TOLERANCES = {"res_g_max": "tol_stat", "res_b_max": "tol_eq", "res_d_max": "tol_ineq", "res_m_max": "tol_comp"}
+_TOLERANCES = {
+    "res_g_max": "tol_stat",
+    "res_b_max": "tol_eq",
+    "res_d_max": "tol_ineq",
+    "res_m_max": "tol_comp",
+}
 
 
 class HpipmUnavailable(RuntimeError):
@@ -56,7 +61,9 @@ def library() -> ctypes.CDLL:
     import casadi
 
     folder = os.path.dirname(casadi.__file__)
-    names = sorted(glob.glob(os.path.join(folder, "libhpipm.*")) + glob.glob(os.path.join(folder, "hpipm.dll")))
+    names = sorted(
+        glob.glob(os.path.join(folder, "libhpipm.*")) + glob.glob(os.path.join(folder, "hpipm.dll"))
+    )
     errors = []
     for name in names:
         try:
@@ -64,15 +71,31 @@ def library() -> ctypes.CDLL:
         except OSError as exc:
             errors.append(f"{name}: {exc}")
             continue
-        for fn in ("d_ocp_qp_ipm_solve", "d_ocp_qp_set_all", "d_ocp_qp_sol_get_all", "d_ocp_qp_ipm_get_status"):
+        for fn in (
+            "d_ocp_qp_ipm_solve",
+            "d_ocp_qp_set_all",
+            "d_ocp_qp_sol_get_all",
+            "d_ocp_qp_ipm_get_status",
+        ):
             getattr(lib, fn).restype = None
-        for fn in ("d_ocp_qp_dim_strsize", "d_ocp_qp_dim_memsize", "d_ocp_qp_strsize", "d_ocp_qp_memsize",
-                   "d_ocp_qp_sol_strsize", "d_ocp_qp_sol_memsize", "d_ocp_qp_ipm_arg_strsize",
-                   "d_ocp_qp_ipm_arg_memsize", "d_ocp_qp_ipm_ws_strsize", "d_ocp_qp_ipm_ws_memsize"):
+        for fn in (
+            "d_ocp_qp_dim_strsize",
+            "d_ocp_qp_dim_memsize",
+            "d_ocp_qp_strsize",
+            "d_ocp_qp_memsize",
+            "d_ocp_qp_sol_strsize",
+            "d_ocp_qp_sol_memsize",
+            "d_ocp_qp_ipm_arg_strsize",
+            "d_ocp_qp_ipm_arg_memsize",
+            "d_ocp_qp_ipm_ws_strsize",
+            "d_ocp_qp_ipm_ws_memsize",
+        ):
             getattr(lib, fn).restype = ctypes.c_size_t
         return lib
-    raise HpipmUnavailable(f"no loadable libhpipm in CasADi's folder {folder!r}"
-                           + (f" ({'; '.join(errors)})" if errors else ""))
+    raise HpipmUnavailable(
+        f"no loadable libhpipm in CasADi's folder {folder!r}"
+        + (f" ({'; '.join(errors)})" if errors else "")
+    )
 
 
 def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
@@ -105,8 +128,10 @@ class HpipmOCP:
         self.lib, self.N, self.nx, self.nu = lib, N, nx, nu
         unknown = set(options) - {"mode", "iter_max", "warm_start", *_TOLERANCES}
         if unknown:
-            raise ValueError(f"HPIPM options {sorted(unknown)} are not interfaced; allowed: "
-                             f"{sorted({'mode', 'iter_max', 'warm_start', *_TOLERANCES})}")
+            raise ValueError(
+                f"HPIPM options {sorted(unknown)} are not interfaced; allowed: "
+                f"{sorted({'mode', 'iter_max', 'warm_start', *_TOLERANCES})}"
+            )
         mode = options.get("mode", "speed")
         if mode not in MODES:
             raise ValueError(f"HPIPM mode {mode!r} is not allowed; allowed: {sorted(MODES)}")
@@ -125,43 +150,58 @@ class HpipmOCP:
         def memory(size: int) -> ctypes.Array:
             block = ctypes.create_string_buffer(int(size) + 64)
             self._mem.append(block)
-            return ctypes.c_void_p((ctypes.addressof(block) + 63) // 64 * 64)  # aligned as HPIPM asks
+            return ctypes.c_void_p(
+                (ctypes.addressof(block) + 63) // 64 * 64
+            )  # aligned as HPIPM asks
 
         self._dim = struct("d_ocp_qp_dim")
         lib.d_ocp_qp_dim_create(N, self._dim, memory(lib.d_ocp_qp_dim_memsize(N)))
         ptr = lambda a: a.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
         # nx, nu, nbx, nbu, ng, ns
-        lib.d_ocp_qp_dim_set_all(ptr(nxs), ptr(nus), ptr(zeros), ptr(nus), ptr(zeros), ptr(zeros), self._dim)
+        lib.d_ocp_qp_dim_set_all(
+            ptr(nxs), ptr(nus), ptr(zeros), ptr(nus), ptr(zeros), ptr(zeros), self._dim
+        )
         self._qp = struct("d_ocp_qp")
         lib.d_ocp_qp_create(self._dim, self._qp, memory(lib.d_ocp_qp_memsize(self._dim)))
         self._sol = struct("d_ocp_qp_sol")
         lib.d_ocp_qp_sol_create(self._dim, self._sol, memory(lib.d_ocp_qp_sol_memsize(self._dim)))
         self._arg = struct("d_ocp_qp_ipm_arg")
-        lib.d_ocp_qp_ipm_arg_create(self._dim, self._arg, memory(lib.d_ocp_qp_ipm_arg_memsize(self._dim)))
+        lib.d_ocp_qp_ipm_arg_create(
+            self._dim, self._arg, memory(lib.d_ocp_qp_ipm_arg_memsize(self._dim))
+        )
         lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], self._arg)
         if "iter_max" in options:
-            lib.d_ocp_qp_ipm_arg_set_iter_max(ctypes.byref(ctypes.c_int(int(options["iter_max"]))), self._arg)
+            lib.d_ocp_qp_ipm_arg_set_iter_max(
+                ctypes.byref(ctypes.c_int(int(options["iter_max"]))), self._arg
+            )
         for key, setter in _TOLERANCES.items():
             if key in options:
-                getattr(lib, f"d_ocp_qp_ipm_arg_set_{setter}")(ctypes.byref(ctypes.c_double(float(options[key]))),
-                                                               self._arg)
-        lib.d_ocp_qp_ipm_arg_set_warm_start(ctypes.byref(ctypes.c_int(int(options.get("warm_start", 0)))), self._arg)
+                getattr(lib, f"d_ocp_qp_ipm_arg_set_{setter}")(
+                    ctypes.byref(ctypes.c_double(float(options[key]))), self._arg
+                )
+        lib.d_ocp_qp_ipm_arg_set_warm_start(
+            ctypes.byref(ctypes.c_int(int(options.get("warm_start", 0)))), self._arg
+        )
         self._ws = struct("d_ocp_qp_ipm_ws")
-        lib.d_ocp_qp_ipm_ws_create(self._dim, self._arg, self._ws,
-                                   memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)))
+        lib.d_ocp_qp_ipm_ws_create(
+            self._dim,
+            self._arg,
+            self._ws,
+            memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)),
+        )
         # data arrays, HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered (cols, rows) array
-        self.A = np.zeros((N, nx, nx))          # stage 0's A has no columns (x_0 eliminated): A[0] unused
+        self.A = np.zeros((N, nx, nx))  # stage 0's A has no columns (x_0 eliminated): A[0] unused
         self.B = np.zeros((N, nu, nx))
         self.b = np.zeros((N, nx))
-        self.Q = np.zeros((N + 1, nx, nx))      # Q[0] unused
-        self.S = np.zeros((N + 1, nx, nu))      # S_k (nu x nx) as (nx, nu); S[0] unused
-        self.R = np.zeros((N + 1, nu, nu))      # R[N] unused
+        self.Q = np.zeros((N + 1, nx, nx))  # Q[0] unused
+        self.S = np.zeros((N + 1, nx, nu))  # S_k (nu x nx) as (nx, nu); S[0] unused
+        self.R = np.zeros((N + 1, nu, nu))  # R[N] unused
         self.q = np.zeros((N + 1, nx))
         self.r = np.zeros((N + 1, nu))
         self.lbu = np.zeros((N + 1, nu))
         self.ubu = np.zeros((N + 1, nu))
-        self.u = np.zeros((N + 1, nu))          # primal start, then the solution
-        self.x = np.zeros((N + 1, nx))          # x[0] unused
+        self.u = np.zeros((N + 1, nu))  # primal start, then the solution
+        self.x = np.zeros((N + 1, nx))  # x[0] unused
         idxbu = np.tile(np.arange(nu, dtype=np.int32), N + 1)
         spare = np.zeros(1)  # what the fields of size 0 point at (never read or written)
         self._keep = (idxbu, spare)
@@ -169,23 +209,54 @@ class HpipmOCP:
         A_p = P(self.A, [nx * nx] * N)
         B_p = P(self.B, [nu * nx] * N)
         b_p = P(self.b, [nx] * N)
-        Q_p, S_p, R_p = P(self.Q, [nx * nx] * (N + 1)), P(self.S, [nx * nu] * (N + 1)), P(self.R, [nu * nu] * (N + 1))
+        Q_p, S_p, R_p = (
+            P(self.Q, [nx * nx] * (N + 1)),
+            P(self.S, [nx * nu] * (N + 1)),
+            P(self.R, [nu * nu] * (N + 1)),
+        )
         q_p, r_p = P(self.q, [nx] * (N + 1)), P(self.r, [nu] * (N + 1))
         lbu_p, ubu_p = P(self.lbu, [nu] * (N + 1)), P(self.ubu, [nu] * (N + 1))
         idx_p = P(idxbu, [nu] * (N + 1))
         no_slack = np.full((N + 1) * nu, -1, dtype=np.int32)  # idxs_rev: no constraint has a slack
         self._keep += (no_slack,)
         rev_p = P(no_slack, [nu] * (N + 1))
-        none = P(spare, [0] * (N + 1))          # fields of size 0 (no state bounds, general rows or slacks)
+        none = P(spare, [0] * (N + 1))  # fields of size 0 (no state bounds, general rows or slacks)
         # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns of them
-        self._set_all = (A_p, B_p, b_p, Q_p, S_p, R_p, q_p, r_p, none, none, none, idx_p, lbu_p, ubu_p,
-                         none, none, none, none, none, none, none, none, none, rev_p, none, none, self._qp)
+        self._set_all = (
+            A_p,
+            B_p,
+            b_p,
+            Q_p,
+            S_p,
+            R_p,
+            q_p,
+            r_p,
+            none,
+            none,
+            none,
+            idx_p,
+            lbu_p,
+            ubu_p,
+            none,
+            none,
+            none,
+            none,
+            none,
+            none,
+            none,
+            none,
+            none,
+            rev_p,
+            none,
+            none,
+            self._qp,
+        )
         u_p, x_p = P(self.u, [nu] * (N + 1)), P(self.x, [nx] * (N + 1))
         multipliers = np.zeros(2 * (N + 1) * (nx + nu) + N * nx)
         self._keep += (multipliers,)
         pi_p = P(multipliers, [nx] * N)
-        lb_p = P(multipliers[N * nx:], [nu] * (N + 1))
-        ub_p = P(multipliers[N * nx + (N + 1) * nu:], [nu] * (N + 1))
+        lb_p = P(multipliers[N * nx :], [nu] * (N + 1))
+        ub_p = P(multipliers[N * nx + (N + 1) * nu :], [nu] * (N + 1))
         # u, x, ls, us, pi, lam_lb, lam_ub, lam_lg, lam_ug, lam_ls, lam_us
         self._sol_all = (u_p, x_p, none, none, pi_p, lb_p, ub_p, none, none, none, none)
         self._status, self._iter = ctypes.c_int(-1), ctypes.c_int(-1)
@@ -207,8 +278,11 @@ class HpipmOCP:
         lib.d_ocp_qp_ipm_get_status(self._ws, ctypes.byref(self._status))
         lib.d_ocp_qp_ipm_get_iter(self._ws, ctypes.byref(self._iter))
         status = int(self._status.value)
-        return {"success": status == 0, "return_status": STATUS.get(status, f"status {status}"),
-                "iter_count": int(self._iter.value)}
+        return {
+            "success": status == 0,
+            "return_status": STATUS.get(status, f"status {status}"),
+            "iter_count": int(self._iter.value),
+        }
 
 
 __all__ = ["HpipmOCP", "HpipmUnavailable", "library", "MODES", "STATUS"]

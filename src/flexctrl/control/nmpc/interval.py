@@ -30,13 +30,14 @@ from __future__ import annotations
 import hashlib
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-from flexctrl.dynamics.parametric import Memo, try_expand as _expanded
+from flexctrl.dynamics.parametric import Memo
+from flexctrl.dynamics.parametric import try_expand as _expanded
 from flexctrl.sim.rk4 import rk4_next
 
 #: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).
@@ -62,9 +63,17 @@ def _frozen_transition(Jx, Ju, h: float, steps: int, eye):
     return Phi_k, Gam_k
 
 
-def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, sensitivities: str | None,
-                  extra: tuple[ca.MX, ...] = (), f_jac: ca.Function | None = None,
-                  jacobian_every: int = 1) -> tuple[ca.Function, ca.Function | None]:
+def interval_core(
+    f: ca.Function,
+    nx: int,
+    nu: int,
+    dt: float,
+    substeps: int,
+    sensitivities: str | None,
+    extra: tuple[ca.MX, ...] = (),
+    f_jac: ca.Function | None = None,
+    jacobian_every: int = 1,
+) -> tuple[ca.Function, ca.Function | None]:
     """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see the module docstring).
 
     ``sensitivities=None`` builds ``F`` only (``FJ`` is None).  ``f_jac(x, u, *extra) ->
@@ -72,7 +81,9 @@ def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, se
     per Jacobian of ``f`` (``"frozen"`` only).
     """
     if jacobian_every < 1:
-        raise ValueError(f"jacobian_every = {jacobian_every} is not allowed; allowed: an integer >= 1")
+        raise ValueError(
+            f"jacobian_every = {jacobian_every} is not allowed; allowed: an integer >= 1"
+        )
     x, u = ca.MX.sym("x", nx), ca.MX.sym("u", nu)
     names = ["x", "u"] + [f"p{i}" for i in range(len(extra))]
     h = dt / substeps
@@ -86,7 +97,9 @@ def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, se
     xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
     es = [ca.SX.sym(f"p{i}", e.sparsity()) for i, e in enumerate(extra)]
     fxu = f(xs, us, *es)
-    fx = f_jac or ca.Function("f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True})
+    fx = f_jac or ca.Function(
+        "f_jac", [xs, us, *es], [fxu, ca.jacobian(fxu, xs), ca.jacobian(fxu, us)], {"cse": True}
+    )
     eye = ca.DM.eye(nx)
 
     def with_sensitivities(state):
@@ -125,8 +138,9 @@ def interval_core(f: ca.Function, nx: int, nu: int, dt: float, substeps: int, se
     return F, FJ
 
 
-def interval_functions(model, dt: float, substeps: int, sensitivities: str | None,
-                       jacobian_every: int = 1) -> tuple[ca.Function, ca.Function | None]:
+def interval_functions(
+    model, dt: float, substeps: int, sensitivities: str | None, jacobian_every: int = 1
+) -> tuple[ca.Function, ca.Function | None]:
     """``F(x, u) -> x_next`` and ``FJ(x, u) -> (x_next, A, B)`` over one sample, physical units.
 
     ``F``: ``substeps`` classical RK4 steps of the model's ``f``.  ``FJ`` adds the
@@ -135,7 +149,9 @@ def interval_functions(model, dt: float, substeps: int, sensitivities: str | Non
     ``jacobian_every``-th RK4 step (see the module docstring).
     """
     f = _expanded(model.functions["f"])
-    return interval_core(f, model.n_x, model.n_u, dt, substeps, sensitivities, jacobian_every=jacobian_every)
+    return interval_core(
+        f, model.n_x, model.n_u, dt, substeps, sensitivities, jacobian_every=jacobian_every
+    )
 
 
 def group_centres(N: int, stages: int) -> list[int]:
@@ -147,8 +163,9 @@ def group_centres(N: int, stages: int) -> list[int]:
     return [j + (min(stages, N - j) - 1) // 2 for j in range(0, N, stages)]
 
 
-def grouped_sensitivities(shoot: ca.Function, lin: ca.Function, n: int, m: int, N: int,
-                          stages: int) -> ca.Function:
+def grouped_sensitivities(
+    shoot: ca.Function, lin: ca.Function, n: int, m: int, N: int, stages: int
+) -> ca.Function:
     """``(Z, V, p) -> (F, A, B)`` over ``N`` intervals with one ``(A, B)`` per ``stages`` of them.
 
     ``shoot(z, v, p) -> F`` gives every interval's nonlinear shooting end; ``lin(z, v, p) ->
@@ -160,13 +177,17 @@ def grouped_sensitivities(shoot: ca.Function, lin: ca.Function, n: int, m: int, 
     centres = group_centres(N, stages)
     Z, V, p = ca.MX.sym("Z", n, N), ca.MX.sym("V", m, N), ca.MX.sym("p", lin.sparsity_in(2))
     F = shoot.map("nmpc_shoot_map", "serial", N, [2], [])(Z, V, p)
-    _, Ac, Bc = lin.map("nmpc_centres_map", "serial", len(centres), [2], [])(Z[:, centres], V[:, centres], p)
+    _, Ac, Bc = lin.map("nmpc_centres_map", "serial", len(centres), [2], [])(
+        Z[:, centres], V[:, centres], p
+    )
     A, B = [], []
     for g, j in enumerate(range(0, N, stages)):
         for _ in range(min(stages, N - j)):
-            A.append(Ac[:, g * n:(g + 1) * n])
-            B.append(Bc[:, g * m:(g + 1) * m])
-    return ca.Function(linearisation_name(N, stages), [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)])
+            A.append(Ac[:, g * n : (g + 1) * n])
+            B.append(Bc[:, g * m : (g + 1) * m])
+    return ca.Function(
+        linearisation_name(N, stages), [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)]
+    )
 
 
 def linearisation_name(N: int, stages: int) -> str:
@@ -174,8 +195,17 @@ def linearisation_name(N: int, stages: int) -> str:
     return f"nmpc_linearize_{N}_by_{stages}" if stages > 1 else f"nmpc_linearize_{N}"
 
 
-def symbolic_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
-                           substeps: int, settings) -> ca.Function:
+def symbolic_linearisation(
+    fp: ca.Function,
+    f_jac: ca.Function | None,
+    nc: int,
+    n: int,
+    m: int,
+    N: int,
+    dt: float,
+    substeps: int,
+    settings,
+) -> ca.Function:
     """``linmap(Z, V, p) -> (F, A, B)``: the scaled shooting intervals over the horizon.
 
     ``p = (x_op, u_op, S_x, S_u, c)``.
@@ -184,20 +214,31 @@ def symbolic_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, 
     when ``nc = 0``); ``settings`` an :class:`~flexctrl.spec.controller_settings.NMPCSettings`.
     """
     extra = (ca.MX.sym("c", nc),) if nc else ()
-    Fp, FJp = interval_core(fp if nc else _expanded(fp), n, m, dt, substeps, settings.sensitivities, extra, f_jac,
-                            settings.jacobian_every)
+    Fp, FJp = interval_core(
+        fp if nc else _expanded(fp),
+        n,
+        m,
+        dt,
+        substeps,
+        settings.sensitivities,
+        extra,
+        f_jac,
+        settings.jacobian_every,
+    )
     p = ca.MX.sym("p", 2 * n + 2 * m + nc)
-    xop, uop = p[:n], p[n:n + m]
-    Sx, Su = p[n + m:2 * n + m], p[2 * n + m:2 * n + 2 * m]
+    xop, uop = p[:n], p[n : n + m]
+    Sx, Su = p[n + m : 2 * n + m], p[2 * n + m : 2 * n + 2 * m]
     z, v = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    consts = (p[2 * n + 2 * m:],) if nc else ()
+    consts = (p[2 * n + 2 * m :],) if nc else ()
     xn, Ad, Bd = FJp(xop + Sx * z, uop + Su * v, *consts)
     Fs = (xn - xop) / Sx
     As = Ad * ca.repmat(Sx.T, n, 1) / ca.repmat(Sx, 1, n)
     Bs = Bd * ca.repmat(Su.T, n, 1) / ca.repmat(Sx, 1, m)
     lin = ca.Function("nmpc_interval", [z, v, p], [Fs, As, Bs], ["z", "v", "p"], ["F", "A", "B"])
     if settings.stages_per_jacobian > 1:
-        shoot = ca.Function("nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx])
+        shoot = ca.Function(
+            "nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx]
+        )
         return grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
     return lin.map(linearisation_name(N, 1), "serial", N, [2], [])
 
@@ -226,9 +267,19 @@ def builder_source_digest() -> str:
     return _BUILDER_SOURCE_DIGEST
 
 
-def horizon_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n: int, m: int, N: int, dt: float,
-                          substeps: int, settings, recipe: str | None = None,
-                          check: Callable[[ca.Function], bool] | None = None) -> tuple:
+def horizon_linearisation(
+    fp: ca.Function,
+    f_jac: ca.Function | None,
+    nc: int,
+    n: int,
+    m: int,
+    N: int,
+    dt: float,
+    substeps: int,
+    settings,
+    recipe: str | None = None,
+    check: Callable[[ca.Function], bool] | None = None,
+) -> tuple:
     """``(linmap, compiled, compile_seconds, cache_hit)`` of :func:`symbolic_linearisation`.
 
     Compiled to C when ``settings.compile`` (the library from the disk cache when its code
@@ -248,8 +299,12 @@ def horizon_linearisation(fp: ca.Function, f_jac: ca.Function | None, nc: int, n
     if recipe is None:
         result = compile_function(build())
     else:
-        result = compile_by_recipe(linearisation_name(N, settings.stages_per_jacobian),
-                                   f"{recipe}\0{builder_source_digest()}", build, check=check)
+        result = compile_by_recipe(
+            linearisation_name(N, settings.stages_per_jacobian),
+            f"{recipe}\0{builder_source_digest()}",
+            build,
+            check=check,
+        )
     return result.function, result.compiled, result.compile_seconds, result.cache_hit
 
 
@@ -273,6 +328,16 @@ def memoised(key: str, build: Callable[[], tuple]) -> tuple:
     return (*value, reused)
 
 
-__all__ = ["interval_core", "interval_functions", "auto_substeps", "RK4_BOUND", "memoised", "group_centres",
-           "grouped_sensitivities", "horizon_linearisation", "symbolic_linearisation", "linearisation_name",
-           "builder_source_digest"]
+__all__ = [
+    "interval_core",
+    "interval_functions",
+    "auto_substeps",
+    "RK4_BOUND",
+    "memoised",
+    "group_centres",
+    "grouped_sensitivities",
+    "horizon_linearisation",
+    "symbolic_linearisation",
+    "linearisation_name",
+    "builder_source_digest",
+]

@@ -42,9 +42,17 @@ def equation_terms(model) -> ca.Function:
     B = ca.vertcat(ca.SX.eye(n), ca.SX.zeros(N - n, n))
     r = ca.mtimes(B, u) - fn["c"](q, qd) - fn["g"](q) - ca.mtimes(K, q) - ca.mtimes(D, qd)
     x = ca.vertcat(q, qd)
-    r_x = ca.jacobian(r - ca.mtimes(M, a), x)  # one Jacobian: M a and c share their configuration derivatives
-    return ca.Function("nmpc_terms", [x, u, a], [M, r, r_x, ca.jacobian(r, u)], ["x", "u", "a"],
-                       ["M", "r", "r_x", "r_u"], {"cse": True})
+    r_x = ca.jacobian(
+        r - ca.mtimes(M, a), x
+    )  # one Jacobian: M a and c share their configuration derivatives
+    return ca.Function(
+        "nmpc_terms",
+        [x, u, a],
+        [M, r, r_x, ca.jacobian(r, u)],
+        ["x", "u", "a"],
+        ["M", "r", "r_x", "r_u"],
+        {"cse": True},
+    )
 
 
 def factored_dynamics(model) -> tuple[ca.Function, ca.Function, np.ndarray]:
@@ -76,14 +84,23 @@ def factored_dynamics(model) -> tuple[ca.Function, ca.Function, np.ndarray]:
     f_u = ca.vertcat(ca.SX(N, n), solve_columns(r_u))
     names = ["x", "u"] + (["c"] if cs else [])
     f = ca.Function("f_factored", [x, u, *cs], [xdot], names, ["xdot"], {"cse": True})
-    f_jac = ca.Function("f_jac_factored", [x, u, *cs], [xdot, f_x, f_u], names, ["xdot", "f_x", "f_u"], {"cse": True})
+    f_jac = ca.Function(
+        "f_jac_factored",
+        [x, u, *cs],
+        [xdot, f_x, f_u],
+        names,
+        ["xdot", "f_x", "f_u"],
+        {"cse": True},
+    )
     rng = np.random.default_rng(0)
     x0, u0 = 0.1 * rng.standard_normal(2 * N), rng.standard_normal(n)
     want = np.array(model.functions["f"](x0, u0), dtype=float).ravel()
     got = np.array(f(x0, u0, *([const] if cs else [])), dtype=float).ravel()
     if not np.allclose(got, want, rtol=1e-9, atol=1e-9 * max(1.0, float(np.max(np.abs(want))))):
-        raise ValueError(f"model {model.name!r}: M(q)^-1 (B u - c - g - K q - D qd) does not reproduce its f "
-                         f"(max difference {np.max(np.abs(got - want)):.3g}); use jacobian = \"symbolic\"")
+        raise ValueError(
+            f"model {model.name!r}: M(q)^-1 (B u - c - g - K q - D qd) does not reproduce its f "
+            f'(max difference {np.max(np.abs(got - want)):.3g}); use jacobian = "symbolic"'
+        )
     return f, f_jac, const
 
 

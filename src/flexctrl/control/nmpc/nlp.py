@@ -28,8 +28,9 @@ def lqr_rollout(step: ca.Function, N: int, n: int, m: int) -> ca.Function:
     return ca.Function("nmpc_rollout", [z0, Zr, Vr], [ca.horzcat(*Z), ca.horzcat(*V)])
 
 
-def nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay, Fz: ca.Function, H: np.ndarray,
-                  g: np.ndarray) -> dict:
+def nlp_functions(
+    settings: NMPCSettings, pb: ScaledProblem, lay, Fz: ca.Function, H: np.ndarray, g: np.ndarray
+) -> dict:
     """``{"nlp", "lbg", "ubg"}``: IPOPT on ``min 1/2 w'Hw + p_g'w`` s.t. the nonlinear shooting and soft rows.
 
     ``lay`` is the QP's layout (``nmpc._Layout``), ``Fz`` the scaled shooting map; the
@@ -37,7 +38,9 @@ def nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay, Fz: ca.Functio
     """
     N, n, ns = lay.N, lay.n, lay.ns
     w = ca.MX.sym("w", lay.nw)
-    p = ca.MX.sym("p", n + lay.nw)  # the initial state, then the linear cost (the reference enters there)
+    p = ca.MX.sym(
+        "p", n + lay.nw
+    )  # the initial state, then the linear cost (the reference enters there)
     Z, V, S = lay.split(w)
     Fmap = Fz.map(N)
     ends = Fmap(Z[:, :N], V)
@@ -55,9 +58,18 @@ def nlp_functions(settings: NMPCSettings, pb: ScaledProblem, lay, Fz: ca.Functio
             ubg += [pb.c_hi, np.full(ns, np.inf)]
     cost = 0.5 * ca.bilin(ca.DM(ca.sparsify(ca.DM(H))), w, w) + ca.dot(p[n:], w)
     nlp = {"x": w, "p": p, "f": cost, "g": ca.vertcat(*cons)}
-    opts = {"ipopt": {"print_level": 0, "max_iter": settings.max_iter, "hessian_approximation": "limited-memory",
-                      "warm_start_init_point": "yes", "tol": 1e-6, "sb": "yes"},
-            "print_time": False, "error_on_fail": False}
+    opts = {
+        "ipopt": {
+            "print_level": 0,
+            "max_iter": settings.max_iter,
+            "hessian_approximation": "limited-memory",
+            "warm_start_init_point": "yes",
+            "tol": 1e-6,
+            "sb": "yes",
+        },
+        "print_time": False,
+        "error_on_fail": False,
+    }
     solver = ca.nlpsol("nmpc_nlp", settings.nlp_solver, nlp, opts)
     return {"nlp": solver, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg)}
 

@@ -76,8 +76,11 @@ def _kept_coordinates(model, modes: int) -> np.ndarray:
     info = getattr(model, "info", {}) or {}
     n_modes = info.get("n_modes")
     if info.get("family") != "amm" or n_modes is None:
-        raise SpecError(f"prediction_modes = {modes} needs an assumed-modes design model ('amm:N'); "
-                        f"the design model is {getattr(model, 'fidelity', '?')}", key="prediction_modes")
+        raise SpecError(
+            f"prediction_modes = {modes} needs an assumed-modes design model ('amm:N'); "
+            f"the design model is {getattr(model, 'fidelity', '?')}",
+            key="prediction_modes",
+        )
     n = model.n_u
     keep = list(range(n))
     offset = n
@@ -85,8 +88,11 @@ def _kept_coordinates(model, modes: int) -> np.ndarray:
         keep += [offset + j for j in range(min(modes, int(count)))]
         offset += int(count)
     if offset != model.n_q:
-        raise SpecError(f"the design model's modes per link {list(n_modes)} do not add up to its "
-                        f"{model.n_q - n} elastic coordinates", key="prediction_modes")
+        raise SpecError(
+            f"the design model's modes per link {list(n_modes)} do not add up to its "
+            f"{model.n_q - n} elastic coordinates",
+            key="prediction_modes",
+        )
     return np.asarray(keep, dtype=int)
 
 
@@ -111,9 +117,20 @@ def truncated_model(model, modes: int):
     P[keep_q, np.arange(keep_q.size)] = 1.0
     names = tuple(model.coordinate_names[i] for i in keep_q)
     n_modes = [min(modes, int(c)) for c in model.info["n_modes"]]
-    info = dict(model.info, n_modes=n_modes, truncated_from=str(model.fidelity), kept_coordinates=keep_q.tolist())
-    fidelity = replace(model.fidelity, count=max(n_modes)) if getattr(model.fidelity, "kind", None) == "amm" else model.fidelity
-    return projected_model(model, P, names, f"{model.name} (first {modes} modes per link)", fidelity, info), keep_q
+    info = dict(
+        model.info,
+        n_modes=n_modes,
+        truncated_from=str(model.fidelity),
+        kept_coordinates=keep_q.tolist(),
+    )
+    fidelity = (
+        replace(model.fidelity, count=max(n_modes))
+        if getattr(model.fidelity, "kind", None) == "amm"
+        else model.fidelity
+    )
+    return projected_model(
+        model, P, names, f"{model.name} (first {modes} modes per link)", fidelity, info
+    ), keep_q
 
 
 def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: dict):
@@ -144,16 +161,30 @@ def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: 
         "M": ca.Function("M", [q], [M_r], ["q"], ["M"], opts),
         "c": ca.Function("c", [q, qd], [c_r], ["q", "qd"], ["c"], opts),
         "g": ca.Function("g", [q], [g_r], ["q"], ["g"], opts),
-        "K": ca.Function("K", [q], [K_r], ["q"], ["K"], opts) if scheduled else ca.Function("K", [], [ca.DM(ca.evalf(K_r))], [], ["K"]),
-        "D": ca.Function("D", [q], [D_r], ["q"], ["D"], opts) if fn["D"].n_in() > 0
+        "K": ca.Function("K", [q], [K_r], ["q"], ["K"], opts)
+        if scheduled
+        else ca.Function("K", [], [ca.DM(ca.evalf(K_r))], [], ["K"]),
+        "D": ca.Function("D", [q], [D_r], ["q"], ["D"], opts)
+        if fn["D"].n_in() > 0
         else ca.Function("D", [], [ca.DM(ca.evalf(D_r))], [], ["D"]),
         "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
-        "energies": ca.Function("energies", [q, qd], list(energies), ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts),
+        "energies": ca.Function(
+            "energies", [q, qd], list(energies), ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+        ),
         "tip": ca.Function("tip", [q, qd], list(tip), ["q", "qd"], ["p", "v"], opts),
         "hubs": ca.Function("hubs", [q], [fn["hubs"](qf)], ["q"], ["p"], opts),
         "deflection": ca.Function("deflection", [q], [w, dw], ["q"], ["w", "dw"], opts),
     }
-    return Model(name, fidelity, model.n_joints, tuple(names), functions, model.omega_max, spec=model.spec, info=info)
+    return Model(
+        name,
+        fidelity,
+        model.n_joints,
+        tuple(names),
+        functions,
+        model.omega_max,
+        spec=model.spec,
+        info=info,
+    )
 
 
 def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic: int) -> np.ndarray:
@@ -178,8 +209,15 @@ def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic:
     return sl.block_diag(np.eye(n_joints), U[:, :n_elastic])
 
 
-def prediction_model(model, modes: int, *, basis: str = "assumed", mapping: str = "select",
-                     mass: np.ndarray | None = None, a_lin: np.ndarray | None = None) -> Prediction:
+def prediction_model(
+    model,
+    modes: int,
+    *,
+    basis: str = "assumed",
+    mapping: str = "select",
+    mass: np.ndarray | None = None,
+    a_lin: np.ndarray | None = None,
+) -> Prediction:
     """The NMPC's :class:`Prediction` for ``prediction_modes = modes`` (0: the design model itself).
 
     ``basis``: ``"assumed"`` (the first ``modes`` assumed modes per link,
@@ -197,24 +235,38 @@ def prediction_model(model, modes: int, *, basis: str = "assumed", mapping: str 
     if basis == "assumed" and mapping == "select":
         return Prediction(reduced, keep, True)
     if mass is None or a_lin is None:
-        raise ValueError(f"prediction basis {basis!r} with mapping {mapping!r} needs the mass matrix and the linearisation")
+        raise ValueError(
+            f"prediction basis {basis!r} with mapping {mapping!r} needs the mass matrix and the linearisation"
+        )
     if basis == "coupled":
         P = coupled_basis(mass, a_lin, model.n_u, keep_q.size - model.n_u)
-        names = tuple(model.coordinate_names[:model.n_u]) + tuple(f"eta{j + 1}" for j in range(P.shape[1] - model.n_u))
+        names = tuple(model.coordinate_names[: model.n_u]) + tuple(
+            f"eta{j + 1}" for j in range(P.shape[1] - model.n_u)
+        )
         info = dict(model.info, truncated_from=str(model.fidelity), basis="coupled")
-        reduced = projected_model(model, P, names, f"{model.name} (slowest {P.shape[1] - model.n_u} coupled modes)",
-                                  reduced.fidelity, info)
+        reduced = projected_model(
+            model,
+            P,
+            names,
+            f"{model.name} (slowest {P.shape[1] - model.n_u} coupled modes)",
+            reduced.fidelity,
+            info,
+        )
     elif basis == "assumed":
         P = np.zeros((model.n_q, keep_q.size))
         P[keep_q, np.arange(keep_q.size)] = 1.0
     else:
-        raise ValueError(f"prediction basis {basis!r} is not allowed; allowed: 'assumed', 'coupled'")
+        raise ValueError(
+            f"prediction basis {basis!r} is not allowed; allowed: 'assumed', 'coupled'"
+        )
     if mapping == "modal":
         T = modal_map(mass, a_lin, P)
     elif mapping == "select":
         T = np.kron(np.eye(2), np.linalg.pinv(P))
     else:
-        raise ValueError(f"prediction mapping {mapping!r} is not allowed; allowed: 'modal', 'select'")
+        raise ValueError(
+            f"prediction mapping {mapping!r} is not allowed; allowed: 'modal', 'select'"
+        )
     return Prediction(reduced, keep, True, T)
 
 
@@ -254,8 +306,10 @@ def modal_map(mass: np.ndarray, a_lin: np.ndarray, basis: np.ndarray) -> np.ndar
     SPhi = basis.T @ Ps
     cond = np.linalg.cond(SPhi)
     if not np.isfinite(cond) or cond > 1e8:
-        raise ValueError(f"the {basis.shape[1]} slowest modes do not span the prediction's coordinates "
-                         f"(condition number {cond:.3g}); use prediction_map = \"select\"")
+        raise ValueError(
+            f"the {basis.shape[1]} slowest modes do not span the prediction's coordinates "
+            f'(condition number {cond:.3g}); use prediction_map = "select"'
+        )
     Tq = SPhi @ Ps.T @ M
     return sl.block_diag(Tq, Tq)
 

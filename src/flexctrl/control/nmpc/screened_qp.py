@@ -36,9 +36,21 @@ from flexctrl.sim.bound import BoundFunction
 
 def hpipm_options(N: int, n: int, nu: int, ng: int, warm_start: bool) -> dict:
     """``casadi.conic`` options of HPIPM for ``N`` stages of ``n`` states, ``nu`` inputs and ``ng`` rows each."""
-    return {"N": N, "nx": [n] * (N + 1), "nu": [nu] * N + [0], "ng": [ng] * N + [0],
-            "hpipm": {"mode": "speed", "iter_max": 30, "res_g_max": 1e-5, "res_b_max": 1e-6,
-                      "res_d_max": 1e-6, "res_m_max": 1e-6, **({"warm_start": 1} if warm_start else {})}}
+    return {
+        "N": N,
+        "nx": [n] * (N + 1),
+        "nu": [nu] * N + [0],
+        "ng": [ng] * N + [0],
+        "hpipm": {
+            "mode": "speed",
+            "iter_max": 30,
+            "res_g_max": 1e-5,
+            "res_b_max": 1e-6,
+            "res_d_max": 1e-6,
+            "res_m_max": 1e-6,
+            **({"warm_start": 1} if warm_start else {}),
+        },
+    }
 
 
 class ScreenedQP:
@@ -63,8 +75,17 @@ class ScreenedQP:
         when CasADi's ``libhpipm`` cannot be loaded, named in :attr:`backend`).
     """
 
-    def __init__(self, layout, H: np.ndarray, a_sparsity: ca.Sparsity, C: np.ndarray, c_lo: np.ndarray,
-                 c_hi: np.ndarray, warm_start: bool, direct: bool = True):
+    def __init__(
+        self,
+        layout,
+        H: np.ndarray,
+        a_sparsity: ca.Sparsity,
+        C: np.ndarray,
+        c_lo: np.ndarray,
+        c_hi: np.ndarray,
+        warm_start: bool,
+        direct: bool = True,
+    ):
         n, m, ns, N = layout.n, layout.m, layout.ns, layout.N
         self.layout = layout
         slack = np.zeros(layout.nw, dtype=bool)
@@ -74,7 +95,11 @@ class ScreenedQP:
         self.rows = np.concatenate([k * (n + 2 * ns) + np.arange(n) for k in range(N)])
         # nonzeros of the whole A that the kept rows and columns select, in the smaller A's order
         numbered = ca.DM(a_sparsity, np.arange(1, a_sparsity.nnz() + 1, dtype=float))
-        self.C, self.c_lo, self.c_hi = np.asarray(C, dtype=float), np.asarray(c_lo, dtype=float), np.asarray(c_hi, dtype=float)
+        self.C, self.c_lo, self.c_hi = (
+            np.asarray(C, dtype=float),
+            np.asarray(c_lo, dtype=float),
+            np.asarray(c_hi, dtype=float),
+        )
         #: the smaller QP's ``z_1 .. z_N`` in its own ``w``
         self._z_next = np.array([self.keep.searchsorted(layout.z[k + 1]) for k in range(N)])
         options = hpipm_options(N, n, m, 0, warm_start)
@@ -92,14 +117,28 @@ class ScreenedQP:
             self.entries = np.array(sub.nonzeros(), dtype=int) - 1
             Hk = H[np.ix_(self.keep, self.keep)]
             H_sp = ca.DM(ca.sparsify(ca.DM(Hk)))
-            self.qp = ca.conic("nmpc_qp_screened", "hpipm", {"h": H_sp.sparsity(), "a": sub.sparsity()},
-                               {"error_on_fail": False, **options})
-            self._bound = BoundFunction(self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True)
+            self.qp = ca.conic(
+                "nmpc_qp_screened",
+                "hpipm",
+                {"h": H_sp.sparsity(), "a": sub.sparsity()},
+                {"error_on_fail": False, **options},
+            )
+            self._bound = BoundFunction(
+                self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True
+            )
             self._in = self._bound.arrays
             self._x = self._bound.arrays["x"].reshape(-1)
 
-    def solve(self, a: np.ndarray, lba: np.ndarray, uba: np.ndarray, g: np.ndarray, lbx: np.ndarray,
-              ubx: np.ndarray, w0: np.ndarray) -> tuple[np.ndarray | None, dict]:
+    def solve(
+        self,
+        a: np.ndarray,
+        lba: np.ndarray,
+        uba: np.ndarray,
+        g: np.ndarray,
+        lbx: np.ndarray,
+        ubx: np.ndarray,
+        w0: np.ndarray,
+    ) -> tuple[np.ndarray | None, dict]:
         """The whole QP's solution with zero slacks if the smaller QP's satisfies the soft rows, else None; its stats.
 
         Arguments are the whole QP's data (``a`` the nonzeros of its constraint matrix).
@@ -150,7 +189,7 @@ class HpipmStages:
         self.layout = layout
         self.ocp = HpipmOCP(N, n, m, options)
         self.z_index = np.array([layout.z[k] for k in range(N + 1)])  # (N + 1, n)
-        self.v_index = np.array([layout.v[k] for k in range(N)])      # (N, m)
+        self.v_index = np.array([layout.v[k] for k in range(N)])  # (N, m)
         # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a structural zero)
         nnz = numbered.nnz()
         numbered = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
@@ -175,8 +214,10 @@ class HpipmStages:
         kept = np.zeros(layout.nw, dtype=bool)
         kept[self.z_index.ravel()] = kept[self.v_index.ravel()] = True
         if np.any(H[np.ix_(kept, kept)][~blocks[np.ix_(kept, kept)]] != 0.0):
-            raise ValueError("the direct HPIPM path takes a Hessian without cross terms between stages, states and "
-                             "inputs (the NMPC's); use ScreenedQP(..., direct=False)")
+            raise ValueError(
+                "the direct HPIPM path takes a Hessian without cross terms between stages, states and "
+                "inputs (the NMPC's); use ScreenedQP(..., direct=False)"
+            )
         state_bounds = np.ones(layout.nw, dtype=bool)
         state_bounds[self.v_index.ravel()] = False
         state_bounds[self.z_index[0]] = False
@@ -184,8 +225,15 @@ class HpipmStages:
         slack[layout.s.ravel()] = True
         self._state_bounds = np.flatnonzero(state_bounds & ~slack)
 
-    def solve(self, a: np.ndarray, lba: np.ndarray, g: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
-              w0: np.ndarray) -> tuple[np.ndarray, dict]:
+    def solve(
+        self,
+        a: np.ndarray,
+        lba: np.ndarray,
+        g: np.ndarray,
+        lbx: np.ndarray,
+        ubx: np.ndarray,
+        w0: np.ndarray,
+    ) -> tuple[np.ndarray, dict]:
         """The smaller QP's solution as the whole QP's ``w`` (zero slacks) and HPIPM's statistics.
 
         Raises
@@ -195,10 +243,15 @@ class HpipmStages:
         """
         ocp, N = self.ocp, self.layout.N
         z0 = lbx[self.z_index[0]]
-        if not np.array_equal(z0, ubx[self.z_index[0]]) or np.any(np.isfinite(lbx[self._state_bounds])) \
-                or np.any(np.isfinite(ubx[self._state_bounds])):
-            raise ValueError("the direct HPIPM path takes z_0 fixed and only the inputs bounded; "
-                             "use ScreenedQP(..., direct=False) for other bounds")
+        if (
+            not np.array_equal(z0, ubx[self.z_index[0]])
+            or np.any(np.isfinite(lbx[self._state_bounds]))
+            or np.any(np.isfinite(ubx[self._state_bounds]))
+        ):
+            raise ValueError(
+                "the direct HPIPM path takes z_0 fixed and only the inputs bounded; "
+                "use ScreenedQP(..., direct=False) for other bounds"
+            )
         self._a[:-1] = a
         ocp.A[:] = self._a[self._ia]
         ocp.B[:] = self._a[self._ib]

@@ -34,8 +34,8 @@ Axial shortening (Eqs 11-18), switchable
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -69,8 +69,13 @@ class _Layout:
         self.n, self.N = n_links, n_elements
         per = 3 * n_elements
         self.size = n_links + n_links * per
-        self.w = [np.arange(n_links + i * per, n_links + i * per + 2 * n_elements) for i in range(n_links)]
-        self.u = [np.arange(n_links + i * per + 2 * n_elements, n_links + (i + 1) * per) for i in range(n_links)]
+        self.w = [
+            np.arange(n_links + i * per, n_links + i * per + 2 * n_elements) for i in range(n_links)
+        ]
+        self.u = [
+            np.arange(n_links + i * per + 2 * n_elements, n_links + (i + 1) * per)
+            for i in range(n_links)
+        ]
 
     def tip(self, i: int) -> tuple[int, int, int]:
         """Indices of ``(w_N, theta_N, u_N)`` of link i."""
@@ -94,8 +99,13 @@ def _link_gram(lm: LinkMatrices, mass: float, inertia: float, qw, qu):
     C = ca.DM(lm.C_wu)
     g_vx_om = -ca.dot(ca.DM(lm.s0w), qw)
     g_vy_om = 0.5 * mass * L + ca.dot(ca.DM(lm.s0u), qu)
-    g_om_om = (inertia + 0.25 * mass * L * L + ca.bilin(ca.DM(lm.M_w), qw, qw)
-               + 2.0 * ca.dot(ca.DM(lm.s1u), qu) + ca.bilin(ca.DM(lm.M_u), qu, qu))
+    g_om_om = (
+        inertia
+        + 0.25 * mass * L * L
+        + ca.bilin(ca.DM(lm.M_w), qw, qw)
+        + 2.0 * ca.dot(ca.DM(lm.s1u), qu)
+        + ca.bilin(ca.DM(lm.M_u), qu, qu)
+    )
     g_om_w = ca.DM(lm.s1w) + ca.mtimes(C, qu)
     g_om_u = -ca.mtimes(C.T, qw)
     size = 3 + nw + nu
@@ -130,7 +140,7 @@ def _axial_energy(lm: LinkMatrices, EA: float, qw, qu, shortening: bool):
         u_left = qu[j - 1] if j > 0 else 0.0
         eps = (qu[j] - u_left) / le
         if shortening:
-            qe = ca.vertcat(qw[2 * j - 2:2 * j] if j > 0 else zero2, qw[2 * j:2 * j + 2])
+            qe = ca.vertcat(qw[2 * j - 2 : 2 * j] if j > 0 else zero2, qw[2 * j : 2 * j + 2])
             eps = eps + 0.5 * ca.bilin(Ge, qe, qe) / le
         total = total + 0.5 * EA * le * eps * eps
     return total
@@ -144,15 +154,24 @@ def _selection(indices: np.ndarray, size: int) -> ca.SX:
 
 
 def _check(arm: ArmSpec, n_elements: int) -> None:
-    if isinstance(n_elements, bool) or not isinstance(n_elements, (int, np.integer)) \
-            or not 1 <= n_elements <= MAX_ELEMENTS:
-        raise SpecError(f"value {n_elements!r} is not allowed; allowed: an integer from 1 to {MAX_ELEMENTS} "
-                        "(elements per link)", key="n_elements")
+    if (
+        isinstance(n_elements, bool)
+        or not isinstance(n_elements, (int, np.integer))
+        or not 1 <= n_elements <= MAX_ELEMENTS
+    ):
+        raise SpecError(
+            f"value {n_elements!r} is not allowed; allowed: an integer from 1 to {MAX_ELEMENTS} "
+            "(elements per link)",
+            key="n_elements",
+        )
     for i, joint in enumerate(arm.joints):
         if joint.type != "revolute":
-            raise SpecError(f"value {joint.type!r} is not supported by the finite-element arm; allowed: 'revolute' "
-                            "(prismatic joints: flexctrl.dynamics.fem.rp_arm)", source=arm.source,
-                            key=f"joints[{i + 1}].type")
+            raise SpecError(
+                f"value {joint.type!r} is not supported by the finite-element arm; allowed: 'revolute' "
+                "(prismatic joints: flexctrl.dynamics.fem.rp_arm)",
+                source=arm.source,
+                key=f"joints[{i + 1}].type",
+            )
 
 
 @dataclass(frozen=True)
@@ -187,7 +206,9 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     lay = _Layout(n, N)
     nq = lay.size
     EA = tuple(link.axial_stiffness() for link in arm.links)
-    mats = tuple(link_matrices(l.length, l.mass_per_length, l.EI, ea, N) for l, ea in zip(arm.links, EA))
+    mats = tuple(
+        link_matrices(l.length, l.mass_per_length, l.EI, ea, N) for l, ea in zip(arm.links, EA)
+    )
     gvec = ca.DM(np.asarray(arm.gravity, dtype=float).reshape(2, 1))
     q = ca.SX.sym("q", nq)
     M = ca.SX(nq, nq)
@@ -218,13 +239,21 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         add_rotor(joint.hub_inertia, alpha)
         U_g -= joint.hub_mass * ca.dot(gvec, r)
         # link i in its frame: T = 1/2 nu^T G nu
-        J_nu = ca.vertcat(ca.mtimes(R.T, ca.jacobian(r, q)), ca.jacobian(alpha, q),
-                          _selection(lay.w[i], nq), _selection(lay.u[i], nq))
+        J_nu = ca.vertcat(
+            ca.mtimes(R.T, ca.jacobian(r, q)),
+            ca.jacobian(alpha, q),
+            _selection(lay.w[i], nq),
+            _selection(lay.u[i], nq),
+        )
         G = _link_gram(lm, link.mass, link.inertia, qw, qu)
         M = M + ca.mtimes(J_nu.T, ca.mtimes(G, J_nu))
-        first = ca.vertcat(0.5 * link.mass * link.length + ca.dot(ca.DM(lm.s0u), qu), ca.dot(ca.DM(lm.s0w), qw))
+        first = ca.vertcat(
+            0.5 * link.mass * link.length + ca.dot(ca.DM(lm.s0u), qu), ca.dot(ca.DM(lm.s0w), qw)
+        )
         U_g -= ca.dot(gvec, link.mass * r + ca.mtimes(R, first))
-        U_el += 0.5 * ca.bilin(ca.DM(lm.K_w), qw, qw) + _axial_energy(lm, EA[i], qw, qu, axial_shortening)
+        U_el += 0.5 * ca.bilin(ca.DM(lm.K_w), qw, qw) + _axial_energy(
+            lm, EA[i], qw, qu, axial_shortening
+        )
         # tip of link i: origin and orientation of the next frame
         w_N, th_N, u_N = (q[k] for k in lay.tip(i))
         r = r + ca.mtimes(R, ca.vertcat(link.length + u_N, w_N))
@@ -235,12 +264,23 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     add_point(arm.payload.mass, r)
     add_rotor(arm.payload.effective_inertia, alpha_hat)
     U_g -= arm.payload.mass * ca.dot(gvec, r)
-    return FemExpressions(layout=lay, mats=mats, EA=EA, q=q, mass_matrix=M, gravity_energy=U_g,
-                          elastic_energy=U_el, positions=ca.horzcat(*positions),
-                          tip_deflection=ca.vertcat(*tip_w), tip_slope=ca.vertcat(*tip_dw))
+    return FemExpressions(
+        layout=lay,
+        mats=mats,
+        EA=EA,
+        q=q,
+        mass_matrix=M,
+        gravity_energy=U_g,
+        elastic_energy=U_el,
+        positions=ca.horzcat(*positions),
+        tip_deflection=ca.vertcat(*tip_w),
+        tip_slope=ca.vertcat(*tip_dw),
+    )
 
 
-def locked_matrices(arm: ArmSpec, n_elements: int, q_r: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+def locked_matrices(
+    arm: ArmSpec, n_elements: int, q_r: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
     """``(M_ff, K_ff)`` of the elastic dofs with the joints clamped at ``q_r`` and the links straight.
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint

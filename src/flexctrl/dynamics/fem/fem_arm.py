@@ -49,26 +49,45 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from flexctrl.dynamics.fem.arm_kinematics import (MAX_ELEMENTS, FemExpressions, fem_coordinate_names,
-                                                  fem_expressions, locked_matrices)
+from flexctrl.dynamics.fem.arm_kinematics import (
+    MAX_ELEMENTS,
+    FemExpressions,
+    fem_coordinate_names,
+    fem_expressions,
+    locked_matrices,
+)
 from flexctrl.dynamics.fem.sparse_ldl import ldl_solve_sparse
 from flexctrl.dynamics.model import Model
-from flexctrl.spec.fidelity import Fidelity
 from flexctrl.modal.fem_modes import link_frequencies_fem
 from flexctrl.spec.arm import ArmSpec
+from flexctrl.spec.fidelity import Fidelity
 
-__all__ = ["MAX_ELEMENTS", "FemExpressions", "build_fem_model", "fem_coordinate_names", "fem_expressions",
-           "generalized_frequencies", "locked_frequencies", "locked_matrices", "relax_axial"]
+__all__ = [
+    "MAX_ELEMENTS",
+    "FemExpressions",
+    "build_fem_model",
+    "fem_coordinate_names",
+    "fem_expressions",
+    "generalized_frequencies",
+    "locked_frequencies",
+    "locked_matrices",
+    "relax_axial",
+]
 
 
-def build_fem_model(arm: ArmSpec, n_elements: int, *, axial_shortening: bool = True,
-                    reference_q: Sequence[float] | None = None) -> Model:
+def build_fem_model(
+    arm: ArmSpec,
+    n_elements: int,
+    *,
+    axial_shortening: bool = True,
+    reference_q: Sequence[float] | None = None,
+) -> Model:
     """Build the floating-frame finite-element model of a planar revolute arm.
 
     Parameters
@@ -147,12 +166,16 @@ def build_fem_model(arm: ArmSpec, n_elements: int, *, axial_shortening: bool = T
         "K": ca.Function("K", [], [K], [], ["K"]),
         "D": ca.Function("D", [], [D], [], ["D"]),
         "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
-        "energies": ca.Function("energies", [q, qd], [E_kin, E_el, U_g], ["q", "qd"],
-                                ["E_kin", "E_el", "E_grav"], opts),
-        "tip": ca.Function("tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts),
+        "energies": ca.Function(
+            "energies", [q, qd], [E_kin, E_el, U_g], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+        ),
+        "tip": ca.Function(
+            "tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts
+        ),
         "hubs": ca.Function("hubs", [q], [hubs], ["q"], ["p"], opts),
-        "deflection": ca.Function("deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"],
-                                  ["w", "dw"], opts),
+        "deflection": ca.Function(
+            "deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts
+        ),
     }
     locked = locked_frequencies(functions, K_np, q_ref, n)
     info = {
@@ -172,12 +195,21 @@ def build_fem_model(arm: ArmSpec, n_elements: int, *, axial_shortening: bool = T
         "input_matrix": "tau acts on q1..qn",
         "build_time_s": time.perf_counter() - start,
     }
-    return Model(name=f"{arm.name} fem {N}{'' if axial_shortening else ' no-shortening'}",
-                 fidelity=Fidelity("fem", N), n_joints=n, coordinate_names=names, functions=functions,
-                 omega_max=float(locked.max()), spec=arm, info=info)
+    return Model(
+        name=f"{arm.name} fem {N}{'' if axial_shortening else ' no-shortening'}",
+        fidelity=Fidelity("fem", N),
+        n_joints=n,
+        coordinate_names=names,
+        functions=functions,
+        omega_max=float(locked.max()),
+        spec=arm,
+        info=info,
+    )
 
 
-def locked_frequencies(functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int) -> np.ndarray:
+def locked_frequencies(
+    functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int
+) -> np.ndarray:
     """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``, elastic dofs at zero.
 
     The joints clamped, no gravity preload; see :func:`generalized_frequencies`.
@@ -210,7 +242,9 @@ def relax_axial(model: Model, q: Sequence[float]) -> np.ndarray:
     loading the stiff axial elements.  Without axial shortening it sets ``u = 0``.
     """
     q = np.asarray(q, dtype=float).copy()
-    idx = np.array([k for k, name in enumerate(model.coordinate_names) if name.startswith("u")], dtype=int)
+    idx = np.array(
+        [k for k, name in enumerate(model.coordinate_names) if name.startswith("u")], dtype=int
+    )
     qs = ca.SX.sym("q", model.n_q)
     E_el = model.functions["energies"](qs, ca.SX.zeros(model.n_q))[1]
     grad = ca.gradient(E_el, qs)[idx]

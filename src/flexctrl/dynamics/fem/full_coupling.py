@@ -20,8 +20,9 @@ and :mod:`flexctrl.dynamics.fem.telescoping_full` (two flexible links, Fig 5).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,7 +51,9 @@ class RPForces:
     Wd0: float = 0.0
 
     @classmethod
-    def sine(cls, torque_amplitude: float, force_amplitude: float, T: float, **initial: float) -> "RPForces":
+    def sine(
+        cls, torque_amplitude: float, force_amplitude: float, T: float, **initial: float
+    ) -> RPForces:
         """One full sine period over ``[0, T]`` (s), zero afterwards: ``A sin(2 pi t / T)`` (N m and N)."""
         if not T > 0:
             raise SpecError(f"value {T!r} is not allowed; allowed: T > 0 s", key="T")
@@ -61,11 +64,16 @@ class RPForces:
         return cls(torque=shape(torque_amplitude), force=shape(force_amplitude), **initial)
 
     @classmethod
-    def from_samples(cls, t: ArrayLike, torque: ArrayLike, force: ArrayLike, **initial: float) -> "RPForces":
+    def from_samples(
+        cls, t: ArrayLike, torque: ArrayLike, force: ArrayLike, **initial: float
+    ) -> RPForces:
         """Inputs interpolated linearly between samples (s, N m, N), e.g. the multipliers of a motion run."""
         t, tau, F = (np.asarray(a, dtype=float).copy() for a in (t, torque, force))
-        return cls(torque=lambda s: float(np.interp(s, t, tau)), force=lambda s: float(np.interp(s, t, F)),
-                   **initial)
+        return cls(
+            torque=lambda s: float(np.interp(s, t, tau)),
+            force=lambda s: float(np.interp(s, t, F)),
+            **initial,
+        )
 
 
 def shortening_matrices(link: FrameLink) -> tuple[Array, Array]:
@@ -75,8 +83,17 @@ def shortening_matrices(link: FrameLink) -> tuple[Array, Array]:
     return rho * (L * link.G_c - link.G_1), rho * (0.5 * L * L * link.G_c - 0.5 * link.G_2)
 
 
-def link_energies(link: FrameLink, q: Any, qd: Any, rE: Any, rEd: Any, thd: Any, g_ax: Any, g_perp: Any,
-                  shortening: bool) -> tuple[Any, Any]:
+def link_energies(
+    link: FrameLink,
+    q: Any,
+    qd: Any,
+    rE: Any,
+    rEd: Any,
+    thd: Any,
+    g_ax: Any,
+    g_perp: Any,
+    shortening: bool,
+) -> tuple[Any, Any]:
     """``(T, V)`` of one link (CasADi expressions; no payload), to second order in ``(q, qd)``.
 
     ``q``, ``qd`` the link's ``2 (N + 1)`` nodal values and rates; ``rE``, ``rEd`` radius of its root
@@ -94,17 +111,36 @@ def link_energies(link: FrameLink, q: Any, qd: Any, rE: Any, rEd: Any, thd: Any,
     def quad(A: Any, a: Any, b: Any) -> Any:
         return ca.dot(a, ca.mtimes(A, b))
 
-    T = (0.5 * rho * L * rEd**2 - sh * rEd * quad(Gs, qd, q) - rEd * thd * ca.dot(S0, q)
-         + 0.5 * thd**2 * quad(Ml, q, q) + 0.5 * quad(Ml, qd, qd) + thd * ca.dot(qd, rE * S0 + S1)
-         + 0.5 * thd**2 * rho * (L * rE**2 + L**2 * rE + L**3 / 3.0)
-         - 0.5 * sh * thd**2 * (rE * quad(Gs, q, q) + quad(Gx, q, q)))
-    V = (0.5 * quad(K, q, q) - g_ax * (rho * (L * rE + 0.5 * L * L) - 0.5 * sh * quad(Gs, q, q))
-         - g_perp * ca.dot(S0, q))
+    T = (
+        0.5 * rho * L * rEd**2
+        - sh * rEd * quad(Gs, qd, q)
+        - rEd * thd * ca.dot(S0, q)
+        + 0.5 * thd**2 * quad(Ml, q, q)
+        + 0.5 * quad(Ml, qd, qd)
+        + thd * ca.dot(qd, rE * S0 + S1)
+        + 0.5 * thd**2 * rho * (L * rE**2 + L**2 * rE + L**3 / 3.0)
+        - 0.5 * sh * thd**2 * (rE * quad(Gs, q, q) + quad(Gx, q, q))
+    )
+    V = (
+        0.5 * quad(K, q, q)
+        - g_ax * (rho * (L * rE + 0.5 * L * L) - 0.5 * sh * quad(Gs, q, q))
+        - g_perp * ca.dot(S0, q)
+    )
     return T, V
 
 
-def payload_energies(link: FrameLink, mass: float, q: Any, qd: Any, rE: Any, rEd: Any, thd: Any, g_ax: Any,
-                     g_perp: Any, shortening: bool) -> tuple[Any, Any]:
+def payload_energies(
+    link: FrameLink,
+    mass: float,
+    q: Any,
+    qd: Any,
+    rE: Any,
+    rEd: Any,
+    thd: Any,
+    g_ax: Any,
+    g_perp: Any,
+    shortening: bool,
+) -> tuple[Any, Any]:
     """``(T, V)`` of a point mass (kg) at the tip H of ``link`` (same expansion as :func:`link_energies`)."""
     import casadi as ca
 
@@ -113,8 +149,20 @@ def payload_energies(link: FrameLink, mass: float, q: Any, qd: Any, rE: Any, rEd
     wL, wdL = q[link.tip], qd[link.tip]
     sL, sdL = 0.5 * sh * ca.dot(q, ca.mtimes(Gc, q)), sh * ca.dot(qd, ca.mtimes(Gc, q))
     r = rE + link.length
-    T = 0.5 * mass * (rEd**2 - 2 * rEd * sdL - 2 * rEd * thd * wL + thd**2 * wL**2 + wdL**2
-                      + 2 * thd * wdL * r + thd**2 * r**2 - 2 * thd**2 * r * sL)
+    T = (
+        0.5
+        * mass
+        * (
+            rEd**2
+            - 2 * rEd * sdL
+            - 2 * rEd * thd * wL
+            + thd**2 * wL**2
+            + wdL**2
+            + 2 * thd * wdL * r
+            + thd**2 * r**2
+            - 2 * thd**2 * r * sL
+        )
+    )
     V = -g_ax * mass * (r - sL) - g_perp * mass * wL
     return T, V
 
@@ -130,7 +178,7 @@ class FullCouplingResult:
     the link frame (m); contact violations (m, m/s); ``newton_iterations`` per step; ``wall_time`` (s).
     """
 
-    model: "SlidingFullModel"
+    model: SlidingFullModel
     dt: float
     t: Array
     theta: Array
@@ -157,7 +205,7 @@ class SlidingFullModel:
     """
 
     ne: int
-    drive: "RPForces | RPMotion"
+    drive: RPForces | RPMotion
 
     def _build(self, z: Any, zd: Any, T: Any, V: Any) -> None:
         import casadi as ca
@@ -289,8 +337,10 @@ class SlidingFullModel:
 
         def h(z: Array, zd: Array, t: float) -> Array:
             q, qd, Wd = z[:ne], zd[:ne], zd[iW]
-            contact = -sum(2 * Wd * v * (R[1] @ qd) + Wd**2 * v**2 * (R[2] @ q)
-                           for R, v in self.contact_parts(z[iW], t))
+            contact = -sum(
+                2 * Wd * v * (R[1] @ qd) + Wd**2 * v**2 * (R[2] @ q)
+                for R, v in self.contact_parts(z[iW], t)
+            )
             return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))] if nj else contact
 
         def h_tangents(z: Array, zd: Array, t: float) -> tuple[Array, Array]:
@@ -306,15 +356,24 @@ class SlidingFullModel:
                 Jqd[:m, iW] -= 2 * v * (R[1] @ qd) + 2 * Wd * v**2 * (R[2] @ q)
             return Jq, Jqd
 
-        return DAEProblem(n_q=nz, n_c=self.contact_parts(self.initial_state()[0][iW])[0][0].shape[1] + nj,
-                          mass=lambda z, t: self.mass(z), force=force, phi=phi, phi_q=phi_q,
-                          phi_t=phi_t, h=h, force_q=lambda z, zd, t: self._eval("f_z", z, zd),
-                          force_qd=lambda z, zd, t: self._eval("f_zd", z, zd),
-                          h_q=lambda z, zd, t: h_tangents(z, zd, t)[0],
-                          h_qd=lambda z, zd, t: h_tangents(z, zd, t)[1])
+        return DAEProblem(
+            n_q=nz,
+            n_c=self.contact_parts(self.initial_state()[0][iW])[0][0].shape[1] + nj,
+            mass=lambda z, t: self.mass(z),
+            force=force,
+            phi=phi,
+            phi_q=phi_q,
+            phi_t=phi_t,
+            h=h,
+            force_q=lambda z, zd, t: self._eval("f_z", z, zd),
+            force_qd=lambda z, zd, t: self._eval("f_zd", z, zd),
+            h_q=lambda z, zd, t: h_tangents(z, zd, t)[0],
+            h_qd=lambda z, zd, t: h_tangents(z, zd, t)[1],
+        )
 
-    def run(self, dt: float, duration: float, initial_q: ArrayLike | None = None, **options: Any
-            ) -> tuple[DAEResult, Array, Array, Array, Array]:
+    def run(
+        self, dt: float, duration: float, initial_q: ArrayLike | None = None, **options: Any
+    ) -> tuple[DAEResult, Array, Array, Array, Array]:
         """Newmark + Baumgarte from :meth:`initial_state` (``initial_q`` replaces the nodal values; must
         satisfy the contacts to 1e-9 m, rates made consistent); ``options`` go to
         :func:`~flexctrl.dynamics.fem.newmark_dae.simulate`.  Returns the result, the torque and force
@@ -323,12 +382,17 @@ class SlidingFullModel:
         if initial_q is not None:
             q0 = np.asarray(initial_q, dtype=float)
             if q0.shape != (self.ne,):
-                raise SpecError(f"initial_q has shape {q0.shape}; allowed: ({self.ne},)", key="initial_q")
-            z0[:self.ne] = q0
+                raise SpecError(
+                    f"initial_q has shape {q0.shape}; allowed: ({self.ne},)", key="initial_q"
+                )
+            z0[: self.ne] = q0
             off = np.abs(self.contact_violations(z0, np.zeros_like(zd0))[0]).max()
             if not off <= 1e-9:
-                raise SpecError(f"initial_q is {off:.3g} m off the contacts; allowed: <= 1e-9 m", key="initial_q")
-            zd0[:self.ne] = self.consistent_rates(z0, zd0[self.iW])
+                raise SpecError(
+                    f"initial_q is {off:.3g} m off the contacts; allowed: <= 1e-9 m",
+                    key="initial_q",
+                )
+            zd0[: self.ne] = self.consistent_rates(z0, zd0[self.iW])
         res = simulate(self.problem(), z0, zd0, float(duration), dt, **options)
         m = res.lam.shape[1] - self.n_joint_rows
         if self.motion_driven:

@@ -57,7 +57,9 @@ def symbolic_point_row(x, order: int, n_elements: int, length: float):
     for e in range(n_elements):
         zeta = x - e * le
         powers = ca.horzcat(1, zeta, zeta**2, zeta**3)
-        row[0, 2 * e:2 * e + 4] += ca.if_else(j == e, ca.mtimes(powers, ca.DM(C)), ca.DM.zeros(1, 4))
+        row[0, 2 * e : 2 * e + 4] += ca.if_else(
+            j == e, ca.mtimes(powers, ca.DM(C)), ca.DM.zeros(1, 4)
+        )
     return row
 
 
@@ -81,9 +83,21 @@ class IdasResult:
     stats: dict
 
 
-def simulate_idas(model: RPArmModel, q0: Array, t_end: float, grid_dt: float, *, rtol: float = 1e-6,
-                  atol: float | None = None, gamma: float = 0.0, beta: float = 0.0, tracked_dof: int | None = None,
-                  max_num_steps: int = 20000, suppress_algebraic: bool = True, max_order: int = 5) -> IdasResult:
+def simulate_idas(
+    model: RPArmModel,
+    q0: Array,
+    t_end: float,
+    grid_dt: float,
+    *,
+    rtol: float = 1e-6,
+    atol: float | None = None,
+    gamma: float = 0.0,
+    beta: float = 0.0,
+    tracked_dof: int | None = None,
+    max_num_steps: int = 20000,
+    suppress_algebraic: bool = True,
+    max_order: int = 5,
+) -> IdasResult:
     """Integrate ``model`` from ``q0`` at rest with IDAS; outputs every ``grid_dt`` seconds to ``t_end``.
 
     Parameters
@@ -115,38 +129,78 @@ def simulate_idas(model: RPArmModel, q0: Array, t_end: float, grid_dt: float, *,
     q, qd = ca.SX.sym("q", n), ca.SX.sym("qd", n)
     qdd, lam = ca.SX.sym("qdd", n), ca.SX.sym("lam", rows.count)
     W = model.motion.W(t)
-    phi = ca.vertcat(*[ca.mtimes(symbolic_point_row(c + v * W, o, model.n, model.spec.length), q)
-                       for o, c, v in zip(rows.orders, rows.offsets, rows.rates)])
+    phi = ca.vertcat(
+        *[
+            ca.mtimes(symbolic_point_row(c + v * W, o, model.n, model.spec.length), q)
+            for o, c, v in zip(rows.orders, rows.offsets, rows.rates)
+        ]
+    )
     A = ca.jacobian(phi, q)
     phidot = ca.mtimes(A, qd) + ca.jacobian(phi, t)
     h = -(ca.mtimes(ca.jacobian(phidot, q), qd) + ca.jacobian(phidot, t))
     Kt, f = link.terms(model.rigid(t), model.driven_end, model.axial_shortening)
-    alg = ca.vertcat(ca.mtimes(ca.DM(model.M), qdd) + ca.mtimes(A.T, lam) - (f - ca.mtimes(Kt, q)),
-                     ca.mtimes(A, qdd) - h + 2 * gamma * phidot + beta**2 * phi)
-    dae = {"x": ca.vertcat(q, qd), "z": ca.vertcat(qdd, lam), "t": t, "ode": ca.vertcat(qd, qdd), "alg": alg}
+    alg = ca.vertcat(
+        ca.mtimes(ca.DM(model.M), qdd) + ca.mtimes(A.T, lam) - (f - ca.mtimes(Kt, q)),
+        ca.mtimes(A, qdd) - h + 2 * gamma * phidot + beta**2 * phi,
+    )
+    dae = {
+        "x": ca.vertcat(q, qd),
+        "z": ca.vertcat(qdd, lam),
+        "t": t,
+        "ode": ca.vertcat(qd, qdd),
+        "alg": alg,
+    }
     n_out = int(round(t_end / grid_dt))
     grid = grid_dt * np.arange(1, n_out + 1)
     atol = 1e-3 * rtol if atol is None else atol
-    opts = {"reltol": rtol, "abstol": atol, "max_num_steps": max_num_steps, "calc_ic": True,
-            "suppress_algebraic": suppress_algebraic, "max_order": max_order}
+    opts = {
+        "reltol": rtol,
+        "abstol": atol,
+        "max_num_steps": max_num_steps,
+        "calc_ic": True,
+        "suppress_algebraic": suppress_algebraic,
+        "max_order": max_order,
+    }
     F = ca.integrator("F", "idas", dae, 0.0, list(grid), opts)
     x0 = np.concatenate([q0, np.zeros(n)])
     prob = model.problem()
     # consistent algebraic start (Eqs 55-56) as the initial guess
-    S = np.block([[model.M, prob.phi_q(q0, 0.0).T], [prob.phi_q(q0, 0.0), np.zeros((rows.count, rows.count))]])
-    z0 = np.linalg.solve(S, np.concatenate([prob.force(q0, np.zeros(n), 0.0), prob.h(q0, np.zeros(n), 0.0)]))
+    S = np.block(
+        [
+            [model.M, prob.phi_q(q0, 0.0).T],
+            [prob.phi_q(q0, 0.0), np.zeros((rows.count, rows.count))],
+        ]
+    )
+    z0 = np.linalg.solve(
+        S, np.concatenate([prob.force(q0, np.zeros(n), 0.0), prob.h(q0, np.zeros(n), 0.0)])
+    )
     start = time.perf_counter()
     try:
         out = F(x0=x0, z0=z0)
     except RuntimeError as exc:
-        raise SolverError(f"IDAS failed (rtol = {rtol:g}, atol = {atol:g}): {str(exc).splitlines()[-1]}") from exc
+        raise SolverError(
+            f"IDAS failed (rtol = {rtol:g}, atol = {atol:g}): {str(exc).splitlines()[-1]}"
+        ) from exc
     wall = time.perf_counter() - start
     X = np.concatenate([x0[:, None], np.asarray(out["xf"])], axis=1).T
     tt = np.concatenate([[0.0], grid])
     Q, QD = X[:, :n], X[:, n:]
     vp = np.array([np.abs(prob.phi(a, s)).max() for a, s in zip(Q, tt)])
-    vv = np.array([np.abs(prob.phi_q(a, s) @ b + prob.phi_t(a, s)).max() for a, b, s in zip(Q, QD, tt)])
+    vv = np.array(
+        [np.abs(prob.phi_q(a, s) @ b + prob.phi_t(a, s)).max() for a, b, s in zip(Q, QD, tt)]
+    )
     stats = {k: v for k, v in F.stats().items() if isinstance(v, (int, float, bool))}
     dof = model.tip if tracked_dof is None else tracked_dof
-    return IdasResult(t=tt, q=Q, qd=QD, tip_y=Q[:, dof], phi_violation=vp, phidot_violation=vv, wall_time=wall,
-                      rtol=rtol, atol=atol, max_order=max_order, stats=stats)
+    return IdasResult(
+        t=tt,
+        q=Q,
+        qd=QD,
+        tip_y=Q[:, dof],
+        phi_violation=vp,
+        phidot_violation=vv,
+        wall_time=wall,
+        rtol=rtol,
+        atol=atol,
+        max_order=max_order,
+        stats=stats,
+    )

@@ -110,7 +110,16 @@ def link_matrices(length: float, rho: float, EI: float, EA: float, n_elements: i
         s1u[bu] += rho * (wq * x) @ A0
     w, u = slice(2, None), slice(1, None)  # clamp node 0
     return LinkMatrices(
-        n_elements=n, length=L,
-        M_w=M_w[w, w], K_w=K_w[w, w], M_u=M_u[u, u], K_u=K_u[u, u],
-        s0w=s0w[w], s1w=s1w[w], s0u=s0u[u], s1u=s1u[u], C_wu=C[w, u],
-        G_e=np.einsum("g,gi,gk->ik", wq, H1, H1))
+        n_elements=n,
+        length=L,
+        M_w=M_w[w, w],
+        K_w=K_w[w, w],
+        M_u=M_u[u, u],
+        K_u=K_u[u, u],
+        s0w=s0w[w],
+        s1w=s1w[w],
+        s0u=s0u[u],
+        s1u=s1u[u],
+        C_wu=C[w, u],
+        G_e=np.einsum("g,gi,gk->ik", wq, H1, H1),
+    )

@@ -9,7 +9,7 @@ Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of `
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
@@ -18,13 +18,17 @@ from flexctrl.dynamics.fem.fem_arm import generalized_frequencies, locked_matric
 from flexctrl.spec.arm import ArmSpec
 
 
-def locked_fem_hz(arm: ArmSpec, n_elements: int, q_deg: Sequence[float], n_modes: int = 6) -> np.ndarray:
+def locked_fem_hz(
+    arm: ArmSpec, n_elements: int, q_deg: Sequence[float], n_modes: int = 6
+) -> np.ndarray:
     """Lowest locked-joint frequencies (Hz) of the FE arm, links straight, no gravity."""
     M, K = locked_matrices(arm, n_elements, np.radians(q_deg))
     return generalized_frequencies(K, M)[:n_modes] / (2 * math.pi)
 
 
-def locked_amm_hz(arm: ArmSpec, n_modes_per_link: int, q_deg: Sequence[float], n_modes: int = 6) -> np.ndarray:
+def locked_amm_hz(
+    arm: ArmSpec, n_modes_per_link: int, q_deg: Sequence[float], n_modes: int = 6
+) -> np.ndarray:
     """Lowest locked-joint frequencies (Hz) of the assumed-modes model with modes frozen at ``q``."""
     from flexctrl.dynamics.build import build_model
 
@@ -45,8 +49,10 @@ def free_joint_radius(model) -> float:
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
     jac = ca.Function("J", [x, u], [ca.jacobian(model.functions["f"](x, u), x)])
     x0 = np.zeros(model.n_x)
-    x0[:model.n_joints] = model.info.get("reference_q", np.zeros(model.n_joints))
-    return float(np.max(np.abs(np.linalg.eigvals(np.asarray(jac(x0, np.zeros(model.n_u)), dtype=float)))))
+    x0[: model.n_joints] = model.info.get("reference_q", np.zeros(model.n_joints))
+    return float(
+        np.max(np.abs(np.linalg.eigvals(np.asarray(jac(x0, np.zeros(model.n_u)), dtype=float))))
+    )
 
 
 def rk4_step_for(model, sample: float, safety: float = 2.4) -> int:

@@ -22,7 +22,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.beam.elements import assemble_beam, assemble_geometric_stiffness, hermite_shape, locate
+from flexctrl.beam.elements import (
+    assemble_beam,
+    assemble_geometric_stiffness,
+    hermite_shape,
+    locate,
+)
 from flexctrl.errors import SpecError
 
 Array = NDArray[np.float64]
@@ -32,8 +37,14 @@ ENDS = ("E", "H")
 
 def check_elements(n_elements: object, key: str = "n_elements") -> None:
     """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256."""
-    if isinstance(n_elements, bool) or not isinstance(n_elements, (int, np.integer)) or not 1 <= n_elements <= 256:
-        raise SpecError(f"value {n_elements!r} is not allowed; allowed: an integer from 1 to 256", key=key)
+    if (
+        isinstance(n_elements, bool)
+        or not isinstance(n_elements, (int, np.integer))
+        or not 1 <= n_elements <= 256
+    ):
+        raise SpecError(
+            f"value {n_elements!r} is not allowed; allowed: an integer from 1 to 256", key=key
+        )
 
 
 def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: int = 2) -> Array:
@@ -48,7 +59,7 @@ def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: in
     for d in range(max_derivative + 1):
         H = hermite_shape(zetas, le, d)
         for k, (j, _) in enumerate(located):
-            R[d, k, 2 * j:2 * j + 4] = H[k]
+            R[d, k, 2 * j : 2 * j + 4] = H[k]
     return R
 
 
@@ -177,9 +188,20 @@ class FrameLink:
     :mod:`flexctrl.dynamics.fem.telescoping`.
     """
 
-    def __init__(self, n_elements: int, length: float, mass_per_length: float, EI: float, payload_mass: float = 0.0):
-        self.n, self.length, self.rho, self.payload_mass = int(n_elements), float(length), float(mass_per_length), \
-            float(payload_mass)
+    def __init__(
+        self,
+        n_elements: int,
+        length: float,
+        mass_per_length: float,
+        EI: float,
+        payload_mass: float = 0.0,
+    ):
+        self.n, self.length, self.rho, self.payload_mass = (
+            int(n_elements),
+            float(length),
+            float(mass_per_length),
+            float(payload_mass),
+        )
         mats = assemble_beam(self.n, length, mass_per_length, EI)
         self.le, self.ndof = mats.element_length, mats.M.shape[0]
         self.M, self.K = mats.M.copy(), mats.K
@@ -193,7 +215,9 @@ class FrameLink:
         self.G_1 = assemble_geometric_stiffness(self.n, length, lambda z: z)
         self.G_2 = assemble_geometric_stiffness(self.n, length, lambda z: z * z)
 
-    def force_coefficients(self, r: dict[str, float], driven_end: str) -> tuple[float, float, float]:
+    def force_coefficients(
+        self, r: dict[str, float], driven_end: str
+    ) -> tuple[float, float, float]:
         """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N, tension positive).
 
         ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at E
@@ -209,11 +233,22 @@ class FrameLink:
             return c0, rho * b0, -0.5 * rho * w2
         return 0.0, rho * b0, -0.5 * rho * w2  # F = int_0^x rho a~
 
-    def terms(self, r: dict[str, float], driven_end: str, axial_shortening: bool) -> tuple[Array, Array]:
+    def terms(
+        self, r: dict[str, float], driven_end: str, axial_shortening: bool
+    ) -> tuple[Array, Array]:
         """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
         also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2).  Numbers give numpy arrays; CasADi
         expressions (a symbolic rigid motion) give CasADi matrices."""
-        mats = (self.K, self.M, self.G_c, self.G_1, self.G_2, self.S0, self.S1, np.eye(self.ndof)[self.tip])
+        mats = (
+            self.K,
+            self.M,
+            self.G_c,
+            self.G_1,
+            self.G_2,
+            self.S0,
+            self.S1,
+            np.eye(self.ndof)[self.tip],
+        )
         if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in r.values()):
             import casadi as ca
 
@@ -228,4 +263,3 @@ class FrameLink:
         if self.payload_mass:
             f = f - self.payload_mass * (a0 + r["thdd"] * self.length - r["g_perp"]) * e_tip
         return Kt, f
-

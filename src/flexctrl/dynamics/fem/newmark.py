@@ -24,7 +24,8 @@ models); ``"potential"`` (default) uses the Hessian of the potential energy
 
 from __future__ import annotations
 
-from typing import Callable, Literal, Sequence
+from collections.abc import Callable, Sequence
+from typing import Literal
 
 import casadi as ca
 import numpy as np
@@ -61,8 +62,13 @@ class _Evaluator:
         return [r.T.copy() for r in self.res]
 
 
-def model_dae_problem(model, torque: Torque | None = None, *, locked: Sequence[float] | None = None,
-                      tangent: Literal["potential", "stiffness", "exact"] = "potential") -> DAEProblem:
+def model_dae_problem(
+    model,
+    torque: Torque | None = None,
+    *,
+    locked: Sequence[float] | None = None,
+    tangent: Literal["potential", "stiffness", "exact"] = "potential",
+) -> DAEProblem:
     """The model's equations of motion as a :class:`DAEProblem`.
 
     Parameters
@@ -77,7 +83,9 @@ def model_dae_problem(model, torque: Torque | None = None, *, locked: Sequence[f
         ``"potential"``, ``"stiffness"`` or ``"exact"`` Newton tangents (module docstring).
     """
     if tangent not in ("potential", "stiffness", "exact"):
-        raise ValueError(f"tangent {tangent!r} is not allowed; allowed: 'potential', 'stiffness', 'exact'")
+        raise ValueError(
+            f"tangent {tangent!r} is not allowed; allowed: 'potential', 'stiffness', 'exact'"
+        )
     n_q, n_u = model.n_q, model.n_u
     q, qd = ca.SX.sym("q", n_q), ca.SX.sym("qd", n_q)
     fn = model.functions
@@ -116,7 +124,8 @@ def model_dae_problem(model, torque: Torque | None = None, *, locked: Sequence[f
     Pq[np.arange(n_c), np.arange(n_c)] = 1.0
     zc, zcq = np.zeros(n_c), np.zeros((n_c, n_q))
     return DAEProblem(
-        n_q=n_q, n_c=n_c,
+        n_q=n_q,
+        n_c=n_c,
         mass=lambda qv, t: mass(qv)[0],
         force=force,
         phi=lambda qv, t: qv[:n_c] - lock,
@@ -130,11 +139,22 @@ def model_dae_problem(model, torque: Torque | None = None, *, locked: Sequence[f
     )
 
 
-def simulate_model_newmark(model, x0, duration: float, dt: float, *, torque: Torque | None = None,
-                           locked: Sequence[float] | None = None, alpha: float = 0.25, delta: float = 0.5,
-                           gamma: float = 5.0, beta: float = 5.0,
-                           tangent: Literal["potential", "stiffness", "exact"] = "potential",
-                           newton_tol: float = 1e-10, max_iterations: int = 30) -> DAEResult:
+def simulate_model_newmark(
+    model,
+    x0,
+    duration: float,
+    dt: float,
+    *,
+    torque: Torque | None = None,
+    locked: Sequence[float] | None = None,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    tangent: Literal["potential", "stiffness", "exact"] = "potential",
+    newton_tol: float = 1e-10,
+    max_iterations: int = 30,
+) -> DAEResult:
     """Integrate ``model`` from ``x0 = (q, qd)`` with Newmark (see module docstring).
 
     Parameters
@@ -153,5 +173,17 @@ def simulate_model_newmark(model, x0, duration: float, dt: float, *, torque: Tor
     x0 = np.asarray(x0, dtype=float).ravel()
     n = model.n_q
     problem = model_dae_problem(model, torque, locked=locked, tangent=tangent)
-    return simulate(problem, x0[:n], x0[n:], duration, dt, gamma=gamma, beta=beta, alpha=alpha, delta=delta,
-                    newton_tol=newton_tol, max_iterations=max_iterations, max_violation=np.inf)
+    return simulate(
+        problem,
+        x0[:n],
+        x0[n:],
+        duration,
+        dt,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        newton_tol=newton_tol,
+        max_iterations=max_iterations,
+        max_violation=np.inf,
+    )

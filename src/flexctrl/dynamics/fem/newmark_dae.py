@@ -39,8 +39,9 @@ equivalent to Eqs 55-56 when ``M`` is invertible and usable when it is not.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,15 +126,26 @@ def _fd_jac(fun: Callable[[Array], Array], x: Array, f0: Array) -> Array:
     return jac
 
 
-def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
-             t0: float = 0.0, gamma: float = 5.0, beta: float = 5.0,
-             alpha: float = 0.25, delta: float = 0.5,
-             feedback: Literal["explicit", "implicit"] = "explicit",
-             baumgarte_form: Literal["eq49", "eq54_printed"] = "eq49",
-             jacobian: Literal["auto", "tangent", "fd"] = "auto",
-             newton_tol: float = 1e-10, max_iterations: int = 20,
-             max_violation: float = 1e-2,
-             max_velocity_violation: float | None = None) -> DAEResult:
+def simulate(
+    problem: DAEProblem,
+    q0: Any,
+    qd0: Any,
+    t_end: float,
+    dt: float,
+    *,
+    t0: float = 0.0,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    feedback: Literal["explicit", "implicit"] = "explicit",
+    baumgarte_form: Literal["eq49", "eq54_printed"] = "eq49",
+    jacobian: Literal["auto", "tangent", "fd"] = "auto",
+    newton_tol: float = 1e-10,
+    max_iterations: int = 20,
+    max_violation: float = 1e-2,
+    max_velocity_violation: float | None = None,
+) -> DAEResult:
     """Integrate a :class:`DAEProblem` from ``t0`` to ``t_end`` with Newmark + Baumgarte.
 
     Parameters
@@ -167,8 +179,10 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
         size, gamma/beta and the violation).
     """
     if not (0 < alpha and 0 < delta and dt > 0 and t_end > t0):
-        raise ValueError(f"need alpha, delta, dt > 0 and t_end > t0; got alpha={alpha}, "
-                         f"delta={delta}, dt={dt}, t0={t0}, t_end={t_end}")
+        raise ValueError(
+            f"need alpha, delta, dt > 0 and t_end > t0; got alpha={alpha}, "
+            f"delta={delta}, dt={dt}, t0={t0}, t_end={t_end}"
+        )
     if feedback not in ("explicit", "implicit") or baumgarte_form not in ("eq49", "eq54_printed"):
         raise ValueError(f"unknown feedback={feedback!r} or baumgarte_form={baumgarte_form!r}")
     if jacobian == "tangent" and not problem.has_tangents:
@@ -178,12 +192,14 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
     n_steps = max(1, int(np.ceil((t_end - t0) / dt - 1e-9)))
     dt = (t_end - t0) / n_steps
     c0, c1 = 1.0 / (alpha * dt * dt), delta / (alpha * dt)
-    kb = -beta**2 if baumgarte_form == "eq54_printed" else beta**2
+    kb = -(beta**2) if baumgarte_form == "eq54_printed" else beta**2
     tgrid = t0 + dt * np.arange(n_steps + 1)
 
     def violations(q: Array, qd: Array, t: float) -> tuple[Array, Array]:
-        return (np.asarray(problem.phi(q, t), float),
-                np.asarray(problem.phi_q(q, t), float) @ qd + np.asarray(problem.phi_t(q, t), float))
+        return (
+            np.asarray(problem.phi(q, t), float),
+            np.asarray(problem.phi_q(q, t), float) @ qd + np.asarray(problem.phi_t(q, t), float),
+        )
 
     q = np.asarray(q0, dtype=float).reshape(n).copy()
     qd = np.asarray(qd0, dtype=float).reshape(n).copy()
@@ -199,13 +215,19 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
         A[:n, :n] = problem.mass(q, t0)
         Pq = np.asarray(problem.phi_q(q, t0), float).reshape(m, n)
         A[:n, n:], A[n:, :n] = Pq.T, Pq
-        rhs = np.concatenate([np.asarray(problem.force(q, qd, t0), float),
-                              np.asarray(problem.h(q, qd, t0), float) - 2 * gamma * phid - kb * phi])
+        rhs = np.concatenate(
+            [
+                np.asarray(problem.force(q, qd, t0), float),
+                np.asarray(problem.h(q, qd, t0), float) - 2 * gamma * phid - kb * phi,
+            ]
+        )
         try:
             sol = np.linalg.solve(A, rhs)
         except np.linalg.LinAlgError as exc:
-            raise NewtonConvergenceError(f"singular augmented matrix for the initial accelerations at "
-                                         f"t = {t0:g} s (dependent constraints?)") from exc
+            raise NewtonConvergenceError(
+                f"singular augmented matrix for the initial accelerations at "
+                f"t = {t0:g} s (dependent constraints?)"
+            ) from exc
         qdd, lam = sol[:n], sol[n:]
         Q[0], QD[0], QDD[0], LAM[0] = q, qd, qdd, lam
         VP[0] = np.max(np.abs(phi), initial=0.0)
@@ -226,8 +248,11 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
                 qn, ln = z[:n], z[n:]
                 acc, vel = states(qn)
                 Pq_ = np.asarray(problem.phi_q(qn, t), float).reshape(m, n)
-                r1 = np.asarray(problem.mass(qn, t), float) @ acc + Pq_.T @ ln \
+                r1 = (
+                    np.asarray(problem.mass(qn, t), float) @ acc
+                    + Pq_.T @ ln
                     - np.asarray(problem.force(qn, vel, t), float)
+                )
                 if feedback == "explicit":
                     fb = fb_old
                 else:
@@ -243,9 +268,11 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
                 acc, vel = states(qn)
                 J = np.zeros((n + m, n + m))
                 Pq_ = np.asarray(problem.phi_q(qn, t), float).reshape(m, n)
-                J[:n, :n] = c0 * np.asarray(problem.mass(qn, t), float) \
-                    - np.asarray(problem.force_q(qn, vel, t), float) \
+                J[:n, :n] = (
+                    c0 * np.asarray(problem.mass(qn, t), float)
+                    - np.asarray(problem.force_q(qn, vel, t), float)
                     - c1 * np.asarray(problem.force_qd(qn, vel, t), float)
+                )
                 J[:n, n:] = Pq_.T
                 hq = np.asarray(problem.h_q(qn, vel, t), float).reshape(m, n)
                 hqd = np.asarray(problem.h_qd(qn, vel, t), float).reshape(m, n)
@@ -264,7 +291,8 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
                     dz = np.linalg.solve(newton_matrix(z, r), -r)
                 except np.linalg.LinAlgError as exc:
                     raise NewtonConvergenceError(
-                        f"singular Newton matrix at step {k} (t = {t:.6g} s, dt = {dt:.3g} s)") from exc
+                        f"singular Newton matrix at step {k} (t = {t:.6g} s, dt = {dt:.3g} s)"
+                    ) from exc
                 z = z + dz
                 size = np.max(np.abs(dz[:n]))
                 if not np.all(np.isfinite(z)):
@@ -278,7 +306,8 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
             if not converged:
                 raise NewtonConvergenceError(
                     f"Newton iteration did not converge at step {k} (t = {t:.6g} s, dt = {dt:.3g} s) "
-                    f"after {its} iterations: max|dq| = {size:.3g}, tol = {newton_tol:.3g}")
+                    f"after {its} iterations: max|dq| = {size:.3g}, tol = {newton_tol:.3g}"
+                )
             q, lam = z[:n], z[n:]
             qdd, qd = states(q)
             phi, phid = violations(q, qd, t)
@@ -290,16 +319,31 @@ def simulate(problem: DAEProblem, q0: Any, qd0: Any, t_end: float, dt: float, *,
                     f"constraint violation grew without bound at step {k} (t = {t:.6g} s, "
                     f"dt = {dt:.3g} s, gamma = {gamma:g}, beta = {beta:g}, form = {baumgarte_form}, "
                     f"feedback = {feedback}): max|Phi| = {vp:.3g} (bound {max_violation:g}), "
-                    f"max|Phidot| = {vv:.3g} (bound {max_velocity_violation})")
+                    f"max|Phidot| = {vv:.3g} (bound {max_velocity_violation})"
+                )
             Q[k], QD[k], QDD[k], LAM[k], VP[k], VV[k], ITS[k] = q, qd, qdd, lam, vp, vv, its
     wall = time.perf_counter() - start
-    return DAEResult(t=tgrid, q=Q, qd=QD, qdd=QDD, lam=LAM, phi_violation=VP,
-                     phidot_violation=VV, newton_iterations=ITS, wall_time=wall, dt=dt,
-                     gamma=float(gamma), beta=float(beta), alpha=float(alpha), delta=float(delta))
+    return DAEResult(
+        t=tgrid,
+        q=Q,
+        qd=QD,
+        qdd=QDD,
+        lam=LAM,
+        phi_violation=VP,
+        phidot_violation=VV,
+        newton_iterations=ITS,
+        wall_time=wall,
+        dt=dt,
+        gamma=float(gamma),
+        beta=float(beta),
+        alpha=float(alpha),
+        delta=float(delta),
+    )
 
 
-def casadi_problem(q: Any, qd: Any, t: Any, mass: Any, force: Any, phi: Any, *,
-                   linear: bool = False) -> DAEProblem:
+def casadi_problem(
+    q: Any, qd: Any, t: Any, mass: Any, force: Any, phi: Any, *, linear: bool = False
+) -> DAEProblem:
     """Build a :class:`DAEProblem` from CasADi symbols and expressions.
 
     Parameters
@@ -332,8 +376,18 @@ def casadi_problem(q: Any, qd: Any, t: Any, mass: Any, force: Any, phi: Any, *,
         "h_q": ca.Function("h_q", [q, qd, t], [ca.jacobian(h, q)]),
         "h_qd": ca.Function("h_qd", [q, qd, t], [ca.jacobian(h, qd)]),
     }
-    shapes = {"mass": (n, n), "phi": (m,), "phi_q": (m, n), "phi_t": (m,), "force": (n,),
-              "force_q": (n, n), "force_qd": (n, n), "h": (m,), "h_q": (m, n), "h_qd": (m, n)}
+    shapes = {
+        "mass": (n, n),
+        "phi": (m,),
+        "phi_q": (m, n),
+        "phi_t": (m,),
+        "force": (n,),
+        "force_q": (n, n),
+        "force_qd": (n, n),
+        "h": (m,),
+        "h_q": (m, n),
+        "h_qd": (m, n),
+    }
 
     def wrap(name: str) -> Callable[..., Array]:
         fun, shape = funcs[name], shapes[name]

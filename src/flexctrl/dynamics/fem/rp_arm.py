@@ -64,8 +64,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.dynamics.fem.moving_frame import (ENDS, FrameLink, RPMotion, check_elements, is_symbolic,
-                                               prismatic_rows)
+from flexctrl.dynamics.fem.moving_frame import (
+    ENDS,
+    FrameLink,
+    RPMotion,
+    check_elements,
+    is_symbolic,
+    prismatic_rows,
+)
 from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import RPArmSpec
@@ -77,21 +83,36 @@ INITIAL = ("rest", "static_load")
 class RPArmModel:
     """FE model of the sliding link in the rotating housing; :meth:`problem` gives the :class:`DAEProblem`."""
 
-    def __init__(self, spec: RPArmSpec, motion: RPMotion, n_elements: int = 8, *, axial_shortening: bool = True,
-                 driven_end: Literal["E", "H"] = "E"):
+    def __init__(
+        self,
+        spec: RPArmSpec,
+        motion: RPMotion,
+        n_elements: int = 8,
+        *,
+        axial_shortening: bool = True,
+        driven_end: Literal["E", "H"] = "E",
+    ):
         if driven_end not in ENDS:
-            raise SpecError(f"value {driven_end!r} is not allowed; allowed: 'E', 'H'", key="driven_end")
+            raise SpecError(
+                f"value {driven_end!r} is not allowed; allowed: 'E', 'H'", key="driven_end"
+            )
         check_elements(n_elements)
         if spec.joint == "clamped" and driven_end != "E":
-            raise SpecError(f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the link "
-                            "is clamped in the carriage that drives it)", key="driven_end")
+            raise SpecError(
+                f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the link "
+                "is clamped in the carriage that drives it)",
+                key="driven_end",
+            )
         self.spec, self.motion, self.n = spec, motion, int(n_elements)
         self.axial_shortening, self.driven_end = bool(axial_shortening), driven_end
         s, L = spec, spec.length
         lo, hi = sorted((float(motion.W(0.0)), float(motion.W(motion.T))))
         if not (lo >= 0.0 and hi <= L - s.D):
-            raise SpecError(f"the overhang W runs over [{lo:g}, {hi:g}] m; allowed: within [0, L - D] = "
-                            f"[0, {L - s.D:g}] m so that both supports stay on the link", key="C1")
+            raise SpecError(
+                f"the overhang W runs over [{lo:g}, {hi:g}] m; allowed: within [0, L - D] = "
+                f"[0, {L - s.D:g}] m so that both supports stay on the link",
+                key="C1",
+            )
         self.link = link = FrameLink(self.n, L, s.mass_per_length, s.EI, s.payload_mass)
         self.le, self.ndof, self.M, self.K = link.le, link.ndof, link.M, link.K
         self.S0, self.S1, self.tip = link.S0, link.S1, link.tip
@@ -113,9 +134,16 @@ class RPArmModel:
         th = val(m.theta(t))
         c, sn = cos(th), sin(th)
         gx, gy = s.gravity
-        return {"rE": s.support_outer - s.length + val(m.W(t)), "rEd": val(m.Wd(t)), "rEdd": val(m.Wdd(t)),
-                "th": th, "thd": val(m.thetad(t)), "thdd": val(m.thetadd(t)),
-                "g_ax": gx * c + gy * sn, "g_perp": -gx * sn + gy * c}
+        return {
+            "rE": s.support_outer - s.length + val(m.W(t)),
+            "rEd": val(m.Wd(t)),
+            "rEdd": val(m.Wdd(t)),
+            "th": th,
+            "thd": val(m.thetad(t)),
+            "thdd": val(m.thetadd(t)),
+            "g_ax": gx * c + gy * sn,
+            "g_perp": -gx * sn + gy * c,
+        }
 
     def axial_force(self, t: float, x: ArrayLike) -> Array:
         """Axial force of the rigid motion (N, tension positive) at material points ``x`` (m)."""
@@ -178,23 +206,36 @@ class RPArmModel:
             return -2.0 * xsd[:, None] * R1
 
         return DAEProblem(
-            n_q=self.ndof, n_c=self.rows.count, mass=lambda q, t: self.M,
+            n_q=self.ndof,
+            n_c=self.rows.count,
+            mass=lambda q, t: self.M,
             force=lambda q, qd, t: self.load(t) - self.stiffness(t) @ q,
             phi=lambda q, t: self._rows(t)[0] @ q,
             phi_q=lambda q, t: self._rows(t)[0],
             phi_t=lambda q, t: self._rows(t)[3] * (self._rows(t)[1] @ q),
             h=lambda q, qd, t: h_q(q, qd, t) @ q + h_qd(q, qd, t) @ qd,
-            force_q=lambda q, qd, t: -self.stiffness(t), force_qd=lambda q, qd, t: zeros,
-            h_q=h_q, h_qd=h_qd, linear=True)
+            force_q=lambda q, qd, t: -self.stiffness(t),
+            force_qd=lambda q, qd, t: zeros,
+            h_q=h_q,
+            h_qd=h_qd,
+            linear=True,
+        )
 
-    def initial_shape(self, kind: Literal["rest", "static_load"] = "rest", tip_deflection: float = 0.01,
-                      tracked_end: Literal["E", "H"] = "H") -> Array:
+    def initial_shape(
+        self,
+        kind: Literal["rest", "static_load"] = "rest",
+        tip_deflection: float = 0.01,
+        tracked_end: Literal["E", "H"] = "H",
+    ) -> Array:
         """Initial nodal values: zero (``"rest"``), or the static deflection under a uniform load with
         the t = 0 supports, scaled so that ``tracked_end`` deflects ``tip_deflection`` (m)."""
         if kind == "rest":
             return np.zeros(self.ndof)
         if kind != "static_load":
-            raise SpecError(f"value {kind!r} is not allowed; allowed: {', '.join(map(repr, INITIAL))}", key="initial")
+            raise SpecError(
+                f"value {kind!r} is not allowed; allowed: {', '.join(map(repr, INITIAL))}",
+                key="initial",
+            )
         q = self._constrained_static(self.S0 / self.spec.mass_per_length, 0.0)[0]
         dof = 0 if tracked_end == "E" else self.tip
         return q * (tip_deflection / q[dof])
@@ -230,11 +271,24 @@ class RPArmResult:
     wall_time: float
 
 
-def simulate_rp_arm(spec: RPArmSpec, motion: RPMotion, n_elements: int = 8, dt: float = 1e-3,
-                    duration: float | None = None, *, gamma: float = 5.0, beta: float = 5.0, alpha: float = 0.25,
-                    delta: float = 0.5, axial_shortening: bool = True, driven_end: Literal["E", "H"] = "E",
-                    tracked_end: Literal["E", "H"] = "H", initial: Literal["rest", "static_load"] = "rest",
-                    tip_deflection: float = 0.01, max_violation: float = 1e-3) -> RPArmResult:
+def simulate_rp_arm(
+    spec: RPArmSpec,
+    motion: RPMotion,
+    n_elements: int = 8,
+    dt: float = 1e-3,
+    duration: float | None = None,
+    *,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    driven_end: Literal["E", "H"] = "E",
+    tracked_end: Literal["E", "H"] = "H",
+    initial: Literal["rest", "static_load"] = "rest",
+    tip_deflection: float = 0.01,
+    max_violation: float = 1e-3,
+) -> RPArmResult:
     """Simulate the prescribed-motion R-P arm with Newmark + Baumgarte (see module docstring).
 
     Parameters
@@ -255,18 +309,44 @@ def simulate_rp_arm(spec: RPArmSpec, motion: RPMotion, n_elements: int = 8, dt: 
         Bound (m) on the position-level constraint violation.
     """
     if tracked_end not in ENDS:
-        raise SpecError(f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end")
-    model = RPArmModel(spec, motion, n_elements, axial_shortening=axial_shortening, driven_end=driven_end)
+        raise SpecError(
+            f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end"
+        )
+    model = RPArmModel(
+        spec, motion, n_elements, axial_shortening=axial_shortening, driven_end=driven_end
+    )
     t_end = max(motion.T, 1.0) if duration is None else float(duration)
     q0 = model.initial_shape(initial, tip_deflection, tracked_end)
-    res = simulate(model.problem(), q0, np.zeros_like(q0), t_end, dt, gamma=gamma, beta=beta, alpha=alpha,
-                   delta=delta, max_violation=max_violation)
+    res = simulate(
+        model.problem(),
+        q0,
+        np.zeros_like(q0),
+        t_end,
+        dt,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        max_violation=max_violation,
+    )
     dof = 0 if tracked_end == "E" else model.tip
     theta = motion.theta(res.t)
     radius = spec.support_outer + motion.W(res.t)  # r_E + L
     w_tip = res.q[:, model.tip]
     c, s = np.cos(theta), np.sin(theta)
     tip_world = np.stack([c * radius - s * w_tip, s * radius + c * w_tip], axis=1)
-    return RPArmResult(model=model, dt=res.dt, t=res.t, W=motion.W(res.t), theta=theta, tip_y=res.q[:, dof],
-                       tip_world=tip_world, q=res.q, qd=res.qd, lam=res.lam, phi_violation=res.phi_violation,
-                       phidot_violation=res.phidot_violation, wall_time=res.wall_time)
+    return RPArmResult(
+        model=model,
+        dt=res.dt,
+        t=res.t,
+        W=motion.W(res.t),
+        theta=theta,
+        tip_y=res.q[:, dof],
+        tip_world=tip_world,
+        q=res.q,
+        qd=res.qd,
+        lam=res.lam,
+        phi_violation=res.phi_violation,
+        phidot_violation=res.phidot_violation,
+        wall_time=res.wall_time,
+    )

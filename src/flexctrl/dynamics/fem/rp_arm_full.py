@@ -42,9 +42,20 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.dynamics.fem.full_coupling import (FullCouplingResult, RPForces, SlidingFullModel, link_energies,
-                                                 payload_energies)
-from flexctrl.dynamics.fem.moving_frame import ENDS, FrameLink, RPMotion, check_elements, prismatic_rows
+from flexctrl.dynamics.fem.full_coupling import (
+    FullCouplingResult,
+    RPForces,
+    SlidingFullModel,
+    link_energies,
+    payload_energies,
+)
+from flexctrl.dynamics.fem.moving_frame import (
+    ENDS,
+    FrameLink,
+    RPMotion,
+    check_elements,
+    prismatic_rows,
+)
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import RPArmSpec
 
@@ -66,43 +77,60 @@ class RPArmFullModel(SlidingFullModel):
     the joint torque and axial force the motion needs.
     """
 
-    def __init__(self, spec: RPArmSpec, drive: "RPForces | RPMotion", n_elements: int = 8, *,
-                 axial_shortening: bool = True):
+    def __init__(
+        self,
+        spec: RPArmSpec,
+        drive: RPForces | RPMotion,
+        n_elements: int = 8,
+        *,
+        axial_shortening: bool = True,
+    ):
         import casadi as ca
 
         check_elements(n_elements)
         if not isinstance(drive, (RPForces, RPMotion)):
-            raise SpecError(f"value {drive!r} is not allowed; allowed: an RPForces or an RPMotion", key="drive")
+            raise SpecError(
+                f"value {drive!r} is not allowed; allowed: an RPForces or an RPMotion", key="drive"
+            )
         self.spec, self.drive, self.n = spec, drive, int(n_elements)
         self.axial_shortening = bool(axial_shortening)
         s, L = spec, spec.length
         motion_driven = isinstance(drive, RPMotion)
         W0 = float(drive.W(0.0)) if motion_driven else float(drive.W0)
         if not 0.0 <= W0 <= L - s.D:
-            raise SpecError(f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = [0, {L - s.D:g}] m",
-                            key="W0" if not motion_driven else "C1")
+            raise SpecError(
+                f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = [0, {L - s.D:g}] m",
+                key="W0" if not motion_driven else "C1",
+            )
         link = FrameLink(self.n, L, s.mass_per_length, s.EI)
         self.link, self.le, self.ne, self.tip = link, link.le, link.ndof, link.tip
         self.rows = prismatic_rows(s.joint, L, s.D)
         z, zd = ca.SX.sym("z", self.ne + 2), ca.SX.sym("zd", self.ne + 2)
-        q, th, W = z[:self.ne], z[self.ne], z[self.ne + 1]
-        qd, thd, Wd = zd[:self.ne], zd[self.ne], zd[self.ne + 1]
+        q, th, W = z[: self.ne], z[self.ne], z[self.ne + 1]
+        qd, thd, Wd = zd[: self.ne], zd[self.ne], zd[self.ne + 1]
         rE = s.support_outer - L + W
         gx, gy = s.gravity
         g_ax, g_perp = gx * ca.cos(th) + gy * ca.sin(th), -gx * ca.sin(th) + gy * ca.cos(th)
         args = (q, qd, rE, Wd, thd, g_ax, g_perp, self.axial_shortening)
         T_l, V_l = link_energies(link, *args)
         T_p, V_p = payload_energies(link, s.payload_mass, *args)
-        T = T_l + T_p + 0.5 * s.hub_inertia * thd**2 + 0.5 * s.carriage_mass * (Wd**2 + rE**2 * thd**2)
+        T = (
+            T_l
+            + T_p
+            + 0.5 * s.hub_inertia * thd**2
+            + 0.5 * s.carriage_mass * (Wd**2 + rE**2 * thd**2)
+        )
         V = V_l + V_p - g_ax * s.carriage_mass * rE
         self._build(z, zd, T, V)
 
     def check_W(self, W: float, t: float) -> None:
         s = self.spec
         if not -1e-12 <= W <= s.length - s.D + 1e-12:
-            raise SimulationError(f"at t = {t:.6g} s the overhang W = {W:.6g} m left [0, L - D] = "
-                                  f"[0, {s.length - s.D:g}] m: a support slid off the link (full coupling; "
-                                  "reduce the axial force or the duration)")
+            raise SimulationError(
+                f"at t = {t:.6g} s the overhang W = {W:.6g} m left [0, L - D] = "
+                f"[0, {s.length - s.D:g}] m: a support slid off the link (full coupling; "
+                "reduce the axial force or the duration)"
+            )
 
     def _parts(self, W: float) -> list[tuple[Array, Array]]:
         s = self.spec
@@ -124,12 +152,24 @@ class RPArmFullResult(FullCouplingResult):
     tip_world: Array
 
 
-def simulate_rp_arm_full(spec: RPArmSpec, drive: "RPForces | RPMotion", n_elements: int = 8, dt: float = 1e-3,
-                         duration: float = 1.0, *, gamma: float = 5.0, beta: float = 5.0, alpha: float = 0.25,
-                         delta: float = 0.5, axial_shortening: bool = True,
-                         tracked_end: Literal["E", "H"] = "H", max_violation: float = 1e-3,
-                         newton_tol: float = 1e-10, max_iterations: int = 30,
-                         initial_q: ArrayLike | None = None) -> RPArmFullResult:
+def simulate_rp_arm_full(
+    spec: RPArmSpec,
+    drive: RPForces | RPMotion,
+    n_elements: int = 8,
+    dt: float = 1e-3,
+    duration: float = 1.0,
+    *,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    tracked_end: Literal["E", "H"] = "H",
+    max_violation: float = 1e-3,
+    newton_tol: float = 1e-10,
+    max_iterations: int = 30,
+    initial_q: ArrayLike | None = None,
+) -> RPArmFullResult:
     """Simulate the fully coupled R-P arm (Eq 43) with Newmark + Baumgarte (Newton on ``z, lam``).
 
     Parameters
@@ -163,20 +203,45 @@ def simulate_rp_arm_full(spec: RPArmSpec, drive: "RPForces | RPMotion", n_elemen
         Newton failed to converge.
     """
     if tracked_end not in ENDS:
-        raise SpecError(f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end")
+        raise SpecError(
+            f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end"
+        )
     model = RPArmFullModel(spec, drive, n_elements, axial_shortening=axial_shortening)
-    res, torque, force, vp, vv = model.run(dt, duration, initial_q, gamma=gamma, beta=beta, alpha=alpha,
-                                           delta=delta, max_violation=max_violation, newton_tol=newton_tol,
-                                           max_iterations=max_iterations)
+    res, torque, force, vp, vv = model.run(
+        dt,
+        duration,
+        initial_q,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        max_violation=max_violation,
+        newton_tol=newton_tol,
+        max_iterations=max_iterations,
+    )
     ne, ith, iW = model.ne, model.ith, model.iW
     theta, W = res.q[:, ith], res.q[:, iW]
     radius = spec.support_outer + W
     w_tip = res.q[:, model.tip]
     c, s = np.cos(theta), np.sin(theta)
     dof = 0 if tracked_end == "E" else model.tip
-    return RPArmFullResult(model=model, dt=res.dt, t=res.t, theta=theta, thetad=res.qd[:, ith], W=W, Wd=res.qd[:, iW],
-                           torque=torque, force=force, q=res.q[:, :ne], qd=res.qd[:, :ne],
-                           lam=res.lam[:, :model.rows.count], tip_y=res.q[:, dof],
-                           tip_world=np.stack([c * radius - s * w_tip, s * radius + c * w_tip], 1),
-                           phi_violation=vp, phidot_violation=vv, newton_iterations=res.newton_iterations,
-                           wall_time=res.wall_time)
+    return RPArmFullResult(
+        model=model,
+        dt=res.dt,
+        t=res.t,
+        theta=theta,
+        thetad=res.qd[:, ith],
+        W=W,
+        Wd=res.qd[:, iW],
+        torque=torque,
+        force=force,
+        q=res.q[:, :ne],
+        qd=res.qd[:, :ne],
+        lam=res.lam[:, : model.rows.count],
+        tip_y=res.q[:, dof],
+        tip_world=np.stack([c * radius - s * w_tip, s * radius + c * w_tip], 1),
+        phi_violation=vp,
+        phidot_violation=vv,
+        newton_iterations=res.newton_iterations,
+        wall_time=res.wall_time,
+    )

@@ -54,8 +54,12 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from flexctrl.beam.elements import (assemble_beam, assemble_geometric_stiffness,
-                                    hermite_shape, locate)
+from flexctrl.beam.elements import (
+    assemble_beam,
+    assemble_geometric_stiffness,
+    hermite_shape,
+    locate,
+)
 from flexctrl.dynamics.fem.newmark_dae import DAEProblem, simulate
 
 Array = NDArray[np.float64]
@@ -83,7 +87,9 @@ class SlidingBeamCase:
     def W(self, t: ArrayLike) -> Array:
         """H-side overhang, m (held at ``W(T)`` for ``t > T`` and ``C1`` for ``t < 0``)."""
         tc = np.clip(np.asarray(t, dtype=float), 0.0, self.T)
-        return self.C1 - self.C2 / self.T * (tc - self.T / (2 * np.pi) * np.sin(2 * np.pi * tc / self.T))
+        return self.C1 - self.C2 / self.T * (
+            tc - self.T / (2 * np.pi) * np.sin(2 * np.pi * tc / self.T)
+        )
 
     def Wd(self, t: ArrayLike) -> Array:
         """dW/dt, m/s."""
@@ -112,8 +118,10 @@ class SlidingBeamModel:
         c = case
         lo, hi = sorted((float(c.W(0.0)), float(c.W(c.T))))
         if not (c.D > 0 and lo >= 0.0 and hi <= c.L - c.D):
-            raise ValueError(f"case {c.name!r}: supports leave the beam (W in [{lo}, {hi}] m, "
-                             f"need 0 <= W <= L - D = {c.L - c.D} m)")
+            raise ValueError(
+                f"case {c.name!r}: supports leave the beam (W in [{lo}, {hi}] m, "
+                f"need 0 <= W <= L - D = {c.L - c.D} m)"
+            )
         mats = assemble_beam(self.n, c.L, c.rho, c.EI)
         self.M, self.K, self.le = mats.M, mats.K, mats.element_length
         self.S0 = mats.S0
@@ -140,7 +148,7 @@ class SlidingBeamModel:
             for d in range(3):
                 H = hermite_shape(zetas, self.le, d)
                 for k, (j, _) in enumerate(located):
-                    R[d, k, 2 * j:2 * j + 4] = H[k]
+                    R[d, k, 2 * j : 2 * j + 4] = H[k]
             Kt = self.K + float(self.case.Wdd(t)) * self.G if self.axial_shortening else self.K
             self._cache = (R[0], R[1], R[2], xsd, xsdd, Kt)
             self._cache_t = t
@@ -176,11 +184,20 @@ class SlidingBeamModel:
             return h_q(q, qd, t) @ q + h_qd(q, qd, t) @ qd
 
         return DAEProblem(
-            n_q=self.ndof, n_c=2, mass=lambda q, t: self.M,
+            n_q=self.ndof,
+            n_c=2,
+            mass=lambda q, t: self.M,
             force=lambda q, qd, t: -(self.stiffness(t) @ q),
-            phi=phi, phi_q=phi_q, phi_t=phi_t, h=h,
-            force_q=lambda q, qd, t: -self.stiffness(t), force_qd=lambda q, qd, t: zeros,
-            h_q=h_q, h_qd=h_qd, linear=True)
+            phi=phi,
+            phi_q=phi_q,
+            phi_t=phi_t,
+            h=h,
+            force_q=lambda q, qd, t: -self.stiffness(t),
+            force_qd=lambda q, qd, t: zeros,
+            h_q=h_q,
+            h_qd=h_qd,
+            linear=True,
+        )
 
     def initial_shape(self) -> Array:
         """Static deflection under a uniform load with the t = 0 supports, scaled to the tip value.
@@ -223,10 +240,18 @@ class SlidingBeamResult:
 DEFAULT_DT = 1e-3
 
 
-def simulate_sliding_beam(case: SlidingBeamCase, n_elements: int = 4, dt: float = DEFAULT_DT,
-                          duration: float | None = None, gamma: float = 5.0, beta: float = 5.0,
-                          alpha: float = 0.25, delta: float = 0.5, axial_shortening: bool = True,
-                          max_violation: float = 1e-3) -> SlidingBeamResult:
+def simulate_sliding_beam(
+    case: SlidingBeamCase,
+    n_elements: int = 4,
+    dt: float = DEFAULT_DT,
+    duration: float | None = None,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    max_violation: float = 1e-3,
+) -> SlidingBeamResult:
     """Simulate one case with Newmark + Baumgarte (paper: 4 elements, gamma = beta = 5).
 
     Parameters
@@ -248,10 +273,29 @@ def simulate_sliding_beam(case: SlidingBeamCase, n_elements: int = 4, dt: float 
     model = SlidingBeamModel(case, n_elements, axial_shortening)
     t_end = max(case.T, 1.0) if duration is None else float(duration)
     q0 = model.initial_shape()
-    res = simulate(model.problem(), q0, np.zeros_like(q0), t_end, dt, gamma=gamma, beta=beta,
-                   alpha=alpha, delta=delta, max_violation=max_violation)
+    res = simulate(
+        model.problem(),
+        q0,
+        np.zeros_like(q0),
+        t_end,
+        dt,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        max_violation=max_violation,
+    )
     return SlidingBeamResult(
-        case=case, n_elements=model.n, axial_shortening=model.axial_shortening, dt=res.dt,
-        t=res.t, W=case.W(res.t), tip_y=res.q[:, model.tip_dof], q=res.q, lam=res.lam,
-        phi_violation=res.phi_violation, phidot_violation=res.phidot_violation,
-        wall_time=res.wall_time)
+        case=case,
+        n_elements=model.n,
+        axial_shortening=model.axial_shortening,
+        dt=res.dt,
+        t=res.t,
+        W=case.W(res.t),
+        tip_y=res.q[:, model.tip_dof],
+        q=res.q,
+        lam=res.lam,
+        phi_violation=res.phi_violation,
+        phidot_violation=res.phidot_violation,
+        wall_time=res.wall_time,
+    )

@@ -16,7 +16,7 @@ symmetric positive definite (mass matrices).
 from __future__ import annotations
 
 import heapq
-from typing import Sequence
+from collections.abc import Sequence
 
 import casadi as ca
 

@@ -65,8 +65,15 @@ class TelescopingModel:
     (``2 N1`` values), then the inner link's (``2 (N2 + 1)``).
     """
 
-    def __init__(self, spec: TelescopingSpec, motion: RPMotion, n_outer: int = 8, n_inner: int = 8, *,
-                 axial_shortening: bool = True):
+    def __init__(
+        self,
+        spec: TelescopingSpec,
+        motion: RPMotion,
+        n_outer: int = 8,
+        n_inner: int = 8,
+        *,
+        axial_shortening: bool = True,
+    ):
         check_elements(n_outer, "n_outer")
         check_elements(n_inner, "n_inner")
         self.spec, self.motion, self.axial_shortening = spec, motion, bool(axial_shortening)
@@ -80,10 +87,15 @@ class TelescopingModel:
         self.i1, self.i2 = slice(0, self.n_q1), slice(self.n_q1, self.ndof)
         self.M = np.zeros((self.ndof, self.ndof))
         self.K = np.zeros((self.ndof, self.ndof))
-        self.M[self.i1, self.i1], self.K[self.i1, self.i1] = self.outer.M[2:, 2:], self.outer.K[2:, 2:]
+        self.M[self.i1, self.i1], self.K[self.i1, self.i1] = (
+            self.outer.M[2:, 2:],
+            self.outer.K[2:, 2:],
+        )
         self.M[self.i2, self.i2], self.K[self.i2, self.i2] = self.inner.M, self.inner.K
         self.orders = np.array([d for c in spec.contacts for d in ((0, 1) if c.slope else (0,))])
-        self.contact_of_row = np.array([k for k, c in enumerate(spec.contacts) for _ in range((1 + c.slope))])
+        self.contact_of_row = np.array(
+            [k for k, c in enumerate(spec.contacts) for _ in range(1 + c.slope)]
+        )
         self.n_c = self.orders.size
         self.tip = self.n_q1 + self.inner.tip  # dof of w2(L2)
         self.outer_tip = self.n_q1 - 2  # dof of w1(L1)
@@ -98,10 +110,20 @@ class TelescopingModel:
         m, sp = self.motion, self.spec
         th = float(m.theta(t))
         gx, gy = sp.gravity
-        common = {"th": th, "thd": float(m.thetad(t)), "thdd": float(m.thetadd(t)),
-                  "g_ax": gx * math.cos(th) + gy * math.sin(th), "g_perp": -gx * math.sin(th) + gy * math.cos(th)}
+        common = {
+            "th": th,
+            "thd": float(m.thetad(t)),
+            "thdd": float(m.thetadd(t)),
+            "g_ax": gx * math.cos(th) + gy * math.sin(th),
+            "g_perp": -gx * math.sin(th) + gy * math.cos(th),
+        }
         outer = {"rE": sp.hub_radius, "rEd": 0.0, "rEdd": 0.0, **common}
-        inner = {"rE": sp.hub_radius + self.s(t), "rEd": float(m.Wd(t)), "rEdd": float(m.Wdd(t)), **common}
+        inner = {
+            "rE": sp.hub_radius + self.s(t),
+            "rEd": float(m.Wd(t)),
+            "rEdd": float(m.Wdd(t)),
+            **common,
+        }
         return outer, inner
 
     def contact_rows(self, t: float) -> tuple[Array, Array, Array]:
@@ -157,13 +179,20 @@ class TelescopingModel:
         """The constrained equations of motion as a linear :class:`DAEProblem`."""
         zeros = np.zeros((self.ndof, self.ndof))
         return DAEProblem(
-            n_q=self.ndof, n_c=self.n_c, mass=lambda q, t: self.M,
+            n_q=self.ndof,
+            n_c=self.n_c,
+            mass=lambda q, t: self.M,
             force=lambda q, qd, t: self.load(t) - self.stiffness(t) @ q,
-            phi=lambda q, t: self._terms(t)[0] @ q, phi_q=lambda q, t: self._terms(t)[0],
+            phi=lambda q, t: self._terms(t)[0] @ q,
+            phi_q=lambda q, t: self._terms(t)[0],
             phi_t=lambda q, t: self._terms(t)[1] @ q,
             h=lambda q, qd, t: self._terms(t)[2] @ q + self._terms(t)[3] @ qd,
-            force_q=lambda q, qd, t: -self.stiffness(t), force_qd=lambda q, qd, t: zeros,
-            h_q=lambda q, qd, t: self._terms(t)[2], h_qd=lambda q, qd, t: self._terms(t)[3], linear=True)
+            force_q=lambda q, qd, t: -self.stiffness(t),
+            force_qd=lambda q, qd, t: zeros,
+            h_q=lambda q, qd, t: self._terms(t)[2],
+            h_qd=lambda q, qd, t: self._terms(t)[3],
+            linear=True,
+        )
 
     def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
         """Static deflection under a transverse force (N) at the inner tip H, contacts at time ``t``,
@@ -177,8 +206,11 @@ class TelescopingModel:
         try:
             sol = np.linalg.solve(S, rhs)
         except np.linalg.LinAlgError as exc:
-            raise SpecError("the contacts do not hold the inner link (singular static system); allowed: two "
-                            "distinct contacts or one with slope = true", key="contacts") from exc
+            raise SpecError(
+                "the contacts do not hold the inner link (singular static system); allowed: two "
+                "distinct contacts or one with slope = true",
+                key="contacts",
+            ) from exc
         return sol[:n], sol[n:]
 
     def vibration_energy(self, q: Array, qd: Array) -> float:
@@ -206,6 +238,7 @@ def static_tip_deflection(spec: TelescopingSpec, s: float, P: float) -> float:
     c = L2 - a
     cs = sorted((k.on, k.at, k.slope) for k in spec.contacts)
     if cs == [("inner", 0.0, False), ("outer", L1, False)]:
+
         def w1(x: float, F: float, b: float) -> float:
             return F * (x * x * (3 * b - x) if x <= b else b * b * (3 * x - b)) / (6 * EI1)
 
@@ -215,10 +248,16 @@ def static_tip_deflection(spec: TelescopingSpec, s: float, P: float) -> float:
         return w_mouth + (w_mouth - w_s) * c / a + P * c * c * (a + c) / (3 * EI2)
     if cs == [("outer", L1, True)]:
         M = P * c
-        w, slope = P * L1**3 / (3 * EI1) + M * L1**2 / (2 * EI1), P * L1**2 / (2 * EI1) + M * L1 / EI1
+        w, slope = (
+            P * L1**3 / (3 * EI1) + M * L1**2 / (2 * EI1),
+            P * L1**2 / (2 * EI1) + M * L1 / EI1,
+        )
         return w + slope * c + P * c**3 / (3 * EI2)
-    raise SpecError(f"no closed form for contacts {spec.contacts}; allowed: mouth + root without slopes, "
-                    "or one slope contact at the mouth", key="contacts")
+    raise SpecError(
+        f"no closed form for contacts {spec.contacts}; allowed: mouth + root without slopes, "
+        "or one slope contact at the mouth",
+        key="contacts",
+    )
 
 
 @dataclass(frozen=True)
@@ -247,10 +286,22 @@ class TelescopingResult:
     wall_time: float
 
 
-def simulate_telescoping(spec: TelescopingSpec, motion: RPMotion, n_outer: int = 8, n_inner: int = 8,
-                         dt: float = 1e-3, duration: float | None = None, *, gamma: float = 5.0, beta: float = 5.0,
-                         alpha: float = 0.25, delta: float = 0.5, axial_shortening: bool = True,
-                         tracked_end: Literal["E", "H"] = "H", max_violation: float = 1e-3) -> TelescopingResult:
+def simulate_telescoping(
+    spec: TelescopingSpec,
+    motion: RPMotion,
+    n_outer: int = 8,
+    n_inner: int = 8,
+    dt: float = 1e-3,
+    duration: float | None = None,
+    *,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    tracked_end: Literal["E", "H"] = "H",
+    max_violation: float = 1e-3,
+) -> TelescopingResult:
     """Simulate the telescoping pair under prescribed motion with Newmark + Baumgarte.
 
     Parameters
@@ -271,20 +322,43 @@ def simulate_telescoping(spec: TelescopingSpec, motion: RPMotion, n_outer: int =
         Bound (m) on the position-level constraint violation (:class:`SimulationError` beyond).
     """
     if tracked_end not in ("E", "H"):
-        raise SpecError(f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end")
+        raise SpecError(
+            f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end"
+        )
     model = TelescopingModel(spec, motion, n_outer, n_inner, axial_shortening=axial_shortening)
     t_end = max(motion.T, 1.0) if duration is None else float(duration)
     q0 = np.zeros(model.ndof)
     start = time.perf_counter()
-    res = simulate(model.problem(), q0, q0.copy(), t_end, dt, gamma=gamma, beta=beta, alpha=alpha, delta=delta,
-                   max_violation=max_violation)
+    res = simulate(
+        model.problem(),
+        q0,
+        q0.copy(),
+        t_end,
+        dt,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        max_violation=max_violation,
+    )
     dof = model.n_q1 if tracked_end == "E" else model.tip
     theta = motion.theta(res.t)
     radius = spec.hub_radius + spec.outer.length + motion.W(res.t)
     w_tip = res.q[:, model.tip]
     c, s = np.cos(theta), np.sin(theta)
     return TelescopingResult(
-        model=model, dt=res.dt, t=res.t, W=motion.W(res.t), theta=theta, tip_y=res.q[:, dof],
-        outer_tip_y=res.q[:, model.outer_tip], tip_world=np.stack([c * radius - s * w_tip, s * radius + c * w_tip], 1),
-        q=res.q, qd=res.qd, lam=res.lam, phi_violation=res.phi_violation, phidot_violation=res.phidot_violation,
-        wall_time=time.perf_counter() - start)
+        model=model,
+        dt=res.dt,
+        t=res.t,
+        W=motion.W(res.t),
+        theta=theta,
+        tip_y=res.q[:, dof],
+        outer_tip_y=res.q[:, model.outer_tip],
+        tip_world=np.stack([c * radius - s * w_tip, s * radius + c * w_tip], 1),
+        q=res.q,
+        qd=res.qd,
+        lam=res.lam,
+        phi_violation=res.phi_violation,
+        phidot_violation=res.phidot_violation,
+        wall_time=time.perf_counter() - start,
+    )

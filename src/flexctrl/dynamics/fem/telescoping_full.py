@@ -27,8 +27,13 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from flexctrl.dynamics.fem.full_coupling import (FullCouplingResult, RPForces, SlidingFullModel, link_energies,
-                                                 payload_energies)
+from flexctrl.dynamics.fem.full_coupling import (
+    FullCouplingResult,
+    RPForces,
+    SlidingFullModel,
+    link_energies,
+    payload_energies,
+)
 from flexctrl.dynamics.fem.moving_frame import FrameLink, PointRows, RPMotion, check_elements
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import TelescopingSpec
@@ -39,14 +44,23 @@ Array = NDArray[np.float64]
 class TelescopingFullModel(SlidingFullModel):
     """The telescoping pair with ``theta`` and ``W`` unknown; ``drive`` an :class:`RPForces` or :class:`RPMotion`."""
 
-    def __init__(self, spec: TelescopingSpec, drive: "RPForces | RPMotion", n_outer: int = 8, n_inner: int = 8, *,
-                 axial_shortening: bool = True):
+    def __init__(
+        self,
+        spec: TelescopingSpec,
+        drive: RPForces | RPMotion,
+        n_outer: int = 8,
+        n_inner: int = 8,
+        *,
+        axial_shortening: bool = True,
+    ):
         import casadi as ca
 
         check_elements(n_outer, "n_outer")
         check_elements(n_inner, "n_inner")
         if not isinstance(drive, (RPForces, RPMotion)):
-            raise SpecError(f"value {drive!r} is not allowed; allowed: an RPForces or an RPMotion", key="drive")
+            raise SpecError(
+                f"value {drive!r} is not allowed; allowed: an RPForces or an RPMotion", key="drive"
+            )
         self.spec, self.drive, self.n1, self.n2 = spec, drive, int(n_outer), int(n_inner)
         self.axial_shortening = bool(axial_shortening)
         o, i = spec.outer, spec.inner
@@ -61,7 +75,7 @@ class TelescopingFullModel(SlidingFullModel):
         on_inner = [c.on == "inner" for c in spec.contacts]
         orders, off1, v1, off2, v2 = [], [], [], [], []
         for c, inner in zip(spec.contacts, on_inner):
-            for order in ((0, 1) if c.slope else (0,)):
+            for order in (0, 1) if c.slope else (0,):
                 orders.append(order)
                 off1.append(c.at + self.ds if inner else c.at)
                 v1.append(1.0 if inner else 0.0)
@@ -72,15 +86,17 @@ class TelescopingFullModel(SlidingFullModel):
 
         z, zd = ca.SX.sym("z", self.ne + 2), ca.SX.sym("zd", self.ne + 2)
         th, W, thd, Wd = z[self.ne], z[self.ne + 1], zd[self.ne], zd[self.ne + 1]
-        q1, qd1 = ca.vertcat(0, 0, z[:self.n_q1]), ca.vertcat(0, 0, zd[:self.n_q1])
-        q2, qd2 = z[self.n_q1:self.ne], zd[self.n_q1:self.ne]
+        q1, qd1 = ca.vertcat(0, 0, z[: self.n_q1]), ca.vertcat(0, 0, zd[: self.n_q1])
+        q2, qd2 = z[self.n_q1 : self.ne], zd[self.n_q1 : self.ne]
         gx, gy = spec.gravity
         g_ax, g_perp = gx * ca.cos(th) + gy * ca.sin(th), -gx * ca.sin(th) + gy * ca.cos(th)
         r0, rE = spec.hub_radius, spec.hub_radius + self.ds + W
         sh = self.axial_shortening
         T1, V1 = link_energies(self.outer, q1, qd1, r0, 0.0, thd, g_ax, g_perp, sh)
         T2, V2 = link_energies(self.inner, q2, qd2, rE, Wd, thd, g_ax, g_perp, sh)
-        Tp, Vp = payload_energies(self.inner, spec.payload_mass, q2, qd2, rE, Wd, thd, g_ax, g_perp, sh)
+        Tp, Vp = payload_energies(
+            self.inner, spec.payload_mass, q2, qd2, rE, Wd, thd, g_ax, g_perp, sh
+        )
         m_c = spec.carriage_mass
         T = T1 + T2 + Tp + 0.5 * spec.hub_inertia * thd**2 + 0.5 * m_c * (Wd**2 + rE**2 * thd**2)
         V = V1 + V2 + Vp - g_ax * m_c * rE
@@ -90,15 +106,17 @@ class TelescopingFullModel(SlidingFullModel):
         try:
             self.spec.check_stroke([self.ds + W], key="W")
         except SpecError as exc:
-            raise SimulationError(f"at t = {t:.6g} s the overhang W = {W:.6g} m took a contact off a link "
-                                  f"(full coupling; reduce the axial force or the duration): {exc}") from exc
+            raise SimulationError(
+                f"at t = {t:.6g} s the overhang W = {W:.6g} m took a contact off a link "
+                f"(full coupling; reduce the axial force or the duration): {exc}"
+            ) from exc
 
     def _parts(self, W: float) -> list[tuple[Array, Array]]:
         o, i = self.spec.outer, self.spec.inner
         R1 = np.zeros((4, self.rows_outer.count, self.ne))
         R2 = np.zeros_like(R1)
-        R1[:, :, :self.n_q1] = self.rows_outer.at(W, self.n1, o.length)[:, :, 2:]
-        R2[:, :, self.n_q1:] = -self.rows_inner.at(W, self.n2, i.length)
+        R1[:, :, : self.n_q1] = self.rows_outer.at(W, self.n1, o.length)[:, :, 2:]
+        R2[:, :, self.n_q1 :] = -self.rows_inner.at(W, self.n2, i.length)
         return [(R1, np.asarray(self.rows_outer.rates)), (R2, np.asarray(self.rows_inner.rates))]
 
 
@@ -111,12 +129,24 @@ class TelescopingFullResult(FullCouplingResult):
     outer_tip_y: Array
 
 
-def simulate_telescoping_full(spec: TelescopingSpec, drive: "RPForces | RPMotion", n_outer: int = 8,
-                              n_inner: int = 8, dt: float = 1e-3, duration: float = 1.0, *, gamma: float = 5.0,
-                              beta: float = 5.0, alpha: float = 0.25, delta: float = 0.5,
-                              axial_shortening: bool = True, tracked_end: Literal["E", "H"] = "H",
-                              max_violation: float = 1e-3, newton_tol: float = 1e-10,
-                              max_iterations: int = 30) -> TelescopingFullResult:
+def simulate_telescoping_full(
+    spec: TelescopingSpec,
+    drive: RPForces | RPMotion,
+    n_outer: int = 8,
+    n_inner: int = 8,
+    dt: float = 1e-3,
+    duration: float = 1.0,
+    *,
+    gamma: float = 5.0,
+    beta: float = 5.0,
+    alpha: float = 0.25,
+    delta: float = 0.5,
+    axial_shortening: bool = True,
+    tracked_end: Literal["E", "H"] = "H",
+    max_violation: float = 1e-3,
+    newton_tol: float = 1e-10,
+    max_iterations: int = 30,
+) -> TelescopingFullResult:
     """Simulate the fully coupled telescoping pair with Newmark + Baumgarte (links start undeformed).
 
     Parameters as :func:`flexctrl.dynamics.fem.rp_arm_full.simulate_rp_arm_full`; ``n_outer``,
@@ -130,15 +160,41 @@ def simulate_telescoping_full(spec: TelescopingSpec, drive: "RPForces | RPMotion
         Newton failed to converge.
     """
     if tracked_end not in ("E", "H"):
-        raise SpecError(f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end")
+        raise SpecError(
+            f"value {tracked_end!r} is not allowed; allowed: 'E', 'H'", key="tracked_end"
+        )
     model = TelescopingFullModel(spec, drive, n_outer, n_inner, axial_shortening=axial_shortening)
-    res, torque, force, vp, vv = model.run(dt, duration, None, gamma=gamma, beta=beta, alpha=alpha, delta=delta,
-                                           max_violation=max_violation, newton_tol=newton_tol,
-                                           max_iterations=max_iterations)
+    res, torque, force, vp, vv = model.run(
+        dt,
+        duration,
+        None,
+        gamma=gamma,
+        beta=beta,
+        alpha=alpha,
+        delta=delta,
+        max_violation=max_violation,
+        newton_tol=newton_tol,
+        max_iterations=max_iterations,
+    )
     ne, ith, iW = model.ne, model.ith, model.iW
     dof = model.n_q1 if tracked_end == "E" else model.tip
     return TelescopingFullResult(
-        model=model, dt=res.dt, t=res.t, theta=res.q[:, ith], thetad=res.qd[:, ith], W=res.q[:, iW],
-        Wd=res.qd[:, iW], torque=torque, force=force, tip_y=res.q[:, dof], outer_tip_y=res.q[:, model.outer_tip],
-        q=res.q[:, :ne], qd=res.qd[:, :ne], lam=res.lam[:, :model.rows_outer.count], phi_violation=vp,
-        phidot_violation=vv, newton_iterations=res.newton_iterations, wall_time=res.wall_time)
+        model=model,
+        dt=res.dt,
+        t=res.t,
+        theta=res.q[:, ith],
+        thetad=res.qd[:, ith],
+        W=res.q[:, iW],
+        Wd=res.qd[:, iW],
+        torque=torque,
+        force=force,
+        tip_y=res.q[:, dof],
+        outer_tip_y=res.q[:, model.outer_tip],
+        q=res.q[:, :ne],
+        qd=res.qd[:, :ne],
+        lam=res.lam[:, : model.rows_outer.count],
+        phi_violation=vp,
+        phidot_violation=vv,
+        newton_iterations=res.newton_iterations,
+        wall_time=res.wall_time,
+    )

@@ -30,8 +30,11 @@ def check_settings(settings: dict) -> None:
     """Validate one study run before any run starts (scene, controller file, model)."""
     scene = load_scene(settings["scene"], _scene_overrides(settings))
     if scene.kind != "closed_loop":
-        raise SpecError(f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = \"closed_loop\"",
-                        source=str(settings["scene"]), key="kind")
+        raise SpecError(
+            f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = \"closed_loop\"",
+            source=str(settings["scene"]),
+            key="kind",
+        )
     if settings.get("controller"):
         load_controller(settings["controller"], overrides_for(settings, "controller"))
     if scene.plant.fidelity.kind == "auto":
@@ -42,15 +45,18 @@ def unavailable_metrics(settings: dict) -> dict[str, str]:
     """The metrics this run cannot produce, from its controller's kind: ``closed_loop_radius`` needs a linear law."""
     from flexctrl.control import has_linear_law
 
-    controller = settings.get("controller") or getattr(load_scene(settings["scene"], _scene_overrides(settings)),
-                                                       "controller", None)
+    controller = settings.get("controller") or getattr(
+        load_scene(settings["scene"], _scene_overrides(settings)), "controller", None
+    )
     if not controller:
         return {}
     kind = load_controller(controller, overrides_for(settings, "controller")).kind
     if has_linear_law(kind):
         return {}
-    return {"closed_loop_radius": f"a {kind} controller has no linear law, so no linear verdict "
-                                  "(flexctrl.loop.verdict)"}
+    return {
+        "closed_loop_radius": f"a {kind} controller has no linear law, so no linear verdict "
+        "(flexctrl.loop.verdict)"
+    }
 
 
 def execute(settings: dict) -> RunOutput:
@@ -69,9 +75,16 @@ def execute(settings: dict) -> RunOutput:
     if settings.get("choice_from") is not None and scene.plant.fidelity.kind == "auto":
         shared = shared_choice(settings["choice_from"], cache)
     choosing = time.perf_counter() - choosing
-    result = run_closed_loop_scene(scene, None, controller=settings.get("controller"),
-                                   overrides=overrides_for(settings, "controller"), plots=False,
-                                   on_divergence="record", cache=cache, choice=shared)
+    result = run_closed_loop_scene(
+        scene,
+        None,
+        controller=settings.get("controller"),
+        overrides=overrides_for(settings, "controller"),
+        plots=False,
+        on_divergence="record",
+        cache=cache,
+        choice=shared,
+    )
     metrics: dict[str, float] = {}
     for key, value in result.summary["metrics"].items():
         if isinstance(value, list):
@@ -86,7 +99,12 @@ def execute(settings: dict) -> RunOutput:
         metrics["choice_time_s"] = choosing
         metrics["choice_shared"] = float(settings["choice_from"] != choice_settings(settings))
     traj = result.trajectory
-    series = {"t": traj.time, "e": result.tip_error, "tip_x": traj.tip[:, 0], "tip_y": traj.tip[:, 1]}
+    series = {
+        "t": traj.time,
+        "e": result.tip_error,
+        "tip_x": traj.tip[:, 0],
+        "tip_y": traj.tip[:, 1],
+    }
     for i in range(traj.inputs.shape[1]):
         series[f"q{i + 1}"] = traj.states[:, i]
         series[f"u{i + 1}"] = traj.inputs[:, i]
@@ -100,11 +118,16 @@ def shared_choice(representative: dict, cache):
     A choice that fails (e.g. :class:`~flexctrl.fidelity.ladder.ToleranceUnreachable`) is
     kept too and raised again for every member, so the group is judged once.
     """
+
     def build():
         scene = load_scene(representative["scene"], _scene_overrides(representative))
         try:
-            return resolve_auto(scene, representative.get("controller"), overrides_for(representative, "controller"),
-                                cache)[1]
+            return resolve_auto(
+                scene,
+                representative.get("controller"),
+                overrides_for(representative, "controller"),
+                cache,
+            )[1]
         except FlexctrlError as exc:
             return exc
 

@@ -18,13 +18,15 @@ import math
 import multiprocessing
 import os
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import SimulationError, SpecError
+from flexctrl.errors import SimulationError
 from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache
+
 
 @dataclass(frozen=True)
 class _SelftestScene:
@@ -38,7 +40,13 @@ class _SelftestScene:
 
 
 @per_worker_cache(maxsize=32)
-def _selftest_documents(scene: str, scene_overrides: tuple[str, ...], controller: str | None, controller_overrides: tuple[str, ...], digest_key: tuple) -> tuple[_SelftestScene, float, float]:
+def _selftest_documents(
+    scene: str,
+    scene_overrides: tuple[str, ...],
+    controller: str | None,
+    controller_overrides: tuple[str, ...],
+    digest_key: tuple,
+) -> tuple[_SelftestScene, float, float]:
     from flexctrl.spec.overrides import apply_overrides
     from flexctrl.spec.reader import TableReader, read_toml
 
@@ -56,10 +64,14 @@ def _selftest_documents(scene: str, scene_overrides: tuple[str, ...], controller
     r.string("source", "")
     r.finish()
     if parsed.duration / parsed.dt > 1e6:
-        raise r.error("dt", f"gives {parsed.duration / parsed.dt:.3g} samples; allowed: at most 1e6")
+        raise r.error(
+            "dt", f"gives {parsed.duration / parsed.dt:.3g} samples; allowed: at most 1e6"
+        )
     zeta, gain = 0.005, 0.0
     if controller is not None:
-        doc = apply_overrides(read_toml(controller), controller_overrides, source=f"{controller} (overrides)")
+        doc = apply_overrides(
+            read_toml(controller), controller_overrides, source=f"{controller} (overrides)"
+        )
         c = TableReader(doc, controller)
         zeta = c.number("damping_ratio", low=-1.0, high=10.0)
         gain = c.number("stiffness_gain", 0.0, low=-1.0, low_open=True)
@@ -72,14 +84,18 @@ def _selftest_documents(scene: str, scene_overrides: tuple[str, ...], controller
 def _selftest_inputs(settings: Mapping[str, Any]):
     digests = settings.get("digests", {})
     return _selftest_documents(
-        settings["scene"], tuple(overrides_for(settings, "scene")),
-        settings.get("controller"), tuple(overrides_for(settings, "controller")),
+        settings["scene"],
+        tuple(overrides_for(settings, "scene")),
+        settings.get("controller"),
+        tuple(overrides_for(settings, "controller")),
         (digests.get("scene"), digests.get("controller")),
     )
 
 
 @per_worker_cache(maxsize=8)
-def _selftest_build(model: str, model_digest: str | None, model_overrides: tuple[str, ...]) -> tuple[float, float]:
+def _selftest_build(
+    model: str, model_digest: str | None, model_overrides: tuple[str, ...]
+) -> tuple[float, float]:
     """First clamped-free frequency (Hz) and modal mass (kg) of the model's last link; built once per worker."""
     from flexctrl.spec.arm import load_arm
 
@@ -121,26 +137,36 @@ def execute(settings: dict) -> RunOutput:
     if scene.sleep_s:
         time.sleep(scene.sleep_s)
     if scene.fail_payload is not None and payload == scene.fail_payload:
-        raise RuntimeError(f"selftest failure requested for payload {payload:g} kg (scene key fail_payload)")
+        raise RuntimeError(
+            f"selftest failure requested for payload {payload:g} kg (scene key fail_payload)"
+        )
     if scene.crash_payload is not None and payload == scene.crash_payload:
         if _in_main_process():
-            raise RuntimeError("selftest crash requested, but the run is in the main process (--workers 0); refusing to exit")
+            raise RuntimeError(
+                "selftest crash requested, but the run is in the main process (--workers 0); refusing to exit"
+            )
         os._exit(70)
-    f0, modal_mass = _selftest_build(settings["model"], settings.get("digests", {}).get("model"), tuple(overrides_for(settings, "model")))
+    f0, modal_mass = _selftest_build(
+        settings["model"],
+        settings.get("digests", {}).get("model"),
+        tuple(overrides_for(settings, "model")),
+    )
     q = np.radians(np.asarray(settings["q0_deg"], dtype=float))
     shape = 1.0 + 0.2 * float(np.mean(np.cos(q[1:]))) if q.size > 1 else 1.0
     freq = f0 * math.sqrt(modal_mass / (modal_mass + payload)) * shape * math.sqrt(1.0 + gain)
     omega = 2 * math.pi * freq
     n = int(round(scene.duration / scene.dt)) + 1
     t = np.arange(n) * scene.dt
-    phi = _expm(np.array([[0.0, 1.0], [-omega**2, -2 * zeta * omega]]) * scene.dt)
+    phi = _expm(np.array([[0.0, 1.0], [-(omega**2), -2 * zeta * omega]]) * scene.dt)
     states = np.empty((n, 2))
     states[0] = (scene.amplitude * (1.0 + 0.5 * math.sin(q[0])), 0.0)
     limit = 1e3 * scene.amplitude
     for k in range(1, n):
         states[k] = phi @ states[k - 1]
         if abs(states[k, 0]) > limit:
-            raise SimulationError(f"diverged: |w| exceeded {limit:g} m at t = {t[k]:.3f} s (damping ratio {zeta:g})")
+            raise SimulationError(
+                f"diverged: |w| exceeded {limit:g} m at t = {t[k]:.3f} s (damping ratio {zeta:g})"
+            )
     rng = np.random.default_rng(settings["seed"])
     measured = states[:, 0] + scene.noise_std * rng.standard_normal(n)
     residual = measured[t >= scene.duration / 2]
@@ -160,4 +186,3 @@ def execute(settings: dict) -> RunOutput:
 def check_settings(settings: dict) -> None:
     """Validate the run's scene and controller documents (with overrides; memoised)."""
     _selftest_inputs(settings)
-

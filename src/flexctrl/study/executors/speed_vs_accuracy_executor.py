@@ -48,25 +48,38 @@ the Pareto front, writes ``pareto.csv`` and tabulates the same numbers.
 
 from __future__ import annotations
 
-import copy
 import csv
 import dataclasses
-import functools
 import json
 import math
 import statistics
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from flexctrl.analysis.accuracy import (
-    OUTPUT_DT, Method, MethodRun, Reference, cached_reference, compute_reference, make_stepper, parse_method,
-    pareto_front, run_closed_loop, run_open_loop,
+    OUTPUT_DT,
+    Method,
+    MethodRun,
+    Reference,
+    cached_reference,
+    compute_reference,
+    make_stepper,
+    pareto_front,
+    parse_method,
+    run_closed_loop,
+    run_open_loop,
 )
 from flexctrl.errors import SpecError
-from flexctrl.study.outputs import RunOutput, freeze, overrides_for, per_worker_cache, worker_scene_cache
 from flexctrl.spec.shipped import data_root
+from flexctrl.study.outputs import (
+    RunOutput,
+    overrides_for,
+    per_worker_cache,
+    worker_scene_cache,
+)
 
 #: Scene keys read by this executor (removed before the scene file is validated).
 OWN_KEYS = ("method", "reference", "reference_meshes", "repeats", "horizon")
@@ -125,35 +138,73 @@ def plan_from_settings(settings: Mapping[str, Any]) -> RunPlan:
     source = str(settings.get("scene"))
     own, rest = _split_overrides(settings)
     if settings.get("fidelity") is not None:
-        raise SpecError(f"value {settings['fidelity']!r} is not used here; allowed: leave 'fidelity' out and give the model in "
-                        "scene.method (e.g. 'amm:2/rk4@1ms')", source=source, key="fidelity")
+        raise SpecError(
+            f"value {settings['fidelity']!r} is not used here; allowed: leave 'fidelity' out and give the model in "
+            "scene.method (e.g. 'amm:2/rk4@1ms')",
+            source=source,
+            key="fidelity",
+        )
     if "method" not in own:
-        raise SpecError("missing: the method to judge, e.g. \"scene.method\" = \"amm:2/rk4@1ms\" (fixed in [set] or a [grid] axis)",
-                        source=source, key="scene.method")
+        raise SpecError(
+            'missing: the method to judge, e.g. "scene.method" = "amm:2/rk4@1ms" (fixed in [set] or a [grid] axis)',
+            source=source,
+            key="scene.method",
+        )
     method = parse_method(own["method"], source=source, key="scene.method")
-    reference = parse_method(own.get("reference", DEFAULT_REFERENCE), source=source, key="scene.reference")
+    reference = parse_method(
+        own.get("reference", DEFAULT_REFERENCE), source=source, key="scene.reference"
+    )
     if reference.fidelity.split(":")[0] != "fem":
-        raise SpecError(f"value {reference.label!r} is not allowed; allowed: a finite-element reference 'fem:N/...'",
-                        source=source, key="scene.reference")
+        raise SpecError(
+            f"value {reference.label!r} is not allowed; allowed: a finite-element reference 'fem:N/...'",
+            source=source,
+            key="scene.reference",
+        )
     meshes = own.get("reference_meshes", list(DEFAULT_MESHES))
-    if not isinstance(meshes, list) or not all(isinstance(m, str) and m.startswith("fem:") for m in meshes):
-        raise SpecError(f"value {meshes!r} is not allowed; allowed: a list of finite-element fidelities, e.g. [\"fem:4\"]",
-                        source=source, key="scene.reference_meshes")
+    if not isinstance(meshes, list) or not all(
+        isinstance(m, str) and m.startswith("fem:") for m in meshes
+    ):
+        raise SpecError(
+            f'value {meshes!r} is not allowed; allowed: a list of finite-element fidelities, e.g. ["fem:4"]',
+            source=source,
+            key="scene.reference_meshes",
+        )
     for m in meshes:
         parse_method(f"{m}/rk4@stable", source=source, key="scene.reference_meshes")
     repeats = own.get("repeats", DEFAULT_REPEATS)
     if isinstance(repeats, bool) or not isinstance(repeats, int) or not 1 <= repeats <= 50:
-        raise SpecError(f"value {repeats!r} is not allowed; allowed: an integer from 1 to 50", source=source, key="scene.repeats")
+        raise SpecError(
+            f"value {repeats!r} is not allowed; allowed: an integer from 1 to 50",
+            source=source,
+            key="scene.repeats",
+        )
     horizon = own.get("horizon")
-    if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, (int, float)) or not 0.01 <= horizon <= 100):
-        raise SpecError(f"value {horizon!r} is not allowed; allowed: a number of seconds from 0.01 to 100", source=source, key="scene.horizon")
+    if horizon is not None and (
+        isinstance(horizon, bool)
+        or not isinstance(horizon, (int, float))
+        or not 0.01 <= horizon <= 100
+    ):
+        raise SpecError(
+            f"value {horizon!r} is not allowed; allowed: a number of seconds from 0.01 to 100",
+            source=source,
+            key="scene.horizon",
+        )
     digests = settings.get("digests", {})
     return RunPlan(
-        scene_path=str(settings["scene"]), scene_digest=digests.get("scene"), scene_overrides=tuple(rest),
-        model_path=str(settings["model"]), model_digest=digests.get("model"), payload=float(settings["payload"]),
-        q0_deg=tuple(float(a) for a in settings["q0_deg"]), controller=settings.get("controller"),
-        controller_digest=digests.get("controller"), controller_overrides=tuple(overrides_for(settings, "controller")),
-        method=method, reference=reference, meshes=tuple(meshes), repeats=repeats,
+        scene_path=str(settings["scene"]),
+        scene_digest=digests.get("scene"),
+        scene_overrides=tuple(rest),
+        model_path=str(settings["model"]),
+        model_digest=digests.get("model"),
+        payload=float(settings["payload"]),
+        q0_deg=tuple(float(a) for a in settings["q0_deg"]),
+        controller=settings.get("controller"),
+        controller_digest=digests.get("controller"),
+        controller_overrides=tuple(overrides_for(settings, "controller")),
+        method=method,
+        reference=reference,
+        meshes=tuple(meshes),
+        repeats=repeats,
         horizon=None if horizon is None else float(horizon),
     )
 
@@ -166,19 +217,34 @@ def _scene(plan_scene: tuple) -> Any:
     from flexctrl.spec.scene import scene_from_document
 
     path, _digest, overrides, model, payload, q0 = plan_scene
-    extra = [f"model={json.dumps(model)}", f"payload={payload!r}", "initial.q=[" + ", ".join(repr(a) for a in q0) + "]"]
+    extra = [
+        f"model={json.dumps(model)}",
+        f"payload={payload!r}",
+        "initial.q=[" + ", ".join(repr(a) for a in q0) + "]",
+    ]
     doc = apply_overrides(read_toml(path), [*extra, *overrides], source=f"{path} (overrides)")
     doc.get("initial", {}).pop("qf", None)
     for key in ("integrator", "solver"):
         doc.pop(key, None)  # the method decides
     scene = scene_from_document(doc, path, Path(path).resolve().parent)
     if scene.kind not in ("arm", "closed_loop"):
-        raise SpecError(f"scene kind '{scene.kind}' is not allowed; allowed: 'arm', 'closed_loop'", source=path, key="kind")
+        raise SpecError(
+            f"scene kind '{scene.kind}' is not allowed; allowed: 'arm', 'closed_loop'",
+            source=path,
+            key="kind",
+        )
     return scene
 
 
 def _plan_scene(plan: RunPlan) -> tuple:
-    return (plan.scene_path, plan.scene_digest, plan.scene_overrides, plan.model_path, plan.payload, plan.q0_deg)
+    return (
+        plan.scene_path,
+        plan.scene_digest,
+        plan.scene_overrides,
+        plan.model_path,
+        plan.payload,
+        plan.q0_deg,
+    )
 
 
 def _plant_scene(scene):
@@ -195,30 +261,44 @@ def _stepper(arm, method: Method, q0: tuple[float, ...]):
 
 
 @per_worker_cache(maxsize=8)
-def _controller(plan_scene: tuple, controller: str | None, controller_digest: str | None, overrides: tuple[str, ...]):
+def _controller(
+    plan_scene: tuple,
+    controller: str | None,
+    controller_digest: str | None,
+    overrides: tuple[str, ...],
+):
     """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload (or
     ``design_payload``) at its design configuration, tracking the scene's reference path, as
     :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
-    from flexctrl.scenes.loop_setup import design_scene_controller
     from flexctrl.scenes.arm_setup import scene_arm
+    from flexctrl.scenes.loop_setup import design_scene_controller
     from flexctrl.spec.controller import load_controller
 
     scene = _scene(plan_scene)
     path = controller or scene.controller
     if path is None:
-        raise SpecError("no controller: give the study's 'controller' or the scene key 'controller'", source=scene.source, key="controller")
+        raise SpecError(
+            "no controller: give the study's 'controller' or the scene key 'controller'",
+            source=scene.source,
+            key="controller",
+        )
     settings = load_controller(path, overrides)
     arm = scene_arm(scene.plant)
     design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
     fidelity = scene.controller_fidelity or scene.plant.fidelity
     design_q = tuple(scene.design_configuration)
     same = design_arm == arm and str(fidelity) == str(scene.plant.fidelity)
-    model = _model(design_arm, str(fidelity), scene.plant.modes, scene.plant.q0 if same else design_q)
+    model = _model(
+        design_arm, str(fidelity), scene.plant.modes, scene.plant.q0 if same else design_q
+    )
     ctrl = design_scene_controller(scene, model, settings, path)
     if ctrl.sensors.kinds == ("state",):
-        raise SpecError(f"controller '{path}' measures the full state, which only a plant of its own design model has; "
-                        "allowed here: sensors that every model has, e.g. outputs = [\"joints\", \"deflection\"]",
-                        source=str(path), key="sensors.outputs")
+        raise SpecError(
+            f"controller '{path}' measures the full state, which only a plant of its own design model has; "
+            'allowed here: sensors that every model has, e.g. outputs = ["joints", "deflection"]',
+            source=str(path),
+            key="sensors.outputs",
+        )
     return ctrl, design_q
 
 
@@ -236,7 +316,9 @@ def simulate_method(plan: RunPlan, method: Method) -> tuple[MethodRun, Any]:
     x0 = initial_state(plant, model, arm)
     duration = plant.duration if plan.horizon is None else min(plant.duration, plan.horizon)
     if scene.kind == "closed_loop":
-        ctrl, design_q = _controller(key, plan.controller, plan.controller_digest, plan.controller_overrides)
+        ctrl, design_q = _controller(
+            key, plan.controller, plan.controller_digest, plan.controller_overrides
+        )
         sensors = plant_sensors(model, ctrl.sensors, design_q)
         return run_closed_loop(stepper, x0, ctrl, sensors, duration), stepper
     n = max(1, int(math.ceil(duration / OUTPUT_DT - 1e-9)))
@@ -245,17 +327,31 @@ def simulate_method(plan: RunPlan, method: Method) -> tuple[MethodRun, Any]:
 
 
 def _reference_key(plan: RunPlan) -> dict[str, Any]:
-    return {"scene": plan.scene_path, "scene_digest": plan.scene_digest, "overrides": list(plan.scene_overrides),
-            "model_digest": plan.model_digest, "payload": plan.payload, "q0_deg": list(plan.q0_deg),
-            "controller": plan.controller, "controller_digest": plan.controller_digest,
-            "controller_overrides": list(plan.controller_overrides), "reference": plan.reference.label,
-            "meshes": list(plan.meshes), "output_dt": OUTPUT_DT, "horizon": plan.horizon}
+    return {
+        "scene": plan.scene_path,
+        "scene_digest": plan.scene_digest,
+        "overrides": list(plan.scene_overrides),
+        "model_digest": plan.model_digest,
+        "payload": plan.payload,
+        "q0_deg": list(plan.q0_deg),
+        "controller": plan.controller,
+        "controller_digest": plan.controller_digest,
+        "controller_overrides": list(plan.controller_overrides),
+        "reference": plan.reference.label,
+        "meshes": list(plan.meshes),
+        "output_dt": OUTPUT_DT,
+        "horizon": plan.horizon,
+    }
 
 
 @per_worker_cache(maxsize=16)
 def _reference(plan_ref: RunPlan) -> tuple[Reference, str, bool]:
-    ref, path, hit = cached_reference(_reference_key(plan_ref),
-                                      lambda: compute_reference(lambda m: simulate_method(plan_ref, m)[0], plan_ref.reference, plan_ref.meshes))
+    ref, path, hit = cached_reference(
+        _reference_key(plan_ref),
+        lambda: compute_reference(
+            lambda m: simulate_method(plan_ref, m)[0], plan_ref.reference, plan_ref.meshes
+        ),
+    )
     return ref, str(path), hit
 
 
@@ -268,13 +364,20 @@ def check_settings(settings: dict) -> None:
 
         path = plan.controller or scene.controller
         if path is None:
-            raise SpecError("closed-loop scene without a controller; allowed: the study's 'controller' or the scene key",
-                            source=scene.source, key="controller")
+            raise SpecError(
+                "closed-loop scene without a controller; allowed: the study's 'controller' or the scene key",
+                source=scene.source,
+                key="controller",
+            )
         ctrl = load_controller(path, plan.controller_overrides)
         per = float(ctrl.sample_time) / OUTPUT_DT
         if abs(per - round(per)) > 1e-9 * per or round(per) < 1:
-            raise SpecError(f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the {OUTPUT_DT:g} s comparison "
-                            "samples, e.g. \"controller.sample_time\" = 0.01 in the study's [set]", source=str(path), key="sample_time")
+            raise SpecError(
+                f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the {OUTPUT_DT:g} s comparison "
+                'samples, e.g. "controller.sample_time" = 0.01 in the study\'s [set]',
+                source=str(path),
+                key="sample_time",
+            )
 
 
 def execute(settings: dict) -> RunOutput:
@@ -295,7 +398,11 @@ def execute(settings: dict) -> RunOutput:
     assert first is not None and stepper is not None
     duration = float(first.time[-1] - first.time[0])
     err = tip_error(ref.time, ref.tip, first.time, first.tip)
-    distance = np.linalg.norm(np.column_stack([np.interp(ref.time, first.time, first.tip[:, k]) for k in range(2)]) - ref.tip, axis=1)
+    distance = np.linalg.norm(
+        np.column_stack([np.interp(ref.time, first.time, first.tip[:, k]) for k in range(2)])
+        - ref.tip,
+        axis=1,
+    )
     model = stepper.model
     step = stepper.step_s
     steps = first.counters.get("internal_steps")
@@ -321,9 +428,15 @@ def execute(settings: dict) -> RunOutput:
         tag = "step2" if name == "step/2" else name.replace(":", "")
         metrics[f"ref_{tag}_rms"] = check["rms"]
         metrics[f"ref_{tag}_max"] = check["max"]
-    return RunOutput(metrics=metrics, trajectories={"t": ref.time, "tip_error": distance,
-                                                     "tip_x": np.interp(ref.time, first.time, first.tip[:, 0]),
-                                                     "tip_y": np.interp(ref.time, first.time, first.tip[:, 1])})
+    return RunOutput(
+        metrics=metrics,
+        trajectories={
+            "t": ref.time,
+            "tip_error": distance,
+            "tip_x": np.interp(ref.time, first.time, first.tip[:, 0]),
+            "tip_y": np.interp(ref.time, first.time, first.tip[:, 1]),
+        },
+    )
 
 
 # -- the report ------------------------------------------------------------------------------
@@ -362,18 +475,44 @@ def summarise(rows: list[dict]) -> list[dict[str, Any]]:
                 model, integ = m.model_label, m.integrator_label
             except SpecError:
                 model, integ = label, ""
-            block.append({
-                "scene": scene, "method": label, "model": model, "integrator": integ,
-                "runs_ok": len(ok), "runs_failed": len(mine) - len(ok),
-                "wall_per_sim_s": _median([r.get("wall_per_sim_s") for r in ok]),
-                "tip_error_rms": _median([r.get("tip_error_rms") for r in ok]),
-                "tip_error_rms_worst": max([r["tip_error_rms"] for r in ok if isinstance(r.get("tip_error_rms"), float)], default=math.nan),
-                "tip_error_max_worst": max([r["tip_error_max"] for r in ok if isinstance(r.get("tip_error_max"), float)], default=math.nan),
-                "n_states": _median([r.get("n_states") for r in ok]),
-                "omega_max": _median([r.get("omega_max") for r in ok]),
-                "step_s": _median([r.get("step_s") for r in ok]),
-                "errors": sorted({(r.get("error") or "").split("\n")[0][:160] for r in mine if r.get("status") != "ok"}),
-            })
+            block.append(
+                {
+                    "scene": scene,
+                    "method": label,
+                    "model": model,
+                    "integrator": integ,
+                    "runs_ok": len(ok),
+                    "runs_failed": len(mine) - len(ok),
+                    "wall_per_sim_s": _median([r.get("wall_per_sim_s") for r in ok]),
+                    "tip_error_rms": _median([r.get("tip_error_rms") for r in ok]),
+                    "tip_error_rms_worst": max(
+                        [
+                            r["tip_error_rms"]
+                            for r in ok
+                            if isinstance(r.get("tip_error_rms"), float)
+                        ],
+                        default=math.nan,
+                    ),
+                    "tip_error_max_worst": max(
+                        [
+                            r["tip_error_max"]
+                            for r in ok
+                            if isinstance(r.get("tip_error_max"), float)
+                        ],
+                        default=math.nan,
+                    ),
+                    "n_states": _median([r.get("n_states") for r in ok]),
+                    "omega_max": _median([r.get("omega_max") for r in ok]),
+                    "step_s": _median([r.get("step_s") for r in ok]),
+                    "errors": sorted(
+                        {
+                            (r.get("error") or "").split("\n")[0][:160]
+                            for r in mine
+                            if r.get("status") != "ok"
+                        }
+                    ),
+                }
+            )
         # a method with failed runs is not on the front: its error is unknown for some cases
         cost = [b["wall_per_sim_s"] if b["runs_failed"] == 0 else math.nan for b in block]
         front = pareto_front(cost, [b["tip_error_rms"] for b in block]) if block else []
@@ -404,31 +543,56 @@ def _plot(summary: list[dict[str, Any]], path: Path) -> None:
     colours = {"rigid": "tab:gray", "amm": "tab:blue", "fem": "tab:red"}
     markers = {"rk4": "o", "newmark": "s", "idas": "^", "cvodes": "v", "scipy": "D"}
     for ax, scene in zip(axes, scenes):
-        block = [s for s in summary if s["scene"] == scene and math.isfinite(s["wall_per_sim_s"]) and math.isfinite(s["tip_error_rms"])]
+        block = [
+            s
+            for s in summary
+            if s["scene"] == scene
+            and math.isfinite(s["wall_per_sim_s"])
+            and math.isfinite(s["tip_error_rms"])
+        ]
         for s in block:
             family = s["model"].split(":")[0].split("+")[0]
             integ = s["integrator"].split("@")[0].split(":")[0]
-            ax.scatter(s["wall_per_sim_s"], 1e3 * max(s["tip_error_rms"], 1e-12), c=colours.get(family, "k"), marker=markers.get(integ, "x"),
-                       s=70 if s["pareto"] else 28, edgecolors="k" if s["pareto"] else "none", zorder=3,
-                       alpha=1.0 if s["runs_failed"] == 0 else 0.4)
-            ax.annotate(s["method"] + (" (failed runs)" if s["runs_failed"] else ""), (s["wall_per_sim_s"], 1e3 * max(s["tip_error_rms"], 1e-12)),
-                        fontsize=6, xytext=(3, 3), textcoords="offset points")
+            ax.scatter(
+                s["wall_per_sim_s"],
+                1e3 * max(s["tip_error_rms"], 1e-12),
+                c=colours.get(family, "k"),
+                marker=markers.get(integ, "x"),
+                s=70 if s["pareto"] else 28,
+                edgecolors="k" if s["pareto"] else "none",
+                zorder=3,
+                alpha=1.0 if s["runs_failed"] == 0 else 0.4,
+            )
+            ax.annotate(
+                s["method"] + (" (failed runs)" if s["runs_failed"] else ""),
+                (s["wall_per_sim_s"], 1e3 * max(s["tip_error_rms"], 1e-12)),
+                fontsize=6,
+                xytext=(3, 3),
+                textcoords="offset points",
+            )
         front = sorted((s for s in block if s["pareto"]), key=lambda s: s["wall_per_sim_s"])
         if front:
             xs = [s["wall_per_sim_s"] for s in front]
             ys = [1e3 * max(s["tip_error_rms"], 1e-12) for s in front]
-            ax.step(xs, ys, where="post", color="k", lw=1.0, ls="--", label="Pareto front", zorder=2)
+            ax.step(
+                xs, ys, where="post", color="k", lw=1.0, ls="--", label="Pareto front", zorder=2
+            )
         families = {s["model"].split(":")[0].split("+")[0] for s in block}
         integrators = {s["integrator"].split("@")[0].split(":")[0] for s in block}
         for family in sorted(families):
             ax.scatter([], [], c=colours.get(family, "k"), marker="o", s=28, label=family)
         for integ in sorted(integrators):
             ax.scatter([], [], c="0.5", marker=markers.get(integ, "x"), s=28, label=integ)
-        ax.legend(fontsize=7, loc="lower left", ncol=2)  # the fast-and-accurate corner is empty but for the front
+        ax.legend(
+            fontsize=7, loc="lower left", ncol=2
+        )  # the fast-and-accurate corner is empty but for the front
         error_cost_axes(ax, scene)
-    for ax in axes[len(scenes):]:
+    for ax in axes[len(scenes) :]:
         ax.set_visible(False)
-    fig.suptitle("speed against accuracy (colour: model family; marker: integrator; large = Pareto-optimal)", fontsize=9)
+    fig.suptitle(
+        "speed against accuracy (colour: model family; marker: integrator; large = Pareto-optimal)",
+        fontsize=9,
+    )
     fig.savefig(path, dpi=110)
 
 
@@ -438,8 +602,22 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     if not any(r.get(METHOD_COLUMN) for r in rows):
         return ["## Speed against accuracy", "", f"No runs with a `{METHOD_COLUMN}` column yet."]
     summary = summarise(rows)
-    columns = ["scene", "method", "model", "integrator", "runs_ok", "runs_failed", "wall_per_sim_s", "tip_error_rms",
-               "tip_error_rms_worst", "tip_error_max_worst", "n_states", "omega_max", "step_s", "pareto"]
+    columns = [
+        "scene",
+        "method",
+        "model",
+        "integrator",
+        "runs_ok",
+        "runs_failed",
+        "wall_per_sim_s",
+        "tip_error_rms",
+        "tip_error_rms_worst",
+        "tip_error_max_worst",
+        "n_states",
+        "omega_max",
+        "step_s",
+        "pareto",
+    ]
     with open(directory / "pareto.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(columns)
@@ -448,21 +626,34 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     figures.mkdir(parents=True, exist_ok=True)
     chart = figures / "pareto.png"
     _plot(summary, chart)
-    lines = ["## Speed against accuracy", "",
-             f"![error against cost]({chart.relative_to(directory).as_posix()})", "",
-             "Cost: integration wall time per simulated second (median over repeats, then over the cases); "
-             "error: RMS over time of the tip distance from the reference (median over the cases; worst: the largest "
-             "over the cases). Pareto: no other method is both cheaper and more accurate (methods with failed runs are "
-             "not eligible). Numbers also in `pareto.csv`.", ""]
+    lines = [
+        "## Speed against accuracy",
+        "",
+        f"![error against cost]({chart.relative_to(directory).as_posix()})",
+        "",
+        "Cost: integration wall time per simulated second (median over repeats, then over the cases); "
+        "error: RMS over time of the tip distance from the reference (median over the cases; worst: the largest "
+        "over the cases). Pareto: no other method is both cheaper and more accurate (methods with failed runs are "
+        "not eligible). Numbers also in `pareto.csv`.",
+        "",
+    ]
     for scene in dict.fromkeys(s["scene"] for s in summary):
-        block = sorted((s for s in summary if s["scene"] == scene), key=lambda s: (not math.isfinite(s["wall_per_sim_s"]), s["wall_per_sim_s"]))
-        lines += [f"### {scene}", "",
-                  "| method | states | s per sim. s | tip RMS (m), median | worst RMS (m) | worst max (m) | runs ok/failed | Pareto |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+        block = sorted(
+            (s for s in summary if s["scene"] == scene),
+            key=lambda s: (not math.isfinite(s["wall_per_sim_s"]), s["wall_per_sim_s"]),
+        )
+        lines += [
+            f"### {scene}",
+            "",
+            "| method | states | s per sim. s | tip RMS (m), median | worst RMS (m) | worst max (m) | runs ok/failed | Pareto |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
         for s in block:
-            lines.append(f"| `{s['method']}` | {_fmt(s['n_states']).replace('.0', '')} | {_fmt(s['wall_per_sim_s'])} | {_fmt(s['tip_error_rms'])} | "
-                         f"{_fmt(s['tip_error_rms_worst'])} | {_fmt(s['tip_error_max_worst'])} | "
-                         f"{s['runs_ok']}/{s['runs_failed']} | {'**yes**' if s['pareto'] else ''} |")
+            lines.append(
+                f"| `{s['method']}` | {_fmt(s['n_states']).replace('.0', '')} | {_fmt(s['wall_per_sim_s'])} | {_fmt(s['tip_error_rms'])} | "
+                f"{_fmt(s['tip_error_rms_worst'])} | {_fmt(s['tip_error_max_worst'])} | "
+                f"{s['runs_ok']}/{s['runs_failed']} | {'**yes**' if s['pareto'] else ''} |"
+            )
         failed = [s for s in block if s["errors"]]
         if failed:
             lines += [""] + [f"- `{s['method']}` failed: {'; '.join(s['errors'])}" for s in failed]
@@ -473,7 +664,14 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
 
 def _reference_table(rows: list[dict]) -> list[str]:
     """One row per (scene, payload, configuration): the reference's convergence evidence."""
-    checks = sorted({c[len("ref_"):-len("_max")] for r in rows for c in r if c.startswith("ref_") and c.endswith("_max")})
+    checks = sorted(
+        {
+            c[len("ref_") : -len("_max")]
+            for r in rows
+            for c in r
+            if c.startswith("ref_") and c.endswith("_max")
+        }
+    )
     if not checks:
         return []
     coords = [c for c in ("scene", "payload", "q1", "q2", "q3") if any(c in r for r in rows)]
@@ -481,12 +679,16 @@ def _reference_table(rows: list[dict]) -> list[str]:
     for r in rows:
         if r.get("status") == "ok":
             seen.setdefault(tuple(r.get(c) for c in coords), r)
-    lines = ["### The reference and its convergence", "",
-             "Tip distance (m, RMS / max over time) of each convergence run from the reference: `step2` is the same model "
-             "with half the step; `femN` another mesh with the reference's integrator. `travel` is the largest distance of "
-             "the reference tip from its start.", "",
-             "| " + " | ".join([*coords, "travel (m)", *checks, "ref. s per sim. s"]) + " |",
-             "| " + " | ".join(["---"] * (len(coords) + len(checks) + 2)) + " |"]
+    lines = [
+        "### The reference and its convergence",
+        "",
+        "Tip distance (m, RMS / max over time) of each convergence run from the reference: `step2` is the same model "
+        "with half the step; `femN` another mesh with the reference's integrator. `travel` is the largest distance of "
+        "the reference tip from its start.",
+        "",
+        "| " + " | ".join([*coords, "travel (m)", *checks, "ref. s per sim. s"]) + " |",
+        "| " + " | ".join(["---"] * (len(coords) + len(checks) + 2)) + " |",
+    ]
     for key, r in seen.items():
         cells = [_fmt(v) for v in key] + [_fmt(r.get("tip_travel"))]
         cells += [f"{_fmt(r.get(f'ref_{c}_rms'))} / {_fmt(r.get(f'ref_{c}_max'))}" for c in checks]
@@ -495,9 +697,15 @@ def _reference_table(rows: list[dict]) -> list[str]:
     return lines + [""]
 
 
-def mesh_convergence(scene: str | Path, meshes: tuple[str, ...] = ("fem:4", "fem:8", "fem:12", "fem:16"), *,
-                     payload: float = 2.0, q0_deg: tuple[float, ...] = (0.0, 0.0, 0.0), horizon: float = 1.0,
-                     model: str | Path | None = None) -> dict[str, Any]:
+def mesh_convergence(
+    scene: str | Path,
+    meshes: tuple[str, ...] = ("fem:4", "fem:8", "fem:12", "fem:16"),
+    *,
+    payload: float = 2.0,
+    q0_deg: tuple[float, ...] = (0.0, 0.0, 0.0),
+    horizon: float = 1.0,
+    model: str | Path | None = None,
+) -> dict[str, Any]:
     """Tip distances (m) between successive meshes, RK4 at each mesh's stable step: the evidence beyond the study's checks.
 
     For ``docs/speed_accuracy.md`` (too slow to repeat for every case of the study:
@@ -511,16 +719,30 @@ def mesh_convergence(scene: str | Path, meshes: tuple[str, ...] = ("fem:4", "fem
     from flexctrl.sim.tip_error import tip_error
 
     root = data_root()
-    settings = {"scene": str(Path(scene).resolve()), "model": str(model or root / "models" / "subedi3link.toml"),
-                "controller": None, "payload": float(payload), "q0_deg": list(q0_deg), "fidelity": None,
-                "overrides": [f'scene.method="{meshes[-1]}/rk4@stable"', f"scene.horizon={float(horizon)!r}"], "digests": {}}
+    settings = {
+        "scene": str(Path(scene).resolve()),
+        "model": str(model or root / "models" / "subedi3link.toml"),
+        "controller": None,
+        "payload": float(payload),
+        "q0_deg": list(q0_deg),
+        "fidelity": None,
+        "overrides": [
+            f'scene.method="{meshes[-1]}/rk4@stable"',
+            f"scene.horizon={float(horizon)!r}",
+        ],
+        "digests": {},
+    }
     plan = plan_from_settings(settings)
     runs: dict[str, MethodRun] = {}
     out: dict[str, Any] = {"runs": {}, "pairs": {}, "against_finest": {}}
     for mesh in meshes:
         run, stepper = simulate_method(plan, parse_method(f"{mesh}/rk4@stable"))
         runs[mesh] = run
-        out["runs"][mesh] = {"wall_per_sim_s": run.wall_s / float(run.time[-1]), "step_s": stepper.step_s, "setup_s": stepper.setup_s}
+        out["runs"][mesh] = {
+            "wall_per_sim_s": run.wall_s / float(run.time[-1]),
+            "step_s": stepper.step_s,
+            "setup_s": stepper.setup_s,
+        }
     for a, b in zip(meshes[:-1], meshes[1:]):
         e = tip_error(runs[b].time, runs[b].tip, runs[a].time, runs[a].tip)
         out["pairs"][f"{a}-{b}"] = {"rms": e.rms, "max": e.max}

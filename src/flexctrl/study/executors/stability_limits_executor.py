@@ -71,7 +71,17 @@ FAILURES = ("growth", "diverged", "solver")
 _FAILURE_TEXT = ("a mode grows", "the run diverges", "the method's solver fails (e.g. Newton)")
 #: The leading columns of ``stability_limits.csv`` (an external check relies on them).
 CSV_COLUMNS = ("integrator", "fidelity", "omega_max", "h_measured", "h_theory")
-EXTRA_COLUMNS = ("ratio", "omega_h_measured", "omega_h_theory", "h_unstable", "outcome", "note", "scene", "run_id", "status")
+EXTRA_COLUMNS = (
+    "ratio",
+    "omega_h_measured",
+    "omega_h_theory",
+    "h_unstable",
+    "outcome",
+    "note",
+    "scene",
+    "run_id",
+    "status",
+)
 
 
 def _scene(settings: dict):
@@ -79,18 +89,33 @@ def _scene(settings: dict):
 
     source = str(settings["scene"])
     if overrides_for(settings, "model"):
-        raise SpecError(f"model overrides {overrides_for(settings, 'model')} are not supported by the stability_limits "
-                        "executor; allowed: scene.KEY overrides (payload, damping, gravity, fidelity, integrator)",
-                        source=source, key="model")
+        raise SpecError(
+            f"model overrides {overrides_for(settings, 'model')} are not supported by the stability_limits "
+            "executor; allowed: scene.KEY overrides (payload, damping, gravity, fidelity, integrator)",
+            source=source,
+            key="model",
+        )
     scene = load_scene(settings["scene"], scene_overrides(settings))
     if scene.kind != "arm":
-        raise SpecError(f"scene kind '{scene.kind}' is not allowed; allowed: kind = \"arm\"", source=source, key="kind")
+        raise SpecError(
+            f"scene kind '{scene.kind}' is not allowed; allowed: kind = \"arm\"",
+            source=source,
+            key="kind",
+        )
     if scene.fidelity.kind not in ("rigid", "amm", "fem"):
-        raise SpecError(f"fidelity '{scene.fidelity}' is not allowed here; allowed: 'rigid', 'amm:N' or 'fem:N' (a model "
-                        "of its own per run: the study compares fidelities)", source=source, key="fidelity")
+        raise SpecError(
+            f"fidelity '{scene.fidelity}' is not allowed here; allowed: 'rigid', 'amm:N' or 'fem:N' (a model "
+            "of its own per run: the study compares fidelities)",
+            source=source,
+            key="fidelity",
+        )
     if scene.integrator not in METHODS:
-        raise SpecError(f"integrator '{scene.integrator}' is not allowed here; allowed: {', '.join(map(repr, METHODS))} "
-                        "(fixed-step methods: an adaptive one has no step to limit)", source=source, key="integrator")
+        raise SpecError(
+            f"integrator '{scene.integrator}' is not allowed here; allowed: {', '.join(map(repr, METHODS))} "
+            "(fixed-step methods: an adaptive one has no step to limit)",
+            source=source,
+            key="integrator",
+        )
     return scene
 
 
@@ -110,9 +135,20 @@ def _build(model_key: tuple, scene_source: str):
     from flexctrl.spec.scene import ArmScene
 
     fields = dict(model_key)
-    scene = ArmScene(name="stability", model=Path(fields["model"]), fidelity=fields["fidelity"], dt=1.0, duration=1.0,
-                     modes=fields["modes"], payload=fields["payload"], gravity=fields["gravity"], q0=fields["q0"],
-                     zeta=fields["zeta"], friction=fields["friction"], source=scene_source)
+    scene = ArmScene(
+        name="stability",
+        model=Path(fields["model"]),
+        fidelity=fields["fidelity"],
+        dt=1.0,
+        duration=1.0,
+        modes=fields["modes"],
+        payload=fields["payload"],
+        gravity=fields["gravity"],
+        q0=fields["q0"],
+        zeta=fields["zeta"],
+        friction=fields["friction"],
+        source=scene_source,
+    )
     arm = scene_arm(scene)
     q0 = scene.q0 if scene.q0 is not None else tuple(arm.configuration)
     model = build_model(arm, scene.fidelity, modes=scene.modes, reference_q=q0)
@@ -120,9 +156,17 @@ def _build(model_key: tuple, scene_source: str):
 
 
 def _model_key(scene, settings: dict) -> tuple:
-    return (("model", str(scene.model)), ("digest", settings.get("digests", {}).get("model")),
-            ("fidelity", scene.fidelity), ("modes", scene.modes), ("payload", scene.payload),
-            ("gravity", scene.gravity), ("q0", scene.q0), ("zeta", scene.zeta), ("friction", scene.friction))
+    return (
+        ("model", str(scene.model)),
+        ("digest", settings.get("digests", {}).get("model")),
+        ("fidelity", scene.fidelity),
+        ("modes", scene.modes),
+        ("payload", scene.payload),
+        ("gravity", scene.gravity),
+        ("q0", scene.q0),
+        ("zeta", scene.zeta),
+        ("friction", scene.friction),
+    )
 
 
 def execute(settings: dict) -> RunOutput:
@@ -163,11 +207,14 @@ def execute(settings: dict) -> RunOutput:
     if limiting is not None:
         metrics["limiting_omega"] = abs(limiting)
         metrics["limiting_zeta"] = max(-limiting.real / abs(limiting), 0.0)
-    return RunOutput(metrics=metrics, trajectories={
-        "probe_h": np.array([p.h for p in result.probes]),
-        "probe_stable": np.array([1.0 if p.stable else 0.0 for p in result.probes]),
-        "probe_growth": np.array([p.growth for p in result.probes]),
-    })
+    return RunOutput(
+        metrics=metrics,
+        trajectories={
+            "probe_h": np.array([p.h for p in result.probes]),
+            "probe_stable": np.array([1.0 if p.stable else 0.0 for p in result.probes]),
+            "probe_growth": np.array([p.growth for p in result.probes]),
+        },
+    )
 
 
 # -- report ---------------------------------------------------------------------------
@@ -229,19 +276,54 @@ def _note(row: dict) -> str:
     h, hu = _num(row.get("h_measured")), _num(row.get("h_unstable"))
     failure = _num(row.get("failure_code"))
     why = f": {_FAILURE_TEXT[int(failure)]}" if failure is not None else ""
-    return f"stable at {h:.6g} s, unstable at {hu:.6g} s{why}" if h is not None and hu is not None else "bracketed"
+    return (
+        f"stable at {h:.6g} s, unstable at {hu:.6g} s{why}"
+        if h is not None and hu is not None
+        else "bracketed"
+    )
 
 
 def stability_rows(directory: Path, rows: list[dict]) -> tuple[list[str], list[dict[str, Any]]]:
     """The ``stability_limits.csv`` table (columns, rows) from the study table's rows."""
     from flexctrl.study.plan import SETTINGS
 
-    skip = set(CSV_COLUMNS) | set(EXTRA_COLUMNS) | {"scene.integrator", "seed", "error", "wall_time_s", "peak_memory_mb",
-                                                   "bytes_written", "worker", "run_id", "status"}
-    known_metrics = {"omega_max_model", "theory_unbounded", "outcome_code", "failure_code", "h_cap", "h_floor", "limiting_omega",
-                     "limiting_zeta", "n_modes", "n_probes", "probe_steps", "growth_tolerance", "equilibrium_residual"}
-    other = [c for c in (rows[0] if rows else {}) if c not in skip and c not in known_metrics and
-             (c in SETTINGS or "." in c or c.startswith("q") or c == "replicate")]
+    skip = (
+        set(CSV_COLUMNS)
+        | set(EXTRA_COLUMNS)
+        | {
+            "scene.integrator",
+            "seed",
+            "error",
+            "wall_time_s",
+            "peak_memory_mb",
+            "bytes_written",
+            "worker",
+            "run_id",
+            "status",
+        }
+    )
+    known_metrics = {
+        "omega_max_model",
+        "theory_unbounded",
+        "outcome_code",
+        "failure_code",
+        "h_cap",
+        "h_floor",
+        "limiting_omega",
+        "limiting_zeta",
+        "n_modes",
+        "n_probes",
+        "probe_steps",
+        "growth_tolerance",
+        "equilibrium_residual",
+    }
+    other = [
+        c
+        for c in (rows[0] if rows else {})
+        if c not in skip
+        and c not in known_metrics
+        and (c in SETTINGS or "." in c or c.startswith("q") or c == "replicate")
+    ]
     out = []
     for original in rows:
         integrator, fidelity, scene_label, row = _run_facts(directory, original)
@@ -250,16 +332,24 @@ def stability_rows(directory: Path, rows: list[dict]) -> tuple[list[str], list[d
         theory_text = "inf" if ok and row.get("theory_unbounded") == 1 else _text(h_theory)
         code = _num(row.get("outcome_code"))
         entry = {
-            "integrator": integrator, "fidelity": fidelity,
+            "integrator": integrator,
+            "fidelity": fidelity,
             "omega_max": _text(_num(row.get("omega_max")), 8) if ok else "",
             "h_measured": _text(_num(row.get("h_measured")), 8) if ok else "",
             "h_theory": theory_text if ok else "",
             "ratio": _text(_num(row.get("ratio"))),
             "omega_h_measured": _text(_num(row.get("omega_h_measured"))) if ok else "",
-            "omega_h_theory": "inf" if ok and row.get("theory_unbounded") == 1 else _text(_num(row.get("omega_h_theory"))),
+            "omega_h_theory": "inf"
+            if ok and row.get("theory_unbounded") == 1
+            else _text(_num(row.get("omega_h_theory"))),
             "h_unstable": _text(_num(row.get("h_unstable")), 8),
-            "outcome": OUTCOMES[int(code)] if ok and code is not None else ("failed" if not ok else ""),
-            "note": _note(row), "scene": scene_label, "run_id": row.get("run_id", ""), "status": row.get("status", ""),
+            "outcome": OUTCOMES[int(code)]
+            if ok and code is not None
+            else ("failed" if not ok else ""),
+            "note": _note(row),
+            "scene": scene_label,
+            "run_id": row.get("run_id", ""),
+            "status": row.get("status", ""),
         }
         for column in other:
             value = row.get(column)
@@ -282,30 +372,54 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     writer.writerows(table)
     atomic_write(directory / "stability_limits.csv", text.getvalue().encode())
 
-    lines = ["## Largest stable step (stability_limits)", "",
-             "Each run perturbs the model's static equilibrium (joints held by constant torques) along every "
-             "vibration mode by +-1e-9 m/rad (two runs; half their difference is watched) and bisects on the step h of the "
-             "real integrator; a probe is unstable when a modal amplitude grows by more than its growth tolerance over its steps, "
-             "or a run fails (see flexctrl/analysis/stability/probe.py and "
-             "docs/stability.md). `h_theory` is the largest h with |R(lambda h)| <= 1 for every eigenvalue lambda of "
-             "df/dx at that equilibrium; `omega_max` = max |lambda| (rad/s).", "",
-             f"RK4: the exact limit on the imaginary axis (undamped modes) is omega h = 2 sqrt 2 = {RK4_IMAGINARY_AXIS_LIMIT:.4f}; "
-             f"the issue's {RK4_STABILITY_LIMIT} is the negative-real-axis limit ({RK4_REAL_AXIS_LIMIT:.4f}), "
-             f"{100 * (1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT):.2f} % lower; below, `h/(2.785/omega)` compares "
-             "with the issue's number and `ratio` with the exact theory.", "",
-             "Files: `stability_limits.csv` (columns integrator, fidelity, omega_max [rad/s], h_measured [s], h_theory [s; "
-             "inf = unconditionally stable], ...).", ""]
-    header = ["integrator", "fidelity", "omega_max (rad/s)", "h_measured (s)", "h_theory (s)", "ratio", "h/(2.785/omega)",
-              "omega h", "note"]
+    lines = [
+        "## Largest stable step (stability_limits)",
+        "",
+        "Each run perturbs the model's static equilibrium (joints held by constant torques) along every "
+        "vibration mode by +-1e-9 m/rad (two runs; half their difference is watched) and bisects on the step h of the "
+        "real integrator; a probe is unstable when a modal amplitude grows by more than its growth tolerance over its steps, "
+        "or a run fails (see flexctrl/analysis/stability/probe.py and "
+        "docs/stability.md). `h_theory` is the largest h with |R(lambda h)| <= 1 for every eigenvalue lambda of "
+        "df/dx at that equilibrium; `omega_max` = max |lambda| (rad/s).",
+        "",
+        f"RK4: the exact limit on the imaginary axis (undamped modes) is omega h = 2 sqrt 2 = {RK4_IMAGINARY_AXIS_LIMIT:.4f}; "
+        f"the issue's {RK4_STABILITY_LIMIT} is the negative-real-axis limit ({RK4_REAL_AXIS_LIMIT:.4f}), "
+        f"{100 * (1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT):.2f} % lower; below, `h/(2.785/omega)` compares "
+        "with the issue's number and `ratio` with the exact theory.",
+        "",
+        "Files: `stability_limits.csv` (columns integrator, fidelity, omega_max [rad/s], h_measured [s], h_theory [s; "
+        "inf = unconditionally stable], ...).",
+        "",
+    ]
+    header = [
+        "integrator",
+        "fidelity",
+        "omega_max (rad/s)",
+        "h_measured (s)",
+        "h_theory (s)",
+        "ratio",
+        "h/(2.785/omega)",
+        "omega h",
+        "note",
+    ]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for entry in table:
         w = float(entry["omega_max"]) if entry["omega_max"] else None
         h = float(entry["h_measured"]) if entry["h_measured"] else None
         issue = _text(h * w / RK4_STABILITY_LIMIT, 5) if (w and h) else ""
-        cells = [entry["integrator"], entry["fidelity"], _text(w, 5), _text(h, 5),
-                 entry["h_theory"] if entry["h_theory"] in ("", "inf") else _text(float(entry["h_theory"]), 5),
-                 entry["ratio"] and _text(float(entry["ratio"]), 6), issue,
-                 entry["omega_h_measured"] and _text(float(entry["omega_h_measured"]), 5), entry["note"].replace("|", "\\|")]
+        cells = [
+            entry["integrator"],
+            entry["fidelity"],
+            _text(w, 5),
+            _text(h, 5),
+            entry["h_theory"]
+            if entry["h_theory"] in ("", "inf")
+            else _text(float(entry["h_theory"]), 5),
+            entry["ratio"] and _text(float(entry["ratio"]), 6),
+            issue,
+            entry["omega_h_measured"] and _text(float(entry["omega_h_measured"]), 5),
+            entry["note"].replace("|", "\\|"),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     if any(e["omega_max"] for e in table):
         name = "stability_limits.png"
@@ -324,8 +438,16 @@ def _draw(path: Path, table: list[dict]) -> None:
     ax, zoom = fig.subplots(1, 2, width_ratios=(1.4, 1.0))
     omegas = [float(e["omega_max"]) for e in table if e["omega_max"]]
     span = np.geomspace(min(omegas) / 1.5, max(omegas) * 1.5, 50)
-    ax.plot(span, RK4_IMAGINARY_AXIS_LIMIT / span, "k-", lw=1, label="RK4 theory, undamped: 2 sqrt 2 / omega")
-    ax.plot(span, RK4_STABILITY_LIMIT / span, "k--", lw=1, label="issue: 2.785 / omega (RK4 real axis)")
+    ax.plot(
+        span,
+        RK4_IMAGINARY_AXIS_LIMIT / span,
+        "k-",
+        lw=1,
+        label="RK4 theory, undamped: 2 sqrt 2 / omega",
+    )
+    ax.plot(
+        span, RK4_STABILITY_LIMIT / span, "k--", lw=1, label="issue: 2.785 / omega (RK4 real axis)"
+    )
     styles = {"rk4": ("o", "C0"), "euler": ("s", "C3"), "newmark": ("^", "C2")}
     seen: set[str] = set()
     for e in table:
@@ -334,18 +456,36 @@ def _draw(path: Path, table: list[dict]) -> None:
         w = float(e["omega_max"])
         marker, colour = styles.get(e["integrator"], ("D", "C7"))
         if e["outcome"] == "unstable_at_floor":
-            h, marker, what = float(e["h_unstable"]), "v", " unstable down to (plotted at the floor)"
+            h, marker, what = (
+                float(e["h_unstable"]),
+                "v",
+                " unstable down to (plotted at the floor)",
+            )
         elif e["outcome"] == "stable_at_cap":
             h, what = float(e["h_measured"]), " stable up to the cap (lower bound)"
         else:
             h, what = float(e["h_measured"]), " measured"
         label = e["integrator"] + what
-        ax.plot([w], [h], marker, color=colour, ms=7, mfc="none" if e["outcome"] != "bracketed" else colour,
-                label=None if label in seen else label)
+        ax.plot(
+            [w],
+            [h],
+            marker,
+            color=colour,
+            ms=7,
+            mfc="none" if e["outcome"] != "bracketed" else colour,
+            label=None if label in seen else label,
+        )
         seen.add(label)
         if e["h_theory"] not in ("", "inf") and float(e["h_theory"]) > 0:
             label = e["integrator"] + " theory"
-            ax.plot([w], [float(e["h_theory"])], "x", color=colour, ms=9, label=None if label in seen else label)
+            ax.plot(
+                [w],
+                [float(e["h_theory"])],
+                "x",
+                color=colour,
+                ms=9,
+                label=None if label in seen else label,
+            )
             seen.add(label)
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -355,23 +495,46 @@ def _draw(path: Path, table: list[dict]) -> None:
     ax.legend(fontsize=7, loc="best")
     # the same, as omega_max h, for the bracketed rows: the 1.5 % between 2 sqrt 2 and 2.785 becomes visible
     zoom.axhline(RK4_IMAGINARY_AXIS_LIMIT, color="k", lw=1, label="2 sqrt 2 (RK4, imaginary axis)")
-    zoom.axhline(RK4_STABILITY_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)")
+    zoom.axhline(
+        RK4_STABILITY_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)"
+    )
     seen = set()
     for e in table:
-        if e["status"] != "ok" or e["outcome"] != "bracketed" or not e["omega_h_measured"] or e["integrator"] != "rk4":
+        if (
+            e["status"] != "ok"
+            or e["outcome"] != "bracketed"
+            or not e["omega_h_measured"]
+            or e["integrator"] != "rk4"
+        ):
             continue
         marker, colour = styles.get(e["integrator"], ("D", "C7"))
         label = e["integrator"] + " measured"
-        zoom.plot([float(e["omega_max"])], [float(e["omega_h_measured"])], marker, color=colour, ms=7,
-                  label=None if label in seen else label)
+        zoom.plot(
+            [float(e["omega_max"])],
+            [float(e["omega_h_measured"])],
+            marker,
+            color=colour,
+            ms=7,
+            label=None if label in seen else label,
+        )
         seen.add(label)
         if e["omega_h_theory"] not in ("", "inf"):
             label = e["integrator"] + " theory"
-            zoom.plot([float(e["omega_max"])], [float(e["omega_h_theory"])], "x", color=colour, ms=9,
-                      label=None if label in seen else label)
+            zoom.plot(
+                [float(e["omega_max"])],
+                [float(e["omega_h_theory"])],
+                "x",
+                color=colour,
+                ms=9,
+                label=None if label in seen else label,
+            )
             seen.add(label)
     zoom.set_xscale("log")
-    values = [float(e["omega_h_measured"]) for e in table if e["integrator"] == "rk4" and e["omega_h_measured"]]
+    values = [
+        float(e["omega_h_measured"])
+        for e in table
+        if e["integrator"] == "rk4" and e["omega_h_measured"]
+    ]
     zoom.set_ylim(min([2.75, *values]) - 0.02, max([2.86, *values]) + 0.02)
     zoom.set_xlabel("omega_max (rad/s)")
     zoom.set_ylabel("omega_max h of RK4")
