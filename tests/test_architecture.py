@@ -44,7 +44,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 RANK = {name: rank for rank, names in enumerate(LAYERS) for name in names}
 #: The public namespace re-exports from every layer and nothing imports it.
 ROOT_MODULE = "flexctrl"
-MAX_LINES = 600
+MAX_LINES = 500
+MAX_FUNCTION_LINES = 80
+MAX_LINE_LENGTH = 100
 _MODULE_STRING = re.compile(r"flexctrl(\.\w+)+(:\w+)?")
 
 
@@ -200,11 +202,98 @@ def test_imports_run_down_the_layers():
     assert layer_violations(import_graph()) == []
 
 
-def test_no_module_over_600_lines():
-    sizes = {
-        str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")
+def _sources() -> dict[str, str]:
+    return {
+        str(p.relative_to(PACKAGE.parent)): p.read_text() for p in sorted(PACKAGE.rglob("*.py"))
     }
-    assert {p: n for p, n in sizes.items() if n > MAX_LINES} == {}
+
+
+def long_modules(sources: dict[str, str]) -> dict[str, int]:
+    """Modules over :data:`MAX_LINES` lines, with their length."""
+    sizes = {path: len(text.splitlines()) for path, text in sources.items()}
+    return {path: n for path, n in sizes.items() if n > MAX_LINES}
+
+
+def long_functions(sources: dict[str, str]) -> dict[str, int]:
+    """Functions and methods over :data:`MAX_FUNCTION_LINES` lines (decorators to last line)."""
+    found = {}
+    for path, text in sources.items():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+                length = node.end_lineno - first + 1
+                if length > MAX_FUNCTION_LINES:
+                    found[f"{path}:{node.lineno} {node.name}"] = length
+    return found
+
+
+def long_lines(sources: dict[str, str]) -> list[str]:
+    """Lines over :data:`MAX_LINE_LENGTH` characters, as ``path:line``."""
+    return [
+        f"{path}:{number}"
+        for path, text in sources.items()
+        for number, line in enumerate(text.splitlines(), 1)
+        if len(line) > MAX_LINE_LENGTH
+    ]
+
+
+def repeated_names(paths: list[str]) -> dict[str, list[str]]:
+    """Module file names found in more than one layer (``commands/`` names its sub-commands)."""
+    layers: dict[str, set[str]] = {}
+    where: dict[str, list[str]] = {}
+    for path in paths:
+        parts = Path(path).parts
+        if parts[-1] == "__init__.py" or parts[1] == "commands" or len(parts) < 3:
+            continue
+        layers.setdefault(parts[-1], set()).add(parts[1])
+        where.setdefault(parts[-1], []).append(path)
+    return {name: where[name] for name, found in layers.items() if len(found) > 1}
+
+
+def test_no_module_over_the_line_limit():
+    assert long_modules(_sources()) == {}
+
+
+def test_no_function_over_the_line_limit():
+    assert long_functions(_sources()) == {}
+
+
+def test_no_line_over_the_length_limit():
+    assert long_lines(_sources()) == []
+
+
+def test_no_module_name_repeats_across_layers():
+    assert repeated_names(list(_sources())) == {}
+
+
+def test_the_package_imports_nothing_from_the_lab():
+    """``benchmarks/`` and ``tools/`` measure the package; the package never imports them."""
+    lab = {"benchmarks", "tools", "tests", "docs"}
+    bad = []
+    for path, text in _sources().items():
+        for node in ast.walk(ast.parse(text)):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                names = [node.module or ""]
+            bad += [f"{path}: {name}" for name in names if name.split(".")[0] in lab]
+    assert bad == []
+
+
+def test_the_size_checks_can_fail():
+    """A long module, function and line and a repeated name planted in copies are found."""
+    body = "    x = 1\n" * (MAX_FUNCTION_LINES + 1)
+    planted = {
+        "flexctrl/sim/a.py": "x = 1\n" * (MAX_LINES + 1),
+        "flexctrl/sim/b.py": f"def f():\n{body}",
+        "flexctrl/sim/c.py": "y = '" + "z" * MAX_LINE_LENGTH + "'\n",
+    }
+    assert list(long_modules(planted)) == ["flexctrl/sim/a.py"]
+    assert list(long_functions(planted)) == ["flexctrl/sim/b.py:1 f"]
+    assert long_lines(planted) == ["flexctrl/sim/c.py:1"]
+    paths = ["flexctrl/sim/same.py", "flexctrl/loop/same.py", "flexctrl/commands/study.py"]
+    assert list(repeated_names(paths)) == ["same.py"]
 
 
 def test_the_checks_can_fail():
@@ -223,10 +312,10 @@ def test_the_checks_can_fail():
     [
         ("import flexctrl", ("casadi", "control", "osqp", "matplotlib")),
         (
-            "import flexctrl.spec, flexctrl.spec.controller, flexctrl.spec.controller_settings, flexctrl.spec.scene, flexctrl.spec.closed_loop_scene, "
+            "import flexctrl.spec, flexctrl.spec.controller_reader, flexctrl.spec.controller_settings, flexctrl.spec.scene, flexctrl.spec.closed_loop_scene, "
             "flexctrl.spec.fem_scene, flexctrl.spec.reference; "
             "flexctrl.spec.scene.load_scene('studies/scenes/move_joint1_30deg.toml'); "
-            "flexctrl.spec.controller.load_controller('controllers/lqr.toml')",
+            "flexctrl.spec.controller_reader.load_controller('controllers/lqr.toml')",
             ("casadi", "control", "osqp"),
         ),
     ],

@@ -270,7 +270,7 @@ def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
     # (designed again here to read the poles; the run above used the same design path)
     from flexctrl.control import design
     from flexctrl.linear import equilibrium
-    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.controller_reader import load_controller
 
     op = equilibrium(result.model, np.radians(target_deg))
     ctrl = design(result.model, op, load_controller("controllers/lqg.toml"))

@@ -9,7 +9,7 @@ import pytest
 from support import DATA
 
 from flexctrl.errors import SpecError
-from flexctrl.spec.controller import load_controller
+from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.controller_settings import (
     LQRSettings,
     MPCSettings,

@@ -16,7 +16,7 @@ import pytest
 from flexctrl.control.nmpc.controller import design_nmpc
 from flexctrl.control.nmpc.interval import group_centres
 from flexctrl.errors import SpecError
-from flexctrl.spec.controller import controller_from_document
+from flexctrl.spec.controller_reader import controller_from_document
 from flexctrl.spec.controller_settings import NMPCSettings
 
 SMALL = dict(compile=False, horizon=10, sample_time=0.02, deflection_limit=0.02, qp_warm_start=True)

@@ -13,7 +13,7 @@ from flexctrl.control.nmpc.controller import interval_functions
 from flexctrl.control.nmpc.prediction_model import prediction_model, truncated_model
 from flexctrl.errors import SpecError
 from flexctrl.scenes.model_files import load_model
-from flexctrl.spec.controller import controller_from_document
+from flexctrl.spec.controller_reader import controller_from_document
 from flexctrl.spec.controller_settings import NMPCSettings
 
 

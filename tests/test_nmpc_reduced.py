@@ -153,7 +153,7 @@ def test_frozen_sensitivities_over_k_steps_are_exact_at_rest_and_coarser_in_moti
 
 def test_reduced_prediction_settings_are_checked():
     from flexctrl.errors import SpecError
-    from flexctrl.spec.controller import controller_from_document
+    from flexctrl.spec.controller_reader import controller_from_document
 
     with pytest.raises(SpecError, match="nmpc_bad.toml.*prediction_basis.*coupled"):
         controller_from_document({"kind": "nmpc", "prediction_basis": "modal"}, "nmpc_bad.toml")

@@ -35,7 +35,7 @@ _EXPORTS: dict[str, str] = {
     "simulate": "flexctrl.sim",
     "Trajectory": "flexctrl.sim.trajectory",
     # controllers
-    "load_controller": "flexctrl.spec.controller",
+    "load_controller": "flexctrl.spec.controller_reader",
     "design": "flexctrl.control",
     "PDSettings": "flexctrl.spec.controller_settings",
     "LQRSettings": "flexctrl.spec.controller_settings",

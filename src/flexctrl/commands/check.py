@@ -4,7 +4,7 @@ Each file is read by the same reader that a run would use, chosen from what the 
 holds (:func:`file_kind`; ``--kind`` names it instead):
 
 * ``controller``: ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"`` (or, its kind missing,
-  ``sample_time``, ``[weights]``, ``[sensors]`` ...): :func:`flexctrl.spec.controller.load_controller`;
+  ``sample_time``, ``[weights]``, ``[sensors]`` ...): :func:`flexctrl.spec.controller_reader.load_controller`;
 * ``tuning``: ``[[parameters]]`` or ``[scenarios]``: :func:`flexctrl.spec.tuning.load_tuning` and
   its scenario study (:func:`flexctrl.tuning.scenarios.scenario_study`);
 * ``model``: ``[[links]]`` or ``[[joints]]`` (:func:`flexctrl.spec.arm.load_arm`); ``kind = "rp_arm"``
@@ -129,14 +129,14 @@ def _scene(path, document) -> str:
     scene = load_scene(path)
     extra = ""
     if scene.kind == "closed_loop" and scene.controller is not None:
-        from flexctrl.spec.controller import load_controller
+        from flexctrl.spec.controller_reader import load_controller
 
         extra = f", controller {load_controller(scene.controller).kind}"
     return f"{scene.kind} scene '{scene.name}'{extra}"
 
 
 def _controller(path, document) -> str:
-    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.controller_reader import load_controller
 
     return f"{load_controller(path).kind} controller"
 

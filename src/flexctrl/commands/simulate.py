@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.controller is not None:
         options["controller"] = args.controller
     if controller_overrides:
-        from flexctrl.spec.controller import load_controller
+        from flexctrl.spec.controller_reader import load_controller
 
         file = args.controller or scene.controller
         if file is None:

@@ -3,7 +3,7 @@
 ``design(model, op, settings)`` builds the controller named by the settings type,
 regulating ``model`` to the target equilibrium ``op``
 (:func:`flexctrl.linear.equilibrium`); settings come from
-:func:`flexctrl.spec.controller.load_controller` or are built in Python.
+:func:`flexctrl.spec.controller_reader.load_controller` or are built in Python.
 
 =========  =================================  ======================================
 kind       settings                           controller
@@ -94,7 +94,7 @@ def design(model, op, settings) -> Controller:
         Target (usually :func:`flexctrl.linear.equilibrium` at the target joint angles).
     settings
         One of the settings dataclasses (see the table in the module docstring), e.g.
-        from :func:`flexctrl.spec.controller.load_controller`.
+        from :func:`flexctrl.spec.controller_reader.load_controller`.
 
     Returns
     -------

@@ -137,7 +137,7 @@ def build_loop(
     machine, the slow path; ``True`` compiled); None (default) follows the plant's
     ``solver.compile`` (compiled unless switched off).
     """
-    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.controller_reader import load_controller
 
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()

@@ -2,7 +2,7 @@
 
 Each settings class checks its own fields when built (``__post_init__``) and
 raises :class:`~flexctrl.errors.SpecError` naming the key, the value and what is
-allowed; :func:`flexctrl.spec.controller.load_controller` reads the same classes
+allowed; :func:`flexctrl.spec.controller_reader.load_controller` reads the same classes
 from ``controllers/*.toml`` and adds the file name to the message.
 
 Units: SI.  Angles are radians here and degrees in the TOML files (the loader

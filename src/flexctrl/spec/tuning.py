@@ -304,7 +304,7 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
             f"value {key!r} names a {type(initial).__name__} in '{controller}' "
             f"({initial!r}); allowed: a numeric key",
         )
-    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.controller_reader import load_controller
 
     probe = low if scale == "linear" else math.sqrt(low * high)
     try:  # the key must exist for this controller kind and accept a value in the bounds

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.spec.controller import load_controller
+from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.tuning import TuningSpec
 from flexctrl.study.plan import StudySpec
 from flexctrl.study.store import ResultStore

@@ -15,7 +15,7 @@ import time
 
 from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.scenes.run_closed_loop_scene import check_auto, resolve_auto, run_closed_loop_scene
-from flexctrl.spec.controller import load_controller
+from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.scene import load_scene
 from flexctrl.study.outputs import RunOutput, overrides_for, scene_overrides, worker_scene_cache
 from flexctrl.study.shared_choice import choice_settings

@@ -272,7 +272,7 @@ def _controller(
     :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
     from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.scenes.loop_setup import design_scene_controller
-    from flexctrl.spec.controller import load_controller
+    from flexctrl.spec.controller_reader import load_controller
 
     scene = _scene(plan_scene)
     path = controller or scene.controller
@@ -360,7 +360,7 @@ def check_settings(settings: dict) -> None:
     plan = plan_from_settings(settings)
     scene = _scene(_plan_scene(plan))
     if scene.kind == "closed_loop":
-        from flexctrl.spec.controller import load_controller
+        from flexctrl.spec.controller_reader import load_controller
 
         path = plan.controller or scene.controller
         if path is None:

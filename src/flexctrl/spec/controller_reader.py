@@ -11,7 +11,7 @@ spellings (``joint``, ``joint_rate``, ``joints``, ``joint_rates``, ``q2``) are r
 with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the file, the dotted key,
 the value and what is allowed; unknown keys are rejected with a "did you mean".
 
->>> from flexctrl.spec.controller import load_controller
+>>> from flexctrl.spec.controller_reader import load_controller
 >>> load_controller("controllers/lqr.toml").kind
 'lqr'
 """
