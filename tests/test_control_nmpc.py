@@ -145,7 +145,7 @@ def test_rti_on_the_three_link_arm_converges_without_fallbacks():
     assert np.max(np.abs(x[:3] - op.x[:3])) < np.radians(3.0) * 0.5
 
 
-def test_compiled_linearisation_is_independent_of_the_operating_point_and_the_model_constants(
+def test_compiled_linearization_is_independent_of_the_operating_point_and_the_model_constants(
     onelink,
 ):
     """One generated library serves every target, reference and model of the same graph structure.
@@ -201,21 +201,21 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
     ctrl.step(0.0, x)
     plan = ctrl._plan.copy()
     calls = ctrl._calls()  # the RTI's two calls per sample (nmpc_calls)
-    linearise, solve = calls.linearise, calls.solve
+    linearize, solve = calls.linearize, calls.solve
 
     def nan_bounds(z0, w):
-        a, lba, uba = linearise(z0, w)
+        a, lba, uba = linearize(z0, w)
         lba = lba.copy()
         lba[3] = np.nan
         return a, lba, uba
 
-    calls.linearise = nan_bounds
+    calls.linearize = nan_bounds
     u = ctrl.step(0.02, x)  # would be HPIPM's "Ill-posed problem detected" assertion
     np.testing.assert_allclose(u, op.u + ctrl.problem.Su * plan[1])
     t, reason, used = ctrl.stats.fallbacks[-1]
     assert (t, used) == (0.02, "shift") and "NaN" in reason
     assert ctrl._w is None  # the next sample starts from a fresh rollout
-    calls.linearise = linearise
+    calls.linearize = linearize
 
     def raising_qp(*args):
         raise RuntimeError(

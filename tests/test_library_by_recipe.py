@@ -140,7 +140,7 @@ def linmap_at_a_point(ctrl) -> list[np.ndarray]:
 SMALL = dict(compile=True, horizon=6, sample_time=0.02, deflection_limit=0.02)
 
 
-def test_an_nmpc_linearisation_is_found_by_its_recipe_and_is_the_built_one(
+def test_an_nmpc_linearization_is_found_by_its_recipe_and_is_the_built_one(
     onelink, fresh_cache, monkeypatch
 ):
     from flexctrl.spec.controller_settings import NMPCSettings
@@ -156,7 +156,7 @@ def test_an_nmpc_linearisation_is_found_by_its_recipe_and_is_the_built_one(
     def no_symbolic_build(*args, **kwargs):
         raise AssertionError("the linearisation was built although its library is on disk")
 
-    monkeypatch.setattr(nmpc_interval, "symbolic_linearisation", no_symbolic_build)
+    monkeypatch.setattr(nmpc_interval, "symbolic_linearization", no_symbolic_build)
     found = design_nmpc(model, op, settings)
     assert found.functions["build"]["cache_hit"] is True
     for a, b in zip(linmap_at_a_point(found), linmap_at_a_point(built)):
@@ -204,10 +204,10 @@ def test_an_edit_to_the_code_that_builds_it_builds_it_again(onelink, fresh_cache
     settings = NMPCSettings(**SMALL)
     design_nmpc(model, op, settings)
     calls = []
-    symbolic = nmpc_interval.symbolic_linearisation
+    symbolic = nmpc_interval.symbolic_linearization
     monkeypatch.setattr(
         nmpc_interval,
-        "symbolic_linearisation",
+        "symbolic_linearization",
         lambda *a, **k: calls.append(1) or symbolic(*a, **k),
     )
     monkeypatch.setattr(nmpc_interval, "_BUILT", Memo(nmpc_interval.MEMO_SIZE))

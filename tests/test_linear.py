@@ -75,7 +75,7 @@ def test_equilibrium_rejects_wrong_joint_count():
 
 
 @pytest.mark.parametrize("builder", ["toy", "onelink"])
-def test_linearisation_matches_central_differences(builder):
+def test_linearization_matches_central_differences(builder):
     model = (
         spring_pendulum(k=2.0e3, zeta=0.02, friction=0.1)
         if builder == "toy"
@@ -95,7 +95,7 @@ def test_linearisation_matches_central_differences(builder):
     np.testing.assert_allclose(sys.B, B_fd, atol=1e-6 * np.max(np.abs(B_fd)))
 
 
-def test_linearisation_of_three_link_arm_matches_central_differences(arm3):
+def test_linearization_of_three_link_arm_matches_central_differences(arm3):
     op = L.equilibrium(arm3, np.radians([80.0, -10.0, -10.0]))
     x = op.x + np.r_[np.zeros(9), 0.05 * np.ones(9)]  # moving, so the Coriolis terms count
     op2 = L.operating_point(arm3, x, op.u + 1.0)

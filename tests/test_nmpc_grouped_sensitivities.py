@@ -31,7 +31,7 @@ def test_each_group_is_served_by_its_middle_interval():
 
 
 @pytest.mark.parametrize("stages", [3, 10])
-def test_grouped_linearisation_has_every_shooting_end_and_the_centres_sensitivities(
+def test_grouped_linearization_has_every_shooting_end_and_the_centres_sensitivities(
     onelink, stages
 ):
     model, op = onelink

@@ -171,7 +171,7 @@ def test_reduced_prediction_settings_are_checked():
     )
 
 
-def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_prediction():
+def test_one_compiled_linearization_serves_every_configuration_of_the_reduced_prediction():
     # the coupled basis's values coincide with other constants at some configurations; lifted per use,
     # the generated code (its cache key) is the same at the straight and the folded arm
     from flexctrl.sim.compile import cache_key
@@ -188,7 +188,7 @@ def test_one_compiled_linearisation_serves_every_configuration_of_the_reduced_pr
     assert len(keys) == 1
 
 
-def test_a_configuration_of_the_same_structure_reuses_the_linearisation_and_gets_the_same_numbers():
+def test_a_configuration_of_the_same_structure_reuses_the_linearization_and_gets_the_same_numbers():
     # the horizon linearisation is memoised by the content of the lifted f and the recipe: a second
     # configuration reuses it; built afresh (memo emptied) it gives the same shooting ends and Jacobians
     from flexctrl.control.nmpc import interval as nmpc_interval

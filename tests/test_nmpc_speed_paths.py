@@ -114,6 +114,6 @@ def test_the_direct_path_refuses_bounds_it_does_not_carry(onelink):
     lay = ctrl.layout
     lbx, ubx = ctrl._bounds(np.zeros(lay.n))
     lbx[lay.z[3][0]] = -1.0  # a state bound the direct path would silently drop
-    a, lba, uba = calls.linearise(np.zeros(lay.n), ctrl._w)
+    a, lba, uba = calls.linearize(np.zeros(lay.n), ctrl._w)
     with pytest.raises(ValueError, match="z_0 fixed and only the inputs bounded"):
         calls.screen.direct.solve(a, lba, ctrl.functions["g0"], lbx, ubx, ctrl._w)

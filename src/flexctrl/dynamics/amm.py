@@ -279,7 +279,7 @@ def build_amm(
     lookups: Sequence[ca.Function | None] | None = None,
     coriolis: Literal["bodies", "lagrange"] = "bodies",
     axial_shortening: bool | None = None,
-    tip_rotation: Literal["linearised", "exact"] | None = None,
+    tip_rotation: Literal["linearized", "exact"] | None = None,
     static_correction: bool | None = None,
     axial_stretch: bool | None = None,
 ) -> Model:
@@ -314,9 +314,9 @@ def build_amm(
         root by ``1/2 int_0^x w'^2`` (``docs/amm.md`` section 10).  Default: the arm's
         ``axial_shortening`` (model file or scene key), else :data:`AMM_AXIAL_SHORTENING`.
     tip_rotation
-        ``"linearised"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
+        ``"linearized"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
         the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
-        kinematics are consistent only then), ``"linearised"`` without.
+        kinematics are consistent only then), ``"linearized"`` without.
     axial_stretch
         Axially compliant links: one elongation ``e_i`` (m) per link with elastic modes
         appended to ``q`` (names ``e1..en``; a link without modes, hence ``rigid``, stays
@@ -347,7 +347,7 @@ def build_amm(
         )
     shortening = bool(axial_shortening)
     rotation = _check_choice(
-        tip_rotation or ("exact" if shortening else "linearised"), TIP_ROTATIONS, "tip_rotation"
+        tip_rotation or ("exact" if shortening else "linearized"), TIP_ROTATIONS, "tip_rotation"
     )
     n = arm.n_links
     n_modes = [int(n_modes)] * n if np.isscalar(n_modes) else [int(k) for k in n_modes]
@@ -519,7 +519,7 @@ def build_amm(
         "axial_stretch": stretch,
         "static_correction": [bool(c) for c in corrected],
         "elastic_rotation": "linearised E_i = [[1, -w'], [w', 1]] (Eq 7)"
-        if rotation == "linearised"
+        if rotation == "linearized"
         else "exact rotation by the tip slope w'_ie",
         "g_convention": "dU_g/dq + dU_el/dq - K(q) q" if scheduled else "dU_g/dq",
         "input_matrix": "tau acts on q1..qn",

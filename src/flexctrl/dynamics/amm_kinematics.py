@@ -142,7 +142,7 @@ def _elastic_rotation(slope):
 
 
 #: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by ``w'``.
-TIP_ROTATIONS = ("linearised", "exact")
+TIP_ROTATIONS = ("linearized", "exact")
 
 
 @dataclass(frozen=True)
@@ -255,7 +255,7 @@ def arm_expressions(
     *,
     shape_rates: bool = False,
     axial_shortening: bool = False,
-    tip_rotation: str = "linearised",
+    tip_rotation: str = "linearized",
     axial_stretch: bool = False,
 ) -> ArmExpressions:
     """Kinematics, mass matrix and potential energies of ``arm`` in ``q``.
@@ -279,7 +279,7 @@ def arm_expressions(
         Points of a bent link move towards its root by ``s(x) = 1/2 int_0^x w'^2``
         (``modal`` must carry the ``sh_*`` integrals; module docstring).
     tip_rotation
-        ``"linearised"`` (Eq 7) or ``"exact"`` (the next frame turned by ``w'_ie``).
+        ``"linearized"`` (Eq 7) or ``"exact"`` (the next frame turned by ``w'_ie``).
     axial_stretch
         Axially compliant links: ``q`` ends with one elongation ``e_i`` (m) per link with
         elastic modes (:func:`stretched_links`; a link without modes stays rigid), a

@@ -104,7 +104,7 @@ Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
 # -- linearisation --------------------------------------------------------------------
 
 
-def linearisation_function(model) -> ca.Function:
+def linearization_function(model) -> ca.Function:
     """``(x, u) -> (f, A = df/dx)`` of the model's forward dynamics (free joints, torques held), expanded to SX.
 
     :func:`flexctrl.dynamics.jacobians.jacobian_function`, the one Jacobian builder.
@@ -112,11 +112,11 @@ def linearisation_function(model) -> ca.Function:
     return try_expand(jacobian_function(model, value=True))
 
 
-def linearise(
+def linearize(
     model, x0: np.ndarray, u0: np.ndarray, function: ca.Function | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(f(x0, u0), A = df/dx(x0, u0))``; pass ``function`` (:func:`linearisation_function`) to reuse it."""
-    f, A = (function or linearisation_function(model))(x0, u0)
+    f, A = (function or linearization_function(model))(x0, u0)
     return np.asarray(f, dtype=float).ravel(), np.asarray(A, dtype=float)
 
 
@@ -315,9 +315,9 @@ def refine_equilibrium(
         If ``x0`` is not near an equilibrium: Newton moves it by more than 1 %
         of ``1 + max|x0|`` or cannot bring the step below ``tolerance``.
     """
-    function = function or linearisation_function(model)
+    function = function or linearization_function(model)
     x = np.array(x0, dtype=float)
-    f, A = linearise(model, x, u0, function)
+    f, A = linearize(model, x, u0, function)
     start = float(np.max(np.abs(f), initial=0.0))
     step_size = math.inf
     for _ in range(max_iterations):
@@ -326,7 +326,7 @@ def refine_equilibrium(
         if step_size <= 1e-3 * tolerance:
             break
         x = x + step
-        f, A = linearise(model, x, u0, function)
+        f, A = linearize(model, x, u0, function)
     residual = float(np.max(np.abs(f), initial=0.0))
     moved = float(np.max(np.abs(x - x0)))
     if moved > 1e-2 * (1.0 + float(np.max(np.abs(x0)))) or step_size > tolerance:
@@ -457,11 +457,11 @@ class StabilityProbe:
                 key="x0",
             )
         self.u0 = u0
-        function = linearisation_function(model)
+        function = linearization_function(model)
         self.x_eq, self.residual = refine_equilibrium(
             model, x0, u0, tolerance=1e-2 * self.criterion.amplitude, function=function
         )
-        _f, A = linearise(model, self.x_eq, u0, function)
+        _f, A = linearize(model, self.x_eq, u0, function)
         self.eigenvalues = np.linalg.eigvals(A)
         self.omega_max = float(np.max(np.abs(self.eigenvalues), initial=0.0))
         if not self.omega_max > 0:
@@ -687,7 +687,7 @@ __all__ = [
     "StabilityProbe",
     "StabilityResult",
     "largest_stable_step",
-    "linearisation_function",
-    "linearise",
+    "linearization_function",
+    "linearize",
     "refine_equilibrium",
 ]

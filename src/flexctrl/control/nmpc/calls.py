@@ -48,7 +48,7 @@ class BoundRTICalls:
         self._g, self._lbx, self._ubx = (self._qp.arrays[k] for k in ("g", "lbx", "ubx"))
         self._x = self._qp.arrays["x"].reshape(-1)
 
-    def linearise(
+    def linearize(
         self, z0: np.ndarray, w0: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(a, lba, uba)`` along ``w0`` from ``z0``: the bound arrays themselves (valid until the next call)."""
@@ -80,7 +80,7 @@ class DMRTICalls:
         self._data: tuple = ()
         self._w0: np.ndarray | None = None
 
-    def linearise(self, z0: np.ndarray, w0: np.ndarray) -> tuple:
+    def linearize(self, z0: np.ndarray, w0: np.ndarray) -> tuple:
         """``(a, lba, uba)`` along ``w0`` from ``z0`` (DMs)."""
         self._data, self._w0 = tuple(self._prepare(z0, w0)), w0
         return self._data

@@ -103,7 +103,7 @@ from flexctrl.control.nmpc.calls import BoundRTICalls, DMRTICalls
 from flexctrl.control.nmpc.interval import (
     RK4_BOUND,
     auto_substeps,
-    horizon_linearisation,
+    horizon_linearization,
     interval_core,
     interval_functions,
     memoised,
@@ -340,7 +340,7 @@ class NMPCController(Controller):
         """
         start = time.perf_counter()
         calls = self._calls()
-        a, lba, uba = calls.linearise(z0, w0)
+        a, lba, uba = calls.linearize(z0, w0)
         lbx, ubx = self._bounds(z0)
         mid = time.perf_counter()
         self.timing["linearize_qp"].append(mid - start)
@@ -525,7 +525,7 @@ def _build(
         expected = np.array(Fz(z, v)).ravel()
         return bool(np.max(np.abs(ends - expected)) <= 1e-9 * (1.0 + np.max(np.abs(expected))))
 
-    build = lambda: horizon_linearisation(
+    build = lambda: horizon_linearization(
         fp,
         f_jac,
         nc,

@@ -186,16 +186,16 @@ def grouped_sensitivities(
             A.append(Ac[:, g * n : (g + 1) * n])
             B.append(Bc[:, g * m : (g + 1) * m])
     return ca.Function(
-        linearisation_name(N, stages), [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)]
+        linearization_name(N, stages), [Z, V, p], [F, ca.horzcat(*A), ca.horzcat(*B)]
     )
 
 
-def linearisation_name(N: int, stages: int) -> str:
+def linearization_name(N: int, stages: int) -> str:
     """The name of the horizon linearisation's Function (and of its library's symbol)."""
     return f"nmpc_linearize_{N}_by_{stages}" if stages > 1 else f"nmpc_linearize_{N}"
 
 
-def symbolic_linearisation(
+def symbolic_linearization(
     fp: ca.Function,
     f_jac: ca.Function | None,
     nc: int,
@@ -240,7 +240,7 @@ def symbolic_linearisation(
             "nmpc_shoot", [z, v, p], [(Fp(xop + Sx * z, uop + Su * v, *consts) - xop) / Sx]
         )
         return grouped_sensitivities(shoot, lin, n, m, N, settings.stages_per_jacobian)
-    return lin.map(linearisation_name(N, 1), "serial", N, [2], [])
+    return lin.map(linearization_name(N, 1), "serial", N, [2], [])
 
 
 def _source_digest() -> str:
@@ -267,7 +267,7 @@ def builder_source_digest() -> str:
     return _BUILDER_SOURCE_DIGEST
 
 
-def horizon_linearisation(
+def horizon_linearization(
     fp: ca.Function,
     f_jac: ca.Function | None,
     nc: int,
@@ -291,7 +291,7 @@ def horizon_linearisation(
     found by its recipe must pass ``check`` (the caller's comparison with the model at a
     generic point); one that fails is removed, with a warning, and built again.
     """
-    build = lambda: symbolic_linearisation(fp, f_jac, nc, n, m, N, dt, substeps, settings)  # noqa: E731
+    build = lambda: symbolic_linearization(fp, f_jac, nc, n, m, N, dt, substeps, settings)  # noqa: E731
     if not settings.compile:
         return build(), False, 0.0, False
     from flexctrl.sim.compile import compile_by_recipe, compile_function
@@ -300,7 +300,7 @@ def horizon_linearisation(
         result = compile_function(build())
     else:
         result = compile_by_recipe(
-            linearisation_name(N, settings.stages_per_jacobian),
+            linearization_name(N, settings.stages_per_jacobian),
             f"{recipe}\0{builder_source_digest()}",
             build,
             check=check,
@@ -336,8 +336,8 @@ __all__ = [
     "memoised",
     "group_centres",
     "grouped_sensitivities",
-    "horizon_linearisation",
-    "symbolic_linearisation",
-    "linearisation_name",
+    "horizon_linearization",
+    "symbolic_linearization",
+    "linearization_name",
     "builder_source_digest",
 ]
