@@ -79,7 +79,8 @@ def test_static_foreshortening_under_tip_load_matches_closed_form(arm, n_modes, 
 
 @pytest.mark.parametrize("shortening, coefficient", [(True, 0.1933), (False, -1.0)])
 def test_spinning_link_follows_southwell(arm, shortening, coefficient):
-    """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2 (Southwell;
+    """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2
+    (Southwell;
     -1 is the frame's softening alone, which is all the model has without the effect)."""
     m = build_amm(one_link(arm, 0.0), 4, axial_shortening=shortening)
     w0 = rotating_frequency(m, 0.0)

@@ -102,7 +102,8 @@ def test_bent_arm_frequencies_meet_the_finite_elements(arm, q_deg):
 
 
 def test_energy_conserved_at_rk4_order(arm):
-    """Undamped free swing under gravity with shortening and stretch: the energy error of RK4 falls by
+    """Undamped free swing under gravity with shortening and stretch: the energy error of RK4 falls
+    by
     at least 2^3.5 when the step halves."""
     a = dataclasses.replace(
         arm.with_payload(2.0),

@@ -51,7 +51,10 @@ def test_unknown_public_name_is_an_attribute_error():
 
 
 def test_import_is_lazy():
-    code = "import flexctrl, sys; print(sorted(m for m in ('casadi', 'control', 'matplotlib') if m in sys.modules))"
+    code = (
+        "import flexctrl, sys; print(sorted(m for m in ('casadi', 'control', 'matplotlib') if "
+        "m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 

@@ -312,7 +312,9 @@ def test_the_checks_can_fail():
     [
         ("import flexctrl", ("casadi", "control", "osqp", "matplotlib")),
         (
-            "import flexctrl.spec, flexctrl.spec.controller_reader, flexctrl.spec.controller_settings, flexctrl.spec.scene, flexctrl.spec.closed_loop_scene, "
+            "import flexctrl.spec, flexctrl.spec.controller_reader, "
+            "flexctrl.spec.controller_settings, flexctrl.spec.scene, "
+            "flexctrl.spec.closed_loop_scene, "
             "flexctrl.spec.fem_scene, flexctrl.spec.reference; "
             "flexctrl.spec.scene.load_scene('studies/scenes/move_joint1_30deg.toml'); "
             "flexctrl.spec.controller_reader.load_controller('controllers/lqr.toml')",

@@ -100,7 +100,8 @@ def test_steady_drift_response_by_iteration(feedback):
 
 
 def test_unstabilised_drift_grows_linearly_once_the_motion_stops(unstabilised):
-    """gamma = beta = 0: G has the Jordan block of eigenvalue 1, so after T (constant constraint rows,
+    """gamma = beta = 0: G has the Jordan block of eigenvalue 1, so after T (constant constraint
+    rows,
     no defects) the velocity violation stays frozen and |Phi| grows linearly at that rate."""
     p = unstabilised
     assert p.bounded and p.result.t[-1] == pytest.approx(1.0)
@@ -119,7 +120,8 @@ def test_unstabilised_drift_grows_linearly_once_the_motion_stops(unstabilised):
 
 
 def test_moderate_gamma_cuts_the_violation_as_the_linear_error_model_predicts(unstabilised):
-    """gamma h = 0.5 (below the limit) lowers max|Phi| by more than 10x; the linear model driven by the
+    """gamma h = 0.5 (below the limit) lowers max|Phi| by more than 10x; the linear model driven by
+    the
     step defects of the gamma = 0 run predicts the stabilised run's max|Phi| and max|Phidot| to 1 %."""
     gamma = 0.5 / DT
     p = run_point(FAST_PUSH, 4, DT, gamma, gamma, duration=1.0)
@@ -132,7 +134,8 @@ def test_moderate_gamma_cuts_the_violation_as_the_linear_error_model_predicts(un
 
 
 def test_explicit_feedback_blows_up_just_above_the_predicted_limit_and_not_below():
-    """Explicit (Eq 54) feedback: bounded at 0.9x the limit, recorded blow-up at 1.3x with the predicted
+    """Explicit (Eq 54) feedback: bounded at 0.9x the limit, recorded blow-up at 1.3x with the
+    predicted
     per-step growth; implicit feedback at the same gamma stays bounded."""
     safe, bad = 0.9 * EXPLICIT_LIMIT / DT, 1.3 * EXPLICIT_LIMIT / DT
     ok = run_point(FAST_PUSH, 4, DT, safe, safe, duration=1.0)

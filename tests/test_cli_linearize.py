@@ -18,7 +18,8 @@ def _run(capsys, *argv):
 
 
 def test_locked_frequencies_agree_between_assumed_modes_and_finite_elements(capsys, model_path):
-    # Without gravity: no axial preload, which the finite elements carry (geometric stiffness) and the
+    # Without gravity: no axial preload, which the finite elements carry (geometric stiffness) and
+    # the
     # assumed modes do not; then the lowest three modes of two independent discretisations agree.
     flat = ("--set", "gravity=[0.0, 0.0]")
     amm = _run(capsys, model_path, "--payload", 2, "--q", 0, 90, 0, "--locked", *flat)
@@ -40,7 +41,8 @@ def test_locked_frequencies_agree_between_assumed_modes_and_finite_elements(caps
         amm["frequencies_hz"] == sorted(amm["frequencies_hz"]) and len(amm["frequencies_hz"]) == 6
     )
     assert amm["frequencies_hz"][:3] == pytest.approx(fem["frequencies_hz"][:3], rel=2e-3)
-    # static deflection under gravity, straight arm (link axes normal to gravity): the same equilibrium
+    # static deflection under gravity, straight arm (link axes normal to gravity): the same
+    # equilibrium
     amm = _run(capsys, model_path, "--q", 0, 0, 0)
     fem = _run(capsys, model_path, "--q", 0, 0, 0, "--fidelity", "fem:4")
     assert amm["static_tip_deflections_m"] == pytest.approx(
@@ -52,7 +54,8 @@ def test_locked_frequencies_agree_between_assumed_modes_and_finite_elements(caps
 def test_whole_arm_locked_frequency_is_below_every_per_link_clamped_mass_frequency(
     capsys, model_path
 ):
-    """The arm's lowest locked mode couples all links; each link's clamped-mass model treats the outboard as rigid,
+    """The arm's lowest locked mode couples all links; each link's clamped-mass model treats the
+    outboard as rigid,
     so it is stiffer: the arm's first frequency lies below every link's first frequency."""
     amm = _run(capsys, model_path, "--q", 0, 0, 0, "--locked", "--fidelity", "amm:3")
     arm = load_arm(model_path)

@@ -127,7 +127,8 @@ def test_auto_substeps_respect_the_rk4_bound(onelink):
 
 @pytest.mark.slow
 def test_rti_on_the_three_link_arm_converges_without_fallbacks():
-    # the step time is a benchmark figure (`flexctrl bench mpc`), not a timed test: this machine is shared
+    # the step time is a benchmark figure (`flexctrl bench mpc`), not a timed test: this machine is
+    # shared
     from flexctrl.scenes.model_files import load_model
 
     model = load_model("models/subedi3link.toml", fidelity="amm:2")
@@ -237,7 +238,8 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
 
 def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
-    sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or one per
+    sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or
+    one per
     sample at its middle node (controllers/nmpc.toml now), NMPC settles."""
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
@@ -260,8 +262,10 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
 
 
 def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
-    # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of consecutive
-    # samples: every variant has its own plant and is reset, so the order may change the times, not the runs
+    # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of
+    # consecutive
+    # samples: every variant has its own plant and is reset, so the order may change the times, not
+    # the runs
     from flexctrl.bench.mpc_step import _run_nmpcs
 
     model, op = onelink

@@ -1,4 +1,5 @@
-"""Floating-frame finite-element arm (flexctrl.dynamics.fem.fem_arm) and the per-link FE modal check.
+"""Floating-frame finite-element arm (flexctrl.dynamics.fem.fem_arm) and the per-link FE modal
+check.
 
 Reference values are independent solutions or limits, never stored output: the
 closed-form clamped-mass frequencies, mesh refinement (h^4 eigenvalue
@@ -95,7 +96,8 @@ def test_modes_command_with_fem_fidelity(capsys):
     np.testing.assert_allclose(f, SUBEDI_TABLE3_HZ[2.0], atol=SUBEDI_TABLE3_ROUNDING_HZ + 0.01)
 
 
-# -- 2. the model interface --------------------------------------------------------------------------
+# -- 2. the model interface
+# --------------------------------------------------------------------------
 def test_model_interface(fem4):
     m = fem4
     assert str(m.fidelity) == "fem:4" and m.n_joints == 3
@@ -262,7 +264,8 @@ def test_locked_frequencies_agree_with_assumed_modes(arm, q_deg):
     assert np.all(amm2[3:] > fem[3:] * 1.005)
 
 
-# -- 5. energy -----------------------------------------------------------------------------------------
+# -- 5. energy
+# -----------------------------------------------------------------------------------------
 def test_free_motion_conserves_energy(arm):
     """No damping, no torque, gravity on, joints free: T + U is a first integral of the model."""
     a = arm.with_payload(2.0)
@@ -284,7 +287,8 @@ def test_free_motion_conserves_energy(arm):
 
 
 def test_locked_free_vibration_energy_with_newmark(arm):
-    """Trapezoidal Newmark conserves the energy of linear systems exactly; the locked arm is linear up
+    """Trapezoidal Newmark conserves the energy of linear systems exactly; the locked arm is linear
+    up
     to its geometric nonlinearity, where the rule's energy error is second order in dt."""
     a = no_gravity(arm)
     m = build_fem_model(a, 4)
@@ -328,7 +332,8 @@ def test_locked_free_vibration_energy_with_newmark(arm):
     assert np.ptp(El) < 1e-10 * El[0]
 
 
-# -- 6. axial shortening -----------------------------------------------------------------------------
+# -- 6. axial shortening
+# -----------------------------------------------------------------------------
 def rotating_frequency(model, spin):
     """Lowest transverse frequency (rad/s) of a one-link model spun at ``spin`` rad/s about its joint."""
     n = model.n_q
@@ -376,7 +381,8 @@ def test_axial_shortening_gives_southwell_centrifugal_stiffening(arm, shortening
 
 def test_axial_shortening_under_gravity(arm):
     """A hanging link with its payload is stiffened by the weight below each section, a standing one
-    softened by as much (to first order): d(omega^2) = g int (rho (L - x) + m_t) phi'^2 / m_l for the
+    softened by as much (to first order): d(omega^2) = g int (rho (L - x) + m_t) phi'^2 / m_l for
+    the
     clamped-mass mode phi (Rayleigh, exact to first order). Without the term neither changes."""
     one = dataclasses.replace(
         arm.with_payload(2.0),

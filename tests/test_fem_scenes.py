@@ -30,7 +30,8 @@ def scene(name: str, *overrides: str) -> tuple[dict, str]:
     return apply_overrides(read_toml(path), overrides), str(path)
 
 
-# -- the scene runner ---------------------------------------------------------------------------------
+# -- the scene runner
+# ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", BK)
 def test_bk_scenes_write_trajectory_summary_and_plot(tmp_path, name):
     doc, src = scene(name, "duration=0.2")
@@ -117,7 +118,8 @@ def test_rp_scene_runs(tmp_path):
     assert summary["model"]["support_outer_m"] == 0.8
 
 
-# -- the R-P arm -------------------------------------------------------------------------------------------
+# -- the R-P arm
+# -------------------------------------------------------------------------------------------
 BK_RP = RPArmSpec(
     "bk", length=1.0, mass_per_length=1.0, EI=1.0, support_inner=0.55, support_outer=0.8
 )

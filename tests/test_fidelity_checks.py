@@ -1,4 +1,5 @@
-"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance (issue 14).
+"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance
+(issue 14).
 
 The walk itself is checked on synthetic runs whose tip paths converge geometrically
 with the rung (every walk: from the top, the ladder's from a start, the estimate-first),
@@ -110,7 +111,8 @@ def test_from_the_top_tolerance_stops_at_the_top_and_makes_no_step_check():
 
 
 def test_tolerance_keeps_a_higher_rung_where_full_finds_a_lower_one():
-    # with 1 mm every rung from amm:1 up meets: full walks down to it; tolerance keeps the top it started from
+    # with 1 mm every rung from amm:1 up meets: full walks down to it; tolerance keeps the top it
+    # started from
     made: list = []
     kw = dict(
         tol=1e-3,
@@ -152,7 +154,8 @@ def test_estimate_first_walk_keeps_its_candidate_and_drops_only_the_step_check()
     made.clear()
     only, _ = _walk("tolerance", linear=_linear(made))
     assert str(only.choice) == str(full.choice) and only.estimated_error == full.estimated_error
-    # the full walk's last two linear runs are its step check: the exact loop and the reference's at its step
+    # the full walk's last two linear runs are its step check: the exact loop and the reference's at
+    # its step
     assert full_linear[-2:] == [("linear", "exact"), ("linear", 4)] and made == full_linear[:-2]
 
 
@@ -217,7 +220,8 @@ def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_run
 
 
 def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it():
-    # reference amm:6: a choice of amm:2 is estimated from amm:3 and amm:4, so the rung below (amm:5) is no run of it
+    # reference amm:6: a choice of amm:2 is estimated from amm:3 and amm:4, so the rung below
+    # (amm:5) is no run of it
     made: list = []
     kw = dict(
         tol=1e-3,
@@ -239,7 +243,8 @@ def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it()
     )  # amm:5 follows the reference's path
     made.clear()
     only = walk_and_judge(**kw, checks="tolerance")
-    # neither the rung below the reference nor the finest model at its own step (the ladder walk's cost evidence)
+    # neither the rung below the reference nor the finest model at its own step (the ladder walk's
+    # cost evidence)
     assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4]
     assert only.evidence["reference"]["convergence"]["rung_below_m"] is None
     assert (
@@ -266,7 +271,8 @@ def test_the_table_says_which_checks_were_not_made(kind):
 
 
 def test_in_tolerance_mode_a_convergence_warning_names_only_the_check_made():
-    # amm:3 is 0.125 mm from the reference amm:4, above half of a 0.2 mm tolerance: the reference may not be converged
+    # amm:3 is 0.125 mm from the reference amm:4, above half of a 0.2 mm tolerance: the reference
+    # may not be converged
     kw = dict(
         tol=2e-4,
         low=0,
@@ -313,7 +319,8 @@ def test_a_predicted_failure_records_the_checks_asked_for():
 
 
 def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
-    # the slow light move of tests/test_auto_fidelity.py: the ladder walk, rungs up to amm:2 against amm:3
+    # the slow light move of tests/test_auto_fidelity.py: the ladder walk, rungs up to amm:2 against
+    # amm:3
     argv = [
         "fidelity",
         "studies/scenes/slow_move_light.toml",
@@ -340,7 +347,8 @@ def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
     )  # full walks down to the lowest rung that meets
     assert main([*argv, "--set", "fidelity_checks='tolerance'"]) == 0
     assert "step check not made" in capsys.readouterr().out
-    # the scene's own resolution (kind = "arm"), with the choices of the two modes kept apart in one cache
+    # the scene's own resolution (kind = "arm"), with the choices of the two modes kept apart in one
+    # cache
     cache = SceneCache()
     scenes = [
         load_scene(

@@ -1,4 +1,5 @@
-"""Inputs that cannot silently mislead: ``flexctrl check``, bad values in every kind of file, unit traps.
+"""Inputs that cannot silently mislead: ``flexctrl check``, bad values in every kind of file, unit
+traps.
 
 Every kind of file a user writes (model, open-loop scene, closed-loop scene, FEM scene,
 controller, study, tuning) is mutated five ways (a NaN, an infinity, a string where a
@@ -241,7 +242,8 @@ def test_check_kind_option_reads_the_file_as_told(capsys, monkeypatch):
     assert "key 'kind'" in capsys.readouterr().err
 
 
-# -- degrees and radians ------------------------------------------------------------------------------
+# -- degrees and radians
+# ------------------------------------------------------------------------------
 
 
 def test_degree_field_that_looks_like_radians_warns_on_one_line(capsys, monkeypatch):
@@ -300,7 +302,8 @@ def test_study_axis_in_radians_warns(tmp_path, monkeypatch):
         load_study("studies/quickstart.toml", ["grid.q2=[0, 1.5708]"], check_executor=False)
 
 
-# -- torque limits and link inertia -------------------------------------------------------------------
+# -- torque limits and link inertia
+# -------------------------------------------------------------------
 
 
 def test_torque_limit_is_required_and_inf_must_be_written(tmp_path):
@@ -349,7 +352,8 @@ def test_link_inertia_defaults_to_the_uniform_link_and_warns_far_from_it(tmp_pat
         )
 
 
-# -- known keys per file kind ---------------------------------------------------------------------------
+# -- known keys per file kind
+# ---------------------------------------------------------------------------
 
 
 def test_closed_loop_scene_lists_its_own_keys(monkeypatch):
@@ -390,12 +394,14 @@ def test_optional_key_misspelt_gets_a_suggestion():
         load_arm(DATA / "models/subedi3link.toml", ["links[1].EAA=3"])
 
 
-# -- holding torques, poles, per-link modes ---------------------------------------------------------------
+# -- holding torques, poles, per-link modes
+# ---------------------------------------------------------------
 
 
 def test_linearize_text_marks_unstable_poles_and_prints_damping(capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
-    # an upright rigid arm with free joints is an inverted pendulum chain (unstable real poles); hanging, it is not
+    # an upright rigid arm with free joints is an inverted pendulum chain (unstable real poles);
+    # hanging, it is not
     assert (
         main(["linearize", "models/subedi3link.toml", "--q", "90", "0", "0", "--fidelity", "rigid"])
         == 0
@@ -453,7 +459,8 @@ def test_linearize_warns_on_one_line_when_the_limits_cannot_hold_the_pose(capsys
     assert status == 0
     assert err.count("\n") == 1 and "Traceback" not in err
     assert re.search(
-        r"warning: models/subedi3link.toml: key '--q': .*holding torques \[[0-9.]+, .*beyond the torque "
+        r"warning: models/subedi3link.toml: key '--q': .*holding torques \[[0-9.]+, .*beyond the "
+        r"torque "
         r"limits \[200.0, 100.0, 50.0\] N m \(joint 1: \|[0-9.]+\| > 200\)",
         err,
     )
@@ -514,7 +521,8 @@ def test_per_link_modes_take_a_model_as_well_as_a_description(monkeypatch):
         fc.link_modes("models/subedi3link.toml", q, 0)
 
 
-# -- controller keys from the command line and per controller in a study --------------------------------------
+# -- controller keys from the command line and per controller in a study
+# --------------------------------------
 
 
 def test_simulate_set_reaches_the_controller_file(capsys, monkeypatch, tmp_path):
@@ -591,7 +599,8 @@ def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
         load_study("studies/quickstart.toml", ["per_controller.pd.horizon=30"])
 
 
-# -- metrics a controller cannot produce ------------------------------------------------------------------------
+# -- metrics a controller cannot produce
+# ------------------------------------------------------------------------
 
 
 def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monkeypatch):

@@ -1,4 +1,5 @@
-"""The compiled closed loop (one CasADi call for all samples after the first) against the Python loop.
+"""The compiled closed loop (one CasADi call for all samples after the first) against the Python
+loop.
 
 Same plant step, same controller arithmetic, the same noise draws: the trajectories
 agree to round-off (the controllers' matrix products and the compiled output map sum
@@ -145,8 +146,10 @@ def test_design_is_kept_and_reset(cache):
 
 @pytest.mark.parametrize("controller", ["controllers/lqg.toml", "controllers/pd.toml"])
 def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache, monkeypatch):
-    # the loop is chained in calls of CHUNK samples (building one mapaccum over the whole run costs time
-    # in proportion to its length); 7 leaves a remainder, so both the full and the last, shorter chunk run
+    # the loop is chained in calls of CHUNK samples (building one mapaccum over the whole run costs
+    # time
+    # in proportion to its length); 7 leaves a remainder, so both the full and the last, shorter
+    # chunk run
     import flexctrl.loop.compiled as compiled
 
     scene = short_scene(noise=True)
@@ -167,8 +170,10 @@ def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache,
 
 
 def test_the_deflection_monitor_stops_both_loops_alike(cache):
-    # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on link 1) trip it,
-    # so the Python loop's per-sample monitor call (bound to arrays for the run) and the compiled loop's
+    # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on
+    # link 1) trip it,
+    # so the Python loop's per-sample monitor call (bound to arrays for the run) and the compiled
+    # loop's
     # batched flags must stop at the same sample for the same reason
     scene = dataclasses.replace(short_scene(), divergence_deflection=0.002)
     runs = both(scene, "controllers/lqr.toml", cache)

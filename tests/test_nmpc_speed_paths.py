@@ -25,8 +25,10 @@ def _transition_error(model, x, u, dt, recipe, every=1):
 
 
 def test_midpoint_sensitivities_are_third_order_in_the_sample_time_the_start_point_second(onelink):
-    # one Jacobian per interval (2 RK4 steps): at its start the transition A = dx_next/dx is wrong by
-    # O(h^2) (J' h^2 / 2), at its middle node by O(h^3) (the midpoint rule); halving the sample divides
+    # one Jacobian per interval (2 RK4 steps): at its start the transition A = dx_next/dx is wrong
+    # by
+    # O(h^2) (J' h^2 / 2), at its middle node by O(h^3) (the midpoint rule); halving the sample
+    # divides
     # the errors by ~4 and ~8 (measured 3.8 and 9.7 at 1 -> 0.5 ms)
     model, op = onelink
     x = op.x + np.array([-0.4, 0.01, 3.0, -2.0])
@@ -58,7 +60,8 @@ def _closed_loop(model, op, samples=40, limit=0.02, **design_args):
 
 def test_bound_calls_give_the_dm_calls_numbers_to_the_bit(onelink):
     model, op = onelink
-    # (with the soft rows binding: a buffer kept between solves would warm-start HPIPM's multipliers)
+    # (with the soft rows binding: a buffer kept between solves would warm-start HPIPM's
+    # multipliers)
     bound, ctrl = _closed_loop(*onelink, limit=LIMIT, bound_calls=True, screen=False)
     plain, _ = _closed_loop(*onelink, limit=LIMIT, bound_calls=False)
     assert ctrl.stats.summary()["fallbacks"] == 0
@@ -103,7 +106,8 @@ def test_the_screened_qp_through_hpipm_directly_gives_casadi_conics_optimum(onel
     # the same samples are screened (the soft rows bind in the transient, then hold) and none fails
     assert 0 < calls.screened == slow.screened < calls.solves
     assert ctrl.stats.summary()["fallbacks"] == other.stats.summary()["fallbacks"] == 0
-    # one optimum to the interior point's tolerance: HPIPM sees no +-1e8 state boxes here, so other iterates
+    # one optimum to the interior point's tolerance: HPIPM sees no +-1e8 state boxes here, so other
+    # iterates
     np.testing.assert_allclose(direct, conic, rtol=0, atol=1e-5 * 15.0)
     assert not np.array_equal(direct, conic)  # really the other path
 

@@ -1,4 +1,5 @@
-"""The study report's figures and tables as a reader sees them: units, panels, best and ratio maps, overlays.
+"""The study report's figures and tables as a reader sees them: units, panels, best and ratio maps,
+overlays.
 
 Every figure the report writes is captured (``Figure.savefig`` wrapped) so its panels,
 axis labels and scales are checked, not only the files' existence.  The closed-loop
@@ -92,7 +93,8 @@ def test_maps_best_and_ratio_maps_carry_units_and_one_panel_per_cell_group(selft
     )  # one best of two per cell: 2 payloads x 6 cells
     for header in (
         "| rank | controller | median tip residual RMS (mm) | min (mm) | max (mm) |",
-        "| rank | run_id | payload (kg) | q2 (deg) | q3 (deg) | controller | tip residual RMS (mm) |",
+        "| rank | run_id | payload (kg) | q2 (deg) | q3 (deg) | controller | tip residual RMS "
+        "(mm) |",
         "### payload = 2 kg",
     ):
         assert header in text, header
@@ -101,7 +103,8 @@ def test_maps_best_and_ratio_maps_carry_units_and_one_panel_per_cell_group(selft
 def test_a_large_grid_is_drawn_without_text_in_its_cells_and_the_report_says_where_the_values_are(
     tmp_path, root, captured
 ):
-    # 9 x 8 = 72 cells a panel: beyond TEXT_CELLS (64) names and values would overlap their neighbours
+    # 9 x 8 = 72 cells a panel: beyond TEXT_CELLS (64) names and values would overlap their
+    # neighbours
     shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
     (tmp_path / "models").mkdir()
     shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")

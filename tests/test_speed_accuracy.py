@@ -175,7 +175,8 @@ def test_rk4_error_falls_as_h4_against_a_tight_implicit_solution():
 
 
 def test_reference_converges_with_mesh_and_step(monkeypatch):
-    """Reduced check (0.1 s of the bang-bang scene): halving the step changes the reference far less than the
+    """Reduced check (0.1 s of the bang-bang scene): halving the step changes the reference far less
+    than the
     mesh does, and the finer mesh pair (fem:4 vs fem:2 -> fem:3 vs fem:4) differs less."""
     monkeypatch.setenv(
         "FLEXCTRL_NO_COMPILE", "1"
@@ -238,7 +239,8 @@ def test_reduced_study_writes_pareto_csv_and_the_figure(tmp_path, monkeypatch):
     overrides = [
         'grid={scene = ["scenes/bangbang.toml"], payload = [0.0], configuration = [[0, 0, 0]], '
         '"scene.method" = ["rigid/rk4@1ms", "amm:1/rk4@1ms", "amm:1/cvodes@1e-6"]}',
-        'set={"scene.horizon" = 0.1, "scene.reference" = "fem:3/rk4@stable", "scene.reference_meshes" = ["fem:2"], '
+        'set={"scene.horizon" = 0.1, "scene.reference" = "fem:3/rk4@stable", '
+        '"scene.reference_meshes" = ["fem:2"], '
         '"scene.repeats" = 2, "controller.sensors.outputs" = ["joints", "deflection"]}',
         'metrics=["tip_error_rms", "tip_error_max", "wall_per_sim_s", "ref_step2_max", "ref_fem2_max"]',
     ]

@@ -87,7 +87,12 @@ def test_run_ids_and_seeds_do_not_depend_on_axis_order(study):
         study,
         "shuffled.toml",
         {
-            'payload = [0.0, 2.0]\nq2 = [0, 90]\nq3 = [-90, 0, 90]\ncontroller = ["controllers/soft.toml", "controllers/stiff.toml"]': 'controller = ["controllers/stiff.toml", "controllers/soft.toml"]\nq3 = [90, 0, -90]\npayload = [2, 0]\nq2 = [90, 0]',
+            "payload = [0.0, 2.0]\nq2 = [0, 90]\nq3 = [-90, 0, 90]\ncontroller = "
+            '["controllers/soft.toml", "controllers/stiff.toml"]': "controller = "
+            '["controllers/stiff.toml", '
+            '"controllers/soft.toml"]\nq3 '
+            "= [90, 0, -90]\npayload = [2, "
+            "0]\nq2 = [90, 0]",
         },
     )
     other = load_study(shuffled)
@@ -289,7 +294,8 @@ def test_records_are_plain_data_with_decimated_trajectories(study, tmp_path):
         json_size = (tmp_path / "out" / "runs" / f"{row['run_id']}.json").stat().st_size
         assert row["bytes_written"] == npz_size + json_size
         assert row["peak_memory_mb"] > 10
-    # the physics of the oscillator: a payload lowers the frequency, the stiff controller damps faster
+    # the physics of the oscillator: a payload lowers the frequency, the stiff controller damps
+    # faster
     rows = {(r["payload"], r["q2"], r["controller"]): r for r in table.rows}
     assert rows[(2.0, 0.0, "soft")]["frequency_hz"] < rows[(0.0, 0.0, "soft")]["frequency_hz"]
     assert (

@@ -19,7 +19,8 @@ from flexctrl.study.blas_threads import (
 )
 from flexctrl.study.runner import LocalPoolBackend, pool_context
 
-#: Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report every thread count.
+# : Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report
+# every thread count.
 PROBE = (
     "(__import__('scipy.linalg'), "
     "__import__('flexctrl.study.blas_threads', fromlist=['blas_threads_now']).blas_threads_now())[1]"

@@ -1,4 +1,5 @@
-"""``[auto] share``: one fidelity choice per group of runs, on the group's first run, listed in fidelity_choices.json.
+"""``[auto] share``: one fidelity choice per group of runs, on the group's first run, listed in
+fidelity_choices.json.
 
 Grid expansion and the choices file are checked here without simulating (the
 ``_selftest`` study); the closed-loop choice itself is :mod:`tests.test_closedloop_auto`'s.
@@ -40,7 +41,8 @@ def test_each_run_carries_its_group_representative_the_first_run_with_the_shared
         groups.setdefault(json.dumps(run.settings["choice_from"], sort_keys=True), []).append(run)
     assert len(groups) == 2 * 2  # payload x controller: the shared axes q2, q3 do not split groups
     assert all(len(members) == 6 for members in groups.values())
-    # the seeds stay those of the study without sharing (the share changes the run ids, not the noise)
+    # the seeds stay those of the study without sharing (the share changes the run ids, not the
+    # noise)
     assert [r.settings["seed"] for r in spec.runs] == [r.settings["seed"] for r in plain.runs]
     assert "choice_from" not in plain.runs[0].settings
 

@@ -223,7 +223,8 @@ def test_written_controller_keeps_comments_and_places_every_kind_of_key():
         and "# inline" in out
         and out.startswith("# made here\n")
     )
-    # a key the inline table lacks goes inside its braces; a key after an array of tables stays in its table
+    # a key the inline table lacks goes inside its braces; a key after an array of tables stays in
+    # its table
     more = with_values(
         "[sensors]\nnoise = { joints_deg = 0.005 }\n[[links]]\nx = 1\n",
         {"sensors.noise.strain": 1e-4, "sensors.extra": 2},

@@ -1,4 +1,5 @@
-"""Operating points, sensors, linearisation and discretisation of a :class:`~flexctrl.dynamics.model.Model`.
+"""Operating points, sensors, linearisation and discretisation of a
+:class:`~flexctrl.dynamics.model.Model`.
 
 * :func:`equilibrium`: the joints hold the arm against gravity at given joint
   angles; the elastic coordinates take their static deflection
@@ -233,7 +234,8 @@ def equilibrium(
                 break
         else:
             raise SolverError(
-                f"equilibrium at joints {qr.tolist()} rad: Newton on the elastic coordinates did not "
+                f"equilibrium at joints {qr.tolist()} rad: Newton on the elastic coordinates did "
+                "not "
                 f"converge in {max_iter} iterations (last step {np.max(np.abs(step)):.3g})"
             )
     tau = np.array(fun(qr, qf)[2], dtype=float).ravel()
@@ -246,7 +248,8 @@ def equilibrium(
 # sensors
 # --------------------------------------------------------------------------------------
 def root_curvature_coefficients(model, q_joints: Sequence[float] | None = None) -> list[np.ndarray]:
-    """``phi_ij''(0)`` (1/m^2) of every mode of every link: root curvature ``w_i''(0) = sum_j phi_ij''(0) q_fij``.
+    """``phi_ij''(0)`` (1/m^2) of every mode of every link: root curvature ``w_i''(0) = sum_j
+    phi_ij''(0) q_fij``.
 
     Taken from, in order: ``model.info["root_curvature"]`` (a list per link), or the
     arm description (``model.spec``) by recomputing the clamped-mass modes at
@@ -264,7 +267,8 @@ def root_curvature_coefficients(model, q_joints: Sequence[float] | None = None) 
     spec = getattr(model, "spec", None)
     if spec is None or "n_modes" not in info:
         raise SpecError(
-            f"model '{model.name}' gives no root curvature of its modes (info['root_curvature']) and "
+            f"model '{model.name}' gives no root curvature of its modes (info['root_curvature']) "
+            "and "
             "no arm description to compute it from; strain sensors need phi''(0) per mode",
             key="sensors",
         )
@@ -421,7 +425,8 @@ class Sensors:
 # linearisation
 # --------------------------------------------------------------------------------------
 class Linearizer:
-    """Exact Jacobians of ``model`` with ``sensors``, built once and evaluated at any operating point.
+    """Exact Jacobians of ``model`` with ``sensors``, built once and evaluated at any operating
+    point.
 
     Use for many linearisations of one model (gain scheduling, frequency maps);
     :func:`linearize` builds one and calls it once.  The Jacobian Function is kept with
@@ -570,7 +575,8 @@ class ModalSummary:
 
 
 def holding_torque_excess(model, op: OperatingPoint) -> str:
-    """Why the holding torques of ``op`` are beyond the model's joint torque limits, or ``""`` when they are not.
+    """Why the holding torques of ``op`` are beyond the model's joint torque limits, or ``""`` when
+    they are not.
 
     Parameters
     ----------
@@ -595,7 +601,8 @@ def holding_torque_excess(model, op: OperatingPoint) -> str:
     )
     q = [round(math.degrees(a), 3) for a in np.asarray(op.x, dtype=float)[: u.size]]
     return (
-        f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} N m beyond the "
+        f"the static equilibrium at q = {q} deg needs holding torques {np.round(u, 3).tolist()} "
+        "N m beyond the "
         f"torque limits {limits.tolist()} N m ({over}): no controller can hold the arm there"
     )
 
@@ -639,7 +646,8 @@ def locked_frequencies(
     Generalised eigenvalues of ``K_ff`` against ``M_ff`` at the configuration of
     ``op`` (default: zero joint angles and deflections).  ``include_gravity`` adds
     the gravitational stiffness ``d g_f / d q_f`` (the linearisation's elastic block).
-    Both matrices are symmetrised (:func:`flexctrl.dynamics.amm.locked_spectrum` computes the spectrum).
+    Both matrices are symmetrised (:func:`flexctrl.dynamics.amm.locked_spectrum` computes the
+    spectrum).
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Speed against accuracy: simulation methods, a converged reference, tip errors and the Pareto front.
+"""Speed against accuracy: simulation methods, a converged reference, tip errors and the Pareto
+front.
 
 A *method* is one way of simulating a scene: a model (fidelity and, for assumed
 modes, frozen or configuration-scheduled mode shapes) and an integrator with its
@@ -35,7 +36,8 @@ microseconds) would keep hundreds of thousands of states; here RK4 substeps insi
 one compiled call per output sample (as :func:`flexctrl.analysis.fem_report.rk4_sampler`).
 CVODES, IDAS and scipy are the package's own integrators (their ``_advance`` hook,
 which already integrates a block of held torques); Newmark is
-:func:`flexctrl.dynamics.fem.newmark_dae.simulate` on :func:`flexctrl.dynamics.fem.newmark.model_dae_problem`.
+:func:`flexctrl.dynamics.fem.newmark_dae.simulate` on
+:func:`flexctrl.dynamics.fem.newmark.model_dae_problem`.
 
 The reference
 -------------
@@ -166,7 +168,8 @@ def parse_step(text: str, *, source: str | None = None, key: str | None = None) 
     match = _STEP.match(text.strip())
     if not match:
         raise SpecError(
-            f"step {text!r} is not allowed; allowed: a positive number with unit s, ms or us (e.g. 1ms, 250us, 1e-3)",
+            f"step {text!r} is not allowed; allowed: a positive number with unit s, ms or us "
+            "(e.g. 1ms, 250us, 1e-3)",
             source=source,
             key=key,
         )
@@ -191,7 +194,8 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
     from flexctrl.spec.fidelity import parse_fidelity
 
     allowed = (
-        "allowed: FIDELITY[+sched]/INTEGRATOR[:VARIANT][@VALUE], e.g. 'amm:2/rk4@1ms', 'fem:4/rk4@stable', "
+        "allowed: FIDELITY[+sched]/INTEGRATOR[:VARIANT][@VALUE], e.g. 'amm:2/rk4@1ms', "
+        "'fem:4/rk4@stable', "
         "'fem:4/newmark@1ms', 'amm:2/cvodes@1e-6', 'amm:2/scipy:DOP853@1e-6'; integrators: "
         + ", ".join(INTEGRATORS)
     )
@@ -264,7 +268,8 @@ def _rtol(value: str, text: str, source: str | None, key: str | None) -> float:
         rtol = math.nan
     if not (1e-12 <= rtol <= 1e-2):
         raise SpecError(
-            f"method {text!r}: tolerance {value!r} is not allowed; allowed: a relative tolerance in [1e-12, 1e-2]",
+            f"method {text!r}: tolerance {value!r} is not allowed; allowed: a relative tolerance "
+            "in [1e-12, 1e-2]",
             source=source,
             key=key,
         )
@@ -336,7 +341,8 @@ class RK4Stepper(Stepper):
             substeps = max(1, int(round(dt / method.step)))
             if abs(substeps * method.step - dt) > 1e-9 * dt:
                 raise SpecError(
-                    f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s; "
+                    f"method '{method.label}': step {method.step:g} s does not divide the output "
+                    f"sample {dt:g} s; "
                     "allowed: dt / step a whole number",
                     key="method",
                 )
@@ -360,8 +366,10 @@ class RK4Stepper(Stepper):
             x = block[k - 1]
             if not np.all(np.isfinite(x)) or np.max(np.abs(x)) > DIVERGED:
                 raise SimulationError(
-                    f"RK4 ({self.method.label}, h = {self.step_s:.3g} s) diverged by t = {t0 + (s + k) * self.dt:.4g} s: "
-                    f"omega_max h = {float(self.model.omega_max) * self.step_s:.3g}; RK4 is stable for omega h < 2.83"
+                    f"RK4 ({self.method.label}, h = {self.step_s:.3g} s) diverged by t = "
+                    f"{t0 + (s + k) * self.dt:.4g} s: "
+                    f"omega_max h = {float(self.model.omega_max) * self.step_s:.3g}; RK4 is "
+                    "stable for omega h < 2.83"
                 )
         self.counters["steps"] = self.counters.get("steps", 0) + n * self.substeps
         return out
@@ -392,14 +400,16 @@ class SundialsStepper(Stepper):
         X = np.asarray(X, dtype=float).reshape(n, -1)
         if not np.all(np.isfinite(X)) or np.max(np.abs(X)) > DIVERGED:
             raise SimulationError(
-                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {times[-1]:.4g} s"
+                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and "
+                f"{times[-1]:.4g} s"
             )
         self.counters = dict(self._integrator.counters)
         return X
 
 
 class NewmarkStepper(Stepper):
-    """Trapezoidal Newmark (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`), restarted at every torque change.
+    """Trapezoidal Newmark (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`), restarted at every
+    torque change.
 
     Each call starts from consistent accelerations at its first instant (the torque
     jumps there), which is what a held torque means.
@@ -415,7 +425,8 @@ class NewmarkStepper(Stepper):
         self.ratio = max(1, int(round(dt / method.step)))
         if abs(self.ratio * method.step - dt) > 1e-9 * dt:
             raise SpecError(
-                f"method '{method.label}': step {method.step:g} s does not divide the output sample {dt:g} s",
+                f"method '{method.label}': step {method.step:g} s does not divide the output "
+                f"sample {dt:g} s",
                 key="method",
             )
         self.step_s = dt / self.ratio
@@ -441,7 +452,8 @@ class NewmarkStepper(Stepper):
         X = np.hstack([res.q[rows], res.qd[rows]])
         if X.shape[0] != n or not np.all(np.isfinite(X)) or np.max(np.abs(X)) > DIVERGED:
             raise SimulationError(
-                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and {t0 + n * self.dt:.4g} s"
+                f"{self.method.label} produced non-finite states between t = {t0:.4g} s and "
+                f"{t0 + n * self.dt:.4g} s"
             )
         self.counters["newton_iterations"] = self.counters.get("newton_iterations", 0) + int(
             res.newton_iterations.sum()
@@ -516,7 +528,8 @@ def run_open_loop(stepper: Stepper, x0: np.ndarray, torque: np.ndarray) -> Metho
 def run_closed_loop(
     stepper: Stepper, x0: np.ndarray, controller, sensors, duration: float
 ) -> MethodRun:
-    """Sampled-data loop: ``u = controller.step(t, sensors(x))``, then the stepper holds ``u`` for one controller sample.
+    """Sampled-data loop: ``u = controller.step(t, sensors(x))``, then the stepper holds ``u`` for
+    one controller sample.
 
     The controller is reset first; measurement noise is off (deterministic runs).
     """
@@ -526,7 +539,8 @@ def run_closed_loop(
     per = int(round(Ts / stepper.dt))
     if per < 1 or abs(per * stepper.dt - Ts) > 1e-9 * Ts:
         raise SpecError(
-            f"controller sample time {Ts:g} s is not a whole number of output samples of {stepper.dt:g} s",
+            f"controller sample time {Ts:g} s is not a whole number of output samples of "
+            f"{stepper.dt:g} s",
             key="sample_time",
         )
     n_samples = int(math.ceil(duration / Ts - 1e-9))
@@ -550,7 +564,8 @@ def run_closed_loop(
 
 
 def pareto_front(cost: Sequence[float], error: Sequence[float]) -> np.ndarray:
-    """Which points are Pareto-optimal (no other point is at least as cheap and as accurate, and better in one).
+    """Which points are Pareto-optimal (no other point is at least as cheap and as accurate, and
+    better in one).
 
     Parameters
     ----------
@@ -649,7 +664,8 @@ class Reference:
 def compute_reference(
     simulate: Callable[[Method], MethodRun], method: Method, meshes: Sequence[str] = ()
 ) -> Reference:
-    """Run the reference ``method`` and its convergence checks through ``simulate(method) -> MethodRun``.
+    """Run the reference ``method`` and its convergence checks through ``simulate(method) ->
+    MethodRun``.
 
     Checks: the same model with the step halved (``"step/2"``), and each fidelity in
     ``meshes`` with the reference's integrator (coarser meshes show the spatial

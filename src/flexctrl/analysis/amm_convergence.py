@@ -19,7 +19,8 @@ world frame compared on the output grid):
     link's first mode): their stiffness-proportional damping is all they have.
 
 The reference (``fem:16`` by default, RK4 at its stable step) is cached on disk under the
-output folder, keyed by everything that determines it (:func:`flexctrl.analysis.accuracy.cached_reference`).
+output folder, keyed by everything that determines it
+(:func:`flexctrl.analysis.accuracy.cached_reference`).
 
 Run from a clone (writes ``convergence.json`` and ``convergence.md``)::
 
@@ -83,7 +84,8 @@ def _scene(case: str, shortening: bool, stretch: bool = False):
     if case == "fast_move":
         from flexctrl.spec.fidelity import parse_fidelity
 
-        # the finite elements' damping rule for every plant (docs/amm.md section 14): with modal ratios
+        # the finite elements' damping rule for every plant (docs/amm.md section 14): with modal
+        # ratios
         # the assumed modes' second modes are 6-13 times less damped than the finite elements'
         plant = dataclasses.replace(
             scene.plant,
@@ -101,7 +103,8 @@ def _scene(case: str, shortening: bool, stretch: bool = False):
 
 
 def _design(scene):
-    """The fast move's controller, designed once on ``DESIGN_FIDELITY`` with the assumed-modes defaults.
+    """The fast move's controller, designed once on ``DESIGN_FIDELITY`` with the assumed-modes
+    defaults.
 
     Every plant then closes the loop with the same controller (the design does not follow the
     plant's ``axial_shortening``/``axial_stretch``), so only the plant changes.
@@ -166,10 +169,11 @@ def simulate(
     static_correction: bool = False,
     stretch: bool = False,
 ) -> dict[str, Any]:
-    """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build + compile).
+    """One run: ``time`` (s), ``tip`` (m, (T, 2)), ``wall_s`` (integration), ``setup_s`` (build +
+    compile).
 
-    ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least this
-    (a diagnosis of how the light hub 3 limits the convergence; ``docs/amm.md`` section 11).
+    ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least
+    this (a diagnosis of how the light hub 3 limits the convergence; ``docs/amm.md`` section 11).
     """
     from flexctrl.dynamics.build import build_model
     from flexctrl.scenes.arm_setup import scene_arm
@@ -192,7 +196,8 @@ def simulate(
         else:
             h = method.step
         stride = max(1, int(round(sample / h)))
-        # the Python loop for the finite elements: the compiled one holds every RK4 substep of the run
+        # the Python loop for the finite elements: the compiled one holds every RK4 substep of the
+        # run
         # (tens of thousands per sample at their damped stable step) in memory at once
         controller = _design(scene)
         out = closed_loop_tip_path(
@@ -307,7 +312,8 @@ def convergence(
     hub_inertia: float | None = None,
     static_correction: bool = False,
 ) -> dict[str, Any]:
-    """Tip errors of ``amm:N`` for N in ``modes``, with and without axial shortening, against the reference.
+    """Tip errors of ``amm:N`` for N in ``modes``, with and without axial shortening, against the
+    reference.
 
     ``steps`` maps N to the RK4 step (default ``0.1ms``, ``0.05ms`` for N >= 4).
     """

@@ -1,4 +1,5 @@
-"""Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports sweep (issue 7).
+"""Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports sweep
+(issue 7).
 
 Constraint-error dynamics (see ``docs/baumgarte.md`` for the derivation)
     :mod:`flexctrl.dynamics.fem.newmark_dae` imposes Eq 49, ``Phi_q qdd = h - 2 gamma Phidot
@@ -74,7 +75,8 @@ def _check_feedback(feedback: str) -> None:
 
 
 def newmark_error_matrices(alpha: float = 0.25, delta: float = 0.5) -> tuple[Array, Array]:
-    """``(N, c)`` with ``x_{i+1} = N x_i + c s_{i+1} + d_i`` for ``x = (e, h e', h^2 e'')`` and ``s = h^2 e''``.
+    """``(N, c)`` with ``x_{i+1} = N x_i + c s_{i+1} + d_i`` for ``x = (e, h e', h^2 e'')`` and ``s
+    = h^2 e''``.
 
     The Newmark rule: ``e_{i+1} = e_i + h e'_i + h^2 ((1/2 - alpha) e''_i + alpha e''_{i+1})``,
     ``e'_{i+1} = e'_i + h ((1 - delta) e''_i + delta e''_{i+1})``; ``d_i`` is the defect.
@@ -95,7 +97,8 @@ def defect_gain(
     alpha: float = 0.25,
     delta: float = 0.5,
 ) -> Array:
-    """``M`` in ``x_{i+1} = G x_i + M d_i``: identity for explicit feedback, ``(I - c l)^-1`` for implicit.
+    """``M`` in ``x_{i+1} = G x_i + M d_i``: identity for explicit feedback, ``(I - c l)^-1`` for
+    implicit.
 
     With implicit feedback the new step's acceleration reacts to the defect of the same
     step, so the defect enters filtered.
@@ -163,7 +166,8 @@ def stability_limit(
     delta: float = 0.5,
     gamma_dt_max: float = 1e4,
 ) -> float:
-    """Smallest ``gamma h`` above which the error dynamics are unstable (``inf`` if none up to ``gamma_dt_max``).
+    """Smallest ``gamma h`` above which the error dynamics are unstable (``inf`` if none up to
+    ``gamma_dt_max``).
 
     Scans ``gamma h`` on a logarithmic grid for the first unstable point and bisects
     (to 1e-12 relative) between it and the last stable one.  For ``gamma = beta``,
@@ -193,7 +197,8 @@ def fastest_decay(
     alpha: float = 0.25,
     delta: float = 0.5,
 ) -> tuple[float, float]:
-    """``(gamma h, |z|)`` where a free violation decays fastest per step: beyond it more gamma stops helping.
+    """``(gamma h, |z|)`` where a free violation decays fastest per step: beyond it more gamma stops
+    helping.
 
     Golden-section search of :func:`spectral_radius` over ``(0, limit)`` (limit: the
     stability limit, or 100 for unconditionally stable rules) after a coarse scan.
@@ -267,7 +272,8 @@ def constraint_states(model: SlidingBeamModel, result: DAEResult) -> Array:
 
 
 def step_defects(states: Array, alpha: float = 0.25, delta: float = 0.5) -> Array:
-    """``d_k = x_{k+1} - N x_k - c s_{k+1}`` (shape (steps, 3, m), m): what the Newmark rule does not explain.
+    """``d_k = x_{k+1} - N x_k - c s_{k+1}`` (shape (steps, 3, m), m): what the Newmark rule does
+    not explain.
 
     Independent of gamma, beta and the feedback variant (they only set ``s_{k+1}``,
     which is taken from the states).
@@ -364,7 +370,8 @@ class SweepPoint:
         return float(self.result.t[-1]) if self.result is not None else 0.0
 
     def growth_per_step(self, window: int = 200) -> float | None:
-        """Fitted per-step factor of ``max|Phi|`` over the last half (at most ``window`` steps) before blow-up.
+        """Fitted per-step factor of ``max|Phi|`` over the last half (at most ``window`` steps)
+        before blow-up.
 
         None for bounded runs or fewer than 4 usable steps.  Least squares on ``log max|Phi|``,
         so an oscillating (complex-root) envelope is averaged.

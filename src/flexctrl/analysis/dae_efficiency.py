@@ -11,12 +11,13 @@ both integrators (:mod:`flexctrl.dynamics.fem.idas_dae` builds the IDAS side fro
 
 Each method is swept over its accuracy knob (Newmark: the step; IDAS: ``rtol``, ``atol = 1e-3
 rtol``, plain index-1 DAE as a Gear-type code integrates it); the error is the largest distance of
-the tracked tip from a reference on a 1 ms grid.  The reference is IDAS at ``rtol = 1e-10`` (reduced runs: 1e-8); a
-fine Newmark run (full form only) checks it independently.  Wall time is the best of ``repeats``
-runs in this process, side by side; the work is also counted in linear solves (Newmark: one per
-step, the problems are linear; IDAS: its Newton iterations), which does not depend on the language
-each integrator's loop is written in (Newmark: Python + numpy; IDAS: C, residuals in CasADi's VM).
-At each target error the wall time of either method is interpolated (log-log) along its sweep.
+the tracked tip from a reference on a 1 ms grid.  The reference is IDAS at ``rtol = 1e-10`` (reduced
+runs: 1e-8); a fine Newmark run (full form only) checks it independently.  Wall time is the best of
+``repeats`` runs in this process, side by side; the work is also counted in linear solves (Newmark:
+one per step, the problems are linear; IDAS: its Newton iterations), which does not depend on the
+language each integrator's loop is written in (Newmark: Python + numpy; IDAS: C, residuals in
+CasADi's VM). At each target error the wall time of either method is interpolated (log-log) along
+its sweep.
 """
 
 from __future__ import annotations
@@ -115,7 +116,8 @@ def newmark_point(case: Case, dt: float, repeats: int = 1, gamma: float = 5.0) -
 
 
 def idas_point(case: Case, rtol: float, repeats: int = 1, max_order: int = 5) -> dict:
-    """One IDAS run (plain index-1 DAE) at ``rtol``: tip on the grid, violations, wall time (best of);
+    """One IDAS run (plain index-1 DAE) at ``rtol``: tip on the grid, violations, wall time (best
+    of);
     ``linear_solves`` counts its Newton iterations, ``factorizations`` its Jacobian set-ups."""
     walls = []
     for _ in range(repeats):
@@ -138,7 +140,8 @@ def idas_point(case: Case, rtol: float, repeats: int = 1, max_order: int = 5) ->
 
 
 def interpolate_wall(points: list[dict], target: float) -> float:
-    """Wall time (s) at which a sweep reaches ``target`` error (m), log-log between neighbours; NaN if
+    """Wall time (s) at which a sweep reaches ``target`` error (m), log-log between neighbours; NaN
+    if
     the sweep does not bracket it."""
     pts = sorted((p["error_m"], p["wall_s"]) for p in points if p["error_m"] > 0)
     for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
@@ -169,7 +172,8 @@ def compare(
     newmark_check_dt: float | None = None,
     reference_rtol: float = 1e-10,
 ) -> dict:
-    """The three sweeps against the IDAS reference (``reference_rtol``, BDF order <= 2), and wall times at
+    """The three sweeps against the IDAS reference (``reference_rtol``, BDF order <= 2), and wall
+    times at
     equal accuracy: for each IDAS variant, at three errors inside the range it shares with the Newmark sweep."""
     ref = idas_point(case, reference_rtol, max_order=2)
     points = (
@@ -247,7 +251,8 @@ def plot(results: list[dict], path: Path) -> None:
         axes[0, c].set_ylabel("wall time (s)")
         axes[1, c].set_ylabel("max |Phi| (m)")
         axes[1, c].set_xlabel(
-            f"max tip error against the reference, IDAS rtol {res.get('reference_rtol', 1e-10):g} (m)"
+            "max tip error against the reference, IDAS rtol "
+            f"{res.get('reference_rtol', 1e-10):g} (m)"
         )
         for ax in axes[:, c]:
             ax.grid(True, which="both", alpha=0.3)

@@ -102,7 +102,8 @@ def amm_versus_fem(
 def rk4_sampler(
     model, substeps: int, h: float, chunk: int = 100, *, compile: bool = True
 ) -> Callable:
-    """``run(x0, U) -> X``: ``substeps`` RK4 steps of ``h`` per sample, torque ``U[k]`` held per sample.
+    """``run(x0, U) -> X``: ``substeps`` RK4 steps of ``h`` per sample, torque ``U[k]`` held per
+    sample.
 
     The chained Function is compiled (cached) by :func:`flexctrl.sim.compile.compile_function`.
     Returns a callable and, as attribute ``compile_seconds``, the build time.

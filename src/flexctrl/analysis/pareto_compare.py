@@ -53,7 +53,8 @@ NUMBERS = (
 
 
 def read_pareto(path: str | Path) -> list[dict[str, Any]]:
-    """The rows of ``pareto.csv`` (a file or a result folder holding one), numbers as floats, ``pareto`` as bool.
+    """The rows of ``pareto.csv`` (a file or a result folder holding one), numbers as floats,
+    ``pareto`` as bool.
 
     Raises
     ------
@@ -65,7 +66,8 @@ def read_pareto(path: str | Path) -> list[dict[str, Any]]:
         path = path / "pareto.csv"
     if not path.is_file():
         raise FileNotFoundError(
-            f"{path}: no pareto.csv (a speed_vs_accuracy study writes it; 'flexctrl report DIR' redraws it)"
+            f"{path}: no pareto.csv (a speed_vs_accuracy study writes it; 'flexctrl report DIR' "
+            "redraws it)"
         )
     rows = []
     with open(path, newline="") as fh:
@@ -82,7 +84,8 @@ def read_pareto(path: str | Path) -> list[dict[str, Any]]:
 
 
 def merge(*tables: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One table from several ``read_pareto`` tables: a scene of a later table replaces that scene's rows before it.
+    """One table from several ``read_pareto`` tables: a scene of a later table replaces that scene's
+    rows before it.
 
     With more than one table the over-all-scenes rows are dropped: they summarise one
     folder's runs and would mix with the replaced scenes.
@@ -95,7 +98,8 @@ def merge(*tables: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def compare(old: Sequence[dict[str, Any]], new: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Rows ``{"scene", "method", "old": {...} | None, "new": {...} | None, "front": "joined" | "left" | ""}``.
+    """Rows ``{"scene", "method", "old": {...} | None, "new": {...} | None, "front": "joined" |
+    "left" | ""}``.
 
     Order: the old file's, then any (scene, method) only the new one has.
     """
@@ -143,7 +147,8 @@ def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "
         lines += [
             f"#### {scene}",
             "",
-            f"| method | s per sim. s, {a} / {b} | tip RMS median (mm), {a} / {b} | worst RMS (mm), {a} / {b} | "
+            f"| method | s per sim. s, {a} / {b} | tip RMS median (mm), {a} / {b} | worst RMS "
+            f"(mm), {a} / {b} | "
             f"worst max (mm), {a} / {b} | runs failed, {a} / {b} | Pareto, {a} / {b} |",
             "| --- | --- | --- | --- | --- | --- | --- |",
         ]
@@ -155,7 +160,8 @@ def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "
                 f"| {_num(o, 'tip_error_rms', 1e3)} / {_num(n, 'tip_error_rms', 1e3)} "
                 f"| {_num(o, 'tip_error_rms_worst', 1e3)} / {_num(n, 'tip_error_rms_worst', 1e3)} "
                 f"| {_num(o, 'tip_error_max_worst', 1e3)} / {_num(n, 'tip_error_max_worst', 1e3)} "
-                f"| {'-' if o is None else int(o['runs_failed'])} / {'-' if n is None else int(n['runs_failed'])} "
+                f"| {'-' if o is None else int(o['runs_failed'])} / "
+                f"{'-' if n is None else int(n['runs_failed'])} "
                 f"| {_flag(o)} / {_flag(n)}{moved} |"
             )
         lines.append("")
@@ -169,10 +175,12 @@ def case_table(
     methods: Sequence[str],
     labels: tuple[str, str] = ("old", "new"),
 ) -> str:
-    """Per case (payload, configuration) of ``scene``, each method's tip RMS (mm) on both sides, from ``results.csv``.
+    """Per case (payload, configuration) of ``scene``, each method's tip RMS (mm) on both sides,
+    from ``results.csv``.
 
     The medians of :func:`markdown` can hide a split (e.g. one payload better, the other
-    worse); this shows it.  ``old``/``new`` are result folders (later ones win, as in :func:`merge`).
+    worse); this shows it.  ``old``/``new`` are result folders (later ones win, as in
+    :func:`merge`).
     """
 
     def runs(folders):
@@ -284,7 +292,8 @@ def plot(
         ax.set_visible(False)
     fig.suptitle(
         title
-        or f"speed against accuracy: {labels[0]} (hollow) and {labels[1]} (filled); methods with failed runs left out",
+        or f"speed against accuracy: {labels[0]} (hollow) and {labels[1]} (filled); methods with "
+        "failed runs left out",
         fontsize=9,
     )
     from matplotlib.backends.backend_agg import FigureCanvasAgg

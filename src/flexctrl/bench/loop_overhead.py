@@ -1,13 +1,14 @@
-"""The closed-loop benchmark: one whole run of a closed-loop scene against the plant's compiled simulation alone.
+"""The closed-loop benchmark: one whole run of a closed-loop scene against the plant's compiled
+simulation alone.
 
-``run_wall_s`` is the wall time of :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`
-on ``studies/scenes/move_joint1_30deg.toml`` with the LQR (build, design, simulate,
-metrics, verdict), warm: in-process, with the worker's :class:`~flexctrl.scenes.cache.SceneCache`
-after a first run (models built, libraries compiled, the design and its reference
-table kept).  ``plant_only_s`` is the plant's compiled RK4 simulation
-(:class:`flexctrl.sim.RK4`, its energies, tip and deflections included) over the same
-duration at the same step with the run's torques held: what the physics costs.
-``ratio = run_wall_s / plant_only_s``.
+``run_wall_s`` is the wall time of
+:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` on
+``studies/scenes/move_joint1_30deg.toml`` with the LQR (build, design, simulate, metrics, verdict),
+warm: in-process, with the worker's :class:`~flexctrl.scenes.cache.SceneCache` after a first run
+(models built, libraries compiled, the design and its reference table kept).  ``plant_only_s`` is
+the plant's compiled RK4 simulation (:class:`flexctrl.sim.RK4`, its energies, tip and deflections
+included) over the same duration at the same step with the run's torques held: what the physics
+costs. ``ratio = run_wall_s / plant_only_s``.
 
 Both loop paths are measured in the same process, interleaved (``repeats`` rounds of
 python, compiled and plant-only), so the machine's load moves them together: the
@@ -177,7 +178,8 @@ def bench_loop(
             "reference_vm_run_wall_s": med["fresh_configuration_reference_vm"],
             "speedup_vs_reference_vm": med["fresh_configuration_reference_vm"]
             / med["fresh_configuration"],
-            "note": "a fresh cache: model built and everything derived from it anew; compiled libraries from disk",
+            "note": "a fresh cache: model built and everything derived from it anew; compiled "
+            "libraries from disk",
         },
         "reference_metric_differences": metric_differences(
             fresh_runs["_reference_vm"].metrics, fresh_runs[""].metrics
@@ -204,16 +206,22 @@ def format_loop(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_loop`'s result."""
     return "\n".join(
         [
-            f"flexctrl bench loop: {Path(result['scene']).name} with {Path(result['controller']).name} "
-            f"({result['fidelity']}, dt {result['dt']:g} s, {result['duration_s']:g} s), medians of {result['repeats']} rounds",
+            f"flexctrl bench loop: {Path(result['scene']).name} with "
+            f"{Path(result['controller']).name} "
+            f"({result['fidelity']}, dt {result['dt']:g} s, {result['duration_s']:g} s), medians "
+            f"of {result['repeats']} rounds",
             f"  plant only (compiled RK4)   {result['plant_only_s'] * 1e3:8.1f} ms",
-            f"  run, compiled loop          {result['run_wall_s'] * 1e3:8.1f} ms   ratio {result['ratio']:.2f} "
+            f"  run, compiled loop          {result['run_wall_s'] * 1e3:8.1f} ms   ratio "
+            f"{result['ratio']:.2f} "
             f"(target <= {result['target_ratio']:g}: {'met' if result['met'] else 'NOT met'})",
-            f"  run, python loop            {result['python']['run_wall_s'] * 1e3:8.1f} ms   ratio {result['python']['ratio']:.2f}",
-            f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms   ratio "
+            f"  run, python loop            {result['python']['run_wall_s'] * 1e3:8.1f} ms   "
+            f"ratio {result['python']['ratio']:.2f}",
+            f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms  "
+            " ratio "
             f"{result['cold_design']['ratio']:.2f}   (reference in the VM: "
             f"{result['cold_design']['reference_vm_run_wall_s'] * 1e3:.1f} ms)",
-            f"  run, compiled, fresh config {result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
+            "  run, compiled, fresh config "
+            f"{result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
             f"{result['fresh_configuration']['ratio']:.2f}   (reference in the VM: "
             f"{result['fresh_configuration']['reference_vm_run_wall_s'] * 1e3:.1f} ms, "
             f"{result['fresh_configuration']['speedup_vs_reference_vm']:.2f}x)",

@@ -1,4 +1,5 @@
-"""Simulation speed: compiled RK4, RK4 in CasADi's virtual machine, and ``scipy.integrate.solve_ivp``.
+"""Simulation speed: compiled RK4, RK4 in CasADi's virtual machine, and
+``scipy.integrate.solve_ivp``.
 
 The workload is the free-vibration scene of Subedi et al. (2021), Section 4.3
 (three-link arm, two assumed modes per link, 2 kg payload, gravity on, link 3

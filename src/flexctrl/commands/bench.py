@@ -13,23 +13,34 @@ BENCHMARKS = ("sim", "mpc", "loop", "studies", "runs")
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp; "
+        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy "
+        "solve_ivp; "
         "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC; "
         "'loop' times one whole closed-loop run against the plant's compiled simulation alone",
-        description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
+        description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 "
+        "ms of the "
         "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
         "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs. "
         "'mpc': the three-link arm (amm:2, 18 states, 3 inputs), horizon 20 at 10 ms: solve times "
-        "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop samples, "
-        "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same problem "
+        "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop "
+        "samples, "
+        "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same "
+        "problem "
         "(--pc-solves solves; each takes seconds). "
-        "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default "
-        "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
-        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio. 'studies': --study files (default "
-        "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a fresh process run twice "
-        "(first pass, repeated pass), --repeats rounds, with the --set overrides applied to every study; prints the "
-        "pass times and their ratios to the first study (of the medians, and round by round for the first pass). "
-        "'runs': the runs of one --study under two --tree source checkouts (one worker process each), alternated run "
+        "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml "
+        "(--controller, default "
+        "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled "
+        "RK4 simulation alone "
+        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s "
+        "and their ratio. 'studies': --study files (default "
+        "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a "
+        "fresh process run twice "
+        "(first pass, repeated pass), --repeats rounds, with the --set overrides applied to "
+        "every study; prints the "
+        "pass times and their ratios to the first study (of the medians, and round by round for "
+        "the first pass). "
+        "'runs': the runs of one --study under two --tree source checkouts (one worker process "
+        "each), alternated run "
         "by run; prints each tree's summed per-run wall time by --by and the ratio.",
     )
     parser.add_argument(
@@ -142,7 +153,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     if args.set and args.what != "studies":
         raise SpecError(
-            f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with 'bench studies' only",
+            f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with "
+            "'bench studies' only",
             key="--set",
         )
     if args.what == "mpc":
@@ -174,7 +186,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(
-        f"flexctrl bench sim: {result['model']} ({result['fidelity']}, {result['n_states']} states), "
+        f"flexctrl bench sim: {result['model']} ({result['fidelity']}, {result['n_states']} "
+        "states), "
         f"RK4 dt = {result['dt']:g} s, medians of {result['repeats']} runs"
     )
     print(
@@ -189,11 +202,13 @@ def run(args: argparse.Namespace) -> int:
     )
     cpu = result["cpu_time_based"]
     print(
-        f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM {cpu['realtime_factor_vm']:.1f}x, "
+        f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM "
+        f"{cpu['realtime_factor_vm']:.1f}x, "
         f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})"
     )
     print(
-        f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= {result['targets']['realtime_factor_compiled']:g}x "
+        f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= "
+        f"{result['targets']['realtime_factor_compiled']:g}x "
         f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}"
     )
     return 0
@@ -205,7 +220,8 @@ def _run_mpc(args: argparse.Namespace) -> int:
 
     if args.steps < 2 or args.pc_solves < 0:
         raise SpecError(
-            f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, solves >= 0",
+            f"--steps {args.steps!r} / --pc-solves {args.pc_solves!r}; allowed: steps >= 2, "
+            "solves >= 0",
             key="--steps",
         )
     result = mpc_benchmark(
@@ -244,7 +260,8 @@ def _run_studies(args: argparse.Namespace) -> int:
 
     if args.repeats < 1 or args.workers < 0:
         raise SpecError(
-            f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= 1, --workers >= 0",
+            f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= "
+            "1, --workers >= 0",
             key="--repeats",
         )
     from flexctrl.study.study_file import load_study
@@ -271,7 +288,8 @@ def _run_runs(args: argparse.Namespace) -> int:
 
     if not args.study or len(args.study) != 1 or not args.tree or len(args.tree) != 2:
         raise SpecError(
-            f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two --tree DIR",
+            f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two "
+            "--tree DIR",
             key="--tree",
         )
     for tree in args.tree:
@@ -283,7 +301,8 @@ def _run_runs(args: argparse.Namespace) -> int:
     for item in args.exclude:
         if "=" not in item:
             raise SpecError(
-                f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of its values)",
+                f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of "
+                "its values)",
                 key="--exclude",
             )
     result = bench_runs(args.study[0], args.tree, by=args.by, exclude=args.exclude)

@@ -4,7 +4,8 @@ Each file is read by the same reader that a run would use, chosen from what the 
 holds (:func:`file_kind`; ``--kind`` names it instead):
 
 * ``controller``: ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"`` (or, its kind missing,
-  ``sample_time``, ``[weights]``, ``[sensors]`` ...): :func:`flexctrl.spec.controller_reader.load_controller`;
+  ``sample_time``, ``[weights]``, ``[sensors]`` ...):
+  :func:`flexctrl.spec.controller_reader.load_controller`;
 * ``tuning``: ``[[parameters]]`` or ``[scenarios]``: :func:`flexctrl.spec.tuning.load_tuning` and
   its scenario study (:func:`flexctrl.tuning.scenarios.scenario_study`);
 * ``model``: ``[[links]]`` or ``[[joints]]`` (:func:`flexctrl.spec.arm.load_arm`); ``kind = "rp_arm"``
@@ -44,8 +45,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "check",
         help="validate model, scene, controller, study and tuning files without running anything",
-        description="Reads every FILE with the reader a run would use (its kind told from its keys, or --kind) and "
-        "prints 'FILE: ok (...)' or its one-line error. Exit status 0 when every file is valid, 2 otherwise. "
+        description="Reads every FILE with the reader a run would use (its kind told from its "
+        "keys, or --kind) and "
+        "prints 'FILE: ok (...)' or its one-line error. Exit status 0 when every file is valid, "
+        "2 otherwise. "
         "Warnings are printed as one line on stderr and do not fail the check.",
     )
     parser.add_argument(
@@ -102,8 +105,10 @@ def check_file(path: str | Path, kind: str | None = None) -> str:
     kind = kind or file_kind(document)
     if kind is None:
         raise SpecError(
-            "cannot tell what the file describes; allowed: a model ([[links]], [[joints]]), a scene "
-            "(kind, model, dt, duration), a controller (kind = 'pd', 'lqr', 'mpc', 'nmpc' or 'shaped'), "
+            "cannot tell what the file describes; allowed: a model ([[links]], [[joints]]), a "
+            "scene "
+            "(kind, model, dt, duration), a controller (kind = 'pd', 'lqr', 'mpc', 'nmpc' or "
+            "'shaped'), "
             "a study (scene, [grid]) or a tuning ([[parameters]], [scenarios]); or name it with --kind",
             source=source,
         )

@@ -59,7 +59,8 @@ def fidelity_from_args(args: argparse.Namespace) -> Fidelity | None:
 
 @contextlib.contextmanager
 def stop_signals_interrupt():
-    """SIGTERM and SIGINT stop a study or a tuning like Ctrl-C, even when it was started in the background.
+    """SIGTERM and SIGINT stop a study or a tuning like Ctrl-C, even when it was started in the
+    background.
 
     A shell starts background jobs with SIGINT ignored, and SIGTERM (``kill``, a batch
     system's time limit) would end Python without running ``finally`` blocks; as a

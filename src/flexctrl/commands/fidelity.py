@@ -1,4 +1,5 @@
-"""``flexctrl fidelity SCENE --tol METRES``: the cheapest model that keeps a scene's tip within a tolerance.
+"""``flexctrl fidelity SCENE --tol METRES``: the cheapest model that keeps a scene's tip within a
+tolerance.
 
 Runs :func:`flexctrl.scenes.auto.choose_fidelity` on a ``kind = "arm"``
 scene, or :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` on a
@@ -31,9 +32,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "fidelity",
         help="choose the cheapest model (rigid, amm:N) that keeps a scene's tip within a tolerance",
-        description="Simulates an arm scene (or a closed loop with the plant) on the ladder rigid, amm:1, ..., amm:TOP, estimates each rung's tip error "
-        "by its distance to the next rung (times a safety factor), starts the walk where the torque's bandwidth "
-        "says, and checks the choice against a converged reference (amm:TOP+1 at a small RK4 step). Units: m, s.",
+        description="Simulates an arm scene (or a closed loop with the plant) on the ladder "
+        "rigid, amm:1, ..., amm:TOP, estimates each rung's tip error "
+        "by its distance to the next rung (times a safety factor), starts the walk where the "
+        "torque's bandwidth "
+        "says, and checks the choice against a converged reference (amm:TOP+1 at a small RK4 "
+        "step). Units: m, s.",
     )
     parser.add_argument(
         "scene",
@@ -93,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.controller is not None and scene.kind != "closed_loop":
         raise SpecError(
-            f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; allowed: "
+            f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; "
+            "allowed: "
             "--controller with a closed-loop scene only",
             source=args.scene,
             key="--controller",
@@ -188,30 +193,35 @@ def format_table(data: dict) -> str:
     lines = [
         f"scene {data['scene']}: tolerance {data['tolerance_m']:.3g} m on the tip position",
         (
-            f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} Hz; modes below "
+            f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} "
+            "Hz; modes below "
             f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}"
         )
         if bw is not None
         else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
         (
-            f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, omega_max*dt {ref['omega_max_dt']:.2f}): "
+            f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, "
+            f"omega_max*dt {ref['omega_max_dt']:.2f}): "
             + _step_check(conv)
             + _rung_below(conv)
             + f"integration {ref['wall_time_s']:.3g} s"
         ),
         "",
-        f"{'rung':>7} {'dt (s)':>9} {'wall (s)':>9} {'to next (m)':>12} {'estimate (m)':>12} {'vs ref (m)':>11} {'cost':>8}",
+        f"{'rung':>7} {'dt (s)':>9} {'wall (s)':>9} {'to next (m)':>12} {'estimate (m)':>12} "
+        f"{'vs ref (m)':>11} {'cost':>8}",
     ]
     for c in data["candidates"]:
         mark = "  <- choice" if c["fidelity"] == data["choice"] else ""
         lines.append(
-            f"{c['fidelity']:>7} {c['dt_s']:9.3g} {c['wall_time_s']:9.3g} {_f(c.get('distance_to_next_m'))} "
+            f"{c['fidelity']:>7} {c['dt_s']:9.3g} {c['wall_time_s']:9.3g} "
+            f"{_f(c.get('distance_to_next_m'))} "
             f"{_f(c.get('estimated_error_m'))} {c['reference_error_max_m']:11.2e} {c['cost_ratio']:8.3g}{mark}"
         )
     lines += [
         "",
         f"choice {data['choice']} ({data['integrator']}, dt {data['dt_s']:.3g} s): estimated error "
-        f"{data['estimated_error']:.2e} m, error against the reference {data['reference_error']:.2e} m, "
+        f"{data['estimated_error']:.2e} m, error against the reference "
+        f"{data['reference_error']:.2e} m, "
         f"cost {data['cost_ratio']:.3g} x the reference's integration time",
     ]
     return "\n".join(lines)

@@ -10,8 +10,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "identify-hubs",
         help="identify hub masses m_h2, m_h3 from Table 3 of Subedi et al. (2021)",
-        description="Least-squares fit of the hub masses of joints 2 and 3 to the link-1 and link-2 "
-        "frequencies of Table 3 (payload 0 and 2 kg, q2 = q3 = 0); prints the fit and the residuals "
+        description="Least-squares fit of the hub masses of joints 2 and 3 to the link-1 and "
+        "link-2 "
+        "frequencies of Table 3 (payload 0 and 2 kg, q2 = q3 = 0); prints the fit and the "
+        "residuals "
         "of all twelve frequencies (the link-3 rows are an independent check).",
     )
     parser.add_argument(

@@ -8,7 +8,8 @@ import math
 
 from flexctrl.commands.common import add_model_arguments
 
-#: A pole with Re s above this fraction of max(1, |s|) (1/s) is marked unstable (the rest is rounding).
+# : A pole with Re s above this fraction of max(1, |s|) (1/s) is marked unstable (the rest is
+# rounding).
 UNSTABLE_TOL = 1e-9
 
 
@@ -16,9 +17,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "linearize",
         help="linearise at the static equilibrium of a configuration: modal frequencies and damping",
-        description="Builds the model (default amm:2), solves the static equilibrium with the joints held at "
-        "--q (degrees) against gravity, linearises it (python-control StateSpace, states q then qd) and prints "
-        "one line per pole: frequency (Hz), damping ratio, real part and kind, unstable poles marked. With --locked, frequencies_hz lists the undamped natural "
+        description="Builds the model (default amm:2), solves the static equilibrium with the "
+        "joints held at "
+        "--q (degrees) against gravity, linearises it (python-control StateSpace, states q then "
+        "qd) and prints "
+        "one line per pole: frequency (Hz), damping ratio, real part and kind, unstable poles "
+        "marked. With --locked, frequencies_hz lists the undamped natural "
         "frequencies of the flexible structure with the joints clamped, ascending.",
     )
     add_model_arguments(parser, fidelity_default="amm:2")
@@ -82,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(
-        f"{arm.name} ({result['fidelity']}), payload {arm.payload.mass:g} kg, q = {[round(a, 3) for a in result['q_deg']]} deg"
+        f"{arm.name} ({result['fidelity']}), payload {arm.payload.mass:g} kg, q = "
+        f"{[round(a, 3) for a in result['q_deg']]} deg"
     )
     print(
         f"  equilibrium torques {[round(v, 3) for v in result['equilibrium_torque_Nm']]} N m, "
@@ -114,7 +119,10 @@ def _pole_table(eigenvalues) -> str:
         mark = ""
         if s.real > UNSTABLE_TOL * max(1.0, magnitude):
             unstable += 1
-            mark = f"  UNSTABLE (grows as exp({s.real:.4g} t), doubling in {math.log(2) / s.real:.3g} s)"
+            mark = (
+                f"  UNSTABLE (grows as exp({s.real:.4g} t), doubling in "
+                f"{math.log(2) / s.real:.3g} s)"
+            )
         lines.append(f"    {magnitude / (2 * math.pi):10.4f}  {zeta}  {s.real:11.4g}  {kind}{mark}")
     lines.append(f"  {unstable} unstable pole(s)" if unstable else "  no unstable pole")
     return "\n".join(lines)

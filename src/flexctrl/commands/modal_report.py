@@ -18,7 +18,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "modal-report",
         help="mode shapes, boundary values and frequency maps as PNG files plus summary.json",
         description="Writes mode_shapes.png (Fig 2 of Subedi et al.), boundary_values.png (Fig 3), "
-        "frequency_maps.png (Figs 6-7, exact and paper boundary inertia) and summary.json with timings "
+        "frequency_maps.png (Figs 6-7, exact and paper boundary inertia) and summary.json with "
+        "timings "
         "and the lookup table's interpolation error.",
     )
     parser.add_argument("model", metavar="MODEL")

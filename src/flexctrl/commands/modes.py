@@ -18,7 +18,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "modes",
         help="per-link natural frequencies (Hz) at a configuration and payload",
-        description="Solves the clamped-mass eigenproblem of each link (Subedi et al. 2021, Eqs 28-40) "
+        description="Solves the clamped-mass eigenproblem of each link (Subedi et al. 2021, Eqs "
+        "28-40) "
         "with boundary values from the outboard links, hubs and payload at the given configuration "
         "(Eqs 69-73). Angles in degrees, payload in kg, frequencies in Hz.",
     )
@@ -98,12 +99,14 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(
-        f"{arm.name}: payload {arm.payload.mass:g} kg, q = {np.round(result['q_deg'], 3).tolist()} deg, boundary_inertia = {arm.boundary_inertia}"
+        f"{arm.name}: payload {arm.payload.mass:g} kg, q = "
+        f"{np.round(result['q_deg'], 3).tolist()} deg, boundary_inertia = {arm.boundary_inertia}"
     )
     for entry in links:
         freqs = ", ".join(f"{f:.4f}" for f in entry["frequencies_hz"])
         b = entry["boundary"]
         print(
-            f"link {entry['link']}: [{freqs}] Hz   (m_D {b['m_D_kg']:.4f} kg, J_D {b['J_D_kg_m2']:.4f} kg m^2, M_D {b['M_D_kg_m']:.4f} kg m)"
+            f"link {entry['link']}: [{freqs}] Hz   (m_D {b['m_D_kg']:.4f} kg, J_D "
+            f"{b['J_D_kg_m2']:.4f} kg m^2, M_D {b['M_D_kg_m']:.4f} kg m)"
         )
     return 0

@@ -9,8 +9,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "report",
         help="redraw report.md and figures of a study folder from results.csv, study.json and runs/",
-        description="Draws the report of a study's result folder without running anything: maps of a metric "
-        "over two grid columns, controller ranking per payload, worst cases with their trajectories, "
+        description="Draws the report of a study's result folder without running anything: maps "
+        "of a metric "
+        "over two grid columns, controller ranking per payload, worst cases with their "
+        "trajectories, "
         "timing and failed runs. Options override the study's [report] table.",
     )
     parser.add_argument("dir", metavar="DIR", help="a folder written by 'flexctrl study'")

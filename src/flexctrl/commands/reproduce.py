@@ -10,10 +10,14 @@ from flexctrl.reproduce.reproduction import PAPERS
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "reproduce",
-        help="every table and figure of a seed paper beside flexctrl's, with verdicts (report.md, reproduction.json)",
-        description="Runs what the paper reports and writes DIR/report.md (each table and figure in the paper's "
-        "order, beside its printed numbers or described behaviour, with a verdict), DIR/reproduction.json (the "
-        "items: item, paper, flexctrl, agrees, note) and DIR/figures/*.png. subedi: Subedi, Tyapin, Hovland "
+        help="every table and figure of a seed paper beside flexctrl's, with verdicts "
+        "(report.md, reproduction.json)",
+        description="Runs what the paper reports and writes DIR/report.md (each table and figure "
+        "in the paper's "
+        "order, beside its printed numbers or described behaviour, with a verdict), "
+        "DIR/reproduction.json (the "
+        "items: item, paper, flexctrl, agrees, note) and DIR/figures/*.png. subedi: Subedi, "
+        "Tyapin, Hovland "
         "(2021); pan: Pan, Scott, Ulsoy (1990).",
     )
     parser.add_argument("paper", choices=PAPERS, metavar="{" + ",".join(PAPERS) + "}")

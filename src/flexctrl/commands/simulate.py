@@ -14,7 +14,8 @@ import json
 
 from flexctrl.spec.fidelity import SPELLINGS
 
-#: ``--set controller.KEY=VALUE`` overrides the controller file (of the scene or --controller), not the scene.
+# : ``--set controller.KEY=VALUE`` overrides the controller file (of the scene or --controller), not
+# the scene.
 CONTROLLER_PREFIX = "controller."
 
 
@@ -22,8 +23,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "simulate",
         help="simulate a scene file (studies/scenes/*.toml) and write trajectory, summary and plots",
-        description="Loads a scene (model, payload, fidelity, initial state, damping, input, integrator, "
-        "step and duration), simulates it and writes trajectory.csv, summary.json and PNG plots to --out. "
+        description="Loads a scene (model, payload, fidelity, initial state, damping, input, "
+        "integrator, "
+        "step and duration), simulates it and writes trajectory.csv, summary.json and PNG plots "
+        "to --out. "
         "Units are SI; angles in scene files are in degrees.",
     )
     parser.add_argument(
@@ -89,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
         file = args.controller or scene.controller
         if file is None:
             raise SpecError(
-                "the scene names no controller file to override; allowed: a scene 'controller' key or "
+                "the scene names no controller file to override; allowed: a scene 'controller' "
+                "key or "
                 "--controller FILE",
                 source=args.scene,
                 key="--set controller.KEY",
@@ -104,9 +108,12 @@ def run(args: argparse.Namespace) -> int:
     if scene.kind == "closed_loop":
         m = s["metrics"]
         print(
-            f"{scene.name} with {s['controller']['kind']} ({s['controller']['file']}): tip residual rms {m['tip_residual_rms']:.3e} m, "
-            f"peak {m['tip_residual_peak']:.3e} m, settling {m['settling_time']:.3g} s, peak deflection {m['peak_deflection']:.3e} m, "
-            f"peak torque {', '.join(f'{v:.3g}' for v in m['peak_torque'])} N m, controller median {m['controller_time_median'] * 1e3:.3g} ms, "
+            f"{scene.name} with {s['controller']['kind']} ({s['controller']['file']}): tip "
+            f"residual rms {m['tip_residual_rms']:.3e} m, "
+            f"peak {m['tip_residual_peak']:.3e} m, settling {m['settling_time']:.3g} s, peak "
+            f"deflection {m['peak_deflection']:.3e} m, "
+            f"peak torque {', '.join(f'{v:.3g}' for v in m['peak_torque'])} N m, controller "
+            f"median {m['controller_time_median'] * 1e3:.3g} ms, "
             f"fallbacks {m['fallbacks']}"
         )
         print(f"  wrote {len(result.files)} files to {args.out}")
@@ -120,12 +127,15 @@ def run(args: argparse.Namespace) -> int:
         for k, v in s["dominant_frequencies_hz"].items()
     )
     print(
-        f"{scene.name}: {s['n_steps']} {s['integrator']} steps of {s['dt']:g} s in {s['wall_time_s']:.3g} s "
+        f"{scene.name}: {s['n_steps']} {s['integrator']} steps of {s['dt']:g} s in "
+        f"{s['wall_time_s']:.3g} s "
         f"({s['realtime_factor']:.1f}x real time{', compiled' if s.get('compiled') else ''})"
     )
     print(
-        f"  energy: E_total(end) - E_total(0) = {energy['drift_rel']:+.3e}, max |E_total - E_total(0) - torque work| = "
-        f"{energy['balance_error_max_rel']:.3e} (damping included), relative to {energy['scale_J']:.4g} J exchanged"
+        f"  energy: E_total(end) - E_total(0) = {energy['drift_rel']:+.3e}, max |E_total - "
+        "E_total(0) - torque work| = "
+        f"{energy['balance_error_max_rel']:.3e} (damping included), relative to "
+        f"{energy['scale_J']:.4g} J exchanged"
     )
     print(f"  dominant frequencies of the link-tip deflections: {freqs}")
     print(f"  wrote {len(result.files)} files to {args.out}")

@@ -11,12 +11,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
     parser = subparsers.add_parser(
         "study",
-        help="run a study file's grid of runs (local process pool or Dask) and write its table and report",
-        description="Validates the study file (every run's settings) before anything runs, then runs every run "
-        "not yet recorded in the output folder, writing one record per run as it finishes, results.csv, "
-        "study.json and report.md. A run that fails is recorded with its error and the study goes on. "
+        help="run a study file's grid of runs (local process pool or Dask) and write its table "
+        "and report",
+        description="Validates the study file (every run's settings) before anything runs, then "
+        "runs every run "
+        "not yet recorded in the output folder, writing one record per run as it finishes, "
+        "results.csv, "
+        "study.json and report.md. A run that fails is recorded with its error and the study "
+        "goes on. "
         "See docs/studies.md for the file format. Exit status: 0 when the study ran to its end "
-        "(whatever the runs' status; --strict: 1 if a run failed), 2 for a broken study file, 130 when interrupted.",
+        "(whatever the runs' status; --strict: 1 if a run failed), 2 for a broken study file, "
+        "130 when interrupted.",
     )
     parser.add_argument("study", metavar="STUDY", help="study file, e.g. studies/quickstart.toml")
     parser.add_argument("--out", metavar="DIR", help="result folder (default: out/<study name>)")
@@ -44,21 +49,26 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument(
         "--no-affinity",
         action="store_true",
-        help="local pool: give each run to whichever worker is free, instead of keeping the runs that "
+        help="local pool: give each run to whichever worker is free, instead of keeping the runs "
+        "that "
         "share a model on one worker (the slow path, for measuring side by side)",
     )
     parser.add_argument(
         "--no-preload",
         action="store_true",
-        help="local pool: each worker imports the executor's code in its first run, instead of the fork "
-        "server importing it once before forking the workers (the old path: the imports land in each worker's first run)",
+        help="local pool: each worker imports the executor's code in its first run, instead of "
+        "the fork "
+        "server importing it once before forking the workers (the old path: the imports land in "
+        "each worker's first run)",
     )
     parser.add_argument(
         "--blas-threads",
         default="auto",
         metavar="N",
-        help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto (default): "
-        "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 CPUs "
+        help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto "
+        "(default): "
+        "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 "
+        "CPUs "
         "two workers' spinning OpenBLAS threads slow each other's runs)",
     )
     parser.add_argument(
@@ -102,8 +112,10 @@ def run(args: argparse.Namespace) -> int:
     c = result.counts
     if not args.quiet:
         print(
-            f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on {result.backend} "
-            f"in {result.elapsed_s:.1f} s; grid: {c['ok']} ok, {c['failed']} failed, {c['pending']} not run",
+            f"{spec.name}: {c['ran']} run(s) this session ({c['skipped']} already recorded) on "
+            f"{result.backend} "
+            f"in {result.elapsed_s:.1f} s; grid: {c['ok']} ok, {c['failed']} failed, "
+            f"{c['pending']} not run",
             file=sys.stderr,
         )
         for note in result.warnings:

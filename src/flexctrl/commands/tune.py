@@ -11,12 +11,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
     parser = subparsers.add_parser(
         "tune",
-        help="tune a controller file's keys over closed-loop scenarios and write the tuned file and a report",
-        description="Validates the tuning file (parameter keys against the controller file, bounds, the scenario "
-        "study, the objective metric) before anything runs; then evaluates candidates as nonlinear closed-loop runs "
-        "on every scenario (local process pool or Dask), keeping every run in DIR/runs so a killed tuning resumes "
-        "with the same command. Writes DIR/controller.toml, DIR/tuning.json, DIR/evaluations.jsonl and "
-        "DIR/report.md. See docs/tuning.md. Exit status: 0 tuned, 2 a broken tuning file, 3 no feasible candidate, "
+        help="tune a controller file's keys over closed-loop scenarios and write the tuned file "
+        "and a report",
+        description="Validates the tuning file (parameter keys against the controller file, "
+        "bounds, the scenario "
+        "study, the objective metric) before anything runs; then evaluates candidates as "
+        "nonlinear closed-loop runs "
+        "on every scenario (local process pool or Dask), keeping every run in DIR/runs so a "
+        "killed tuning resumes "
+        "with the same command. Writes DIR/controller.toml, DIR/tuning.json, "
+        "DIR/evaluations.jsonl and "
+        "DIR/report.md. See docs/tuning.md. Exit status: 0 tuned, 2 a broken tuning file, 3 no "
+        "feasible candidate, "
         "130 interrupted (finished runs are kept).",
     )
     parser.add_argument("tuning", metavar="TUNING", help="tuning file, e.g. studies/tune_lqr.toml")
@@ -49,15 +55,18 @@ def run(args: argparse.Namespace) -> int:
             )
     except KeyboardInterrupt:
         print(
-            f"flexctrl tune: interrupted; the finished runs are kept in {out / 'runs'}: run the same command to "
+            f"flexctrl tune: interrupted; the finished runs are kept in {out / 'runs'}: run the "
+            "same command to "
             "resume",
             file=sys.stderr,
         )
         return 130
     s = result.summary
     print(
-        f"{spec.name}: {spec.objective.statistic} {spec.objective.metric} {s['initial_objective']:.6g} as shipped -> "
-        f"{s['best_objective']:.6g} tuned ({s['evaluations']} candidates, {s['feasible_evaluations']} feasible, "
+        f"{spec.name}: {spec.objective.statistic} {spec.objective.metric} "
+        f"{s['initial_objective']:.6g} as shipped -> "
+        f"{s['best_objective']:.6g} tuned ({s['evaluations']} candidates, "
+        f"{s['feasible_evaluations']} feasible, "
         f"{result.wall_time_s:.0f} s)",
         file=sys.stderr,
     )

@@ -1,4 +1,5 @@
-"""Controllers for flexible arms, all with one small protocol (:class:`~flexctrl.control.controller.Controller`).
+"""Controllers for flexible arms, all with one small protocol
+(:class:`~flexctrl.control.controller.Controller`).
 
 ``design(model, op, settings)`` builds the controller named by the settings type,
 regulating ``model`` to the target equilibrium ``op``
@@ -47,7 +48,8 @@ def _check_holding_torque(model, op) -> None:
     excess = holding_torque_excess(model, op)
     if excess:
         raise SpecError(
-            f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
+            f"{excess}; allowed: a target whose holding torques are within the limits (check "
+            "gravity, "
             "the payload and the target)",
             source=getattr(model.spec, "source", None) or None,
             key="target",

@@ -174,9 +174,9 @@ class LQRController(Controller):
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
 
-        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
-        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the state estimate
-        and ``H = -K`` (the scheduled gain at ``q_joints``).
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J
+        dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the state
+        estimate and ``H = -K`` (the scheduled gain at ``q_joints``).
         """
         x = np.array(self.op.x, dtype=float)
         x[: self.n_u] = np.asarray(q_joints, dtype=float)
@@ -196,7 +196,8 @@ class LQRController(Controller):
         return self.schedule is None
 
     def sampled_law(self) -> SampledLaw | None:
-        """The law and its estimator as one CasADi map (None with a gain schedule); see :class:`SampledLaw`.
+        """The law and its estimator as one CasADi map (None with a gain schedule); see
+        :class:`SampledLaw`.
 
         Reference rows ``r = (x_ref, u_ref)``; memory the estimator's (the Kalman
         deviation estimate, nothing for full-state sensors).

@@ -54,7 +54,8 @@ def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarra
     if settings.kp:
         if len(settings.kp) != n:
             raise SpecError(
-                f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one per joint)",
+                f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one "
+                "per joint)",
                 key="kp",
             )
         return np.asarray(settings.kp, dtype=float), np.asarray(settings.kd, dtype=float)
@@ -147,10 +148,10 @@ class PDController(Controller):
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
 
-        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
-        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
-        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation
-        adds its Jacobian through ``J``.
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J
+        dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
+        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation adds
+        its Jacobian through ``J``.
         """
         n, n_y = self.n_u, self.sensors.n_y
         Sq, Sqd = np.zeros((n, n_y)), np.zeros((n, n_y))
@@ -166,7 +167,8 @@ class PDController(Controller):
         if not self.strain_gain.size:
             return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
         # memory (filtered torque, last curvatures, filtered curvature rate):
-        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r + J dy
+        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r +
+        # J dy
         Sk = np.zeros((n, n_y))
         Sk[np.arange(n), self._ik] = 1.0
         b, Ts, Z, I = self.strain_pole, self.sample_time, np.zeros((n, n)), np.eye(n)
@@ -200,7 +202,8 @@ class PDController(Controller):
         return True
 
     def sampled_law(self) -> SampledLaw:
-        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same order.
+        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same
+        order.
 
         Memory: the filtered PD torque, then (with strain-rate damping) the last root
         curvatures and their filtered rate.  Reference rows: :meth:`reference_table`.

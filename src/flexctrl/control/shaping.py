@@ -1,4 +1,5 @@
-"""Input shaping (ZV, ZVD) of joint references: the classical open-loop way to move without vibration.
+"""Input shaping (ZV, ZVD) of joint references: the classical open-loop way to move without
+vibration.
 
 A shaper is a train of impulses ``(A_i, t_i)`` with ``sum A_i = 1``; convolving a
 reference with it cancels the residual vibration of a mode of natural frequency
@@ -12,8 +13,8 @@ Several modes are handled by convolving their shapers.  :class:`ShapedController
 tracks the shaped reference with PD; the shaper is designed from the lowest
 vibration modes of the arm at the target, either under the PD loop
 (``frequency_source = "closed_loop"``: the lightly damped complex pairs, damping
-< 0.3, of the linearisation closed with the continuous PD law and its torque filter) or of the locked-joint
-structure (``"locked"``: :func:`flexctrl.linear.locked_frequencies`, undamped).
+< 0.3, of the linearisation closed with the continuous PD law and its torque filter) or of the
+locked-joint structure (``"locked"``: :func:`flexctrl.linear.locked_frequencies`, undamped).
 """
 
 from __future__ import annotations
@@ -230,7 +231,8 @@ class ShapedController(PDController):
         return row[:n], row[n : 2 * n], row[2 * n : 3 * n], row[3 * n :]
 
     def reference_table(self, times: np.ndarray) -> np.ndarray:
-        """Rows ``(q_s, qd_s, u_ref, u_static)`` of the shaped reference at the sample ``times`` (s).
+        """Rows ``(q_s, qd_s, u_ref, u_static)`` of the shaped reference at the sample ``times``
+        (s).
 
         A step or no reference is shaped from the joint angles of the first measurement
         (so this needs a :meth:`step` first).

@@ -143,7 +143,8 @@ def ldl_solve(A, b):
 
 
 def natural_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """Undamped natural frequencies (rad/s, ascending) of ``M qdd + K q = 0``: ``sqrt`` of the eigenvalues of ``K v = lambda M v``.
+    """Undamped natural frequencies (rad/s, ascending) of ``M qdd + K q = 0``: ``sqrt`` of the
+    eigenvalues of ``K v = lambda M v``.
 
     ``M`` symmetric positive definite; only the lower triangles are read (``scipy.linalg.eigh``),
     so pass ``0.5 (A + A^T)`` for a matrix that is symmetric only to rounding when both
@@ -363,7 +364,8 @@ def build_amm(
     corrected = [correction and i < n - 1 and nf > 0 for i, nf in enumerate(n_modes)]
     if any(corrected) and modes == "scheduled":
         raise SpecError(
-            "value True is not allowed with modes='scheduled'; allowed: static_correction with frozen modes",
+            "value True is not allowed with modes='scheduled'; allowed: static_correction with "
+            "frozen modes",
             key="static_correction",
         )
     frozen_modal, link_freqs = _frozen_modal(arm, q_ref, n_modes, corrected)
@@ -373,7 +375,8 @@ def build_amm(
     stretch = bool(axial_stretch)
     if stretch and modes == "scheduled":
         raise SpecError(
-            "value True is not allowed with modes='scheduled'; allowed: axial_stretch with frozen modes",
+            "value True is not allowed with modes='scheduled'; allowed: axial_stretch with "
+            "frozen modes",
             key="axial_stretch",
         )
     stretched = stretched_links(n_modes) if stretch else []
@@ -423,7 +426,8 @@ def build_amm(
             k_axial = link.axial_stiffness() / link.length
             stiffness.append(ca.SX(k_axial))
             E_el = E_el + 0.5 * k_axial * q[names.index(f"e{i + 1}")] ** 2
-            # stiffness-proportional, (2 zeta / omega_1) k with omega_1 the link's first clamped-mass mode
+            # stiffness-proportional, (2 zeta / omega_1) k with omega_1 the link's first
+            # clamped-mass mode
             damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial))
     K = ca.diag(ca.vertcat(*stiffness))
     D = ca.diag(ca.vertcat(*damp))
@@ -532,7 +536,8 @@ def build_amm(
         n_joints=n,
         coordinate_names=names,
         functions=functions,
-        # the free-joint spectrum bounds explicit steps (RK4: omega h < 2.785); it is higher than the locked one
+        # the free-joint spectrum bounds explicit steps (RK4: omega h < 2.785); it is higher than
+        # the locked one
         omega_max=float(max(np.max(free, initial=0.0), np.max(locked, initial=0.0))),
         spec=arm,
         info=info,

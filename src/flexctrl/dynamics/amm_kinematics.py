@@ -82,7 +82,8 @@ class LinkModal:
     z: object
     #: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad), scheduled modes only
     shape_cross: object = None
-    #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes only
+    # : ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes
+    # only
     shape_gram: object = None
     #: axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1), 1/m
     sh_tip: object = None
@@ -109,7 +110,8 @@ class LinkModal:
 
     @staticmethod
     def from_modes(modes, n_modes: int) -> LinkModal:
-        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None if n_f = 0),
+        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None
+        if n_f = 0),
         with the axial-shortening integrals of :func:`flexctrl.modal.shortening.link_shortening`."""
         from flexctrl.modal.shortening import link_shortening
 
@@ -141,7 +143,8 @@ def _elastic_rotation(slope):
     return ca.vertcat(ca.horzcat(1, -slope), ca.horzcat(slope, 1))
 
 
-#: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by ``w'``.
+# : How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by
+# ``w'``.
 TIP_ROTATIONS = ("linearized", "exact")
 
 

@@ -75,7 +75,8 @@ def build_model(
 
         if modes != "frozen":
             raise ModelFamilyUnavailable(
-                f"modes '{modes}' applies to assumed modes only; a finite-element model has no mode option"
+                f"modes '{modes}' applies to assumed modes only; a finite-element model has no "
+                "mode option"
             )
         if (arm.damping_form if damping is None else damping) == "paper":
             raise ModelFamilyUnavailable(
@@ -86,7 +87,8 @@ def build_model(
             )
         if arm.axial_stretch is False:
             raise SpecError(
-                "axial_stretch = false is not allowed with a finite-element fidelity: its links are always "
+                "axial_stretch = false is not allowed with a finite-element fidelity: its links "
+                "are always "
                 "axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity",
                 key="axial_stretch",
             )

@@ -9,10 +9,9 @@ constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, one cons
 use, so that coinciding values do not change the structure) and kept once per process for
 each lifted structure (with the kept lift itself, and by its serialized form), so every later
 model of that structure evaluates the kept Jacobian at its own constants.  The operations are
-the same ones in the same order (the lift keeps them; the constants are read from an input instead of the code), and
-the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
-model whose ``f`` does not lift (it calls other Functions, say) gets the per-model
-Jacobian.
+the same ones in the same order (the lift keeps them; the constants are read from an input instead
+of the code), and the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
+model whose ``f`` does not lift (it calls other Functions, say) gets the per-model Jacobian.
 
 The kept Jacobian is built on an SX graph (``graph="sx"``, the default) when the lift is an
 SX Function, as it is for every assumed-modes model: CasADi then differentiates the
@@ -33,7 +32,8 @@ import casadi as ca
 
 from flexctrl.dynamics.parametric import FROM_LIFTED, Memo, parametric
 
-#: Jacobians of lifted dynamics built in this process, by the lift's serialized form and the outputs asked for.
+# : Jacobians of lifted dynamics built in this process, by the lift's serialized form and the
+# outputs asked for.
 SHARED = Memo(8)
 
 
@@ -46,7 +46,8 @@ def jacobian_function(
     shared: bool = False,
     graph: str = "sx",
 ) -> ca.Function:
-    """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of ``(x, u)``.
+    """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of
+    ``(x, u)``.
 
     The one Jacobian builder: linearisation (:class:`flexctrl.linear.Linearizer`, with
     ``shared=True``), stability advice (:meth:`flexctrl.sim.integrator.Integrator.jacobian_radius`)
@@ -57,7 +58,8 @@ def jacobian_function(
     Parameters
     ----------
     model
-        Anything with ``functions["f"]``, ``n_x`` and ``n_u`` (a :class:`~flexctrl.dynamics.model.Model`).
+        Anything with ``functions["f"]``, ``n_x`` and ``n_u`` (a
+        :class:`~flexctrl.dynamics.model.Model`).
     value
         Put ``f`` itself first.
     inputs
@@ -126,7 +128,8 @@ def _shared_dynamics(
             0
         ]
 
-    # the lift kept for the structure is the same object for every model of it: no serializing per model
+    # the lift kept for the structure is the same object for every model of it: no serializing per
+    # model
     return FROM_LIFTED.get(
         lifted, ("jacobians", value, inputs, symbol.__name__), by_content
     ), constants

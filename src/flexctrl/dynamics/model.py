@@ -14,9 +14,9 @@ Required functions (``functions[name]``), with their input and output names:
 ``D``         () -> (D)                 damping, (N, N) (scheduled modes: (q) -> (D))
 ``f``         (x, u) -> (xdot)          forward dynamics, x = (q, qd), u = joint torques (n,)
 ``energies``  (q, qd) -> (E_kin, E_el, E_grav)   J
-``tip``       (q, qd) -> (p, v)         last link's tip position and velocity in the world frame (2,)
-``hubs``      (q) -> (p)                joint positions in the world frame, (2, n+1) incl. the tip
-``deflection``(q) -> (w, dw)            tip deflection (m) and slope (rad) of every link, (n,)
+``tip``       (q, qd) -> (p, v)         last link's tip position and velocity in the world frame
+(2,) ``hubs``      (q) -> (p)                joint positions in the world frame, (2, n+1) incl. the
+tip ``deflection``(q) -> (w, dw)            tip deflection (m) and slope (rad) of every link, (n,)
 """
 
 from __future__ import annotations

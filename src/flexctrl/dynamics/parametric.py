@@ -1,4 +1,5 @@
-"""CasADi Functions whose numeric constants become an input, so one compiled library serves many models.
+"""CasADi Functions whose numeric constants become an input, so one compiled library serves many
+models.
 
 A frozen-modes model bakes its modal constants (which depend on the payload and on
 the configuration the modes were computed at) into ``f``; C code generated from it
@@ -6,8 +7,9 @@ differs per configuration, so a study over configurations would compile once per
 :func:`constants_as_parameters` rebuilds such a Function with its constants as a
 vector input: models whose graphs differ only in constant values then share one
 compiled library (the cache key is a hash of the generated code).  Used by the NMPC
-(:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step (:mod:`flexctrl.loop.plant_step`)
-and the Jacobians shared by a model structure (:mod:`flexctrl.dynamics.jacobians`).
+(:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step
+(:mod:`flexctrl.loop.plant_step`) and the Jacobians shared by a model structure
+(:mod:`flexctrl.dynamics.jacobians`).
 :class:`Memo` keeps what is built from such a lifted Function once per process.
 """
 
@@ -119,7 +121,8 @@ def try_expand(fun: ca.Function) -> ca.Function:
 
 
 def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
-    """:func:`constants_as_parameters` of ``fun()`` (a Function of ``model`` called ``name``), once per model.
+    """:func:`constants_as_parameters` of ``fun()`` (a Function of ``model`` called ``name``), once
+    per model.
 
     Kept with the model (:func:`~flexctrl.dynamics.model.derived`): every plant step count,
     output-map length and reference table of one model lifts its constants once (the lift
@@ -132,12 +135,14 @@ def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Func
     )
 
 
-#: Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used beyond 16.
+# : Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used
+# beyond 16.
 LIFTED = Memo(16)
 
 
 def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
-    """A hash of an SX Function's operation sequence, its input and output sparsities and ``per_use``.
+    """A hash of an SX Function's operation sequence, its input and output sparsities and
+    ``per_use``.
 
     It leaves out the operands' wiring, which costs a Python call per instruction to read
     (0.17 s of the 0.38 s lift of the NMPC's 42,000-instruction equation terms): a kept

@@ -152,7 +152,8 @@ class FidelityChoice:
     tolerance : float
         Tolerance on the tip position (m).
     estimated_error : float
-        ``safety`` times the largest tip distance to the next rung (m): the estimate that justified the choice.
+        ``safety`` times the largest tip distance to the next rung (m): the estimate that justified
+        the choice.
     reference_error : float
         Largest tip distance of the choice from the reference (m).
     reference_error_rms : float
@@ -283,27 +284,34 @@ def tip_distance(a: RunRecord, b: RunRecord):
 
 # -- the method -------------------------------------------------------------------------------
 METHOD = (
-    "lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference model) <= "
+    "lowest rung whose safety * (largest tip distance to the next two rungs, up to the reference "
+    "model) <= "
     "tolerance; walk from the bandwidth rule's start"
 )
 
 
-#: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds ``LINEAR_FACTOR``
-#: times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear estimate 0.43-1.17,
+# : Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds
+# ``LINEAR_FACTOR``
+# : times the tolerance is not certified (measured on the quickstart's loops: nonlinear / linear
+# estimate 0.43-1.17,
 #: docs/auto_fidelity.md; tests/test_fidelity_estimate.py checks a small case).
 LINEAR_FACTOR = 3.0
 #: The walks of the closed-loop chooser (:data:`flexctrl.spec.fidelity.FIDELITY_WALKS`).
 WALKS = FIDELITY_WALKS
 METHOD_ESTIMATE = (
-    "linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 step), then "
-    "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * (largest "
+    "linear estimate of every rung (the loop on each rung's linearised plant at its own RK4 "
+    "step), then "
+    "the lowest rung it cannot exclude certified by nonlinear runs: lowest rung whose safety * "
+    "(largest "
     "tip distance to the next two rungs, up to the reference model) <= tolerance, walking up"
 )
 
 
 METHOD_FROM_TOP = (
-    "nonlinear runs from the top rung down (the controller steps in Python: a linear run would cost as much "
-    "as a nonlinear one): the lowest rung of the unbroken run from the top whose safety * (largest tip "
+    "nonlinear runs from the top rung down (the controller steps in Python: a linear run would "
+    "cost as much "
+    "as a nonlinear one): the lowest rung of the unbroken run from the top whose safety * "
+    "(largest tip "
     "distance to the next two rungs, up to the reference model) <= tolerance"
 )
 
@@ -322,7 +330,8 @@ def linear_candidate(
     safety: float,
     factor: float = LINEAR_FACTOR,
 ) -> tuple[int | None, dict[str, Any]]:
-    """The lowest rung whose linear estimate is within ``factor`` of the tolerance, and the evidence.
+    """The lowest rung whose linear estimate is within ``factor`` of the tolerance, and the
+    evidence.
 
     The linear estimate of rung ``m`` is the walk's formula (``safety`` times the largest
     tip distance to rungs ``m + 1`` and ``m + 2``, up to ``ref_n``) on the linear runs
@@ -384,7 +393,8 @@ def linear_candidate(
 
 
 def _buildable_estimate(estimate, m: int) -> float:
-    """``estimate(m)``, infinite when rung ``m`` cannot be built (``SpecError``, e.g. strain gauges on ``rigid``).
+    """``estimate(m)``, infinite when rung ``m`` cannot be built (``SpecError``, e.g. strain gauges
+    on ``rigid``).
 
     Only a rung that cannot be built stops the walk this way; a solver or simulation
     failure on it is raised, as the other walks raise it.
@@ -418,7 +428,8 @@ def check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, refe
     ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
     if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
         raise SpecError(
-            f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top candidate amm:{top})",
+            f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top "
+            f"candidate amm:{top})",
             key="reference",
         )
     for name, value, low, high in (
@@ -570,10 +581,14 @@ def walk_and_judge(
                 linear_evidence["rungs"], key=lambda item: item.get("estimated_error_m", math.inf)
             )
             raise ToleranceUnreachable(
-                f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}', predicted by the linear "
-                f"estimate: its best is {best.get('estimated_error_m', math.inf):.3g} m ({best['fidelity']}), above "
-                f"{factor:g} x the tolerance (the bound assumed on its error), so no nonlinear run was made; allowed: a "
-                f"tolerance >= {best.get('estimated_error_m', math.inf) / factor:.3g} m, a higher top rung, or "
+                f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}', "
+                "predicted by the linear "
+                f"estimate: its best is {best.get('estimated_error_m', math.inf):.3g} m "
+                f"({best['fidelity']}), above "
+                f"{factor:g} x the tolerance (the bound assumed on its error), so no nonlinear "
+                "run was made; allowed: a "
+                f"tolerance >= {best.get('estimated_error_m', math.inf) / factor:.3g} m, a "
+                "higher top rung, or "
                 "fidelity_walk = 'ladder'",
                 {
                     "method": METHOD_ESTIMATE,
@@ -616,22 +631,28 @@ def walk_and_judge(
         }
         if from_top:
             raise ToleranceUnreachable(
-                f"the top rung amm:{top} does not meet the tolerance {tol:.3g} m on scene '{name}': its estimate is "
-                f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); the walk from the top "
+                f"the top rung amm:{top} does not meet the tolerance {tol:.3g} m on scene "
+                f"'{name}': its estimate is "
+                f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); "
+                "the walk from the top "
                 "tries no rung below a top that fails; allowed: a tolerance >= "
-                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or 'ladder' (they try the "
+                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or "
+                "'ladder' (they try the "
                 "rungs below)",
                 evidence,
             )
         raise ToleranceUnreachable(
-            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the best estimate is "
-            f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the rungs above); "
+            f"no rung up to amm:{top} meets the tolerance {tol:.3g} m on scene '{name}': the "
+            "best estimate is "
+            f"{best_estimate:.3g} m ({rung_name(best)}, {safety:g} x its largest distance to the "
+            "rungs above); "
             f"allowed: a tolerance >= {best_estimate:.3g} m, or a higher top rung",
             evidence,
         )
 
     # (c) the reference and its convergence
-    # the reference model as a user would run it (its own step): the "always finest" cost; in the ladder walk only
+    # the reference model as a user would run it (its own step): the "always finest" cost; in the
+    # ladder walk only
     # evidence (its cost ratio), so not run for it with checks = "tolerance"
     finest = run(ref_n) if full or linear is not None or ref_n in runs else None
     if linear is None:
@@ -643,7 +664,8 @@ def walk_and_judge(
     if ref_run.diverged_at is not None or half.diverged_at is not None:
         raise SimulationError(
             f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) diverged at "
-            f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to judge the "
+            f"{ref_run.diverged_at or half.diverged_at:.4g} s on scene '{name}': nothing to "
+            "judge the "
             "choice against"
         )
     below = run(ref_n - 1) if full or ref_n - 1 in runs else None
@@ -658,7 +680,8 @@ def walk_and_judge(
         step_check = tip_distance(exact, linear[0](ref_n)).max
         convergence = {
             "step_error_linear_m": step_check,
-            "step_check": "linear estimate: the reference model's linear loop at its own RK4 step against "
+            "step_check": "linear estimate: the reference model's linear loop at its own RK4 "
+            "step against "
             "the same loop without integrator error (zero-order hold)",
         }
         if linear_evidence is not None:
@@ -676,8 +699,10 @@ def walk_and_judge(
             else ""
         )
         warnings.warn(
-            f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) {moves}differs by {model_check:.3g} m from "
-            f"{rung_name(ref_n - 1)}: above half the tolerance {tol:.3g} m, so it may not be converged enough to "
+            f"the reference {reference} (rk4, dt = {ref_dt:.3g} s) {moves}differs by "
+            f"{model_check:.3g} m from "
+            f"{rung_name(ref_n - 1)}: above half the tolerance {tol:.3g} m, so it may not be "
+            "converged enough to "
             "judge the choice",
             stacklevel=3,
         )

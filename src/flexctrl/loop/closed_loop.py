@@ -41,7 +41,8 @@ def closed_loop(
     compile: bool | None = None,
     loop: str = "auto",
 ) -> ClosedLoopResult:
-    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` seconds.
+    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration``
+    seconds.
 
     The controller tracks the reference built on ``model`` (its design model: the joint
     path, the quasi-static deflection the path's accelerations need and the feed-forward
@@ -106,7 +107,8 @@ def closed_loop(
         )
     if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
         raise SpecError(
-            f"value of type {type(controller).__name__} is not a controller; allowed: a controller from "
+            f"value of type {type(controller).__name__} is not a controller; allowed: a "
+            "controller from "
             "flexctrl.design(model, op, settings)",
             key="controller",
         )
@@ -237,7 +239,8 @@ def _as_move(reference) -> Move:
             reference.t_start,
         )
     raise SpecError(
-        f"value of type {type(reference).__name__} is not a reference; allowed: flexctrl.Move(start=, "
+        f"value of type {type(reference).__name__} is not a reference; allowed: "
+        "flexctrl.Move(start=, "
         "target=, time=) (rad, s) or a JointReference",
         key="reference",
     )

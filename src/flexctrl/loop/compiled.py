@@ -1,4 +1,5 @@
-"""The closed loop in one CasADi call: every sample after the first, for controllers whose law is a CasADi map.
+"""The closed loop in one CasADi call: every sample after the first, for controllers whose law is a
+CasADi map.
 
 Per sample the Python loop (:mod:`flexctrl.loop.sampled`) measures, calls
 ``controller.step`` and the plant's compiled step: hundreds of microseconds of Python
@@ -62,7 +63,8 @@ CHUNK = 128
 
 
 def run_compiled(run, law, chunk: int | None = CHUNK) -> None:
-    """Samples ``run.done`` to the end of ``run`` (a :class:`~flexctrl.loop.sampled.LoopRun`), chained in CasADi.
+    """Samples ``run.done`` to the end of ``run`` (a :class:`~flexctrl.loop.sampled.LoopRun`),
+    chained in CasADi.
 
     ``chunk``: samples per call (:func:`_chained`); None: the whole run in one call.
     """
@@ -94,7 +96,8 @@ def run_compiled(run, law, chunk: int | None = CHUNK) -> None:
 def _chained(
     sample: ca.Function, x0, xi0, u0, R: np.ndarray, Z: np.ndarray, chunk: int | None
 ) -> list[np.ndarray]:
-    """``(xi, u, X, v, y)`` rows of ``len(R)`` chained samples: ``mapaccum`` calls of ``chunk`` samples each.
+    """``(xi, u, X, v, y)`` rows of ``len(R)`` chained samples: ``mapaccum`` calls of ``chunk``
+    samples each.
 
     Building a ``mapaccum`` costs time in proportion to its length (about 0.2 ms per sample
     with CasADi 3.8, 0.04-0.27 s for the 940-1070 samples of an LQR or LQG run of

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-#: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or m/s).
+# : Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or
+# m/s).
 MODAL_BOUND = 10.0
 
 
@@ -44,7 +45,8 @@ class LoopMonitor:
         return self.verdict(np.array(self.deflection(x[: self.N])[0], dtype=float).ravel(), x)
 
     def for_run(self):
-        """This monitor as ``monitor(t, x)`` with its deflections through a buffer bound for one run alone.
+        """This monitor as ``monitor(t, x)`` with its deflections through a buffer bound for one run
+        alone.
 
         The Python loop calls the monitor every sample; a bound call skips the DM conversions.
         One per run, so two runs in the threads of one Dask worker share no buffer.
@@ -69,7 +71,8 @@ class LoopMonitor:
             i = int(out[0])
             return (
                 f"joint {i + 1} at {math.degrees(q[i]):.4g} deg, more than divergence_angle = "
-                f"{math.degrees(self.margin):g} deg outside its move [{math.degrees(self.start[i]):.4g}, "
+                f"{math.degrees(self.margin):g} deg outside its move "
+                f"[{math.degrees(self.start[i]):.4g}, "
                 f"{math.degrees(self.target[i]):.4g}] deg"
             )
         return None
@@ -78,7 +81,8 @@ class LoopMonitor:
 def divergence_monitor(
     plant, arm, start_q, target_q, fraction: float, margin: float
 ) -> LoopMonitor:
-    """``monitor(t, x)`` for :func:`simulate_closed_loop`: link tip deflections and joint excursions.
+    """``monitor(t, x)`` for :func:`simulate_closed_loop`: link tip deflections and joint
+    excursions.
 
     A link diverges when its tip deflection exceeds ``fraction`` of its length (m); a
     joint when it leaves the range of its move widened by ``margin`` (rad) on each side.

@@ -13,14 +13,16 @@ from flexctrl.sim.compile import compile_for, compile_function
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
-#: (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the count).
+# : (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the
+# count).
 UNROLL_LIMIT = 32
 
 
 def plant_step_function(
     model, substeps: int, f: ca.Function | None = None, n_constants: int = 0
 ) -> ca.Function:
-    """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X is (n_x, substeps).
+    """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X
+    is (n_x, substeps).
 
     The steps are unrolled into one expression (compiled whole by :func:`advance_function`
     up to :data:`UNROLL_LIMIT` steps).  With ``f = fp(x, u, c)`` (the model's ``f`` with
@@ -62,7 +64,8 @@ def _name(text: str) -> str:
 def output_map(
     model, count: int, compile: bool | None = None, *, energies: bool = True
 ) -> ca.Function:
-    """``Y = outputs(X)`` over ``count`` states (columns) of :func:`flexctrl.sim.integrator.output_function`, compiled.
+    """``Y = outputs(X)`` over ``count`` states (columns) of
+    :func:`flexctrl.sim.integrator.output_function`, compiled.
 
     The rows of ``Y`` are the energies, tip and deflections (``energies=False``: the tip and
     deflections alone, a tenth of the cost or less).  Compiled with the model's
@@ -93,8 +96,10 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
         if constants.size == 0:
             return compile_function(fun, enabled=compile).function
-        # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a reduced
-        # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
+        # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a
+        # reduced
+        # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for
+        # amm:5) and
         # evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
         compiled = compile_for(
@@ -106,16 +111,18 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
 
 
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:
-    """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, compiled; and whether it is.
+    """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, compiled; and whether it
+    is.
 
     Up to :data:`UNROLL_LIMIT` steps: :func:`plant_step_function` compiled whole (the
     fastest per call).  Above (a fine plant step under a slow controller, e.g. ``amm:5``
     at 38 us under a 10 ms LQR: 260 steps): ONE compiled RK4 step, chained by a CasADi
     ``mapaccum`` loop in the virtual machine, so one library per model serves every
     step count and step size (compiling ``amm:5``'s step takes about 13 s here, the
-    same as six unrolled steps).  Built once per model and step count (:func:`flexctrl.dynamics.model.derived`);
-    the compiled Function is kept with the lifted ``f`` (:func:`flexctrl.sim.compile.compile_for`), so a
-    later configuration of the model shape wraps it with its own constants without building it again.
+    same as six unrolled steps).  Built once per model and step count
+    (:func:`flexctrl.dynamics.model.derived`); the compiled Function is kept with the lifted ``f``
+    (:func:`flexctrl.sim.compile.compile_for`), so a later configuration of the model shape wraps it
+    with its own constants without building it again.
     """
     return derived(
         model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile)
@@ -129,7 +136,8 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
         if constants.size == 0:  # f could not be rebuilt: one library per model
             compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
             return compiled.function, compiled.compiled
-        # kept with the lifted f: a later configuration of the model shape neither builds nor loads it again
+        # kept with the lifted f: a later configuration of the model shape neither builds nor loads
+        # it again
         compiled = compile_for(
             fp,
             ("advance", substeps),
@@ -145,7 +153,8 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
             if constants.size
             else compile_function(build(), enabled=compile)
         )
-        # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
+        # the constants enter once per step; as a constant of this (uncompiled) loop they are stored
+        # once
         c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
         X = compiled.function.mapaccum(substeps)(
             x,
@@ -159,7 +168,8 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
 
 
 def _single_step(model, fp: ca.Function, n_constants: int) -> ca.Function:
-    """``rk4(x, u, h[, c]) -> x_next``: one RK4 step; with ``c`` (``n_constants > 0``) named by the sizes alone.
+    """``rk4(x, u, h[, c]) -> x_next``: one RK4 step; with ``c`` (``n_constants > 0``) named by the
+    sizes alone.
 
     With the constants as the input ``c`` the generated code is the same for every
     configuration of one model shape, so one library serves them all.

@@ -22,7 +22,8 @@ def tip_at_rest(model, q_joints) -> np.ndarray:
 
 @dataclass
 class ClosedLoopResult:
-    """A closed-loop run (:func:`flexctrl.closed_loop`, :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`).
+    """A closed-loop run (:func:`flexctrl.closed_loop`,
+    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`).
 
     Attributes
     ----------
@@ -73,7 +74,8 @@ class ClosedLoopResult:
         return self.trajectory.to_pandas()
 
     def plot(self, label: str | None = None):
-        """One figure: tip error, every link's tip deflection, torques with their limits, joint angles.
+        """One figure: tip error, every link's tip deflection, torques with their limits, joint
+        angles.
 
         Returns
         -------
@@ -85,7 +87,8 @@ class ClosedLoopResult:
         return compare({label or self.summary.get("controller", {}).get("kind", "run"): self})
 
     def save(self, directory: str | Path, *, plots: bool = True) -> list[Path]:
-        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) the PNGs into ``directory``.
+        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) the PNGs into
+        ``directory``.
 
         Returns the paths written (also kept in :attr:`files`).
         """

@@ -42,8 +42,10 @@ from flexctrl.sim.bound import BoundFunction, evaluate
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
 from flexctrl.sim.trajectory import LazyEnergies, Trajectory, energy_dict
 
-#: How the samples are run: ``"python"`` (one iteration per sample), ``"compiled"`` (one CasADi call for all but
-#: the first; an error for a controller without a :meth:`sampled_law`), ``"auto"`` (compiled when offered).
+# : How the samples are run: ``"python"`` (one iteration per sample), ``"compiled"`` (one CasADi
+# call for all but
+# : the first; an error for a controller without a :meth:`sampled_law`), ``"auto"`` (compiled when
+# offered).
 LOOPS = ("auto", "compiled", "python")
 #: When a closed loop's energies are evaluated (:func:`trajectory_from_states`).
 ENERGY_MODES = ("lazy", "eager")
@@ -54,7 +56,8 @@ def mapped(model, name: str, count: int, *args):
 
 
 def tip_positions(model, X: np.ndarray, compile: bool | None = None) -> np.ndarray:
-    """The tip positions (m, shape (T, 2)) of the states ``X`` (rows), from the compiled map without energies.
+    """The tip positions (m, shape (T, 2)) of the states ``X`` (rows), from the compiled map without
+    energies.
 
     The same values as :attr:`Trajectory.tip` of :func:`trajectory_from_states` (compiled):
     the fidelity chooser compares rungs by them.  Over 16,000 states of ``amm:2`` here
@@ -80,8 +83,8 @@ def trajectory_from_states(
     else by mapped calls of the model's Functions in CasADi's virtual machine.
     ``energies``: ``"lazy"`` (default) evaluates them when first read
     (:class:`~flexctrl.sim.trajectory.LazyEnergies`; no metric of the loop reads them, and on
-    ``amm:5`` they cost ten times the tip and deflections), ``"eager"`` with the tip and deflections,
-    in one map (the slow path, kept to measure against).
+    ``amm:5`` they cost ten times the tip and deflections), ``"eager"`` with the tip and
+    deflections, in one map (the slow path, kept to measure against).
     """
     if energies not in ENERGY_MODES:
         raise SpecError(
@@ -239,7 +242,8 @@ def integrate_closed_loop(
     substeps = int(round(Ts / dt))
     if substeps < 1 or abs(substeps * dt - Ts) > 1e-9 * Ts:
         raise SpecError(
-            f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: Ts/dt a whole number",
+            f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: "
+            "Ts/dt a whole number",
             key="dt",
         )
     if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1 or substeps % stride:
@@ -273,7 +277,8 @@ def integrate_closed_loop(
         law = controller.sampled_law()
         if law is None and loop == "compiled":
             raise SpecError(
-                f"the {type(controller).__name__} has no sampled law (it optimises or schedules per "
+                f"the {type(controller).__name__} has no sampled law (it optimises or schedules "
+                "per "
                 "sample); allowed: loop = 'python' or 'auto'",
                 key="loop",
             )
@@ -342,7 +347,8 @@ class LoopRun:
         self.done = 0
         self.end = n_samples * self.per + 1
         self.divergence = None
-        # the Python loop's per-sample calls, bound to arrays for this run alone (a Dask worker may run two in threads)
+        # the Python loop's per-sample calls, bound to arrays for this run alone (a Dask worker may
+        # run two in threads)
         self._outputs, self._advance = BoundFunction(sensors.function), BoundFunction(advance)
         self._monitor = monitor.for_run() if hasattr(monitor, "for_run") else monitor
 
@@ -375,8 +381,10 @@ class LoopRun:
             return False
         Ts, dt = self.controller.sample_time, self.dt
         message = (
-            f"closed loop diverged at t = {t_end:.4g} s ({reason}; plant step {dt:g} s, controller sample "
-            f"{Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the controller does not stabilise "
+            f"closed loop diverged at t = {t_end:.4g} s ({reason}; plant step {dt:g} s, "
+            "controller sample "
+            f"{Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the controller does not "
+            "stabilise "
             f"this plant (or the plant step is too large for RK4: stable below "
             f"~{RK4_STABILITY_LIMIT / max(plant.omega_max, 1e-12):.3g} s for the locked-joint modes)"
         )

@@ -41,7 +41,8 @@ def closed_loop_matrix(Ad, Bd, C, D, law) -> np.ndarray:
 
 
 def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> float | None:
-    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q`` (see the module docstring).
+    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q`` (see
+    the module docstring).
 
     Parameters
     ----------

@@ -18,7 +18,8 @@ def _arm_spec(arm) -> ArmSpec:
     if isinstance(spec, ArmSpec):
         return spec
     raise SpecError(
-        f"value {type(arm).__name__} is not an arm; allowed: an ArmSpec (flexctrl.load_arm) or a Model "
+        f"value {type(arm).__name__} is not an arm; allowed: an ArmSpec (flexctrl.load_arm) or a "
+        "Model "
         "built from one (flexctrl.load_model)",
         key="arm",
     )

@@ -23,7 +23,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-#: Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate integrals).
+# : Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate
+# integrals).
 GAUSS_POINTS = 24
 #: Field names, in the order the kinematics and the lookup tables carry them.
 SHORTENING_FIELDS = ("sh_tip", "sh_v", "sh_w", "sh_y", "sh_z")
@@ -62,7 +63,8 @@ def axial_shapes(
 def shortening_integrals(
     shape: Callable[[np.ndarray, int], np.ndarray], length: float, rho: float, n_modes: int
 ) -> dict[str, np.ndarray]:
-    """The integrals of the module docstring for shapes ``shape(x, derivative)`` -> (n_modes, len(x)).
+    """The integrals of the module docstring for shapes ``shape(x, derivative)`` -> (n_modes,
+    len(x)).
 
     Returns ``{"sh_tip", "sh_v", "sh_w", "sh_y", "sh_z"}`` with shapes ``(P,)``, ``(P,)``,
     ``(P,)``, ``(n_modes, P)``, ``(P, P)``, ``P = n_modes (n_modes + 1) / 2``.

@@ -1,4 +1,5 @@
-"""Clamped-mass modes augmented by a static-correction shape for a tip moment (modal truncation augmentation).
+"""Clamped-mass modes augmented by a static-correction shape for a tip moment (modal truncation
+augmentation).
 
 A link's clamped-mass modes (:mod:`flexctrl.beam.clamped_mass`) treat everything outboard as
 one rigid body fixed to the link's tip, with the tip inertia ``J_D`` of the whole outboard arm
@@ -177,7 +178,8 @@ class CorrectedModes:
 
 
 def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PANELS):
-    """``psi(x, d)`` of ``count`` rows: the link's modes with its root *pinned* on its hub's rotor, less their root rotation.
+    """``psi(x, d)`` of ``count`` rows: the link's modes with its root *pinned* on its hub's rotor,
+    less their root rotation.
 
     The link (0-based ``link``) as a Hermite-cubic beam of ``n_elements`` elements with
     ``w(0) = 0``, the rotor inertia of its hub on the root slope and the clamped-mass tip body

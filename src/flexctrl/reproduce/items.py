@@ -73,7 +73,8 @@ def _table(items: list[Item]) -> list[str]:
     for it in items:
         verdict = "agrees" if it.agrees else "differs"
         lines.append(
-            f"| {_cell(it.item)} | {_cell(it.paper)} | {_cell(it.flexctrl)} | {verdict} | {_cell(it.note)} |"
+            f"| {_cell(it.item)} | {_cell(it.paper)} | {_cell(it.flexctrl)} | {verdict} | "
+            f"{_cell(it.note)} |"
         )
     return lines
 

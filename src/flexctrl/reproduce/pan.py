@@ -20,7 +20,8 @@ from pathlib import Path
 from flexctrl.reproduce.items import Section
 
 TITLE = (
-    "Pan, Scott and Ulsoy 1990, Dynamic Modeling and Simulation of Flexible Robots With Prismatic Joints, "
+    "Pan, Scott and Ulsoy 1990, Dynamic Modeling and Simulation of Flexible Robots With "
+    "Prismatic Joints, "
     "ASME J. Mech. Design 112, 307-314"
 )
 

@@ -152,15 +152,18 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
         Item(
             "Fig 6, where W is measured",
             "not stated (the figure is missing from the text)",
-            "W = overhang beyond the support on the H side: supports at material points L - D - W and L - W",
+            "W = overhang beyond the support on the H side: supports at material points L - D - "
+            "W and L - W",
             True,
-            "decided: the only reading under which Eq 57's C1 = 0.725 m, C2 = 0.7 m keeps both supports on "
+            "decided: the only reading under which Eq 57's C1 = 0.725 m, C2 = 0.7 m keeps both "
+            "supports on "
             "the beam and push/pull mirror each other (flexctrl/dynamics/fem/sliding_beam.py)",
         ),
     ]
     sec6 = Section(
         "Fig 6: beam moving over bilateral supports",
-        "The geometry as decided from the text (Fig 6 itself is not in the text): the two push cases "
+        "The geometry as decided from the text (Fig 6 itself is not in the text): the two push "
+        "cases "
         "draw the long H-side overhang in through the supports; the pull case mirrors it.",
         geometry,
         ["fig6_geometry.png"],
@@ -180,8 +183,10 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
 
     note4 = (
         f"max |4 elements - {fine} elements| over the run, shortening on; the converged answer "
-        f"({fine} elements) moves by < 0.1 mm from 16 to 32 elements (tests/test_sliding_beam.py checks "
-        "monotone convergence). Buffinton and Kane's curve is not in the text, so the paper's agreement "
+        f"({fine} elements) moves by < 0.1 mm from 16 to 32 elements (tests/test_sliding_beam.py "
+        "checks "
+        "monotone convergence). Buffinton and Kane's curve is not in the text, so the paper's "
+        "agreement "
         "can only be read at plot resolution: an offset of this size is visible on a 10 mm scale"
     )
     secs = []
@@ -207,7 +212,8 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
                 True
                 if key != "slow_push"
                 else shortening_effect(key) < 0.5 * shortening_effect("fast_push"),
-                "slow push: the inertial axial force scales with the acceleration (C2 / T^2), 25x smaller "
+                "slow push: the inertial axial force scales with the acceleration (C2 / T^2), "
+                "25x smaller "
                 "than in the fast cases"
                 if key == "slow_push"
                 else "the fast motion's axial force is large enough to change the response",
@@ -224,12 +230,16 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
         Item(
             "Fig 8, amplitude after 0.5 s",
             "so small that the slight disagreement there is not important",
-            f"the last large swing ends at t = {res.t[k_last]:.3f} s ({_mm(abs(res.tip_y[k_last]))}); from "
-            f"{SETTLED:g} s on max |tip| = {_mm(np.abs(res.tip_y[settled]).max())} = {100 * ratio:.0f} % of the "
+            f"the last large swing ends at t = {res.t[k_last]:.3f} s "
+            f"({_mm(abs(res.tip_y[k_last]))}); from "
+            f"{SETTLED:g} s on max |tip| = {_mm(np.abs(res.tip_y[settled]).max())} = "
+            f"{100 * ratio:.0f} % of the "
             f"run's peak {_mm(peak('fast_push'))}",
             ratio < SMALL,
-            f"'small' taken as below {100 * SMALL:.0f} % of the peak, judged from {SETTLED:g} s (the first "
-            f"{1e3 * (SETTLED - 0.5):.0f} ms after 0.5 s still hold the end of the last swing of the push)",
+            f"'small' taken as below {100 * SMALL:.0f} % of the peak, judged from {SETTLED:g} s "
+            "(the first "
+            f"{1e3 * (SETTLED - 0.5):.0f} ms after 0.5 s still hold the end of the last swing of "
+            "the push)",
         )
     )
     late = offset("fast_push", after=0.5)
@@ -240,7 +250,8 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
             f"4 elements are {_mm(late)} off the converged answer after 0.5 s, "
             f"{100 * late / peak('fast_push', 0.5):.0f} % of the amplitude there",
             late > 0.1 * peak("fast_push", 0.5),
-            "the coarse mesh alone disagrees there by a visible share of the late amplitude: a likely source of "
+            "the coarse mesh alone disagrees there by a visible share of the late amplitude: a "
+            "likely source of "
             "the paper's late disagreement (B&K's own discretisation is not known from the text)",
         )
     )
@@ -262,12 +273,18 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
                 "push and pull responses would be identical",
                 f"max |pull - push| without shortening = {identical:.1e} m",
                 identical < IDENTICAL * 0.01,
-                "mirroring x -> L - x maps one case onto the other exactly (at 4 elements to 1e-12 m, a test); "
-                f"bound {IDENTICAL:g} of the 10 mm: at t = T/2 both supports sit exactly on nodes (x = 0.375, "
-                "0.625 m, nodes whenever N is a multiple of 8); a node belongs to the element on its right in "
-                "both cases, which are mirror images, so that one step's w'' rows in h (Eq 47) differ and the "
-                "tips part by ~1e-8 m from then on (measured: from t = 0.353 s at 8-32 elements). Only the axial "
-                "force (compression while the push accelerates, tension for the pull) tells the cases apart",
+                "mirroring x -> L - x maps one case onto the other exactly (at 4 elements to "
+                "1e-12 m, a test); "
+                f"bound {IDENTICAL:g} of the 10 mm: at t = T/2 both supports sit exactly on "
+                "nodes (x = 0.375, "
+                "0.625 m, nodes whenever N is a multiple of 8); a node belongs to the element on "
+                "its right in "
+                "both cases, which are mirror images, so that one step's w'' rows in h (Eq 47) "
+                "differ and the "
+                "tips part by ~1e-8 m from then on (measured: from t = 0.353 s at 8-32 "
+                "elements). Only the axial "
+                "force (compression while the push accelerates, tension for the pull) tells the "
+                "cases apart",
             ),
         ]
     )
@@ -277,9 +294,11 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
         "Fig 9": "Fast pull, C1 = 0.025 m, C2 = -0.7 m, T = 0.7 s, tip E. ",
     }
     common = (
-        f"Four equal elements (the paper's mesh) and {fine} elements, each with and without the axial "
+        f"Four equal elements (the paper's mesh) and {fine} elements, each with and without the "
+        "axial "
         "shortening; Newmark (alpha = 1/4, delta = 1/2) + Baumgarte (gamma = beta = 5), dt = 1 ms. "
-        "All three cases are in the one figure below (left: tip displacement; right: the effect of the "
+        "All three cases are in the one figure below (left: tip displacement; right: the effect "
+        "of the "
         "shortening and the four-element error)."
     )
     out = [sec6]

@@ -36,9 +36,11 @@ from flexctrl.spec.fem_models import RPArmSpec, load_rp_arm, load_telescoping
 from flexctrl.spec.shipped import data_root
 
 ROOT = data_root()
-#: The rest-to-rest move of ``studies/scenes/rp_extend_rotate.toml``: W 0.3 -> 0.7 m, 0 -> 60 deg in 1 s.
+# : The rest-to-rest move of ``studies/scenes/rp_extend_rotate.toml``: W 0.3 -> 0.7 m, 0 -> 60 deg
+# in 1 s.
 EXTEND = RPMotion(C1=0.3, C2=-0.4, T=1.0, dtheta=math.radians(60.0))
-#: Southwell's coefficient of the first mode of a uniform cantilever (omega^2 = omega_0^2 + S Omega^2
+# : Southwell's coefficient of the first mode of a uniform cantilever (omega^2 = omega_0^2 + S
+# Omega^2
 #: out of the plane of rotation; in the plane the frame's -Omega^2 softening makes it S - 1).
 SOUTHWELL = 1.1933
 
@@ -70,7 +72,8 @@ def fig1(out_dir: Path, reduced: bool) -> Section:
             "Fig 1, floating frame of the sliding link",
             "frames follow the nominal (rigid) motion; small "
             "displacements measured from them (Eqs 1-7)",
-            f"housing held fixed: the R-P arm is the beam of Figs 6-9, tip difference {_gap(fixed.tip_y, reference.tip_y):.1e} m",
+            "housing held fixed: the R-P arm is the beam of Figs 6-9, tip difference "
+            f"{_gap(fixed.tip_y, reference.tip_y):.1e} m",
             _gap(fixed.tip_y, reference.tip_y) < 1e-10,
             "two independent codes of the same equations "
             "(rp_arm.py with a turning frame, sliding_beam.py with a translating one)",
@@ -79,18 +82,22 @@ def fig1(out_dir: Path, reduced: bool) -> Section:
             "Fig 1, partial against full coupling",
             "prescribed motion (Eq 42) assumes the elastic motion "
             "hardly disturbs the rigid one; full coupling (Eq 43) solves both",
-            f"full coupling fed the same motion: tip {_gap(full.tip_y, part.tip_y):.1e} m from partial "
-            f"(peak {1e3 * peak:.2f} mm); torque {full.torque.min():.1f} .. {full.torque.max():.1f} N m, "
+            f"full coupling fed the same motion: tip {_gap(full.tip_y, part.tip_y):.1e} m from "
+            "partial "
+            f"(peak {1e3 * peak:.2f} mm); torque {full.torque.min():.1f} .. "
+            f"{full.torque.max():.1f} N m, "
             f"force {full.force.min():.1f} .. {full.force.max():.1f} N needed",
             _gap(full.tip_y, part.tip_y) < 1e-3 * peak,
-            "the Lagrangian of the full model keeps the shortening in T; with the motion imposed its nodal rows "
+            "the Lagrangian of the full model keeps the shortening in T; with the motion imposed "
+            "its nodal rows "
             "are Eq 42 with Pan's K_g (bound 0.1 % of the peak; the gap is the O(dt^2) joint tracking)",
         ),
     ]
     _draw_arm(part, spec, out_dir / "fig1_rp_arm.png")
     return Section(
         "Fig 1: two-link robot with a revolute and a prismatic joint",
-        "`models/rp_arm.toml` (chosen laboratory-scale parameters: the paper's Part II data are not in "
+        "`models/rp_arm.toml` (chosen laboratory-scale parameters: the paper's Part II data are "
+        "not in "
         "the text): the link extends from W = 0.3 to 0.7 m while the housing turns 60 deg in 1 s, "
         f"{n} elements, Newmark + Baumgarte, dt = 1 ms.",
         items,
@@ -164,12 +171,15 @@ def fig2() -> Section:
         Item(
             "Fig 2, axial shortening of a bent link (Eqs 14-18)",
             f"the work of the axial force through "
-            f"dL = 1/2 w'^2 dx stiffens a link in tension; for a spinning cantilever Southwell's coefficient "
-            f"gives (omega^2 - omega_0^2) / Omega^2 = {SOUTHWELL} - 1 = {SOUTHWELL - 1:.4f} in the plane",
+            "dL = 1/2 w'^2 dx stiffens a link in tension; for a spinning cantilever Southwell's "
+            "coefficient "
+            f"gives (omega^2 - omega_0^2) / Omega^2 = {SOUTHWELL} - 1 = {SOUTHWELL - 1:.4f} in "
+            "the plane",
             f"{coefficient[True]:.4f} (8 elements, Omega = 0.1 omega_0); without the term "
             f"{coefficient[False]:.4f}",
             abs(coefficient[True] - (SOUTHWELL - 1)) < 0.01,
-            "the frame's centrifugal softening alone gives -1; K_g of the centrifugal tension (Eq 17, reaction "
+            "the frame's centrifugal softening alone gives -1; K_g of the centrifugal tension "
+            "(Eq 17, reaction "
             "at the clamp) restores Southwell's value; bound 0.01",
         )
     ]
@@ -194,13 +204,16 @@ def fig3() -> Section:
             "Fig 3, revolute-joint compatibility (Eqs 19-21)",
             "displacement and slope continuous at the "
             "joint, as constraints with multipliers between frames on the nominal motion",
-            f"eliminated: each link clamped in a frame at the deformed tip of the previous one; locked "
+            "eliminated: each link clamped in a frame at the deformed tip of the previous one; "
+            "locked "
             f"frequencies of the three-link arm (2 kg, q = (0, 45, -90) deg), 4 elements per link: "
             f"{', '.join(f'{f:.4f}' for f in fem)} Hz against the assumed-modes arm's "
             f"{', '.join(f'{f:.4f}' for f in amm)} Hz",
             rel < 1e-3,
-            f"largest relative difference {rel:.1e} (bound 1e-3: the assumed-modes links are axially rigid, "
-            "docs/fem.md section 2); in the plane the constraints are linear in the nodal values, so "
+            f"largest relative difference {rel:.1e} (bound 1e-3: the assumed-modes links are "
+            "axially rigid, "
+            "docs/fem.md section 2); in the plane the constraints are linear in the nodal "
+            "values, so "
             "eliminating them is exact and leaves an ODE without drift",
         )
     ]
@@ -230,8 +243,10 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
                 f"{1e3 * (q[model.tip] - slope * c):.4f} mm",
                 abs(q[model.tip] / closed - 1) < 1e-9
                 and abs((q[model.tip] - slope * c) / (P * c**3 / (3 * spec.EI)) - 1) < 1e-9,
-                f"closed form P c^2 a / (4 EI) + P c^3 / (3 EI) = {1e3 * closed:.4f} mm, cantilever "
-                f"P c^3 / (3 EI) = {1e3 * P * c**3 / (3 * spec.EI):.4f} mm (P = {P:g} N, mouth on a node)",
+                f"closed form P c^2 a / (4 EI) + P c^3 / (3 EI) = {1e3 * closed:.4f} mm, "
+                "cantilever "
+                f"P c^3 / (3 EI) = {1e3 * P * c**3 / (3 * spec.EI):.4f} mm (P = {P:g} N, mouth "
+                "on a node)",
             )
         )
     n = 4 if reduced else 8
@@ -245,7 +260,8 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
         Item(
             "Fig 4, prescribed motion (Eq 42)",
             "the clamp and the moving contact point D' as constraints",
-            f"peak tip {1e3 * peak:.2f} mm (two supports instead: {1e3 * np.abs(supports.tip_y).max():.2f} mm); "
+            f"peak tip {1e3 * peak:.2f} mm (two supports instead: "
+            f"{1e3 * np.abs(supports.tip_y).max():.2f} mm); "
             f"max |Phi| {clamped.phi_violation.max():.1e} m",
             clamped.phi_violation.max() < 1e-6,
             "clamp rows fixed on the link, mouth row sliding; bound 1e-6 m",
@@ -302,12 +318,14 @@ def fig5(out_dir: Path, reduced: bool) -> Section:
             f"{1e3 * static[tip_dof]:.4f} mm against the closed form {1e3 * closed:.4f} mm",
             abs(static[tip_dof] / closed - 1) < 1e-3,
             "bearings at the tube mouth and at the inner root "
-            "(models/telescoping.toml; Pan's one-point sleeve is the other reading, tested too); bound 0.1 %",
+            "(models/telescoping.toml; Pan's one-point sleeve is the other reading, tested too); "
+            "bound 0.1 %",
         ),
         Item(
             "Fig 5, full coupling fed the same motion",
             "prescribed torques/forces (Eq 43)",
-            f"tip {_gap(full.tip_y, part.tip_y):.1e} m, mouth {_gap(full.outer_tip_y, part.outer_tip_y):.1e} m "
+            f"tip {_gap(full.tip_y, part.tip_y):.1e} m, mouth "
+            f"{_gap(full.outer_tip_y, part.outer_tip_y):.1e} m "
             f"from the motion-driven model (peak {1e3 * peak:.2f} mm)",
             _gap(full.tip_y, part.tip_y) < 1e-3 * peak,
             "bound 0.1 % of the peak; the gap is O(dt^2) (tests/test_telescoping_full.py)",
@@ -315,10 +333,12 @@ def fig5(out_dir: Path, reduced: bool) -> Section:
         Item(
             "Fig 5, the needed torque and force fed back",
             "full coupling driven by forces",
-            f"theta {_gap(replay.theta, full.theta):.1e} rad, W {_gap(replay.W, full.W):.1e} m, tip "
+            f"theta {_gap(replay.theta, full.theta):.1e} rad, W {_gap(replay.W, full.W):.1e} m, "
+            "tip "
             f"{_gap(replay.tip_y, full.tip_y):.1e} m from the motion run",
             _gap(replay.tip_y, full.tip_y) < 1e-9,
-            f"torque {full.torque.min():.1f} .. {full.torque.max():.1f} N m, force {full.force.min():.1f} .. "
+            f"torque {full.torque.min():.1f} .. {full.torque.max():.1f} N m, force "
+            f"{full.force.min():.1f} .. "
             f"{full.force.max():.1f} N; same grid, so the same discrete equations (bound 1e-9)",
         ),
     ]

@@ -22,7 +22,8 @@ from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SLOW_PUSH, simulate_sl
 from flexctrl.reproduce.items import Item, Section
 
 #: Sweeps of the full run per case (beam, arm); the reduced one keeps two points per method and
-#: shorter runs.  IDAS at BDF order <= 5 costs ~1.5e5 steps on the arm whatever its rtol (see the text).
+# : shorter runs.  IDAS at BDF order <= 5 costs ~1.5e5 steps on the arm whatever its rtol (see the
+# text).
 FULL = (
     {
         "dts": [4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4],
@@ -49,8 +50,10 @@ REDUCED = (
         "reference_rtol": 1e-8,
     },
 ) * 2
-#: the reduced reference: IDAS at rtol 1e-10 took 61 s of the reduced run's 123 s on the arm (1.6 million
-#: steps); at 1e-8 it is still far below the swept points' errors (their smallest, IDAS at rtol 1e-5)
+# : the reduced reference: IDAS at rtol 1e-10 took 61 s of the reduced run's 123 s on the arm (1.6
+# million
+# : steps); at 1e-8 it is still far below the swept points' errors (their smallest, IDAS at rtol
+# 1e-5)
 
 
 def baumgarte_section() -> Section:
@@ -69,7 +72,8 @@ def baumgarte_section() -> Section:
             f"{free.phi_violation.max():.1e} m without the terms; tip error against dt = 0.1 ms "
             f"{1e6 * err['stab']:.0f} um against {1e6 * err['free']:.0f} um",
             stab.phi_violation.max() < free.phi_violation.max() and err["stab"] <= err["free"],
-            "satisfactory read as: less drift and a tip no worse than without the terms; gamma h = 0.005 is "
+            "satisfactory read as: less drift and a tip no worse than without the terms; gamma h "
+            "= 0.005 is "
             "far inside the explicit-feedback stability limit gamma h < 3 - sqrt(5) (docs/baumgarte.md)",
         )
     ]
@@ -81,8 +85,10 @@ def baumgarte_section() -> Section:
             f"slow push, then held still, 12 s: Eq 49's sign keeps max |Phi| at {eq49}; the "
             f"printed sign: {printed}",
             False,
-            "Eq 54's sign makes Phi'' + 2 gamma Phi' - beta^2 Phi = 0 (root +2.07 1/s at 5/5): once the beam "
-            "stops (constant rows) any violation grows by that rate. Read as a misprint; Eq 49's sign is "
+            "Eq 54's sign makes Phi'' + 2 gamma Phi' - beta^2 Phi = 0 (root +2.07 1/s at 5/5): "
+            "once the beam "
+            "stops (constant rows) any violation grows by that rate. Read as a misprint; Eq 49's "
+            "sign is "
             "used everywhere",
         )
     )
@@ -94,7 +100,8 @@ def baumgarte_section() -> Section:
 
 
 def _violation(case, form: str, duration: float = 12.0) -> str:
-    """The largest violation (m) of ``case`` over ``duration`` (s) with Baumgarte's ``form``, or where it
+    """The largest violation (m) of ``case`` over ``duration`` (s) with Baumgarte's ``form``, or
+    where it
     passed 1e-4 m."""
     from flexctrl.dynamics.fem.newmark_dae import simulate
     from flexctrl.dynamics.fem.sliding_beam import SlidingBeamModel
@@ -149,8 +156,10 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
     for res in results:
         for p in sorted(res["points"], key=lambda p: (p["method"], -p["knob"])):
             lines.append(
-                f"| {res['case']} | {eff.LABELS[p['method']]} | {p['knob']:g} | {p['wall_s']:.3f} | "
-                f"{p['error_m']:.1e} | {p['max_phi_m']:.1e} | {p['steps']} | {p['linear_solves']} | "
+                f"| {res['case']} | {eff.LABELS[p['method']]} | {p['knob']:g} | "
+                f"{p['wall_s']:.3f} | "
+                f"{p['error_m']:.1e} | {p['max_phi_m']:.1e} | {p['steps']} | "
+                f"{p['linear_solves']} | "
                 f"{p['factorizations']} |"
             )
         by = {}
@@ -181,13 +190,18 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
                 Item(
                     f"Sec. 4, efficiency against Gear-type codes, {res['case']}, {eff.LABELS[method]}",
                     "Newmark + Baumgarte more efficient than codes based on Gear's algorithm",
-                    f"at tip error {mid['target_m']:.1e} m: Newmark {mid['newmark_wall_s']:.2f} s, IDAS "
-                    f"{mid['idas_wall_s']:.2f} s (Newmark / IDAS wall time {ratio_text} at {targets} m); nearest runs: Newmark {nm['linear_solves']} "
-                    f"solves, max |Phi| {nm['max_phi_m']:.1e} m; IDAS {ida['linear_solves']} Newton iterations, "
+                    f"at tip error {mid['target_m']:.1e} m: Newmark {mid['newmark_wall_s']:.2f} "
+                    "s, IDAS "
+                    f"{mid['idas_wall_s']:.2f} s (Newmark / IDAS wall time {ratio_text} at "
+                    f"{targets} m); nearest runs: Newmark {nm['linear_solves']} "
+                    f"solves, max |Phi| {nm['max_phi_m']:.1e} m; IDAS {ida['linear_solves']} "
+                    "Newton iterations, "
                     f"{ida['factorizations']} factorisations, max |Phi| {ida['max_phi_m']:.1e} m",
                     faster,
-                    "verdict on wall time at equal accuracy, measured side by side in one process: Newmark's loop "
-                    "is Python + numpy, IDAS is C with residuals in CasADi's virtual machine; the solve counts do not "
+                    "verdict on wall time at equal accuracy, measured side by side in one "
+                    "process: Newmark's loop "
+                    "is Python + numpy, IDAS is C with residuals in CasADi's virtual machine; "
+                    "the solve counts do not "
                     "depend on that",
                 )
             )
@@ -199,19 +213,25 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
     ]
     text = (
         "Both integrators solve the same equations built from one `RPArmModel` "
-        "(`flexctrl/dynamics/fem/idas_dae.py` makes the IDAS residual symbolic in t, with the support rows "
+        "(`flexctrl/dynamics/fem/idas_dae.py` makes the IDAS residual symbolic in t, with the "
+        "support rows "
         "switching element by `if_else`). IDAS integrates the plain index-1 DAE (Eqs 44, 47), "
-        "`atol = 1e-3 rtol`, algebraic variables out of the error test (they jump where a support crosses a "
+        "`atol = 1e-3 rtol`, algebraic variables out of the error test (they jump where a "
+        "support crosses a "
         "node); once with its default BDF orders up to 5 and once with orders up to 2 (A-stable). "
-        f"Error: largest distance of the tip from IDAS at rtol {results[0]['reference_rtol']:g} on a 1 ms grid"
+        f"Error: largest distance of the tip from IDAS at rtol {results[0]['reference_rtol']:g} "
+        "on a 1 ms grid"
         + (f" ({'; '.join(ref_checks)})" if ref_checks else "")
         + ". Wall time: best of "
         f"{cfg[0]['repeats']} run(s). Durations: "
         + ", ".join(f"{c.name} {c.duration:g} s" for c in cases)
         + ".\n\n"
-        "BDF orders 3-5 are not A-stable: the undamped element modes of the R-P arm's stiff link (about "
-        "1e4 rad/s at 8 elements) sit on the imaginary axis, so order 5 holds the step near 1e-6 s whatever "
-        "the tolerance, while the trapezoidal Newmark rule is A-stable and its step follows accuracy only. "
+        "BDF orders 3-5 are not A-stable: the undamped element modes of the R-P arm's stiff link "
+        "(about "
+        "1e4 rad/s at 8 elements) sit on the imaginary axis, so order 5 holds the step near 1e-6 "
+        "s whatever "
+        "the tolerance, while the trapezoidal Newmark rule is A-stable and its step follows "
+        "accuracy only. "
         "This is a likely mechanism behind the paper's claim. Limiting IDAS to order 2 removes it.\n\n"
         + "\n".join(lines)
     )

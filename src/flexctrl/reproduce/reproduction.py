@@ -73,7 +73,8 @@ def reproduce_paper(paper: str, out_dir: str | Path, reduced: bool = False) -> d
     form = "reduced form (coarser grids, shorter runs, same code paths)" if reduced else "full form"
     preamble = (
         f"`flexctrl reproduce {paper} --out DIR{' --reduced' if reduced else ''}`: {form}, "
-        f"{seconds:.0f} s on this machine. Each item sets a number the paper prints, or a behaviour its text "
+        f"{seconds:.0f} s on this machine. Each item sets a number the paper prints, or a "
+        "behaviour its text "
         "states, beside flexctrl's, with a verdict and the reason."
     )
     return write_reproduction(

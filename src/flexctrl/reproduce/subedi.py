@@ -26,7 +26,8 @@ from flexctrl.reproduce.items import Section
 from flexctrl.spec.shipped import data_root
 
 TITLE = (
-    'Subedi, Tyapin, Hovland (2021), "Dynamic Modeling of Planar Multi-Link Flexible Manipulators", '
+    'Subedi, Tyapin, Hovland (2021), "Dynamic Modeling of Planar Multi-Link Flexible '
+    'Manipulators", '
     "Robotics 10, 70"
 )
 MODEL = data_root() / "models" / "subedi3link.toml"

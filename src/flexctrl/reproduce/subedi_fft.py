@@ -1,4 +1,5 @@
-"""Subedi et al. (2021), Fig 14: the FFT of the tip deflections (Section 4.4), and link 2's low peak.
+"""Subedi et al. (2021), Fig 14: the FFT of the tip deflections (Section 4.4), and link 2's low
+peak.
 
 The paper transforms w_ie (the tip deflection of link i in its own frame, Eq 2) of the damped
 free vibration, N_s = 2000 samples at 1 ms, and prints Link 1: 0.4883, 1.465 Hz; Link 2:
@@ -81,11 +82,16 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
         for k, (paper, mine, mine_2000) in enumerate(
             zip(SUBEDI_FIG14_PEAKS_HZ[link], ours, ours_2000)
         ):
-            note = f"one 2048-point bin is {RESOLUTION_HZ:.4f} Hz; without padding {mine_2000:.2f} Hz (0.5 Hz bins)"
+            note = (
+                f"one 2048-point bin is {RESOLUTION_HZ:.4f} Hz; without padding "
+                f"{mine_2000:.2f} Hz (0.5 Hz bins)"
+            )
             if link == 1 and k == 0:
                 note = (
-                    f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own 2048-point grid "
-                    "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' dropped); "
+                    f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own "
+                    "2048-point grid "
+                    "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' "
+                    "dropped); "
                     "within one bin either way (see the text)"
                 )
             items.append(
@@ -128,11 +134,14 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
         Item(
             "Fig 14, the paper's frequency grid",
             f"N_s = {SUBEDI_FIG14_SAMPLES} samples at 1 ms",
-            f"{len(printed) - len(off)} of {len(printed)} printed peaks are multiples of 1000/2048 Hz "
-            f"(within 0.05 bin: {', '.join(f'{f / RESOLUTION_HZ:.2f}' for f in printed)} bins); off the grid: "
+            f"{len(printed) - len(off)} of {len(printed)} printed peaks are multiples of "
+            "1000/2048 Hz "
+            f"(within 0.05 bin: {', '.join(f'{f / RESOLUTION_HZ:.2f}' for f in printed)} bins); "
+            "off the grid: "
             f"{', '.join(map(str, off)) or 'none'}",
             len(off) == 1 and off[0] == SUBEDI_FIG14_PEAKS_HZ[1][0],
-            "so the paper zero-padded its 2000 samples to 2048, and 0.883 is the one value that does not fit",
+            "so the paper zero-padded its 2000 samples to 2048, and 0.883 is the one value that "
+            "does not fit",
         )
     )
     found = readings(runs)
@@ -144,18 +153,28 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
     )
     best = max(found, key=lambda case: matched(case[1]))
     text = (
-        "Damped free vibration under gravity (Fig 9's run, frozen modes), the first 2000 samples of w_ie at 1 ms "
-        "(the tip deflection of link i in its own frame, Eq 2), mean removed, amplitude spectrum zero-padded to "
-        "2048 points as the printed digits show the paper did. Verdict per peak: within one bin (0.488 Hz).\n\n"
-        "Link 2's low peak, 0.883 Hz in the paper against 0.4883 Hz here. Every reading tried, with the two "
-        "strongest peaks of each link (Hz) and how many of the six printed peaks it gives to their printed "
+        "Damped free vibration under gravity (Fig 9's run, frozen modes), the first 2000 samples "
+        "of w_ie at 1 ms "
+        "(the tip deflection of link i in its own frame, Eq 2), mean removed, amplitude spectrum "
+        "zero-padded to "
+        "2048 points as the printed digits show the paper did. Verdict per peak: within one bin "
+        "(0.488 Hz).\n\n"
+        "Link 2's low peak, 0.883 Hz in the paper against 0.4883 Hz here. Every reading tried, "
+        "with the two "
+        "strongest peaks of each link (Hz) and how many of the six printed peaks it gives to "
+        "their printed "
         "digits (0.01 Hz):\n\n| reading | link 1 | link 2 | link 3 | printed peaks reproduced |\n"
         "|---|---|---|---|---|\n" + rows + "\n\n"
-        f"The best reading is '{best[0]}' ({matched(best[1])} of 6). A Hann window moves link 2's low peak to "
-        "0.9766 Hz (bin 2, nearer 0.883) but loses link 1's printed 1.465 Hz, so it is not the paper's reading. "
-        "No reading can give 0.883 Hz, which lies between two bins of the grid all the other printed values sit "
-        "on; the slow content of w_2e is the whole arm's swing under gravity (0.49 Hz in all three links), not a "
-        "mode of link 2. Neither the window, the sampling, the transformed coordinate, the modes (frozen or "
+        f"The best reading is '{best[0]}' ({matched(best[1])} of 6). A Hann window moves link "
+        "2's low peak to "
+        "0.9766 Hz (bin 2, nearer 0.883) but loses link 1's printed 1.465 Hz, so it is not the "
+        "paper's reading. "
+        "No reading can give 0.883 Hz, which lies between two bins of the grid all the other "
+        "printed values sit "
+        "on; the slow content of w_2e is the whole arm's swing under gravity (0.49 Hz in all "
+        "three links), not a "
+        "mode of link 2. Neither the window, the sampling, the transformed coordinate, the modes "
+        "(frozen or "
         "scheduled) nor Eq 68's form explains it; the explanation left is a misprint of 0.4883."
     )
     return Section(

@@ -121,14 +121,17 @@ def fig3(arm: ArmSpec, out_dir: Path) -> Section:
                 Item(
                     f"Fig 3, {name} ({conv} J_D)",
                     f"depends on {says}",
-                    f"range over q2 {spread(value, 0):.3g} {unit}, over q3 {spread(value, 1):.3g} {unit}; "
+                    f"range over q2 {spread(value, 0):.3g} {unit}, over q3 "
+                    f"{spread(value, 1):.3g} {unit}; "
                     f"{value.min():.3f} to {value.max():.3f} {unit}",
                     ok,
                 )
             )
     text = (
-        "Two readings of J_D (Eq 69): the rigid-body moment of inertia about the link tip (`exact`, the model "
-        "file's choice) and Eq 70's projected distances (`paper`, e.g. d_l32 = l2 + l3/2 cos q3). They agree "
+        "Two readings of J_D (Eq 69): the rigid-body moment of inertia about the link tip "
+        "(`exact`, the model "
+        "file's choice) and Eq 70's projected distances (`paper`, e.g. d_l32 = l2 + l3/2 cos "
+        "q3). They agree "
         "at q3 = 0 and 180 deg, so Table 3 cannot tell them apart; both are drawn."
     )
     return Section(
@@ -190,7 +193,8 @@ def fig4(arm: ArmSpec, out_dir: Path, step: float) -> Section:
     return Section(
         "Fig 4: mode shapes against the configuration (2 kg)",
         f"Families every {step:g} deg from -180 to "
-        "180 deg (+a and -a give the same shapes: Eqs 69-70 hold only cosines), the sign of each shape aligned "
+        "180 deg (+a and -a give the same shapes: Eqs 69-70 hold only cosines), the sign of each "
+        "shape aligned "
         "to the first (an eigenvector has none).",
         items,
         [save(fig, out_dir, "fig04_shape_families.png")],
@@ -255,7 +259,8 @@ def fig5(arm: ArmSpec, out_dir: Path) -> Section:
                 says,
                 ", ".join(f"link {i + 1} {100 * c:.2f} %" for i, c in enumerate(change)),
                 [c > CHANGE for c in change] == expect,
-                "the paper's text for 5b says 'with the change in q_r3', a slip for q_r2 (its own caption)"
+                "the paper's text for 5b says 'with the change in q_r3', a slip for q_r2 (its "
+                "own caption)"
                 if joint == 1
                 else "",
             )
@@ -264,7 +269,8 @@ def fig5(arm: ArmSpec, out_dir: Path) -> Section:
     return Section(
         "Fig 5: the arm with its mode shapes (2 kg)",
         "Links thick dashed (1 red, 2 green, 3 blue), first "
-        "modes thin solid, second modes thin dashed, joint frames (X_i, Y_i) as arrows, as in the paper; "
+        "modes thin solid, second modes thin dashed, joint frames (X_i, Y_i) as arrows, as in "
+        "the paper; "
         "the paper overlays [I]-[III] in one panel, here each pose has its own.",
         items,
         [save(fig, out_dir, "fig05_arm_shapes.png")],
@@ -329,7 +335,8 @@ def fig6(arm: ArmSpec, out_dir: Path, step: float) -> Section:
                 Item(
                     f"Fig 6{panel}, q{hold + 1} = {fixed:g} deg",
                     says,
-                    f"range of f11, f12: {rng1[0]:.3f}, {rng1[1]:.3f} Hz; f21, f22: {rng2[0]:.3g}, {rng2[1]:.3g} Hz",
+                    f"range of f11, f12: {rng1[0]:.3f}, {rng1[1]:.3f} Hz; f21, f22: "
+                    f"{rng2[0]:.3g}, {rng2[1]:.3g} Hz",
                     ok,
                     f"Eq 70 J_D differs from exact by up to "
                     f"{np.max(np.abs(freqs['paper'] - freqs['exact'])):.2f} Hz on this slice",
@@ -342,7 +349,8 @@ def fig6(arm: ArmSpec, out_dir: Path, step: float) -> Section:
         Item(
             "Fig 6, link 3 at every pose",
             "constant, equal to Table 3 (2 kg)",
-            f"{at_zero[2, 0]:.3f}, {at_zero[2, 1]:.3f} Hz at every pose (link 3's boundary is the payload alone)",
+            f"{at_zero[2, 0]:.3f}, {at_zero[2, 1]:.3f} Hz at every pose (link 3's boundary is "
+            "the payload alone)",
             bool(np.all(np.abs(at_zero[2] - ref[2]) < 0.005))
             and shape_change(arm, 2, [(0, 0, 0), (0, 90, 45)]) < CHANGE,
         )
@@ -350,7 +358,8 @@ def fig6(arm: ArmSpec, out_dir: Path, step: float) -> Section:
     return Section(
         "Fig 6: eigenfrequencies of links 1 and 2 along slices (2 kg)",
         f"Every {step:g} deg; solid: exact "
-        "J_D (the model's), dotted: Eq 70's projected J_D (link 2's J_D has no projection, so its two lines coincide).",
+        "J_D (the model's), dotted: Eq 70's projected J_D (link 2's J_D has no projection, so "
+        "its two lines coincide).",
         items,
         [save(fig, out_dir, "fig06_frequency_slices.png")],
     )
@@ -367,7 +376,8 @@ def fig7(arm: ArmSpec, out_dir: Path, step: float) -> Section:
         Item(
             "Fig 7a-b, f11 and f12 over (q2, q3)",
             "vary over the whole (q2, q3) plane",
-            f"f11 {f1[..., 0].min():.3f} to {f1[..., 0].max():.3f} Hz, f12 {f1[..., 1].min():.2f} to "
+            f"f11 {f1[..., 0].min():.3f} to {f1[..., 0].max():.3f} Hz, f12 "
+            f"{f1[..., 1].min():.2f} to "
             f"{f1[..., 1].max():.2f} Hz; mirror symmetry f(q2, q3) = f(-q2, -q3) to {mirror:.1e} Hz",
             bool(np.ptp(f1[..., 0]) > CHANGE and mirror < 1e-6),
             "symmetry: Eqs 69-70 hold only cosines",

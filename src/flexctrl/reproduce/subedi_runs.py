@@ -56,8 +56,10 @@ class Runs:
                 raise ValueError(
                     f"variant {variant!r} is not allowed; allowed: frozen, scheduled, eq68, fine"
                 )
-            # reduced: the scheduled runs in CasADi's virtual machine, where compiling their step (one library per
-            # scene: the scheduled model's constants are not lifted) takes 30-50 s against the VM's 12-24 s
+            # reduced: the scheduled runs in CasADi's virtual machine, where compiling their step
+            # (one library per
+            # scene: the scheduled model's constants are not lifted) takes 30-50 s against the VM's
+            # 12-24 s
             options = {"compile": False} if self.reduced and variant == "scheduled" else {}
             start = time.perf_counter()
             trajectory, _model, _arm = simulate_arm_scene(

@@ -45,7 +45,8 @@ def table1(arm: ArmSpec) -> Section:
             Item(
                 f"Table 1, link {i + 1}",
                 f"{length} m, {width * 1e3:g} x {height * 1e3:g} mm, wall {wall * 1e3:g} mm, aluminium",
-                f"A = {sec.area * 1e6:.1f} mm^2, I = {sec.second_moment * 1e9:.1f} mm^4: Table 2's rho / A = {density:.1f} kg/m^3, "
+                f"A = {sec.area * 1e6:.1f} mm^2, I = {sec.second_moment * 1e9:.1f} mm^4: Table "
+                f"2's rho / A = {density:.1f} kg/m^3, "
                 f"EI / I = {modulus / 1e9:.2f} GPa; model file: length {arm.links[i].length} m",
                 ok and arm.links[i].length == length,
                 "aluminium: 2700 kg/m^3, 69 GPa (not printed; checked to 0.2 % and 0.5 %)",
@@ -78,7 +79,10 @@ def table2(arm: ArmSpec, fit) -> Section:
         for name, paper, ours, unit in pairs:
             note = "m_l = rho l" if name == "m_l" else ""
             if name == "J_l":
-                note = f"m_l l^2 / 12 = {link.mass * link.length**2 / 12:.4f} kg m^2 (centroidal, slender link)"
+                note = (
+                    f"m_l l^2 / 12 = {link.mass * link.length**2 / 12:.4f} kg m^2 "
+                    "(centroidal, slender link)"
+                )
             items.append(
                 Item(
                     f"Table 2, {name}{i + 1}",
@@ -116,11 +120,14 @@ def table2(arm: ArmSpec, fit) -> Section:
         Item(
             "Table 2, m_h2 and m_h3 (not printed)",
             "not printed, yet they enter m_D1, m_D2 (Eqs 69, 71) and so Table 3",
-            f"identified from Table 3: m_h2 = {masses[2]:.4f} kg, m_h3 = {masses[3]:.4f} kg (rms {fit.rms_hz:.4f} Hz, "
-            f"max {fit.max_abs_hz:.4f} Hz over 8 rows); model file: {arm.joints[1].hub_mass:.4f}, {arm.joints[2].hub_mass:.4f} kg",
+            f"identified from Table 3: m_h2 = {masses[2]:.4f} kg, m_h3 = {masses[3]:.4f} kg (rms "
+            f"{fit.rms_hz:.4f} Hz, "
+            f"max {fit.max_abs_hz:.4f} Hz over 8 rows); model file: "
+            f"{arm.joints[1].hub_mass:.4f}, {arm.joints[2].hub_mass:.4f} kg",
             fit.max_abs_hz < SUBEDI_TABLE3_ROUNDING_HZ
             and _close(masses[2], arm.joints[1].hub_mass, 1e-3),
-            "decision: fit them (least squares, flexctrl identify-hubs); the verdict is whether one pair of masses "
+            "decision: fit them (least squares, flexctrl identify-hubs); the verdict is whether "
+            "one pair of masses "
             "reproduces Table 3 within its print rounding",
         )
     )
@@ -147,13 +154,17 @@ def table3(arm: ArmSpec) -> Section:
                 f"{ref:.2f} Hz",
                 f"{ours:.4f} Hz",
                 abs(res) <= SUBEDI_TABLE3_ROUNDING_HZ,
-                f"residual {res:+.4f} Hz (print rounding 0.005 Hz); without hub masses {other:.2f} Hz",
+                f"residual {res:+.4f} Hz (print rounding 0.005 Hz); without hub masses "
+                f"{other:.2f} Hz",
             )
         )
     text = (
-        "Clamped-mass eigenproblem (Eqs 35-40) at q2 = q3 = 0. Two readings of Table 2: the identified hub "
-        "masses (verdict) and no hub masses at all (in the note): the link-1 and link-2 rows then miss by up to "
-        f"{max(abs(literal[k] - r[3]) for k, r in zip(literal, table3_residuals(arm))):.2f} Hz, the link-3 rows "
+        "Clamped-mass eigenproblem (Eqs 35-40) at q2 = q3 = 0. Two readings of Table 2: the "
+        "identified hub "
+        "masses (verdict) and no hub masses at all (in the note): the link-1 and link-2 rows "
+        "then miss by up to "
+        f"{max(abs(literal[k] - r[3]) for k, r in zip(literal, table3_residuals(arm))):.2f} Hz, "
+        "the link-3 rows "
         "need no hub mass and match either way (an independent check of the method)."
     )
     return Section("Table 3: effect of payload on eigenfrequencies", text, items)
@@ -210,7 +221,8 @@ def fig1(arm: ArmSpec, model, out_dir: Path) -> Section:
         "r_4 = r_3 + W_3 (l_3, w_3e), tip slopes turning the next link (Eq 7)",
         f"model tip ({ours[0]:.4f}, {ours[1]:.4f}) m; Eqs 3-9 by hand differ by {err:.1e} m",
         err < 1e-9,
-        "q = (30, -45, 60) deg, q_f = (0.02, 0.001, -0.03, 0.002, 0.05, -0.001) m; Eq 7 taken literally "
+        "q = (30, -45, 60) deg, q_f = (0.02, 0.001, -0.03, 0.002, 0.05, -0.001) m; Eq 7 taken "
+        "literally "
         "(E linearised, not a rotation: a true rotation by w' moves this tip by 7.6e-5 m)",
     )
     return Section(

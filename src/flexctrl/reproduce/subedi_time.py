@@ -1,4 +1,5 @@
-"""Subedi et al. (2021), Figs 8-13: free and forced vibration, with and without damping, and energies.
+"""Subedi et al. (2021), Figs 8-13: free and forced vibration, with and without damping, and
+energies.
 
 The paper prints no numbers for these figures; the items test what its text says about
 them, on the frozen-mode and the scheduled-mode model side by side (the paper's model
@@ -91,11 +92,14 @@ def _frozen_vs_scheduled(runs: Runs, key: str, fig: str) -> Item:
         "the paper's model updates the modes with the configuration (lookup table, Section 3)",
         "deflections differ by at most "
         + ", ".join(f"{1e3 * d:.3f} mm ({100 * r:.1f} %)" for d, r in zip(w_diff, share))
-        + f" for links 1-3; tips by {1e3 * diff:.2f} mm over {frozen.time[-1]:g} s (joints travel up to "
+        + f" for links 1-3; tips by {1e3 * diff:.2f} mm over {frozen.time[-1]:g} s (joints "
+        "travel up to "
         f"{travel:.0f} deg)",
         bool(np.max(share) < SAME_FIGURE),
-        f"verdict: frozen modes draw the figure of scheduled ones (each deflection within {100 * SAME_FIGURE:g} % "
-        "of its range); where they do not, the configuration dependence the paper argues for shows in time",
+        "verdict: frozen modes draw the figure of scheduled ones (each deflection within "
+        f"{100 * SAME_FIGURE:g} % "
+        "of its range); where they do not, the configuration dependence the paper argues for "
+        "shows in time",
     )
 
 
@@ -119,7 +123,8 @@ def fig8_9(runs: Runs, out_dir: Path) -> list[Section]:
             Item(
                 "Fig 8d, link 3 deflection",
                 "oscillates without decay (no damping)",
-                f"42 Hz content RMS {1e3 * first:.2f} mm in the first second, {1e3 * undamped:.2f} mm in the last",
+                f"42 Hz content RMS {1e3 * first:.2f} mm in the first second, "
+                f"{1e3 * undamped:.2f} mm in the last",
                 undamped > 0.5 * first,
                 "high-passed over 48 ms",
             ),
@@ -155,9 +160,12 @@ def fig8_9(runs: Runs, out_dir: Path) -> list[Section]:
     s9 = Section(
         "Fig 9: free vibration with damping under gravity",
         "zeta = 0.005 on every mode, b = 0. Solid: "
-        "frozen, dashed: scheduled, dotted: Eq 68 as printed (frozen). Eq 68 prints d = 2 zeta sqrt(k/m_l) = "
-        "2 zeta omega, in 1/s where a modal force on q_f (m) needs kg/s: with Eq 40's modal mass m_l it is "
-        "the damping ratio zeta/m_l (0.0017, 0.0028, 0.0045 for links 1-3). The scene key `[damping] form` "
+        "frozen, dashed: scheduled, dotted: Eq 68 as printed (frozen). Eq 68 prints d = 2 zeta "
+        "sqrt(k/m_l) = "
+        "2 zeta omega, in 1/s where a modal force on q_f (m) needs kg/s: with Eq 40's modal mass "
+        "m_l it is "
+        "the damping ratio zeta/m_l (0.0017, 0.0028, 0.0045 for links 1-3). The scene key "
+        "`[damping] form` "
         "chooses `ratio` (default) or `paper`.",
         items,
         [
@@ -228,16 +236,19 @@ def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
         Item(
             "Fig 10b, total energy, RK4 at 1 ms",
             "constant without damping (the paper's empirical validation)",
-            f"falls by {lost:.3f} J in {horizon:g} s ({100 * lost / el0:.0f} % of the initial elastic energy, "
+            f"falls by {lost:.3f} J in {horizon:g} s ({100 * lost / el0:.0f} % of the initial "
+            "elastic energy, "
             f"{100 * lost / e0:.0f} % of the total at t = 0); scheduled modes: {lost_sched:.3f} J",
             abs(lost) < 0.01 * el0,
             "cause: with free joints the arm has modes near 263 and 325 Hz (omega h = 1.65, "
-            "2.05 at 1 ms) that RK4 damps numerically; the initial bend of link 3 puts part of its energy there",
+            "2.05 at 1 ms) that RK4 damps numerically; the initial bend of link 3 puts part of "
+            "its energy there",
         ),
         Item(
             f"Fig 10b, total energy, RK4 at {FINE_DT * 1e3:g} ms",
             "constant without damping",
-            f"changes by {-lost_fine:+.1e} J in {horizon:g} s ({-100 * lost_fine / el0:+.3f} % of the elastic energy)",
+            f"changes by {-lost_fine:+.1e} J in {horizon:g} s ({-100 * lost_fine / el0:+.3f} % "
+            "of the elastic energy)",
             abs(lost_fine) < 0.01 * el0,
             "the loss is the integrator's, not the model's",
         ),
@@ -245,7 +256,8 @@ def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
     s10 = Section(
         "Fig 10: energies, free vibration without damping",
         "RK4 at the paper's 1 ms against a tenth of it. "
-        "The paper shows a total energy it calls constant (it contrasts Fig 11's decrease with it); at 1 ms "
+        "The paper shows a total energy it calls constant (it contrasts Fig 11's decrease with "
+        "it); at 1 ms "
         "flexctrl's does not stay constant for the reason in the note.",
         items,
         [
@@ -270,7 +282,8 @@ def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
                 f"Fig 11, total and elastic energy, {reading}",
                 "the total energy decreases; the elastic "
                 "energy, high at the start, decreases through structural damping",
-                f"total {total[0]:.3f} -> {total[-1]:.3f} J (largest rise in one step {rise:.1e} J); elastic "
+                f"total {total[0]:.3f} -> {total[-1]:.3f} J (largest rise in one step {rise:.1e} "
+                "J); elastic "
                 f"{el[0]:.3f} J at t = 0, {tail:.3g} J mean over the last 0.5 s",
                 rise <= 1e-9 and tail < el[0],
             )
@@ -305,13 +318,15 @@ def fig12_13(runs: Runs, out_dir: Path) -> list[Section]:
         Item(
             "Fig 12a-b, joints 1 and 2",
             "slow relative drifting after the torque ends (as in De Luca and Siciliano)",
-            f"from 0.2 s to {end:g} s: q1 moves {drift[0]:+.2f} deg, q2 {drift[1]:+.2f} deg (no torque acts)",
+            f"from 0.2 s to {end:g} s: q1 moves {drift[0]:+.2f} deg, q2 {drift[1]:+.2f} deg (no "
+            "torque acts)",
             bool(np.all(np.abs(drift) > 0.05)),
         ),
         Item(
             "Fig 12f, total energy after the torque",
             "constant (no damping, no gravity)",
-            f"the {work:.2f} J put in by the torque falls by {lost:.3f} J to {end:g} s (RK4 at 1 ms; "
+            f"the {work:.2f} J put in by the torque falls by {lost:.3f} J to {end:g} s (RK4 at 1 "
+            "ms; "
             f"{100 * lost / work:.1f} %)",
             abs(lost) < 0.01 * work,
             "RK4's numerical damping of the fast free-joint modes, as in Fig 10",

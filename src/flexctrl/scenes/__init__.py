@@ -36,7 +36,8 @@ def run_scene(scene, out: str | Path | None = None, **options: Any):
     scene
         From :func:`flexctrl.load_scene`.
     out : str or Path, optional
-        Folder for ``trajectory.csv``, ``summary.json`` and the figures; nothing is written when None.
+        Folder for ``trajectory.csv``, ``summary.json`` and the figures; nothing is written when
+        None.
     **options
         The kind's runner's keywords: ``controller`` (a file or a controller designed in
         Python), ``fidelity``, ``plots``, ``cache`` (:class:`~flexctrl.scenes.cache.SceneCache`) ...

@@ -135,7 +135,8 @@ def _simulate_rung(
 
 
 def prepared(scene, cache: SceneCache) -> tuple[Any, Any]:
-    """The cached model and set-up integrator for a scene at a concrete fidelity, integrator and step.
+    """The cached model and set-up integrator for a scene at a concrete fidelity, integrator and
+    step.
 
     Used to run a scene that ``fidelity = "auto"`` resolved: the chooser has built both already.
     """
@@ -165,12 +166,14 @@ def choose_fidelity(
     cache: SceneCache | None = None,
     checks: str = "full",
 ) -> FidelityChoice:
-    """The lowest rung of ``rigid, amm:1 .. amm:top`` estimated to keep the tip within ``tol`` (see module docstring).
+    """The lowest rung of ``rigid, amm:1 .. amm:top`` estimated to keep the tip within ``tol`` (see
+    module docstring).
 
     Parameters
     ----------
     scene : ArmScene
-        A ``kind = "arm"`` scene (its fidelity is ignored); a closed-loop scene's ``plant`` is not accepted.
+        A ``kind = "arm"`` scene (its fidelity is ignored); a closed-loop scene's ``plant`` is not
+        accepted.
     tol : float
         Tolerance on the largest tip-position error (m), > 0.
     top : int
@@ -206,7 +209,8 @@ def choose_fidelity(
     tol = check_tolerance(tol, key="tolerance")
     if getattr(scene, "kind", None) != "arm":
         raise SpecError(
-            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; allowed: a kind = \"arm\" scene",
+            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported; "
+            'allowed: a kind = "arm" scene',
             source=getattr(scene, "source", None),
             key="kind",
         )
@@ -256,7 +260,8 @@ def _choose(
     low = required_modes(scene)
     if low > top:
         raise SpecError(
-            f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
+            f"the initial elastic coordinates need {low} modes per link, above the top candidate "
+            f"amm:{top}; "
             f"allowed: top >= {low}",
             source=scene.source,
             key="initial.qf",
@@ -318,7 +323,8 @@ def controller_digest(path: str | Path) -> str:
 def closed_loop_key(
     scene, controller: str | Path | None = None, overrides: tuple[str, ...] = ()
 ) -> str:
-    """A canonical string of everything that changes a closed loop's simulation except the plant fidelity.
+    """A canonical string of everything that changes a closed loop's simulation except the plant
+    fidelity.
 
     The scene's settings (plant, payload, initial configuration, target, reference,
     design payload / fidelity / configuration, noise and seed, metrics windows), the
@@ -357,7 +363,8 @@ def simulate_closed_rung(
     overrides: tuple[str, ...] = (),
     cache: SceneCache | None = None,
 ) -> RunRecord:
-    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4).
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step
+    4).
 
     The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
     every rung is compared on the same times without interpolation.  A run at the rung's
@@ -402,7 +409,8 @@ def simulate_closed_rung(
     return cache.get("closed_runs", key, run)
 
 
-#: The cache's kind for whole closed-loop runs at a rung's own step, kept for one reuse; at most this many.
+# : The cache's kind for whole closed-loop runs at a rung's own step, kept for one reuse; at most
+# this many.
 WHOLE_RUNS, WHOLE_RUNS_KEPT = "whole_closed_runs", 8
 
 
@@ -414,7 +422,8 @@ def whole_run_key(
 
 
 def check_closed_loop_auto(scene, controller=None) -> None:
-    """Refuse a closed loop whose plant ``fidelity = "auto"`` cannot choose (the tolerance is checked apart).
+    """Refuse a closed loop whose plant ``fidelity = "auto"`` cannot choose (the tolerance is
+    checked apart).
 
     Raises
     ------
@@ -424,14 +433,16 @@ def check_closed_loop_auto(scene, controller=None) -> None:
     """
     if scene.plant.integrator != "rk4":
         raise SpecError(
-            f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed loop; "
+            f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed "
+            "loop; "
             "allowed: 'rk4' (the loop integrates the plant with RK4)",
             source=scene.source,
             key="integrator",
         )
     if scene.controller_fidelity is not None and scene.controller_fidelity.kind == "auto":
         raise SpecError(
-            "value 'auto' is not allowed for the design model; allowed: 'rigid', 'amm:N' or 'fem:N' "
+            "value 'auto' is not allowed for the design model; allowed: 'rigid', 'amm:N' or "
+            "'fem:N' "
             f"(default {AUTO_DESIGN_FIDELITY!r} when the plant is auto)",
             source=scene.source,
             key="controller_fidelity",
@@ -460,15 +471,16 @@ def choose_closed_loop_fidelity(
     walk: str = "estimate",
     checks: str = "full",
 ) -> FidelityChoice:
-    """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a closed loop's tip within ``tol``.
+    """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a closed loop's tip
+    within ``tol``.
 
     As :func:`choose_fidelity`, with every candidate a whole closed-loop run: the
     controller (the scene's or ``controller`` with ``overrides``) designed on the
     scene's ``controller_fidelity`` (pinned: the plant's fidelity is what is chosen;
-    :func:`flexctrl.scenes.run_closed_loop_scene.pin_design` gives ``amm:2`` when the scene names none),
-    its payload and configuration, the same for every rung; the plant at the rung, RK4
-    at the rung's step (the scene's ``dt`` divided by the smallest whole number that
-    makes ``omega_max * dt <= 0.9 * 2.785``).  Differences from the arm method:
+    :func:`flexctrl.scenes.run_closed_loop_scene.pin_design` gives ``amm:2`` when the scene names
+    none), its payload and configuration, the same for every rung; the plant at the rung, RK4 at the
+    rung's step (the scene's ``dt`` divided by the smallest whole number that makes ``omega_max * dt
+    <= 0.9 * 2.785``).  Differences from the arm method:
 
     * The excitation is the controller's torque, known only by running the loop, so
       the bandwidth rule (method step 1) reads the torques of a first run with the
@@ -530,14 +542,16 @@ def choose_closed_loop_fidelity(
     tol = check_tolerance(tol, key="tolerance")
     if getattr(scene, "kind", None) != "closed_loop":
         raise SpecError(
-            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported here; allowed: "
+            f"scene kind '{getattr(scene, 'kind', type(scene).__name__)}' is not supported here; "
+            "allowed: "
             'a kind = "closed_loop" scene (choose_fidelity takes arm scenes)',
             source=getattr(scene, "source", None),
             key="kind",
         )
     if scene.controller_fidelity is None:
         raise SpecError(
-            "value None is not allowed when the plant is chosen; allowed: a concrete design model, e.g. "
+            "value None is not allowed when the plant is chosen; allowed: a concrete design "
+            "model, e.g. "
             f"{AUTO_DESIGN_FIDELITY!r} (flexctrl.scenes.loop_setup.pin_design sets the default)",
             source=scene.source,
             key="controller_fidelity",
@@ -592,7 +606,8 @@ def _choose_closed(
     low = required_modes(plant)
     if low > top:
         raise SpecError(
-            f"the initial elastic coordinates need {low} modes per link, above the top candidate amm:{top}; "
+            f"the initial elastic coordinates need {low} modes per link, above the top candidate "
+            f"amm:{top}; "
             f"allowed: top >= {low}",
             source=scene.source,
             key="initial.qf",
@@ -628,7 +643,8 @@ def _choose_closed(
                 scene, reference, None, controller=controller, overrides=overrides, cache=cache
             ),
         )
-        # a controller stepped in Python costs as much on a linear plant as on the nonlinear one: no linear
+        # a controller stepped in Python costs as much on a linear plant as on the nonlinear one: no
+        # linear
         # estimate of the rungs, the nonlinear walk from the top down (the step check stays linear)
         from_top = (
             walk == "estimate"

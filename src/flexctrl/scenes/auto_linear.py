@@ -40,7 +40,8 @@ LINEAR_STEPS = ("rk4", "exact")
 def grid_maps(
     A: np.ndarray, B: np.ndarray, grid: float, h: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step ``grid`` (s), ``du`` held.
+    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step ``grid`` (s),
+    ``du`` held.
 
     ``h`` None: the exact zero-order hold.  Otherwise ``grid / h`` (a whole number) RK4
     steps of ``h`` on ``dx' = A dx + B du``: one step is ``dx + h T(hA) (A dx + B du)``
@@ -94,7 +95,8 @@ def linear_closed_rung(
     overrides=(),
     cache: SceneCache | None = None,
 ) -> RunRecord:
-    """The scene's closed loop on the linearised plant at ``fidelity`` (module docstring), on the scene's grid.
+    """The scene's closed loop on the linearised plant at ``fidelity`` (module docstring), on the
+    scene's grid.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""An explicit cache for scene runs: models, reference tables, set-up integrators, runs and fidelity choices.
+"""An explicit cache for scene runs: models, reference tables, set-up integrators, runs and fidelity
+choices.
 
 Building a model (symbolic derivation, modes, compilation) costs far more than most
 runs, and a study worker or a fidelity chooser runs many scenes on the same arm.  What
@@ -49,7 +50,8 @@ class SceneCache:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
                 raise ValueError(f"{name} {size!r} is not allowed; allowed: a whole number >= 1")
         self.maxsize = maxsize
-        #: entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the most memory)
+        # : entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the
+        # most memory)
         self.limits = dict(limits or {})
         self._stores: dict[str, OrderedDict] = {}
         self._hits: dict[str, int] = {}
@@ -70,7 +72,8 @@ class SceneCache:
         return value
 
     def keep(self, kind: str, key: Hashable, value: Any, limit: int = 1) -> None:
-        """Keep ``value`` under ``key`` for one :meth:`take`, at most ``limit`` entries of ``kind`` (oldest dropped).
+        """Keep ``value`` under ``key`` for one :meth:`take`, at most ``limit`` entries of ``kind``
+        (oldest dropped).
 
         For large things worth reusing once, such as a whole run the next call will ask for.
 
@@ -126,7 +129,8 @@ class SceneCache:
         deflection: str,
         compile: bool | None = False,
     ):
-        """A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of ``path`` on :meth:`model`'s model, built once.
+        """A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of ``path`` on
+        :meth:`model`'s model, built once.
 
         Keyed on the model's description, the joint path and the deflection (plain data), so
         the controllers designed on one model for one move share its tables (one per sample

@@ -1,4 +1,5 @@
-"""Building a closed loop from a scene: plant and design models, the designed controller, its reference.
+"""Building a closed loop from a scene: plant and design models, the designed controller, its
+reference.
 
 :func:`build_loop` is the one place a closed-loop scene becomes objects: the plant
 (the scene's arm at the plant's fidelity), the design model (another payload, fidelity
@@ -27,7 +28,8 @@ from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
 from flexctrl.scenes.arm_setup import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
 
-#: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names no
+# : The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene
+# names no
 #: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
 AUTO_DESIGN_FIDELITY = "amm:2"
 
@@ -66,15 +68,18 @@ class LoopSetup:
     x0: np.ndarray
     monitor: Any
     build_time_s: float
-    #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a designed controller).
+    # : What the designed controller depends on (the key of ``cache``'s "designs"; None for a
+    # designed controller).
     design_key: Any = None
 
 
 def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
-    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
+    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking
+    the scene's path.
 
-    ``reference``: the :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the scene's path on
-    ``design_model`` when the caller keeps one (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
+    ``reference``: the :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the
+    scene's path on ``design_model`` when the caller keeps one
+    (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
 
     Raises
     ------
@@ -255,14 +260,16 @@ def _design_model_of(ctrl, scene, overrides):
     ):
         if value is not None:
             raise SpecError(
-                "does not apply to a controller designed in Python (it keeps its own design model); "
+                "does not apply to a controller designed in Python (it keeps its own design "
+                "model); "
                 "allowed: no such key, or a controller file",
                 source=scene.source,
                 key=key,
             )
     if overrides:
         raise SpecError(
-            f"controller overrides {list(overrides)} do not apply to a designed controller; allowed: none",
+            f"controller overrides {list(overrides)} do not apply to a designed controller; "
+            "allowed: none",
             key="overrides",
         )
     model = getattr(ctrl, "design_model", None)
@@ -287,7 +294,8 @@ def closed_loop_tip_path(
     keep: bool = False,
     loop: str = "auto",
 ) -> dict[str, Any]:
-    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques
+    only.
 
     Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
     diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``

@@ -47,7 +47,8 @@ from flexctrl.scenes.loop_setup import build_loop, pin_design
 def resolve_auto(
     scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any
 ):
-    """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step, and the choice.
+    """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step,
+    and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
     :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` with the
@@ -67,7 +68,8 @@ def resolve_auto(
 
 
 def apply_choice(scene, choice, cache: SceneCache):
-    """The auto scene run at a choice made for another run (a study's shared choice): the chosen rung, with
+    """The auto scene run at a choice made for another run (a study's shared choice): the chosen
+    rung, with
     the RK4 step the chooser's rule gives this scene's own model at that rung (:func:`~flexctrl.sim.rk4.rk4_step`)."""
     from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.sim.rk4 import rk4_step
@@ -98,7 +100,8 @@ def run_closed_loop_scene(
     reference_compile: bool | None = None,
     energies: str = "lazy",
 ) -> ClosedLoopResult:
-    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
+    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its
+    files.
 
     Parameters
     ----------
@@ -153,14 +156,14 @@ def run_closed_loop_scene(
     -----
     With ``fidelity = "auto"`` (scene or override) and the scene's ``tolerance`` (m),
     the controller is designed on ``controller_fidelity`` (default
-    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are chosen by
-    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` (kept in
-    ``cache`` by everything that changes the loop), and the run uses them.  The summary
-    then holds ``"fidelity_choice"`` (the choice and all its evidence) and the metrics
-    ``chosen_modes`` (modes per link of the chosen plant, 0 = rigid), ``chosen_dt``
-    (s), ``estimated_error`` and ``reference_error`` (m), ``choice_cost_ratio`` (the
-    choice's loop wall time over the reference's) and ``choice_time_s`` (time this
-    call spent choosing, s: milliseconds when the choice was cached).
+    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are
+    chosen by :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` (kept in ``cache`` by
+    everything that changes the loop), and the run uses them.  The summary then holds
+    ``"fidelity_choice"`` (the choice and all its evidence) and the metrics ``chosen_modes`` (modes
+    per link of the chosen plant, 0 = rigid), ``chosen_dt`` (s), ``estimated_error`` and
+    ``reference_error`` (m), ``choice_cost_ratio`` (the choice's loop wall time over the
+    reference's) and ``choice_time_s`` (time this call spent choosing, s: milliseconds when the
+    choice was cached).
     """
     from flexctrl.spec.fidelity import parse_fidelity
 

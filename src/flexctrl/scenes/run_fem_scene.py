@@ -51,7 +51,8 @@ def _simulate(scene: FemScene):
     if isinstance(scene, RPArmScene):
         return _simulate_rp_arm(scene)
     raise TypeError(
-        f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, RPArmScene, "
+        f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, "
+        "RPArmScene, "
         "TelescopingScene (from read_fem_scene)"
     )
 
@@ -317,7 +318,8 @@ def run_scene(
     Parameters
     ----------
     scene
-        From :func:`flexctrl.spec.fem_scene.read_fem_scene` (or :func:`flexctrl.spec.scene.load_scene`).
+        From :func:`flexctrl.spec.fem_scene.read_fem_scene` (or
+        :func:`flexctrl.spec.scene.load_scene`).
     out
         Folder for ``trajectory.csv``, ``summary.json`` and ``tip.png``; None writes nothing.
     plots

@@ -5,10 +5,10 @@ chosen by name or class, like scipy's ``solve_ivp(method=...)``:
 
 ``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
 ``euler``   fixed-step explicit Euler, compiled like rk4 (:mod:`.euler`; unstable on undamped modes)
-``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop) (:mod:`.newmark_model`)
-``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`)
-``idas``    SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`)
-``scipy``   ``scipy.integrate.solve_ivp`` (RK45, DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
+``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop)
+(:mod:`.newmark_model`) ``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`) ``idas``
+SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`) ``scipy``   ``scipy.integrate.solve_ivp`` (RK45,
+DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
 
 Every run returns a :class:`~flexctrl.sim.trajectory.Trajectory`.
 
@@ -79,7 +79,8 @@ def simulate(
     dt : float
         Step / output interval and torque hold period (s).
     method : str or Integrator subclass
-        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or a class.
+        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or a
+        class.
     u : array_like, optional
         Held joint torques (N m), shape (n_steps, n_u) or (n_u,).
     **options

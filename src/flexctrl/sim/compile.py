@@ -71,8 +71,10 @@ log = logging.getLogger(__name__)
 ENV_NO_COMPILE = "FLEXCTRL_NO_COMPILE"
 DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-march=native")
 PORTABLE_FLAGS: tuple[str, ...] = ("-O2",)
-#: For large Functions evaluated in bulk rather than per step (the reference tables' Newton): half the
-#: compile time of ``-O2`` for the same evaluation speed (measured on the three-link arm's ``amm:2``: 21 s
+# : For large Functions evaluated in bulk rather than per step (the reference tables' Newton): half
+# the
+# : compile time of ``-O2`` for the same evaluation speed (measured on the three-link arm's
+# ``amm:2``: 21 s
 #: against 39 s to compile, 0.28 s against 0.26 s per table at load 7).
 QUICK_FLAGS: tuple[str, ...] = ("-O1", "-march=native")
 NATIVE = ("-march=native", "-mcpu=native", "-mtune=native")
@@ -116,7 +118,8 @@ def compile_disabled_by_env() -> bool:
 
 
 def trusted_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is the user's alone: owned by the effective user, not writable by group or others.
+    """Whether ``path`` is the user's alone: owned by the effective user, not writable by group or
+    others.
 
     A symbolic link is never trusted (its target could change); a folder must be one.
     """
@@ -130,7 +133,8 @@ def trusted_file(path: str | os.PathLike) -> bool:
 
 
 def private_directory(directory: Path) -> Path:
-    """``directory``, created owner-only if missing, when it is the user's alone; else a private temporary folder.
+    """``directory``, created owner-only if missing, when it is the user's alone; else a private
+    temporary folder.
 
     The temporary folder (mode 0700, one per process and untrusted folder) keeps this
     process's libraries out of reach of the folder's other writers; a warning names the
@@ -158,8 +162,10 @@ def _fallback_directory(untrusted: str) -> Path:
         why = str(exc)
     fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
     warnings.warn(
-        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries that others "
-        f"could write are never loaded: compiling into the private folder '{fallback}' for this process "
+        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries "
+        "that others "
+        f"could write are never loaded: compiling into the private folder '{fallback}' for this "
+        "process "
         f"instead (set ${ENV_CACHE} to a folder only you can write)",
         stacklevel=3,
     )
@@ -278,7 +284,10 @@ def compile_function(
         if isinstance(result, CompiledFunction):
             return result
         failure = result
-    message = f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's virtual machine"
+    message = (
+        f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's "
+        "virtual machine"
+    )
     warnings.warn(message, stacklevel=2)
     return CompiledFunction(fun, compiled=False, reason=message)
 
@@ -293,7 +302,8 @@ def compile_by_recipe(
     flags: Sequence[str] = DEFAULT_FLAGS,
     check: Callable[[ca.Function], bool] | None = None,
 ) -> CompiledFunction:
-    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it exists.
+    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it
+    exists.
 
     Parameters
     ----------
@@ -396,7 +406,8 @@ def compile_for(
     enabled: bool | None = None,
     flags: Sequence[str] = DEFAULT_FLAGS,
 ) -> CompiledFunction:
-    """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function) and ``tag``.
+    """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function)
+    and ``tag``.
 
     For a Function built from ``owner`` alone (a plant step of the lifted ``f``, say): the
     first model of a structure builds and compiles (or loads) it, later models of the
@@ -436,7 +447,8 @@ def _compile_or_load(
     library = directory / f"{name}_{cache_key(fun, flags, compiler)}.so"
     if library.is_file() and not trusted_file(library):
         log.warning(
-            "cached library %s is not the user's alone (owner or write permission of others); rebuilding "
+            "cached library %s is not the user's alone (owner or write permission of others); "
+            "rebuilding "
             "it instead of loading it",
             library,
         )

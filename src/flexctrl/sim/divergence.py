@@ -62,7 +62,8 @@ class DivergenceMonitor:
             self._fail(
                 times[i],
                 f"kinetic plus elastic energy grew to {energy[i]:.3g} J, more than "
-                f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can account for",
+                f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can "
+                "account for",
             )
         if bad.any():
             self._fail(times[first_bad], "the state became non-finite (NaN or inf)")

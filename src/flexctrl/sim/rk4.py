@@ -68,7 +68,8 @@ def _rk4_combine(x, h, k1, k2, k3, k4):
 
 
 def rk4_next(f: Callable, x, h, t=None, *, k1=None):
-    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given) of length ``h``.
+    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given)
+    of length ``h``.
 
     The one place RK4's stages are written; symbolic (CasADi) or numeric.  The
     expression is, in this order of floating-point operations,
@@ -149,7 +150,8 @@ def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
 def held_sample_loop(
     model, h: float, substeps: int, chunk: int, name: str = "held_rk4"
 ) -> ca.Function:
-    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h`` (s), torque held.
+    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h``
+    (s), torque held.
 
     The sample-level building block of the FEM timing report and the speed/accuracy
     study: the output is the state at the end of each of ``chunk`` samples.
@@ -166,8 +168,10 @@ def held_sample_loop(
     return ca.Function(name, args, loop.call(args))
 
 
-#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the imaginary-axis
-#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the polynomial).  The one copy.
+# : The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the
+# imaginary-axis
+# : limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the
+# polynomial).  The one copy.
 RK4_STABILITY_LIMIT = 2.785
 
 #: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.
@@ -253,8 +257,10 @@ class RK4(Integrator):
         self.compiled = compile_function(
             loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags
         )
-        # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per chunk.
-        # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows) array.
+        # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per
+        # chunk.
+        # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows)
+        # array.
         n = self.chunk
         self._args = [
             np.zeros(self.model.n_x),

@@ -108,7 +108,8 @@ class ScipyIntegrator(Integrator):
             ) + int(res.njev)
             if res.status != 0 or res.y.shape[1] != b - a:
                 raise SimulationError(
-                    f"scipy {self.method} failed between t = {times[a]:.6g} s and {times[b]:.6g} s: "
+                    f"scipy {self.method} failed between t = {times[a]:.6g} s and {times[b]:.6g} "
+                    "s: "
                     f"{res.message}. " + self.stability_advice()
                 )
             out[a:b] = res.y.T

@@ -51,7 +51,8 @@ from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
 MAX_MODES = 6
-#: A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length * length**3 / 12``
+# : A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length *
+# length**3 / 12``
 #: warns (a slip of a unit or of the axis: about the link's end it would be 4x).
 INERTIA_FACTOR = 2.0
 JOINT_TYPES = ("revolute", "prismatic")
@@ -138,7 +139,8 @@ class LinkSpec:
             return self.damping_ratios[0]
         if mode >= len(self.damping_ratios):
             raise SpecError(
-                f"damping_ratio lists {len(self.damping_ratios)} values but mode {mode + 1} was asked for; "
+                f"damping_ratio lists {len(self.damping_ratios)} values but mode {mode + 1} was "
+                "asked for; "
                 "give one value per mode or a single value for all"
             )
         return self.damping_ratios[mode]
@@ -327,7 +329,8 @@ def _read_link(r: TableReader) -> LinkSpec:
     if len(ratios) > 1 and len(ratios) < link.n_modes:
         raise r.error(
             "damping_ratio",
-            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per mode",
+            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one "
+            "per mode",
         )
     r.finish()
     return link
@@ -342,8 +345,10 @@ def _link_inertia(r: TableReader) -> float:
     value = r.nonnegative("inertia", unit="kg m^2")
     if not uniform / INERTIA_FACTOR <= value <= uniform * INERTIA_FACTOR:
         warn_spec(
-            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / 12 = "
-            f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within a factor "
+            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / "
+            "12 = "
+            f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within "
+            "a factor "
             f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
             source=r.source,
             key=r.key("inertia"),
@@ -354,7 +359,10 @@ def _link_inertia(r: TableReader) -> float:
 
 def _torque_limit(r: TableReader) -> float:
     """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an actuator without a limit."""
-    allowed = "a finite number > 0 (N m), or inf for an actuator without a limit (written out: no default)"
+    allowed = (
+        "a finite number > 0 (N m), or inf for an actuator without a limit (written out: "
+        "no default)"
+    )
     value = r.raw("torque_limit", allowed=allowed)
     if isinstance(value, float) and value == math.inf:
         return math.inf

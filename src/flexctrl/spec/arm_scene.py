@@ -26,8 +26,9 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint),
                 form = "ratio" (d = 2 zeta omega m_l, zeta the modal damping ratio) or "paper"
                 (Subedi et al. Eq 68 as printed, d = 2 zeta omega: 1/s where kg/s is needed,
-                an effective ratio zeta / m_l) or "stiffness" (the finite elements' (2 zeta / omega_1) K:
-                mode j has the ratio zeta omega_j / omega_1); default: the model file's damping_form
+                an effective ratio zeta / m_l) or "stiffness" (the finite elements' (2 zeta /
+                omega_1) K: mode j has the ratio zeta omega_j / omega_1); default: the model file's
+                damping_form
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
     [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
@@ -132,7 +133,8 @@ class ArmScene:
     #: How ``fidelity = "auto"`` walks the ladder for a closed loop: one of ``FIDELITY_WALKS``
     #: (:mod:`flexctrl.spec.fidelity`): ``estimate``, ``linear`` or ``ladder``.
     fidelity_walk: str = "estimate"
-    #: What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full`` or ``tolerance``.
+    # : What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full``
+    # or ``tolerance``.
     fidelity_checks: str = "full"
     axial_shortening: bool | None = None
     axial_stretch: bool | None = None
@@ -305,7 +307,8 @@ def read_arm_scene(
     if duration / dt > 5e7:
         raise r.error(
             "duration",
-            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most 5e7 steps",
+            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most "
+            "5e7 steps",
         )
     scene = ArmScene(
         name=r.string("name", Path(source).stem),

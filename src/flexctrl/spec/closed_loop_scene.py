@@ -13,15 +13,18 @@ zero-order hold.  The extra keys::
                                          # (linearised) at (default: the target)
     [target]   q = [30, 0, 0]            # degrees: the joint angles to move to
                # or move = [30, 0, 0]    # degrees relative to the initial joint angles (for sweeps)
-               profile = "quintic"       # "step" (default: the reference jumps at t = 0) or "quintic"
-               move_time = 1.5           # s, duration of the quintic (required with it; unused by a step)
-               deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static" or "static"
+               profile = "quintic"       # "step" (default: the reference jumps at t = 0) or
+               "quintic" move_time = 1.5           # s, duration of the quintic (required with it;
+               unused by a step) deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC:
+               "quasi_static" or "static"
     [noise]    enabled = true, seed = 0  # measurement noise as set in the controller's sensors
     [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
-               divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the link's
+               divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the
+               link's
                                              # length means the closed loop diverged
-               divergence_angle = 90.0       # deg: so does a joint this far outside the range of its move
-               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last second below it
+               divergence_angle = 90.0       # deg: so does a joint this far outside the range of
+               its move stable_band = 0.01            # m: stable = 1 needs the tip error of the
+               run's last second below it
 
 Angles are in degrees in the file and radians in the dataclass.  The reference
 (:mod:`flexctrl.control.reference_trajectory`) goes from the initial joint angles to the target;
@@ -45,7 +48,8 @@ from flexctrl.spec.reader import TableReader
 
 @dataclass(frozen=True)
 class MetricSettings:
-    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the file's).
+    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the
+    file's).
 
     Attributes
     ----------

@@ -93,7 +93,8 @@ class ScheduleSettings:
 class PDSettings:
     """Joint PD control with gravity compensation.
 
-    ``tau = tau_g + tau_ff + F(s) [Kp (q_ref - q) + Kd (qd_ref - qd)]`` (see :mod:`flexctrl.control.pd`).
+    ``tau = tau_g + tau_ff + F(s) [Kp (q_ref - q) + Kd (qd_ref - qd)]`` (see
+    :mod:`flexctrl.control.pd`).
 
     Attributes
     ----------
@@ -163,7 +164,8 @@ class PDSettings:
         missing = {"joints", "joint_rates"} - set(self.sensors.outputs)
         if missing and not self.sensors.full_state:
             raise SpecError(
-                f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and 'joint_rates' "
+                f"value {list(self.sensors.outputs)!r} is not allowed; PD needs 'joints' and "
+                "'joint_rates' "
                 "(or 'state')",
                 key="sensors.outputs",
             )
@@ -171,7 +173,8 @@ class PDSettings:
         number_field("strain_rate_filter", self.strain_rate_filter, low=0.0, unit="Hz")
         if self.strain_rate_gain and "strain" not in self.sensors.outputs:
             raise SpecError(
-                f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' among "
+                f"value {list(self.strain_rate_gain)!r} needs strain gauges; allowed: 'strain' "
+                "among "
                 f"sensors.outputs (now {list(self.sensors.outputs)!r})",
                 key="strain_rate_gain",
             )
@@ -179,7 +182,8 @@ class PDSettings:
 
 @dataclass(frozen=True)
 class LQRSettings:
-    """Discrete LQR on the flexible linearisation (LQG with a Kalman filter when the state is not measured).
+    """Discrete LQR on the flexible linearisation (LQG with a Kalman filter when the state is not
+    measured).
 
     Attributes
     ----------
@@ -350,13 +354,15 @@ class MPCSettings:
             isinstance(b, int) and not isinstance(b, bool) and b >= 1 for b in self.blocks
         ):
             raise SpecError(
-                f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 (samples "
+                f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 "
+                "(samples "
                 "per block)",
                 key="blocks",
             )
         if self.blocks and sum(self.blocks) != self.horizon:
             raise SpecError(
-                f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks that "
+                f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks "
+                "that "
                 f"add up to the horizon ({self.horizon})",
                 key="blocks",
             )
@@ -408,7 +414,8 @@ class NMPCSettings:
         Real-time iteration (one SQP step per sample, Gauss-Newton QP) or a full NLP solve.
     nlp_solver : {"ipopt"}
         For ``full`` and for the RTI initialisation (FATROP's structure detection rejected
-        this formulation in CasADi 3.8; see the module docs of :mod:`flexctrl.control.nmpc.controller`).
+        this formulation in CasADi 3.8; see the module docs of
+        :mod:`flexctrl.control.nmpc.controller`).
     qp_solver : {"hpipm", "osqp", "qpoases"}
         QP of the RTI (through ``casadi.conic``).
     max_iter : int

@@ -1,4 +1,5 @@
-"""Model files of the finite-element arms with moving supports: ``models/rp_arm.toml`` and ``models/telescoping.toml``.
+"""Model files of the finite-element arms with moving supports: ``models/rp_arm.toml`` and
+``models/telescoping.toml``.
 
 Plain descriptions, read and validated here and simulated by
 :mod:`flexctrl.dynamics.fem.rp_arm`, :mod:`flexctrl.dynamics.fem.rp_arm_full` and
@@ -24,15 +25,19 @@ from flexctrl.spec.reader import TableReader, read_toml
 Array = NDArray[np.float64]
 #: The two links of a telescoping pair, in the order of the model file.
 SIDES = ("outer", "inner")
-#: The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or the
-#: link clamped at its inner end E in the carriage and held by one bearing at the housing mouth (Fig 4).
+# : The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or
+# the
+# : link clamped at its inner end E in the carriage and held by one bearing at the housing mouth
+# (Fig 4).
 JOINTS = ("supports", "clamped")
 
 
-# -- the revolute-prismatic arm ---------------------------------------------------------------------
+# -- the revolute-prismatic arm
+# ---------------------------------------------------------------------
 @dataclass(frozen=True)
 class RPArmSpec:
-    """An R-P arm (``models/rp_arm.toml``): a flexible link sliding through a rotating rigid housing.
+    """An R-P arm (``models/rp_arm.toml``): a flexible link sliding through a rotating rigid
+    housing.
 
     Attributes
     ----------
@@ -45,9 +50,9 @@ class RPArmSpec:
     EI : float
         Bending stiffness of the link, N m^2.
     support_inner, support_outer : float
-        Radii of the two bilateral supports from the base axis, m (``support_inner < support_outer``).
-        With ``joint = "clamped"`` ``support_outer`` is the mouth bearing D' and ``support_inner``
-        the outboard end of the carriage's travel (E stays inboard of it).
+        Radii of the two bilateral supports from the base axis, m (``support_inner <
+        support_outer``). With ``joint = "clamped"`` ``support_outer`` is the mouth bearing D' and
+        ``support_inner`` the outboard end of the carriage's travel (E stays inboard of it).
     joint : {"supports", "clamped"}
         ``"supports"``: the link slides through two bilateral supports (Eqs 24-25 twice), driven at
         an end.  ``"clamped"``: Pan's Fig 4, the link clamped at its inner end E in the carriage
@@ -162,7 +167,8 @@ def load_rp_arm(path: str | Path, overrides: Iterable[str] = ()) -> RPArmSpec:
     return rp_arm_from_document(document, str(path))
 
 
-# -- the telescoping pair ---------------------------------------------------------------------------
+# -- the telescoping pair
+# ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Contact:
     """A bearing between the two links of a telescoping pair (Eqs 26-28).
@@ -193,7 +199,8 @@ class LinkProps:
 
 @dataclass(frozen=True)
 class TelescopingSpec:
-    """A telescoping pair (``models/telescoping.toml``): an inner flexible link sliding in an outer one.
+    """A telescoping pair (``models/telescoping.toml``): an inner flexible link sliding in an outer
+    one.
 
     Attributes
     ----------
@@ -243,9 +250,12 @@ class TelescopingSpec:
             for k, c in enumerate(self.contacts):
                 if not (0.0 < x1[k] <= L1 + 1e-12 and -1e-12 <= x2[k] <= L2 + 1e-12):
                     raise SpecError(
-                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact {k + 1} "
-                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; allowed: "
-                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on both links, "
+                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) "
+                        f"contact {k + 1} "
+                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; "
+                        "allowed: "
+                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on "
+                        "both links, "
                         "off the clamped root)",
                         source=self.source or None,
                         key=key,

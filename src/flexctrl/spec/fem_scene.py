@@ -1,4 +1,5 @@
-"""Descriptions of the finite-element scenes with moving supports: ``kind = "sliding_beam"``, ``"rp_arm"``, ``"telescoping"``.
+"""Descriptions of the finite-element scenes with moving supports: ``kind = "sliding_beam"``,
+``"rp_arm"``, ``"telescoping"``.
 
 :func:`read_fem_scene` (the reader :func:`flexctrl.spec.scene.load_scene` uses for every
 ``kind`` in :data:`FEM_SCENE_KINDS`) validates a scene once, into a frozen description:
@@ -159,7 +160,8 @@ class FemScene:
     def with_fidelity(
         self, fidelity: Fidelity | str | None, *, source: str = "--fidelity"
     ) -> FemScene:
-        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes nothing.
+        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes
+        nothing.
 
         Raises
         ------
@@ -374,9 +376,9 @@ def read_fem_scene(
 ) -> AnyFemScene:
     """Validate a finite-element scene document (see the module docstring) into its description.
 
-    The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of :data:`FEM_SCENE_KINDS`:
-    everything is checked here, once, including the model file and (``telescoping``) the
-    contacts over the stroke, so errors surface when the scene is loaded.
+    The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of
+    :data:`FEM_SCENE_KINDS`: everything is checked here, once, including the model file and
+    (``telescoping``) the contacts over the stroke, so errors surface when the scene is loaded.
 
     Parameters
     ----------

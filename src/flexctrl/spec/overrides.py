@@ -42,7 +42,8 @@ def _pieces(key: str, source: str) -> list[tuple[str, bool]]:
             current += char
     if inside:
         raise SpecError(
-            f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, e.g. grid.\"scene.dt\"",
+            f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, "
+            'e.g. grid."scene.dt"',
             source=source,
         )
     pieces.append((current, quoted))
@@ -98,7 +99,8 @@ def apply_overrides(
 def apply_values(
     document: dict[str, Any], values: Mapping[str, Any], source: str = "overrides"
 ) -> dict[str, Any]:
-    """Return a copy of ``document`` with ``{KEY: value}`` set, keys spelled as for :func:`apply_overrides`.
+    """Return a copy of ``document`` with ``{KEY: value}`` set, keys spelled as for
+    :func:`apply_overrides`.
 
     The values are used as given (Python numbers, lists, strings), not parsed, so the
     document's validation sees exactly what the caller passed: ``{"payload.mass": "0.5"}``

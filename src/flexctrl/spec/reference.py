@@ -120,7 +120,8 @@ class JointReference:
 
 @dataclass(frozen=True)
 class Move:
-    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad), a quintic by default.
+    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad), a quintic
+    by default.
 
     Parameters
     ----------

@@ -6,11 +6,12 @@ the one place where scene kinds are known to the descriptions:
 ==================  ======================================================  ==============================
 kind                reader                                                  description
 ==================  ======================================================  ==============================
-``arm``             :func:`flexctrl.spec.arm_scene.read_arm_scene`          :class:`~flexctrl.spec.arm_scene.ArmScene`
-``closed_loop``     :func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene`  :class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene`
-``sliding_beam``,   :func:`flexctrl.spec.fem_scene.read_fem_scene`          :class:`~flexctrl.spec.fem_scene.FemScene`
-``rp_arm``,
-``telescoping``
+``arm``             :func:`flexctrl.spec.arm_scene.read_arm_scene`
+:class:`~flexctrl.spec.arm_scene.ArmScene` ``closed_loop``
+:func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene`
+:class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene` ``sliding_beam``,
+:func:`flexctrl.spec.fem_scene.read_fem_scene`          :class:`~flexctrl.spec.fem_scene.FemScene`
+``rp_arm``, ``telescoping``
 ==================  ======================================================  ==============================
 
 Running a scene is a higher layer's job (:func:`flexctrl.scenes.run_scene`).
@@ -30,7 +31,8 @@ from flexctrl.spec.arm_scene import ArmScene, InputSpec, resolve_model_path  # n
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
-#: Scene kinds: kind -> ``"module:reader"``; readers take ``(document, source, base_dir)`` and return a scene.
+# : Scene kinds: kind -> ``"module:reader"``; readers take ``(document, source, base_dir)`` and
+# return a scene.
 SCENE_READERS: dict[str, str] = {
     "arm": "flexctrl.spec.arm_scene:read_arm_scene",
     "closed_loop": "flexctrl.spec.closed_loop_scene:read_closed_loop_scene",

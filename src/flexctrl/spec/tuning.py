@@ -1,4 +1,5 @@
-"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, over which scenarios, for what.
+"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, over which scenarios, for
+what.
 
 Layout (paths relative to the tuning file; SI units, angles in degrees as in every file)::
 
@@ -96,7 +97,8 @@ class ParameterSpec:
         return math.log10(value) if self.scale == "log" else float(value)
 
     def from_unit(self, coordinate: float) -> float:
-        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 significant digits
+        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 significant
+        digits
         (what a file shows; the runs use exactly the value written), whole for integers."""
         value = 10.0**coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)

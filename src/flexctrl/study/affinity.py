@@ -31,12 +31,14 @@ from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-#: Settings that name or tune the controller alone (the model a worker builds does not depend on them).
+# : Settings that name or tune the controller alone (the model a worker builds does not depend on
+# them).
 CONTROLLER_KEYS = ("controller", "seed", "replicate")
 
 
 def affinity_key(settings: dict[str, Any]) -> str:
-    """The settings that decide what a worker builds before the controller: all but the controller's and the seed.
+    """The settings that decide what a worker builds before the controller: all but the controller's
+    and the seed.
 
     Examples
     --------
@@ -126,10 +128,12 @@ def run_pinned(
     describe: Callable[[BaseException], str],
     window: int = 2,
 ) -> Iterator[tuple[Any, dict]]:
-    """Run ``runs`` on ``workers`` one-process pools with affinity (the module docstring); yields ``(run, result)``.
+    """Run ``runs`` on ``workers`` one-process pools with affinity (the module docstring); yields
+    ``(run, result)``.
 
     ``submit(pool, run)`` starts a run, ``make_pool()`` makes a one-process pool, ``failed(text)``
-    the record of a failed run, ``describe(exc)`` its one line; ``window`` runs are queued per worker.
+    the record of a failed run, ``describe(exc)`` its one line; ``window`` runs are queued per
+    worker.
     """
     queue = AffinityQueue(runs, key)
     suspects: deque = deque()

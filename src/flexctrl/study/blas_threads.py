@@ -45,7 +45,8 @@ def usable_cpus() -> int:
 
 
 def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None) -> int:
-    """BLAS threads per worker for ``setting`` (``"auto"``, or a whole number; 0: leave the libraries alone).
+    """BLAS threads per worker for ``setting`` (``"auto"``, or a whole number; 0: leave the
+    libraries alone).
 
     Parameters
     ----------
@@ -72,7 +73,8 @@ def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None
         return max(1, (usable_cpus() if cpus is None else cpus) // max(1, workers))
     if isinstance(setting, bool) or not isinstance(setting, int) or setting < 0:
         raise SpecError(
-            f"value {setting!r} is not allowed; allowed: 'auto' (usable CPUs // workers, at least 1), "
+            f"value {setting!r} is not allowed; allowed: 'auto' (usable CPUs // workers, at "
+            "least 1), "
             "a whole number of BLAS threads per worker, or 0 (the libraries' own default)",
             key="--blas-threads",
         )
@@ -109,7 +111,8 @@ def thread_environment(threads: int) -> dict[str, str]:
 
 
 def limit_blas_threads(threads: int) -> None:
-    """Hold this process's BLAS and OpenMP libraries to ``threads`` threads (a pool worker's initializer).
+    """Hold this process's BLAS and OpenMP libraries to ``threads`` threads (a pool worker's
+    initializer).
 
     The libraries loaded already are limited through :mod:`threadpoolctl`; the environment
     variables of :data:`THREAD_VARIABLES` are set for any library loaded later.

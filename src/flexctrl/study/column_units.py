@@ -39,7 +39,8 @@ OTHER_UNITS = {
     "h_cap": "s",
     "h_floor": "s",
     "omega_h_measured": "-",
-    # stored trajectories: the closed loop's (t, e, tip_x, tip_y, q1.., u1.., w1..) and the selftest's
+    # stored trajectories: the closed loop's (t, e, tip_x, tip_y, q1.., u1.., w1..) and the
+    # selftest's
     "t": "s",
     "e": "m",
     "tip_x": "m",

@@ -213,7 +213,8 @@ def throughput(
     overrides: Sequence[str] = (),
     blas_threads: int | str = "auto",
 ) -> dict:
-    """Runs per minute of ``study`` on a :class:`LocalhostCluster` of each size in ``worker_counts``.
+    """Runs per minute of ``study`` on a :class:`LocalhostCluster` of each size in
+    ``worker_counts``.
 
     Every size runs the whole study into a fresh folder with fresh workers (the compiled
     code cache on disk is shared, as on a cluster with a shared file system); the result
@@ -292,14 +293,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(result, indent=1))
     else:
         print(
-            f"{args.study}: load {result['load_average_before'][0]:.2f} -> {result['load_average_after'][0]:.2f} "
+            f"{args.study}: load {result['load_average_before'][0]:.2f} -> "
+            f"{result['load_average_after'][0]:.2f} "
             f"on {result['cpu_count']} CPUs"
         )
         for size in result["sizes"].values():
             threads = size["blas_threads_per_worker"] or "default"
             print(
-                f"  {size['workers']} worker(s), {threads} BLAS thread(s) each: {size['runs']} runs ({size['ok']} ok) "
-                f"in {size['elapsed_s']:.1f} s = {size['runs_per_minute']:.1f} runs/min, speed-up {size['speedup']:.2f}"
+                f"  {size['workers']} worker(s), {threads} BLAS thread(s) each: {size['runs']} "
+                f"runs ({size['ok']} ok) "
+                f"in {size['elapsed_s']:.1f} s = {size['runs_per_minute']:.1f} runs/min, "
+                f"speed-up {size['speedup']:.2f}"
             )
     return 0
 

@@ -1,4 +1,5 @@
-"""What a study executor returns, and the helpers its authors use (see :mod:`flexctrl.study.registry`).
+"""What a study executor returns, and the helpers its authors use (see
+:mod:`flexctrl.study.registry`).
 
 An executor is a function ``fn(settings: dict) -> RunOutput`` (the settings are the
 plain dict of :mod:`flexctrl.study.study_file`).  Worker processes live for the whole study,
@@ -61,7 +62,8 @@ class RunOutput:
             array = np.asarray(value)
             if array.ndim != 1 or array.dtype.kind not in "biuf":
                 raise TypeError(
-                    f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; expected a 1-D numeric array"
+                    f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; "
+                    "expected a 1-D numeric array"
                 )
             arrays[name] = array
         object.__setattr__(self, "metrics", metrics)
@@ -113,7 +115,8 @@ def freeze(value: Any) -> Any:
 
 
 def overrides_for(settings: Mapping[str, Any], target: str) -> list[str]:
-    """The ``KEY=VALUE`` overrides of one file (``"scene"``, ``"controller"`` or ``"model"``), prefix removed.
+    """The ``KEY=VALUE`` overrides of one file (``"scene"``, ``"controller"`` or ``"model"``),
+    prefix removed.
 
     Examples
     --------
@@ -160,11 +163,16 @@ def worker_scene_cache():
     return SceneCache(maxsize=32, limits=WORKER_CACHE_LIMITS)
 
 
-#: Entries a worker keeps of the kinds that hold a model (with everything derived from it: about 19 MB per
-#: configuration of amm:2 with the seven controllers of the sweep).  At 32, as for the other kinds, a worker of
-#: the 4032-run sweep grew to 1040 MB; with these it stays at about 400 MB from the 12th configuration on (one
-#: process, seven controllers per configuration, 36 configurations).  8 models cover an automatic-fidelity walk
-#: (rigid, amm:1..5 and the design model); a configuration's runs are consecutive in a worker (affinity).
+# : Entries a worker keeps of the kinds that hold a model (with everything derived from it: about 19
+# MB per
+# : configuration of amm:2 with the seven controllers of the sweep).  At 32, as for the other kinds,
+# a worker of
+# : the 4032-run sweep grew to 1040 MB; with these it stays at about 400 MB from the 12th
+# configuration on (one
+# : process, seven controllers per configuration, 36 configurations).  8 models cover an
+# automatic-fidelity walk
+# : (rigid, amm:1..5 and the design model); a configuration's runs are consecutive in a worker
+# (affinity).
 WORKER_CACHE_LIMITS = {
     "models": 8,
     "references": 8,

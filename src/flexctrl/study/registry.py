@@ -100,7 +100,8 @@ class Executor:
     report: Callable[..., list[str]] | None = None
     needs_model: bool = True
     unavailable: Callable[[dict], dict[str, str]] | None = None
-    #: the module that holds the executor's code, which a local pool's fork server imports once for its workers
+    # : the module that holds the executor's code, which a local pool's fork server imports once for
+    # its workers
     module: str | None = None
 
     def unavailable_metrics(self, settings: dict) -> dict[str, str]:
@@ -218,7 +219,8 @@ def _module_executor(name: str, module: str, summary: str, *, needs_model: bool 
     _REGISTRY[name] = Executor(name, run, check, summary, report, needs_model, unavailable, module)
 
 
-#: The shipped executors: name -> (module, one line for ``flexctrl study --help``, needs a model file).
+# : The shipped executors: name -> (module, one line for ``flexctrl study --help``, needs a model
+# file).
 BUILTIN: dict[str, tuple[str, str, bool]] = {
     "closed_loop": (
         "flexctrl.study.executors.closed_loop_executor",

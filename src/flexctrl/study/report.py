@@ -218,19 +218,24 @@ def _header(ctx: _Context) -> list[str]:
     lines = [
         f"# Study `{s.get('name', '?')}`",
         "",
-        f"- study file: `{s.get('source', '?')}` (sha256 {s.get('sha256', '?')}), executor `{s.get('executor', '?')}`, seed {s.get('seed', '?')}",
-        f"- runs: {n_plan} in the grid; {ok} ok, {failed} failed, {max(n_plan - ok - failed, 0)} not run",
+        f"- study file: `{s.get('source', '?')}` (sha256 {s.get('sha256', '?')}), executor "
+        f"`{s.get('executor', '?')}`, seed {s.get('seed', '?')}",
+        f"- runs: {n_plan} in the grid; {ok} ok, {failed} failed, {max(n_plan - ok - failed, 0)} "
+        "not run",
         "- grid: "
         + (", ".join(f"{k} ({len(v)})" for k, v in s.get("grid", {}).items()) or "a single run"),
-        f"- report metric: `{ctx.metric}` ({'lower' if ctx.spec.lower_is_better else 'higher'} is better)"
+        f"- report metric: `{ctx.metric}` ({'lower' if ctx.spec.lower_is_better else 'higher'} "
+        "is better)"
         if ctx.metric
         else "- no metric recorded yet",
-        f"- started {ctx.study.get('start', '?')}, ended {ctx.study.get('end') or 'not yet (interrupted or running)'}; "
+        f"- started {ctx.study.get('start', '?')}, ended "
+        f"{ctx.study.get('end') or 'not yet (interrupted or running)'}; "
         f"{len(ctx.study.get('sessions', []))} session(s), last on {ctx.study.get('sessions', [{}])[-1].get('backend', '?')}",
         f"- machine: {machine.get('platform', '?')}, {machine.get('cpu_count', '?')} CPUs",
         "- versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()),
         "",
-        "Files: `results.csv` (one row per run), `runs/<id>.json` (records), `runs/<id>.npz` (trajectories), `study.json`.",
+        "Files: `results.csv` (one row per run), `runs/<id>.json` (records), `runs/<id>.npz` "
+        "(trajectories), `study.json`.",
     ]
     return lines
 
@@ -300,9 +305,12 @@ def _maps(ctx: _Context) -> list[str]:
     log = wants_log(finite)
     lines += [
         "",
-        f"Median {shown.label} over ({display(x_axis).label}, {display(y_axis).label}), one panel per "
-        f"{' x '.join(f'`{f}`' for f in facets) or 'study'}; one {'logarithmic ' if log else ''}colour scale for all "
-        f"panels ({_fmt(float(finite.min()))} to {_fmt(float(finite.max()))}{' ' + shown.unit if shown.unit else ''}), grey: no ok run.",
+        f"Median {shown.label} over ({display(x_axis).label}, {display(y_axis).label}), one "
+        "panel per "
+        f"{' x '.join(f'`{f}`' for f in facets) or 'study'}; one "
+        f"{'logarithmic ' if log else ''}colour scale for all "
+        f"panels ({_fmt(float(finite.min()))} to "
+        f"{_fmt(float(finite.max()))}{' ' + shown.unit if shown.unit else ''}), grey: no ok run.",
     ]
     last = len(ctx.distinct(facets[-1])) if facets else 1
     for page in range(0, len(panels), MAX_PANELS):
@@ -372,11 +380,13 @@ def _best_maps(ctx: _Context, facets: list[str], xs, ys, x_axis: str, y_axis: st
         "",
         "### Best per cell",
         "",
-        f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in each cell "
+        f"The `{rank_by}` with the {'lowest' if sign > 0 else 'highest'} median {shown.label} in "
+        "each cell "
         + (
             "(its value written below its name; hatched: a tie, every tied name listed)."
             if written
-            else f"(colour: the best, named in the legend; hatched: a tie; {len(xs)} x {len(ys)} cells leave no room "
+            else f"(colour: the best, named in the legend; hatched: a tie; {len(xs)} x {len(ys)} "
+            "cells leave no room "
             "for names and values, which the ranking above and the ratio maps below give)."
         ),
     ]
@@ -397,7 +407,8 @@ def _best_maps(ctx: _Context, facets: list[str], xs, ys, x_axis: str, y_axis: st
     if binary or ratios.size == 0:
         return lines + [
             "",
-            f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says it all."
+            f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says "
+            "it all."
             if binary
             else "No ratio map: no finite ratio.",
         ]
@@ -438,7 +449,8 @@ def _ranking(ctx: _Context) -> list[str]:
         "",
         f"Median {shown.label} of the ok runs per `{rank_by}`"
         + (f", for each `{group_by}`" if group_by in ctx.coords else "")
-        + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other grid columns (poses ...).",
+        + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other "
+        "grid columns (poses ...).",
     ]
     values: dict[Any, dict[Any, list[float]]] = {}
     for group in groups:
@@ -500,7 +512,8 @@ def _worst(ctx: _Context) -> list[str]:
     rank_by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
     lines += [
         "",
-        f"The {len(rows)} ok runs with the {'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
+        f"The {len(rows)} ok runs with the "
+        f"{'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
         + (
             f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one thicker)."
             if rank_by
@@ -669,13 +682,16 @@ def _resources(ctx: _Context) -> list[str]:
     ]
     if memory:
         lines.append(
-            f"- worker peak resident memory when a run ended: median {_fmt(_median(memory))} MB, max {_fmt(max(memory))} MB "
+            f"- worker peak resident memory when a run ended: median {_fmt(_median(memory))} MB, "
+            f"max {_fmt(max(memory))} MB "
             "(a worker's high-water mark, so it bounds every run it did)"
         )
     if disk:
         lines.append(
-            f"- disk written per run (record and trajectory): median {_fmt(_median(disk) / 1024)} KiB, "
-            f"max {_fmt(max(disk) / 1024)} KiB, total {_fmt(sum(disk) / 2**20)} MiB over {len(disk)} runs"
+            "- disk written per run (record and trajectory): median "
+            f"{_fmt(_median(disk) / 1024)} KiB, "
+            f"max {_fmt(max(disk) / 1024)} KiB, total {_fmt(sum(disk) / 2**20)} MiB over "
+            f"{len(disk)} runs"
         )
     return lines
 

@@ -21,7 +21,8 @@ from flexctrl.study.column_units import Shown, display
 LOG_SPAN = 20.0
 
 
-#: Cells per panel up to which a map writes its values (names, for the best map) into the cells; a 12 x 12 grid
+# : Cells per panel up to which a map writes its values (names, for the best map) into the cells; a
+# 12 x 12 grid
 #: of the sweep at 100 dpi leaves about 20 pixels per cell, where the text of neighbours overlaps.
 TEXT_CELLS = 64
 

@@ -265,11 +265,14 @@ class LocalPoolBackend:
         from flexctrl.study.blas_threads import blas_thread_budget
 
         self.workers = workers
-        #: runs that share a model go to the same worker (:mod:`flexctrl.study.affinity`); False: any free worker
+        # : runs that share a model go to the same worker (:mod:`flexctrl.study.affinity`); False:
+        # any free worker
         self.affinity = affinity and workers > 1
-        #: the fork server imports the executor's module once for all workers; False: each worker in its first run
+        # : the fork server imports the executor's module once for all workers; False: each worker
+        # in its first run
         self.preload = preload
-        #: as asked (``"auto"``, a count, 0); :attr:`threads` is the count each worker holds its BLAS to (0: no limit)
+        # : as asked (``"auto"``, a count, 0); :attr:`threads` is the count each worker holds its
+        # BLAS to (0: no limit)
         self.blas_threads = blas_threads
         self.threads = blas_thread_budget(blas_threads, workers)
         self.description = (
@@ -408,7 +411,10 @@ class DaskBackend:
             self._own = True
         nthreads = self.client.nthreads()
         self.workers = sum(nthreads.values())
-        self.description = f"dask scheduler {self.client.scheduler.address}, {len(nthreads)} workers, {self.workers} threads"
+        self.description = (
+            f"dask scheduler {self.client.scheduler.address}, {len(nthreads)} "
+            f"workers, {self.workers} threads"
+        )
         if not self.workers:
             self.close()
             raise FlexctrlError(
@@ -541,11 +547,13 @@ def make_backend(
     preload: bool = True,
     blas_threads: int | str = "auto",
 ):
-    """The backend for the given options (see the module docstring); call its ``start()`` and ``close()``.
+    """The backend for the given options (see the module docstring); call its ``start()`` and
+    ``close()``.
 
-    ``affinity``: the local pool sends the runs that share a model to one worker (:mod:`flexctrl.study.affinity`);
-    ``preload``: its fork server imports the executor's module once for all workers; ``blas_threads``: BLAS
-    threads per local worker (:func:`~flexctrl.study.blas_threads.blas_thread_budget`).
+    ``affinity``: the local pool sends the runs that share a model to one worker
+    (:mod:`flexctrl.study.affinity`); ``preload``: its fork server imports the executor's module
+    once for all workers; ``blas_threads``: BLAS threads per local worker
+    (:func:`~flexctrl.study.blas_threads.blas_thread_budget`).
     """
     if scheduler is not None or client is not None:
         if workers is not None:

@@ -62,7 +62,8 @@ def choice_settings(settings: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]]) -> Path | None:
-    """Write :data:`CHOICES_FILE`: per group its representative, choice and members; None without shared choices.
+    """Write :data:`CHOICES_FILE`: per group its representative, choice and members; None without
+    shared choices.
 
     ``runs`` are the study's :class:`~flexctrl.study.plan.RunSpec`; ``records`` the
     stored run records by run id (their ``metrics`` hold ``chosen_modes``,
@@ -104,7 +105,8 @@ def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]
         return None
     path = Path(directory) / CHOICES_FILE
     document = {
-        "note": "fidelity = 'auto' with [auto] share: one choice per group, made on its representative "
+        "note": "fidelity = 'auto' with [auto] share: one choice per group, made on its "
+        "representative "
         "(first run in grid order) and used by every member (docs/auto_fidelity.md)",
         "groups": list(groups.values()),
     }

@@ -218,7 +218,8 @@ class ResultStore:
                 self._lock_fh.close()
                 self._lock_fh = None
                 raise FlexctrlError(
-                    f"another flexctrl study is writing into '{self.dir}'; wait for it or choose another --out"
+                    f"another flexctrl study is writing into '{self.dir}'; wait for it or choose "
+                    "another --out"
                 ) from None
         for folder in (self.dir, self.runs_dir):
             for stale in folder.glob(".*.tmp"):

@@ -120,8 +120,8 @@ class _Context:
         if not isinstance(value, str) or not value:
             raise self.error(
                 key,
-                f"value {value!r} is not a file path; allowed: a path to a {role} TOML file relative to the study file"
-                + (" or 'none'" if role == "controller" else ""),
+                f"value {value!r} is not a file path; allowed: a path to a {role} TOML file "
+                "relative to the study file" + (" or 'none'" if role == "controller" else ""),
             )
         path = (self.root / value).resolve()
         if not path.is_file():
@@ -187,7 +187,8 @@ def _setting_value(ctx: _Context, key: str, name: str, value: Any) -> Any:
         if not isinstance(value, list) or not value:
             raise ctx.error(
                 key,
-                f"value {value!r} is not a configuration; allowed: a list of joint angles in degrees, e.g. [0, 90, 0]",
+                f"value {value!r} is not a configuration; allowed: a list of joint angles in "
+                "degrees, e.g. [0, 90, 0]",
             )
         angles = [_angle(ctx, f"{key}[{i + 1}]", v) for i, v in enumerate(value)]
         warn_if_radians(angles, source=ctx.source, key=key)
@@ -241,7 +242,8 @@ def _unknown_axis(ctx: _Context, key: str, name: str) -> SpecError:
     extra = f"; did you mean '{hint[0]}'?" if hint else ""
     return ctx.error(
         key,
-        f"unknown setting{extra} Allowed: {', '.join(SETTINGS)}, q1..qN (one joint, degrees), scene.KEY, controller.KEY, model.KEY",
+        f"unknown setting{extra} Allowed: {', '.join(SETTINGS)}, q1..qN (one joint, degrees), "
+        "scene.KEY, controller.KEY, model.KEY",
     )
 
 
@@ -368,7 +370,8 @@ def study_from_document(
             if isinstance(value, dict):
                 raise r.error(
                     setting,
-                    f'value {value!r} is a table; overrides of the {setting} file go in [set] as "{setting}.KEY" = VALUE',
+                    f"value {value!r} is a table; overrides of the {setting} file go in [set] as "
+                    f'"{setting}.KEY" = VALUE',
                 )
             fixed[setting] = _setting_value(ctx, setting, setting, value)
             origin[setting] = setting
@@ -405,7 +408,8 @@ def study_from_document(
         if name_ in fixed:
             raise ctx.error(
                 key,
-                f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: one of the two",
+                f"'{name_}' is both a fixed setting ({origin[name_]}) and a grid axis; allowed: "
+                "one of the two",
             )
         checked = tuple(
             _setting_value(ctx, f"{key}[{i + 1}]", name_, v) for i, v in enumerate(values)
@@ -418,7 +422,8 @@ def study_from_document(
             if text in seen:
                 raise ctx.error(
                     key,
-                    f"value {values[i]!r} (entry {i + 1}) repeats entry {seen[text] + 1}; allowed: distinct values",
+                    f"value {values[i]!r} (entry {i + 1}) repeats entry {seen[text] + 1}; "
+                    "allowed: distinct values",
                 )
             seen[text] = i
         axes.append(Axis(name_, checked))
@@ -441,7 +446,8 @@ def study_from_document(
         if required not in origin:
             raise r.error(
                 required,
-                f"missing required key; allowed: the {required} file, as a fixed setting or a grid axis",
+                f"missing required key; allowed: the {required} file, as a fixed setting or a "
+                "grid axis",
             )
 
     t = r.table_of("trajectories", {})
@@ -508,7 +514,8 @@ def study_from_document(
 
 
 def nest_dotted_keys(document: dict, source: str) -> dict:
-    """``[grid]``/``[set]`` keys written quoted (``"scene.dt" = ...``) as nested tables (``scene.dt``).
+    """``[grid]``/``[set]`` keys written quoted (``"scene.dt" = ...``) as nested tables
+    (``scene.dt``).
 
     Both spellings are allowed in a study file; nesting them first gives one
     spelling, so ``--set grid.scene.dt=[...]`` replaces the file's axis instead
@@ -541,7 +548,8 @@ def nest_dotted_keys(document: dict, source: str) -> dict:
                 node = child
             if parts[-1] in node:
                 raise SpecError(
-                    f"'{key}' is given twice (quoted and as a nested table); allowed: one spelling per setting",
+                    f"'{key}' is given twice (quoted and as a nested table); allowed: one "
+                    "spelling per setting",
                     source=source,
                     key=f"{section}.{key}",
                 )
@@ -692,7 +700,8 @@ def _expand(
             elif len(config) != arm.n_links:
                 raise ctx.error(
                     origin["configuration"],
-                    f"configuration {config} has {len(config)} angles; the model '{arm.name}' has {arm.n_links} joints",
+                    f"configuration {config} has {len(config)} angles; the model '{arm.name}' "
+                    f"has {arm.n_links} joints",
                 )
             config = list(config)
             for k, v in values.items():
@@ -702,7 +711,8 @@ def _expand(
                     if joint > arm.n_links:
                         raise ctx.error(
                             origin[k],
-                            f"joint {joint} does not exist; the model '{arm.name}' has {arm.n_links} joints",
+                            f"joint {joint} does not exist; the model '{arm.name}' has "
+                            f"{arm.n_links} joints",
                         )
                     config[joint - 1] = v
         controller = values.get("controller")
@@ -710,7 +720,8 @@ def _expand(
             key = next(origin[k] for k in overrides if k.startswith("controller."))
             raise ctx.error(
                 key,
-                "overrides a controller setting, but the run has no controller; allowed: a controller file, fixed or as an axis",
+                "overrides a controller setting, but the run has no controller; allowed: a "
+                "controller file, fixed or as an axis",
             )
         for target in ("scene", "controller"):
             stripped = tuple(
@@ -746,7 +757,8 @@ def _expand(
         if rid in ids:
             raise ctx.error(
                 "grid",
-                f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); allowed: distinct grid points",
+                f"runs {ids[rid] + 1} and {index + 1} have the same settings ({dict(coords)}); "
+                "allowed: distinct grid points",
             )
         ids[rid] = index
         for column, _ in coords:

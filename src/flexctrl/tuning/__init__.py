@@ -1,4 +1,5 @@
-"""Automatic tuning of a controller file over closed-loop scenarios (``flexctrl tune``, :func:`flexctrl.tuning`).
+"""Automatic tuning of a controller file over closed-loop scenarios (``flexctrl tune``,
+:func:`flexctrl.tuning`).
 
 ``scenarios``   the tuning file's scenario set as a study (the study grid syntax);
 ``evaluate``    one candidate = the controller file with the tuned keys set, run on every scenario

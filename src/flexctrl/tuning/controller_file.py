@@ -28,7 +28,8 @@ _VALUE = r"[-+0-9.eEinfa_]+|true|false|\"[^\"]*\""
 def with_values(
     text: str, values: Mapping[str, Any], *, header: str = "", source: str = "controller file"
 ) -> str:
-    """``text`` (a TOML controller file) with ``values`` set (key -> value), ``header`` comment lines first.
+    """``text`` (a TOML controller file) with ``values`` set (key -> value), ``header`` comment
+    lines first.
 
     Raises
     ------
@@ -54,8 +55,10 @@ def with_values(
     if written != expected:
         why = written if isinstance(written, Exception) else "it reads back differently"
         raise SpecError(
-            f"the tuned values {dict(values)!r} could not be written into the file as intended ({why}); "
-            "allowed: keys written on their own lines or in one-line inline tables of plain [table] "
+            f"the tuned values {dict(values)!r} could not be written into the file as intended "
+            f"({why}); "
+            "allowed: keys written on their own lines or in one-line inline tables of plain "
+            "[table] "
             "headers",
             source=source,
         )
@@ -73,7 +76,8 @@ def write_controller(
 
 
 def _line_tables(lines: list[str]) -> list[str | None]:
-    """The table each line belongs to (``""`` before the first header, ``"[[array]]"`` inside arrays of
+    """The table each line belongs to (``""`` before the first header, ``"[[array]]"`` inside arrays
+    of
     tables, None for a header line itself): one scan, shared by every search below."""
     owners: list[str | None] = []
     current = ""
@@ -162,7 +166,8 @@ def _set_element(
             values[index - 1] = tomllib.loads(f"v = {literal}")["v"]
             return _replaced(lines, i, found.group(1) + toml_literal(values) + found.group(3))
     raise SpecError(
-        f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array '{name}' with "
+        f"key '{table + '.' if table else ''}{name}[{index}]': the file has no one-line array "
+        f"'{name}' with "
         f"that entry; allowed: write the array in the file first",
         source=source,
     )

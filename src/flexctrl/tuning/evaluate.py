@@ -1,4 +1,5 @@
-"""One candidate of a tuning: the controller file with the tuned keys set, run on every scenario and judged.
+"""One candidate of a tuning: the controller file with the tuned keys set, run on every scenario and
+judged.
 
 A candidate's runs are study runs (the scenario's settings plus the candidate's
 ``controller.KEY=VALUE`` overrides), so their ids are hashes of everything that makes
@@ -213,7 +214,8 @@ class Evaluator:
                 violations.append(f"{where}: no metric '{metric}'")
             if c.stable and m.get("stable", 0) != 1:
                 violations.append(
-                    f"{where}: unstable (final tip error {m.get('final_tip_error', math.nan):.3g} m)"
+                    f"{where}: unstable (final tip error "
+                    f"{m.get('final_tip_error', math.nan):.3g} m)"
                 )
             if c.torque_limits and m.get("torque_limit_exceeded", 0):
                 violations.append(f"{where}: a torque beyond its joint's limit")
@@ -228,7 +230,8 @@ class Evaluator:
                 )
             if c.real_time and m.get("controller_time_p95", 0.0) >= self._sample_time(overrides):
                 violations.append(
-                    f"{where}: controller p95 {1e3 * m['controller_time_p95']:.3g} ms not below the "
+                    f"{where}: controller p95 {1e3 * m['controller_time_p95']:.3g} ms not below "
+                    "the "
                     f"sample time {1e3 * self._sample_time(overrides):.3g} ms"
                 )
         objective = (

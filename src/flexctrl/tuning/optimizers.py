@@ -41,7 +41,8 @@ class BudgetSpent(Exception):
 def minimize(
     method: str, evaluate: Evaluate, x0: np.ndarray, budget: int, population: int, seed: int
 ) -> None:
-    """Run ``method`` on the unit box from ``x0`` until ``budget`` candidates were evaluated (or it converged).
+    """Run ``method`` on the unit box from ``x0`` until ``budget`` candidates were evaluated (or it
+    converged).
 
     Parameters
     ----------

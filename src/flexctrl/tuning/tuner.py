@@ -105,7 +105,8 @@ def tune(
     progress: bool = True,
     stream=None,
 ) -> TuningResult:
-    """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tuning.tuner` for the files written).
+    """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tuning.tuner` for the
+    files written).
 
     Parameters
     ----------
@@ -217,7 +218,8 @@ def _search(
         evaluations.extend(judged)
         _save_evaluations(out, evaluations)
         _log(stream, progress, spec, evaluations, evaluator, started)
-        # beyond the budget a generation's members are not run: they score worst, and the next call stops
+        # beyond the budget a generation's members are not run: they score worst, and the next call
+        # stops
         return [e.score for e in judged] + [math.inf] * (len(points) - len(judged))
 
     minimize(
@@ -254,8 +256,10 @@ def _log(
     feasible = [e for e in evaluations[1:] if e.feasible]
     best = min((e.score for e in feasible), default=math.nan)
     print(
-        f"{spec.name}: {len(evaluations) - 1}/{spec.optimizer.evaluations} candidates, {len(feasible)} feasible, "
-        f"best {spec.objective.statistic} {spec.objective.metric} {best:.4g}, runs made {evaluator.runs_made}, "
+        f"{spec.name}: {len(evaluations) - 1}/{spec.optimizer.evaluations} candidates, "
+        f"{len(feasible)} feasible, "
+        f"best {spec.objective.statistic} {spec.objective.metric} {best:.4g}, runs made "
+        f"{evaluator.runs_made}, "
         f"reused {evaluator.runs_reused}, {time.perf_counter() - started:.0f} s",
         file=stream,
         flush=True,
@@ -274,8 +278,10 @@ def _write(result: TuningResult) -> None:
         unit, factor = metric_unit(spec.objective.metric)
         header = (
             f"Tuned by `flexctrl tune {spec.source} --out {out}` from {spec.controller.name}: "
-            f"{spec.objective.statistic} {spec.objective.metric} over {len(result.initial.scenarios)} scenarios "
-            f"{_fmt(factor * result.initial.objective)} -> {_fmt(factor * result.best.objective)} {unit} "
+            f"{spec.objective.statistic} {spec.objective.metric} over "
+            f"{len(result.initial.scenarios)} scenarios "
+            f"{_fmt(factor * result.initial.objective)} -> "
+            f"{_fmt(factor * result.best.objective)} {unit} "
             f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method})."
         )
         integers = {p.key for p in spec.parameters if p.integer}

@@ -114,8 +114,10 @@ def write_report(result) -> list[Path]:
         f"# Tuning `{spec.name}`",
         "",
         f"`flexctrl tune {spec.source} --out {out}`: {spec.objective.statistic} of `{spec.objective.metric}`"
-        f"{f' ({unit})' if unit else ''} over {len(result.initial.scenarios)} scenarios, starting from "
-        f"`{spec.controller}`, {spec.optimizer.method} with {spec.optimizer.evaluations} candidates "
+        f"{f' ({unit})' if unit else ''} over {len(result.initial.scenarios)} scenarios, "
+        "starting from "
+        f"`{spec.controller}`, {spec.optimizer.method} with {spec.optimizer.evaluations} "
+        "candidates "
         f"(population {spec.optimizer.population}, seed {spec.optimizer.seed}).",
         "",
     ]
@@ -131,7 +133,8 @@ def write_report(result) -> list[Path]:
     ]
     if c.closed_loop_radius is not None:
         rules.append(
-            f"linear closed-loop radius below {c.closed_loop_radius:g} where the controller has a gain"
+            f"linear closed-loop radius below {c.closed_loop_radius:g} where the controller has "
+            "a gain"
         )
     lines += ["Constraints: " + ("; ".join(rules) if rules else "none") + ".", ""]
     lines += [
@@ -159,7 +162,8 @@ def write_report(result) -> list[Path]:
     else:
         ratio = best.objective / result.initial.objective if result.initial.objective else math.nan
         lines.append(
-            f"- tuned: **{fmt(best.objective)} {unit}** (candidate {best.number}; {ratio:.3g} x as shipped)"
+            f"- tuned: **{fmt(best.objective)} {unit}** (candidate {best.number}; {ratio:.3g} x "
+            "as shipped)"
         )
         lines.append(f"- written to `{out / 'controller.toml'}`")
     lines.append(

@@ -55,18 +55,16 @@ Measured: :func:`largest_stable_step` (probes: :class:`StabilityProbe`)
     rounding noise would otherwise decide the verdict at small steps.
 
     The search starts at ``omega_max h = 1``, grows the step fourfold while stable
-    (up to a cap, ``omega_max h = 1000 x 2.785``, :data:`flexctrl.sim.rk4.RK4_STABILITY_LIMIT`) or shrinks it fourfold while
-    unstable (down to a floor, ``omega_max h = 0.01``), then bisects
-    geometrically to ``rel_tol``.  The outcome is ``"bracketed"``
-    (``h_measured`` stable, ``h_unstable`` unstable), ``"stable_at_cap"``
-    (``h_measured`` = the cap: stable at every tested step, e.g. Newmark) or
-    ``"unstable_at_floor"`` (``h_measured = 0``: unstable at every tested step,
-    e.g. explicit Euler on undamped modes; at the floor an undamped mode grows
-    by ``(omega h)^2/2 = 5e-5`` per step, five times the tolerance, so the floor
-    is resolvable).  Bisection assumes one boundary (stable below it, unstable
-    above), which holds for these methods along every ray ``lambda h``,
-    ``h > 0``, met here; a failure that is not growth (Newton divergence) also
-    ends the stable range and is reported as such (:attr:`Probe.reason`).
+    (up to a cap, ``omega_max h = 1000 x 2.785``, :data:`flexctrl.sim.rk4.RK4_STABILITY_LIMIT`) or
+    shrinks it fourfold while unstable (down to a floor, ``omega_max h = 0.01``), then bisects
+    geometrically to ``rel_tol``.  The outcome is ``"bracketed"`` (``h_measured`` stable,
+    ``h_unstable`` unstable), ``"stable_at_cap"`` (``h_measured`` = the cap: stable at every tested
+    step, e.g. Newmark) or ``"unstable_at_floor"`` (``h_measured = 0``: unstable at every tested
+    step, e.g. explicit Euler on undamped modes; at the floor an undamped mode grows by ``(omega
+    h)^2/2 = 5e-5`` per step, five times the tolerance, so the floor is resolvable).  Bisection
+    assumes one boundary (stable below it, unstable above), which holds for these methods along
+    every ray ``lambda h``, ``h > 0``, met here; a failure that is not growth (Newton divergence)
+    also ends the stable range and is reported as such (:attr:`Probe.reason`).
 
 The theory it is compared with (``h_theory``, :attr:`StabilityResult.theory`) is
 :mod:`flexctrl.analysis.stability.theory`.
@@ -105,7 +103,8 @@ Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
 
 
 def linearization_function(model) -> ca.Function:
-    """``(x, u) -> (f, A = df/dx)`` of the model's forward dynamics (free joints, torques held), expanded to SX.
+    """``(x, u) -> (f, A = df/dx)`` of the model's forward dynamics (free joints, torques held),
+    expanded to SX.
 
     :func:`flexctrl.dynamics.jacobians.jacobian_function`, the one Jacobian builder.
     """
@@ -167,7 +166,8 @@ class StabilityCriterion:
             or not 0.0 < self.amplitude <= 0.1
         ):
             raise SpecError(
-                f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, 0.1] (m or rad)",
+                f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, 0.1] "
+                "(m or rad)",
                 key="amplitude",
             )
 
@@ -212,7 +212,8 @@ class StabilityResult:
     ----------
     integrator : str
     h_measured : float
-        Largest step found stable (s): the cap for ``"stable_at_cap"``, 0 for ``"unstable_at_floor"``.
+        Largest step found stable (s): the cap for ``"stable_at_cap"``, 0 for
+        ``"unstable_at_floor"``.
     h_unstable : float
         Smallest step found unstable (s); inf for ``"stable_at_cap"``.
     outcome : {"bracketed", "stable_at_cap", "unstable_at_floor"}
@@ -301,7 +302,8 @@ def refine_equilibrium(
     max_iterations: int = 8,
     function: ca.Function | None = None,
 ) -> tuple[np.ndarray, float]:
-    """Newton on ``f(x, u0) = 0`` from ``x0`` (least squares where ``A`` is singular); returns ``(x, max|f|)``.
+    """Newton on ``f(x, u0) = 0`` from ``x0`` (least squares where ``A`` is singular); returns ``(x,
+    max|f|)``.
 
     Parameters
     ----------
@@ -331,8 +333,10 @@ def refine_equilibrium(
     moved = float(np.max(np.abs(x - x0)))
     if moved > 1e-2 * (1.0 + float(np.max(np.abs(x0)))) or step_size > tolerance:
         raise SpecError(
-            f"the state is not an equilibrium: max |f(x0, u0)| = {start:.3g}; Newton moved it by {moved:.3g} "
-            f"and its last step is {step_size:.3g} (allowed: {tolerance:.3g}); allowed: a static equilibrium "
+            f"the state is not an equilibrium: max |f(x0, u0)| = {start:.3g}; Newton moved it by "
+            f"{moved:.3g} "
+            f"and its last step is {step_size:.3g} (allowed: {tolerance:.3g}); allowed: a static "
+            "equilibrium "
             "with its holding torques, e.g. flexctrl.linear.equilibrium(model, q_joints)",
             key="x0",
         )
@@ -453,7 +457,8 @@ class StabilityProbe:
             or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(u0)))
         ):
             raise SpecError(
-                f"x0 has shape {x0.shape}, u0 {u0.shape}; expected {model.n_x} and {model.n_u} finite values",
+                f"x0 has shape {x0.shape}, u0 {u0.shape}; expected {model.n_x} and {model.n_u} "
+                "finite values",
                 key="x0",
             )
         self.u0 = u0
@@ -466,22 +471,28 @@ class StabilityProbe:
         self.omega_max = float(np.max(np.abs(self.eigenvalues), initial=0.0))
         if not self.omega_max > 0:
             raise SimulationError(
-                f"the linearisation of '{model.name}' at this state has no vibration mode (omega_max = 0), "
-                "so there is no step scale to search; use a flexible fidelity or a configuration under load"
+                f"the linearisation of '{model.name}' at this state has no vibration mode "
+                "(omega_max = 0), "
+                "so there is no step scale to search; use a flexible fidelity or a configuration "
+                "under load"
             )
         kind, _snapped, _w = classify_eigenvalues(self.eigenvalues)
         if np.any(kind == "growing"):
             rates = np.sort(self.eigenvalues.real[kind == "growing"])[::-1]
             raise SpecError(
-                f"the equilibrium is unstable: {rates.size} eigenvalues of df/dx grow physically (rates up to "
-                f"{rates[0]:.4g} 1/s), and over a probe they would swamp the modes being watched; allowed: a "
-                "stable equilibrium (e.g. hanging, or joints held where gravity does not tip the arm over)",
+                f"the equilibrium is unstable: {rates.size} eigenvalues of df/dx grow physically "
+                "(rates up to "
+                f"{rates[0]:.4g} 1/s), and over a probe they would swamp the modes being "
+                "watched; allowed: a "
+                "stable equilibrium (e.g. hanging, or joints held where gravity does not tip the "
+                "arm over)",
                 key="x0",
             )
         lam, vectors, rows = _modal_basis(A, model.n_q, EIGENVALUE_TOL)
         if rows.size == 0:
             raise SimulationError(
-                f"the linearisation of '{model.name}' has no mode that is neither zero nor growing; nothing to probe"
+                f"the linearisation of '{model.name}' has no mode that is neither zero nor "
+                "growing; nothing to probe"
             )
         shape = vectors.real.sum(axis=1)
         self.d0 = self.criterion.amplitude * shape / np.max(np.abs(shape[: model.n_q]))
@@ -494,15 +505,18 @@ class StabilityProbe:
         self.offset = float(np.max(np.abs(self._rows @ offset) / self._c0))
         if self.offset > 1e-3:
             raise SpecError(
-                f"the equilibrium is not accurate enough for a probe of amplitude {self.criterion.amplitude:g}: "
-                f"its remaining offset is {self.offset:.3g} of a mode's initial amplitude (max |f| = "
+                "the equilibrium is not accurate enough for a probe of amplitude "
+                f"{self.criterion.amplitude:g}: "
+                f"its remaining offset is {self.offset:.3g} of a mode's initial amplitude (max "
+                "|f| = "
                 f"{self.residual:.3g}); allowed: at most 1e-3 (a larger amplitude, or a better equilibrium)",
                 key="x0",
             )
         self.settings: dict[str, Any] = {}
 
     def watched(self, h: float) -> np.ndarray:
-        """Which modes a probe at step ``h`` watches: those with ``|lambda| h >= sqrt(2 rate_tolerance)``.
+        """Which modes a probe at step ``h`` watches: those with ``|lambda| h >= sqrt(2
+        rate_tolerance)``.
 
         A slower mode cannot grow faster than the tolerance under rk4, euler or
         newmark (``|R(z)| <= 1 + |z|^2 / 2`` for small ``z`` in the closed left
@@ -530,7 +544,8 @@ class StabilityProbe:
         )
 
     def amplitudes(self, states: np.ndarray, h: float | None = None) -> np.ndarray:
-        """Modal amplitudes of state rows relative to their initial values (rows: samples; columns: the
+        """Modal amplitudes of state rows relative to their initial values (rows: samples; columns:
+        the
         modes watched at step ``h``, or every excited mode)."""
         keep = slice(None) if h is None else self.watched(h)
         return (
@@ -586,7 +601,8 @@ def largest_stable_step(
     expansion: float = 4.0,
     integrator_options: Mapping[str, Any] | None = None,
 ) -> StabilityResult:
-    """Largest stable step of ``integrator`` on ``model`` about the equilibrium ``(x0, u0)``, by bisection.
+    """Largest stable step of ``integrator`` on ``model`` about the equilibrium ``(x0, u0)``, by
+    bisection.
 
     Parameters
     ----------
@@ -621,7 +637,8 @@ def largest_stable_step(
         )
     if not (0 < omega_h_floor <= omega_h_start <= omega_h_cap and math.isfinite(omega_h_cap)):
         raise SpecError(
-            f"omega_h_floor = {omega_h_floor!r}, omega_h_start = {omega_h_start!r}, omega_h_cap = {omega_h_cap!r} "
+            f"omega_h_floor = {omega_h_floor!r}, omega_h_start = {omega_h_start!r}, omega_h_cap "
+            f"= {omega_h_cap!r} "
             "are not allowed; allowed: 0 < floor <= start <= cap < inf",
             key="omega_h_start",
         )

@@ -49,21 +49,24 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 
-#: Amplification polynomials ``R(z) = sum c_k z^k`` of the explicit methods (coefficients c_0, c_1, ...).
+# : Amplification polynomials ``R(z) = sum c_k z^k`` of the explicit methods (coefficients c_0, c_1,
+# ...).
 EXPLICIT_POLYNOMIALS: dict[str, tuple[float, ...]] = {
     "euler": (1.0, 1.0),
     "rk4": (1.0, 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0),
 }
 #: Methods with a stability theory here.
 THEORY_METHODS = ("rk4", "euler", "newmark")
-#: Eigenvalues within this fraction of the fastest oscillation of zero (or of the imaginary axis) are treated as such.
+# : Eigenvalues within this fraction of the fastest oscillation of zero (or of the imaginary axis)
+# are treated as such.
 EIGENVALUE_TOL = 1e-8
 
 
 def amplification_factor(
     method: str, z: complex | np.ndarray, *, alpha: float = 0.25, delta: float = 0.5
 ) -> np.ndarray:
-    """``R(z)``, ``z = lambda h``, of ``"euler"``, ``"rk4"`` or ``"newmark"`` (trapezoidal parameters only).
+    """``R(z)``, ``z = lambda h``, of ``"euler"``, ``"rk4"`` or ``"newmark"`` (trapezoidal
+    parameters only).
 
     Raises
     ------
@@ -77,14 +80,16 @@ def amplification_factor(
     if method == "newmark" and alpha == 0.25 and delta == 0.5:
         return (1 + z / 2) / (1 - z / 2)
     raise SpecError(
-        f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification factor here; "
+        f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification "
+        "factor here; "
         "allowed: 'euler', 'rk4', 'newmark' with alpha = 0.25, delta = 0.5",
         key="method",
     )
 
 
 def ray_limit(coefficients: Sequence[float], direction: complex) -> float:
-    """Where the ray ``s d`` (``s > 0``, ``|d| = 1``) first leaves ``|R(z)| <= 1`` for a polynomial ``R``.
+    """Where the ray ``s d`` (``s > 0``, ``|d| = 1``) first leaves ``|R(z)| <= 1`` for a polynomial
+    ``R``.
 
     ``|R(s d)|^2 - 1`` is a real polynomial in ``s``; its coefficients are formed
     exactly and those below the rounding of their own terms set to zero (on the

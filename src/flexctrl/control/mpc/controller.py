@@ -8,14 +8,13 @@ Problem (deviations from the reference over the horizon, scaled, see below)::
          lo - c_op - C r_k+1 - s_k <= C z_{k+1} <= hi - c_op - C r_k+1 + s_k,  s_k >= 0
                                                                  (soft: deflection or tip error)
 
-with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) - x_op``
-(:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection and the
-feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The
-prediction ``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the
-Jacobians of the design point along the reference: exact for a reference that is a
-trajectory of the linear model, and without steady-state offset at a target
-equilibrium away from the design point (the target's holding torque is ``u_ref``).
-Only the bounds depend on the reference, so between samples only vectors change.
+with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) -
+x_op`` (:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection
+and the feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The prediction
+``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the Jacobians of the design point
+along the reference: exact for a reference that is a trajectory of the linear model, and without
+steady-state offset at a target equilibrium away from the design point (the target's holding torque
+is ``u_ref``). Only the bounds depend on the reference, so between samples only vectors change.
 
 ``P`` is the DARE solution (``terminal = "dare"``), so without active constraints the
 first move is the LQR move ``-K z(t)``.  The slack makes the QP feasible for any
@@ -149,7 +148,8 @@ class MPCController(Controller):
     def arrival_release(
         self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray
     ) -> np.ndarray | None:
-        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival rows).
+        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival
+        rows).
 
         The first call after a reset or a new reference plans the arrival time
         (:func:`~flexctrl.control.mpc.arrival_search.shortest_arrival` plus the margin) and records
@@ -177,7 +177,8 @@ class MPCController(Controller):
         return None if self._plan_u is None else self._plan_u.copy()
 
     def reference_shifts(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N, m), dc (N, ns))``.
+        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N,
+        m), dc (N, ns))``.
 
         ``r_k = (x_ref,k - x_op) / S_x``; ``dv``, ``dc`` shift the input and soft-row bounds.
         """
@@ -189,7 +190,8 @@ class MPCController(Controller):
         return r, U[:-1], dv, dc
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
-        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw :class:`Solution`.
+        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw
+        :class:`Solution`.
 
         For inspection: the plan and the statistics are not updated (OSQP's internal
         warm start is).

@@ -1,4 +1,5 @@
-"""The linear MPC's quadratic programme: scaled problem data, the sparse and condensed QPs, move blocking.
+"""The linear MPC's quadratic programme: scaled problem data, the sparse and condensed QPs, move
+blocking.
 
 See :mod:`flexctrl.control.mpc.controller` for the problem, the formulations and the scaling.
 """
@@ -138,7 +139,8 @@ def soft_rows(
 
 
 def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
-    """Physical arrival rows (m) on the state: the tip position error, then each joint's error as tip motion.
+    """Physical arrival rows (m) on the state: the tip position error, then each joint's error as
+    tip motion.
 
     Row ``j`` of the joint part is ``|d tip / d q_j| e_j``: the tip displacement that joint
     ``j``'s error alone causes at ``op`` (a tip inside the band with the joints off
@@ -213,7 +215,8 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
 # --------------------------------------------------------------------------------------
 @dataclass(eq=False)
 class QP:
-    """``min 1/2 w'Hw + g'w  s.t.  lba <= A w <= uba,  lbx <= w <= ubx`` with ``z(t)`` entering affinely.
+    """``min 1/2 w'Hw + g'w  s.t.  lba <= A w <= uba,  lbx <= w <= ubx`` with ``z(t)`` entering
+    affinely.
 
     ``g = g0 + Gz @ z``; ``lba/uba = lba0/uba0 + Lz @ z`` (rows ``Lz`` nonzero only for the
     condensed soft rows); ``lbx[ix0] = ubx[ix0] = z`` (sparse: the initial state).

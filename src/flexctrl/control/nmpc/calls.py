@@ -1,4 +1,5 @@
-"""The RTI's two calls per sample, linearise-and-assemble then the QP, with or without bound buffers.
+"""The RTI's two calls per sample, linearise-and-assemble then the QP, with or without bound
+buffers.
 
 :class:`BoundRTICalls` binds ``prepare(z0, w) -> (a, lba, uba)`` and the QP solver to
 numpy arrays once per controller: ``prepare`` writes the constraint matrix and bounds
@@ -29,7 +30,8 @@ class BoundRTICalls:
     def __init__(
         self, prepare: ca.Function, qp: ca.Function, H: ca.DM, screen: ScreenedQP | None = None
     ):
-        #: the QP without its soft rows, tried first (:mod:`flexctrl.control.nmpc.screened_qp`); samples it served
+        # : the QP without its soft rows, tried first (:mod:`flexctrl.control.nmpc.screened_qp`);
+        # samples it served
         self.screen, self.screened, self.solves = screen, 0, 0
         if qp.sparsity_in("a") != prepare.sparsity_out("a") or qp.sparsity_in("h") != H.sparsity():
             raise ValueError(
@@ -40,7 +42,8 @@ class BoundRTICalls:
         self._lba, self._uba = np.zeros(prepare.nnz_out("lba")), np.zeros(prepare.nnz_out("uba"))
         data = {"a": self._a, "lba": self._lba, "uba": self._uba}
         self._prepare = BoundFunction(prepare, {"w": self._w, **data})
-        # renewed per solve: HPIPM would otherwise warm-start its multipliers from the last solve's work memory
+        # renewed per solve: HPIPM would otherwise warm-start its multipliers from the last solve's
+        # work memory
         self._qp = BoundFunction(
             qp, {"h": np.array(H.nonzeros(), dtype=float), "x0": self._w, **data}, renew=True
         )

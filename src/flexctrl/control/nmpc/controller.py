@@ -170,7 +170,8 @@ class NMPCController(Controller):
         self.keep = self.prediction.keep
         #: the prediction model's operating point (the design one unless the model is truncated)
         self.pred_op = self.prediction_plant.op
-        #: the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with a modal map)
+        # : the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with
+        # a modal map)
         self.u_out = self.pred_op.u if self.prediction.state_map is None else plant.op.u
         self.problem = problem
         self.observer = observer
@@ -187,11 +188,14 @@ class NMPCController(Controller):
         self._w_ref: np.ndarray | None = None
         #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
         self._cost_window: tuple | None = None
-        #: the RTI's calls through bound buffers (else CasADi's DM calls; :mod:`flexctrl.control.nmpc.calls`)
+        # : the RTI's calls through bound buffers (else CasADi's DM calls;
+        # :mod:`flexctrl.control.nmpc.calls`)
         self.bound_calls = bound_calls
-        #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc.screened_qp`)
+        # : try the QP without its soft rows first (HPIPM, bound calls;
+        # :mod:`flexctrl.control.nmpc.screened_qp`)
         self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
-        #: the screened QP through HPIPM called directly (:mod:`flexctrl.control.nmpc.hpipm_ocp`), else ``casadi.conic``
+        # : the screened QP through HPIPM called directly (:mod:`flexctrl.control.nmpc.hpipm_ocp`),
+        # else ``casadi.conic``
         self.direct_qp = direct_qp
         self._rti_calls = None
 
@@ -283,7 +287,8 @@ class NMPCController(Controller):
         ):  # e.g. the reference has arrived
             w_ref, g = self._cost_window[1]
         else:
-            # row by row, as the state is mapped in the loop (one matrix product would round differently)
+            # row by row, as the state is mapped in the loop (one matrix product would round
+            # differently)
             w_ref = np.zeros(lay.nw)
             w_ref[lay.z.ravel()] = (
                 (np.array([self.to_prediction(x) for x in X]) - self.pred_op.x) / pb.Sx
@@ -512,7 +517,8 @@ def _build(
             settings.sensitivities,
             settings.jacobian_every,
             settings.compile,
-            # named only when grouped: the per-interval key (and its library on disk) stays as it was
+            # named only when grouped: the per-interval key (and its library on disk) stays as it
+            # was
             *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []),
         )
     except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
@@ -673,8 +679,8 @@ def design_nmpc(
     (HPIPM with bound calls; the same optimum to the solver's tolerance,
     :mod:`flexctrl.control.nmpc.screened_qp`); False always solves the whole QP.
     ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
-    (:mod:`flexctrl.control.nmpc.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
-    ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
+    (:mod:`flexctrl.control.nmpc.hpipm_ocp`; default), or through ``casadi.conic`` (the slower
+    path). ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
     from before it is built (default), or always built and then looked up by its content.
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with

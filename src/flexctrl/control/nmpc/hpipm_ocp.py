@@ -36,7 +36,8 @@ import numpy as np
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 #: HPIPM's ``enum hpipm_status``
 STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
-#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their HPIPM setters
+# : the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their
+# HPIPM setters
 _TOLERANCES = {
     "res_g_max": "tol_stat",
     "res_b_max": "tol_eq",
@@ -106,7 +107,8 @@ def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
 
 
 class HpipmOCP:
-    """HPIPM on the problem of the module docstring; one per controller (not picklable, not thread-safe).
+    """HPIPM on the problem of the module docstring; one per controller (not picklable, not
+    thread-safe).
 
     Parameters
     ----------
@@ -189,7 +191,8 @@ class HpipmOCP:
             self._ws,
             memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)),
         )
-        # data arrays, HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered (cols, rows) array
+        # data arrays, HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered
+        # (cols, rows) array
         self.A = np.zeros((N, nx, nx))  # stage 0's A has no columns (x_0 eliminated): A[0] unused
         self.B = np.zeros((N, nu, nx))
         self.b = np.zeros((N, nx))
@@ -221,7 +224,8 @@ class HpipmOCP:
         self._keep += (no_slack,)
         rev_p = P(no_slack, [nu] * (N + 1))
         none = P(spare, [0] * (N + 1))  # fields of size 0 (no state bounds, general rows or slacks)
-        # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns of them
+        # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns of
+        # them
         self._set_all = (
             A_p,
             B_p,
@@ -262,13 +266,14 @@ class HpipmOCP:
         self._status, self._iter = ctypes.c_int(-1), ctypes.c_int(-1)
 
     def solve(self) -> dict:
-        """Solve on the data in the bound arrays from the primal start in :attr:`u`, :attr:`x`; the solution replaces them.
+        """Solve on the data in the bound arrays from the primal start in :attr:`u`, :attr:`x`; the
+        solution replaces them.
 
         Returns
         -------
         dict
-            ``success`` (HPIPM's status is SUCCESS), ``return_status`` (its name) and ``iter_count``,
-            the keys of ``casadi.conic``'s statistics that the NMPC reads.
+            ``success`` (HPIPM's status is SUCCESS), ``return_status`` (its name) and
+            ``iter_count``, the keys of ``casadi.conic``'s statistics that the NMPC reads.
         """
         lib = self.lib
         lib.d_ocp_qp_set_all(*self._set_all)

@@ -14,8 +14,9 @@ with ``a`` held fixed while ``M a`` is differentiated: one LDL^T factorisation o
 common subexpression elimination) serves ``qdd`` and every column of the Jacobian.
 
 :func:`factored_dynamics` returns ``f`` and ``(f, f_x, f_u)`` built this way with the
-numeric constants of the pieces as an input (:func:`flexctrl.dynamics.parametric.constants_as_parameters`),
-so the compiled NMPC sensitivities still depend only on the model's graph structure.
+numeric constants of the pieces as an input
+(:func:`flexctrl.dynamics.parametric.constants_as_parameters`), so the compiled NMPC sensitivities
+still depend only on the model's graph structure.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Kinematics, mass matrix and energies of the finite-element arm (see :mod:`flexctrl.dynamics.fem.fem_arm`).
+"""Kinematics, mass matrix and energies of the finite-element arm (see
+:mod:`flexctrl.dynamics.fem.fem_arm`).
 
 Kinematics and kinetic energy of link i (Eqs 2-6, 30)
     In the frame ``(r_i, R(alpha_i))`` a material point ``x`` is at
@@ -167,7 +168,8 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
     for i, joint in enumerate(arm.joints):
         if joint.type != "revolute":
             raise SpecError(
-                f"value {joint.type!r} is not supported by the finite-element arm; allowed: 'revolute' "
+                f"value {joint.type!r} is not supported by the finite-element arm; allowed: "
+                "'revolute' "
                 "(prismatic joints: flexctrl.dynamics.fem.rp_arm)",
                 source=arm.source,
                 key=f"joints[{i + 1}].type",
@@ -281,7 +283,8 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
 def locked_matrices(
     arm: ArmSpec, n_elements: int, q_r: Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(M_ff, K_ff)`` of the elastic dofs with the joints clamped at ``q_r`` and the links straight.
+    """``(M_ff, K_ff)`` of the elastic dofs with the joints clamped at ``q_r`` and the links
+    straight.
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint
     natural frequencies are ``sqrt(eig(K_ff, M_ff))``.

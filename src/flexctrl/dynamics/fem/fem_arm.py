@@ -186,7 +186,8 @@ def build_fem_model(
         "reference_q": q_ref.tolist(),
         "locked_frequencies_rad_s": locked.tolist(),
         "link_first_frequencies_rad_s": link_omega1,
-        "joint_compatibility": "eliminated: link i clamped in a frame at the deformed tip of link i-1",
+        "joint_compatibility": "eliminated: link i clamped in a frame at the deformed tip of "
+        "link i-1",
         "elastic_rotation": "exact rotation by the nodal tip slope theta_N",
         "g_convention": "dU_g/dq + dU_el/dq - K q" if axial_shortening else "dU_g/dq",
         "axial_strain": "u' + 1/2 mean_e(w'^2)" if axial_shortening else "u'",
@@ -210,7 +211,8 @@ def build_fem_model(
 def locked_frequencies(
     functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int
 ) -> np.ndarray:
-    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``, elastic dofs at zero.
+    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``, elastic dofs at
+    zero.
 
     The joints clamped, no gravity preload; see :func:`generalized_frequencies`.
     """
@@ -222,7 +224,8 @@ def locked_frequencies(
 
 
 def generalized_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` positive definite.
+    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` positive
+    definite.
 
     Solved as ``M v = mu K v``, ``lambda = 1/mu``: with the stiff axial elements
     ``||K||`` exceeds the lowest eigenvalues by 1e7 and more, and the direct

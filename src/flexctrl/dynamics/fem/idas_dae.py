@@ -1,4 +1,5 @@
-"""The prescribed-motion sliding-link problems integrated by IDAS, a variable-order BDF (Gear-type) DAE code.
+"""The prescribed-motion sliding-link problems integrated by IDAS, a variable-order BDF (Gear-type)
+DAE code.
 
 Pan, Scott & Ulsoy (1990, Sec. 4) write: "Computer runs showed the current method [Newmark with
 Baumgarte stabilisation] to be more efficient than existing codes based on Gear's algorithm."  To
@@ -34,7 +35,8 @@ Array = NDArray[np.float64]
 
 
 def _hermite_coefficients(le: float) -> Array:
-    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i] zeta^k``
+    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i]
+    zeta^k``
     (exact: the cubic through four samples of :func:`~flexctrl.beam.elements.hermite_shape`)."""
     zs = le * np.array([0.0, 1 / 3, 2 / 3, 1.0])
     C0 = np.linalg.solve(np.vander(zs, 4, increasing=True), hermite_shape(zs, le, 0))
@@ -46,7 +48,8 @@ def _hermite_coefficients(le: float) -> Array:
 
 
 def symbolic_point_row(x, order: int, n_elements: int, length: float):
-    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` for a symbolic material point ``x``
+    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` for a symbolic material point
+    ``x``
     (m) on a uniform mesh of Hermite elements (an interior node belongs to the element on its right)."""
     import casadi as ca
 
@@ -65,9 +68,10 @@ def symbolic_point_row(x, order: int, n_elements: int, length: float):
 
 @dataclass(frozen=True)
 class IdasResult:
-    """An IDAS run on the output grid ``t`` (s): nodal values ``q`` and rates ``qd``, the tracked-end
-    deflection ``tip_y`` (m), constraint violations ``phi_violation`` (m) and ``phidot_violation``
-    (m/s) evaluated independently from the numpy rows, ``wall_time`` (s) of the integration and the
+    """An IDAS run on the output grid ``t`` (s): nodal values ``q`` and rates ``qd``, the
+    tracked-end deflection ``tip_y`` (m), constraint violations ``phi_violation`` (m) and
+    ``phidot_violation`` (m/s) evaluated independently from the numpy rows, ``wall_time`` (s) of the
+    integration and the
     solver statistics ``stats`` (steps, residual evaluations)."""
 
     t: Array
@@ -98,7 +102,8 @@ def simulate_idas(
     suppress_algebraic: bool = True,
     max_order: int = 5,
 ) -> IdasResult:
-    """Integrate ``model`` from ``q0`` at rest with IDAS; outputs every ``grid_dt`` seconds to ``t_end``.
+    """Integrate ``model`` from ``q0`` at rest with IDAS; outputs every ``grid_dt`` seconds to
+    ``t_end``.
 
     Parameters
     ----------

@@ -1,8 +1,9 @@
-"""Frequencies of a model: locked-joint frequencies of the FE arm and of the assumed-modes model, the
-free-joint spectral radius, and the fixed RK4 step they allow.
+"""Frequencies of a model: locked-joint frequencies of the FE arm and of the assumed-modes model,
+the free-joint spectral radius, and the fixed RK4 step they allow.
 
-Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`) and the
-Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of ``docs/fem.md``) and
+Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`)
+and the Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of
+``docs/fem.md``) and
 :mod:`flexctrl.analysis.accuracy` (the speed/accuracy study).
 """
 
@@ -56,7 +57,8 @@ def free_joint_radius(model) -> float:
 
 
 def rk4_step_for(model, sample: float, safety: float = 2.4) -> int:
-    """Substeps per sample so that ``omega h <= safety`` for the larger of the locked ``omega_max`` and
+    """Substeps per sample so that ``omega h <= safety`` for the larger of the locked ``omega_max``
+    and
     the free-joint spectral radius (RK4's limit on the imaginary axis is 2.83)."""
     omega = max(float(model.omega_max), free_joint_radius(model))
     return max(1, math.ceil(sample * omega / safety))

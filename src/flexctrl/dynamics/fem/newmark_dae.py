@@ -61,7 +61,8 @@ class NewtonConvergenceError(SolverError):
 
 @dataclass(frozen=True)
 class DAEProblem:
-    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables returning numpy arrays.
+    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables returning numpy
+    arrays.
 
     ``mass(q,t)`` (n,n); ``force(q,qd,t)`` (n,); ``phi(q,t)``, ``phi_t(q,t)`` (m,);
     ``phi_q(q,t)`` (m,n); ``h(q,qd,t)`` (m,), the right side of ``Phi_q qdd = h``
@@ -305,7 +306,8 @@ def simulate(
                     break
             if not converged:
                 raise NewtonConvergenceError(
-                    f"Newton iteration did not converge at step {k} (t = {t:.6g} s, dt = {dt:.3g} s) "
+                    f"Newton iteration did not converge at step {k} (t = {t:.6g} s, dt = "
+                    f"{dt:.3g} s) "
                     f"after {its} iterations: max|dq| = {size:.3g}, tol = {newton_tol:.3g}"
                 )
             q, lam = z[:n], z[n:]
@@ -317,7 +319,8 @@ def simulate(
             if not (vp <= max_violation and np.isfinite(vv)) or bad_v or not np.all(np.isfinite(q)):
                 raise ConstraintViolationError(
                     f"constraint violation grew without bound at step {k} (t = {t:.6g} s, "
-                    f"dt = {dt:.3g} s, gamma = {gamma:g}, beta = {beta:g}, form = {baumgarte_form}, "
+                    f"dt = {dt:.3g} s, gamma = {gamma:g}, beta = {beta:g}, form = "
+                    f"{baumgarte_form}, "
                     f"feedback = {feedback}): max|Phi| = {vp:.3g} (bound {max_violation:g}), "
                     f"max|Phidot| = {vv:.3g} (bound {max_velocity_violation})"
                 )

@@ -1,4 +1,5 @@
-"""Revolute-prismatic arm: a flexible link sliding through a rotating rigid housing (Pan et al. 1990, Figs 1, 4).
+"""Revolute-prismatic arm: a flexible link sliding through a rotating rigid housing (Pan et al.
+1990, Figs 1, 4).
 
 Geometry
     Joint 1 (revolute, at the origin) turns a rigid housing by ``theta(t)``.  The
@@ -17,7 +18,8 @@ Pan's Fig 4 joint (``[housing] joint = "clamped"``, ``models/rp_arm_clamped.toml
     housing mouth D' (radius ``support_outer``, material point ``L - W``, Eq 24).  Statically it
     is a beam clamped at E and propped at D' with the overhang ``c = W`` beyond it: under a tip
     force ``P`` the tip deflects ``P c^3 / (3 EI)`` (a cantilever of the current free length) plus
-    ``w'(D') c = P c^2 a / (4 EI)`` from the clamped-propped span ``a = L - W`` (test).  Driven at E.
+    ``w'(D') c = P c^2 a / (4 EI)`` from the clamped-propped span ``a = L - W`` (test).  Driven at
+    E.
 
 Prescribed motion (partial coupling, Eq 42)
     ``theta(t)`` and ``W(t)`` follow the smooth rest-to-rest profile of Eq 57:
@@ -99,7 +101,8 @@ class RPArmModel:
         check_elements(n_elements)
         if spec.joint == "clamped" and driven_end != "E":
             raise SpecError(
-                f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the link "
+                f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the "
+                "link "
                 "is clamped in the carriage that drives it)",
                 key="driven_end",
             )
@@ -122,7 +125,8 @@ class RPArmModel:
 
     # -- rigid motion -------------------------------------------------------------------
     def rigid(self, t: float) -> dict[str, float]:
-        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame
+        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the
+        frame
         (CasADi expressions for a symbolic ``t``)."""
         m, s = self.motion, self.spec
         if is_symbolic(t):
@@ -227,7 +231,8 @@ class RPArmModel:
         tip_deflection: float = 0.01,
         tracked_end: Literal["E", "H"] = "H",
     ) -> Array:
-        """Initial nodal values: zero (``"rest"``), or the static deflection under a uniform load with
+        """Initial nodal values: zero (``"rest"``), or the static deflection under a uniform load
+        with
         the t = 0 supports, scaled so that ``tracked_end`` deflects ``tip_deflection`` (m)."""
         if kind == "rest":
             return np.zeros(self.ndof)

@@ -1,4 +1,5 @@
-"""Telescoping prismatic joint: two flexible links sliding on each other (Pan et al. 1990, Fig 5, Eqs 26-28).
+"""Telescoping prismatic joint: two flexible links sliding on each other (Pan et al. 1990, Fig 5,
+Eqs 26-28).
 
 Geometry
     Joint 1 (revolute, at the origin) turns the pair by ``theta(t)``.  The *outer* link (a
@@ -27,17 +28,18 @@ Contacts (the compatibility conditions of Eqs 26-28)
 
 Frame, loads, axial force
     Both links are measured in the frame turning with ``theta``; each has the partial-coupling
-    terms of :class:`~flexctrl.dynamics.fem.moving_frame.FrameLink`: ``-theta'^2 M`` softening, loads
-    ``-int rho N^T (theta'' (r + x) + 2 theta' r' - g_perp)``, and (axial shortening, Eqs 16-18)
-    ``K_g`` from the rigid-motion axial force.  The axial drive is anchored at the hub and
+    terms of :class:`~flexctrl.dynamics.fem.moving_frame.FrameLink`: ``-theta'^2 M`` softening,
+    loads ``-int rho N^T (theta'' (r + x) + 2 theta' r' - g_perp)``, and (axial shortening, Eqs
+    16-18) ``K_g`` from the rigid-motion axial force.  The axial drive is anchored at the hub and
     pushes the inner link at E, so the inner link carries Eq 18 with the reaction at E, and the
-    outer link only its own inertia (reaction at its clamped root).  Axial displacements are
-    not modelled (Eq 26's axial component is the prescribed ``s(t)``).
+    outer link only its own inertia (reaction at its clamped root).  Axial displacements are not
+    modelled (Eq 26's axial component is the prescribed ``s(t)``).
 
-Solution: Newmark + Baumgarte (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`); the DAE is linear.
+Solution: Newmark + Baumgarte (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`); the DAE is
+linear.
 
-Description and model file: :class:`~flexctrl.spec.fem_models.TelescopingSpec` (``models/telescoping.toml``,
-read by :func:`~flexctrl.spec.fem_models.load_telescoping`).
+Description and model file: :class:`~flexctrl.spec.fem_models.TelescopingSpec`
+(``models/telescoping.toml``, read by :func:`~flexctrl.spec.fem_models.load_telescoping`).
 """
 
 from __future__ import annotations
@@ -127,9 +129,10 @@ class TelescopingModel:
         return outer, inner
 
     def contact_rows(self, t: float) -> tuple[Array, Array, Array]:
-        """``(R, xd, xdd)``: ``R[d]`` (rows x ndof) the derivative-``d`` rows of ``w1(x1_k) - w2(x2_k)``
-        (or of the slopes for slope rows) for ``d = 0, 1, 2`` (derivatives along the links), and the
-        sliding speeds/accelerations of the contact points along the outer (column 0) and inner
+        """``(R, xd, xdd)``: ``R[d]`` (rows x ndof) the derivative-``d`` rows of ``w1(x1_k) -
+        w2(x2_k)`` (or of the slopes for slope rows) for ``d = 0, 1, 2`` (derivatives along the
+        links), and the sliding speeds/accelerations of the contact points along the outer (column
+        0) and inner
         (column 1) link (m/s, m/s^2)."""
         sp = self.spec
         x1, x2 = sp.contact_points(self.s(t))
@@ -195,7 +198,8 @@ class TelescopingModel:
         )
 
     def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
-        """Static deflection under a transverse force (N) at the inner tip H, contacts at time ``t``,
+        """Static deflection under a transverse force (N) at the inner tip H, contacts at time
+        ``t``,
         no frame loads: solves ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``.  Returns ``(q, lam)``."""
         A = self._terms(t)[0]
         n, m = self.ndof, self.n_c

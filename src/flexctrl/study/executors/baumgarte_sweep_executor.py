@@ -532,15 +532,18 @@ def _draw(
             ax.grid(True, which="both", alpha=0.3)
         top.legend(fontsize=7, loc="lower left")
     fig.suptitle(
-        "Constraint violation vs gamma = beta. o: bounded run; x: blew up (max before blow-up); dashed: "
-        "gamma = 0;\ndotted: linear error model from the gamma = 0 defects; vertical: predicted stability limit",
+        "Constraint violation vs gamma = beta. o: bounded run; x: blew up (max before blow-up); "
+        "dashed: "
+        "gamma = 0;\ndotted: linear error model from the gamma = 0 defects; vertical: predicted "
+        "stability limit",
         fontsize=8,
     )
     fig.savefig(path, dpi=110)
 
 
 def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[str]:
-    """Markdown for ``report.md``: table, predicted vs observed boundary, findings; writes ``baumgarte.csv`` and a figure.
+    """Markdown for ``report.md``: table, predicted vs observed boundary, findings; writes
+    ``baumgarte.csv`` and a figure.
 
     Drawn from the table rows alone (no simulation); the theory columns are evaluated
     from :mod:`flexctrl.analysis.baumgarte`.
@@ -589,9 +592,12 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
         "",
         "### Predicted against observed",
         "",
-        "| feedback | dt (s) | predicted limit gamma h | predicted limit gamma (1/s) | largest bounded gamma | "
-        "smallest blown-up gamma | every run as predicted | fastest decay at gamma h (per-step factor) | "
-        "max|Phi| gamma=0 / best | slope d log max|Phi| / d log gamma (3 largest bounded gammas) | max/min of max|Phidot| | "
+        "| feedback | dt (s) | predicted limit gamma h | predicted limit gamma (1/s) | largest "
+        "bounded gamma | "
+        "smallest blown-up gamma | every run as predicted | fastest decay at gamma h (per-step "
+        "factor) | "
+        "max|Phi| gamma=0 / best | slope d log max|Phi| / d log gamma (3 largest bounded gammas) "
+        "| max/min of max|Phidot| | "
         "linear model: max rel. error of max|Phi| | growth per step: max rel. error vs predicted | "
         "max tip error (um): gamma = 0, best |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -601,7 +607,8 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
             (m["zero"]["max_phi_m"] / m["best"]["max_phi_m"]) if m["zero"] and m["best"] else None
         )
         lines.append(
-            f"| {m['feedback']} | {m['dt']:g} | {_g(m['limit'], 4)} | {_g(m['predicted_gamma'], 4)} | "
+            f"| {m['feedback']} | {m['dt']:g} | {_g(m['limit'], 4)} | "
+            f"{_g(m['predicted_gamma'], 4)} | "
             f"{_g(m['largest_ok'])} | {_g(m['smallest_bad'])} | {'yes' if m['agrees'] else 'NO'} | "
             f"{_g(m['g_opt'], 3)} ({_g(m['rho_min'], 3)}) | {_g(ratio)} | {_g(m['slope'])} | "
             f"{_g(m['phidot_spread'])} | {_g(m['model_err'], 2)} | {_g(m['growth_err'], 2)} | "
@@ -619,8 +626,10 @@ def _findings(summaries: Sequence[dict], records: Sequence[dict]) -> str:
         n_ok = sum(m["agrees"] for m in explicit)
         limit = explicit[0]["limit"]
         parts.append(
-            f"Explicit feedback (the paper's Eq 54): the discrete theory puts the stability limit at gamma h = "
-            f"{limit:.4g}; the boundary is observed where predicted at {n_ok} of {len(explicit)} steps "
+            "Explicit feedback (the paper's Eq 54): the discrete theory puts the stability "
+            "limit at gamma h = "
+            f"{limit:.4g}; the boundary is observed where predicted at {n_ok} of {len(explicit)} "
+            "steps "
             f"(every run bounded exactly when gamma h <= limit)."
         )
         bad_growth = [m["growth_err"] for m in explicit if m["growth_err"] is not None]
@@ -632,8 +641,10 @@ def _findings(summaries: Sequence[dict], records: Sequence[dict]) -> str:
     if implicit:
         blown = [r for r in records if r["feedback"] == "implicit" and not r["bounded"]]
         parts.append(
-            f"Implicit feedback: {len(blown)} of {sum(1 for r in records if r['feedback'] == 'implicit')} "
-            f"runs blew up (theory: none; the rule is A-stable, but the free-violation factor per step "
+            f"Implicit feedback: {len(blown)} of "
+            f"{sum(1 for r in records if r['feedback'] == 'implicit')} "
+            "runs blew up (theory: none; the rule is A-stable, but the free-violation factor "
+            "per step "
             f"is smallest at gamma h = {implicit[0]['g_opt']:.3g} and tends to 1 beyond)."
         )
     ratios = [
@@ -651,14 +662,17 @@ def _findings(summaries: Sequence[dict], records: Sequence[dict]) -> str:
     if slopes:
         parts.append(
             f"Over the three largest bounded gammas max|Phi| falls as gamma^({min(slopes):.2f} .. "
-            f"{max(slopes):.2f}); the steady-drift theory predicts gamma^-1 (e = 2 gamma d / (beta^2 h) for a "
+            f"{max(slopes):.2f}); the steady-drift theory predicts gamma^-1 (e = 2 gamma d / "
+            "(beta^2 h) for a "
             f"position defect d per step), not the gamma^-2 of a smooth forcing."
         )
     spreads = [m["phidot_spread"] for m in summaries if m["phidot_spread"] is not None]
     if spreads:
         parts.append(
-            f"max|Phidot| changes by at most a factor {max(spreads):.3g} across all bounded gammas at one "
-            f"step: Baumgarte does not reduce the velocity-level violation, which is set by the defect rate "
+            f"max|Phidot| changes by at most a factor {max(spreads):.3g} across all bounded "
+            "gammas at one "
+            "step: Baumgarte does not reduce the velocity-level violation, which is set by the "
+            "defect rate "
             f"d/h (theory: e' = -d/h for every gamma), so for Phidot it never helps."
         )
     errs = [m["model_err"] for m in summaries if m["model_err"] is not None]
@@ -676,8 +690,10 @@ def _findings(summaries: Sequence[dict], records: Sequence[dict]) -> str:
     tip_gain = [m["tip_zero"] / m["tip_min"] for m in summaries if m["tip_zero"] and m["tip_min"]]
     if tip_gain:
         parts.append(
-            f"Stabilisation lowers the largest tip error against the reference by a factor of at most "
-            f"{max(tip_gain):.3g} (gamma = 0 against the best bounded gamma, per step and feedback); the rest "
+            "Stabilisation lowers the largest tip error against the reference by a factor of at "
+            "most "
+            f"{max(tip_gain):.3g} (gamma = 0 against the best bounded gamma, per step and "
+            "feedback); the rest "
             f"of the tip error comes with the step."
         )
     tips = [r for r in records if r["bounded"] and r["tip_error_max_m"] is not None]
@@ -685,9 +701,12 @@ def _findings(summaries: Sequence[dict], records: Sequence[dict]) -> str:
         best = min(tips, key=lambda r: r["tip_error_max_m"])
         worst = max(tips, key=lambda r: r["tip_error_max_m"])
         parts.append(
-            f"Tip error against the reference (bounded runs): {1e6 * best['tip_error_max_m']:.3g} um "
-            f"(best: {best['feedback']}, dt = {best['dt_s']:g} s, gamma = {best['gamma_per_s']:g}) to "
-            f"{1e6 * worst['tip_error_max_m']:.3g} um (worst: {worst['feedback']}, dt = {worst['dt_s']:g} s, "
+            "Tip error against the reference (bounded runs): "
+            f"{1e6 * best['tip_error_max_m']:.3g} um "
+            f"(best: {best['feedback']}, dt = {best['dt_s']:g} s, gamma = "
+            f"{best['gamma_per_s']:g}) to "
+            f"{1e6 * worst['tip_error_max_m']:.3g} um (worst: {worst['feedback']}, dt = "
+            f"{worst['dt_s']:g} s, "
             f"gamma = {worst['gamma_per_s']:g})."
         )
     return " ".join(parts)

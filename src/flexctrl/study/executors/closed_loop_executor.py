@@ -113,7 +113,8 @@ def execute(settings: dict) -> RunOutput:
 
 
 def shared_choice(representative: dict, cache):
-    """The fidelity choice of a group's representative run (its settings), made once per worker and kept.
+    """The fidelity choice of a group's representative run (its settings), made once per worker and
+    kept.
 
     A choice that fails (e.g. :class:`~flexctrl.fidelity.ladder.ToleranceUnreachable`) is
     kept too and raised again for every member, so the group is judged once.

@@ -143,7 +143,8 @@ def execute(settings: dict) -> RunOutput:
     if scene.crash_payload is not None and payload == scene.crash_payload:
         if _in_main_process():
             raise RuntimeError(
-                "selftest crash requested, but the run is in the main process (--workers 0); refusing to exit"
+                "selftest crash requested, but the run is in the main process (--workers 0); "
+                "refusing to exit"
             )
         os._exit(70)
     f0, modal_mass = _selftest_build(

@@ -86,7 +86,8 @@ OWN_KEYS = ("method", "reference", "reference_meshes", "repeats", "horizon")
 DEFAULT_REFERENCE = "fem:8/rk4@stable"
 DEFAULT_MESHES = ("fem:4",)
 DEFAULT_REPEATS = 3
-#: Repeats stop once the timed runs of one candidate add up to this (s): a long run is its own average.
+# : Repeats stop once the timed runs of one candidate add up to this (s): a long run is its own
+# average.
 REPEAT_BUDGET_S = 3.0
 #: Right-hand-side evaluations per step of the explicit solve_ivp methods (for their mean step).
 _RK_STAGES = {"RK45": 6, "RK23": 3, "DOP853": 12}
@@ -139,14 +140,16 @@ def plan_from_settings(settings: Mapping[str, Any]) -> RunPlan:
     own, rest = _split_overrides(settings)
     if settings.get("fidelity") is not None:
         raise SpecError(
-            f"value {settings['fidelity']!r} is not used here; allowed: leave 'fidelity' out and give the model in "
+            f"value {settings['fidelity']!r} is not used here; allowed: leave 'fidelity' out and "
+            "give the model in "
             "scene.method (e.g. 'amm:2/rk4@1ms')",
             source=source,
             key="fidelity",
         )
     if "method" not in own:
         raise SpecError(
-            'missing: the method to judge, e.g. "scene.method" = "amm:2/rk4@1ms" (fixed in [set] or a [grid] axis)',
+            'missing: the method to judge, e.g. "scene.method" = "amm:2/rk4@1ms" (fixed in [set] '
+            "or a [grid] axis)",
             source=source,
             key="scene.method",
         )
@@ -165,7 +168,8 @@ def plan_from_settings(settings: Mapping[str, Any]) -> RunPlan:
         isinstance(m, str) and m.startswith("fem:") for m in meshes
     ):
         raise SpecError(
-            f'value {meshes!r} is not allowed; allowed: a list of finite-element fidelities, e.g. ["fem:4"]',
+            f"value {meshes!r} is not allowed; allowed: a list of finite-element fidelities, "
+            'e.g. ["fem:4"]',
             source=source,
             key="scene.reference_meshes",
         )
@@ -267,8 +271,8 @@ def _controller(
     controller_digest: str | None,
     overrides: tuple[str, ...],
 ):
-    """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload (or
-    ``design_payload``) at its design configuration, tracking the scene's reference path, as
+    """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload
+    (or ``design_payload``) at its design configuration, tracking the scene's reference path, as
     :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
     from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.scenes.loop_setup import design_scene_controller
@@ -294,7 +298,8 @@ def _controller(
     ctrl = design_scene_controller(scene, model, settings, path)
     if ctrl.sensors.kinds == ("state",):
         raise SpecError(
-            f"controller '{path}' measures the full state, which only a plant of its own design model has; "
+            f"controller '{path}' measures the full state, which only a plant of its own design "
+            "model has; "
             'allowed here: sensors that every model has, e.g. outputs = ["joints", "deflection"]',
             source=str(path),
             key="sensors.outputs",
@@ -365,7 +370,8 @@ def check_settings(settings: dict) -> None:
         path = plan.controller or scene.controller
         if path is None:
             raise SpecError(
-                "closed-loop scene without a controller; allowed: the study's 'controller' or the scene key",
+                "closed-loop scene without a controller; allowed: the study's 'controller' or "
+                "the scene key",
                 source=scene.source,
                 key="controller",
             )
@@ -373,7 +379,8 @@ def check_settings(settings: dict) -> None:
         per = float(ctrl.sample_time) / OUTPUT_DT
         if abs(per - round(per)) > 1e-9 * per or round(per) < 1:
             raise SpecError(
-                f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the {OUTPUT_DT:g} s comparison "
+                f"value {ctrl.sample_time!r} s is not allowed; allowed: a whole number of the "
+                f"{OUTPUT_DT:g} s comparison "
                 'samples, e.g. "controller.sample_time" = 0.01 in the study\'s [set]',
                 source=str(path),
                 key="sample_time",
@@ -631,9 +638,12 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
         "",
         f"![error against cost]({chart.relative_to(directory).as_posix()})",
         "",
-        "Cost: integration wall time per simulated second (median over repeats, then over the cases); "
-        "error: RMS over time of the tip distance from the reference (median over the cases; worst: the largest "
-        "over the cases). Pareto: no other method is both cheaper and more accurate (methods with failed runs are "
+        "Cost: integration wall time per simulated second (median over repeats, then over the "
+        "cases); "
+        "error: RMS over time of the tip distance from the reference (median over the cases; "
+        "worst: the largest "
+        "over the cases). Pareto: no other method is both cheaper and more accurate (methods "
+        "with failed runs are "
         "not eligible). Numbers also in `pareto.csv`.",
         "",
     ]
@@ -645,12 +655,14 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
         lines += [
             f"### {scene}",
             "",
-            "| method | states | s per sim. s | tip RMS (m), median | worst RMS (m) | worst max (m) | runs ok/failed | Pareto |",
+            "| method | states | s per sim. s | tip RMS (m), median | worst RMS (m) | worst max "
+            "(m) | runs ok/failed | Pareto |",
             "| --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
         for s in block:
             lines.append(
-                f"| `{s['method']}` | {_fmt(s['n_states']).replace('.0', '')} | {_fmt(s['wall_per_sim_s'])} | {_fmt(s['tip_error_rms'])} | "
+                f"| `{s['method']}` | {_fmt(s['n_states']).replace('.0', '')} | "
+                f"{_fmt(s['wall_per_sim_s'])} | {_fmt(s['tip_error_rms'])} | "
                 f"{_fmt(s['tip_error_rms_worst'])} | {_fmt(s['tip_error_max_worst'])} | "
                 f"{s['runs_ok']}/{s['runs_failed']} | {'**yes**' if s['pareto'] else ''} |"
             )
@@ -682,8 +694,10 @@ def _reference_table(rows: list[dict]) -> list[str]:
     lines = [
         "### The reference and its convergence",
         "",
-        "Tip distance (m, RMS / max over time) of each convergence run from the reference: `step2` is the same model "
-        "with half the step; `femN` another mesh with the reference's integrator. `travel` is the largest distance of "
+        "Tip distance (m, RMS / max over time) of each convergence run from the reference: "
+        "`step2` is the same model "
+        "with half the step; `femN` another mesh with the reference's integrator. `travel` is "
+        "the largest distance of "
         "the reference tip from its start.",
         "",
         "| " + " | ".join([*coords, "travel (m)", *checks, "ref. s per sim. s"]) + " |",
@@ -706,7 +720,8 @@ def mesh_convergence(
     horizon: float = 1.0,
     model: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Tip distances (m) between successive meshes, RK4 at each mesh's stable step: the evidence beyond the study's checks.
+    """Tip distances (m) between successive meshes, RK4 at each mesh's stable step: the evidence
+    beyond the study's checks.
 
     For ``docs/speed_accuracy.md`` (too slow to repeat for every case of the study:
     fem:16 compiles for minutes).  Returns ``{"runs": {mesh: {"wall_per_sim_s", "step_s"}},
@@ -714,7 +729,8 @@ def mesh_convergence(
 
     Examples
     --------
-    ``python -c "from flexctrl.study.executors.speed_vs_accuracy_executor import mesh_convergence as m; print(m('studies/scenes/bangbang.toml'))"``
+    ``python -c "from flexctrl.study.executors.speed_vs_accuracy_executor import mesh_convergence as
+    m; print(m('studies/scenes/bangbang.toml'))"``
     """
     from flexctrl.sim.tip_error import tip_error
 

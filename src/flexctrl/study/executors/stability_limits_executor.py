@@ -1,4 +1,5 @@
-"""The ``stability_limits`` study executor: the largest stable step of each integrator on each model.
+"""The ``stability_limits`` study executor: the largest stable step of each integrator on each
+model.
 
 One run = one integrator on one model: the run's scene (``kind = "arm"``)
 gives the arm file, payload, gravity, damping, fidelity and integrator, with
@@ -20,19 +21,20 @@ adaptive one the output interval is not a step.
 
 Metrics (SI units; all finite, as the study runner requires)
     ``omega_max``            max ``|lambda|`` of ``df/dx`` at the equilibrium, rad/s
-    ``omega_max_model``      the model's own ``omega_max`` (at the build configuration, no static deflection), rad/s
-    ``h_measured``           largest step found stable, s (the cap when stable at every tested step; 0 when unstable at every one)
-    ``h_unstable``           smallest step found unstable, s (absent when none was)
-    ``h_theory``             theoretical limit, s (absent when unbounded: then ``theory_unbounded`` = 1)
-    ``theory_unbounded``     1 when every step is stable in theory (Newmark), else 0
-    ``ratio``                ``h_measured / h_theory`` (absent when undefined)
-    ``omega_h_measured``     ``omega_max * h_measured``
-    ``omega_h_theory``       ``omega_max * h_theory`` (absent when unbounded)
-    ``outcome_code``         0 bracketed, 1 stable at every tested step (up to the cap), 2 unstable at every tested step (down to the floor)
-    ``failure_code``         why the smallest unstable step failed: 0 a mode grew, 1 the run diverged, 2 the method's solver (Newton) failed; absent when none did
-    ``h_cap``, ``h_floor``   the search range, s
-    ``limiting_omega``, ``limiting_zeta``   ``|lambda|`` (rad/s) and ``-Re(lambda)/|lambda|`` of the eigenvalue that limits the theory
-    ``n_modes``, ``n_probes``, ``probe_steps``, ``growth_tolerance``, ``equilibrium_residual`` (max ``|f|``, SI)
+    ``omega_max_model``      the model's own ``omega_max`` (at the build configuration, no static
+    deflection), rad/s ``h_measured``           largest step found stable, s (the cap when stable at
+    every tested step; 0 when unstable at every one) ``h_unstable``           smallest step found
+    unstable, s (absent when none was) ``h_theory``             theoretical limit, s (absent when
+    unbounded: then ``theory_unbounded`` = 1) ``theory_unbounded``     1 when every step is stable
+    in theory (Newmark), else 0 ``ratio``                ``h_measured / h_theory`` (absent when
+    undefined) ``omega_h_measured``     ``omega_max * h_measured`` ``omega_h_theory``
+    ``omega_max * h_theory`` (absent when unbounded) ``outcome_code``         0 bracketed, 1 stable
+    at every tested step (up to the cap), 2 unstable at every tested step (down to the floor)
+    ``failure_code``         why the smallest unstable step failed: 0 a mode grew, 1 the run
+    diverged, 2 the method's solver (Newton) failed; absent when none did ``h_cap``, ``h_floor``
+    the search range, s ``limiting_omega``, ``limiting_zeta``   ``|lambda|`` (rad/s) and
+    ``-Re(lambda)/|lambda|`` of the eigenvalue that limits the theory ``n_modes``, ``n_probes``,
+    ``probe_steps``, ``growth_tolerance``, ``equilibrium_residual`` (max ``|f|``, SI)
 
 Trajectories: ``probe_h`` (s), ``probe_stable`` (1/0) and ``probe_growth``
 (largest modal amplitude ratio; inf for a diverged probe), in the order run.
@@ -66,7 +68,8 @@ from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache, s
 METHODS = ("rk4", "euler", "newmark")
 #: Outcomes by ``outcome_code``.
 OUTCOMES = ("bracketed", "stable_at_cap", "unstable_at_floor")
-#: Why the smallest unstable step failed, by ``failure_code`` (see :class:`flexctrl.analysis.stability.probe.Probe`).
+# : Why the smallest unstable step failed, by ``failure_code`` (see
+# :class:`flexctrl.analysis.stability.probe.Probe`).
 FAILURES = ("growth", "diverged", "solver")
 _FAILURE_TEXT = ("a mode grows", "the run diverges", "the method's solver fails (e.g. Newton)")
 #: The leading columns of ``stability_limits.csv`` (an external check relies on them).
@@ -90,7 +93,8 @@ def _scene(settings: dict):
     source = str(settings["scene"])
     if overrides_for(settings, "model"):
         raise SpecError(
-            f"model overrides {overrides_for(settings, 'model')} are not supported by the stability_limits "
+            f"model overrides {overrides_for(settings, 'model')} are not supported by the "
+            "stability_limits "
             "executor; allowed: scene.KEY overrides (payload, damping, gravity, fidelity, integrator)",
             source=source,
             key="model",
@@ -104,14 +108,16 @@ def _scene(settings: dict):
         )
     if scene.fidelity.kind not in ("rigid", "amm", "fem"):
         raise SpecError(
-            f"fidelity '{scene.fidelity}' is not allowed here; allowed: 'rigid', 'amm:N' or 'fem:N' (a model "
+            f"fidelity '{scene.fidelity}' is not allowed here; allowed: 'rigid', 'amm:N' or "
+            "'fem:N' (a model "
             "of its own per run: the study compares fidelities)",
             source=source,
             key="fidelity",
         )
     if scene.integrator not in METHODS:
         raise SpecError(
-            f"integrator '{scene.integrator}' is not allowed here; allowed: {', '.join(map(repr, METHODS))} "
+            f"integrator '{scene.integrator}' is not allowed here; allowed: "
+            f"{', '.join(map(repr, METHODS))} "
             "(fixed-step methods: an adaptive one has no step to limit)",
             source=source,
             key="integrator",
@@ -229,7 +235,8 @@ def _text(value: float | None, digits: int = 6) -> str:
 
 
 def _run_facts(directory: Path, row: dict) -> tuple[str, str, str, dict]:
-    """Integrator, fidelity, scene label and every metric of a row, from its grid columns and its record.
+    """Integrator, fidelity, scene label and every metric of a row, from its grid columns and its
+    record.
 
     The record (``runs/<id>.json``) holds every metric even when the study's
     ``metrics`` list keeps some out of ``results.csv``.
@@ -269,10 +276,16 @@ def _note(row: dict) -> str:
     w = _num(row.get("omega_max")) or math.nan
     if code == 1:
         cap = _num(row.get("h_cap")) or math.nan
-        return f"stable at every tested step up to the cap h = {cap:.4g} s (omega_max h = {w * cap:.4g}); h_measured is that cap (a lower bound)"
+        return (
+            f"stable at every tested step up to the cap h = {cap:.4g} s (omega_max h = "
+            f"{w * cap:.4g}); h_measured is that cap (a lower bound)"
+        )
     if code == 2:
         floor = _num(row.get("h_floor")) or math.nan
-        return f"unstable at every tested step down to h = {floor:.4g} s (omega_max h = {w * floor:.3g}); h_measured = 0"
+        return (
+            f"unstable at every tested step down to h = {floor:.4g} s (omega_max h = "
+            f"{w * floor:.3g}); h_measured = 0"
+        )
     h, hu = _num(row.get("h_measured")), _num(row.get("h_unstable"))
     failure = _num(row.get("failure_code"))
     why = f": {_FAILURE_TEXT[int(failure)]}" if failure is not None else ""
@@ -375,19 +388,27 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     lines = [
         "## Largest stable step (stability_limits)",
         "",
-        "Each run perturbs the model's static equilibrium (joints held by constant torques) along every "
-        "vibration mode by +-1e-9 m/rad (two runs; half their difference is watched) and bisects on the step h of the "
-        "real integrator; a probe is unstable when a modal amplitude grows by more than its growth tolerance over its steps, "
+        "Each run perturbs the model's static equilibrium (joints held by constant torques) "
+        "along every "
+        "vibration mode by +-1e-9 m/rad (two runs; half their difference is watched) and bisects "
+        "on the step h of the "
+        "real integrator; a probe is unstable when a modal amplitude grows by more than its "
+        "growth tolerance over its steps, "
         "or a run fails (see flexctrl/analysis/stability/probe.py and "
-        "docs/stability.md). `h_theory` is the largest h with |R(lambda h)| <= 1 for every eigenvalue lambda of "
+        "docs/stability.md). `h_theory` is the largest h with |R(lambda h)| <= 1 for every "
+        "eigenvalue lambda of "
         "df/dx at that equilibrium; `omega_max` = max |lambda| (rad/s).",
         "",
-        f"RK4: the exact limit on the imaginary axis (undamped modes) is omega h = 2 sqrt 2 = {RK4_IMAGINARY_AXIS_LIMIT:.4f}; "
-        f"the issue's {RK4_STABILITY_LIMIT} is the negative-real-axis limit ({RK4_REAL_AXIS_LIMIT:.4f}), "
-        f"{100 * (1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT):.2f} % lower; below, `h/(2.785/omega)` compares "
+        "RK4: the exact limit on the imaginary axis (undamped modes) is omega h = 2 sqrt 2 = "
+        f"{RK4_IMAGINARY_AXIS_LIMIT:.4f}; "
+        f"the issue's {RK4_STABILITY_LIMIT} is the negative-real-axis limit "
+        f"({RK4_REAL_AXIS_LIMIT:.4f}), "
+        f"{100 * (1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT):.2f} % lower; below, "
+        "`h/(2.785/omega)` compares "
         "with the issue's number and `ratio` with the exact theory.",
         "",
-        "Files: `stability_limits.csv` (columns integrator, fidelity, omega_max [rad/s], h_measured [s], h_theory [s; "
+        "Files: `stability_limits.csv` (columns integrator, fidelity, omega_max [rad/s], "
+        "h_measured [s], h_theory [s; "
         "inf = unconditionally stable], ...).",
         "",
     ]
@@ -493,7 +514,8 @@ def _draw(path: Path, table: list[dict]) -> None:
     ax.set_ylabel("largest stable step h (s)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="best")
-    # the same, as omega_max h, for the bracketed rows: the 1.5 % between 2 sqrt 2 and 2.785 becomes visible
+    # the same, as omega_max h, for the bracketed rows: the 1.5 % between 2 sqrt 2 and 2.785 becomes
+    # visible
     zoom.axhline(RK4_IMAGINARY_AXIS_LIMIT, color="k", lw=1, label="2 sqrt 2 (RK4, imaginary axis)")
     zoom.axhline(
         RK4_STABILITY_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)"
