@@ -44,10 +44,10 @@ format: $(STAMP)
 	$(BIN)/ruff check --fix .
 
 # Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
-# about 15 minutes the first time on 2 busy cores, under a minute after; docs/make_figures.py
+# about 15 minutes the first time on 2 busy cores, under a minute after; tools/make_figures.py
 # lists what it runs).
 figures: $(STAMP)
-	$(BIN)/python docs/make_figures.py
+	$(BIN)/python tools/make_figures.py
 
 clean:
 	rm -rf $(VENV) out

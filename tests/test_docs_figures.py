@@ -34,8 +34,8 @@ def test_every_figure_is_shown_and_every_shown_figure_exists():
 
 
 def test_figures_are_small_and_made_by_make_figures():
-    script = (ROOT / "docs" / "make_figures.py").read_text()
-    assert "docs/make_figures.py" in (ROOT / "Makefile").read_text()
+    script = (ROOT / "tools" / "make_figures.py").read_text()
+    assert "tools/make_figures.py" in (ROOT / "Makefile").read_text()
     for png in FIGURES.glob("*.png"):
         assert png.stat().st_size < 200 * 1024, f"{png.name}: {png.stat().st_size / 1024:.0f} KiB"
-        assert f'"{png.name}"' in script, f"{png.name} is not drawn by docs/make_figures.py"
+        assert f'"{png.name}"' in script, f"{png.name} is not drawn by tools/make_figures.py"

@@ -33,7 +33,7 @@ a user pays per simulated second once the model is built.
 Why not the :class:`~flexctrl.sim.integrator.Integrator` classes directly?  Their output
 grid is their step, so RK4 on a stiff finite-element model (steps of a few
 microseconds) would keep hundreds of thousands of states; here RK4 substeps inside
-one compiled call per output sample (as :func:`flexctrl.analysis.fem_report.rk4_sampler`).
+one compiled call per output sample (as ``rk4_sampler`` of ``tools/fem_report.py``).
 CVODES, IDAS and scipy are the package's own integrators (their ``_advance`` hook,
 which already integrates a block of held torques); Newmark is
 :func:`flexctrl.dynamics.fem.newmark_dae.simulate` on

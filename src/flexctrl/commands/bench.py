@@ -1,4 +1,10 @@
-"""``flexctrl bench sim|mpc|loop|studies|runs``: simulation speed (:mod:`flexctrl.bench.simulation_speed`), MPC solve times (:mod:`flexctrl.bench.mpc_step`), closed-loop run against plant alone (:mod:`flexctrl.bench.loop_overhead`), study files side by side (:mod:`flexctrl.bench.studies`), one study's runs under two source trees (:mod:`flexctrl.bench.runs`)."""
+"""``flexctrl bench sim|mpc|loop``: the speed figures a user asks for.
+
+Simulation speed (:mod:`flexctrl.bench.simulation_speed`), MPC solve times
+(:mod:`flexctrl.bench.mpc_step`) and a closed-loop run against the plant alone
+(:mod:`flexctrl.bench.loop_overhead`). Comparisons of the toolkit against an earlier
+commit live beside the package, in ``benchmarks/``.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +13,7 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim", "mpc", "loop", "studies", "runs")
+BENCHMARKS = ("sim", "mpc", "loop")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -32,16 +38,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled "
         "RK4 simulation alone "
         "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s "
-        "and their ratio. 'studies': --study files (default "
-        "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a "
-        "fresh process run twice "
-        "(first pass, repeated pass), --repeats rounds, with the --set overrides applied to "
-        "every study; prints the "
-        "pass times and their ratios to the first study (of the medians, and round by round for "
-        "the first pass). "
-        "'runs': the runs of one --study under two --tree source checkouts (one worker process "
-        "each), alternated run "
-        "by run; prints each tree's summed per-run wall time by --by and the ratio.",
+        "and their ratio.",
     )
     parser.add_argument(
         "what",
@@ -102,47 +99,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="loop: controller file (default controllers/lqr.toml)",
     )
     parser.add_argument(
-        "--study",
-        action="append",
-        default=None,
-        metavar="FILE",
-        help="studies: a study file (repeatable; the first is the baseline)",
-    )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=0,
-        metavar="N",
-        help="studies: workers per pass (default 0: in the process)",
-    )
-    parser.add_argument(
-        "--keep", default=None, metavar="DIR", help="studies: write the passes' folders here"
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="studies: override a key of every study file, as 'flexctrl study --set' (repeatable)",
-    )
-    parser.add_argument(
-        "--tree",
-        action="append",
-        default=None,
-        metavar="DIR",
-        help="runs: a source checkout (twice: the old one first, then the new one)",
-    )
-    parser.add_argument(
-        "--by", default="controller", metavar="COLUMN", help="runs: group wall times by this column"
-    )
-    parser.add_argument(
-        "--exclude",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="runs: leave out the runs with this coordinate (repeatable), e.g. controller=nmpc",
-    )
-    parser.add_argument(
         "--use-cache",
         action="store_true",
         help="reuse the compiled-code cache (default: compile afresh to time it)",
@@ -151,20 +107,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.set and args.what != "studies":
-        raise SpecError(
-            f"value {args.set[0]!r} is not allowed for 'bench {args.what}'; allowed: --set with "
-            "'bench studies' only",
-            key="--set",
-        )
     if args.what == "mpc":
         return _run_mpc(args)
     if args.what == "loop":
         return _run_loop(args)
-    if args.what == "studies":
-        return _run_studies(args)
-    if args.what == "runs":
-        return _run_runs(args)
     from flexctrl.bench.simulation_speed import DEFAULT_MODEL, bench_sim
 
     if args.repeats < 1:
@@ -252,59 +198,4 @@ def _run_loop(args: argparse.Namespace) -> int:
         )
     result = bench_loop(controller=args.controller or DEFAULT_CONTROLLER, repeats=args.repeats)
     print(json.dumps(result, indent=2) if args.json else format_loop(result))
-    return 0
-
-
-def _run_studies(args: argparse.Namespace) -> int:
-    from flexctrl.bench.studies import DEFAULT_STUDIES, bench_studies, format_studies
-
-    if args.repeats < 1 or args.workers < 0:
-        raise SpecError(
-            f"value {min(args.repeats, args.workers)!r} is out of range; allowed: --repeats >= "
-            "1, --workers >= 0",
-            key="--repeats",
-        )
-    from flexctrl.study.study_file import load_study
-
-    for study in (
-        args.study or DEFAULT_STUDIES
-    ):  # a bad study or override is refused before any pass runs
-        load_study(study, overrides=args.set)
-    result = bench_studies(
-        args.study or DEFAULT_STUDIES,
-        rounds=args.repeats,
-        workers=args.workers,
-        keep=args.keep,
-        overrides=args.set,
-    )
-    print(json.dumps(result, indent=2) if args.json else format_studies(result))
-    return 0
-
-
-def _run_runs(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from flexctrl.bench.runs import bench_runs, format_runs
-
-    if not args.study or len(args.study) != 1 or not args.tree or len(args.tree) != 2:
-        raise SpecError(
-            f"--study {args.study!r} --tree {args.tree!r}; allowed: one --study FILE and two "
-            "--tree DIR",
-            key="--tree",
-        )
-    for tree in args.tree:
-        if not (Path(tree) / "flexctrl" / "__init__.py").is_file():
-            raise SpecError(
-                f"value {tree!r} is not a flexctrl checkout; allowed: a folder holding flexctrl/__init__.py",
-                key="--tree",
-            )
-    for item in args.exclude:
-        if "=" not in item:
-            raise SpecError(
-                f"value {item!r} is not allowed; allowed: KEY=VALUE (a grid column and one of "
-                "its values)",
-                key="--exclude",
-            )
-    result = bench_runs(args.study[0], args.tree, by=args.by, exclude=args.exclude)
-    print(json.dumps(result, indent=2) if args.json else format_runs(result))
     return 0

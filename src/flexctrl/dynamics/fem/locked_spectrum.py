@@ -2,7 +2,7 @@
 the free-joint spectral radius, and the fixed RK4 step they allow.
 
 Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`)
-and the Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of
+and the Jacobian of ``f``; used by ``tools/fem_report.py`` (the figures of
 ``docs/fem.md``) and
 :mod:`flexctrl.analysis.accuracy` (the speed/accuracy study).
 """

@@ -1,9 +1,9 @@
-"""``flexctrl bench runs``: one study's runs under two source trees, alternated run by run."""
+"""``benchmarks/compare_trees.py``: one study's runs under two source trees, alternated."""
 
 from support import ROOT
 
-from flexctrl import cli
-from flexctrl.bench.runs import bench_runs, format_runs
+import pytest
+from compare_trees import bench_runs, format_runs, import_root, main
 
 STUDY = "tests/data/study_selftest.toml"
 
@@ -21,9 +21,20 @@ def test_the_same_tree_twice_gives_the_same_metrics_and_every_run():
 def test_bad_arguments_are_refused(capsys):
     root = ROOT
     for argv, message in (
-        (["--tree", str(root)], "two --tree"),
+        (["--tree", str(root)], "exactly two --tree"),
         (["--tree", str(root), "--tree", str(root / "tests")], "not a flexctrl checkout"),
         (["--tree", str(root), "--tree", str(root), "--exclude", "nmpc"], "KEY=VALUE"),
     ):
-        assert cli.main(["bench", "runs", "--study", STUDY, *argv]) != 0
+        with pytest.raises(SystemExit) as exit_info:
+            main(["--study", STUDY, *argv])
+        assert exit_info.value.code == 2
         assert message in capsys.readouterr().err
+
+
+def test_both_layouts_are_found(tmp_path):
+    """A tree of the src layout and one with the package at its top both give their import root."""
+    assert import_root(ROOT) == ROOT / "src"
+    old = tmp_path / "old"
+    (old / "flexctrl").mkdir(parents=True)
+    (old / "flexctrl" / "__init__.py").write_text("")
+    assert import_root(old) == old

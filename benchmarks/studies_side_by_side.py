@@ -1,7 +1,7 @@
-"""Studies side by side: each study file's first pass and a repeated pass, alternated in one run of the benchmark.
+"""Studies side by side: each study's first pass and a repeated pass, alternated round by round.
 
-``flexctrl bench studies`` (default: ``studies/quickstart_finest.toml`` then
-``studies/quickstart_auto.toml``) runs, for every round and every study in turn, a
+``python benchmarks/studies_side_by_side.py --study A --study B [--repeats N] [--set K=V]``
+(default: ``studies/quickstart_finest.toml`` then ``studies/quickstart_auto.toml``) runs, for every round and every study in turn, a
 fresh Python process that runs the study twice into new folders: the *first pass*
 (nothing in the process: models built, designs made, fidelity choices made; the
 compiled-library cache on disk as it is) and a *repeated pass* in the same process (its
@@ -184,7 +184,7 @@ def bench_studies(
 def format_studies(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_studies`."""
     lines = [
-        f"flexctrl bench studies: {result['rounds']} round(s), {result['passes']} passes per process, "
+        f"studies_side_by_side: {result['rounds']} round(s), {result['passes']} passes per process, "
         f"workers {result['workers']} (load average {result['load_average_1min']})"
         + (
             f"; every study with --set {' --set '.join(result['overrides'])}"
@@ -207,3 +207,37 @@ def format_studies(result: dict[str, Any]) -> str:
         each = ", ".join(f"{x:.2f}" for x in q["first_pass_rounds"])
         lines.append(f"  {name} / {first}: first pass {q['first_pass']:.2f} (rounds: {each}){rep}")
     return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line (see the module docstring); exit status 2 on bad arguments."""
+    import argparse
+
+    from flexctrl.errors import SpecError
+    from flexctrl.study.study_file import load_study
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--study", action="append", default=None, help="a study file (repeat)")
+    parser.add_argument("--repeats", type=int, default=3, help="rounds (default 3)")
+    parser.add_argument("--workers", type=int, default=0, help="study workers (0: in process)")
+    parser.add_argument("--keep", default=None, metavar="DIR", help="write the passes' folders here")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.workers < 0:
+        parser.error("allowed: --repeats >= 1 and --workers >= 0")
+    studies = args.study or DEFAULT_STUDIES
+    try:
+        for study in studies:  # a bad study or override is refused before any pass runs
+            load_study(study, overrides=args.set)
+    except SpecError as exc:
+        parser.error(str(exc))
+    result = bench_studies(
+        studies, rounds=args.repeats, workers=args.workers, keep=args.keep, overrides=args.set
+    )
+    print(json.dumps(result, indent=2) if args.json else format_studies(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

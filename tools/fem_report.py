@@ -1,6 +1,6 @@
 """The figures quoted in ``docs/fem.md``: convergence tables, AMM-versus-FEM comparison, timings.
 
-Run ``python -m flexctrl.analysis.fem_report --out out/fem`` (about 10 minutes; most
+Run ``python tools/fem_report.py --out out/fem`` (about 10 minutes; most
 of it compiling and running the 16-element RK4 reference); ``--quick`` skips the
 16-element runs.  Writes ``report.json`` and prints the tables.
 
@@ -30,7 +30,6 @@ from flexctrl.dynamics.fem.locked_spectrum import (
     rk4_step_for,
 )
 from flexctrl.spec.arm import ArmSpec, load_arm
-from flexctrl.spec.shipped import data_root
 
 __all__ = [
     "amm_versus_fem",
@@ -47,7 +46,6 @@ __all__ = [
 
 CONFIGS_DEG = ((0.0, 0.0, 0.0), (0.0, 90.0, 0.0), (0.0, 45.0, -90.0))
 PAYLOADS = (0.0, 2.0)
-ROOT = data_root()
 
 
 def locked_convergence(
@@ -327,7 +325,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/fem", help="output folder (default out/fem)")
     parser.add_argument("--quick", action="store_true", help="skip the 16-element time-domain runs")
-    parser.add_argument("--model", default=str(ROOT / "models" / "subedi3link.toml"))
+    parser.add_argument("--model", default="subedi3link")
     args = parser.parse_args(argv)
     arm = load_arm(args.model)
     elements = (4, 8) if args.quick else (4, 8, 16)

@@ -22,7 +22,7 @@ and resumed, so a second ``make figures`` only redraws; ``--fresh`` reruns them)
     mode shapes of every link at 0 and 2 kg, the first two link-1 frequencies over
     (q2, q3) and the link-2 ones over q3 at 2 kg (15-degree grid; seconds).
 
-Run from the repository root: ``python docs/make_figures.py [--only NAME ...] [--workers N]``.
+Run from the repository root: ``python tools/make_figures.py [--only NAME ...] [--workers N]``.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def comparison(args) -> Path:
     import flexctrl as fc
 
     model = fc.load_model(
-        ROOT / "models" / "subedi3link.toml",
+        "subedi3link",
         payload=2.0,
         fidelity="amm:2",
         gravity=[0.0, 0.0],
@@ -57,7 +57,7 @@ def comparison(args) -> Path:
     judge = fc.MetricSettings(settle_allowance=1.0)
     results = {}
     for name in ("pd", "lqr", "mpc"):
-        controller = fc.design(model, op, fc.load_controller(ROOT / "controllers" / f"{name}.toml"))
+        controller = fc.design(model, op, fc.load_controller(name))
         results[name.upper()] = fc.closed_loop(model, controller, move, duration=8.0, metrics=judge)
     fig = fc.compare(
         results,
@@ -72,7 +72,7 @@ def _study(name: str, study: str, overrides: list[str], args, workers: int | Non
     out = OUT / name
     if args.fresh and out.exists():
         shutil.rmtree(out)
-    spec = fc.load_study(ROOT / study, overrides)
+    spec = fc.load_study(study, overrides)
     try:
         fc.run_study(
             spec,
@@ -157,7 +157,7 @@ def modes(args) -> list[Path]:
     from flexctrl.modal.mode_plots import frequency_maps
     from flexctrl.spec.arm import load_arm
 
-    arm = load_arm(ROOT / "models" / "subedi3link.toml")
+    arm = load_arm("subedi3link")
     fig = Figure(figsize=(10.5, 3.6), layout="constrained")
     axes = fig.subplots(1, arm.n_links)
     for payload, style in ((0.0, "--"), (2.0, "-")):

@@ -1,9 +1,9 @@
-"""``flexctrl bench studies``: study files side by side, each pass in a fresh process, with shared overrides."""
+"""``benchmarks/studies_side_by_side.py``: studies side by side, each pass in a fresh process."""
 
 import shutil
 
-from flexctrl import cli
-from flexctrl.bench.studies import bench_studies, format_studies
+import pytest
+from studies_side_by_side import bench_studies, format_studies, main
 
 
 def test_overrides_reach_every_study_and_each_round_has_its_ratio(selftest_study, tmp_path):
@@ -34,36 +34,16 @@ def test_overrides_reach_every_study_and_each_round_has_its_ratio(selftest_study
 
 def test_a_bad_override_is_refused_before_any_pass(selftest_study, tmp_path, capsys):
     keep = tmp_path / "bench"
-    assert (
-        cli.main(
-            [
-                "bench",
-                "studies",
-                "--study",
-                str(selftest_study),
-                "--set",
-                "grid.nonsense=[1]",
-                "--keep",
-                str(keep),
-            ]
-        )
-        != 0
-    )
+    argv = ["--study", str(selftest_study), "--set", "grid.nonsense=[1]", "--keep", str(keep)]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
     err = capsys.readouterr().err
-    assert (
-        "nonsense" in err and "passes of study" not in err
-    )  # the study's own error, before any pass ran
+    assert "nonsense" in err and "passes of study" not in err  # refused before any pass ran
     assert not keep.exists()
 
 
-def test_set_is_refused_by_the_other_benchmarks(capsys):
-    assert cli.main(["bench", "loop", "--set", "grid.payload=[2.0]"]) != 0
-    assert "--set with 'bench studies' only" in capsys.readouterr().err
-
-
 def test_a_pass_that_fails_names_its_study_and_the_error(selftest_study, tmp_path):
-    import pytest
-
     from flexctrl.errors import FlexctrlError
 
     with pytest.raises(FlexctrlError, match=r"study_selftest\.toml.*nonsense"):

@@ -1,18 +1,22 @@
-"""One study's runs under two source trees, alternated run by run: a code change's per-run cost, measured side by side.
+"""One study's runs under two source trees, alternated run by run: a change's per-run cost.
 
-``flexctrl bench runs --study FILE --tree OLD --tree NEW`` starts one worker process per
-source tree (``PYTHONPATH`` = the tree; each keeps its own worker cache, as a study
-worker does) and sends every run of the study, in the study's order, to both, the order
-of the two alternating from run to run, so the machine's load moves them together.
-Reported: each tree's summed per-run wall time (:func:`flexctrl.study.runner.execute_run`'s
-``wall_time_s``) per value of ``--by`` (default the ``controller`` column) and in all, the
-ratios to the first tree, and the largest relative difference of any non-timing metric
-between the trees (with the run and metric where it is, and the largest per metric; for metrics below
-:data:`~flexctrl.bench.loop_overhead.FLOOR` in both trees, round-off, the absolute difference, as
-:func:`~flexctrl.bench.loop_overhead.metric_differences` compares them).  ``--exclude KEY=VALUE`` leaves
-runs out (e.g. ``controller=nmpc``).  Both trees read the same study file (and the scene,
-model and controller files it names); they must expand it into the same runs.  Every
-process's first run includes its imports.
+Run from a clone::
+
+    git worktree add ../before OLD_COMMIT
+    python benchmarks/compare_trees.py --study STUDY --tree ../before --tree .
+
+One worker process per tree imports that tree's flexctrl (``PYTHONPATH`` = ``TREE/src``, or
+``TREE`` for a tree of the earlier layout with ``flexctrl/`` at its top) and keeps its own
+worker cache, as a study worker does. Every run of the study goes to both, in the study's
+order, the two alternating from run to run so that the machine's load moves them together.
+Printed: each tree's summed per-run wall time (``wall_time_s`` of
+:func:`flexctrl.study.runner.execute_run`) per value of ``--by`` (default the ``controller``
+column) and in all, the ratios to the first tree, and the largest relative difference of any
+non-timing metric between the trees (with the run and metric where it is; below
+:data:`flexctrl.bench.loop_overhead.FLOOR` in both trees the absolute difference counts, as
+round-off). ``--exclude KEY=VALUE`` leaves runs out (e.g. ``controller=nmpc``). Both trees
+read the same study file and must expand it into the same runs. Every process's first run
+includes its imports.
 """
 
 from __future__ import annotations
@@ -43,9 +47,20 @@ for line in sys.stdin:
 """
 
 
+def import_root(tree: Path) -> Path:
+    """The folder that holds ``tree``'s package: ``src/`` or, in the earlier layout, the tree."""
+    for root in (tree / "src", tree):
+        if (root / "flexctrl" / "__init__.py").is_file():
+            return root
+    raise ValueError(
+        f"--tree {str(tree)!r} is not a flexctrl checkout; allowed: a folder holding "
+        "src/flexctrl/__init__.py or flexctrl/__init__.py"
+    )
+
+
 def _start(tree: Path, study: Path) -> tuple[subprocess.Popen, list]:
     """A worker on ``tree`` and the study's runs as it reads them (``[run_id, {column: value}]``)."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
+    env = dict(os.environ, PYTHONPATH=str(import_root(tree)))
     proc = subprocess.Popen(
         [sys.executable, "-c", _WORKER, str(study)],
         cwd=tree,
@@ -137,7 +152,7 @@ def format_runs(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_runs`."""
     trees = result["trees"]
     lines = [
-        f"flexctrl bench runs: {Path(result['study']).name}, {result['runs']} runs alternated between "
+        f"compare_trees: {Path(result['study']).name}, {result['runs']} runs alternated between "
         f"{len(trees)} trees (load average {result['load_average_1min']}); summed run wall (s) by {result['by']}"
     ]
     for group in result["summed_run_wall_s"][0]:
@@ -156,3 +171,35 @@ def format_runs(result: dict[str, Any]) -> str:
         )
     )
     return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line (see the module docstring); exit status 2 on bad arguments."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--study", required=True, help="the study file both trees run")
+    parser.add_argument("--tree", action="append", required=True, help="a checkout (twice)")
+    parser.add_argument("--by", default="controller", help="column to sum the wall time by")
+    parser.add_argument("--exclude", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    if len(args.tree) != 2:
+        parser.error(f"--tree given {len(args.tree)} times; allowed: exactly two --tree DIR")
+    bad = [item for item in args.exclude if "=" not in item]
+    if bad:
+        parser.error(
+            f"--exclude {bad[0]!r}; allowed: KEY=VALUE (a grid column and one of its values)"
+        )
+    try:
+        for tree in args.tree:
+            import_root(Path(tree).resolve())
+    except ValueError as exc:
+        parser.error(str(exc))
+    result = bench_runs(args.study, args.tree, by=args.by, exclude=args.exclude)
+    print(json.dumps(result, indent=2) if args.json else format_runs(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
