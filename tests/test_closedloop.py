@@ -145,7 +145,7 @@ def test_plant_step_with_constants_as_input_is_shared_across_configurations_and_
         build_model(arm, "amm:2", modes="frozen", reference_q=np.radians(q))
         for q in ([0, 30, -60], [0, 120, 45])
     ]
-    fps = [constants_as_parameters(m.functions["f"], reuse=False) for m in models]
+    fps = [constants_as_parameters(m.functions["f"]) for m in models]
     assert all(c.size > 0 for _, c in fps)
     # the two configurations differ only in constant values: one generated code serves both
     texts = []

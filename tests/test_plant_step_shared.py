@@ -46,10 +46,10 @@ def code(fun: ca.Function) -> str:
 
 def test_output_constants_per_use_give_one_structure_where_per_node_do_not(models):
     outputs = [output_function(m) for m in models]
-    per_node = [constants_as_parameters(f, reuse=False) for f in outputs]
+    per_node = [constants_as_parameters(f) for f in outputs]
     # the straight arm's graph has constants that coincide and were merged: fewer nodes, other code
     assert per_node[0][1].size != per_node[1][1].size
-    per_use = [constants_as_parameters(f, per_use=True, reuse=False) for f in outputs]
+    per_use = [constants_as_parameters(f, per_use=True) for f in outputs]
     assert per_use[0][1].size == per_use[1][1].size
     assert code(per_use[0][0]) == code(per_use[1][0])
     rng = np.random.default_rng(5)
@@ -65,7 +65,7 @@ def test_long_substep_step_is_shared_and_matches_the_unrolled_chain(models):
     substeps = UNROLL_LIMIT + 8
     texts = []
     for m in models:
-        fp, c = constants_as_parameters(m.functions["f"], reuse=False)
+        fp, c = constants_as_parameters(m.functions["f"])
         assert c.size > 0
         texts.append(code(_single_step(m, fp, c.size)))
     assert texts[0] == texts[1]

@@ -1,28 +1,23 @@
-"""The closed-loop benchmark: one whole run of a closed-loop scene against the plant's compiled
-simulation alone.
+"""The closed-loop benchmark: one whole closed-loop run against the plant's compiled simulation.
 
 ``run_wall_s`` is the wall time of
 :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` on
-``studies/scenes/move_joint1_30deg.toml`` with the LQR (build, design, simulate, metrics, verdict),
-warm: in-process, with the worker's :class:`~flexctrl.scenes.cache.SceneCache` after a first run
-(models built, libraries compiled, the design and its reference table kept).  ``plant_only_s`` is
-the plant's compiled RK4 simulation (:class:`flexctrl.sim.RK4`, its energies, tip and deflections
-included) over the same duration at the same step with the run's torques held: what the physics
-costs. ``ratio = run_wall_s / plant_only_s``.
+``studies/scenes/move_joint1_30deg.toml`` with the LQR (build, design, simulate, metrics,
+verdict), warm: in-process, with the worker's :class:`~flexctrl.scenes.cache.SceneCache` after
+a first run (models built, libraries compiled, the design and its reference table kept).
+``plant_only_s`` is the plant's compiled RK4 simulation (:class:`flexctrl.sim.RK4`, its
+energies, tip and deflections included) over the same duration at the same step with the
+run's torques held: what the physics costs.  ``ratio = run_wall_s / plant_only_s``.
 
-Both loop paths are measured in the same process, interleaved (``repeats`` rounds of
-python, compiled and plant-only), so the machine's load moves them together: the
-``python`` block is the slow path (one Python iteration per sample), ``compiled`` the
-one-call path (:mod:`flexctrl.loop.compiled`).  ``cold_design`` repeats the compiled run
-with a fresh design on the kept model (design, reference table and verdict paid);
-``fresh_configuration`` with everything fresh but the compiled libraries on disk (a new
-configuration in a sweep: the model built, its constants lifted, Jacobians and
-reference Functions built).  Each of the two also runs with the reference table's
-Newton iteration in CasADi's virtual machine (``reference_vm``, the slow path:
-``reference_compile=False`` of :func:`~flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`)
-beside the compiled one, in the same round.  Medians of the rounds; the metrics of the
-two loop paths are compared (``max_metric_relative_difference``), and those of the two
-reference paths (``reference_metric_differences``).
+Both loops are measured in the same process, interleaved (``repeats`` rounds of python,
+compiled and plant-only), so the machine's load moves them together: ``python`` runs one
+Python iteration per sample (the loop of the optimising controllers), ``compiled`` the
+one-call loop of the linear laws (:mod:`flexctrl.loop.compiled`).  ``cold_design`` repeats
+the compiled run with a fresh design on the kept model (design, reference table and verdict
+paid); ``fresh_configuration`` with everything fresh but the compiled libraries on disk (a
+new configuration in a sweep: the model built, its constants lifted, Jacobians and reference
+Functions built).  Medians of the rounds; the metrics of the two loops are compared
+(``max_metric_relative_difference``).
 """
 
 from __future__ import annotations
@@ -113,11 +108,8 @@ def bench_loop(
         "compiled": [],
         "plant_only": [],
         "cold_design": [],
-        "cold_design_reference_vm": [],
         "fresh_configuration": [],
-        "fresh_configuration_reference_vm": [],
     }
-    fresh_runs = {}
     for _ in range(repeats):
         for loop in ("python", "compiled"):
             start = time.perf_counter()
@@ -128,29 +120,14 @@ def bench_loop(
         start = time.perf_counter()
         integrator.run(x0, span, u=torques)
         walls["plant_only"].append(time.perf_counter() - start)
-        for name, reference_compile in (("", None), ("_reference_vm", False)):
-            fresh = SceneCache()
-            fresh._stores["models"] = cache._stores[
-                "models"
-            ]  # models built; design, reference and verdict anew
-            start = time.perf_counter()
-            run_closed_loop_scene(
-                scene,
-                cache=fresh,
-                on_divergence="record",
-                loop="compiled",
-                reference_compile=reference_compile,
-            )
-            walls["cold_design" + name].append(time.perf_counter() - start)
-            start = time.perf_counter()
-            fresh_runs[name] = run_closed_loop_scene(
-                scene,
-                cache=SceneCache(),
-                on_divergence="record",
-                loop="compiled",
-                reference_compile=reference_compile,
-            )
-            walls["fresh_configuration" + name].append(time.perf_counter() - start)
+        fresh = SceneCache()
+        fresh._stores["models"] = cache._stores["models"]  # models built; design and verdict anew
+        start = time.perf_counter()
+        run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled")
+        walls["cold_design"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        run_closed_loop_scene(scene, cache=SceneCache(), on_divergence="record", loop="compiled")
+        walls["fresh_configuration"].append(time.perf_counter() - start)
     med = {k: statistics.median(v) for k, v in walls.items()}
     run_wall, plant_only = med["compiled"], med["plant_only"]
     return {
@@ -169,21 +146,14 @@ def bench_loop(
         "cold_design": {
             "run_wall_s": med["cold_design"],
             "ratio": med["cold_design"] / plant_only,
-            "reference_vm_run_wall_s": med["cold_design_reference_vm"],
             "note": "models built, but design, reference table and linear verdict computed afresh",
         },
         "fresh_configuration": {
             "run_wall_s": med["fresh_configuration"],
             "ratio": med["fresh_configuration"] / plant_only,
-            "reference_vm_run_wall_s": med["fresh_configuration_reference_vm"],
-            "speedup_vs_reference_vm": med["fresh_configuration_reference_vm"]
-            / med["fresh_configuration"],
             "note": "a fresh cache: model built and everything derived from it anew; compiled "
             "libraries from disk",
         },
-        "reference_metric_differences": metric_differences(
-            fresh_runs["_reference_vm"].metrics, fresh_runs[""].metrics
-        ),
         "speedup_vs_python": med["python"] / run_wall,
         "max_metric_relative_difference": metric_difference(
             results["python"].metrics, results["compiled"].metrics
@@ -218,15 +188,11 @@ def format_loop(result: dict[str, Any]) -> str:
             f"ratio {result['python']['ratio']:.2f}",
             f"  run, compiled, fresh design {result['cold_design']['run_wall_s'] * 1e3:8.1f} ms  "
             " ratio "
-            f"{result['cold_design']['ratio']:.2f}   (reference in the VM: "
-            f"{result['cold_design']['reference_vm_run_wall_s'] * 1e3:.1f} ms)",
+            f"{result['cold_design']['ratio']:.2f}",
             "  run, compiled, fresh config "
             f"{result['fresh_configuration']['run_wall_s'] * 1e3:8.1f} ms   ratio "
-            f"{result['fresh_configuration']['ratio']:.2f}   (reference in the VM: "
-            f"{result['fresh_configuration']['reference_vm_run_wall_s'] * 1e3:.1f} ms, "
-            f"{result['fresh_configuration']['speedup_vs_reference_vm']:.2f}x)",
-            f"  compiled / VM reference metrics: largest relative difference "
-            f"{max(result['reference_metric_differences'].values(), default=0.0):.2g}",
-            f"  compiled / python metrics: largest relative difference {result['max_metric_relative_difference']:.2g}",
+            f"{result['fresh_configuration']['ratio']:.2f}",
+            "  compiled / python metrics: largest relative difference "
+            f"{result['max_metric_relative_difference']:.2g}",
         ]
     )

@@ -1,27 +1,20 @@
 """Exact Jacobians of a model's forward dynamics, the one Jacobian builder.
 
-CasADi builds the derivative of a Function once per Function object: for a new model
-(a new configuration or payload of a frozen-modes arm) the symbolic Jacobian of its
-``f`` is built from scratch, 0.13 s on ``amm:2`` of the three-link arm and 0.6-0.9 s on
-``amm:5``, though the models of one structure differ only in the values of their
-constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its
-constants as an input (:func:`flexctrl.dynamics.parametric.parametric`, one constant per
-use, so that coinciding values do not change the structure) and kept once per process for
-each lifted structure (with the kept lift itself, and by its serialized form), so every later
-model of that structure evaluates the kept Jacobian at its own constants.  The operations are
-the same ones in the same order (the lift keeps them; the constants are read from an input instead
-of the code), and the matrices are the same to the last bit (``tests/test_jacobians_shared.py``).  A
-model whose ``f`` does not lift (it calls other Functions, say) gets the per-model Jacobian.
+CasADi builds the derivative of a Function once per Function object, so a new model (a new
+configuration or payload of a frozen-modes arm) would build the symbolic Jacobian of its
+``f`` from scratch, although the models of one structure differ only in the values of their
+constants.  With ``shared=True`` the Jacobian is taken of ``f`` lifted with its constants as
+an input (:func:`flexctrl.dynamics.parametric.parametric`, one constant per use, so that
+coinciding values do not change the structure) and kept once per process for each lifted
+structure (with the kept lift itself, and by its serialized form); every later model of that
+structure evaluates the kept Jacobian at its own constants.  The operations are the same ones
+in the same order, so the matrices are the same to the last bit
+(``tests/dynamics/test_jacobians.py``).  A model whose ``f`` does not lift (it calls other
+Functions, say) gets the per-model Jacobian.
 
-The kept Jacobian is built on an SX graph (``graph="sx"``, the default) when the lift is an
-SX Function, as it is for every assumed-modes model: CasADi then differentiates the
-expression itself instead of an MX call of it.  ``.venv/bin/python docs/bench_jacobians.py 3``
-(fresh processes, the lift included) measured ``amm:5`` 0.33 s against 0.67 s and the rigid
-model to ``amm:5`` together 0.74 s against 1.42 s, with the same bits on ``amm:1..5``; on
-the rigid model some entries differ by up to 2.8e-17 (the two graphs order a few operations
-differently), so ``tests/test_jacobians_shared.py`` holds the bits on assumed-modes rungs
-only.  ``graph="mx"`` keeps the former construction (``docs/auto_fidelity.md``, "The
-Jacobians' graph").
+The kept Jacobian of an SX lift (every assumed-modes model) is built on an SX graph: CasADi
+differentiates the expression itself, which builds about twice as fast as differentiating
+an MX call of it.
 """
 
 from __future__ import annotations
@@ -44,7 +37,6 @@ def jacobian_function(
     inputs: bool = False,
     outputs: ca.Function | None = None,
     shared: bool = False,
-    graph: str = "sx",
 ) -> ca.Function:
     """Exact Jacobians (CasADi AD) of the forward dynamics ``xdot = f(x, u)`` as one MX Function of
     ``(x, u)``.
@@ -69,9 +61,6 @@ def jacobian_function(
     shared
         Take ``f``'s part from the Jacobian kept for the model's lifted structure (see
         the module docstring); the values are the same.
-    graph
-        ``"sx"``: the kept Jacobian of an SX lift is built on an SX graph (faster to build);
-        ``"mx"``: on an MX call of the lift, as before (module docstring).  Only with ``shared``.
 
     Returns
     -------
@@ -80,9 +69,7 @@ def jacobian_function(
     """
     x = ca.MX.sym("x", model.n_x)
     u = ca.MX.sym("u", model.n_u)
-    if graph not in ("sx", "mx"):
-        raise ValueError(f"jacobian_function: graph = {graph!r}; allowed: 'sx', 'mx'")
-    dynamics = _shared_dynamics(model, value, inputs, graph) if shared else None
+    dynamics = _shared_dynamics(model, value, inputs) if shared else None
     if dynamics is not None:
         fp, constants = dynamics
         outs = list(fp(x, u, ca.DM(constants)))
@@ -102,9 +89,7 @@ def _dynamics_jacobians(f: ca.Function, x, u, value: bool, inputs: bool, *extra)
     return [xdot] * value + [ca.jacobian(xdot, x)] + [ca.jacobian(xdot, u)] * inputs
 
 
-def _shared_dynamics(
-    model, value: bool, inputs: bool, graph: str = "sx"
-) -> tuple[ca.Function, object] | None:
+def _shared_dynamics(model, value: bool, inputs: bool) -> tuple[ca.Function, object] | None:
     """``(J(x, u, c), c)``: the kept Jacobian Function of the model's lifted ``f`` and its constants, or None."""
     # per use: a reduced model's constants coincide by value at some configurations, and a lift
     # per node would then give each configuration a structure (and a Jacobian) of its own
@@ -112,7 +97,7 @@ def _shared_dynamics(
     if constants.size == 0:
         return None
 
-    symbol = ca.SX if graph == "sx" and lifted.is_a("SXFunction") else ca.MX
+    symbol = ca.SX if lifted.is_a("SXFunction") else ca.MX
 
     def build() -> ca.Function:
         x, u = symbol.sym("x", model.n_x), symbol.sym("u", model.n_u)

@@ -636,9 +636,8 @@ def walk_and_judge(
                 f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); "
                 "the walk from the top "
                 "tries no rung below a top that fails; allowed: a tolerance >= "
-                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or "
-                "'ladder' (they try the "
-                "rungs below)",
+                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'ladder' (it tries "
+                "the rungs below)",
                 evidence,
             )
         raise ToleranceUnreachable(
@@ -733,7 +732,7 @@ def walk_and_judge(
             "role": (
                 "the reference model at omega_max * dt <= reference_omega_dt"
                 if linear is None
-                else "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')"
+                else "the reference model at its own RK4 step (fidelity_walk = 'estimate')"
             ),
         },
         "candidates": rungs,

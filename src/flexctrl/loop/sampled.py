@@ -11,15 +11,15 @@ Per controller sample (period ``Ts = controller.sample_time``):
    inside ONE compiled CasADi call that also returns the intermediate states
    (:mod:`flexctrl.loop.plant_step`), so the tip vibration is recorded at the plant rate.
 
-That is the ``loop = "python"`` path: one Python iteration per sample.  A controller whose
-law is a CasADi map (:meth:`~flexctrl.control.controller.Controller.sampled_law`: LQR, LQG, PD,
-shaped) runs, after its first sample, every remaining sample in ONE CasADi call
-(``loop = "compiled"``, :mod:`flexctrl.loop.compiled`; ``"auto"``, the default, uses it
-when the controller offers it); the energies, tip and deflections come from a compiled
-output map on every path but ``loop = "python"`` (the virtual machine's mapped calls, the
-slow path throughout).  Both paths do the same arithmetic in the plant and the controller; the
-compiled output map and the controller's matrix products can differ in the last digits
-(tests/test_loop_compiled.py holds them within 1e-9 relative).
+That is the ``loop = "python"`` path: one Python iteration per sample, for controllers that
+optimise or schedule per sample (MPC, NMPC, a gain schedule), and for plants whose fine step
+would make one call's states too many to hold.  A controller whose law is a CasADi map
+(:meth:`~flexctrl.control.controller.Controller.sampled_law`: LQR, LQG, PD, shaped) runs,
+after its first sample, every remaining sample in ONE CasADi call (``loop = "compiled"``,
+:mod:`flexctrl.loop.compiled`; ``"auto"``, the default, uses it when the controller offers
+it).  Both paths do the same arithmetic in the plant and the controller; the compiled output
+map and the controller's matrix products can differ in the last digits (the tests hold them
+within 1e-9 relative).
 
 Instability is detected, never a silent NaN: after every sample the state must be
 finite, its modal coordinates and rates within :data:`~flexctrl.loop.monitors.MODAL_BOUND`
@@ -40,15 +40,13 @@ from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
 from flexctrl.loop.plant_step import advance_function, output_map
 from flexctrl.sim.bound import BoundFunction, evaluate
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
-from flexctrl.sim.trajectory import LazyEnergies, Trajectory, energy_dict
+from flexctrl.sim.trajectory import LazyEnergies, Trajectory
 
 # : How the samples are run: ``"python"`` (one iteration per sample), ``"compiled"`` (one CasADi
 # call for all but
 # : the first; an error for a controller without a :meth:`sampled_law`), ``"auto"`` (compiled when
 # offered).
 LOOPS = ("auto", "compiled", "python")
-#: When a closed loop's energies are evaluated (:func:`trajectory_from_states`).
-ENERGY_MODES = ("lazy", "eager")
 
 
 def mapped(model, name: str, count: int, *args):
@@ -60,8 +58,7 @@ def tip_positions(model, X: np.ndarray, compile: bool | None = None) -> np.ndarr
     energies.
 
     The same values as :attr:`Trajectory.tip` of :func:`trajectory_from_states` (compiled):
-    the fidelity chooser compares rungs by them.  Over 16,000 states of ``amm:2`` here
-    about 0.010 s, against 0.085 s for mapped calls in CasADi's virtual machine (medians of 5).
+    the fidelity chooser compares rungs by them.
     """
     return evaluate(output_map(model, X.shape[0], compile, energies=False), X)[0][:, 0:2]
 
@@ -75,28 +72,18 @@ def trajectory_from_states(
     *,
     compiled: bool = False,
     compile: bool | None = None,
-    energies: str = "lazy",
 ) -> Trajectory:
     """A :class:`Trajectory` with energies, tip and deflections of the states ``X`` (rows).
 
     ``compiled``: from the compiled output maps (:func:`flexctrl.loop.plant_step.output_map`),
-    else by mapped calls of the model's Functions in CasADi's virtual machine.
-    ``energies``: ``"lazy"`` (default) evaluates them when first read
-    (:class:`~flexctrl.sim.trajectory.LazyEnergies`; no metric of the loop reads them, and on
-    ``amm:5`` they cost ten times the tip and deflections), ``"eager"`` with the tip and
-    deflections, in one map (the slow path, kept to measure against).
+    else by mapped calls of the model's Functions in CasADi's virtual machine.  The energies
+    are evaluated when first read (:class:`~flexctrl.sim.trajectory.LazyEnergies`): no metric
+    of the loop reads them, and on fine models they cost several times the tip and
+    deflections.
     """
-    if energies not in ENERGY_MODES:
-        raise SpecError(
-            f"value {energies!r} is not allowed; allowed: {', '.join(map(repr, ENERGY_MODES))}",
-            key="energies",
-        )
     count = t.size
-    if compiled and energies == "eager":
-        Y = evaluate(output_map(model, count, compile), X)[0]
-        tip, deflection = Y[:, 3:5], Y[:, 5:]
-        values: Any = energy_dict(Y[:, 0], Y[:, 1], Y[:, 2])
-    elif compiled:
+    values: Any
+    if compiled:
         Y = evaluate(output_map(model, count, compile, energies=False), X)[0]
         tip, deflection = Y[:, 0:2], Y[:, 2:]
 
@@ -115,7 +102,7 @@ def trajectory_from_states(
                 np.array(v, dtype=float).ravel() for v in mapped(model, "energies", count, q, qd)
             )
 
-        values = LazyEnergies(compute_vm) if energies == "lazy" else energy_dict(*compute_vm())
+        values = LazyEnergies(compute_vm)
     return Trajectory(
         time=t,
         states=X,
@@ -141,7 +128,6 @@ def simulate_closed_loop(
     monitor=None,
     stop_on_divergence: bool = False,
     loop: str = "auto",
-    energies: str = "lazy",
 ) -> tuple[Trajectory, np.ndarray]:
     """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
 
@@ -158,10 +144,8 @@ def simulate_closed_loop(
         ``meta["divergence"] = {"time": t (s), "reason": str}`` instead of raising.
     loop : {"auto", "compiled", "python"}
         How the samples are run (:data:`LOOPS`, module docstring).  The energies, tip and
-        deflections come from the compiled output map except with ``"python"`` (the slow
-        path throughout: mapped calls in CasADi's virtual machine).
-    energies : {"lazy", "eager"}
-        When the trajectory's energies are evaluated (:func:`trajectory_from_states`).
+        deflections come from the compiled output map except with ``"python"`` (mapped calls
+        in CasADi's virtual machine, which compile nothing for the run's length).
 
     Returns
     -------
@@ -189,7 +173,7 @@ def simulate_closed_loop(
         loop=loop,
     )
     return trajectory_from_states(
-        plant, t, X, U, meta, compiled=loop != "python", compile=compile, energies=energies
+        plant, t, X, U, meta, compiled=loop != "python", compile=compile
     ), samples
 
 

@@ -115,14 +115,7 @@ def is_designed(controller) -> bool:
     return hasattr(controller, "step") and hasattr(controller, "sensors")
 
 
-def build_loop(
-    scene,
-    controller=None,
-    overrides=(),
-    cache: SceneCache | None = None,
-    *,
-    reference_compile: bool | None = None,
-) -> LoopSetup:
+def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None) -> LoopSetup:
     """Build plant and design models (kept in ``cache``), design the controller, set its reference.
 
     ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).  ``controller``
@@ -137,16 +130,11 @@ def build_loop(
     only in the plant (payload, fidelity, step, noise) design once.  Its reference
     trajectory is kept in ``cache`` ("references") under the design model's description,
     the path and the deflection, so every controller designed on one model for one move
-    shares its tables.  ``reference_compile`` is the reference's ``compile``
-    (:class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`: ``False`` CasADi's virtual
-    machine, the slow path; ``True`` compiled); None (default) follows the plant's
-    ``solver.compile`` (compiled unless switched off).
+    shares its tables.  The reference's Newton iteration is compiled as the plant's
+    ``solver.compile`` says (compiled unless switched off).
     """
-    from flexctrl.spec.controller_reader import load_controller
-
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
-    design_key = None
     plant_scene = scene.plant
     designed = is_designed(controller)
     path = None if designed else (controller or scene.controller)
@@ -165,63 +153,11 @@ def build_loop(
         )
     plant = cache.model(arm, str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0)
     if designed:
-        ctrl, settings = controller, controller.settings
-        design_model = _design_model_of(ctrl, scene, overrides)
-        design_arm, design_fidelity = design_model.spec, design_model.fidelity
-        design_q = tuple(float(a) for a in ctrl.op.joints)
-        same = design_model is plant
-        ctrl.set_reference(
-            ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection)
-        )
-        ctrl.reset()
+        design = _designed_in_python(scene, controller, overrides, plant)
     else:
-        settings = load_controller(path, overrides)
-        if reference_compile is None:
-            reference_compile = plant_scene.solver.get("compile")
-        design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
-        design_fidelity = scene.controller_fidelity or plant_scene.fidelity
-        design_q = tuple(scene.design_configuration)
-        same = (
-            design_arm == arm
-            and str(design_fidelity) == str(plant_scene.fidelity)
-            and scene.design_q is None
-        )
-        design_model = (
-            plant
-            if same
-            else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
-        )
-        model_key = (
-            design_arm,
-            str(design_fidelity),
-            plant_scene.modes,
-            plant_scene.q0 if same else design_q,
-        )
-        design_key = (
-            *model_key,
-            design_q,
-            settings,
-            scene.joint_reference(),
-            scene.deflection,
-            reference_compile,
-        )
-        ctrl = cache.get(
-            "designs",
-            design_key,
-            lambda: design_scene_controller(
-                scene,
-                design_model,
-                settings,
-                path,
-                cache.reference(
-                    *model_key, scene.joint_reference(), scene.deflection, reference_compile
-                ),
-            ),
-        )
-        ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
-    path_ref = scene.joint_reference()
-    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
-    x0 = initial_state(plant_scene, plant, arm)
+        design = _designed_from_file(scene, path, overrides, arm, plant, cache)
+    ctrl = design.controller
+    sensors = ctrl.sensors if design.same else plant_sensors(plant, ctrl.sensors, design.q)
     monitor = divergence_monitor(
         plant,
         arm,
@@ -235,19 +171,89 @@ def build_loop(
         plant_scene,
         arm,
         plant,
-        design_arm,
-        design_fidelity,
-        design_q,
-        design_model,
+        design.arm,
+        design.fidelity,
+        design.q,
+        design.model,
         ctrl,
-        settings,
+        design.settings,
         None if path is None else Path(path),
-        path_ref,
+        scene.joint_reference(),
         sensors,
-        x0,
+        initial_state(plant_scene, plant, arm),
         monitor,
         time.perf_counter() - start,
-        design_key,
+        design.key,
+    )
+
+
+@dataclass
+class _Design:
+    """The controller of a loop and what it was designed on (:func:`build_loop`)."""
+
+    controller: Any
+    settings: Any
+    model: Any
+    arm: Any
+    fidelity: Any
+    q: tuple[float, ...]
+    same: bool  # designed on the plant itself (its sensors are the plant's)
+    key: Any = None
+
+
+def _designed_in_python(scene, ctrl, overrides, plant) -> _Design:
+    """A controller from :func:`flexctrl.design`, set to track the scene's path."""
+    design_model = _design_model_of(ctrl, scene, overrides)
+    ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+    ctrl.reset()
+    return _Design(
+        ctrl,
+        ctrl.settings,
+        design_model,
+        design_model.spec,
+        design_model.fidelity,
+        tuple(float(a) for a in ctrl.op.joints),
+        design_model is plant,
+    )
+
+
+def _designed_from_file(scene, path, overrides, arm, plant, cache: SceneCache) -> _Design:
+    """The controller file's design at the scene's design point, kept in ``cache``."""
+    from flexctrl.spec.controller_reader import load_controller
+
+    plant_scene = scene.plant
+    settings = load_controller(path, overrides)
+    compile_reference = plant_scene.solver.get("compile")
+    design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
+    design_fidelity = scene.controller_fidelity or plant_scene.fidelity
+    design_q = tuple(scene.design_configuration)
+    same = (
+        design_arm == arm
+        and str(design_fidelity) == str(plant_scene.fidelity)
+        and scene.design_q is None
+    )
+    design_model = (
+        plant
+        if same
+        else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
+    )
+    model_key = (
+        design_arm,
+        str(design_fidelity),
+        plant_scene.modes,
+        plant_scene.q0 if same else design_q,
+    )
+    path_key = (scene.joint_reference(), scene.deflection, compile_reference)
+    design_key = (*model_key, design_q, settings, *path_key)
+
+    def design():
+        reference = cache.reference(*model_key, *path_key)
+        return design_scene_controller(scene, design_model, settings, path, reference)
+
+    ctrl = cache.get("designs", design_key, design)
+    ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
+    return _Design(
+        ctrl, settings, design_model, design_arm, design_fidelity, design_q, same, design_key
     )
 
 

@@ -97,8 +97,6 @@ def run_closed_loop_scene(
     cache: SceneCache | None = None,
     loop: str = "auto",
     choice=None,
-    reference_compile: bool | None = None,
-    energies: str = "lazy",
 ) -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its
     files.
@@ -113,6 +111,8 @@ def run_closed_loop_scene(
         Python (:func:`flexctrl.design`; see :func:`flexctrl.scenes.loop_setup.build_loop`).
     fidelity
         Plant fidelity override (``--fidelity``); ``"auto"`` chooses it (below).
+    plots : bool, optional
+        Write the PNGs with ``out`` (default: the scene's ``plots``).
     overrides
         ``KEY=VALUE`` overrides of the controller file.
     on_divergence : {"raise", "record"}
@@ -132,20 +132,12 @@ def run_closed_loop_scene(
     loop : {"auto", "compiled", "python"}
         How the samples run (:func:`flexctrl.loop.sampled.simulate_closed_loop`): in one
         CasADi call for the controllers that allow it (``"auto"``), or one Python
-        iteration per sample (``"python"``, the slow path, for comparison).
+        iteration per sample (``"python"``: only one sample's plant steps in memory at a
+        time, for plants whose fine step makes a whole run's states too many to hold).
     choice : FidelityChoice, optional
         For a plant with ``fidelity = "auto"``: a choice made for another run (a study's
         shared choice, :mod:`flexctrl.study.shared_choice`) used instead of choosing
         (:func:`apply_choice`); ``choice_time_s`` is then 0.
-    reference_compile : bool, optional
-        How the reference table's Newton iteration is evaluated
-        (:func:`~flexctrl.scenes.loop_setup.build_loop`): ``False`` in CasADi's virtual
-        machine (the slow path, for comparison), ``True`` compiled; None follows the
-        plant's ``solver.compile``.
-    energies : {"lazy", "eager"}
-        When the trajectory's energies are evaluated (no metric reads them): when first read
-        (default), or with the tip and deflections (the slow path, for comparison;
-        :func:`~flexctrl.loop.sampled.trajectory_from_states`).
 
     Returns
     -------
@@ -165,20 +157,12 @@ def run_closed_loop_scene(
     reference's) and ``choice_time_s`` (time this call spent choosing, s: milliseconds when the
     choice was cached).
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     if on_divergence not in ("raise", "record"):
         raise SpecError(
             f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
             key="on_divergence",
         )
-    if fidelity is not None:
-        scene = dataclasses.replace(
-            scene,
-            plant=dataclasses.replace(
-                scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity")
-            ),
-        )
+    scene = _with_fidelity(scene, fidelity)
     cache = SceneCache() if cache is None else cache
     requested = scene
     choosing = time.perf_counter()
@@ -187,91 +171,132 @@ def run_closed_loop_scene(
     else:
         scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
     choosing = time.perf_counter() - choosing
-    setup = build_loop(scene, controller, overrides, cache, reference_compile=reference_compile)
-    plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
-    whole = (
-        None
-        if choice is None or loop != "auto"
-        else cache.take(
-            WHOLE_RUNS,
-            whole_run_key(
-                pin_design(requested),
-                str(plant_scene.fidelity),
-                plant_scene.dt,
-                controller,
-                tuple(overrides),
-            ),
+    setup = build_loop(scene, controller, overrides, cache)
+    reused = None
+    if choice is not None and loop == "auto":
+        key = whole_run_key(
+            pin_design(requested),
+            str(setup.plant_scene.fidelity),
+            setup.plant_scene.dt,
+            controller,
+            tuple(overrides),
         )
-    )
-    if (
-        whole is not None
-    ):  # the choice's own run of this scene at this rung and step (auto's "whole runs")
-        ctrl.stats = copy.deepcopy(whole["stats"])
-        meta = {
-            **whole["meta"],
-            "reused": "the fidelity choice's run of this scene at the chosen rung and step",
-        }
-        trajectory = trajectory_from_states(
-            plant,
-            whole["t"],
-            whole["X"].copy(),
-            whole["U"].copy(),
-            meta,
-            compiled=loop != "python",
-            compile=plant_scene.solver.get("compile"),
-            energies=energies,
-        )
+        reused = cache.take(WHOLE_RUNS, key)
+    if reused is not None:
+        trajectory = _reused_trajectory(setup, reused, loop)
     else:
-        rng = np.random.default_rng(scene.seed) if scene.noise else None
-        trajectory, _ = simulate_closed_loop(
-            plant,
-            ctrl,
-            setup.x0,
-            plant_scene.duration,
-            plant_scene.dt,
-            sensors=setup.sensors,
-            rng=rng,
-            compile=plant_scene.solver.get("compile"),
-            monitor=setup.monitor,
-            stop_on_divergence=on_divergence == "record",
-            loop=loop,
-            energies=energies,
-        )
-    tip_target = tip_at_rest(plant, scene.target_q)
-    report = ctrl.stats.summary()
-    metrics = run_metrics(
+        trajectory = _simulate(scene, setup, on_divergence, loop)
+    metrics = _metrics(scene, setup, trajectory, cache)
+    if choice is not None:
+        metrics.update(_choice_metrics(choice, setup.plant_scene.dt, choosing))
+    result = ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=metrics,
+        summary=_summary(requested, scene, setup, trajectory, metrics, choice),
+        model=setup.plant,
+        controller=setup.controller,
+        reference=setup.reference,
+        scene=scene,
+    )
+    if out is not None:
+        result.save(out, plots=setup.plant_scene.plots if plots is None else plots)
+    return result
+
+
+def _with_fidelity(scene, fidelity):
+    """``scene`` with its plant at ``fidelity`` (unchanged for None)."""
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    if fidelity is None:
+        return scene
+    plant = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity"))
+    return dataclasses.replace(scene, plant=plant)
+
+
+def _reused_trajectory(setup, whole: dict[str, Any], loop: str):
+    """The trajectory of the fidelity choice's own run of this scene at the chosen rung and step."""
+    setup.controller.stats = copy.deepcopy(whole["stats"])
+    meta = {
+        **whole["meta"],
+        "reused": "the fidelity choice's run of this scene at the chosen rung and step",
+    }
+    return trajectory_from_states(
+        setup.plant,
+        whole["t"],
+        whole["X"].copy(),
+        whole["U"].copy(),
+        meta,
+        compiled=loop != "python",
+        compile=setup.plant_scene.solver.get("compile"),
+    )
+
+
+def _simulate(scene, setup, on_divergence: str, loop: str):
+    """The closed loop of ``setup`` run for the scene's duration."""
+    plant_scene = setup.plant_scene
+    rng = np.random.default_rng(scene.seed) if scene.noise else None
+    trajectory, _ = simulate_closed_loop(
+        setup.plant,
+        setup.controller,
+        setup.x0,
+        plant_scene.duration,
+        plant_scene.dt,
+        sensors=setup.sensors,
+        rng=rng,
+        compile=plant_scene.solver.get("compile"),
+        monitor=setup.monitor,
+        stop_on_divergence=on_divergence == "record",
+        loop=loop,
+    )
+    return trajectory
+
+
+def _metrics(scene, setup, trajectory, cache: SceneCache) -> dict[str, Any]:
+    """The run's metrics (:func:`flexctrl.loop.metrics.run_metrics`) with its linear verdict."""
+    ctrl = setup.controller
+    return run_metrics(
         trajectory,
-        tip_target=tip_target,
+        tip_target=tip_at_rest(setup.plant, scene.target_q),
         reference_joints=setup.reference.joints(trajectory.time),
         t_arrive=scene.t_arrive,
         settle_allowance=scene.settle_allowance,
         band=scene.band,
         stable_band=scene.stable_band,
-        duration=plant_scene.duration,
-        torque_limits=[j.torque_limit for j in arm.joints],
-        controller_stats=report,
+        duration=setup.plant_scene.duration,
+        torque_limits=[j.torque_limit for j in setup.arm.joints],
+        controller_stats=ctrl.stats.summary(),
         step_times=ctrl.stats.step_times,
         radius=loop_radius(setup, cache),
     )
-    if choice is not None:
-        metrics["chosen_modes"] = float(choice.choice.count or 0)
-        metrics["chosen_dt"] = float(plant_scene.dt)
-        metrics["estimated_error"] = float(choice.estimated_error)
-        metrics["reference_error"] = float(choice.reference_error)
-        metrics["choice_cost_ratio"] = float(choice.cost_ratio)
-        metrics["choice_time_s"] = float(choosing)
+
+
+def _choice_metrics(choice, dt: float, choosing: float) -> dict[str, float]:
+    """The metrics that record an automatic fidelity choice."""
+    return {
+        "chosen_modes": float(choice.choice.count or 0),
+        "chosen_dt": float(dt),
+        "estimated_error": float(choice.estimated_error),
+        "reference_error": float(choice.reference_error),
+        "choice_cost_ratio": float(choice.cost_ratio),
+        "choice_time_s": float(choosing),
+    }
+
+
+def _summary(requested, scene, setup, trajectory, metrics, choice) -> dict[str, Any]:
+    """``summary.json``'s content."""
+    ctrl, plant_scene = setup.controller, setup.plant_scene
     summary = {
         "scene": requested.settings(),
         "controller": {
             "file": None if setup.path is None else str(setup.path),
             "kind": setup.settings.kind,
             "sample_time": ctrl.sample_time,
-            **report,
+            **ctrl.stats.summary(),
         },
         "plant": {
             "fidelity": str(plant_scene.fidelity),
-            "n_states": plant.n_x,
-            "payload_kg": arm.payload.mass,
+            "n_states": setup.plant.n_x,
+            "payload_kg": setup.arm.payload.mass,
         },
         "design": {
             "fidelity": str(setup.design_fidelity),
@@ -279,7 +304,7 @@ def run_closed_loop_scene(
             "configuration_deg": np.degrees(setup.design_q).tolist(),
         },
         "reference": setup.reference.settings() | {"deflection": scene.deflection},
-        "tip_target": tip_target.tolist(),
+        "tip_target": tip_at_rest(setup.plant, scene.target_q).tolist(),
         "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
         "metrics": metrics,
         "divergence": trajectory.meta.get("divergence"),
@@ -287,18 +312,7 @@ def run_closed_loop_scene(
     }
     if choice is not None:
         summary["fidelity_choice"] = choice.to_dict()
-    result = ClosedLoopResult(
-        trajectory=trajectory,
-        metrics=metrics,
-        summary=summary,
-        model=plant,
-        controller=ctrl,
-        reference=setup.reference,
-        scene=scene,
-    )
-    if out is not None:
-        result.save(out, plots=plant_scene.plots if plots is None else plots)
-    return result
+    return summary
 
 
 def loop_radius(setup, cache: SceneCache) -> float | None:

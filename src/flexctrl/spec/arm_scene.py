@@ -12,7 +12,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     payload = 2.0                     # kg (default: the model file's)
     fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
-    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate", "linear" or "ladder"
+    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate" or "ladder"
                                       # (flexctrl.scenes.auto chooses the model)
     fidelity_checks = "full"          # or "tolerance": auto certifies the tolerance only (no rung below, no step check)
     modes = "frozen"                  # or "scheduled"
