@@ -34,8 +34,14 @@ from flexctrl.bench.loop_overhead import FLOOR, TIMING_METRICS
 
 _WORKER = """
 import json, sys
-from flexctrl.study.runner import execute_run
-from flexctrl.study.study_file import load_study
+try:
+    from flexctrl.study.run_execution import execute_run
+except ImportError:  # a tree of an earlier layout
+    from flexctrl.study.runner import execute_run
+try:
+    from flexctrl.study.study_file import load_study
+except ImportError:
+    from flexctrl.study.spec import load_study
 spec = load_study(sys.argv[1])
 options = {"metrics": list(spec.metrics) if spec.metrics else None, "keep_trajectories": spec.keep_trajectories,
            "decimation": spec.decimation}

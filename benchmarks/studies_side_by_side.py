@@ -220,7 +220,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--study", action="append", default=None, help="a study file (repeat)")
     parser.add_argument("--repeats", type=int, default=3, help="rounds (default 3)")
     parser.add_argument("--workers", type=int, default=0, help="study workers (0: in process)")
-    parser.add_argument("--keep", default=None, metavar="DIR", help="write the passes' folders here")
+    parser.add_argument(
+        "--keep", default=None, metavar="DIR", help="write the passes' folders here"
+    )
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)

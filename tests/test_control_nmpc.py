@@ -78,9 +78,8 @@ def test_rti_closed_loop_reaches_the_target_within_torque_limits(onelink):
 
 def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
     model, op = onelink
-    ctrl = design_nmpc(
-        model, op, NMPCSettings(**SMALL), screen=False
-    )  # the whole QP, the one made to fail
+    ctrl = design_nmpc(model, op, NMPCSettings(**SMALL))
+    ctrl.screen = False  # always the whole QP: the one made to fail
     ctrl.reset()
     x = op.x.copy()
     x[0] -= 0.05

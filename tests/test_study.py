@@ -24,7 +24,7 @@ from flexctrl.study.executors.selftest_executor import _selftest_build
 from flexctrl.study.executors.selftest_executor import execute as run_selftest
 from flexctrl.study.hashing import canonical_json, derive_seed, identity, short_hash
 from flexctrl.study.progress import Progress
-from flexctrl.study.runner import execute_run
+from flexctrl.study.run_execution import execute_run
 from flexctrl.study.store import Table
 from flexctrl.study.study_file import toml_literal
 

@@ -68,14 +68,12 @@ def test_the_key_ignores_the_controller_its_overrides_digest_and_the_seed_only()
         assert affinity_key(dict(base, **{key: value})) != affinity_key(base), key
 
 
-def test_grouped_runs_share_a_worker_and_the_table_is_the_plain_pools(selftest_study, tmp_path):
+def test_grouped_runs_share_a_worker_and_the_table_is_the_in_process_ones(selftest_study, tmp_path):
     spec = load_study(
         selftest_study, overrides=["set.scene.sleep_s=0.05"]
     )  # 12 configurations x 2 controllers
     grouped = run_study(spec, tmp_path / "grouped", workers=2, progress="none", report=False)
-    plain = run_study(
-        spec, tmp_path / "plain", workers=2, progress="none", report=False, affinity=False
-    )
+    plain = run_study(spec, tmp_path / "plain", workers=0, progress="none", report=False)
     assert "runs grouped by model per worker" in grouped.backend and "grouped" not in plain.backend
     strip = lambda table: [
         {k: v for k, v in row.items() if k not in VOLATILE} for row in table.rows
@@ -93,7 +91,7 @@ def test_grouped_runs_share_a_worker_and_the_table_is_the_plain_pools(selftest_s
 
 PRELOAD_PROBE = """
 import concurrent.futures as cf, sys
-from flexctrl.study.runner import pool_context
+from flexctrl.study.backends import pool_context
 context = pool_context({preload!r})
 with cf.ProcessPoolExecutor(1, mp_context=context) as pool:
     print(pool.submit(eval, "sorted(m for m in __import__('sys').modules if m.startswith('flexctrl.study'))").result())
@@ -127,40 +125,22 @@ def test_the_fork_server_imports_the_executors_module_for_its_workers():
             check=True,
         ).stdout
         loaded[preload] = set(ast.literal_eval(out.strip().splitlines()[-1]))
-    assert {module, "flexctrl.study.runner"} <= loaded[module]
-    assert module not in loaded[None] and "flexctrl.study.runner" not in loaded[None]
-
-
-def test_no_preload_is_kept_through_a_resume_and_named_in_the_backend(selftest_study, tmp_path):
-    spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q3=[0]"])  # 4 runs
-    first = run_study(
-        spec, tmp_path / "out", workers=2, progress="none", report=False, preload=False
-    )
-    assert "imports in each worker" in first.backend
-    (tmp_path / "out" / "runs" / f"{spec.runs[0].run_id}.json").unlink()
-    again = run_study(
-        spec, tmp_path / "out", workers=2, progress="none", report=False, preload=False, resume=True
-    )
-    assert again.counts["ran"] == 1 and "imports in each worker" in again.backend
-    assert (
-        "imports"
-        not in run_study(spec, tmp_path / "pre", workers=2, progress="none", report=False).backend
-    )
+    assert {module, "flexctrl.study.backends"} <= loaded[module]
+    assert module not in loaded[None] and "flexctrl.study.backends" not in loaded[None]
 
 
 def test_the_pool_asks_its_fork_server_for_the_executors_registered_module(
     selftest_study, tmp_path, monkeypatch
 ):
-    from flexctrl.study import runner
+    from flexctrl.study import backends
 
     asked = []
-    real = runner.pool_context
+    real = backends.pool_context
     monkeypatch.setattr(
-        runner, "pool_context", lambda preload=None: asked.append(preload) or real(preload)
+        backends, "pool_context", lambda preload=None: asked.append(preload) or real(preload)
     )
     spec = load_study(
         selftest_study, overrides=["grid.payload=[2.0]", "grid.q2=[0]", "grid.q3=[0]"]
     )  # 2 runs
     run_study(spec, tmp_path / "pre", workers=1, progress="none", report=False)
-    run_study(spec, tmp_path / "plain", workers=1, progress="none", report=False, preload=False)
-    assert asked == ["flexctrl.study.executors.selftest_executor", None]
+    assert asked == ["flexctrl.study.executors.selftest_executor"]

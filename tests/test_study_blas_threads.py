@@ -17,7 +17,7 @@ from flexctrl.study.blas_threads import (
     parse_blas_threads,
     usable_cpus,
 )
-from flexctrl.study.runner import LocalPoolBackend, pool_context
+from flexctrl.study.backends import LocalPoolBackend, pool_context
 
 # : Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report
 # every thread count.
@@ -36,22 +36,18 @@ def worker_threads(blas_threads) -> list[int]:
 def test_the_budget_shares_the_cpus_between_the_workers():
     assert [blas_thread_budget("auto", w, cpus=2) for w in (1, 2, 3)] == [2, 1, 1]
     assert [blas_thread_budget("auto", w, cpus=8) for w in (1, 2, 3, 8, 16)] == [8, 4, 2, 1, 1]
-    assert blas_thread_budget(0, 2, cpus=2) == 0 and blas_thread_budget(3, 2, cpus=2) == 3
+    assert blas_thread_budget(3, 2, cpus=2) == 3
     assert blas_thread_budget("auto", 1) == usable_cpus()
 
 
-@pytest.mark.parametrize("bad", ["two", "-1", "1.5", ""])
+@pytest.mark.parametrize("bad", ["two", "-1", "0", "1.5", ""])
 def test_a_bad_option_names_the_option_the_value_and_what_is_allowed(bad):
-    with pytest.raises(SpecError, match=r"--blas-threads.*allowed: auto, or a whole number"):
+    with pytest.raises(SpecError, match=r"--blas-threads.*allowed: auto, or a whole number >= 1"):
         parse_blas_threads(bad)
-    assert (
-        parse_blas_threads(" auto ") == "auto"
-        and parse_blas_threads("0") == 0
-        and parse_blas_threads("3") == 3
-    )
+    assert parse_blas_threads(" auto ") == "auto" and parse_blas_threads("3") == 3
 
 
-@pytest.mark.parametrize("bad", [-1, 1.5, "2", True])
+@pytest.mark.parametrize("bad", [-1, 0, 1.5, "2", True])
 def test_the_budget_refuses_what_is_not_a_count(bad):
     with pytest.raises(SpecError, match="--blas-threads"):
         blas_thread_budget(bad, 2)
@@ -66,37 +62,6 @@ def test_a_pool_worker_holds_every_blas_library_to_its_budget():
         assert set(counts) == {threads}, (threads, counts)
 
 
-#: Run in a fresh interpreter without the thread variables (``make test`` sets them to 1, and the
-#: fork server keeps the environment it started with): a plain pool worker's counts, then a
-#: ``blas_threads=0`` worker's.
-ZERO_AGAINST_PLAIN = f"""
-import concurrent.futures as cf, json
-from flexctrl.study.runner import LocalPoolBackend, pool_context
-with cf.ProcessPoolExecutor(1, mp_context=pool_context(None)) as pool:
-    plain = pool.submit(eval, {PROBE!r}).result(timeout=120)
-with LocalPoolBackend(2, blas_threads=0).pool(1, pool_context(None)) as pool:
-    zero = pool.submit(eval, {PROBE!r}).result(timeout=120)
-print(json.dumps([plain, zero]))
-"""
-
-
-@pytest.mark.skipif(usable_cpus() < 2, reason="one CPU: OpenBLAS starts one thread anyway")
-def test_zero_leaves_the_libraries_as_they_start():
-    """``--blas-threads 0`` (the old path) passes no limit: the worker's counts are those of a plain worker."""
-    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
-    done = subprocess.run(
-        [sys.executable, "-c", ZERO_AGAINST_PLAIN],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    )
-    plain, zero = json.loads(done.stdout.strip().splitlines()[-1])
-    assert zero == plain
-    assert max(plain) >= 2, plain  # the libraries started more than one thread: nothing held them
-
-
 def test_the_budget_is_named_in_the_backend_and_the_table_does_not_move(selftest_study, tmp_path):
     spec = load_study(selftest_study, overrides=["grid.payload=[2.0]", "grid.q3=[0]"])  # 4 runs
     limited = run_study(
@@ -107,10 +72,6 @@ def test_the_budget_is_named_in_the_backend_and_the_table_does_not_move(selftest
     )
     assert "2 workers" in limited.backend and "1 BLAS thread per worker" in limited.backend
     assert "2 BLAS threads per worker" in library.backend  # set, whatever the environment says
-    assert (
-        "BLAS threads as the libraries start them"
-        in LocalPoolBackend(2, blas_threads=0).description
-    )
     volatile = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
     strip = lambda table: [
         {k: v for k, v in row.items() if k not in volatile} for row in table.rows

@@ -16,7 +16,7 @@ import pytest
 from flexctrl import cli
 from flexctrl.errors import FlexctrlError
 from flexctrl.study import load_study, run_study
-from flexctrl.study.runner import DaskBackend
+from flexctrl.study.dask_backend import DaskBackend
 from flexctrl.study.store import Table
 
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")

@@ -150,37 +150,22 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
-# : NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.controller.design_nmpc`,
-# not settings.
-DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen", "direct_qp")
-
-
 def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`),
     stepped interleaved.
 
     ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
     per sample, at the middle RK4 node of the horizon's middle interval, held over the whole
-    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started from
-    the shifted previous solution, the QP without its soft rows tried first (through HPIPM called
-    directly), the RTI's calls through bound buffers, predicting with the joints and the three
-    slowest coupled modes at the target, the estimate's fast modes removed (12 states, 2 RK4
-    substeps).  Against it, one change each: ``rti_frozen_per_interval`` one Jacobian per interval
-    of the horizon (the setting before); ``rti_frozen_conic_qp`` the QP without soft rows through
-    ``casadi.conic`` (``direct_qp``, an argument of ``design_nmpc``); ``rti_frozen_dm_calls`` the
-    RTI's calls as before, through CasADi's DM conversions and the whole QP every sample
-    (``bound_calls``, an argument of ``design_nmpc``); ``rti_frozen_whole_qp`` always the whole QP
-    (``screen``, an argument of ``design_nmpc``; the same optimum to the solver's tolerance);
-    ``rti_frozen_per_step`` one Jacobian per RK4 step at its start (``sensitivities = "frozen"``,
-    the setting before the midpoint). The others predict with the whole design model (18 states, 9
-    substeps): ``rti_frozen_full`` the setting before (``controllers/nmpc_full.toml``);
-    ``rti_frozen_cold`` with HPIPM's default start; ``rti_frozen_factored`` with the Jacobian of
-    ``f`` through one factorisation of the mass matrix (the key ``jacobian`` is an argument of
-    :func:`~flexctrl.control.nmpc.controller.design_nmpc`, not a setting); ``rti_exact`` cold with
-    exact sensitivities; ``rti_frozen_every3`` one Jacobian of ``f`` per three RK4 steps.
-    ``rti_first_modes`` predicts with the first assumed mode of every link, the estimate selected
-    (12 states, 2 substeps; destabilises the full arm with the tuned weights).  ``docs/control.md``,
-    "NMPC speed".
+    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started
+    from the shifted previous solution, predicting with the joints and the three slowest
+    coupled modes at the target, the estimate's fast modes removed (12 states, 2 RK4
+    substeps).  Against it, one setting changed each: ``rti_frozen_per_interval`` one Jacobian
+    per interval of the horizon; ``rti_frozen_per_step`` one Jacobian per RK4 step at its start
+    (``sensitivities = "frozen"``).  The others predict with the whole design model (18 states,
+    9 substeps): ``rti_frozen_full`` (``controllers/nmpc_full.toml``); ``rti_frozen_cold`` with
+    HPIPM's default start; ``rti_exact`` cold with exact sensitivities; ``rti_frozen_every3``
+    one Jacobian of ``f`` per three RK4 steps.  ``rti_first_modes`` predicts with the first
+    assumed mode of every link, the estimate selected (12 states, 2 substeps).
     """
     reduced = {"prediction_modes": 1, "qp_warm_start": True}
     per_interval = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
@@ -188,12 +173,8 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     return {
         "rti_frozen": {**shipped, "sensitivities": "midpoint"},
         "rti_frozen_per_interval": {**per_interval, "sensitivities": "midpoint"},
-        "rti_frozen_conic_qp": {**shipped, "sensitivities": "midpoint", "direct_qp": False},
-        "rti_frozen_dm_calls": {**shipped, "sensitivities": "midpoint", "bound_calls": False},
-        "rti_frozen_whole_qp": {**shipped, "sensitivities": "midpoint", "screen": False},
         "rti_frozen_per_step": {**per_interval},
         "rti_frozen_full": {"qp_warm_start": True},
-        "rti_frozen_factored": {"qp_warm_start": True, "jacobian": "factored"},
         "rti_frozen_cold": {},
         "rti_exact": {"sensitivities": "exact"},
         "rti_frozen_every3": {"qp_warm_start": True, "jacobian_every": 3},
@@ -228,7 +209,7 @@ def _run_nmpcs(
     """
     from flexctrl.control import design
     from flexctrl.control.lqr import build_sensors, linear_plant
-    from flexctrl.control.nmpc.controller import auto_substeps, design_nmpc, interval_functions
+    from flexctrl.control.nmpc.controller import auto_substeps, interval_functions
     from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
     plant_substeps = auto_substeps(
@@ -238,17 +219,8 @@ def _run_nmpcs(
     controllers, builds = {}, {}
     for name, overrides in variants.items():
         start = time.perf_counter()
-        settings = NMPCSettings(
-            horizon=horizon,
-            sample_time=sample_time,
-            **{k: v for k, v in overrides.items() if k not in DESIGN_ARGUMENTS},
-        )
-        arguments = {k: v for k, v in overrides.items() if k in DESIGN_ARGUMENTS}
-        controllers[name] = (
-            design_nmpc(model, op, settings, **arguments)
-            if arguments
-            else design(model, op, settings)
-        )
+        settings = NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides)
+        controllers[name] = design(model, op, settings)
         builds[name] = time.perf_counter() - start
 
     def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:

@@ -47,29 +47,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress and no summary")
     parser.add_argument(
-        "--no-affinity",
-        action="store_true",
-        help="local pool: give each run to whichever worker is free, instead of keeping the runs "
-        "that "
-        "share a model on one worker (the slow path, for measuring side by side)",
-    )
-    parser.add_argument(
-        "--no-preload",
-        action="store_true",
-        help="local pool: each worker imports the executor's code in its first run, instead of "
-        "the fork "
-        "server importing it once before forking the workers (the old path: the imports land in "
-        "each worker's first run)",
-    )
-    parser.add_argument(
         "--blas-threads",
         default="auto",
         metavar="N",
         help="local pool only (not --workers 0 or --scheduler): BLAS threads per worker; auto "
-        "(default): "
-        "usable CPUs // workers, at least 1; 0: the libraries' own default (the old path: on 2 "
-        "CPUs "
-        "two workers' spinning OpenBLAS threads slow each other's runs)",
+        "(default): usable CPUs // workers, at least 1 (more threads than CPUs slow every run)",
     )
     parser.add_argument(
         "--no-report",
@@ -105,8 +87,6 @@ def run(args: argparse.Namespace) -> int:
             resume=args.resume,
             progress="none" if args.quiet else args.progress,
             report=not args.no_report,
-            affinity=not args.no_affinity,
-            preload=not args.no_preload,
             blas_threads=blas_threads,
         )
     c = result.counts

@@ -2,23 +2,17 @@
 
 NumPy and SciPy each load their own OpenBLAS, and OpenBLAS starts one thread per CPU by
 default.  A study's linear algebra is small (matrices of 6-30 rows: Riccati equations,
-Kalman gains, discretisations, the MPC's set-up), too small for a second thread to help,
-but an OpenBLAS thread that has finished its share spins for a while before it sleeps.
-On 2 CPUs with 2 workers that is four busy threads on two CPUs, and every worker's run
-waits for the other worker's spinning threads.  Measured on
-``studies/payload_configuration_slice.toml`` (2 workers on 2 CPUs, alternated, warm compile
-cache): the six controllers' summed per-run wall, median of seven rounds, 16.5 s with the
-libraries' own thread count against 14.0 s with one BLAS thread per worker, tables identical
-(the rounds: ``docs/studies.md``, "Backends").
+Kalman gains, discretizations, the MPC's set-up), too small for a second thread to help,
+but an OpenBLAS thread that has finished its share spins for a while before it sleeps.  With
+as many workers as CPUs that is twice as many busy threads as CPUs, and every worker's run
+waits for the other workers' spinning threads.
 
 A Dask worker started by ``dask worker`` (under its nanny) already gets
 ``OMP_NUM_THREADS = MKL_NUM_THREADS = OPENBLAS_NUM_THREADS = 1``
 (``distributed.nanny.pre-spawn-environ`` in distributed's own configuration); this module
 gives the local pool (and ``LocalhostCluster``'s workers, started without a nanny) the same
-rule, sized to the machine: ``auto`` is
-``max(1, usable CPUs // workers)`` threads per worker, so one worker on 2 CPUs keeps the
-libraries' default of 2 and two workers get 1 each.  ``0`` leaves the libraries alone
-(the old path, kept to measure side by side: ``flexctrl study --blas-threads 0``).
+rule, sized to the machine: ``auto`` is ``max(1, usable CPUs // workers)`` threads per
+worker, so one worker on 2 CPUs keeps the libraries' default of 2 and two workers get 1 each.
 
 A worker limits its threads when it starts (:func:`limit_blas_threads`, the pool's
 ``initializer``): the libraries already loaded (the fork server imports them before
@@ -45,8 +39,7 @@ def usable_cpus() -> int:
 
 
 def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None) -> int:
-    """BLAS threads per worker for ``setting`` (``"auto"``, or a whole number; 0: leave the
-    libraries alone).
+    """BLAS threads per worker for ``setting`` (``"auto"``, or a whole number >= 1).
 
     Parameters
     ----------
@@ -66,16 +59,15 @@ def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None
     --------
     >>> blas_thread_budget("auto", 2, cpus=2), blas_thread_budget("auto", 1, cpus=2), blas_thread_budget("auto", 3, cpus=8)
     (1, 2, 2)
-    >>> blas_thread_budget(0, 2, cpus=2), blas_thread_budget(3, 2, cpus=2)
-    (0, 3)
+    >>> blas_thread_budget(3, 2, cpus=2)
+    3
     """
     if setting == "auto":
         return max(1, (usable_cpus() if cpus is None else cpus) // max(1, workers))
-    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 0:
+    if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
         raise SpecError(
             f"value {setting!r} is not allowed; allowed: 'auto' (usable CPUs // workers, at "
-            "least 1), "
-            "a whole number of BLAS threads per worker, or 0 (the libraries' own default)",
+            "least 1) or a whole number >= 1 of BLAS threads per worker",
             key="--blas-threads",
         )
     return setting
@@ -96,10 +88,10 @@ def parse_blas_threads(text: str) -> int | str:
         value = int(text)
     except ValueError:
         value = None
-    if value is None or value < 0:
+    if value is None or value < 1:
         raise SpecError(
-            f"value {text!r} is not allowed; allowed: auto, or a whole number of BLAS threads per "
-            "worker (0: the libraries' own default)",
+            f"value {text!r} is not allowed; allowed: auto, or a whole number >= 1 of BLAS "
+            "threads per worker",
             key="--blas-threads",
         )
     return value

@@ -99,7 +99,7 @@ from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc.qp import ScaledProblem, _shift_blocks, scaled_problem
 from flexctrl.control.mpc.qp_backends import Solution
-from flexctrl.control.nmpc.calls import BoundRTICalls, DMRTICalls
+from flexctrl.control.nmpc.calls import BoundRTICalls
 from flexctrl.control.nmpc.interval import (
     RK4_BOUND,
     auto_substeps,
@@ -108,7 +108,6 @@ from flexctrl.control.nmpc.interval import (
     interval_functions,
     memoised,
 )
-from flexctrl.control.nmpc.jacobian import factored_dynamics
 from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
 from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
 from flexctrl.control.nmpc.screened_qp import ScreenedQP, hpipm_options
@@ -158,9 +157,6 @@ class NMPCController(Controller):
         compiled: bool,
         prediction: Prediction | None = None,
         prediction_plant: LinearPlant | None = None,
-        bound_calls: bool = True,
-        screen: bool = True,
-        direct_qp: bool = True,
     ):
         super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
         self.plant = plant
@@ -188,15 +184,9 @@ class NMPCController(Controller):
         self._w_ref: np.ndarray | None = None
         #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
         self._cost_window: tuple | None = None
-        # : the RTI's calls through bound buffers (else CasADi's DM calls;
-        # :mod:`flexctrl.control.nmpc.calls`)
-        self.bound_calls = bound_calls
-        # : try the QP without its soft rows first (HPIPM, bound calls;
-        # :mod:`flexctrl.control.nmpc.screened_qp`)
-        self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
-        # : the screened QP through HPIPM called directly (:mod:`flexctrl.control.nmpc.hpipm_ocp`),
-        # else ``casadi.conic``
-        self.direct_qp = direct_qp
+        #: try the QP without its soft rows first and keep that answer when they hold (HPIPM;
+        #: :mod:`flexctrl.control.nmpc.screened_qp`): the same optimum to the solver's tolerance
+        self.screen = layout.ns > 0 and settings.qp_solver == "hpipm"
         self._rti_calls = None
 
     def __getstate__(self) -> dict:
@@ -208,24 +198,20 @@ class NMPCController(Controller):
     def _calls(self):
         if self._rti_calls is None:
             fn, pb = self.functions, self.problem
-            if not self.bound_calls:
-                self._rti_calls = DMRTICalls(fn["prepare"], fn["qp"], fn["H"])
-            else:
-                screen = (
-                    ScreenedQP(
-                        self.layout,
-                        fn["Hnp"].toarray(),
-                        fn["prepare"].sparsity_out(0),
-                        pb.C,
-                        pb.c_lo,
-                        pb.c_hi,
-                        self.settings.qp_warm_start,
-                        self.direct_qp,
-                    )
-                    if self.screen
-                    else None
+            screen = (
+                ScreenedQP(
+                    self.layout,
+                    fn["Hnp"].toarray(),
+                    fn["prepare"].sparsity_out(0),
+                    pb.C,
+                    pb.c_lo,
+                    pb.c_hi,
+                    self.settings.qp_warm_start,
                 )
-                self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
+                if self.screen
+                else None
+            )
+            self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
         return self._rti_calls
 
     def _reset(self) -> None:
@@ -473,16 +459,14 @@ def _build(
     settings: NMPCSettings,
     pb: ScaledProblem,
     substeps: int,
-    jacobian: str = "symbolic",
     per_use: bool = False,
-    by_recipe: bool = True,
 ):
     """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
 
     ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
     constants coincide by value at some configurations (the reduced prediction's basis).
-    ``by_recipe``: the compiled linearisation found on disk by its recipe before it is built
-    (:func:`~flexctrl.control.nmpc.interval.horizon_linearisation`).
+    The compiled linearization is found on disk by its recipe before it is built
+    (:func:`~flexctrl.control.nmpc.interval.horizon_linearization`).
     """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = _Layout(n, m, ns, N)
@@ -490,10 +474,7 @@ def _build(
     # The compiled part sees the operating point, the scales and the model's constants
     # as inputs, so one library serves every operating point, reference and (frozen-modes)
     # configuration whose model graph has the same structure.
-    if jacobian == "factored":
-        fp, f_jac, const = factored_dynamics(model)
-    else:
-        (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
+    (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
     nc = const.size
     params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
     P = ca.DM(params)
@@ -541,7 +522,7 @@ def _build(
         plant.dt,
         substeps,
         settings,  # noqa: E731
-        recipe=key if by_recipe else None,
+        recipe=key,
         check=reproduces_the_model,
     )
     linmap, compiled, compile_seconds, cache_hit, reused = (
@@ -661,34 +642,13 @@ def design_nmpc(
     model,
     op: OperatingPoint,
     settings: NMPCSettings,
-    *,
-    jacobian: str = "symbolic",
-    bound_calls: bool = True,
-    screen: bool = True,
-    direct_qp: bool = True,
-    library_by_recipe: bool = True,
 ) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
-
-    ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
-    (``"symbolic"``) or through one factorisation of the mass matrix (``"factored"``,
-    :mod:`flexctrl.control.nmpc.jacobian`: equal to rounding, not faster; ``docs/control.md``).
-    ``bound_calls``: the RTI's two calls per sample through buffers bound once (default) or
-    CasADi's DM calls (the slower path, same values; :mod:`flexctrl.control.nmpc.calls`).
-    ``screen``: solve the QP without its soft rows first and keep that answer when they hold
-    (HPIPM with bound calls; the same optimum to the solver's tolerance,
-    :mod:`flexctrl.control.nmpc.screened_qp`); False always solves the whole QP.
-    ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
-    (:mod:`flexctrl.control.nmpc.hpipm_ocp`; default), or through ``casadi.conic`` (the slower
-    path). ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
-    from before it is built (default), or always built and then looked up by its content.
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
     whether the library came from the cache and how many model constants were lifted.
     """
-    if jacobian not in ("symbolic", "factored"):
-        raise ValueError(f"jacobian {jacobian!r} is not allowed; allowed: 'symbolic', 'factored'")
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)
@@ -713,7 +673,7 @@ def design_nmpc(
     # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
     # compiled library serves every configuration of a payload (as for the design model)
     functions, layout, compiled = _build(
-        pm, pplant, settings, problem, substeps, jacobian, prediction.reduced, library_by_recipe
+        pm, pplant, settings, problem, substeps, prediction.reduced
     )
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(
@@ -728,9 +688,6 @@ def design_nmpc(
         compiled,
         prediction,
         pplant,
-        bound_calls,
-        screen,
-        direct_qp,
     )
 
 
