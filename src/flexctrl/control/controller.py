@@ -136,6 +136,9 @@ class Controller(ABC):
         Torque limits per joint, N m (``inf`` for none).
     saturate : bool
         Clip torques at ``limits``.
+    design_model : Model, optional
+        The model the controller was designed on; the closed loop builds the controller's
+        reference (:meth:`set_reference`) on it.
     """
 
     kind: ClassVar[str] = ""
@@ -148,6 +151,7 @@ class Controller(ABC):
         limits: np.ndarray,
         *,
         saturate: bool = True,
+        design_model=None,
     ):
         self.settings = settings
         self.op = op
@@ -155,8 +159,8 @@ class Controller(ABC):
         self.limits = np.asarray(limits, dtype=float)
         self.saturate = saturate
         self.n_u = self.limits.size
-        #: The model the controller was designed on (set by :func:`flexctrl.control.design`).
-        self.design_model = None
+        #: The model the controller was designed on.
+        self.design_model = design_model
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
         from flexctrl.control.reference_trajectory import HoldReference

@@ -73,7 +73,27 @@ def static_torque_function(model, q_flex: np.ndarray) -> ca.Function:
 
 
 class PDController(Controller):
-    """PD on the joints with gravity compensation (see the module docstring)."""
+    """PD on the joints with gravity compensation (see the module docstring).
+
+    Built by :func:`design_pd` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : PDSettings
+        Sample time, bandwidth, damping, torque filter, gravity compensation, sensors.
+    op : OperatingPoint
+        The target equilibrium.
+    sensors : Sensors
+        Joint encoders (and rates).
+    limits : ndarray
+        Torque limits per joint, N m.
+    kp, kd : ndarray
+        Proportional (N m/rad) and derivative (N m s/rad) gains per joint.
+    gravity : casadi.Function or None
+        The gravity torque compensated, or None.
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "pd"
 
@@ -86,8 +106,12 @@ class PDController(Controller):
         kp: np.ndarray,
         kd: np.ndarray,
         gravity: ca.Function | None,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, op, sensors, limits, saturate=settings.saturate)
+        super().__init__(
+            settings, op, sensors, limits, saturate=settings.saturate, design_model=design_model
+        )
         self.pd_settings = settings
         self.kp, self.kd = kp, kd
         self.gravity = gravity
@@ -280,7 +304,7 @@ def pd_parts(model, op: OperatingPoint, settings: PDSettings):
 
 def design_pd(model, op: OperatingPoint, settings: PDSettings) -> PDController:
     """Build the PD controller holding ``model`` at ``op``."""
-    return PDController(settings, op, *pd_parts(model, op, settings))
+    return PDController(settings, op, *pd_parts(model, op, settings), design_model=model)
 
 
 __all__ = ["PDController", "design_pd", "pd_gains", "static_torque_function", "pd_parts"]

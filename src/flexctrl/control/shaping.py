@@ -183,6 +183,21 @@ class ShapedController(PDController):
     joint 1 in a horizontal plane).  With a step or no reference it shapes its own
     profile from the joint angles of the first measurement to the target: a step, or a
     ramp over ``move_time`` (the classical shaped step).
+
+    Built by :func:`design_shaped` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : ShapedSettings
+        The shaper and its PD (``settings.pd``).
+    op, sensors, limits, kp, kd, gravity
+        As for :class:`~flexctrl.control.pd.PDController`.
+    shaper : Shaper
+        The impulse sequence (times s, amplitudes summing to 1).
+    modes : list of (float, float)
+        The shaped modes: (frequency rad/s, damping ratio).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
     """
 
     kind = "shaped"
@@ -198,8 +213,12 @@ class ShapedController(PDController):
         gravity,
         shaper: Shaper,
         modes: list[tuple[float, float]],
+        *,
+        design_model=None,
     ):
-        super().__init__(settings.pd, op, sensors, limits, kp, kd, gravity)
+        super().__init__(
+            settings.pd, op, sensors, limits, kp, kd, gravity, design_model=design_model
+        )
         self.settings = settings
         self.pd_settings = settings.pd
         self.shaper = shaper
@@ -280,8 +299,9 @@ def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> Shaped
     """Build the shaped-reference PD controller moving ``model`` to ``op``."""
     sensors, limits, kp, kd, gravity = pd_parts(model, op, settings.pd)
     modes = [] if settings.shaper == "none" else shaping_modes(model, op, settings, kp, kd)
+    shaper = design_shaper(modes, settings.shaper)
     return ShapedController(
-        settings, op, sensors, limits, kp, kd, gravity, design_shaper(modes, settings.shaper), modes
+        settings, op, sensors, limits, kp, kd, gravity, shaper, modes, design_model=model
     )
 
 

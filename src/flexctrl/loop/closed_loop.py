@@ -41,8 +41,7 @@ def closed_loop(
     compile: bool | None = None,
     loop: str = "auto",
 ) -> ClosedLoopResult:
-    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration``
-    seconds.
+    """Run ``controller`` on ``plant`` (default ``model``) along ``reference``.
 
     The controller tracks the reference built on ``model`` (its design model: the joint
     path, the quasi-static deflection the path's accelerations need and the feed-forward

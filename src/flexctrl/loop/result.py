@@ -22,8 +22,10 @@ def tip_at_rest(model, q_joints) -> np.ndarray:
 
 @dataclass
 class ClosedLoopResult:
-    """A closed-loop run (:func:`flexctrl.closed_loop`,
-    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`).
+    """A closed-loop run: its trajectory, metrics, summary, figures and files.
+
+    Returned by :func:`flexctrl.closed_loop` and
+    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`.
 
     Attributes
     ----------

@@ -72,7 +72,15 @@ DAMPING_FORMS = ("ratio", "paper", "stiffness")
 
 @dataclass(frozen=True)
 class SectionSpec:
-    """Hollow rectangular cross-section (m); used to derive the axial stiffness EA."""
+    """Hollow rectangular cross-section; used to derive the axial stiffness EA.
+
+    Attributes
+    ----------
+    width, height : float
+        Outer dimensions, m (bending in the height direction).
+    thickness : float
+        Wall thickness, m.
+    """
 
     width: float
     height: float
@@ -194,6 +202,15 @@ class PayloadSpec:
     ``inertia`` (kg m^2, about its centre of mass) belongs to the payload: it is
     carried only when ``mass > 0`` (Table 3 of Subedi et al. treats the no-payload
     link 3 as a plain clamped-free beam).
+
+    Attributes
+    ----------
+    mass : float
+        kg.
+    inertia : float
+        kg m^2, about the payload's centre of mass.
+    source : str
+        Where the values come from (free text).
     """
 
     mass: float
@@ -237,6 +254,8 @@ class ArmSpec:
         ``False`` with a finite-element fidelity is refused when the model is built.
     source : str
         The file it was loaded from.
+    notes : str
+        Free text of the file's ``notes`` key (where its numbers come from).
     """
 
     name: str

@@ -48,8 +48,9 @@ from flexctrl.spec.reader import TableReader
 
 @dataclass(frozen=True)
 class MetricSettings:
-    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the
-    file's).
+    """How a closed-loop run is judged: the ``[metrics]`` table of a scene.
+
+    The defaults are those of a scene file.
 
     Attributes
     ----------

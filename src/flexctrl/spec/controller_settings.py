@@ -98,6 +98,8 @@ class PDSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"pd"``, the controller this describes (fixed by the class).
     sample_time : float
         s.
     kp, kd : tuple of float
@@ -182,11 +184,14 @@ class PDSettings:
 
 @dataclass(frozen=True)
 class LQRSettings:
-    """Discrete LQR on the flexible linearisation (LQG with a Kalman filter when the state is not
-    measured).
+    """Settings of a discrete LQR on the flexible linearization (LQG with a Kalman filter).
+
+    The Kalman filter estimates the state when the sensors do not measure all of it.
 
     Attributes
     ----------
+    kind : str
+        ``"lqr"``, the controller this describes (fixed by the class).
     sample_time : float
         s.
     weights : Weights
@@ -265,6 +270,8 @@ class MPCSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"mpc"``, the controller this describes (fixed by the class).
     sample_time : float
         s.
     horizon : int
@@ -392,6 +399,8 @@ class NMPCSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"nmpc"``, the controller this describes (fixed by the class).
     sample_time : float
         s.
     horizon : int
@@ -521,6 +530,8 @@ class ShapedSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"shaped"``, the controller this describes (fixed by the class).
     shaper : {"zv", "zvd", "none"}
     modes : int
         Number of lowest vibration modes shaped (one shaper per mode, convolved).

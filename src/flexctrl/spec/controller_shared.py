@@ -133,6 +133,8 @@ class EstimatorSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"kalman"``, the estimator this describes.
     torque_noise : float
         Standard deviation of an unmeasured torque disturbance on each joint, N m
         (held over a sample).

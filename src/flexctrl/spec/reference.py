@@ -120,8 +120,9 @@ class JointReference:
 
 @dataclass(frozen=True)
 class Move:
-    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad), a quintic
-    by default.
+    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad).
+
+    A quintic (minimum-jerk) path by default.
 
     Parameters
     ----------

@@ -105,8 +105,9 @@ def tune(
     progress: bool = True,
     stream=None,
 ) -> TuningResult:
-    """Tune a controller file over closed-loop scenarios (see :mod:`flexctrl.tuning.tuner` for the
-    files written).
+    """Tune a controller file over closed-loop scenarios.
+
+    :mod:`flexctrl.tuning.tuner` lists the files written.
 
     Parameters
     ----------
@@ -122,7 +123,9 @@ def tune(
     scheduler, client
         A Dask scheduler address or client instead of the local pool.
     progress : bool
-        One line per batch on ``stream`` (default stderr).
+        One line per batch on ``stream``.
+    stream : file, optional
+        Where the progress lines go (default stderr).
 
     Returns
     -------

@@ -77,7 +77,29 @@ OSQP_OK = {1: "solved", 2: "solved_inaccurate"}
 # controller
 # --------------------------------------------------------------------------------------
 class MPCController(Controller):
-    """Linear MPC (see the module docstring)."""
+    """Linear MPC (see the module docstring).
+
+    Built by :func:`design_mpc` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : MPCSettings
+        Sample time, horizon, weights, constraints, QP backend, sensors, estimator.
+    plant : LinearPlant
+        The linearization at the design point with the controller's sensors.
+    limits : ndarray
+        Torque limits per joint, N m.
+    problem : ScaledProblem
+        The scaled prediction model, weights and constraint rows.
+    qp : QP
+        The quadratic programme, built once.
+    backend
+        Its solver (:mod:`flexctrl.control.mpc.qp_backends`).
+    observer
+        The state estimator (:mod:`flexctrl.control.estimator`).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "mpc"
 
@@ -90,8 +112,12 @@ class MPCController(Controller):
         qp: QP,
         backend,
         observer,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
+        super().__init__(
+            settings, plant.op, plant.sensors, limits, saturate=True, design_model=design_model
+        )
         self.plant = plant
         self.problem = problem
         self.qp = qp
@@ -251,7 +277,9 @@ def design_mpc(model, op: OperatingPoint, settings: MPCSettings) -> MPCControlle
         qp = condensed_qp(problem, settings.blocks, settings.constraint_stride)
     backend = make_backend(qp, settings)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
-    return MPCController(settings, plant, limits, problem, qp, backend, observer)
+    return MPCController(
+        settings, plant, limits, problem, qp, backend, observer, design_model=model
+    )
 
 
 __all__ = ["MPCController", "design_mpc"]

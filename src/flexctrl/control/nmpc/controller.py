@@ -140,7 +140,37 @@ class _Layout:
 
 
 class NMPCController(Controller):
-    """Nonlinear MPC (see the module docstring)."""
+    """Nonlinear MPC (see the module docstring).
+
+    Built by :func:`design_nmpc` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : NMPCSettings
+        Sample time, horizon, weights, sensitivities, prediction model, QP solver.
+    plant : LinearPlant
+        The design model's linearization at the target with the controller's sensors.
+    limits : ndarray
+        Torque limits per joint, N m.
+    problem : ScaledProblem
+        The scaled prediction model, weights and constraint rows.
+    observer
+        The state estimator (:mod:`flexctrl.control.estimator`).
+    functions : dict
+        The CasADi Functions of the real-time iteration (``prepare``, ``qp``, ``H``, ...).
+    layout : _Layout
+        Where states, inputs and slacks sit in the QP's variables.
+    substeps : int
+        RK4 steps per sample of the prediction.
+    compiled : bool
+        Whether the linearization is a compiled library.
+    prediction : Prediction, optional
+        The prediction model (the design model or its truncation) and its state map.
+    prediction_plant : LinearPlant, optional
+        The prediction model's linearization (default ``plant``).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "nmpc"
 
@@ -157,8 +187,12 @@ class NMPCController(Controller):
         compiled: bool,
         prediction: Prediction | None = None,
         prediction_plant: LinearPlant | None = None,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
+        super().__init__(
+            settings, plant.op, plant.sensors, limits, saturate=True, design_model=design_model
+        )
         self.plant = plant
         #: the model predicted with and the selection ``x[keep]`` of the design state it sees
         self.prediction = prediction or Prediction(None, np.arange(plant.sys.A.shape[0]), False)
@@ -688,6 +722,7 @@ def design_nmpc(
         compiled,
         prediction,
         pplant,
+        design_model=model,
     )
 
 
