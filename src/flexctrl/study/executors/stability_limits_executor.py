@@ -138,7 +138,7 @@ def _build(model_key: tuple, scene_source: str):
     from flexctrl.dynamics.build import build_model
     from flexctrl.linear import equilibrium
     from flexctrl.scenes.arm_setup import scene_arm
-    from flexctrl.spec.scene import ArmScene
+    from flexctrl.spec.arm_scene import ArmScene
 
     fields = dict(model_key)
     scene = ArmScene(
