@@ -26,7 +26,7 @@ from flexctrl.study.hashing import canonical_json, derive_seed, identity, short_
 from flexctrl.study.progress import Progress
 from flexctrl.study.run_execution import execute_run
 from flexctrl.study.store import Table
-from flexctrl.study.study_file import toml_literal
+from flexctrl.study.plan import toml_literal
 
 TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")

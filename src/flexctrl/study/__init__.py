@@ -16,7 +16,8 @@ from flexctrl.study.report import write_report
 from flexctrl.study.run_execution import execute_run
 from flexctrl.study.runner import StudyResult, run_study
 from flexctrl.study.store import ResultStore, Table
-from flexctrl.study.study_file import ReportSpec, RunSpec, StudySpec, load_study
+from flexctrl.study.plan import ReportSpec, RunSpec, StudySpec
+from flexctrl.study.study_file import load_study
 
 __all__ = [
     "RunOutput",

@@ -15,7 +15,7 @@ from typing import Any
 
 from flexctrl.errors import FlexctrlError
 from flexctrl.study.run_execution import describe_exception, execute_run, failed_result
-from flexctrl.study.study_file import RunSpec
+from flexctrl.study.plan import RunSpec
 
 
 class DaskBackend:

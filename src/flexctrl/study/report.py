@@ -49,7 +49,7 @@ from flexctrl.study.report_figures import (
     wants_log,
 )
 from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table, atomic_write
-from flexctrl.study.study_file import ReportSpec
+from flexctrl.study.plan import ReportSpec
 
 TIMING = re.compile(r"(controller|solve|solver|step|compute|cpu|qp|nlp)_?time", re.IGNORECASE)
 MAX_PANELS = 12

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.study.study_file import RESERVED_COLUMNS
+from flexctrl.study.plan import RESERVED_COLUMNS
 
 
 def peak_memory_mb() -> float | None:

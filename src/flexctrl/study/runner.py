@@ -25,7 +25,7 @@ from flexctrl.study.backends import InProcessBackend, LocalPoolBackend, default_
 from flexctrl.study.dask_backend import DaskBackend
 from flexctrl.study.run_execution import peak_memory_mb
 from flexctrl.study.store import ResultStore, Table, now_iso
-from flexctrl.study.study_file import StudySpec
+from flexctrl.study.plan import StudySpec
 
 STUDY_FORMAT = 1
 VERSIONED = (

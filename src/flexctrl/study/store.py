@@ -250,7 +250,7 @@ class ResultStore:
         atomic_write(self.study_path, (json.dumps(document, indent=2, default=str) + "\n").encode())
 
     def write_plan(self, runs: Iterable[Any]) -> None:
-        """Write ``plan.jsonl`` from :class:`~flexctrl.study.study_file.RunSpec` objects."""
+        """Write ``plan.jsonl`` from :class:`~flexctrl.study.plan.RunSpec` objects."""
 
         def write(fh):
             for run in runs:
