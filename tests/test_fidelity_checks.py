@@ -19,7 +19,7 @@ from flexctrl.cli import main
 from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import RunRecord, ToleranceUnreachable, tip_distance, walk_and_judge
-from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes import auto_closed_loop as auto_fidelity
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import pin_design
 from flexctrl.scenes.run_arm_scene import resolve_auto as resolve_arm_auto

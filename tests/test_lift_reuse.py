@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from support import MODEL
 
-from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics import parametric
+from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.parametric import LIFTED, Memo, constants_as_parameters
 from flexctrl.sim.integrator import output_function
 from flexctrl.spec.arm import load_arm

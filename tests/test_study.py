@@ -23,10 +23,10 @@ from flexctrl.study import RunOutput, load_study, register_executor, run_study
 from flexctrl.study.executors.selftest_executor import _selftest_build
 from flexctrl.study.executors.selftest_executor import execute as run_selftest
 from flexctrl.study.hashing import canonical_json, derive_seed, identity, short_hash
+from flexctrl.study.plan import toml_literal
 from flexctrl.study.progress import Progress
 from flexctrl.study.run_execution import execute_run
 from flexctrl.study.store import Table
-from flexctrl.study.plan import toml_literal
 
 TEST_DATA = Path(__file__).resolve().parent / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")

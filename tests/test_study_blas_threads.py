@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import os
 import subprocess
 import sys
 
@@ -11,13 +9,12 @@ import pytest
 
 from flexctrl.errors import SpecError
 from flexctrl.study import load_study, run_study
+from flexctrl.study.backends import LocalPoolBackend, pool_context
 from flexctrl.study.blas_threads import (
-    THREAD_VARIABLES,
     blas_thread_budget,
     parse_blas_threads,
     usable_cpus,
 )
-from flexctrl.study.backends import LocalPoolBackend, pool_context
 
 # : Evaluated in a worker: load NumPy's and SciPy's BLAS (SciPy's may load only now), then report
 # every thread count.

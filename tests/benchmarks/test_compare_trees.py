@@ -1,9 +1,8 @@
 """``benchmarks/compare_trees.py``: one study's runs under two source trees, alternated."""
 
-from support import ROOT
-
 import pytest
 from compare_trees import bench_runs, format_runs, import_root, main
+from support import ROOT
 
 STUDY = "tests/data/study_selftest.toml"
 

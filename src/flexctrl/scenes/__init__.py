@@ -39,7 +39,6 @@ def scene_runners() -> dict:
     }
 
 
-
 def run_scene(scene, out: str | Path | None = None, **options: Any):
     """Run ``scene`` (any kind of :func:`scene_runners`), writing results to ``out`` when given.
 

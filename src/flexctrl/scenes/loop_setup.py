@@ -303,7 +303,7 @@ def closed_loop_tip_path(
     """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques
     only.
 
-    Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
+    Used by :func:`flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`.  A
     diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``
     (the design model) is kept, so only the plant changes with ``fidelity``.  ``loop``: as in
     :func:`~flexctrl.loop.sampled.integrate_closed_loop` (``"python"`` holds one sample's

@@ -34,7 +34,7 @@ from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
-from flexctrl.scenes.auto import (
+from flexctrl.scenes.auto_closed_loop import (
     WHOLE_RUNS,
     check_closed_loop_auto,
     choose_closed_loop_fidelity,
@@ -51,7 +51,7 @@ def resolve_auto(
     and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
-    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` with the
+    :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` with the
     scene's ``tolerance`` (kept in ``cache``).  Other scenes come back unchanged with None.
     """
     if scene.plant.fidelity.kind != "auto":
@@ -125,7 +125,7 @@ def run_closed_loop_scene(
         that never settles into the band reports ``settled = 0`` and ``settling_time`` =
         the duration (finite: :func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
     auto_options
-        Keywords of :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity`
+        Keywords of :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
         (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
     cache : SceneCache, optional
         Models, designs, verdicts, fidelity runs and choices to reuse (a fresh one when None).
@@ -149,7 +149,7 @@ def run_closed_loop_scene(
     With ``fidelity = "auto"`` (scene or override) and the scene's ``tolerance`` (m),
     the controller is designed on ``controller_fidelity`` (default
     :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are
-    chosen by :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` (kept in ``cache`` by
+    chosen by :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` (kept in ``cache`` by
     everything that changes the loop), and the run uses them.  The summary then holds
     ``"fidelity_choice"`` (the choice and all its evidence) and the metrics ``chosen_modes`` (modes
     per link of the chosen plant, 0 = rigid), ``chosen_dt`` (s), ``estimated_error`` and
