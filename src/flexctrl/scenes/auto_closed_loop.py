@@ -323,41 +323,9 @@ def _choose_closed(
 ) -> FidelityChoice:
     started = time.perf_counter()
     plant = scene.plant
-    low = required_modes(plant)
-    if low > top:
-        raise SpecError(
-            f"the initial elastic coordinates need {low} modes per link, above the top candidate "
-            f"amm:{top}; allowed: top >= {low}",
-            source=scene.source,
-            key="initial.qf",
-        )
-    design = scene.controller_fidelity
-
-    def rung(m: int) -> RunRecord:
-        return simulate_closed_rung(
-            scene, rung_name(m), controller=controller, overrides=overrides, cache=cache
-        )
-
-    design_rung = (
-        0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
+    low, first, linear, from_top, runs, record = _first_runs(
+        scene, controller, overrides, cache, top, reference, walk
     )
-    first = min(max(low, design_rung), top)
-    linear, from_top = None, False
-    if walk == "estimate":
-        linear = _linear_runs(scene, controller, overrides, cache, reference)
-        # a controller stepped in Python costs as much on a linear plant as on the nonlinear one:
-        # no linear estimate of the rungs, the nonlinear walk from the top down (the step check
-        # stays linear)
-        loop = loop_at(scene, rung_name(first), controller, overrides, cache)
-        from_top = not loop.controller.has_sampled_law()
-    if from_top:
-        runs = {top: rung(top)}
-        record = runs[top]
-    elif linear is not None:  # the linear runs give the torques: no nonlinear run before the walk
-        runs, record = {}, linear[0](first)
-    else:
-        runs = {first: rung(first)}
-        record = runs[first]
     ref_model = model_for(plant, reference, cache)
     start, rule = _bandwidth_rule(
         record, ref_model, low, first, top, energy_fraction, bandwidth_factor
@@ -376,7 +344,7 @@ def _choose_closed(
         "kind": "closed_loop",
         "controller": str(controller or scene.controller),
         "controller_overrides": list(overrides),
-        "design_fidelity": str(design),
+        "design_fidelity": str(scene.controller_fidelity),
         "comparison_grid_dt_s": plant.dt,
         "walk": walk,
         "linear_estimate_skipped": from_top,
@@ -397,7 +365,9 @@ def _choose_closed(
             reference=reference,
             safety=safety,
             rule=rule,
-            run_rung=rung,
+            run_rung=lambda m: simulate_closed_rung(
+                scene, rung_name(m), controller=controller, overrides=overrides, cache=cache
+            ),
             run_reference=lambda dt: simulate_closed_rung(
                 scene, reference, dt, controller=controller, overrides=overrides, cache=cache
             ),
@@ -418,6 +388,39 @@ def _choose_closed(
     )
     choice.evidence["choosing_time_s"] = time.perf_counter() - started
     return choice
+
+
+def _first_runs(scene, controller, overrides, cache: SceneCache, top: int, reference, walk):
+    """The lowest rung the initial state allows, the design model's rung, the linear runs (for
+    the estimate walk), whether the walk starts at the top, and the runs made to start it."""
+    low = required_modes(scene.plant)
+    if low > top:
+        raise SpecError(
+            f"the initial elastic coordinates need {low} modes per link, above the top candidate "
+            f"amm:{top}; allowed: top >= {low}",
+            source=scene.source,
+            key="initial.qf",
+        )
+    design = scene.controller_fidelity
+    design_rung = (
+        0 if design.kind == "rigid" else (design.count or 0) if design.kind == "amm" else top
+    )
+    first = min(max(low, design_rung), top)
+    linear, from_top = None, False
+    if walk == "estimate":
+        linear = _linear_runs(scene, controller, overrides, cache, reference)
+        # a controller stepped in Python costs as much on a linear plant as on the nonlinear one:
+        # no linear estimate of the rungs, the nonlinear walk from the top down (the step check
+        # stays linear)
+        loop = loop_at(scene, rung_name(first), controller, overrides, cache)
+        from_top = not loop.controller.has_sampled_law()
+    if linear is not None and not from_top:  # the linear runs give the torques
+        return low, first, linear, from_top, {}, linear[0](first)
+    m = top if from_top else first
+    record = simulate_closed_rung(
+        scene, rung_name(m), controller=controller, overrides=overrides, cache=cache
+    )
+    return low, first, linear, from_top, {m: record}, record
 
 
 def _linear_runs(scene, controller, overrides, cache: SceneCache, reference: str):

@@ -183,7 +183,123 @@ def resolve_model_path(name: str, base_dir: Path, r: TableReader) -> Path:
     try:
         return shipped.find(name, "model", base_dir).resolve()
     except SpecError as exc:
-        raise r.error("model", f"file {name!r} not found ({exc.message})") from None
+        raise r.error("model", exc.message.replace("file", f"file {name!r}", 1)) from None
+
+
+def _read_initial(r: TableReader):
+    """The ``[initial]`` table: joint angles and rates (rad, rad/s), elastic coordinates (m)."""
+    ini = r.table_of("initial", {})
+    q0 = tuple(math.radians(a) for a in ini.degrees("q")) if ini.has("q") else None
+    qd0 = (
+        tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s"))
+        if ini.has("qd")
+        else None
+    )
+    qf0: dict[str, float] = {}
+    if ini.has("qf"):
+        qf = ini.table_of("qf")
+        for name in list(qf.table):
+            if not _QF_NAME.match(name):
+                raise qf.error(
+                    name, "is not an elastic coordinate name; allowed: qf<link><mode>, e.g. qf31"
+                )
+            qf0[name] = qf.number(name, unit="m")
+        qf.finish()
+    ini.finish()
+    return q0, qd0, qf0
+
+
+def _read_damping(r: TableReader):
+    """The ``[damping]`` table: modal damping ratio, joint friction (N m s/rad), form."""
+    dmp = r.table_of("damping", {})
+    zeta = dmp.number("zeta", low=0.0, high=10.0) if dmp.has("zeta") else None
+    friction = None
+    if dmp.has("friction"):
+        raw = dmp.raw("friction")
+        friction = (
+            dmp.numbers("friction", low=0.0, unit="N m s/rad")
+            if isinstance(raw, list)
+            else (dmp.nonnegative("friction", unit="N m s/rad"),)
+        )
+    damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
+    dmp.finish()
+    return zeta, friction, damping_form
+
+
+def _read_input(r: TableReader):
+    """The ``[input]`` table: the open-loop joint torque."""
+    inp = r.table_of("input", {})
+    kind = inp.string("kind", "none", choices=INPUT_KINDS)
+    if kind == "bangbang":
+        t_accel = inp.positive("t_accel", unit="s")
+        spec = InputSpec(
+            kind,
+            joint=inp.integer("joint", low=1),
+            amplitude=inp.number("amplitude", unit="N m"),
+            t_accel=t_accel,
+            t_decel=inp.nonnegative("t_decel", t_accel, unit="s"),
+            t_start=inp.nonnegative("t_start", 0.0, unit="s"),
+        )
+    else:
+        spec = InputSpec("none")
+    inp.finish()
+    return spec
+
+
+def _read_solver(r: TableReader, integrator: str):
+    """The ``[solver]`` table: the integrator's options (each refused for another integrator)."""
+    sol = r.table_of("solver", {})
+    solver: dict[str, Any] = {}
+    for key in list(sol.table):
+        if key in SOLVER_KEYS and integrator not in SOLVER_KEYS[key]:
+            raise sol.error(
+                key,
+                f"does not apply to integrator '{integrator}'; it applies to: {', '.join(SOLVER_KEYS[key])}",
+            )
+    if sol.has("rtol"):
+        solver["rtol"] = sol.number("rtol", low=0.0, low_open=True, high=0.1)
+    if sol.has("atol"):
+        solver["atol"] = sol.number("atol", low=0.0, low_open=True, high=0.1)
+    if sol.has("method"):
+        solver["method"] = sol.string("method", choices=SCIPY_METHODS)
+    if sol.has("compile"):
+        solver["compile"] = sol.boolean("compile")
+    if sol.has("chunk"):
+        solver["chunk"] = sol.integer("chunk", low=1, high=1_000_000)
+    if sol.has("alpha"):
+        solver["alpha"] = sol.number("alpha", low=0.0, high=0.5)
+    if sol.has("delta"):
+        solver["delta"] = sol.number("delta", low=0.5, high=1.0)
+    sol.finish()
+    return solver
+
+
+def _read_outputs(r: TableReader):
+    """The ``[outputs]`` table: the FFT span (s) and peaks, and whether to plot."""
+    out = r.table_of("outputs", {})
+    fft_span = out.positive("fft_span", 2.0, unit="s")
+    fft_peaks = out.integer("fft_peaks", 2, low=1, high=20)
+    plots = out.boolean("plots", True)
+    out.finish()
+    return fft_span, fft_peaks, plots
+
+
+def _read_step_and_duration(r: TableReader):
+    """The plant step and the duration (s)."""
+    dt = r.positive("dt", unit="s")
+    duration = r.positive("duration", unit="s")
+    if dt > duration:
+        raise r.error(
+            "dt",
+            f"value {dt!r} is longer than the duration {duration!r}; allowed: 0 < dt <= duration",
+        )
+    if duration / dt > 5e7:
+        raise r.error(
+            "duration",
+            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most "
+            "5e7 steps",
+        )
+    return dt, duration
 
 
 def read_arm_scene(
@@ -219,97 +335,13 @@ def read_arm_scene(
     integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
     gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
 
-    ini = r.table_of("initial", {})
-    q0 = tuple(math.radians(a) for a in ini.degrees("q")) if ini.has("q") else None
-    qd0 = (
-        tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s"))
-        if ini.has("qd")
-        else None
-    )
-    qf0: dict[str, float] = {}
-    if ini.has("qf"):
-        qf = ini.table_of("qf")
-        for name in list(qf.table):
-            if not _QF_NAME.match(name):
-                raise qf.error(
-                    name, "is not an elastic coordinate name; allowed: qf<link><mode>, e.g. qf31"
-                )
-            qf0[name] = qf.number(name, unit="m")
-        qf.finish()
-    ini.finish()
+    q0, qd0, qf0 = _read_initial(r)
 
-    dmp = r.table_of("damping", {})
-    zeta = dmp.number("zeta", low=0.0, high=10.0) if dmp.has("zeta") else None
-    friction = None
-    if dmp.has("friction"):
-        raw = dmp.raw("friction")
-        friction = (
-            dmp.numbers("friction", low=0.0, unit="N m s/rad")
-            if isinstance(raw, list)
-            else (dmp.nonnegative("friction", unit="N m s/rad"),)
-        )
-    damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
-    dmp.finish()
-
-    inp = r.table_of("input", {})
-    kind = inp.string("kind", "none", choices=INPUT_KINDS)
-    if kind == "bangbang":
-        t_accel = inp.positive("t_accel", unit="s")
-        spec = InputSpec(
-            kind,
-            joint=inp.integer("joint", low=1),
-            amplitude=inp.number("amplitude", unit="N m"),
-            t_accel=t_accel,
-            t_decel=inp.nonnegative("t_decel", t_accel, unit="s"),
-            t_start=inp.nonnegative("t_start", 0.0, unit="s"),
-        )
-    else:
-        spec = InputSpec("none")
-    inp.finish()
-
-    sol = r.table_of("solver", {})
-    solver: dict[str, Any] = {}
-    for key in list(sol.table):
-        if key in SOLVER_KEYS and integrator not in SOLVER_KEYS[key]:
-            raise sol.error(
-                key,
-                f"does not apply to integrator '{integrator}'; it applies to: {', '.join(SOLVER_KEYS[key])}",
-            )
-    if sol.has("rtol"):
-        solver["rtol"] = sol.number("rtol", low=0.0, low_open=True, high=0.1)
-    if sol.has("atol"):
-        solver["atol"] = sol.number("atol", low=0.0, low_open=True, high=0.1)
-    if sol.has("method"):
-        solver["method"] = sol.string("method", choices=SCIPY_METHODS)
-    if sol.has("compile"):
-        solver["compile"] = sol.boolean("compile")
-    if sol.has("chunk"):
-        solver["chunk"] = sol.integer("chunk", low=1, high=1_000_000)
-    if sol.has("alpha"):
-        solver["alpha"] = sol.number("alpha", low=0.0, high=0.5)
-    if sol.has("delta"):
-        solver["delta"] = sol.number("delta", low=0.5, high=1.0)
-    sol.finish()
-
-    out = r.table_of("outputs", {})
-    fft_span = out.positive("fft_span", 2.0, unit="s")
-    fft_peaks = out.integer("fft_peaks", 2, low=1, high=20)
-    plots = out.boolean("plots", True)
-    out.finish()
-
-    dt = r.positive("dt", unit="s")
-    duration = r.positive("duration", unit="s")
-    if dt > duration:
-        raise r.error(
-            "dt",
-            f"value {dt!r} is longer than the duration {duration!r}; allowed: 0 < dt <= duration",
-        )
-    if duration / dt > 5e7:
-        raise r.error(
-            "duration",
-            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most "
-            "5e7 steps",
-        )
+    zeta, friction, damping_form = _read_damping(r)
+    spec = _read_input(r)
+    solver = _read_solver(r, integrator)
+    fft_span, fft_peaks, plots = _read_outputs(r)
+    dt, duration = _read_step_and_duration(r)
     scene = ArmScene(
         name=r.string("name", Path(source).stem),
         description=r.string("description", ""),

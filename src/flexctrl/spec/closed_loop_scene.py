@@ -40,10 +40,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
+from flexctrl.spec.reference import DEFLECTIONS, PROFILES
 
 
 @dataclass(frozen=True)
@@ -172,46 +174,14 @@ def read_closed_loop_scene(
         try:
             controller = shipped.find(name, "controller", base_dir)
         except SpecError as exc:
-            raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
+            raise r.error("controller", exc.message.replace("file", f"file {name!r}", 1)) from None
     design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
     cf = (
         parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity")
         if r.has("controller_fidelity")
         else None
     )
-    target = r.table_of("target")
-    if target.has("q") == target.has("move"):
-        given = "both are given" if target.has("q") else "missing required key"
-        raise target.error(
-            "q",
-            f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
-            "to initial.q), degrees",
-        )
-    if target.has("q"):
-        target_q = tuple(math.radians(a) for a in target.degrees("q"))
-    else:
-        move = target.degrees("move")
-        start = plant.q0 if plant.q0 is not None else (0.0,) * len(move)
-        if len(move) != len(start):
-            raise target.error(
-                "move",
-                f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint",
-            )
-        target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
-    from flexctrl.spec.reference import DEFLECTIONS, PROFILES
-
-    profile = target.string("profile", "step", choices=PROFILES)
-    if profile == "quintic":
-        if not target.has("move_time"):
-            raise target.error(
-                "move_time",
-                'is missing; allowed: a move time > 0 s, required with profile = "quintic"',
-            )
-        move_time = target.positive("move_time", unit="s")
-    else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch profiles
-        move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
-    deflection = target.string("deflection", "quasi_static", choices=DEFLECTIONS)
-    target.finish()
+    target_q, profile, move_time, deflection = _read_target(r.table_of("target"), plant)
     design_q = None
     if r.has("design_configuration"):
         values = r.degrees("design_configuration")
@@ -225,16 +195,7 @@ def read_closed_loop_scene(
     noise = r.table_of("noise", {})
     enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
     noise.finish()
-    metrics = r.table_of("metrics", {})
-    default = MetricSettings()
-    settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
-    band = metrics.positive("band", default.band, unit="m")
-    div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
-    div_angle = math.radians(
-        metrics.positive("divergence_angle", math.degrees(default.divergence_angle), unit="degrees")
-    )
-    stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
-    metrics.finish()
+    settle, band, div_deflection, div_angle, stable_band = _read_metrics(r.table_of("metrics", {}))
     r.finish()
     t_arrive = move_time if profile == "quintic" else 0.0
     move_time = move_time if profile == "quintic" else 0.0
@@ -263,3 +224,53 @@ def read_closed_loop_scene(
         div_angle,
         stable_band,
     )
+
+
+def _read_target(target: TableReader, plant):
+    """The ``[target]`` table: target joint angles (rad), profile, move time (s), deflection."""
+    if target.has("q") == target.has("move"):
+        given = "both are given" if target.has("q") else "missing required key"
+        raise target.error(
+            "q",
+            f"{given}; allowed: exactly one of 'target.q' (absolute) and 'target.move' (relative "
+            "to initial.q), degrees",
+        )
+    if target.has("q"):
+        target_q = tuple(math.radians(a) for a in target.degrees("q"))
+    else:
+        move = target.degrees("move")
+        start = plant.q0 if plant.q0 is not None else (0.0,) * len(move)
+        if len(move) != len(start):
+            raise target.error(
+                "move",
+                f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per "
+                "joint",
+            )
+        target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
+    profile = target.string("profile", "step", choices=PROFILES)
+    if profile == "quintic":
+        if not target.has("move_time"):
+            raise target.error(
+                "move_time",
+                'is missing; allowed: a move time > 0 s, required with profile = "quintic"',
+            )
+        move_time = target.positive("move_time", unit="s")
+    else:  # a step has no duration; a move_time is accepted (unused): a study may switch profiles
+        move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
+    deflection = target.string("deflection", "quasi_static", choices=DEFLECTIONS)
+    target.finish()
+    return target_q, profile, move_time, deflection
+
+
+def _read_metrics(metrics: TableReader):
+    """The ``[metrics]`` table (:class:`MetricSettings`' defaults for what it leaves out)."""
+    default = MetricSettings()
+    settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
+    band = metrics.positive("band", default.band, unit="m")
+    div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
+    div_angle = math.radians(
+        metrics.positive("divergence_angle", math.degrees(default.divergence_angle), unit="degrees")
+    )
+    stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
+    metrics.finish()
+    return settle, band, div_deflection, div_angle, stable_band

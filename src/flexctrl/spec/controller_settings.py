@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Literal, Union
+from typing import Literal
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
@@ -569,7 +569,7 @@ class ShapedSettings:
         return self.pd.sensors
 
 
-ControllerSettings = Union[PDSettings, LQRSettings, MPCSettings, NMPCSettings, ShapedSettings]
+ControllerSettings = PDSettings | LQRSettings | MPCSettings | NMPCSettings | ShapedSettings
 
 #: Settings class per controller kind.
 SETTINGS: dict[str, type] = {

@@ -68,7 +68,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, ClassVar, Literal, Union
+from typing import Any, ClassVar, Literal
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.fem_models import RPArmSpec, TelescopingSpec, load_rp_arm, load_telescoping
@@ -300,7 +300,7 @@ class TelescopingScene(_ModelFileScene):
 
 
 #: Any finite-element scene.
-AnyFemScene = Union[SlidingBeamScene, RPArmScene, TelescopingScene]
+AnyFemScene = SlidingBeamScene | RPArmScene | TelescopingScene
 SCENE_CLASSES: dict[str, type[FemScene]] = {
     c.KIND: c for c in (SlidingBeamScene, RPArmScene, TelescopingScene)
 }
