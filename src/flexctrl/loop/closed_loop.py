@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import SpecError
 from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.mismatch import plant_sensors
@@ -19,10 +20,9 @@ from flexctrl.spec.reference import JointReference, Move
 
 #: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
 #: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``:
-#: 0.99979 at y = 0.5, but 0.81 at 1.65 and 0.52 at 2.05 (sim/rk4.py), so a step chosen only
-#: for stability (y up to 2.5) damps the fastest modes numerically and moves the residual
-#: vibration by about 1 % on the 30-degree move (PD: 5.00 against 4.94 mm); at 0.5 it is 4.938 mm,
-#: within 0.1 % of the scenes' 0.5 ms step.
+#: 0.99979 at y = 0.5, but 0.81 at 1.65 and 0.52 at 2.05, so a step chosen only for stability
+#: (y up to 2.5) damps the fastest modes numerically and moves the residual vibration; at 0.5
+#: the residual is that of the scenes' finer step to 0.1 %.
 ACCURATE_OMEGA_DT = 0.5
 
 
@@ -79,8 +79,8 @@ def closed_loop(
         Compile the plant's step to C (default: when a compiler is present).
     loop : {"auto", "compiled", "python"}
         Run the samples in one CasADi call when the controller's law allows it
-        (``"auto"``), or one Python iteration per sample (``"python"``, the slow path);
-        :func:`flexctrl.loop.sampled.simulate_closed_loop`.
+        (``"auto"``), or one Python iteration per sample (``"python"``: one sample's plant
+        steps in memory at a time); :func:`flexctrl.loop.sampled.simulate_closed_loop`.
 
     Returns
     -------
@@ -99,45 +99,13 @@ def closed_loop(
     >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3
     (True, True)
     """
-    if on_divergence not in ("raise", "record"):
-        raise SpecError(
-            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
-            key="on_divergence",
-        )
-    if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
-        raise SpecError(
-            f"value of type {type(controller).__name__} is not a controller; allowed: a "
-            "controller from "
-            "flexctrl.design(model, op, settings)",
-            key="controller",
-        )
-    move = _as_move(reference)
-    path = move.joint_reference()
-    if len(path.q_target) != model.n_u:
-        raise SpecError(
-            f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
-            key="reference",
-        )
-    if (
-        isinstance(duration, bool)
-        or not isinstance(duration, (int, float))
-        or not math.isfinite(duration)
-        or duration <= path.t_arrive
-    ):
-        raise SpecError(
-            f"value {duration!r} is not allowed; allowed: a duration (s) longer than the move "
-            f"({path.t_arrive:g} s)",
-            key="duration",
-        )
+    move, path = _checked(model, controller, reference, duration, on_divergence)
     plant = model if plant is None else plant
     judge = MetricSettings() if metrics is None else metrics
-    from flexctrl.control.reference_trajectory import ReferenceTrajectory
-
     controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
     controller.reset()
-    Ts = controller.sample_time
     dt = (
-        rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
+        rk4_step(plant.omega_max, controller.sample_time, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
         if dt is None
         else float(dt)
     )
@@ -146,14 +114,7 @@ def closed_loop(
         if plant is model
         else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
     )
-    if x0 is None:
-        x0 = np.zeros(plant.n_x)
-        x0[: plant.n_u] = path.q_start
-    x0 = np.asarray(x0, dtype=float)
-    if x0.shape != (plant.n_x,) or not np.all(np.isfinite(x0)):
-        raise SpecError(
-            f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0"
-        )
+    x0 = _initial_state(plant, path, x0)
     rng = (
         noise
         if isinstance(noise, np.random.Generator)
@@ -180,25 +141,85 @@ def closed_loop(
         stop_on_divergence=on_divergence == "record",
         loop=loop,
     )
-    tip_target = tip_at_rest(plant, path.q_target)
-    report = controller.stats.summary()
-    limits = [getattr(j, "torque_limit", math.inf) for j in plant.spec.joints]
     values = run_metrics(
         trajectory,
-        tip_target=tip_target,
+        tip_target=tip_at_rest(plant, path.q_target),
         reference_joints=path.joints(trajectory.time),
         t_arrive=path.t_arrive,
         settle_allowance=judge.settle_allowance,
         band=judge.band,
         stable_band=judge.stable_band,
         duration=float(duration),
-        torque_limits=limits,
-        controller_stats=report,
+        torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
+        controller_stats=controller.stats.summary(),
         step_times=controller.stats.step_times,
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
     )
-    summary = {
-        "controller": {"kind": controller.settings.kind, "sample_time": Ts, **report},
+    return ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=values,
+        summary=_summary(model, plant, controller, move, path, judge, trajectory, values),
+        model=plant,
+        controller=controller,
+        reference=path,
+    )
+
+
+def _checked(model, controller, reference, duration, on_divergence):
+    """The move and its joint path, after the arguments are checked."""
+    if on_divergence not in ("raise", "record"):
+        raise SpecError(
+            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
+            key="on_divergence",
+        )
+    if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
+        raise SpecError(
+            f"value of type {type(controller).__name__} is not a controller; allowed: a "
+            "controller from flexctrl.design(model, op, settings)",
+            key="controller",
+        )
+    move = _as_move(reference)
+    path = move.joint_reference()
+    if len(path.q_target) != model.n_u:
+        raise SpecError(
+            f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
+            key="reference",
+        )
+    if (
+        isinstance(duration, bool)
+        or not isinstance(duration, (int, float))
+        or not math.isfinite(duration)
+        or duration <= path.t_arrive
+    ):
+        raise SpecError(
+            f"value {duration!r} is not allowed; allowed: a duration (s) longer than the move "
+            f"({path.t_arrive:g} s)",
+            key="duration",
+        )
+    return move, path
+
+
+def _initial_state(plant, path, x0) -> np.ndarray:
+    """``x0`` checked, or the plant at rest at the move's start with undeformed links."""
+    if x0 is None:
+        x0 = np.zeros(plant.n_x)
+        x0[: plant.n_u] = path.q_start
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (plant.n_x,) or not np.all(np.isfinite(x0)):
+        raise SpecError(
+            f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0"
+        )
+    return x0
+
+
+def _summary(model, plant, controller, move, path, judge, trajectory, values) -> dict:
+    """The run's summary (``summary.json`` when saved)."""
+    return {
+        "controller": {
+            "kind": controller.settings.kind,
+            "sample_time": controller.sample_time,
+            **controller.stats.summary(),
+        },
         "plant": {
             "fidelity": str(plant.fidelity),
             "n_states": plant.n_x,
@@ -210,20 +231,12 @@ def closed_loop(
             "configuration_deg": np.degrees(controller.op.joints).tolist(),
         },
         "reference": path.settings() | {"deflection": move.deflection},
-        "tip_target": tip_target.tolist(),
+        "tip_target": tip_at_rest(plant, path.q_target).tolist(),
         "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
         "metrics": values,
         "divergence": trajectory.meta.get("divergence"),
         "wall_time_s": trajectory.meta["wall_time_s"],
     }
-    return ClosedLoopResult(
-        trajectory=trajectory,
-        metrics=values,
-        summary=summary,
-        model=plant,
-        controller=controller,
-        reference=path,
-    )
 
 
 def _as_move(reference) -> Move:

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from flexctrl.errors import SimulationError, SpecError
+from flexctrl.loop.compiled import run_compiled
 from flexctrl.loop.monitors import MODAL_BOUND, RATE_BOUND
 from flexctrl.loop.plant_step import advance_function, output_map
 from flexctrl.sim.bound import BoundFunction, evaluate
@@ -216,25 +217,8 @@ def integrate_closed_loop(
     sample_times : ndarray
         Times (s) at which the controller was called.
     """
-    from flexctrl.loop.compiled import run_compiled
-
-    if loop not in LOOPS:
-        raise SpecError(
-            f"value {loop!r} is not allowed; allowed: {', '.join(map(repr, LOOPS))}", key="loop"
-        )
     Ts = controller.sample_time
-    substeps = int(round(Ts / dt))
-    if substeps < 1 or abs(substeps * dt - Ts) > 1e-9 * Ts:
-        raise SpecError(
-            f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: "
-            "Ts/dt a whole number",
-            key="dt",
-        )
-    if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1 or substeps % stride:
-        raise SpecError(
-            f"value {stride!r} is not allowed; allowed: a whole divisor of Ts/dt = {substeps}",
-            key="stride",
-        )
+    substeps = _checked_substeps(loop, Ts, dt, stride)
     setup = time.perf_counter()
     advance, compiled = advance_function(plant, substeps, compile)
     setup = time.perf_counter() - setup
@@ -252,27 +236,7 @@ def integrate_closed_loop(
         x0,
     )
     wall = time.perf_counter()
-    python_until = run.n_samples if loop == "python" else min(1, run.n_samples)
-    for k in range(python_until):
-        if run.python_sample(k):
-            break
-    used = "python"
-    if run.divergence is None and run.done < run.n_samples:
-        law = controller.sampled_law()
-        if law is None and loop == "compiled":
-            raise SpecError(
-                f"the {type(controller).__name__} has no sampled law (it optimises or schedules "
-                "per "
-                "sample); allowed: loop = 'python' or 'auto'",
-                key="loop",
-            )
-        if law is None:
-            for k in range(run.done, run.n_samples):
-                if run.python_sample(k):
-                    break
-        else:
-            run_compiled(run, law)
-            used = "compiled"
+    used = _run_samples(run, controller, loop)
     if run.divergence is not None and not stop_on_divergence:
         raise SimulationError(run.divergence["message"])
     X, U = run.X[: run.end], run.U[: run.end]
@@ -290,6 +254,52 @@ def integrate_closed_loop(
         "loop": used,
     }
     return t, X, U, meta, np.arange(run.done) * Ts
+
+
+def _checked_substeps(loop: str, Ts: float, dt: float, stride) -> int:
+    """Plant steps per sample, after ``loop``, ``dt`` and ``stride`` are checked."""
+    if loop not in LOOPS:
+        raise SpecError(
+            f"value {loop!r} is not allowed; allowed: {', '.join(map(repr, LOOPS))}", key="loop"
+        )
+    substeps = int(round(Ts / dt))
+    if substeps < 1 or abs(substeps * dt - Ts) > 1e-9 * Ts:
+        raise SpecError(
+            f"plant step {dt:g} s does not divide the controller sample time {Ts:g} s; allowed: "
+            "Ts/dt a whole number",
+            key="dt",
+        )
+    if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1 or substeps % stride:
+        raise SpecError(
+            f"value {stride!r} is not allowed; allowed: a whole divisor of Ts/dt = {substeps}",
+            key="stride",
+        )
+    return substeps
+
+
+def _run_samples(run: LoopRun, controller, loop: str) -> str:
+    """Run the samples: the first in Python, the rest in one CasADi call when the controller's
+    law allows it; returns which loop ran the samples after the first."""
+    python_until = run.n_samples if loop == "python" else min(1, run.n_samples)
+    for k in range(python_until):
+        if run.python_sample(k):
+            return "python"
+    if run.divergence is not None or run.done >= run.n_samples:
+        return "python"
+    law = controller.sampled_law()
+    if law is None and loop == "compiled":
+        raise SpecError(
+            f"the {type(controller).__name__} has no sampled law (it optimises or schedules per "
+            "sample); allowed: loop = 'python' or 'auto'",
+            key="loop",
+        )
+    if law is None:
+        for k in range(run.done, run.n_samples):
+            if run.python_sample(k):
+                break
+        return "python"
+    run_compiled(run, law)
+    return "compiled"
 
 
 class LoopRun:
