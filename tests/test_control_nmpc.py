@@ -153,7 +153,7 @@ def test_compiled_linearization_is_independent_of_the_operating_point_and_the_mo
     (A payload mass of 0 or of a value CasADi keeps as a shared constant, 0.5 here, changes the
     structure; a stiffer link and another payload inertia do not.)
     """
-    from flexctrl.control.nmpc.controller import constants_as_parameters
+    from flexctrl.dynamics.parametric import constants_as_parameters
 
     model, op = onelink
     fp, const = constants_as_parameters(model.functions["f"])
