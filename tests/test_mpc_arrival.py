@@ -10,7 +10,8 @@ from support import DATA
 
 import flexctrl as fc
 from flexctrl.control.mpc.arrival_search import shortest_arrival
-from flexctrl.control.mpc.qp import ScaledProblem, condensed_qp
+from flexctrl.control.mpc.problem import ScaledProblem
+from flexctrl.control.mpc.qp import condensed_qp
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import MPCSettings

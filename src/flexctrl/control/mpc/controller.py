@@ -65,7 +65,8 @@ from flexctrl.control.controller import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc.arrival_search import shortest_arrival, stage_times
-from flexctrl.control.mpc.qp import QP, ScaledProblem, condensed_qp, scaled_problem, sparse_qp
+from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
+from flexctrl.control.mpc.qp import QP, condensed_qp, sparse_qp
 from flexctrl.control.mpc.qp_backends import Solution, make_backend
 from flexctrl.linear import OperatingPoint, torque_limits
 from flexctrl.spec.controller_settings import MPCSettings

@@ -16,7 +16,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from flexctrl.control.lqr import LinearPlant
-from flexctrl.control.mpc.qp import ScaledProblem, _shift_blocks
+from flexctrl.control.mpc.problem import ScaledProblem
+from flexctrl.control.mpc.qp import _shift_blocks
 from flexctrl.control.nmpc.interval import horizon_linearization, interval_core, memoised
 from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
 from flexctrl.control.nmpc.screened_qp import hpipm_options

@@ -97,7 +97,7 @@ import numpy as np
 from flexctrl.control.controller import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
-from flexctrl.control.mpc.qp import ScaledProblem, scaled_problem
+from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
 from flexctrl.control.mpc.qp_backends import Solution
 from flexctrl.control.nmpc.build import Layout as _Layout
 from flexctrl.control.nmpc.build import build_functions

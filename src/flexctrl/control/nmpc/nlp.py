@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.mpc.qp import ScaledProblem
+from flexctrl.control.mpc.problem import ScaledProblem
 from flexctrl.spec.controller_settings import NMPCSettings
 
 
