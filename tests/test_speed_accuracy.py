@@ -19,6 +19,7 @@ from flexctrl.analysis.accuracy import (
 )
 from flexctrl.errors import SpecError
 from flexctrl.sim.tip_error import tip_error
+from flexctrl.study.executors import speed_accuracy_report as report
 from flexctrl.study.executors import speed_vs_accuracy_executor as study
 
 STUDY = DATA / "studies" / "speed_vs_accuracy.toml"
@@ -135,7 +136,7 @@ def test_summary_marks_the_front_and_excludes_methods_with_failures():
             rows.append(
                 {
                     "scene": scene,
-                    study.METHOD_COLUMN: method,
+                    report.METHOD_COLUMN: method,
                     "status": status,
                     "error": "diverged" if status != "ok" else "",
                     "wall_per_sim_s": cost if status == "ok" else None,
@@ -146,15 +147,15 @@ def test_summary_marks_the_front_and_excludes_methods_with_failures():
                     "step_s": 1e-3,
                 }
             )
-    summary = {(s["scene"], s["method"]): s for s in study.summarise(rows)}
+    summary = {(s["scene"], s["method"]): s for s in report.summarise(rows)}
     assert (
         summary[("a", "amm:3/rk4@1ms")]["pareto"] and not summary[("a", "amm:2/rk4@1ms")]["pareto"]
     )
     assert (
         not summary[("b", "amm:3/rk4@1ms")]["pareto"] and summary[("b", "amm:2/rk4@1ms")]["pareto"]
     )
-    assert not summary[(study.ALL, "fem:4/rk4@stable")]["pareto"]
-    assert summary[(study.ALL, "amm:3/rk4@1ms")]["runs_failed"] == 1
+    assert not summary[(report.ALL, "fem:4/rk4@stable")]["pareto"]
+    assert summary[(report.ALL, "amm:3/rk4@1ms")]["runs_failed"] == 1
 
 
 # -- numerics: RK4 order and the reference's convergence ------------------------------------
