@@ -130,6 +130,37 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
     out_dir = Path(out_dir)
     _geometry(out_dir / "fig6_geometry.png")
     _overlay(r, out_dir / "figs7-9_tip.png")
+    secs = _convergence_items(r, fine)
+    secs[1][2].extend(_fig8_items(r, fine))
+    secs[2][2].extend(_fig9_items(r, fine))
+    text = {
+        "Fig 7": "Slow push, C1 = 0.725 m, C2 = 0.7 m, T = 3.5 s (peak speed 0.4 m/s), tip H. ",
+        "Fig 8": "Fast push, C1 = 0.725 m, C2 = 0.7 m, T = 0.7 s (peak speed 2 m/s), tip H. ",
+        "Fig 9": "Fast pull, C1 = 0.025 m, C2 = -0.7 m, T = 0.7 s, tip E. ",
+    }
+    common = (
+        f"Four equal elements (the paper's mesh) and {fine} elements, each with and without the "
+        "axial "
+        "shortening; Newmark (alpha = 1/4, delta = 1/2) + Baumgarte (gamma = beta = 5), dt = 1 ms. "
+        "All three cases are in the one figure below (left: tip displacement; right: the effect "
+        "of the "
+        "shortening and the four-element error)."
+    )
+    out = [_fig6_section(r, fine)]
+    for k, (fig, key, items) in enumerate(secs):
+        out.append(
+            Section(
+                f"{fig}: tip displacement, {CASES[key].name}",
+                text[fig] + common,
+                items,
+                ["figs7-9_tip.png"] if k == 0 else [],
+            )
+        )
+    return out
+
+
+def _fig6_section(r, fine) -> Section:
+    """Fig 6: the geometry as decided from the text."""
     c = CASES["slow_push"]
     geometry = [
         Item(
@@ -169,18 +200,29 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
         ["fig6_geometry.png"],
     )
 
-    def offset(key: str, sh: bool = True, after: float = 0.0) -> float:
-        a, b = r[key, PAPER_ELEMENTS, sh], r[key, fine, sh]
-        keep = a.t >= after
-        return float(np.abs(a.tip_y - b.tip_y)[keep].max())
+    return sec6
 
-    def shortening_effect(key: str) -> float:
-        return float(np.abs(r[key, fine, True].tip_y - r[key, fine, False].tip_y).max())
 
-    def peak(key: str, after: float = 0.0) -> float:
-        res = r[key, fine, True]
-        return float(np.abs(res.tip_y[res.t >= after]).max())
+def _offset(r, fine, key: str, sh: bool = True, after: float = 0.0) -> float:
+    """Largest tip distance (m) of four elements from the converged mesh, from ``after`` (s)."""
+    a, b = r[key, PAPER_ELEMENTS, sh], r[key, fine, sh]
+    keep = a.t >= after
+    return float(np.abs(a.tip_y - b.tip_y)[keep].max())
 
+
+def _shortening_effect(r, fine, key: str) -> float:
+    """Largest tip distance (m) between the runs with and without axial shortening."""
+    return float(np.abs(r[key, fine, True].tip_y - r[key, fine, False].tip_y).max())
+
+
+def _peak(r, fine, key: str, after: float = 0.0) -> float:
+    """Largest tip displacement (m) of the converged run from ``after`` (s)."""
+    res = r[key, fine, True]
+    return float(np.abs(res.tip_y[res.t >= after]).max())
+
+
+def _convergence_items(r, fine) -> list:
+    """Per case of Figs 7-9: four elements against the converged mesh, and the shortening."""
     note4 = (
         f"max |4 elements - {fine} elements| over the run, shortening on; the converged answer "
         f"({fine} elements) moves by < 0.1 mm from 16 to 32 elements (tests/test_sliding_beam.py "
@@ -190,28 +232,25 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
         "can only be read at plot resolution: an offset of this size is visible on a 10 mm scale"
     )
     secs = []
-    for fig, key, extra in (
-        ("Fig 7", "slow_push", []),
-        ("Fig 8", "fast_push", []),
-        ("Fig 9", "fast_pull", []),
-    ):
+    for fig, key in (("Fig 7", "slow_push"), ("Fig 8", "fast_push"), ("Fig 9", "fast_pull")):
         items = [
             Item(
                 f"{fig}, four elements against the converged answer",
                 "excellent agreement with Buffinton and Kane"
                 if key == "slow_push"
                 else "very good agreement with Buffinton and Kane",
-                f"4 elements are {_mm(offset(key))} off the {fine}-element answer (10 mm initial deflection)",
+                f"4 elements are {_mm(_offset(r, fine, key))} off the {fine}-element answer (10 mm initial deflection)",
                 False,
                 note4,
             ),
             Item(
                 f"{fig}, effect of the axial shortening",
                 "included (Eqs 16-18); matters at high speed",
-                f"max |on - off| = {_mm(shortening_effect(key))} ({fine} elements)",
+                f"max |on - off| = {_mm(_shortening_effect(r, fine, key))} ({fine} elements)",
                 True
                 if key != "slow_push"
-                else shortening_effect(key) < 0.5 * shortening_effect("fast_push"),
+                else _shortening_effect(r, fine, key)
+                < 0.5 * _shortening_effect(r, fine, "fast_push"),
                 "slow push: the inertial axial force scales with the acceleration (C2 / T^2), "
                 "25x smaller "
                 "than in the fast cases"
@@ -220,13 +259,19 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
             ),
         ]
         secs.append((fig, key, items))
+    return secs
+
+
+def _fig8_items(r, fine) -> list[Item]:
+    """Fig 8's statements on the amplitude after 0.5 s."""
+    items = []
     # Fig 8's qualitative statement: small amplitude after 0.5 s
     res = r["fast_push", fine, True]
     after = res.t > 0.5
     k_last = int(np.flatnonzero(after)[np.argmax(np.abs(res.tip_y[after]))])
     settled = res.t >= SETTLED
-    ratio = peak("fast_push", SETTLED) / peak("fast_push")
-    secs[1][2].append(
+    ratio = _peak(r, fine, "fast_push", SETTLED) / _peak(r, fine, "fast_push")
+    items.append(
         Item(
             "Fig 8, amplitude after 0.5 s",
             "so small that the slight disagreement there is not important",
@@ -234,7 +279,7 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
             f"({_mm(abs(res.tip_y[k_last]))}); from "
             f"{SETTLED:g} s on max |tip| = {_mm(np.abs(res.tip_y[settled]).max())} = "
             f"{100 * ratio:.0f} % of the "
-            f"run's peak {_mm(peak('fast_push'))}",
+            f"run's peak {_mm(_peak(r, fine, 'fast_push'))}",
             ratio < SMALL,
             f"'small' taken as below {100 * SMALL:.0f} % of the peak, judged from {SETTLED:g} s "
             "(the first "
@@ -242,73 +287,52 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
             "the push)",
         )
     )
-    late = offset("fast_push", after=0.5)
-    secs[1][2].append(
+    late = _offset(r, fine, "fast_push", after=0.5)
+    items.append(
         Item(
             "Fig 8, four elements after 0.5 s",
             "slight disagreement with Buffinton and Kane beyond 0.5 s",
             f"4 elements are {_mm(late)} off the converged answer after 0.5 s, "
-            f"{100 * late / peak('fast_push', 0.5):.0f} % of the amplitude there",
-            late > 0.1 * peak("fast_push", 0.5),
+            f"{100 * late / _peak(r, fine, 'fast_push', 0.5):.0f} % of the amplitude there",
+            late > 0.1 * _peak(r, fine, "fast_push", 0.5),
             "the coarse mesh alone disagrees there by a visible share of the late amplitude: a "
             "likely source of "
             "the paper's late disagreement (B&K's own discretisation is not known from the text)",
         )
     )
+    return items
+
+
+def _fig9_items(r, fine) -> list[Item]:
+    """Fig 9's statements: pull against push, with and without the shortening."""
     push, pull = r["fast_push", fine, True], r["fast_pull", fine, True]
     push0, pull0 = r["fast_push", fine, False], r["fast_pull", fine, False]
     identical = float(np.abs(push0.tip_y - pull0.tip_y).max())
     differ = float(np.abs(push.tip_y - pull.tip_y).max())
-    secs[2][2].extend(
-        [
-            Item(
-                "Fig 9, pull against push",
-                "the response is quite different from the push cases",
-                f"max |pull tip E - fast push tip H| = {_mm(differ)} (peak {_mm(peak('fast_push'))})",
-                differ > SMALL * peak("fast_push"),
-                f"'quite different' taken as more than {100 * SMALL:.0f} % of the peak",
-            ),
-            Item(
-                "Fig 9, without axial shortening",
-                "push and pull responses would be identical",
-                f"max |pull - push| without shortening = {identical:.1e} m",
-                identical < IDENTICAL * 0.01,
-                "mirroring x -> L - x maps one case onto the other exactly (at 4 elements to "
-                "1e-12 m, a test); "
-                f"bound {IDENTICAL:g} of the 10 mm: at t = T/2 both supports sit exactly on "
-                "nodes (x = 0.375, "
-                "0.625 m, nodes whenever N is a multiple of 8); a node belongs to the element on "
-                "its right in "
-                "both cases, which are mirror images, so that one step's w'' rows in h (Eq 47) "
-                "differ and the "
-                "tips part by ~1e-8 m from then on (measured: from t = 0.353 s at 8-32 "
-                "elements). Only the axial "
-                "force (compression while the push accelerates, tension for the pull) tells the "
-                "cases apart",
-            ),
-        ]
-    )
-    text = {
-        "Fig 7": "Slow push, C1 = 0.725 m, C2 = 0.7 m, T = 3.5 s (peak speed 0.4 m/s), tip H. ",
-        "Fig 8": "Fast push, C1 = 0.725 m, C2 = 0.7 m, T = 0.7 s (peak speed 2 m/s), tip H. ",
-        "Fig 9": "Fast pull, C1 = 0.025 m, C2 = -0.7 m, T = 0.7 s, tip E. ",
-    }
-    common = (
-        f"Four equal elements (the paper's mesh) and {fine} elements, each with and without the "
-        "axial "
-        "shortening; Newmark (alpha = 1/4, delta = 1/2) + Baumgarte (gamma = beta = 5), dt = 1 ms. "
-        "All three cases are in the one figure below (left: tip displacement; right: the effect "
-        "of the "
-        "shortening and the four-element error)."
-    )
-    out = [sec6]
-    for k, (fig, key, items) in enumerate(secs):
-        out.append(
-            Section(
-                f"{fig}: tip displacement, {CASES[key].name}",
-                text[fig] + common,
-                items,
-                ["figs7-9_tip.png"] if k == 0 else [],
-            )
-        )
-    return out
+    return [
+        Item(
+            "Fig 9, pull against push",
+            "the response is quite different from the push cases",
+            f"max |pull tip E - fast push tip H| = {_mm(differ)} (peak {_mm(_peak(r, fine, 'fast_push'))})",
+            differ > SMALL * _peak(r, fine, "fast_push"),
+            f"'quite different' taken as more than {100 * SMALL:.0f} % of the peak",
+        ),
+        Item(
+            "Fig 9, without axial shortening",
+            "push and pull responses would be identical",
+            f"max |pull - push| without shortening = {identical:.1e} m",
+            identical < IDENTICAL * 0.01,
+            "mirroring x -> L - x maps one case onto the other exactly (at 4 elements to "
+            "1e-12 m, a test); "
+            f"bound {IDENTICAL:g} of the 10 mm: at t = T/2 both supports sit exactly on "
+            "nodes (x = 0.375, "
+            "0.625 m, nodes whenever N is a multiple of 8); a node belongs to the element on "
+            "its right in "
+            "both cases, which are mirror images, so that one step's w'' rows in h (Eq 47) "
+            "differ and the "
+            "tips part by ~1e-8 m from then on (measured: from t = 0.353 s at 8-32 "
+            "elements). Only the axial "
+            "force (compression while the push accelerates, tension for the pull) tells the "
+            "cases apart",
+        ),
+    ]
