@@ -72,62 +72,16 @@ def matched(found: list[list[float]], tol: float = 0.01) -> int:
 
 
 def fig14(runs: Runs, out_dir: Path) -> Section:
-    """Fig 14: the peaks against the paper's within one bin, the figure, and link 2's low peak explained."""
+    """Fig 14: the peaks against the paper's within one bin, the figure, and link 2's low peak
+    explained."""
     w = tip_signals(runs)
     t = np.arange(w.shape[0]) * SUBEDI_FIG14_DT_S
     items = []
     fig, axes = figure(3, 2, 5.2, 2.6)
     for link in range(3):
-        ours, ours_2000 = peaks(w[:, link]), peaks(w[:, link], None)
-        for k, (paper, mine, mine_2000) in enumerate(
-            zip(SUBEDI_FIG14_PEAKS_HZ[link], ours, ours_2000)
-        ):
-            note = (
-                f"one 2048-point bin is {RESOLUTION_HZ:.4f} Hz; without padding "
-                f"{mine_2000:.2f} Hz (0.5 Hz bins)"
-            )
-            if link == 1 and k == 0:
-                note = (
-                    f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own "
-                    "2048-point grid "
-                    "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' "
-                    "dropped); "
-                    "within one bin either way (see the text)"
-                )
-            items.append(
-                Item(
-                    f"Fig 14, link {link + 1}, {('first', 'second')[k]} peak",
-                    f"{paper} Hz",
-                    f"{mine:.4f} Hz",
-                    abs(mine - paper) <= RESOLUTION_HZ * (1 + 1e-9),
-                    note,
-                )
-            )
-        axes[link, 0].plot(t, 1e3 * w[:, link], lw=0.7)
-        axes[link, 0].set(
-            xlabel="t (s)",
-            ylabel=f"w{link + 1}e (mm)",
-            title=f"({'ace'[link]}) tip deflection of link {link + 1}",
-        )
-        freq, amp = amplitude_spectrum(w[:, link], SUBEDI_FIG14_DT_S, N_FFT)
-        ax = axes[link, 1]
-        ax.semilogy(freq, 1e3 * np.maximum(amp, 1e-12), lw=0.7, label="flexctrl (2048-point)")
-        for j, paper in enumerate(SUBEDI_FIG14_PEAKS_HZ[link]):
-            ax.axvline(paper, color="r", ls=":", lw=1, label="paper's peaks" if j == 0 else None)
-        ax.plot(
-            ours,
-            [1e3 * amp[int(round(f / RESOLUTION_HZ))] for f in ours],
-            "kv",
-            label="flexctrl's peaks",
-        )
-        ax.set(
-            xlim=(0, 60),
-            ylim=(1e-4, None),
-            xlabel="f (Hz)",
-            ylabel=f"|W{link + 1}e(f)| (mm)",
-            title=f"({'bdf'[link]}) spectrum of link {link + 1}",
-        )
-        ax.legend(fontsize=6)
+        ours = peaks(w[:, link])
+        items.extend(_peak_items(link, ours, peaks(w[:, link], None)))
+        _draw_link(axes, link, t, w[:, link], ours)
     printed = [f for row in SUBEDI_FIG14_PEAKS_HZ for f in row]
     off = [f for f in printed if on_grid(f) > 0.05]
     items.append(
@@ -144,6 +98,73 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
             "does not fit",
         )
     )
+    return Section(
+        "Fig 14: tip deflections and their spectra",
+        _fig14_text(runs),
+        items,
+        [save(fig, out_dir, "fig14_fft.png")],
+    )
+
+
+def _peak_items(link: int, ours: list[float], ours_2000: list[float]) -> list[Item]:
+    """Link ``link``'s two peaks against the paper's, each within one bin."""
+    items = []
+    for k, (paper, mine, mine_2000) in enumerate(zip(SUBEDI_FIG14_PEAKS_HZ[link], ours, ours_2000)):
+        note = (
+            f"one 2048-point bin is {RESOLUTION_HZ:.4f} Hz; without padding "
+            f"{mine_2000:.2f} Hz (0.5 Hz bins)"
+        )
+        if link == 1 and k == 0:
+            note = (
+                f"0.883 Hz is {paper / RESOLUTION_HZ:.2f} bins, off the paper's own "
+                "2048-point grid "
+                "(bin 1 = 0.4883, bin 2 = 0.9766 Hz): read as a misprint of 0.4883 (the '4' "
+                "dropped); "
+                "within one bin either way (see the text)"
+            )
+        items.append(
+            Item(
+                f"Fig 14, link {link + 1}, {('first', 'second')[k]} peak",
+                f"{paper} Hz",
+                f"{mine:.4f} Hz",
+                abs(mine - paper) <= RESOLUTION_HZ * (1 + 1e-9),
+                note,
+            )
+        )
+    return items
+
+
+def _draw_link(axes, link: int, t, w_link, ours: list[float]) -> None:
+    """Link ``link``'s tip deflection and its spectrum with the paper's peaks."""
+    axes[link, 0].plot(t, 1e3 * w_link, lw=0.7)
+    axes[link, 0].set(
+        xlabel="t (s)",
+        ylabel=f"w{link + 1}e (mm)",
+        title=f"({'ace'[link]}) tip deflection of link {link + 1}",
+    )
+    freq, amp = amplitude_spectrum(w_link, SUBEDI_FIG14_DT_S, N_FFT)
+    ax = axes[link, 1]
+    ax.semilogy(freq, 1e3 * np.maximum(amp, 1e-12), lw=0.7, label="flexctrl (2048-point)")
+    for j, paper in enumerate(SUBEDI_FIG14_PEAKS_HZ[link]):
+        ax.axvline(paper, color="r", ls=":", lw=1, label="paper's peaks" if j == 0 else None)
+    ax.plot(
+        ours,
+        [1e3 * amp[int(round(f / RESOLUTION_HZ))] for f in ours],
+        "kv",
+        label="flexctrl's peaks",
+    )
+    ax.set(
+        xlim=(0, 60),
+        ylim=(1e-4, None),
+        xlabel="f (Hz)",
+        ylabel=f"|W{link + 1}e(f)| (mm)",
+        title=f"({'bdf'[link]}) spectrum of link {link + 1}",
+    )
+    ax.legend(fontsize=6)
+
+
+def _fig14_text(runs: Runs) -> str:
+    """The section's text: the method, every reading of the paper's spectrum tried."""
     found = readings(runs)
     rows = "\n".join(
         f"| {name} | "
@@ -152,7 +173,7 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
         for name, per_link in found
     )
     best = max(found, key=lambda case: matched(case[1]))
-    text = (
+    return (
         "Damped free vibration under gravity (Fig 9's run, frozen modes), the first 2000 samples "
         "of w_ie at 1 ms "
         "(the tip deflection of link i in its own frame, Eq 2), mean removed, amplitude spectrum "
@@ -176,10 +197,4 @@ def fig14(runs: Runs, out_dir: Path) -> Section:
         "mode of link 2. Neither the window, the sampling, the transformed coordinate, the modes "
         "(frozen or "
         "scheduled) nor Eq 68's form explains it; the explanation left is a misprint of 0.4883."
-    )
-    return Section(
-        "Fig 14: tip deflections and their spectra",
-        text,
-        items,
-        [save(fig, out_dir, "fig14_fft.png")],
     )

@@ -278,70 +278,20 @@ def fig5(arm: ArmSpec, out_dir: Path) -> Section:
 
 
 def fig6(arm: ArmSpec, out_dir: Path, step: float) -> Section:
-    """Fig 6: f11, f12, f21, f22 against q3 at q2 = 0/90/180 (a, c, e) and against q2 at q3 = 0/90/180 (b, d, f)."""
+    """Fig 6: f11, f12, f21, f22 against q3 at q2 = 0/90/180 (a, c, e) and against q2 at
+    q3 = 0/90/180 (b, d, f)."""
     angles = np.arange(-180.0, 180.0 + step / 2, step)
     fig, axes = figure(3, 2, 5.0, 3.0)
     items = []
     for row, fixed in enumerate((0.0, 90.0, 180.0)):
         for col, (vary, hold) in enumerate(((2, 1), (1, 2))):
             panel = "abcdef"[2 * row + col]
-            ax = axes[row, col]
-            freqs = {}
-            for conv, style in (("exact", "-"), ("paper", ":")):
-                f = np.array(
-                    [
-                        [
-                            link_modes(
-                                arm,
-                                np.radians([0.0] + [a if k == vary else fixed for k in (1, 2)]),
-                                link,
-                                2,
-                                conv,
-                            ).frequency_hz
-                            for link in (0, 1)
-                        ]
-                        for a in angles
-                    ]
-                )
-                freqs[conv] = f
-                for link in (0, 1):
-                    for mode in range(2):
-                        ax.plot(
-                            angles,
-                            f[:, link, mode],
-                            style,
-                            lw=1,
-                            color=f"C{2 * link + mode}",
-                            label=f"f{link + 1}{mode + 1} ({conv})"
-                            if row == 0 and col == 0
-                            else None,
-                        )
-            ax.set_xlabel(f"q{vary + 1} (deg)")
-            ax.set_ylabel("frequency (Hz)")
-            ax.set_title(f"Fig 6{panel}: q{hold + 1} = {fixed:g} deg", fontsize=9)
-            f = freqs["exact"]
-            rng1, rng2 = np.ptp(f[:, 0, :], axis=0), np.ptp(f[:, 1, :], axis=0)
-            if vary == 1:
-                says, ok = (
-                    "link 1 changes with q2; link 2 does not",
-                    bool(np.all(rng1 > CHANGE) and np.all(rng2 < CHANGE)),
-                )
-            else:
-                says, ok = (
-                    "links 1 and 2 change with q3",
-                    bool(np.all(rng1 > CHANGE) and np.all(rng2 > CHANGE)),
-                )
-            items.append(
-                Item(
-                    f"Fig 6{panel}, q{hold + 1} = {fixed:g} deg",
-                    says,
-                    f"range of f11, f12: {rng1[0]:.3f}, {rng1[1]:.3f} Hz; f21, f22: "
-                    f"{rng2[0]:.3g}, {rng2[1]:.3g} Hz",
-                    ok,
-                    f"Eq 70 J_D differs from exact by up to "
-                    f"{np.max(np.abs(freqs['paper'] - freqs['exact'])):.2f} Hz on this slice",
-                )
-            )
+            freqs = _slice_frequencies(arm, angles, vary, fixed)
+            _draw_slice(axes[row, col], angles, freqs, row == 0 and col == 0)
+            axes[row, col].set_xlabel(f"q{vary + 1} (deg)")
+            axes[row, col].set_ylabel("frequency (Hz)")
+            axes[row, col].set_title(f"Fig 6{panel}: q{hold + 1} = {fixed:g} deg", fontsize=9)
+            items.append(_slice_item(freqs, panel, vary, hold, fixed))
     axes[0, 0].legend(fontsize=6, ncol=2)
     at_zero = np.array([link_modes(arm, np.zeros(3), link, 2).frequency_hz for link in range(3)])
     ref = np.array(SUBEDI_TABLE3_HZ[arm.payload.mass])
@@ -362,6 +312,64 @@ def fig6(arm: ArmSpec, out_dir: Path, step: float) -> Section:
         "its two lines coincide).",
         items,
         [save(fig, out_dir, "fig06_frequency_slices.png")],
+    )
+
+
+def _slice_frequencies(arm: ArmSpec, angles, vary: int, fixed: float) -> dict[str, np.ndarray]:
+    """Links 1 and 2's two frequencies (Hz) along a slice, with the exact and Eq 70's J_D."""
+    freqs = {}
+    for conv in ("exact", "paper"):
+        freqs[conv] = np.array(
+            [
+                [
+                    link_modes(
+                        arm,
+                        np.radians([0.0] + [a if k == vary else fixed for k in (1, 2)]),
+                        link,
+                        2,
+                        conv,
+                    ).frequency_hz
+                    for link in (0, 1)
+                ]
+                for a in angles
+            ]
+        )
+    return freqs
+
+
+def _draw_slice(ax, angles, freqs: dict[str, np.ndarray], label: bool) -> None:
+    for conv, style in (("exact", "-"), ("paper", ":")):
+        f = freqs[conv]
+        for link in (0, 1):
+            for mode in range(2):
+                ax.plot(
+                    angles,
+                    f[:, link, mode],
+                    style,
+                    lw=1,
+                    color=f"C{2 * link + mode}",
+                    label=f"f{link + 1}{mode + 1} ({conv})" if label else None,
+                )
+
+
+def _slice_item(freqs, panel: str, vary: int, hold: int, fixed: float) -> Item:
+    """Which links' frequencies change along the slice, against what the paper says."""
+    f = freqs["exact"]
+    rng1, rng2 = np.ptp(f[:, 0, :], axis=0), np.ptp(f[:, 1, :], axis=0)
+    if vary == 1:
+        says = "link 1 changes with q2; link 2 does not"
+        ok = bool(np.all(rng1 > CHANGE) and np.all(rng2 < CHANGE))
+    else:
+        says = "links 1 and 2 change with q3"
+        ok = bool(np.all(rng1 > CHANGE) and np.all(rng2 > CHANGE))
+    return Item(
+        f"Fig 6{panel}, q{hold + 1} = {fixed:g} deg",
+        says,
+        f"range of f11, f12: {rng1[0]:.3f}, {rng1[1]:.3f} Hz; f21, f22: "
+        f"{rng2[0]:.3g}, {rng2[1]:.3g} Hz",
+        ok,
+        f"Eq 70 J_D differs from exact by up to "
+        f"{np.max(np.abs(freqs['paper'] - freqs['exact'])):.2f} Hz on this slice",
     )
 
 

@@ -220,7 +220,13 @@ def _energy_figure(
 
 
 def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
-    """Figs 10 and 11: energies of the free vibration; RK4's loss at 1 ms against the paper's constant total."""
+    """Figs 10 and 11: energies of the free vibration; RK4's loss at 1 ms against the paper's
+    constant total."""
+    return [_fig10(runs, out_dir), _fig11(runs, out_dir)]
+
+
+def _fig10(runs: Runs, out_dir: Path) -> Section:
+    """Fig 10: the undamped free vibration's energies."""
     coarse, fine = runs.get("free"), runs.get("free", "fine")
     e0, el0 = float(coarse.energies["E_total"][0]), float(coarse.energies["E_el"][0])
     horizon = min(1.0, float(fine.time[-1]))
@@ -271,6 +277,11 @@ def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
             )
         ],
     )
+    return s10
+
+
+def _fig11(runs: Runs, out_dir: Path) -> Section:
+    """Fig 11: the damped free vibration's energies, both readings of Eq 68."""
     items = []
     for variant, reading in (("frozen", "ratio form"), ("eq68", "Eq 68 as printed")):
         traj = runs.get("free_damped", variant)
@@ -303,11 +314,17 @@ def fig10_11(runs: Runs, out_dir: Path) -> list[Section]:
             )
         ],
     )
-    return [s10, s11]
+    return s11
 
 
 def fig12_13(runs: Runs, out_dir: Path) -> list[Section]:
-    """Figs 12 and 13: bang-bang torque of 50 N m at joint 3 without gravity, without and with damping."""
+    """Figs 12 and 13: bang-bang torque of 50 N m at joint 3 without gravity, without and with
+    damping."""
+    return [_fig12(runs, out_dir), _fig13(runs, out_dir)]
+
+
+def _fig12(runs: Runs, out_dir: Path) -> Section:
+    """Fig 12: the undamped forced vibration."""
     undamped = runs.get("forced", "scheduled")
     after = undamped.time >= 0.2 - 1e-12
     drift = np.degrees(undamped.q[-1, :2] - undamped.q[after][0, :2])
@@ -349,6 +366,14 @@ def fig12_13(runs: Runs, out_dir: Path) -> list[Section]:
             )
         ],
     )
+    return s12
+
+
+def _fig13(runs: Runs, out_dir: Path) -> Section:
+    """Fig 13: the damped forced vibration, both readings of Eq 68."""
+    undamped = runs.get("forced", "scheduled")
+    after = undamped.time >= 0.2 - 1e-12
+    end = float(undamped.time[-1])
     start = max(0.2, end - 1.0)
     items13 = []
     for variant, reading in (("frozen", "ratio form"), ("eq68", "Eq 68 as printed")):
@@ -392,4 +417,4 @@ def fig12_13(runs: Runs, out_dir: Path) -> list[Section]:
             )
         ],
     )
-    return [s12, s13]
+    return s13
