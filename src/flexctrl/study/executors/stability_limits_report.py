@@ -259,7 +259,12 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     return lines
 
 
+#: Marker and colour per integrator.
+STYLES = {"rk4": ("o", "C0"), "euler": ("s", "C3"), "newmark": ("^", "C2")}
+
+
 def _draw(path: Path, table: list[dict]) -> None:
+    """The largest stable steps against omega_max beside theory; RK4's omega_max h zoomed."""
     from matplotlib.figure import Figure
 
     from flexctrl.analysis.stability.theory import RK4_IMAGINARY_AXIS_LIMIT
@@ -276,10 +281,15 @@ def _draw(path: Path, table: list[dict]) -> None:
         lw=1,
         label="RK4 theory, undamped: 2 sqrt 2 / omega",
     )
-    ax.plot(
-        span, RK4_STABILITY_LIMIT / span, "k--", lw=1, label="issue: 2.785 / omega (RK4 real axis)"
-    )
-    styles = {"rk4": ("o", "C0"), "euler": ("s", "C3"), "newmark": ("^", "C2")}
+    ax.plot(span, RK4_STABILITY_LIMIT / span, "k--", lw=1, label="2.785 / omega (RK4, real axis)")
+    _draw_steps(ax, table)
+    _draw_rk4_zoom(zoom, table, RK4_IMAGINARY_AXIS_LIMIT, RK4_STABILITY_LIMIT)
+    fig.savefig(path, dpi=100)
+
+
+def _draw_steps(ax, table: list[dict]) -> None:
+    """Each run's largest stable step (s) against omega_max (rad/s), with theory's."""
+    styles = STYLES
     seen: set[str] = set()
     for e in table:
         if not e["omega_max"] or e["status"] != "ok":
@@ -324,12 +334,13 @@ def _draw(path: Path, table: list[dict]) -> None:
     ax.set_ylabel("largest stable step h (s)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="best")
-    # the same, as omega_max h, for the bracketed rows: the 1.5 % between 2 sqrt 2 and 2.785 becomes
-    # visible
-    zoom.axhline(RK4_IMAGINARY_AXIS_LIMIT, color="k", lw=1, label="2 sqrt 2 (RK4, imaginary axis)")
-    zoom.axhline(
-        RK4_STABILITY_LIMIT, color="k", ls="--", lw=1, label="2.785 (issue; RK4 real axis)"
-    )
+
+
+def _draw_rk4_zoom(zoom, table: list[dict], imaginary_limit: float, real_limit: float) -> None:
+    """RK4's bracketed rows as omega_max h: the 1.5 % between 2 sqrt 2 and 2.785 shows."""
+    styles = STYLES
+    zoom.axhline(imaginary_limit, color="k", lw=1, label="2 sqrt 2 (RK4, imaginary axis)")
+    zoom.axhline(real_limit, color="k", ls="--", lw=1, label="2.785 (RK4, real axis)")
     seen = set()
     for e in table:
         if (
@@ -372,4 +383,3 @@ def _draw(path: Path, table: list[dict]) -> None:
     zoom.set_ylabel("omega_max h of RK4")
     zoom.grid(True, which="both", alpha=0.3)
     zoom.legend(fontsize=7, loc="best")
-    fig.savefig(path, dpi=100)
