@@ -100,12 +100,12 @@ def convergence_figure(result, path: Path) -> Path:
 
 
 def write_report(result) -> list[Path]:
-    """Write ``report.md`` and ``figures/convergence.png`` into the tuning's folder; returns the paths."""
+    """Write ``report.md`` and ``figures/convergence.png`` into the tuning's folder; returns the
+    paths."""
     spec = result.spec
     out = result.directory
     figure = convergence_figure(result, out / "figures" / "convergence.png")
     unit, factor = metric_unit(spec.objective.metric)
-    best = result.best
 
     def fmt(value) -> str:
         return "n/a" if value is None or not math.isfinite(value) else f"{factor * value:.4g}"
@@ -121,6 +121,29 @@ def write_report(result) -> list[Path]:
         f"(population {spec.optimizer.population}, seed {spec.optimizer.seed}).",
         "",
     ]
+    lines += _constraint_lines(spec) + _parameter_lines(spec, result.best)
+    lines += _result_lines(result, fmt, unit)
+    lines += [
+        "",
+        f"![convergence]({figure.relative_to(out)})",
+        "",
+        "## Before and after, per scenario",
+        "",
+    ]
+    lines += _scenario_lines(result, fmt, unit)
+    infeasible = [e for e in result.evaluations[1:] if not e.feasible]
+    if infeasible:
+        lines += ["", "## Infeasible candidates (first reasons)", ""]
+        for e in infeasible[:10]:
+            values = ", ".join(f"{k} = {v:.4g}" for k, v in e.values.items())
+            lines.append(f"- {e.number} ({values}): {'; '.join(e.violations[:2])}")
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return [path, figure]
+
+
+def _constraint_lines(spec) -> list[str]:
+    """The constraints every candidate met."""
     c = spec.constraints
     rules = [
         name
@@ -136,7 +159,12 @@ def write_report(result) -> list[Path]:
             f"linear closed-loop radius below {c.closed_loop_radius:g} where the controller has "
             "a gain"
         )
-    lines += ["Constraints: " + ("; ".join(rules) if rules else "none") + ".", ""]
+    return ["Constraints: " + ("; ".join(rules) if rules else "none") + ".", ""]
+
+
+def _parameter_lines(spec, best) -> list[str]:
+    """The table of the tuned keys: bounds, scale, value as shipped and tuned."""
+    lines: list[str] = []
     lines += [
         "| key | low | high | scale | as shipped | tuned |",
         "| --- | --- | --- | --- | --- | --- |",
@@ -146,6 +174,13 @@ def write_report(result) -> list[Path]:
         tuned = "n/a" if best is None else ("default" if value is None else f"{value:.6g}")
         shipped = "default" if p.initial is None else f"{p.initial:.6g}"
         lines.append(f"| `{p.key}` | {p.low:g} | {p.high:g} | {p.scale} | {shipped} | {tuned} |")
+    return lines
+
+
+def _result_lines(result, fmt, unit: str) -> list[str]:
+    """The objective as shipped and tuned, and what the tuning ran."""
+    best = result.best
+    lines: list[str] = []
     lines += ["", "## Result", ""]
     n = len(result.evaluations) - 1
     feasible = sum(e.feasible for e in result.evaluations[1:])
@@ -165,18 +200,19 @@ def write_report(result) -> list[Path]:
             f"- tuned: **{fmt(best.objective)} {unit}** (candidate {best.number}; {ratio:.3g} x "
             "as shipped)"
         )
-        lines.append(f"- written to `{out / 'controller.toml'}`")
+        lines.append(f"- written to `{result.directory / 'controller.toml'}`")
     lines.append(
         f"- {n} candidates, {feasible} feasible; {result.runs_made} closed-loop runs made and "
         f"{result.runs_reused} reused from the store in {result.wall_time_s:.0f} s"
     )
-    lines += [
-        "",
-        f"![convergence]({figure.relative_to(out)})",
-        "",
-        "## Before and after, per scenario",
-        "",
-    ]
+    return lines
+
+
+def _scenario_lines(result, fmt, unit: str) -> list[str]:
+    """Per scenario, the objective and stability before and after."""
+    spec = result.spec
+    best = result.best
+    lines: list[str] = []
     coords = list(result.initial.scenarios[0]["coords"]) if result.initial.scenarios else []
     lines.append(
         "| "
@@ -202,12 +238,4 @@ def write_report(result) -> list[Path]:
             _flag(after.get("stable")),
         ]
         lines.append("| " + " | ".join(cells) + " |")
-    infeasible = [e for e in result.evaluations[1:] if not e.feasible]
-    if infeasible:
-        lines += ["", "## Infeasible candidates (first reasons)", ""]
-        for e in infeasible[:10]:
-            values = ", ".join(f"{k} = {v:.4g}" for k, v in e.values.items())
-            lines.append(f"- {e.number} ({values}): {'; '.join(e.violations[:2])}")
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return [path, figure]
+    return lines
