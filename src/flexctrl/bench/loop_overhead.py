@@ -76,6 +76,39 @@ def metric_difference(a: dict, b: dict) -> float:
     return max(metric_differences(a, b).values(), default=0.0)
 
 
+def _rounds(scene, cache, results, integrator, x0, span, torques, repeats) -> dict:
+    """Wall times (s) of each variant, ``repeats`` rounds interleaved."""
+    from flexctrl.scenes.cache import SceneCache
+    from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
+
+    walls: dict[str, list[float]] = {
+        "python": [],
+        "compiled": [],
+        "plant_only": [],
+        "cold_design": [],
+        "fresh_configuration": [],
+    }
+    for _ in range(repeats):
+        for loop in ("python", "compiled"):
+            start = time.perf_counter()
+            results[loop] = run_closed_loop_scene(
+                scene, cache=cache, on_divergence="record", loop=loop
+            )
+            walls[loop].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        integrator.run(x0, span, u=torques)
+        walls["plant_only"].append(time.perf_counter() - start)
+        fresh = SceneCache()
+        fresh._stores["models"] = cache._stores["models"]  # models built; design and verdict anew
+        start = time.perf_counter()
+        run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled")
+        walls["cold_design"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        run_closed_loop_scene(scene, cache=SceneCache(), on_divergence="record", loop="compiled")
+        walls["fresh_configuration"].append(time.perf_counter() - start)
+    return walls
+
+
 def bench_loop(
     scene_path: str | Path = DEFAULT_SCENE,
     controller: str | Path = DEFAULT_CONTROLLER,
@@ -103,31 +136,7 @@ def bench_loop(
         :-1
     ]  # the loop runs whole samples: 942 x 17 steps = 8.007 s for the LQR
     x0, span = trajectory.states[0], torques.shape[0] * dt
-    walls: dict[str, list[float]] = {
-        "python": [],
-        "compiled": [],
-        "plant_only": [],
-        "cold_design": [],
-        "fresh_configuration": [],
-    }
-    for _ in range(repeats):
-        for loop in ("python", "compiled"):
-            start = time.perf_counter()
-            results[loop] = run_closed_loop_scene(
-                scene, cache=cache, on_divergence="record", loop=loop
-            )
-            walls[loop].append(time.perf_counter() - start)
-        start = time.perf_counter()
-        integrator.run(x0, span, u=torques)
-        walls["plant_only"].append(time.perf_counter() - start)
-        fresh = SceneCache()
-        fresh._stores["models"] = cache._stores["models"]  # models built; design and verdict anew
-        start = time.perf_counter()
-        run_closed_loop_scene(scene, cache=fresh, on_divergence="record", loop="compiled")
-        walls["cold_design"].append(time.perf_counter() - start)
-        start = time.perf_counter()
-        run_closed_loop_scene(scene, cache=SceneCache(), on_divergence="record", loop="compiled")
-        walls["fresh_configuration"].append(time.perf_counter() - start)
+    walls = _rounds(scene, cache, results, integrator, x0, span, torques, repeats)
     med = {k: statistics.median(v) for k, v in walls.items()}
     run_wall, plant_only = med["compiled"], med["plant_only"]
     return {

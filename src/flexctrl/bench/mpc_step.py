@@ -281,6 +281,38 @@ def _nmpc_summary(
     }
 
 
+def _header(model, model_path, fidelity, base, steps, target_deg, offset_deg) -> dict[str, Any]:
+    """The benchmark's problem and environment, and an empty table of variants."""
+    import casadi
+    import control
+    import osqp
+
+    horizon, sample_time = base.horizon, base.sample_time
+    return {
+        "problem": {
+            "model": str(model_path),
+            "fidelity": fidelity,
+            "states": model.n_x,
+            "inputs": model.n_u,
+            "horizon": horizon,
+            "sample_time_s": sample_time,
+            "steps": steps,
+            "target_deg": list(target_deg),
+            "offset_deg": list(offset_deg),
+            "soft_constraint": f"{base.soft} <= {base.deflection_limit} m",
+        },
+        "environment": {
+            "cpu_count": os.cpu_count(),
+            "load_average": list(os.getloadavg()),
+            "osqp": osqp.__version__,
+            "casadi": casadi.__version__,
+            "control": control.__version__,
+        },
+        "variants": {},
+        "command": COMMAND,
+    }
+
+
 def mpc_benchmark(
     model_path: str = "models/subedi3link.toml",
     *,
@@ -328,10 +360,6 @@ def mpc_benchmark(
         ``nmpc`` (the variants stepped one sample each in turn), ``nmpc_blocks`` (the same
         runs in blocks of consecutive samples, see :func:`_run_nmpcs`) and ``command``.
     """
-    import casadi
-    import control
-    import osqp
-
     from flexctrl import linear as L
     from flexctrl.scenes.model_files import load_model
     from flexctrl.spec.controller_settings import MPCSettings
@@ -341,29 +369,8 @@ def mpc_benchmark(
     dx0 = np.zeros(model.n_x)
     dx0[: model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
     base = MPCSettings(horizon=horizon, sample_time=sample_time)
-    result: dict[str, Any] = {
-        "problem": {
-            "model": str(model_path),
-            "fidelity": fidelity,
-            "states": model.n_x,
-            "inputs": model.n_u,
-            "horizon": horizon,
-            "sample_time_s": sample_time,
-            "steps": steps,
-            "target_deg": list(target_deg),
-            "offset_deg": list(offset_deg),
-            "soft_constraint": f"{base.soft} <= {base.deflection_limit} m",
-        },
-        "environment": {
-            "cpu_count": os.cpu_count(),
-            "load_average": list(os.getloadavg()),
-            "osqp": osqp.__version__,
-            "casadi": casadi.__version__,
-            "control": control.__version__,
-        },
-        "variants": {},
-        "command": COMMAND,
-    }
+    result = _header(model, model_path, fidelity, base, steps, target_deg, offset_deg)
+
     for name, overrides in (variants if variants is not None else default_variants()).items():
         try:
             result["variants"][name] = _run_linear(

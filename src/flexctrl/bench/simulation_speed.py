@@ -60,6 +60,37 @@ def free_vibration_state(model) -> np.ndarray:
     return x0
 
 
+def _measure(model, dt, duration, repeats, scipy_span, scipy_options, use_cache) -> dict:
+    """Wall and CPU times of compiled RK4, RK4 in the VM and scipy, and the accuracy runs."""
+    from flexctrl.sim import RK4, ScipyIntegrator
+
+    x0 = free_vibration_state(model)
+    with tempfile.TemporaryDirectory(prefix="flexctrl-bench-") as tmp:
+        cache = None if use_cache else tmp
+        compiled = RK4(model, dt, compile=True, cache_dir=cache).setup()
+        metas_c = [compiled.run(x0, duration).meta for _ in range(repeats)]
+        settings = compiled.settings()
+        # accuracy reference for the scipy span: RK4 at dt/10 (same library: h is an input)
+        coarse = compiled.run(x0, scipy_span)
+        fine = RK4(model, dt / 10, compile=True, cache_dir=cache).run(x0, scipy_span)
+    vm = RK4(model, dt, compile=False).setup()
+    metas_vm = [vm.run(x0, duration).meta for _ in range(repeats)]
+    sp = ScipyIntegrator(model, dt, **scipy_options).setup()
+    metas_sp = []
+    for _ in range(repeats):
+        traj_sp = sp.run(x0, scipy_span)
+        metas_sp.append(traj_sp.meta)
+    return {
+        "walls": [[m["wall_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)],
+        "cpus": [[m["cpu_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)],
+        "settings": settings,
+        "coarse": coarse,
+        "fine": fine,
+        "scipy_run": traj_sp,
+        "nfev": traj_sp.meta["counters"].get("rhs_evaluations", 0),
+    }
+
+
 def bench_sim(
     model_path: str | Path = DEFAULT_MODEL,
     *,
@@ -76,36 +107,21 @@ def bench_sim(
 ) -> dict[str, Any]:
     """Measure the simulation speeds described in the module docstring; returns a dict."""
     from flexctrl.scenes.model_files import load_model
-    from flexctrl.sim import RK4, ScipyIntegrator
 
     start = time.perf_counter()
     model = load_model(model_path, payload=payload, fidelity=fidelity)
     build_time = time.perf_counter() - start
-    x0 = free_vibration_state(model)
-
-    with tempfile.TemporaryDirectory(prefix="flexctrl-bench-") as tmp:
-        cache = None if use_cache else tmp
-        compiled = RK4(model, dt, compile=True, cache_dir=cache).setup()
-        metas_c = [compiled.run(x0, duration).meta for _ in range(repeats)]
-        settings = compiled.settings()
-        # accuracy reference for the scipy span: RK4 at dt/10 (same library: h is an input)
-        coarse = compiled.run(x0, scipy_span)
-        fine = RK4(model, dt / 10, compile=True, cache_dir=cache).run(x0, scipy_span)
-    vm = RK4(model, dt, compile=False).setup()
-    metas_vm = [vm.run(x0, duration).meta for _ in range(repeats)]
-    sp = ScipyIntegrator(model, dt, method=scipy_method, rtol=scipy_rtol, atol=scipy_atol).setup()
-    metas_sp = []
-    for _ in range(repeats):
-        traj_sp = sp.run(x0, scipy_span)
-        metas_sp.append(traj_sp.meta)
-    nfev = traj_sp.meta["counters"].get("rhs_evaluations", 0)
-    walls_c, walls_vm, walls_sp = (
-        [m["wall_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)
+    scipy_options = dict(method=scipy_method, rtol=scipy_rtol, atol=scipy_atol)
+    m = _measure(model, dt, duration, repeats, scipy_span, scipy_options, use_cache)
+    walls_c, walls_vm, walls_sp = m["walls"]
+    cpus_c, cpus_vm, cpus_sp = m["cpus"]
+    settings, coarse, fine, traj_sp, nfev = (
+        m["settings"],
+        m["coarse"],
+        m["fine"],
+        m["scipy_run"],
+        m["nfev"],
     )
-    cpus_c, cpus_vm, cpus_sp = (
-        [m["cpu_time_s"] for m in ms] for ms in (metas_c, metas_vm, metas_sp)
-    )
-
     rf_c = duration / statistics.median(walls_c)
     rf_vm = duration / statistics.median(walls_vm)
     rf_sp = scipy_span / statistics.median(walls_sp)
