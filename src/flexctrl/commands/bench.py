@@ -16,30 +16,40 @@ from flexctrl.errors import SpecError
 BENCHMARKS = ("sim", "mpc", "loop")
 
 
+HELP = (
+    "benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp; "
+    "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC; "
+    "'loop' times one whole closed-loop run against the plant's compiled simulation alone"
+)
+DESCRIPTION = (
+    "'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
+    "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
+    "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs. "
+    "'mpc': the three-link arm (amm:2, 18 states, 3 inputs), horizon 20 at 10 ms: solve times "
+    "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop "
+    "samples, the NMPC real-time iteration, and python-control's create_mpc_iosystem on the "
+    "same problem (--pc-solves solves; each takes seconds). 'loop': one warm in-process "
+    "closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default the LQR) "
+    "with the compiled loop and with the Python loop, beside the plant's compiled RK4 "
+    "simulation alone (same step and duration), interleaved --repeats rounds; prints "
+    "run_wall_s, plant_only_s and their ratio."
+)
+#: ``(flag, type, default, metavar, help)`` of the numeric and file options.
+OPTIONS = (
+    ("--repeats", int, 3, "N", "runs per variant; medians are reported (default 3)"),
+    ("--model", str, None, "MODEL", "model file (default models/subedi3link.toml)"),
+    ("--fidelity", str, "amm:2", "F", "model fidelity (default amm:2)"),
+    ("--duration", float, 10.0, "S", "simulated seconds per RK4 run (default 10)"),
+    ("--scipy-span", float, 1.0, "S", "simulated seconds per scipy run (default 1; scaled)"),
+    ("--steps", int, 300, "N", "mpc: closed-loop samples per variant (default 300)"),
+    ("--pc-solves", int, 1, "N", "mpc: python-control solves to time (0 skips; default 1)"),
+    ("--controller", str, None, "FILE", "loop: controller file (default controllers/lqr.toml)"),
+)
+
+
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "bench",
-        help="benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy "
-        "solve_ivp; "
-        "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC; "
-        "'loop' times one whole closed-loop run against the plant's compiled simulation alone",
-        description="'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 "
-        "ms of the "
-        "three-link arm (amm:2), compiled and in CasADi's virtual machine, beside scipy solve_ivp "
-        "(RK45, rtol 1e-8) run for --scipy-span seconds and scaled; medians of --repeats runs. "
-        "'mpc': the three-link arm (amm:2, 18 states, 3 inputs), horizon 20 at 10 ms: solve times "
-        "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop "
-        "samples, "
-        "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same "
-        "problem "
-        "(--pc-solves solves; each takes seconds). "
-        "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml "
-        "(--controller, default "
-        "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled "
-        "RK4 simulation alone "
-        "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s "
-        "and their ratio.",
-    )
+    """The ``bench`` sub-command's arguments."""
+    parser = subparsers.add_parser("bench", help=HELP, description=DESCRIPTION)
     parser.add_argument(
         "what",
         choices=BENCHMARKS,
@@ -47,57 +57,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="benchmark to run: " + ", ".join(BENCHMARKS),
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument(
-        "--repeats",
-        type=int,
-        default=3,
-        metavar="N",
-        help="runs per variant; medians are reported (default 3)",
-    )
-    parser.add_argument(
-        "--model",
-        default=None,
-        metavar="MODEL",
-        help="model file (default models/subedi3link.toml)",
-    )
-    parser.add_argument(
-        "--fidelity", default="amm:2", metavar="F", help="model fidelity (default amm:2)"
-    )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=10.0,
-        metavar="S",
-        help="simulated seconds per RK4 run (default 10)",
-    )
-    parser.add_argument(
-        "--scipy-span",
-        type=float,
-        default=1.0,
-        metavar="S",
-        help="simulated seconds per scipy run (default 1; scaled)",
-    )
-    parser.add_argument(
-        "--steps",
-        type=int,
-        default=300,
-        metavar="N",
-        help="mpc: closed-loop samples per variant (default 300)",
-    )
-    parser.add_argument(
-        "--pc-solves",
-        type=int,
-        default=1,
-        metavar="N",
-        help="mpc: python-control solves to time (0 skips; default 1)",
-    )
+    for flag, kind, default, metavar, text in OPTIONS:
+        parser.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
-    parser.add_argument(
-        "--controller",
-        default=None,
-        metavar="FILE",
-        help="loop: controller file (default controllers/lqr.toml)",
-    )
     parser.add_argument(
         "--use-cache",
         action="store_true",

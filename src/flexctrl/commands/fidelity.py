@@ -81,14 +81,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return parser
 
 
-def run(args: argparse.Namespace) -> int:
+def _checked(args: argparse.Namespace, scene) -> float:
+    """The tolerance (m), after the scene kind and the options are checked."""
     from flexctrl.errors import SpecError
-    from flexctrl.fidelity.ladder import ToleranceUnreachable, check_tolerance
-    from flexctrl.scenes.auto import choose_fidelity
-    from flexctrl.spec.fidelity import parse_fidelity
-    from flexctrl.spec.scene import load_scene
+    from flexctrl.fidelity.ladder import check_tolerance
 
-    scene = load_scene(args.scene, args.set)
     if scene.kind not in ("arm", "closed_loop"):
         raise SpecError(
             f"scene kind '{scene.kind}' is not supported; allowed: 'arm', 'closed_loop'",
@@ -98,50 +95,62 @@ def run(args: argparse.Namespace) -> int:
     if args.controller is not None and scene.kind != "closed_loop":
         raise SpecError(
             f"value '{args.controller}' is not allowed for a kind = \"{scene.kind}\" scene; "
-            "allowed: "
-            "--controller with a closed-loop scene only",
+            "allowed: --controller with a closed-loop scene only",
             source=args.scene,
             key="--controller",
         )
     tolerance = scene.tolerance if scene.kind == "arm" else scene.plant.tolerance
-    if args.tol is None:
-        if tolerance is None:
-            raise SpecError(
-                "is missing and the scene sets no 'tolerance'; allowed: a number > 0 (m)",
-                source=args.scene,
-                key="--tol",
-            )
-        tol = tolerance
-    else:
-        tol = check_tolerance(args.tol, source=args.scene, key="--tol")
-    try:
-        if scene.kind == "closed_loop":
-            from flexctrl.scenes.auto_closed_loop import choose_closed_loop_fidelity
-            from flexctrl.scenes.loop_setup import pin_design
-            from flexctrl.scenes.run_closed_loop_scene import check_auto
+    if args.tol is not None:
+        return check_tolerance(args.tol, source=args.scene, key="--tol")
+    if tolerance is None:
+        raise SpecError(
+            "is missing and the scene sets no 'tolerance'; allowed: a number > 0 (m)",
+            source=args.scene,
+            key="--tol",
+        )
+    return tolerance
 
-            design = scene.controller_fidelity
-            if design is None and scene.plant.fidelity.kind != "auto":
-                design = scene.plant.fidelity  # the model the scene's controller is designed on
-            auto = dataclasses.replace(
-                scene,
-                controller_fidelity=design,
-                plant=dataclasses.replace(
-                    scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol
-                ),
-            )
-            check_auto(auto, args.controller)
-            choice = choose_closed_loop_fidelity(
-                pin_design(auto),
-                tol,
-                controller=args.controller,
-                top=args.top,
-                reference=args.reference,
-                safety=args.safety,
-                walk=auto.plant.fidelity_walk,
-                checks=auto.plant.fidelity_checks,
-            )
-        else:
+
+def _choose_closed(args: argparse.Namespace, scene, tol: float):
+    """The plant's fidelity of a closed-loop scene, its controller designed on the scene's model."""
+    from flexctrl.scenes.auto_closed_loop import choose_closed_loop_fidelity
+    from flexctrl.scenes.loop_setup import pin_design
+    from flexctrl.scenes.run_closed_loop_scene import check_auto
+    from flexctrl.spec.fidelity import parse_fidelity
+
+    design = scene.controller_fidelity
+    if design is None and scene.plant.fidelity.kind != "auto":
+        design = scene.plant.fidelity  # the model the scene's controller is designed on
+    auto = dataclasses.replace(
+        scene,
+        controller_fidelity=design,
+        plant=dataclasses.replace(scene.plant, fidelity=parse_fidelity("auto"), tolerance=tol),
+    )
+    check_auto(auto, args.controller)
+    return choose_closed_loop_fidelity(
+        pin_design(auto),
+        tol,
+        controller=args.controller,
+        top=args.top,
+        reference=args.reference,
+        safety=args.safety,
+        walk=auto.plant.fidelity_walk,
+        checks=auto.plant.fidelity_checks,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Choose, and print the choice and its evidence (a table, or JSON)."""
+    from flexctrl.fidelity.ladder import ToleranceUnreachable
+    from flexctrl.spec.scene import load_scene
+
+    scene = load_scene(args.scene, args.set)
+    tol = _checked(args, scene)
+    try:
+        choice = _choose_closed(args, scene, tol) if scene.kind == "closed_loop" else None
+        if choice is None:
+            from flexctrl.scenes.auto import choose_fidelity
+
             choice = choose_fidelity(
                 scene,
                 tol,
