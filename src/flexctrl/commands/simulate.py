@@ -59,7 +59,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flexctrl.errors import SpecError
+    """Run the scene, write its files and print a short report (or ``summary.json``)."""
     from flexctrl.scenes import run_scene
     from flexctrl.spec.scene import load_scene
 
@@ -72,7 +72,22 @@ def run(args: argparse.Namespace) -> int:
     if args.fidelity is not None:
         overrides.append(f"fidelity={json.dumps(args.fidelity)}")
     scene = load_scene(args.scene, overrides)
-    options = {"plots": False if args.no_plots else None}
+    options = _run_options(args, scene, controller_overrides)
+    result = run_scene(scene, args.out, **options)
+    s = result.summary
+    if args.json or (scene.kind != "closed_loop" and "energy" not in s):
+        print(json.dumps(s, indent=2, default=str))
+        return 0
+    lines = _closed_loop_report(scene, s) if scene.kind == "closed_loop" else _arm_report(scene, s)
+    print("\n".join([*lines, f"  wrote {len(result.files)} files to {args.out}"]))
+    return 0
+
+
+def _run_options(args: argparse.Namespace, scene, controller_overrides: list[str]) -> dict:
+    """The runner's options: plots, the controller file and its overrides (checked here)."""
+    from flexctrl.errors import SpecError
+
+    options: dict = {"plots": False if args.no_plots else None}
     if scene.kind != "closed_loop" and (args.controller is not None or controller_overrides):
         key = (
             "--controller"
@@ -93,50 +108,41 @@ def run(args: argparse.Namespace) -> int:
         if file is None:
             raise SpecError(
                 "the scene names no controller file to override; allowed: a scene 'controller' "
-                "key or "
-                "--controller FILE",
+                "key or --controller FILE",
                 source=args.scene,
                 key="--set controller.KEY",
             )
         load_controller(file, controller_overrides)  # refused here, before the model is built
         options["overrides"] = controller_overrides
-    result = run_scene(scene, args.out, **options)
-    s = result.summary
-    if args.json:
-        print(json.dumps(s, indent=2, default=str))
-        return 0
-    if scene.kind == "closed_loop":
-        m = s["metrics"]
-        print(
-            f"{scene.name} with {s['controller']['kind']} ({s['controller']['file']}): tip "
-            f"residual rms {m['tip_residual_rms']:.3e} m, "
-            f"peak {m['tip_residual_peak']:.3e} m, settling {m['settling_time']:.3g} s, peak "
-            f"deflection {m['peak_deflection']:.3e} m, "
-            f"peak torque {', '.join(f'{v:.3g}' for v in m['peak_torque'])} N m, controller "
-            f"median {m['controller_time_median'] * 1e3:.3g} ms, "
-            f"fallbacks {m['fallbacks']}"
-        )
-        print(f"  wrote {len(result.files)} files to {args.out}")
-        return 0
-    if "energy" not in s:
-        print(json.dumps(s, indent=2, default=str))
-        return 0
+    return options
+
+
+def _closed_loop_report(scene, s: dict) -> list[str]:
+    m = s["metrics"]
+    return [
+        f"{scene.name} with {s['controller']['kind']} ({s['controller']['file']}): tip "
+        f"residual rms {m['tip_residual_rms']:.3e} m, "
+        f"peak {m['tip_residual_peak']:.3e} m, settling {m['settling_time']:.3g} s, peak "
+        f"deflection {m['peak_deflection']:.3e} m, "
+        f"peak torque {', '.join(f'{v:.3g}' for v in m['peak_torque'])} N m, controller "
+        f"median {m['controller_time_median'] * 1e3:.3g} ms, "
+        f"fallbacks {m['fallbacks']}"
+    ]
+
+
+def _arm_report(scene, s: dict) -> list[str]:
     energy = s["energy"]
     freqs = "; ".join(
         f"{k}: {', '.join(f'{f:.4g}' for f in v) or '-'} Hz"
         for k, v in s["dominant_frequencies_hz"].items()
     )
-    print(
+    return [
         f"{scene.name}: {s['n_steps']} {s['integrator']} steps of {s['dt']:g} s in "
         f"{s['wall_time_s']:.3g} s "
-        f"({s['realtime_factor']:.1f}x real time{', compiled' if s.get('compiled') else ''})"
-    )
-    print(
+        f"({s['realtime_factor']:.1f}x real time{', compiled' if s.get('compiled') else ''})",
         f"  energy: E_total(end) - E_total(0) = {energy['drift_rel']:+.3e}, max |E_total - "
         "E_total(0) - torque work| = "
         f"{energy['balance_error_max_rel']:.3e} (damping included), relative to "
-        f"{energy['scale_J']:.4g} J exchanged"
-    )
-    print(f"  dominant frequencies of the link-tip deflections: {freqs}")
-    print(f"  wrote {len(result.files)} files to {args.out}")
-    return 0
+        f"{energy['scale_J']:.4g} J exchanged",
+        f"  dominant frequencies of the link-tip deflections: {freqs}",
+    ]
