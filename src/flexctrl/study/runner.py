@@ -23,9 +23,9 @@ from typing import Any
 from flexctrl.errors import SpecError
 from flexctrl.study.backends import InProcessBackend, LocalPoolBackend, default_workers
 from flexctrl.study.dask_backend import DaskBackend
+from flexctrl.study.plan import StudySpec
 from flexctrl.study.run_execution import peak_memory_mb
 from flexctrl.study.store import ResultStore, Table, now_iso
-from flexctrl.study.plan import StudySpec
 
 STUDY_FORMAT = 1
 VERSIONED = (
@@ -212,6 +212,54 @@ def run_study(
         backend.close()
 
 
+def _open_session(store, spec, previous, backend, resume: bool, todo, skip):
+    """``study.json`` with this session opened in it (written at once)."""
+    document = previous or {"format": STUDY_FORMAT, "start": now_iso(), "sessions": []}
+    session: dict[str, Any] = {
+        "start": now_iso(),
+        "end": None,
+        "backend": backend.description,
+        "resume": resume,
+        "to_run": len(todo),
+        "skipped": len(skip),
+        "ok": 0,
+        "failed": 0,
+        "interrupted": False,
+    }
+    document.update(
+        {"study": spec.to_dict(), "versions": versions(), "machine": machine(), "end": None}
+    )
+    document["sessions"].append(session)
+    store.write_study(document)
+
+    return document, session
+
+
+def _close_session(store, spec, document, session, backend, interrupted: bool, start: float):
+    """The table written, the shared fidelity choices listed, the session closed; the counts."""
+    _, counts = store.write_table(columns=spec.columns, metrics=spec.metrics)
+    if any("choice_from" in run.settings for run in spec.runs[:1]):
+        from flexctrl.study.shared_choice import write_choices
+
+        write_choices(
+            store.dir,
+            spec.runs,
+            {run.run_id: store.read_record(run.run_id) for run in spec.runs},
+        )
+    session.update(
+        {
+            "end": now_iso(),
+            "interrupted": interrupted,
+            "backend": backend.description,
+            "elapsed_s": round(time.monotonic() - start, 3),
+            "parent_peak_memory_mb": peak_memory_mb(),
+        }
+    )
+    document["end"] = session["end"]
+    store.write_study(document)
+    return counts
+
+
 def _run(
     spec: StudySpec,
     store: ResultStore,
@@ -235,24 +283,7 @@ def _run(
             # no idle processes for a short resume
             backend = LocalPoolBackend(max(1, len(todo)), backend.blas_threads)
         store.write_plan(spec.runs)
-        document = previous or {"format": STUDY_FORMAT, "start": now_iso(), "sessions": []}
-        session: dict[str, Any] = {
-            "start": now_iso(),
-            "end": None,
-            "backend": backend.description,
-            "resume": resume,
-            "to_run": len(todo),
-            "skipped": len(skip),
-            "ok": 0,
-            "failed": 0,
-            "interrupted": False,
-        }
-        document.update(
-            {"study": spec.to_dict(), "versions": versions(), "machine": machine(), "end": None}
-        )
-        document["sessions"].append(session)
-        store.write_study(document)
-
+        document, session = _open_session(store, spec, previous, backend, resume, todo, skip)
         bar = Progress(len(todo), skipped=len(skip), label=spec.name, mode=progress, stream=stream)
         interrupted = False
         try:
@@ -265,26 +296,7 @@ def _run(
             interrupted = True
         finally:
             bar.close()
-            _, counts = store.write_table(columns=spec.columns, metrics=spec.metrics)
-            if any("choice_from" in run.settings for run in spec.runs[:1]):
-                from flexctrl.study.shared_choice import write_choices
-
-                write_choices(
-                    store.dir,
-                    spec.runs,
-                    {run.run_id: store.read_record(run.run_id) for run in spec.runs},
-                )
-            session.update(
-                {
-                    "end": now_iso(),
-                    "interrupted": interrupted,
-                    "backend": backend.description,
-                    "elapsed_s": round(time.monotonic() - start, 3),
-                    "parent_peak_memory_mb": peak_memory_mb(),
-                }
-            )
-            document["end"] = session["end"]
-            store.write_study(document)
+            counts = _close_session(store, spec, document, session, backend, interrupted, start)
         report_path = None
         if report and not interrupted:
             from flexctrl.study.report import write_report
