@@ -104,7 +104,6 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
 
     if not runs:
         raise ValueError("nothing to draw: give at least one run")
@@ -117,31 +116,60 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     FigureCanvasAgg(fig)
     axes = dict(zip(panels, np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))))
     first = runs[0]
-    run_handles, limit_handles = [], []
     for ax in axes.values():
         if first.window is not None:
             ax.axvspan(*first.window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
-    for index, run in enumerate(runs):
-        style = {
-            "color": f"C{index % 10}",
-            "lw": 1.8 if run.label == highlight else 0.9,
-            "zorder": 1.5 if run.label == highlight else 2.0,
-        }  # the others stay visible over the worst
-        rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
-        if "tip" in axes and run.tip_error is not None:
-            axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
-        for link in range(run.deflections.shape[1]):
-            axes["w"].plot(
-                run.time, 1e3 * run.deflections[:, link], ls=_LINK_STYLES[link % 4], **style
+    run_handles = [_draw_run(axes, index, run, highlight) for index, run in enumerate(runs)]
+    limit_handles = _draw_limits(axes, first)
+    if "q" in axes and first.reference is not None:
+        _draw_reference(axes["q"], first)
+    _label(axes, runs, run_handles, limit_handles, first, title)
+    return fig
+
+
+def _tip_scale(ax, errors: list[np.ndarray]) -> None:
+    """A log axis when the tip errors span more than two decades (down to 1e-7 of the peak).
+
+    The move's metre-scale start and the residual window's micrometre ringing both stay
+    in view; only the dips of the zero crossings are cut.
+    """
+    positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
+    if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
+        ax.set_yscale("log")
+        ax.set_ylim(
+            bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max()))
+        )
+
+
+def _draw_run(axes: dict, index: int, run: RunCurves, highlight: str | None):
+    """One run's curves on every panel; its legend handle."""
+    from matplotlib.lines import Line2D
+
+    style = {
+        "color": f"C{index % 10}",
+        "lw": 1.8 if run.label == highlight else 0.9,
+        "zorder": 1.5 if run.label == highlight else 2.0,
+    }  # the others stay visible over the worst
+    rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
+    if "tip" in axes and run.tip_error is not None:
+        axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
+    for link in range(run.deflections.shape[1]):
+        axes["w"].plot(run.time, 1e3 * run.deflections[:, link], ls=_LINK_STYLES[link % 4], **style)
+    for joint in range(run.torques.shape[1]):
+        axes["u"].plot(run.time, run.torques[:, joint], ls=_LINK_STYLES[joint % 4], **style)
+        if "q" in axes and run.joints is not None:
+            axes["q"].plot(
+                run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style
             )
-        for joint in range(run.torques.shape[1]):
-            axes["u"].plot(run.time, run.torques[:, joint], ls=_LINK_STYLES[joint % 4], **style)
-            if "q" in axes and run.joints is not None:
-                axes["q"].plot(
-                    run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style
-                )
-        run_handles.append(Line2D([], [], label=f"{run.label}{rms}", **style))
+    return Line2D([], [], label=f"{run.label}{rms}", **style)
+
+
+def _draw_limits(axes: dict, first: RunCurves) -> list:
+    """The first run's torque limits; their legend handles."""
+    from matplotlib.lines import Line2D
+
+    limit_handles = []
     for joint, limit in enumerate(first.torque_limits):
         if math.isfinite(limit):
             for sign in (1, -1):
@@ -158,16 +186,26 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
                     label=f"limit joint {joint + 1}: ±{limit:g} N m",
                 )
             )
-    if "q" in axes and first.reference is not None:
-        for joint in range(first.reference.shape[1]):
-            axes["q"].plot(
-                first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8
-            )
-        axes["q"].legend(
-            handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")],
-            fontsize=7,
-            loc="best",
-        )
+    return limit_handles
+
+
+def _draw_reference(ax, first: RunCurves) -> None:
+    """The first run's joint reference (deg)."""
+    from matplotlib.lines import Line2D
+
+    for joint in range(first.reference.shape[1]):
+        ax.plot(first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8)
+    ax.legend(
+        handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")],
+        fontsize=7,
+        loc="best",
+    )
+
+
+def _label(axes: dict, runs, run_handles, limit_handles, first: RunCurves, title) -> None:
+    """Axis labels, legends and the title with the residual-vibration window."""
+    from matplotlib.lines import Line2D
+
     if "tip" in axes:
         _tip_scale(axes["tip"], [r.tip_error for r in runs if r.tip_error is not None])
     labels = {
@@ -195,18 +233,3 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
         else ""
     )
     list(axes.values())[0].set_title("\n".join(t for t in (title, shaded) if t), fontsize=9)
-    return fig
-
-
-def _tip_scale(ax, errors: list[np.ndarray]) -> None:
-    """A log axis when the tip errors span more than two decades (down to 1e-7 of the peak).
-
-    The move's metre-scale start and the residual window's micrometre ringing both stay
-    in view; only the dips of the zero crossings are cut.
-    """
-    positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
-    if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
-        ax.set_yscale("log")
-        ax.set_ylim(
-            bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max()))
-        )
