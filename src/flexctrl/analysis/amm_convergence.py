@@ -160,6 +160,44 @@ def _bent_start(scene, model, arm) -> np.ndarray:
     return x0
 
 
+def _simulate_closed_loop(case: str, scene, method, fidelity: str) -> dict[str, Any]:
+    """The closed-loop case: the LQR loop with the plant at ``fidelity``."""
+    from flexctrl.dynamics.build import build_model
+    from flexctrl.dynamics.fem.locked_spectrum import rk4_step_for
+    from flexctrl.scenes.arm_setup import scene_arm
+    from flexctrl.scenes.loop_setup import closed_loop_tip_path
+
+    sample = 5e-4
+    start = time.perf_counter()
+    if method.step is None:
+        arm = scene_arm(scene.plant)
+        h = sample / rk4_step_for(build_model(arm, fidelity, reference_q=scene.plant.q0), sample)
+    else:
+        h = method.step
+    stride = max(1, int(round(sample / h)))
+    # the Python loop for the finite elements: the compiled one holds every RK4 substep of the
+    # run
+    # (tens of thousands per sample at their damped stable step) in memory at once
+    controller = _design(scene)
+    out = closed_loop_tip_path(
+        dataclasses.replace(scene, controller_fidelity=None),
+        fidelity,
+        h,
+        controller=controller,
+        stride=stride,
+        loop="python" if fidelity.startswith("fem:") else "auto",
+    )
+    if out["diverged_at"] is not None:
+        raise RuntimeError(f"{case} {fidelity} diverged at {out['diverged_at']} s")
+    return {
+        "time": out["time"],
+        "tip": out["tip"][:, :2],
+        "wall_s": out["wall_time_s"],
+        "setup_s": time.perf_counter() - start - out["wall_time_s"],
+        "step_s": h,
+    }
+
+
 def simulate(
     case: str,
     fidelity: str,
@@ -183,40 +221,7 @@ def simulate(
     if case == "fast_move" and hub_inertia is not None:
         raise ValueError("hub_inertia applies to the open-loop cases only")
     if case == "fast_move":
-        from flexctrl.dynamics.fem.locked_spectrum import rk4_step_for
-        from flexctrl.scenes.loop_setup import closed_loop_tip_path
-
-        sample = 5e-4
-        start = time.perf_counter()
-        if method.step is None:
-            arm = scene_arm(scene.plant)
-            h = sample / rk4_step_for(
-                build_model(arm, fidelity, reference_q=scene.plant.q0), sample
-            )
-        else:
-            h = method.step
-        stride = max(1, int(round(sample / h)))
-        # the Python loop for the finite elements: the compiled one holds every RK4 substep of the
-        # run
-        # (tens of thousands per sample at their damped stable step) in memory at once
-        controller = _design(scene)
-        out = closed_loop_tip_path(
-            dataclasses.replace(scene, controller_fidelity=None),
-            fidelity,
-            h,
-            controller=controller,
-            stride=stride,
-            loop="python" if fidelity.startswith("fem:") else "auto",
-        )
-        if out["diverged_at"] is not None:
-            raise RuntimeError(f"{case} {fidelity} diverged at {out['diverged_at']} s")
-        return {
-            "time": out["time"],
-            "tip": out["tip"][:, :2],
-            "wall_s": out["wall_time_s"],
-            "setup_s": time.perf_counter() - start - out["wall_time_s"],
-            "step_s": h,
-        }
+        return _simulate_closed_loop(case, scene, method, fidelity)
     arm = scene_arm(scene)
     if hub_inertia is not None:
         arm = dataclasses.replace(
