@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from test_fem_arm import rotating_frequency  # noqa: E402  (the spinning-beam helper of the FEM tests)
 
-from flexctrl.analysis.accuracy import make_stepper, parse_method, run_open_loop
+from flexctrl.analysis.simulation_methods import parse_method
+from flexctrl.analysis.steppers import make_stepper, run_open_loop
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError

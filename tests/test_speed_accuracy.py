@@ -9,14 +9,9 @@ import numpy as np
 import pytest
 from support import DATA
 
-from flexctrl.analysis.accuracy import (
-    Method,
-    compute_reference,
-    make_stepper,
-    pareto_front,
-    parse_method,
-    run_open_loop,
-)
+from flexctrl.analysis.accuracy import compute_reference, pareto_front
+from flexctrl.analysis.simulation_methods import Method, parse_method
+from flexctrl.analysis.steppers import make_stepper, run_open_loop
 from flexctrl.errors import SpecError
 from flexctrl.sim.tip_error import tip_error
 from flexctrl.study.executors import speed_accuracy_report as report

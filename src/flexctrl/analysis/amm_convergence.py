@@ -40,13 +40,9 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.analysis.accuracy import (
-    Reference,
-    cached_reference,
-    make_stepper,
-    parse_method,
-    run_open_loop,
-)
+from flexctrl.analysis.accuracy import Reference, cached_reference
+from flexctrl.analysis.simulation_methods import parse_method
+from flexctrl.analysis.steppers import make_stepper, run_open_loop
 from flexctrl.spec.shipped import data_root
 
 _SCENES = data_root() / "studies" / "scenes"

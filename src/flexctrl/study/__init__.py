@@ -11,12 +11,12 @@ format and the folder layout are described in ``docs/studies.md``.
 """
 
 from flexctrl.study.outputs import RunOutput, per_worker_cache
+from flexctrl.study.plan import ReportSpec, RunSpec, StudySpec
 from flexctrl.study.registry import executor_names, get_executor, register_executor
 from flexctrl.study.report import write_report
 from flexctrl.study.run_execution import execute_run
 from flexctrl.study.runner import StudyResult, run_study
 from flexctrl.study.store import ResultStore, Table
-from flexctrl.study.plan import ReportSpec, RunSpec, StudySpec
 from flexctrl.study.study_file import load_study
 
 __all__ = [

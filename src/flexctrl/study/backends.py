@@ -14,9 +14,9 @@ from collections.abc import Iterable, Iterator
 
 from flexctrl.study.affinity import affinity_key, run_pinned
 from flexctrl.study.blas_threads import blas_thread_budget, limit_blas_threads, usable_cpus
+from flexctrl.study.plan import RunSpec
 from flexctrl.study.registry import get_executor
 from flexctrl.study.run_execution import describe_exception, execute_run, failed_result
-from flexctrl.study.plan import RunSpec
 
 
 class InProcessBackend:

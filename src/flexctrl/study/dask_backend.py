@@ -14,8 +14,8 @@ from itertools import islice
 from typing import Any
 
 from flexctrl.errors import FlexctrlError
-from flexctrl.study.run_execution import describe_exception, execute_run, failed_result
 from flexctrl.study.plan import RunSpec
+from flexctrl.study.run_execution import describe_exception, execute_run, failed_result
 
 
 class DaskBackend:

@@ -12,10 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.analysis.accuracy import (
-    pareto_front,
-    parse_method,
-)
+from flexctrl.analysis.accuracy import pareto_front
+from flexctrl.analysis.simulation_methods import parse_method
 from flexctrl.errors import SpecError
 
 #: Scene keys read by this executor (removed before the scene file is validated).

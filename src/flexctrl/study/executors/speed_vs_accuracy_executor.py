@@ -6,7 +6,7 @@ axis without any change to the study machinery; the executor removes them from t
 scene's overrides before the scene file is validated:
 
 ``scene.method``
-    The method to time and judge (:func:`flexctrl.analysis.accuracy.parse_method`),
+    The method to time and judge (:func:`flexctrl.analysis.simulation_methods.parse_method`),
     e.g. ``"amm:2/rk4@1ms"``.  Required.
 ``scene.reference``
     The reference method (default ``"fem:8/rk4@stable"``).
@@ -58,18 +58,9 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.analysis.accuracy import (
-    OUTPUT_DT,
-    Method,
-    MethodRun,
-    Reference,
-    cached_reference,
-    compute_reference,
-    make_stepper,
-    parse_method,
-    run_closed_loop,
-    run_open_loop,
-)
+from flexctrl.analysis.accuracy import Reference, cached_reference, compute_reference
+from flexctrl.analysis.simulation_methods import OUTPUT_DT, Method, parse_method
+from flexctrl.analysis.steppers import MethodRun, make_stepper, run_closed_loop, run_open_loop
 from flexctrl.errors import SpecError
 from flexctrl.spec.shipped import data_root
 
