@@ -1,0 +1,50 @@
+"""Sphinx configuration of the flexctrl documentation (``make docs`` builds it)."""
+
+import importlib.metadata
+import os
+
+project = "flexctrl"
+author = "the flexctrl developers"
+release = importlib.metadata.version("flexctrl")
+version = release
+
+extensions = [
+    "myst_nb",
+    "numpydoc",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.mathjax",
+    "sphinx_copybutton",
+    "sphinx_design",
+]
+
+# numpydoc renders the docstrings; autosummary writes one page per public name
+autosummary_generate = True
+autodoc_typehints = "none"
+numpydoc_show_class_members = False
+numpydoc_xref_param_type = False
+numpydoc_validation_checks: set[str] = set()
+
+# Markdown pages (MyST) and notebooks (myst-nb, executed when the site is built)
+source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb"}
+myst_enable_extensions = ["colon_fence", "deflist", "dollarmath", "amsmath"]
+myst_heading_anchors = 3
+nb_execution_mode = os.environ.get("FLEXCTRL_DOCS_EXECUTE", "cache")
+nb_execution_timeout = 1800
+nb_execution_raise_on_error = True
+nb_execution_show_tb = True
+
+exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
+templates_path = ["_templates"]
+html_static_path = ["_static"]
+html_theme = "pydata_sphinx_theme"
+html_title = "flexctrl"
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "secondary_sidebar_items": ["page-toc"],
+    "footer_start": ["copyright"],
+    "footer_end": ["sphinx-version"],
+}
+html_sidebars = {"**": ["sidebar-nav-bs"]}
+suppress_warnings = ["mystnb.unknown_mime_type"]
