@@ -5,12 +5,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint format figures clean
+.PHONY: demo test lint format docs figures clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev,notebooks,dask]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,notebooks,dask,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -43,6 +43,13 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
+# The documentation site, into docs/_build/html: warnings are errors, the notebooks executed
+# (DOCS_QUICK=1 runs them on their reduced grids, as the tests do).
+DOCS_QUICK ?= 0
+docs: $(STAMP)
+	cd docs && FLEXCTRL_NOTEBOOK_QUICK=$(DOCS_QUICK) FLEXCTRL_DOCS_EXECUTE=force \
+		../$(BIN)/python -m sphinx -b html -W --keep-going -n -q . _build/html
+
 # Redraw docs/figures/*.png from reduced studies (results kept in out/figures and resumed:
 # about 15 minutes the first time on 2 busy cores, under a minute after; tools/make_figures.py
 # lists what it runs).
@@ -50,4 +57,4 @@ figures: $(STAMP)
 	$(BIN)/python tools/make_figures.py
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out docs/_build docs/jupyter_execute

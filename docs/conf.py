@@ -2,6 +2,10 @@
 
 import importlib.metadata
 import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))
 
 project = "flexctrl"
 author = "the flexctrl developers"
@@ -16,6 +20,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "sphinx_copybutton",
     "sphinx_design",
+    "flexctrl_reference",
 ]
 
 # numpydoc renders the docstrings; autosummary writes one page per public name
@@ -26,7 +31,7 @@ numpydoc_xref_param_type = False
 numpydoc_validation_checks: set[str] = set()
 
 # Markdown pages (MyST) and notebooks (myst-nb, executed when the site is built)
-source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb"}
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath", "amsmath"]
 myst_heading_anchors = 3
 nb_execution_mode = os.environ.get("FLEXCTRL_DOCS_EXECUTE", "cache")
@@ -35,6 +40,14 @@ nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 
 exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
+# the earlier notes, kept in the tree until every section has its place in the site
+exclude_patterns += [
+    f"{name}.md"
+    for name in (
+        "amm", "architecture", "auto_fidelity", "baumgarte", "control", "fem", "inputs",
+        "modal", "speed_accuracy", "stability", "studies", "tuning",
+    )
+]
 templates_path = ["_templates"]
 html_static_path = ["_static"]
 html_theme = "pydata_sphinx_theme"
