@@ -14,9 +14,10 @@ Every run returns a :class:`~flexctrl.sim.trajectory.Trajectory`.
 
 Examples
 --------
+>>> import flexctrl as fc
 >>> from flexctrl.sim import simulate
->>> from flexctrl.sim.toymodel import spring_pendulum
->>> traj = simulate(spring_pendulum(), [0.3, 0, 0, 0, 0, 0], 0.1, dt=1e-3, compile=False)
+>>> model = fc.load_model("subedi3link", fidelity="rigid", gravity=[0.0, 0.0])
+>>> traj = simulate(model, [0.3, 0, 0, 0, 0, 0], 0.1, dt=1e-3, compile=False)
 >>> traj.states.shape
 (101, 6)
 """

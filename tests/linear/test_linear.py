@@ -14,7 +14,7 @@ from flexctrl.beam.clamped_mass import clamped_mass_modes
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.errors import SpecError
 from flexctrl.scenes.model_files import load_model
-from flexctrl.sim.toymodel import spring_pendulum
+from support_models import spring_pendulum
 from flexctrl.spec.arm import arm_from_document
 
 

@@ -13,9 +13,8 @@ import dataclasses
 import casadi as ca
 import numpy as np
 import pytest
-from test_fem_arm import rotating_frequency  # noqa: E402  (the spinning-beam helper of the FEM tests)
+from model_checks import energy_drift, one_link, rotating_frequency
 
-from flexctrl.analysis.accuracy import make_stepper, parse_method, run_open_loop
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
@@ -25,17 +24,6 @@ from flexctrl.spec.arm import load_arm
 @pytest.fixture
 def arm(model_path):
     return load_arm(model_path)
-
-
-def one_link(arm, payload: float, gravity=(0.0, 0.0), link: int = 2):
-    """Link ``link`` of the arm alone, clamped at a massless hub, carrying ``payload`` kg."""
-    return dataclasses.replace(
-        arm.with_payload(payload),
-        links=arm.links[link : link + 1],
-        configuration=(0.0,),
-        gravity=gravity,
-        joints=(dataclasses.replace(arm.joints[link], hub_mass=0.0),),
-    )
 
 
 def static_elastic(model, q_joints):
@@ -88,14 +76,6 @@ def test_spinning_link_follows_southwell(arm, shortening, coefficient):
     assert (w**2 - w0**2) / spin**2 == pytest.approx(coefficient, abs=0.006)
 
 
-def _energy_drift(model, x0, h, duration=0.2):
-    stepper = make_stepper(model, parse_method(f"{model.fidelity}/rk4@{h}"), 1e-3, compile=False)
-    run = run_open_loop(stepper, x0, np.zeros((int(round(duration / 1e-3)), model.n_u)))
-    n = model.n_q
-    E = [sum(float(v) for v in model.functions["energies"](x[:n], x[n:])) for x in run.states]
-    return abs(E[-1] - E[0]) / max(abs(e) for e in E), np.ptp([x[0] for x in run.states])
-
-
 @pytest.mark.parametrize("modes", ["frozen", "scheduled"])
 def test_energy_conserved_at_rk4_order(arm, modes):
     """Undamped free swing under gravity with link 3 bent and the joints moving: the energy error of
@@ -112,8 +92,8 @@ def test_energy_conserved_at_rk4_order(arm, modes):
     x0[[0, 1, 2]] = [0.2, -0.3, 0.4]
     x0[model.coordinate_names.index("qf31")] = 0.05
     x0[model.n_q : model.n_q + 3] = [1.0, -2.0, 3.0]
-    coarse, swing = _energy_drift(model, x0, 2.5e-4)
-    fine, _ = _energy_drift(model, x0, 1.25e-4)
+    coarse, swing = energy_drift(model, x0, 2.5e-4)
+    fine, _ = energy_drift(model, x0, 1.25e-4)
     assert swing > 0.05  # the joints really move (rad)
     assert fine < 1e-5
     assert coarse / fine > 2**3.5

@@ -1,4 +1,4 @@
-"""A small analytic :class:`~flexctrl.dynamics.model.Model` for tests and examples.
+"""A small analytic :class:`~flexctrl.dynamics.model.Model` for the tests.
 
 Two rigid links with point masses at their ends (a double pendulum, joints
 ``q1``, ``q2``) carry a third mass that slides along link 2 on a spring of
@@ -11,7 +11,7 @@ function of the :class:`Model` interface and conserves energy exactly.
 
 Examples
 --------
->>> from flexctrl.sim.toymodel import spring_pendulum
+>>> from support_models import spring_pendulum
 >>> model = spring_pendulum(k=1.0e4)
 >>> model.coordinate_names
 ('q1', 'q2', 'qf21')

@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 import pytest
 import scipy.linalg
+from model_checks import rotating_frequency
 from scipy.integrate import solve_ivp
 from support import MODEL
 
@@ -329,33 +330,6 @@ def test_locked_free_vibration_energy_with_newmark(arm):
 
 
 # -- 6. axial shortening -----------------------------------------------------------------------------
-def rotating_frequency(model, spin):
-    """Lowest transverse frequency (rad/s) of a one-link model spun at ``spin`` rad/s about its joint."""
-    n = model.n_q
-    q, qd = ca.SX.sym("q", n), ca.SX.sym("qd", n)
-    F = (
-        model.functions["c"](q, qd)
-        + model.functions["g"](q)
-        + ca.mtimes(model.functions["K"]()["K"], q)
-    )[1:]
-    fun = ca.Function("F", [q, qd], [F, ca.jacobian(F, q)[:, 1:], ca.jacobian(F, qd)[:, 1:]])
-    rate = np.r_[spin, np.zeros(n - 1)]
-    qf = np.zeros(n - 1)
-    for _ in range(20):  # steady stretched state in the rotating frame
-        r, J, _ = (np.asarray(v, dtype=float) for v in fun(np.r_[0.0, qf], rate))
-        step = np.linalg.solve(J, r.ravel())
-        qf -= step
-        if np.abs(step).max() < 1e-15:
-            break
-    _, KT, C = (np.asarray(v, dtype=float) for v in fun(np.r_[0.0, qf], rate))
-    M = model.mass_matrix(np.r_[0.0, qf])[1:, 1:]
-    A = np.block(
-        [[np.zeros_like(M), np.eye(n - 1)], [-np.linalg.solve(M, KT), -np.linalg.solve(M, C)]]
-    )
-    ev = np.linalg.eigvals(A)
-    return np.sort(np.abs(ev.imag[ev.imag > 1e-6]))[0]
-
-
 @pytest.mark.parametrize("shortening, coefficient", [(True, 0.1933), (False, -1.0)])
 def test_axial_shortening_gives_southwell_centrifugal_stiffening(arm, shortening, coefficient):
     """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2

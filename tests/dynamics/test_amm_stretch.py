@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 import pytest
+from model_checks import energy_drift, one_link
 from scipy.optimize import brentq
-from test_amm_shortening import _energy_drift, one_link  # noqa: E402  (helpers of the shortening tests)
 
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.build import build_model
@@ -118,8 +118,8 @@ def test_energy_conserved_at_rk4_order(arm):
     x0[model.coordinate_names.index("qf31")] = 0.05
     x0[model.coordinate_names.index("e2")] = 1e-5
     x0[model.n_q : model.n_q + 3] = [1.0, -2.0, 3.0]
-    coarse, swing = _energy_drift(model, x0, 1e-4)
-    fine, _ = _energy_drift(model, x0, 5e-5)
+    coarse, swing = energy_drift(model, x0, 1e-4)
+    fine, _ = energy_drift(model, x0, 5e-5)
     assert swing > 0.05
     assert fine < 1e-5
     assert coarse / fine > 2**3.5

@@ -25,7 +25,7 @@ from flexctrl.sim import (
     simulate,
 )
 from flexctrl.sim.compile import compile_function
-from flexctrl.sim.toymodel import spring_pendulum
+from support_models import spring_pendulum
 
 X0 = np.array([0.4, -0.3, 0.02, 0.5, 0.0, 0.0])
 
