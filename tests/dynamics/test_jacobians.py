@@ -72,26 +72,14 @@ def test_dynamics_without_constants_to_lift_keep_their_own_jacobian():
     assert np.array_equal(A, [[0.0, 1.0], [-x0[1], -x0[0]]]) and np.array_equal(B, [[0.0], [1.0]])
 
 
-def test_the_sx_graph_is_what_is_kept_and_gives_the_mx_graphs_bits(arm):
-    """The default graph differentiates the SX lift itself; the former MX graph stays an option with the same bits."""
+def test_the_kept_jacobian_of_an_sx_lift_is_an_sx_function_with_the_per_model_bits(arm):
+    """The kept Jacobian differentiates the SX lift itself and gives the per-model values."""
     SHARED.clear()
     FROM_LIFTED.clear()  # what the kept lifts of earlier tests hold
     for fidelity in ("amm:1", "amm:4"):
         model = build_model(arm, fidelity, reference_q=[0, 1.2, -0.7])
         for seed in range(3):
-            sx = _at(jacobian_function(model, value=True, inputs=True, shared=True), model, seed)
-            mx = _at(
-                jacobian_function(model, value=True, inputs=True, shared=True, graph="mx"),
-                model,
-                seed,
-            )
-            assert all(np.array_equal(a, b) for a, b in zip(sx, mx)), (fidelity, seed)
-    kept = list(SHARED._built.values())
-    assert sorted(f.is_a("SXFunction") for f in kept) == [
-        False,
-        False,
-        True,
-        True,
-    ]  # one of each graph per fidelity
-    with pytest.raises(ValueError, match="graph = 'ad'; allowed: 'sx', 'mx'"):
-        jacobian_function(model, shared=True, graph="ad")
+            kept = _at(jacobian_function(model, value=True, inputs=True, shared=True), model, seed)
+            own = _at(jacobian_function(model, value=True, inputs=True), model, seed)
+            assert all(np.array_equal(a, b) for a, b in zip(kept, own)), (fidelity, seed)
+    assert [f.is_a("SXFunction") for f in SHARED._built.values()] == [True, True]

@@ -15,7 +15,7 @@ import pytest
 from support import MODEL
 
 from flexctrl.dynamics.build import build_model
-from flexctrl.dynamics.parametric import constants_as_parameters
+from flexctrl.dynamics.parametric import LIFTED, constants_as_parameters
 from flexctrl.loop.plant_step import (
     UNROLL_LIMIT,
     _single_step,
@@ -43,12 +43,18 @@ def code(fun: ca.Function) -> str:
     return generator.dump()
 
 
+def lift_anew(fun, per_use=False):
+    """:func:`constants_as_parameters` of ``fun`` with no lift kept from another Function."""
+    LIFTED.clear()
+    return constants_as_parameters(fun, per_use=per_use)
+
+
 def test_output_constants_per_use_give_one_structure_where_per_node_do_not(models):
     outputs = [output_function(m) for m in models]
-    per_node = [constants_as_parameters(f, reuse=False) for f in outputs]
+    per_node = [lift_anew(f) for f in outputs]
     # the straight arm's graph has constants that coincide and were merged: fewer nodes, other code
     assert per_node[0][1].size != per_node[1][1].size
-    per_use = [constants_as_parameters(f, per_use=True, reuse=False) for f in outputs]
+    per_use = [lift_anew(f, per_use=True) for f in outputs]
     assert per_use[0][1].size == per_use[1][1].size
     assert code(per_use[0][0]) == code(per_use[1][0])
     rng = np.random.default_rng(5)
@@ -64,7 +70,7 @@ def test_long_substep_step_is_shared_and_matches_the_unrolled_chain(models):
     substeps = UNROLL_LIMIT + 8
     texts = []
     for m in models:
-        fp, c = constants_as_parameters(m.functions["f"], reuse=False)
+        fp, c = lift_anew(m.functions["f"])
         assert c.size > 0
         texts.append(code(_single_step(m, fp, c.size)))
     assert texts[0] == texts[1]

@@ -160,7 +160,7 @@ def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
 
 
 def constants_as_parameters(
-    fun: ca.Function, *, per_use: bool = False, reuse: bool = True
+    fun: ca.Function, *, per_use: bool = False
 ) -> tuple[ca.Function, np.ndarray]:
     """``fun`` rebuilt with every numeric constant of its expression graph turned into an input.
 
@@ -170,6 +170,12 @@ def constants_as_parameters(
     the same operations in the same order with ``c`` the vector of the graph's constants,
     so two models whose graphs differ only in constant values share one compiled
     library.
+
+    A lift kept in this process (:data:`LIFTED`) serves every later Function with the same
+    :func:`structure_key`: its constants are read from the instructions the kept lift
+    records (one call per constant, not a walk of the graph and a rebuild), and the kept
+    ``fp`` is returned once it reproduces ``fun`` at a generic point; otherwise the graph is
+    lifted anew.  Either way ``fp`` has the same structure and ``c`` the same values.
 
     Parameters
     ----------
@@ -181,13 +187,6 @@ def constants_as_parameters(
         subexpression elimination merges constants whose values happen to coincide
         (at the straight arm, say), so its node count, and the code generated from it,
         depend on the values; per use the structure depends on the operations alone.
-    reuse : bool
-        Use a lift kept in this process (:data:`LIFTED`) for a Function with the same
-        :func:`structure_key`: its constants are read from the instructions the kept lift
-        records (one call per constant, not a walk of the graph and a rebuild), and the
-        kept ``fp`` is returned once it reproduces ``fun`` at a generic point; otherwise
-        the graph is lifted anew.  False: always lift anew (the slow path, kept to measure
-        against; same ``fp`` structure and the same ``c`` to the bit).
 
     Returns
     -------
@@ -202,8 +201,8 @@ def constants_as_parameters(
     if not f.is_a("SXFunction") or f.has_free():
         return fun, np.zeros(0)
     ops = [f.instruction_id(k) for k in range(f.n_instructions())]
-    key = structure_key(f, ops, per_use) if reuse else None
-    kept = LIFTED.lookup(key) if key is not None else None
+    key = structure_key(f, ops, per_use)
+    kept = LIFTED.lookup(key)
     if kept is not None:
         fp, sources, uses = kept
         const = _constants_per_use(f, ops, uses) if per_use else _constants(f, sources)
@@ -216,8 +215,7 @@ def constants_as_parameters(
     const = _constants(f, sources)
     if not _reproduces(f, fp, const):
         return fun, np.zeros(0)
-    if key is not None:
-        LIFTED.keep(key, lifted)
+    LIFTED.keep(key, lifted)
     return fp, const
 
 
