@@ -21,15 +21,12 @@ environment variable ``FLEXCTRL_NO_COMPILE`` is set to anything but ``""``/``"0"
 the Function itself is returned and CasADi's virtual machine evaluates it
 (a warning says why when a compiler was expected but failed).
 
-Flags: ``-O2 -march=native`` by default.  Measured on the RK4 loop of the
-three-link arm with two modes per link (1000 steps, AMD EPYC with AVX-512, gcc 12;
-best of 15): ``-O1``/``-O2``/``-O3`` all compile in 1-2 s and run in 4.4 ms;
-adding ``-march=native`` (FMA, AVX-512) brings that to 3.0 ms, again in about
-1.3 s of compilation.  Code generated for the *expanded* step (one SX expression
-instead of four calls of ``f``) took 5.7 s to compile for no gain.  Because
-``-march=native`` code only runs on the CPU it was built for, the cache key
-includes the host's CPU identity; if the compiler rejects the flags, the
-portable ``-O2`` is tried before giving up.
+Flags: ``-O2 -march=native`` by default, for the Functions evaluated at every step (the
+integrators' loops, the closed loop's plant step).  ``-march=native`` lets the compiler use
+the host's vector and fused multiply-add instructions; such code only runs on the CPU it was
+built for, so the cache key includes the host's CPU identity, and if the compiler rejects
+the flags the portable ``-O2`` is tried before giving up.  :data:`QUICK_FLAGS` serve large
+Functions evaluated in bulk a few times per run, where the compile time dominates.
 
 :func:`compile_by_recipe` finds a library without building its Function: for a Function whose
 symbolic construction costs more than loading it (the NMPC's horizon linearisation), the
@@ -71,10 +68,11 @@ log = logging.getLogger(__name__)
 ENV_NO_COMPILE = "FLEXCTRL_NO_COMPILE"
 DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-march=native")
 PORTABLE_FLAGS: tuple[str, ...] = ("-O2",)
-#: For large Functions evaluated in bulk rather than per step (the reference tables' Newton): half the
-#: compile time of ``-O2`` for the same evaluation speed (measured on the three-link arm's ``amm:2``: 21 s
-#: against 39 s to compile, 0.28 s against 0.26 s per table at load 7).
-QUICK_FLAGS: tuple[str, ...] = ("-O1", "-march=native")
+#: For large Functions evaluated in bulk a few times per run rather than per step (the reference
+#: tables' Newton): GCC's ``-Og`` runs the cheap optimisations of ``-O1`` without the costly
+#: register allocation over one huge function body, so a generated file of tens of thousands of
+#: lines compiles in seconds instead of tens of seconds and evaluates as fast.
+QUICK_FLAGS: tuple[str, ...] = ("-Og", "-march=native")
 NATIVE = ("-march=native", "-mcpu=native", "-mtune=native")
 COMPILE_TIMEOUT_S = 900.0
 
