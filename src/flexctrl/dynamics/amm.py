@@ -47,16 +47,13 @@ Frozen and scheduled modes
     The approximations left are the assumed-modes truncation and the interpolation
     of the tables.
 
-    An earlier version formed T from velocities with the shapes held still
-    (``phi_j qd_fj`` only).  That drops a term of the *same* order as the one it
-    keeps: ``d/dt (dT/d qd_f)`` then holds ``(dv_j/dt)(n . rdot) + (dw_j/dt) alpha-dot``,
-    a force on the modes that does not vanish at zero deflection.  In the free
-    swing of ``studies/scenes/free_vibration.toml`` it drove link 1's first mode to
-    three times the frozen model's amplitude (0.27 m RMS tip error at 1 ms against the
-    finite-element reference; ``docs/speed_accuracy.md``).  The test
-    ``test_scheduled_inertial_load_equals_frozen_at_rest_deflection`` catches it.  Keeping
-    only the rigid-velocity cross terms of the shape rate is not enough: M then loses
-    definiteness at a few centimetres of deflection.
+    The shape rates stay in T.  Forming T with the shapes held still (``phi_j qd_fj``
+    only) drops a term of the *same* order as the one it keeps: ``d/dt (dT/d qd_f)``
+    then holds ``(dv_j/dt)(n . rdot) + (dw_j/dt) alpha-dot``, a force on the modes that
+    does not vanish at zero deflection and drives them in a free swing
+    (``test_scheduled_inertial_load_equals_frozen_at_rest_deflection`` guards it).
+    Keeping only the rigid-velocity cross terms of the shape rate is not enough either:
+    M then loses definiteness at a few centimetres of deflection.
 
     Interface: ``K`` and ``D`` take ``q``; ``g`` holds every potential force not in
     ``K q``, i.e. ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
@@ -253,11 +250,10 @@ def _scheduled_modal(arm: ArmSpec, q, n_modes: Sequence[int], lookups):
 
 
 #: The assumed-modes default of ``axial_shortening`` when neither the call, the scene nor the
-#: model file sets it: off.  The effect is correct physics and converges over 0.5 s
-#: (docs/amm.md section 12), but every shipped controller, tuning and study figure was measured
-#: without it; the bang-bang error over 2 s still plateaus (hub 3's light rotor), amm:1 is worse
-#: with it over 2 s, and the compiled step costs 1.3-3 times as much.  Turn it on per model file
-#: or scene (``axial_shortening = true``) until the studies are re-measured on it.
+#: model file sets it: off.  The effect is correct physics (docs/amm.md section 12), but the
+#: shipped controllers, tunings and studies are tuned on the model without it, and the
+#: compiled step costs more with it.  Turn it on per model file or scene
+#: (``axial_shortening = true``).
 AMM_AXIAL_SHORTENING = False
 
 #: The default of ``axial_stretch``: off (``docs/amm.md`` section 14).

@@ -140,8 +140,8 @@ def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
     """A hash of an SX Function's operation sequence, its input and output sparsities and ``per_use``.
 
     It leaves out the operands' wiring, which costs a Python call per instruction to read
-    (0.17 s of the 0.38 s lift of the NMPC's 42,000-instruction equation terms): a kept
-    lift found by this key is used only after it reproduces the Function (:func:`_reproduces`).
+    (most of a lift's time): a kept lift found by this key is used only after it reproduces
+    the Function (:func:`_reproduces`).
     Per use, the constant nodes are left out too: common subexpression elimination merges
     constants whose values coincide, so their count moves with the configuration while the
     lifted Function does not.

@@ -39,9 +39,8 @@ class BoundFunction:
 
     ``bound(*args)`` copies the inputs into the bound arrays, evaluates and returns copies of
     the outputs as rows (an output of shape (rows, cols) comes back as (cols, rows), as from
-    :func:`evaluate`).  Measured on the Python loop's per-sample calls (amm:2, 17 RK4 steps
-    per sample): the plant's advance 150 -> 55 us, the sensors and the deflection monitor
-    about 60 -> 5 us each, under load; the same values (the same compiled code).
+    :func:`evaluate`).  No CasADi matrices are made per call, which is most of the cost of a
+    small Function's ordinary call; the values are the same (the same compiled code).
 
     ``shared`` binds named inputs or outputs to arrays the caller owns (C-ordered float64
     with the entries of the Function's sparsity, stored nonzeros only), so one Function's
@@ -49,11 +48,11 @@ class BoundFunction:
     arrays hold and :attr:`arrays` gives every bound array by name.  Not picklable: make
     one per run (or per controller, dropped when it is pickled).
 
-    ``renew``: a new buffer, so fresh work memory, for every evaluation (about 21 us here).  A
-    buffer keeps its work vector between calls where an ordinary call starts from new
-    memory, and some Functions read it: CasADi's HPIPM interface, warm-started, then takes
-    the previous solve's multipliers and slacks from it (measured on the NMPC: other
-    iterates from the second sample on), where an ordinary call starts them afresh.
+    ``renew``: a new buffer, so fresh work memory, for every evaluation.  A buffer keeps
+    its work vector between calls where an ordinary call starts from new memory, and some
+    Functions read it: CasADi's HPIPM interface, warm-started, then takes the previous
+    solve's multipliers and slacks from it (other iterates from the second sample on),
+    where an ordinary call starts them afresh.
     """
 
     def __init__(

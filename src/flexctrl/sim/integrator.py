@@ -49,8 +49,7 @@ def output_function(model, energies: bool = True) -> ca.Function:
     """``y(x) = (E_kin, E_el, E_grav, tip_x, tip_y, w_1..w_n)`` of a model, as one Function.
 
     ``energies=False``: ``(tip_x, tip_y, w_1..w_n)`` alone (named ``kinematic_outputs``).  The
-    kinetic energy needs the mass matrix, so it costs most of the outputs: 0.54 s against
-    0.04 s over 48,000 states of ``amm:5`` here, compiled.
+    kinetic energy needs the mass matrix, so it costs most of the outputs.
     """
     x = ca.MX.sym("x", model.n_x)
     q, qd = x[: model.n_q], x[model.n_q :]

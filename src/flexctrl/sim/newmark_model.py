@@ -38,9 +38,8 @@ Torque inputs
 
 Cost
     The steps run in Python with numpy linear algebra (a few CasADi evaluations
-    and one dense solve per Newton iteration), about 0.1 to 1 ms per step for
-    the three-link arm, so Newmark pays off only where its step can be much
-    longer than an explicit method's (stiff finite-element models).
+    and one dense solve per Newton iteration), so Newmark pays off only where its
+    step can be much longer than an explicit method's (stiff finite-element models).
 """
 
 from __future__ import annotations

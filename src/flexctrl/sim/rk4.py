@@ -18,24 +18,10 @@ Stability and numerical damping
     y = 1.65 and 0.52 at y = 2.05.  High modes are therefore damped out
     numerically while low ones are kept almost exactly.
 
-Measured on the paper's free-vibration scene (``studies/scenes/free_vibration.toml``:
-three links, two modes each, 2 kg payload, gravity, q = 0, q_f31 = 0.1 m,
-q_f32 = 0.002 m, no damping) at the paper's 1 ms step
-    ``Model.omega_max`` (joints locked) is 1188 rad/s (189 Hz, y = 1.19), but with the
-    joints free the Jacobian at the initial state has modes at 263 Hz (y = 1.65) and
-    325 Hz (y = 2.05; |R| = 0.72, its energy falls a thousandfold in 10 steps).
-    The initial deformation of link 3 puts part of its 5.63 J of elastic energy
-    into those modes, and RK4 removes it: the total energy (7.29 J at t = 0) is
-    0.36 J lower after 10 ms, 1.06 J after 50 ms, 1.15 J after 0.1 s; the
-    swinging arm keeps re-exciting the fast modes slightly, so the loss reaches
-    1.31 J at 1 s and 2.17 J at 5 s (0.22 % of the 987 J exchanged between gravity
-    and motion).  At 0.5 ms the 5 s loss is 1.32 J, at 0.1 ms 0.0074 J
-    (7.5e-6 of the exchanged energy); a 0.2 s run at 20 us keeps it to 1e-9
-    (tests/test_sim_arm.py).  So the paper's 1 ms RK4 runs are stable but have the
-    fast free-joint modes damped away.  The low-frequency content is unaffected:
-    the FFT peaks of the damped scene over 2 s (Section 4.4) are link 1: 0.50 and
-    1.50 Hz, link 2: 0.50 and 42.5 Hz, link 3: 42.5 and 1.00 Hz at both 1 ms and
-    0.1 ms (the paper: 0.49/1.47, 0.88/42.48, 0.98/42.48 Hz at 0.49 Hz resolution).
+    On the arm an initial deflection puts energy into the fast modes of the free-joint
+    Jacobian; at steps near the limit RK4 damps it away while the slow modes (the
+    frequencies the studies look at) are kept, and the energy is conserved to round-off
+    only at steps well below the limit (``tests/sim/test_integrators_on_the_arm.py``).
 """
 
 from __future__ import annotations

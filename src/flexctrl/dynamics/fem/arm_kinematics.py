@@ -25,9 +25,9 @@ Axial shortening (Eqs 11-18), switchable
     exact and quadratic in the velocities, so ``M`` is positive definite at every
     state, the undamped model conserves ``T + U``, and under full coupling the joint
     accelerations enter the axial force through the equations themselves.  (A
-    Lagrangian term built from the *nominal* rigid motion was tried first: being a
-    second-order truncation of ``T`` it left ``M`` indefinite at tip slopes of a few
-    milliradians; see ``docs/fem.md``.)  ``axial_shortening=False`` uses the linear
+    Lagrangian term built from the *nominal* rigid motion instead is a second-order
+    truncation of ``T`` and leaves ``M`` indefinite at tip slopes of a few milliradians;
+    see ``docs/fem.md``.)  ``axial_shortening=False`` uses the linear
     strain ``eps = u'``.  ``K`` is the stiffness at ``q = 0`` (the Hessian of
     ``U_el``); ``g`` carries the rest: ``g = dU_g/dq + dU_el/dq - K q``.
 """
