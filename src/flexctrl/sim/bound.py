@@ -1,8 +1,7 @@
 """CasADi Functions called through buffers bound to numpy arrays: no DM conversions per call.
 
 Calling a CasADi Function from Python converts every numpy input to a ``DM`` and every
-output back (about 130 ns per entry here: 50 us for one vector of 372 entries), which
-dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its inputs
+output back, which dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its inputs
 from and writes its outputs to memory bound once.  CasADi is column-major, so an input or
 output of shape (rows, cols) is a C-ordered numpy array of shape (cols, rows): pass states
 as rows, get results as rows.
