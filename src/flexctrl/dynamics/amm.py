@@ -523,7 +523,7 @@ def build_amm(
     }
     return Model(
         name=f"{arm.name} amm {'/'.join(map(str, n_modes))} {info['modes']}{'' if shortening else ' no-shortening'}{' static-correction' if any(corrected) else ''}{' axial-stretch' if stretch else ''}"
-        f"{'' if rotation == ('exact' if shortening else 'linearised') else ' ' + rotation + '-rotation'}",
+        f"{'' if rotation == ('exact' if shortening else 'linearized') else ' ' + rotation + '-rotation'}",
         fidelity=fidelity,
         n_joints=n,
         coordinate_names=names,
