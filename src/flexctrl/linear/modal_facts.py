@@ -14,8 +14,8 @@ import casadi as ca
 import control
 import numpy as np
 
-from flexctrl.dynamics.amm import locked_spectrum
 from flexctrl.dynamics.model import Model
+from flexctrl.dynamics.natural_frequencies import locked_spectrum
 from flexctrl.linear.model_facts import stiffness_matrix
 from flexctrl.linear.operating_point import OperatingPoint
 
@@ -98,7 +98,7 @@ def locked_frequencies(
     Generalised eigenvalues of ``K_ff`` against ``M_ff`` at the configuration of
     ``op`` (default: zero joint angles and deflections).  ``include_gravity`` adds
     the gravitational stiffness ``d g_f / d q_f`` (the linearisation's elastic block).
-    Both matrices are symmetrised (:func:`flexctrl.dynamics.amm.locked_spectrum` computes
+    Both matrices are symmetrised (:func:`flexctrl.dynamics.natural_frequencies.locked_spectrum` computes
     the spectrum).
 
     Parameters
