@@ -10,7 +10,7 @@ takes ten times the instructions of ``f`` itself.  Differentiating
     d qdd / dx = M^-1 (dr/dx - d(M a)/dq |_{a = qdd} [I 0]),    d qdd / du = M^-1 dr/du
 
 with ``a`` held fixed while ``M a`` is differentiated: one LDL^T factorisation of
-``M`` (:func:`flexctrl.dynamics.amm.ldl_solve`, merged over all right-hand sides by
+``M`` (:func:`flexctrl.dynamics.dense_ldl.ldl_solve`, merged over all right-hand sides by
 common subexpression elimination) serves ``qdd`` and every column of the Jacobian.
 
 :func:`factored_dynamics` returns ``f`` and ``(f, f_x, f_u)`` built this way with the
@@ -23,7 +23,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.dynamics.amm import ldl_solve
+from flexctrl.dynamics.dense_ldl import ldl_solve
 from flexctrl.dynamics.parametric import constants_as_parameters
 
 
