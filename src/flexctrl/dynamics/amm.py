@@ -58,6 +58,17 @@ Frozen and scheduled modes
     Interface: ``K`` and ``D`` take ``q``; ``g`` holds every potential force not in
     ``K q``, i.e. ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
     ``1/2 q_f^T (dK/dq_r) q_f`` on the joint rows).
+
+Kinematic options (``docs/amm.md`` sections 10, 13, 14)
+    ``axial_shortening``: a bent link's points move towards its root by
+    ``1/2 int_0^x w'^2`` (second-order foreshortening).  ``tip_rotation``: the next link's
+    frame turns by Eq 7's linearised rotation or exactly by the tip slope; the exact one is
+    the default with axial shortening, the kinematics being consistent only then.
+    ``static_correction``: each link but the last gets the static shape under a tip moment
+    after its modes (:mod:`flexctrl.modal.static_correction`).  ``axial_stretch``: one
+    elongation ``e_i`` (m) per link with modes, appended to ``q`` (``e1..en``), a uniform
+    strain ``e_i / L_i`` with strain energy ``1/2 (EA_i / L_i) e_i^2`` and the finite
+    elements' damping ``(2 zeta_i / omega_1i) EA_i / L_i``.  The last two need frozen modes.
 """
 
 from __future__ import annotations
@@ -221,7 +232,7 @@ def build_amm(
     static_correction: bool | None = None,
     axial_stretch: bool | None = None,
 ) -> Model:
-    """Build the assumed-modes model of ``arm``.
+    """Build the assumed-modes model of ``arm`` (see the module docstring).
 
     Parameters
     ----------
@@ -230,47 +241,29 @@ def build_amm(
     n_modes
         Modes per link (one number for every link, or one per link), 0..6.
     modes
-        ``"frozen"`` (modes at ``reference_q``) or ``"scheduled"`` (modal parameters
-        looked up from the configuration; see the module docstring).
+        ``"frozen"`` (modes at ``reference_q``) or ``"scheduled"`` (looked up from ``q``).
     reference_q
-        Joint angles (rad) of the frozen modes and of ``omega_max``; default the
-        arm's ``configuration``.
+        Joint angles (rad) of the frozen modes and of ``omega_max``; default the arm's.
     damping
-        ``"ratio"`` (d = 2 zeta omega m_l), ``"paper"`` (Eq 68 as printed, 2 zeta omega) or
-        ``"stiffness"`` (``(2 zeta_1 / omega_1) m_l omega_j^2``); None: the arm's
-        ``damping_form``.
+        ``"ratio"``, ``"paper"`` or ``"stiffness"`` (module docstring); None: the arm's.
     solver
-        Symbolic solve of ``M qdd = rhs`` in ``f``: ``"ldl"`` (explicit LDL^T) or
-        ``"qr"`` (``casadi.solve``).
+        Solve of ``M qdd = rhs``: ``"ldl"`` (explicit LDL^T) or ``"qr"`` (``casadi.solve``).
     fidelity
         Recorded in the model (default ``amm:N`` when all links have N modes).
     lookups
-        For ``"scheduled"``: one CasADi Function per link with the signature of
-        :attr:`flexctrl.modal.lookup.ModalLookup.function` (None for links without
-        modes); default: built by :func:`~flexctrl.modal.lookup.modal_lookup`.
+        For ``"scheduled"``: one table Function per link (None without modes), as
+        :attr:`flexctrl.modal.lookup.ModalLookup.function`; default: built.
     coriolis
-        How ``c`` is formed for frozen modes: ``"bodies"`` (``sum J^T G Jdot qd`` over
-        the bodies, smaller code) or ``"lagrange"`` (``d(M qd)/dq qd - dT/dq``, the
-        form always used for scheduled modes).  Both are exact.
+        ``"bodies"`` (``sum J^T G Jdot qd``, smaller code) or ``"lagrange"`` (generic,
+        always for scheduled modes); both exact.
     axial_shortening
-        Second-order (foreshortening) kinematics: a bent link's points move towards its
-        root by ``1/2 int_0^x w'^2`` (``docs/amm.md`` section 10).  Default: the arm's
-        ``axial_shortening`` (model file or scene key), else :data:`AMM_AXIAL_SHORTENING`.
+        Second-order kinematics; default the arm's, else :data:`AMM_AXIAL_SHORTENING`.
     tip_rotation
-        ``"linearized"`` (Eq 7 as printed) or ``"exact"`` (the next link's frame turned by
-        the tip slope).  Default: ``"exact"`` with axial shortening (the second-order
-        kinematics are consistent only then), ``"linearized"`` without.
+        ``"linearized"`` (Eq 7) or ``"exact"``; default exact with axial shortening.
     static_correction
-        Append to each link but the last the static shape under a tip moment
-        (:mod:`flexctrl.modal.static_correction`, ``docs/amm.md`` section 13); frozen modes
-        only.  Default: :data:`AMM_STATIC_CORRECTION`.
+        A tip-moment shape per link but the last; default :data:`AMM_STATIC_CORRECTION`.
     axial_stretch
-        Axially compliant links: one elongation ``e_i`` (m) per link with elastic modes
-        appended to ``q`` (names ``e1..en``; a link without modes, hence ``rigid``, stays
-        rigid), a uniform strain ``e_i / L_i`` with strain energy
-        ``1/2 (EA_i / L_i) e_i^2`` and the finite elements' damping rule
-        ``(2 zeta_i / omega_1i) EA_i / L_i`` (``docs/amm.md`` section 14).  Frozen modes
-        only.  Default: the arm's ``axial_stretch``, else :data:`AMM_AXIAL_STRETCH`.
+        An elongation per link; default the arm's, else :data:`AMM_AXIAL_STRETCH`.
 
     Returns
     -------
@@ -293,6 +286,13 @@ def build_amm(
         static_correction=static_correction,
         axial_stretch=axial_stretch,
     )
+    return _build(arm, opts, lookups, start)
+
+
+def _build(
+    arm: ArmSpec, opts: _Options, lookups: Sequence[ca.Function | None] | None, start: float
+) -> Model:
+    """The model of ``arm`` with the options ``opts`` (``start``: when the build began)."""
     frozen, link_freqs = frozen_modal(arm, opts.q_ref, opts.n_modes, opts.corrected)
     counts = [md.n_modes for md in frozen]  # with the correction shapes
     n = arm.n_links

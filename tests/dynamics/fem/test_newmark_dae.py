@@ -8,11 +8,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from flexctrl.beam.elements import assemble_beam
+from flexctrl.dynamics.fem.casadi_dae import casadi_problem
 from flexctrl.dynamics.fem.newmark_dae import (
     ConstraintViolationError,
     DAEProblem,
     NewtonConvergenceError,
-    casadi_problem,
     simulate,
 )
 

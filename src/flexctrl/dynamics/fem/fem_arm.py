@@ -124,27 +124,69 @@ def build_fem_model(
     """
     start = time.perf_counter()
     ex = fem_expressions(arm, n_elements, axial_shortening)
-    n, N, lay = arm.n_links, int(n_elements), ex.layout
-    nq = lay.size
-    names = fem_coordinate_names(n, N)
+    n, N = arm.n_links, int(n_elements)
     q_ref = arm.configuration_or_default(reference_q)
-    q, M, U_g, U_el = ex.q, ex.mass_matrix, ex.gravity_energy, ex.elastic_energy
-    qd, u = ca.SX.sym("qd", nq), ca.SX.sym("u", n)
+    K_np, D_np, link_omega1 = _stiffness_and_damping(arm, ex, q_ref, N)
+    functions = _fem_functions(ex, K_np, D_np, n, axial_shortening)
+    locked = locked_frequencies(functions, K_np, q_ref, n)
+    info = {
+        "family": "fem",
+        "n_elements": N,
+        "axial_shortening": bool(axial_shortening),
+        "EA_N": list(ex.EA),
+        "reference_q": q_ref.tolist(),
+        "locked_frequencies_rad_s": locked.tolist(),
+        "link_first_frequencies_rad_s": link_omega1,
+        "joint_compatibility": "eliminated: link i clamped in a frame at the deformed tip of "
+        "link i-1",
+        "elastic_rotation": "exact rotation by the nodal tip slope theta_N",
+        "g_convention": "dU_g/dq + dU_el/dq - K q" if axial_shortening else "dU_g/dq",
+        "axial_strain": "u' + 1/2 mean_e(w'^2)" if axial_shortening else "u'",
+        "damping": "joint friction; stiffness-proportional per link, 2 zeta / omega_1 K",
+        "solver": "symbolic sparse LDL^T, interior nodes eliminated first",
+        "input_matrix": "tau acts on q1..qn",
+        "build_time_s": time.perf_counter() - start,
+    }
+    return Model(
+        name=f"{arm.name} fem {N}{'' if axial_shortening else ' no-shortening'}",
+        fidelity=Fidelity("fem", N),
+        n_joints=n,
+        coordinate_names=fem_coordinate_names(n, N),
+        functions=functions,
+        omega_max=float(locked.max()),
+        spec=arm,
+        info=info,
+    )
 
-    # -- stiffness, damping ---------------------------------------------------------------
+
+def _stiffness_and_damping(
+    arm: ArmSpec, ex: FemExpressions, q_ref: np.ndarray, n_elements: int
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """``(K, D, omega_1)``: the stiffness at ``q = 0``, the damping (joint friction, and per
+    link ``(2 zeta / omega_1) K``) and each link's first clamped-mass frequency (rad/s)."""
+    n, lay = arm.n_links, ex.layout
     K_np = ex.stiffness()
-    D_np = np.diag([j.friction for j in arm.joints] + [0.0] * (nq - n))
+    D_np = np.diag([j.friction for j in arm.joints] + [0.0] * (lay.size - n))
     link_omega1 = []
     for i, link in enumerate(arm.links):
-        w1 = 2 * math.pi * float(link_frequencies_fem(arm, q_ref, i, 1, N)[0])
+        w1 = 2 * math.pi * float(link_frequencies_fem(arm, q_ref, i, 1, n_elements)[0])
         link_omega1.append(w1)
         zeta = link.damping_ratio(0)
         if zeta > 0.0:
             idx = np.concatenate([lay.w[i], lay.u[i]])
             D_np[np.ix_(idx, idx)] += (2.0 * zeta / w1) * K_np[np.ix_(idx, idx)]
-    K, D = ca.sparsify(ca.DM(K_np)), ca.sparsify(ca.DM(D_np))
+    return K_np, D_np, link_omega1
 
-    # -- Lagrange's equations -------------------------------------------------------------
+
+def _fem_functions(
+    ex: FemExpressions, K_np: np.ndarray, D_np: np.ndarray, n: int, axial_shortening: bool
+) -> dict[str, ca.Function]:
+    """Lagrange's equations solved for ``qdd`` and the model's named Functions."""
+    lay = ex.layout
+    nq = lay.size
+    q, M, U_g, U_el = ex.q, ex.mass_matrix, ex.gravity_energy, ex.elastic_energy
+    qd, u = ca.SX.sym("qd", nq), ca.SX.sym("u", n)
+    K, D = ca.sparsify(ca.DM(K_np)), ca.sparsify(ca.DM(D_np))
     Mqd = ca.mtimes(M, qd)
     E_kin = 0.5 * ca.dot(qd, Mqd)
     c = ca.jtimes(Mqd, q, qd) - ca.gradient(E_kin, q)
@@ -159,7 +201,7 @@ def build_fem_model(
     hubs = ex.positions
     tip = hubs[:, n]
     opts = {"cse": True}
-    functions = {
+    return {
         "M": ca.Function("M", [q], [M], ["q"], ["M"], opts),
         "c": ca.Function("c", [q, qd], [c], ["q", "qd"], ["c"], opts),
         "g": ca.Function("g", [q], [g], ["q"], ["g"], opts),
@@ -177,34 +219,6 @@ def build_fem_model(
             "deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts
         ),
     }
-    locked = locked_frequencies(functions, K_np, q_ref, n)
-    info = {
-        "family": "fem",
-        "n_elements": N,
-        "axial_shortening": bool(axial_shortening),
-        "EA_N": list(ex.EA),
-        "reference_q": q_ref.tolist(),
-        "locked_frequencies_rad_s": locked.tolist(),
-        "link_first_frequencies_rad_s": link_omega1,
-        "joint_compatibility": "eliminated: link i clamped in a frame at the deformed tip of link i-1",
-        "elastic_rotation": "exact rotation by the nodal tip slope theta_N",
-        "g_convention": "dU_g/dq + dU_el/dq - K q" if axial_shortening else "dU_g/dq",
-        "axial_strain": "u' + 1/2 mean_e(w'^2)" if axial_shortening else "u'",
-        "damping": "joint friction; stiffness-proportional per link, 2 zeta / omega_1 K",
-        "solver": "symbolic sparse LDL^T, interior nodes eliminated first",
-        "input_matrix": "tau acts on q1..qn",
-        "build_time_s": time.perf_counter() - start,
-    }
-    return Model(
-        name=f"{arm.name} fem {N}{'' if axial_shortening else ' no-shortening'}",
-        fidelity=Fidelity("fem", N),
-        n_joints=n,
-        coordinate_names=names,
-        functions=functions,
-        omega_max=float(locked.max()),
-        spec=arm,
-        info=info,
-    )
 
 
 def locked_frequencies(

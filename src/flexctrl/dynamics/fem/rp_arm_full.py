@@ -56,6 +56,7 @@ from flexctrl.dynamics.fem.moving_frame import (
     check_elements,
     prismatic_rows,
 )
+from flexctrl.dynamics.fem.newmark_dae import DAEResult
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import RPArmSpec
 
@@ -219,6 +220,20 @@ def simulate_rp_arm_full(
         newton_tol=newton_tol,
         max_iterations=max_iterations,
     )
+    return _result(spec, model, res, (torque, force), (vp, vv), tracked_end)
+
+
+def _result(
+    spec: RPArmSpec,
+    model: RPArmFullModel,
+    res: DAEResult,
+    inputs: tuple[Array, Array],
+    violations: tuple[Array, Array],
+    tracked_end: str,
+) -> RPArmFullResult:
+    """The run ``res`` of ``model`` as an :class:`RPArmFullResult` (the tip in the world frame)."""
+    torque, force = inputs
+    vp, vv = violations
     ne, ith, iW = model.ne, model.ith, model.iW
     theta, W = res.q[:, ith], res.q[:, iW]
     radius = spec.support_outer + W
