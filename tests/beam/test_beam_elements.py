@@ -121,7 +121,8 @@ def test_static_tip_load_is_exact(n):
     q = np.linalg.solve(b.K[2:, 2:], f[2:])
     assert q[-2] == pytest.approx(Pt * L**3 / (3 * EI), rel=1e-12)
     assert q[-1] == pytest.approx(Pt * L**2 / (2 * EI), rel=1e-12)
-    # deflection between nodes is cubic in each element and exact too: w(x) = P x^2 (3L - x) / (6 EI)
+    # deflection between nodes is cubic in each element and exact too: w(x) = P x^2 (3L - x) / (6
+    # EI)
     qf = np.concatenate([[0.0, 0.0], q])
     for x in (0.31 * L, 0.77 * L):
         row = el.interpolation_row(x, n, L)

@@ -45,7 +45,8 @@ def static_elastic(model, q_joints):
 @pytest.mark.parametrize("n_modes, rel", [(2, 2e-2), (4, 2e-3)])
 def test_static_foreshortening_under_tip_load_matches_closed_form(arm, n_modes, rel):
     """Horizontal cantilever under its weight and a 10 kg tip weight: the tip draws in by
-    s(L) = 1/2 int w'^2 of the Euler-Bernoulli slope w' = (P x (2L - x) / 2 + q x (3L^2 - 3Lx + x^2) / 6) / EI."""
+    s(L) = 1/2 int w'^2 of the Euler-Bernoulli slope w' = (P x (2L - x) / 2 + q x (3L^2 - 3Lx +
+    x^2) / 6) / EI."""
     one = one_link(arm, 10.0, gravity=(0.0, -9.81))
     link = one.links[0]
     L, EI = link.length, link.EI
@@ -101,7 +102,8 @@ def test_energy_conserved_at_rk4_order(arm, modes):
 
 def test_rigid_limit_and_rest_frequencies_unchanged(arm):
     """amm:0 does not see the switch; at rest (straight links) M and K, hence the locked frequencies
-    and Table 3, are those of the model without the effect (it is second order in the deflection)."""
+    and Table 3, are those of the model without the effect (it is second order in the
+    deflection)."""
     loaded = arm.with_payload(2.0)
     rng = np.random.default_rng(3)
     rigid = [build_amm(loaded, 0, axial_shortening=flag) for flag in (True, False)]

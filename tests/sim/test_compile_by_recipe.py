@@ -106,7 +106,8 @@ def test_a_found_library_that_fails_the_check_or_raises_in_it_is_unlinked_and_bu
 def test_a_leftover_temporary_file_does_not_fail_a_build(tmp_path):
     first = compile_by_recipe("sq", "recipe-1", Builds(square_plus()), cache_dir=tmp_path)
     link = next(tmp_path.rglob("sq_r*.so"))
-    # what a process killed between linking and renaming leaves: a link to the library under a name of its own
+    # what a process killed between linking and renaming leaves: a link to the library under a name
+    # of its own
     os.link(first.path, link.with_name(f"{link.name}.{os.getpid()}.tmp"))
     link.unlink()
     again = Builds(square_plus())
@@ -189,8 +190,8 @@ def test_a_library_that_does_not_reproduce_the_model_is_removed_and_built_again(
     reference = design_nmpc(model, op, settings, library_by_recipe=False)
     for a, b in zip(linmap_at_a_point(rebuilt), linmap_at_a_point(reference)):
         np.testing.assert_array_equal(a, b)
-    # the build linked the right library in the stale one's place (checked by file: this process has the
-    # stale one loaded under the link's path, and the loader would hand it back for that path)
+    # the build linked the right library in the stale one's place (checked by file: this process has
+    # the stale one loaded under the link's path, and the loader would hand it back for that path)
     assert link.exists() and os.stat(link).st_ino != stale_inode
     content = [p for p in fresh_cache.rglob("nmpc_linearize_*.so") if "_r" not in p.name]
     assert any(os.path.samefile(link, p) for p in content)

@@ -87,7 +87,8 @@ def test_a_later_configuration_builds_nothing_again_and_gets_the_same_bits(
         kept[tuple(q)] = _everything(model)
         assert compiles == [], f"built again at {q}: {compiles}"
     assert len(keys) == 1  # the Jacobian's structure was not serialized again
-    # the control: with nothing kept, the same configurations build everything and give the same bits
+    # the control: with nothing kept, the same configurations build everything and give the same
+    # bits
     for q in POSES[1:]:
         FROM_LIFTED.clear()
         jacobians.SHARED.clear()
@@ -117,7 +118,8 @@ def test_switching_compilation_off_or_moving_the_cache_builds_anew(
 
 
 def test_each_step_count_gets_its_own_plant_step(arm):
-    # the tag holds the step count: a kept 3-step advance must not serve 5 steps, nor the mapaccum loop
+    # the tag holds the step count: a kept 3-step advance must not serve 5 steps, nor the mapaccum
+    # loop
     FROM_LIFTED.clear()
     counts = (3, 5, UNROLL_LIMIT + 1)
     models = [build_model(arm, "amm:2", reference_q=q) for q in POSES]

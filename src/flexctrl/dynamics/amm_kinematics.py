@@ -91,7 +91,8 @@ class LinkModal:
     z: Expression
     #: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad), scheduled modes only
     shape_cross: Expression = None
-    #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes only
+    #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes
+    #: only
     shape_gram: Expression = None
     #: axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1), 1/m
     sh_tip: Expression = None
@@ -152,7 +153,8 @@ def _elastic_rotation(slope):
     return ca.vertcat(ca.horzcat(1, -slope), ca.horzcat(slope, 1))
 
 
-#: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by ``w'``.
+#: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by
+#: ``w'``.
 TIP_ROTATIONS = ("linearized", "exact")
 
 

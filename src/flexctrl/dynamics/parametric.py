@@ -6,9 +6,10 @@ differs per configuration, so a study over configurations would compile once per
 :func:`constants_as_parameters` rebuilds such a Function with its constants as a
 vector input: models whose graphs differ only in constant values then share one
 compiled library (the cache key is a hash of the generated code).  Used by the NMPC
-(:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step (:mod:`flexctrl.loop.plant_step`)
-and the Jacobians shared by a model structure (:mod:`flexctrl.dynamics.jacobians`).
-:class:`Memo` keeps what is built from such a lifted Function once per process.
+(:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step
+(:mod:`flexctrl.loop.plant_step`) and the Jacobians shared by a model structure
+(:mod:`flexctrl.dynamics.jacobians`).  :class:`Memo` keeps what is built from such a lifted Function
+once per process.
 """
 
 from __future__ import annotations
@@ -132,7 +133,8 @@ def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Func
     )
 
 
-#: Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used beyond 16.
+#: Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used
+#: beyond 16.
 LIFTED = Memo(16)
 
 
@@ -254,7 +256,8 @@ def _lift(
 ) -> tuple[ca.Function, list[int], list] | None:
     """``(fp, sources, uses)``: ``f`` rebuilt with its constants as the last input, the constant
     instruction that gives each entry of ``c`` and, per use, where each entry is read (the
-    ``j``-th non-constant instruction's operand ``pos``); None when an instruction cannot be rebuilt."""
+    ``j``-th non-constant instruction's operand ``pos``); None when an instruction cannot be
+    rebuilt."""
     n_const = (
         sum(
             len(f.instruction_input(k))

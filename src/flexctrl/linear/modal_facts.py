@@ -98,8 +98,8 @@ def locked_frequencies(
     Generalised eigenvalues of ``K_ff`` against ``M_ff`` at the configuration of
     ``op`` (default: zero joint angles and deflections).  ``include_gravity`` adds
     the gravitational stiffness ``d g_f / d q_f`` (the linearisation's elastic block).
-    Both matrices are symmetrised (:func:`flexctrl.dynamics.natural_frequencies.locked_spectrum` computes
-    the spectrum).
+    Both matrices are symmetrised (:func:`flexctrl.dynamics.natural_frequencies.locked_spectrum`
+    computes the spectrum).
 
     Parameters
     ----------

@@ -93,8 +93,8 @@ class ModalLookup:
         (n_modes, 1), ``z`` (kg), (n_modes, n_modes), ``y`` (kg/rad),
         (n_modes, n_modes * n_joints), ``s`` (kg/rad^2), (n_modes * n_joints,) * 2, then the
         axial-shortening integrals ``sh_tip, sh_v, sh_w`` (P, 1), ``sh_y`` (n_modes, P),
-        ``sh_z`` (P, P) and ``sh_psi[r n_modes + j, p] = int rho dphi_j/dq_r N_p`` (n_modes n_joints, P),
-        ``P = n_modes (n_modes + 1) / 2`` (:mod:`flexctrl.modal.shortening`).
+        ``sh_z`` (P, P) and ``sh_psi[r n_modes + j, p] = int rho dphi_j/dq_r N_p`` (n_modes
+        n_joints, P), ``P = n_modes (n_modes + 1) / 2`` (:mod:`flexctrl.modal.shortening`).
     build_time_s : float
         Wall time to compute the table (0 when read from the cache).
     """

@@ -23,7 +23,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-#: Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate integrals).
+#: Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate
+#: integrals).
 GAUSS_POINTS = 24
 #: Field names, in the order the kinematics and the lookup tables carry them.
 SHORTENING_FIELDS = ("sh_tip", "sh_v", "sh_w", "sh_y", "sh_z")

@@ -1,10 +1,10 @@
 """CasADi Functions called through buffers bound to numpy arrays: no DM conversions per call.
 
 Calling a CasADi Function from Python converts every numpy input to a ``DM`` and every
-output back, which dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its inputs
-from and writes its outputs to memory bound once.  CasADi is column-major, so an input or
-output of shape (rows, cols) is a C-ordered numpy array of shape (cols, rows): pass states
-as rows, get results as rows.
+output back, which dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its
+inputs from and writes its outputs to memory bound once.  CasADi is column-major, so an input or
+output of shape (rows, cols) is a C-ordered numpy array of shape (cols, rows): pass states as rows,
+get results as rows.
 """
 
 from __future__ import annotations

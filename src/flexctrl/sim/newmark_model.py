@@ -25,9 +25,9 @@ Stability
     For ``delta >= 1/2`` and ``2 alpha < delta`` the step is stable only for
     ``omega h <= Omega_crit`` with
     ``Omega_crit = (zeta (delta - 1/2) + sqrt(delta/2 - alpha + zeta^2 (delta - 1/2)^2)) / (delta/2 - alpha)``
-    (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the
-    central-difference choice ``alpha = 0, delta = 1/2`` undamped; ``delta < 1/2``
-    makes it unstable.  :attr:`Newmark.stability_limit` is the undamped value.
+    (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the central-difference choice
+    ``alpha = 0, delta = 1/2`` undamped; ``delta < 1/2`` makes it unstable.
+    :attr:`Newmark.stability_limit` is the undamped value.
 
 Torque inputs
     The residual at the end of step ``i`` uses that step's held torque sample (plus
@@ -106,7 +106,8 @@ class Newmark(Integrator):
     newton_tol
         Newton stops when ``max|dq| <= newton_tol (1 + max|q|)``.
     max_iterations
-        Newton iterations per step before :class:`~flexctrl.dynamics.fem.newmark_dae.NewtonConvergenceError`.
+        Newton iterations per step before
+        :class:`~flexctrl.dynamics.fem.newmark_dae.NewtonConvergenceError`.
     """
 
     name: ClassVar[str] = "newmark"

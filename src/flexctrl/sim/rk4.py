@@ -152,8 +152,9 @@ def held_sample_loop(
     return ca.Function(name, args, loop.call(args))
 
 
-#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the imaginary-axis
-#: limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the polynomial).  The one copy.
+#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the
+#: imaginary-axis limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both
+#: from the polynomial).  The one copy.
 RK4_STABILITY_LIMIT = 2.785
 
 #: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.
@@ -239,8 +240,9 @@ class RK4(Integrator):
         self.compiled = compile_function(
             loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags
         )
-        # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per chunk.
-        # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows) array.
+        # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per
+        # chunk.  CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk,
+        # n_rows) array.
         n = self.chunk
         self._args = [
             np.zeros(self.model.n_x),

@@ -96,7 +96,7 @@ def test_modes_command_with_fem_fidelity(capsys):
     np.testing.assert_allclose(f, SUBEDI_TABLE3_HZ[2.0], atol=SUBEDI_TABLE3_ROUNDING_HZ + 0.01)
 
 
-# -- 2. the model interface --------------------------------------------------------------------------
+# -- 2. the model interface ------------------------------------------------------------------------
 def test_model_interface(fem4):
     m = fem4
     assert str(m.fidelity) == "fem:4" and m.n_joints == 3
@@ -263,7 +263,7 @@ def test_locked_frequencies_agree_with_assumed_modes(arm, q_deg):
     assert np.all(amm2[3:] > fem[3:] * 1.005)
 
 
-# -- 5. energy -----------------------------------------------------------------------------------------
+# -- 5. energy -------------------------------------------------------------------------------------
 def test_free_motion_conserves_energy(arm):
     """No damping, no torque, gravity on, joints free: T + U is a first integral of the model."""
     a = arm.with_payload(2.0)
@@ -329,7 +329,7 @@ def test_locked_free_vibration_energy_with_newmark(arm):
     assert np.ptp(El) < 1e-10 * El[0]
 
 
-# -- 6. axial shortening -----------------------------------------------------------------------------
+# -- 6. axial shortening ---------------------------------------------------------------------------
 @pytest.mark.parametrize("shortening, coefficient", [(True, 0.1933), (False, -1.0)])
 def test_axial_shortening_gives_southwell_centrifugal_stiffening(arm, shortening, coefficient):
     """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2
@@ -350,8 +350,8 @@ def test_axial_shortening_gives_southwell_centrifugal_stiffening(arm, shortening
 
 def test_axial_shortening_under_gravity(arm):
     """A hanging link with its payload is stiffened by the weight below each section, a standing one
-    softened by as much (to first order): d(omega^2) = g int (rho (L - x) + m_t) phi'^2 / m_l for the
-    clamped-mass mode phi (Rayleigh, exact to first order). Without the term neither changes."""
+    softened by as much (to first order): d(omega^2) = g int (rho (L - x) + m_t) phi'^2 / m_l for
+    the clamped-mass mode phi (Rayleigh, exact to first order). Without the term neither changes."""
     one = dataclasses.replace(
         arm.with_payload(2.0),
         links=arm.links[2:],

@@ -25,7 +25,8 @@ def test_symbolic_rows_are_the_numeric_rows(order):
 def test_idas_and_newmark_agree_on_the_beam():
     """Two integrators, one model: over 0.5 s of the fast push the tips part by Newmark's O(dt^2)
     error (IDAS at rtol 1e-8 is 1e-8 m from its own tight reference): halving Newmark's step cuts
-    the gap by about 3 (2.96 over this window, 3.7-3.9 over 1 s); the plain index-1 DAE drifts, but below its tolerance's level."""
+    the gap by about 3 (2.96 over this window, 3.7-3.9 over 1 s); the plain index-1 DAE drifts,
+    but below its tolerance's level."""
     case = beam_case()
     ida = simulate_idas(case.model, case.q0, 0.5, 1e-3, rtol=1e-8)
     gaps = []

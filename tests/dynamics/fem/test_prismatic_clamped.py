@@ -69,7 +69,8 @@ def test_prescribed_motion_holds_the_clamp_and_matches_full_coupling(motion_run)
     part = simulate_rp_arm(SPEC, MOTION, 4, dt=1e-3, duration=0.8)
     peak = np.abs(part.tip_y).max()
     assert peak > 5e-4
-    # the mouth row slides (its Newmark defect drifts it, 1.3e-8 m); the clamp rows are fixed on the link
+    # the mouth row slides (its Newmark defect drifts it, 1.3e-8 m); the clamp rows are fixed on the
+    # link
     assert part.phi_violation.max() < 1e-7 and np.abs(part.q[:, :2]).max() < 1e-12
     full = motion_run
     assert np.abs(full.tip_y - part.tip_y).max() < 1e-4 * peak

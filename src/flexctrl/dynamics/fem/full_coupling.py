@@ -96,9 +96,9 @@ def link_energies(
 ) -> tuple[Any, Any]:
     """``(T, V)`` of one link (CasADi expressions; no payload), to second order in ``(q, qd)``.
 
-    ``q``, ``qd`` the link's ``2 (N + 1)`` nodal values and rates; ``rE``, ``rEd`` radius of its root
-    E and its rate (m, m/s); ``thd`` (rad/s); ``g_ax``, ``g_perp`` gravity along and across the axis
-    (m/s^2).  ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
+    ``q``, ``qd`` the link's ``2 (N + 1)`` nodal values and rates; ``rE``, ``rEd`` radius of its
+    root E and its rate (m, m/s); ``thd`` (rad/s); ``g_ax``, ``g_perp`` gravity along and across the
+    axis (m/s^2).  ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
     """
     import casadi as ca
 
@@ -175,7 +175,8 @@ class FullCouplingResult:
     coordinates, now unknowns; ``torque`` (N m) and ``force`` (N): applied (force drive) or needed
     (motion drive, minus the joint multipliers); ``q``, ``qd`` nodal values and rates; ``lam`` the
     contact forces (N; N m for slope rows); ``tip_y`` transverse displacement of the tracked end in
-    the link frame (m); contact violations (m, m/s); ``newton_iterations`` per step; ``wall_time`` (s).
+    the link frame (m); contact violations (m, m/s); ``newton_iterations`` per step; ``wall_time``
+    (s).
     """
 
     model: SlidingFullModel
@@ -228,7 +229,7 @@ class SlidingFullModel:
         self._fast = {k: _Evaluator(self._fun[k]) for k in ("M", "f", "f_z", "f_zd")}
         self._parts_W: float | None = None
 
-    # -- to provide ----------------------------------------------------------------------------------
+    # -- to provide --------------------------------------------------------------------------------
     def _parts(self, W: float) -> list[tuple[Array, Array]]:
         """``[(R, v), ...]``: per link part, ``R[d]`` (``d = 0..3``, rows x ``ne``) and ``v = dx/dW`` per row."""
         raise NotImplementedError
@@ -237,7 +238,7 @@ class SlidingFullModel:
         """Raise :class:`~flexctrl.errors.SimulationError` when ``W`` (m) leaves the stroke."""
         raise NotImplementedError
 
-    # -- evaluation ----------------------------------------------------------------------------------
+    # -- evaluation --------------------------------------------------------------------------------
     def contact_parts(self, W: float, t: float = math.nan) -> list[tuple[Array, Array]]:
         """The constraint rows at overhang ``W`` (cached per ``W``); see :meth:`_parts`."""
         self.check_W(W, t)
@@ -376,8 +377,9 @@ class SlidingFullModel:
     ) -> tuple[DAEResult, Array, Array, Array, Array]:
         """Newmark + Baumgarte from :meth:`initial_state` (``initial_q`` replaces the nodal values; must
         satisfy the contacts to 1e-9 m, rates made consistent); ``options`` go to
-        :func:`~flexctrl.dynamics.fem.newmark_dae.simulate`.  Returns the result, the torque and force
-        (applied, or needed by a motion drive: minus the joint multipliers) and the contact violations."""
+        :func:`~flexctrl.dynamics.fem.newmark_dae.simulate`.  Returns the result, the torque and
+        force (applied, or needed by a motion drive: minus the joint multipliers) and the contact
+        violations."""
         z0, zd0 = self.initial_state()
         if initial_q is not None:
             q0 = np.asarray(initial_q, dtype=float)

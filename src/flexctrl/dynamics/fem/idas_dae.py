@@ -48,7 +48,8 @@ def _hermite_coefficients(le: float) -> Array:
 
 def symbolic_point_row(x, order: int, n_elements: int, length: float):
     """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` for a symbolic material point ``x``
-    (m) on a uniform mesh of Hermite elements (an interior node belongs to the element on its right)."""
+    (m) on a uniform mesh of Hermite elements (an interior node belongs to the element on its
+    right)."""
     import casadi as ca  # only here: the numpy models of this layer do without CasADi
 
     le = length / n_elements

@@ -1,9 +1,9 @@
 """Frequencies of a model: locked-joint frequencies of the FE arm and of the assumed-modes model, the
 free-joint spectral radius, and the fixed RK4 step they allow.
 
-Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`) and the
-Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of ``docs/fem.md``) and
-:mod:`flexctrl.analysis.accuracy` (the speed/accuracy study).
+Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`)
+and the Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of
+``docs/fem.md``) and :mod:`flexctrl.analysis.accuracy` (the speed/accuracy study).
 """
 
 from __future__ import annotations

@@ -11,8 +11,9 @@
   points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus mouth bearing);
 * :func:`check_elements` and :data:`ENDS`, the checks the models share.
 
-Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling), :mod:`flexctrl.dynamics.fem.rp_arm_full`
-(full coupling) and :mod:`flexctrl.dynamics.fem.telescoping`.
+Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling),
+:mod:`flexctrl.dynamics.fem.rp_arm_full` (full coupling) and
+:mod:`flexctrl.dynamics.fem.telescoping`.
 """
 
 from __future__ import annotations
@@ -49,8 +50,8 @@ def check_elements(n_elements: object, key: str = "n_elements") -> None:
 
 def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: int = 2) -> Array:
     """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q`` (``d = 0..max_derivative``) on a uniform mesh
-    of ``n_elements`` Hermite elements over ``length`` (m); each row holds the shape functions of the
-    element containing ``x_k`` (an interior node belongs to the element on its right)."""
+    of ``n_elements`` Hermite elements over ``length`` (m); each row holds the shape functions of
+    the element containing ``x_k`` (an interior node belongs to the element on its right)."""
     xs = np.atleast_1d(np.asarray(xs, dtype=float))
     le = length / n_elements
     R = np.zeros((max_derivative + 1, xs.size, 2 * (n_elements + 1)))
@@ -220,9 +221,10 @@ class FrameLink:
     ) -> tuple[float, float, float]:
         """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N, tension positive).
 
-        ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at E
-        (the reaction of the whole link and payload enters at ``x = 0``): ``F(x) = -int_x^L rho a~ -
-        m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``; ``a~ = r_E'' - theta'^2 (r_E + x) - g_ax``.
+        ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at
+        E (the reaction of the whole link and payload enters at ``x = 0``):
+        ``F(x) = -int_x^L rho a~ - m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``;
+        ``a~ = r_E'' - theta'^2 (r_E + x) - g_ax``.
         """
         rho, L, m_t = self.rho, self.length, self.payload_mass
         # a~(x) = b0 - w2 x  with b0 = rE'' - th'^2 rE - g_ax, w2 = th'^2

@@ -17,7 +17,8 @@ Pan's Fig 4 joint (``[housing] joint = "clamped"``, ``models/rp_arm_clamped.toml
     housing mouth D' (radius ``support_outer``, material point ``L - W``, Eq 24).  Statically it
     is a beam clamped at E and propped at D' with the overhang ``c = W`` beyond it: under a tip
     force ``P`` the tip deflects ``P c^3 / (3 EI)`` (a cantilever of the current free length) plus
-    ``w'(D') c = P c^2 a / (4 EI)`` from the clamped-propped span ``a = L - W`` (test).  Driven at E.
+    ``w'(D') c = P c^2 a / (4 EI)`` from the clamped-propped span ``a = L - W`` (test).  Driven at
+    E.
 
 Prescribed motion (partial coupling, Eq 42)
     ``theta(t)`` and ``W(t)`` follow the smooth rest-to-rest profile of Eq 57:
@@ -156,7 +157,8 @@ class RPArmModel:
 
     def support_positions(self, t: float) -> tuple[Array, Array, Array]:
         """Material positions of the constraint points (m) and their first/second time derivatives
-        (the two supports; with ``joint = "clamped"`` E twice, for ``w`` and ``w'``, then the mouth)."""
+        (the two supports; with ``joint = "clamped"`` E twice, for ``w`` and ``w'``, then the
+        mouth)."""
         m = self.motion
         v = np.asarray(self.rows.rates)
         return self.rows.points(float(m.W(t))), v * float(m.Wd(t)), v * float(m.Wdd(t))
@@ -172,7 +174,8 @@ class RPArmModel:
 
     def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
         """Static deflection under a transverse force ``tip_force`` (N) at H with the constraints of
-        time ``t`` and no frame loads: ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``; returns ``(q, lam)``."""
+        time ``t`` and no frame loads: ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``; returns
+        ``(q, lam)``."""
         f = np.zeros(self.ndof)
         f[self.tip] = tip_force
         return self._constrained_static(f, t)

@@ -1,7 +1,8 @@
 """Revolute-prismatic arm, full coupling (Pan et al. 1990, Eq 43): ``theta`` and ``W`` among the unknowns.
 
 The arm, its geometry and the prescribed-motion model (partial coupling, Eq 42) are described in
-:mod:`flexctrl.dynamics.fem.rp_arm`; the description is :class:`~flexctrl.spec.fem_models.RPArmSpec`.
+:mod:`flexctrl.dynamics.fem.rp_arm`; the description is
+:class:`~flexctrl.spec.fem_models.RPArmSpec`.
 
 Equations (:class:`RPArmFullModel`, :func:`simulate_rp_arm_full`)
     Coordinates ``z = (q, theta, W)``; inputs the joint torque ``tau`` and the axial force ``F``
@@ -21,13 +22,14 @@ Equations (:class:`RPArmFullModel`, :func:`simulate_rp_arm_full`)
     with ``Gs = rho int (L - x) N'^T N'`` (``int rho s = 1/2 q.Gs q``) and ``Gx = rho int (L^2 -
     x^2)/2 N'^T N'``.  ``M(z)``, the velocity terms and gravity follow by CasADi differentiation
     of ``L = T - V``; ``Q = (0, tau, F)``.  With ``theta(t)``, ``W(t)`` prescribed the ``q`` rows
-    are exactly the partial-coupling equations of :mod:`~flexctrl.dynamics.fem.rp_arm`, Pan's ``K_g`` included (the ``- W' qd.Gs q``
-    and ``- theta'^2 ... Gs`` terms produce it), which a test checks; unlike Pan's ``K_g`` with
-    the nominal axial force, the shortening here stays a conservative part of ``T``, so
-    ``M`` is symmetric and the free arm conserves ``T + V``.  The supports ``w(L - W - d_k) = 0``
-    now depend on the unknown ``W``: ``Phi_z = (R0, 0, -R1 q)``, ``h = 2 W' R1 qd - W'^2 R2 q``.
-    With Pan's Fig 4 joint (``spec.joint = "clamped"``) the rows are ``w(0) = w'(0) = 0`` (fixed
-    on the link, Eqs 22-23) and the mouth bearing ``w(L - W) = 0`` (Eq 24).
+    are exactly the partial-coupling equations of :mod:`~flexctrl.dynamics.fem.rp_arm`, Pan's
+    ``K_g`` included (the ``- W' qd.Gs q`` and ``- theta'^2 ... Gs`` terms produce it), which a test
+    checks; unlike Pan's ``K_g`` with the nominal axial force, the shortening here stays a
+    conservative part of ``T``, so ``M`` is symmetric and the free arm conserves ``T + V``.  The
+    supports ``w(L - W - d_k) = 0`` now depend on the unknown ``W``: ``Phi_z = (R0, 0, -R1 q)``,
+    ``h = 2 W' R1 qd - W'^2 R2 q``.  With Pan's Fig 4 joint (``spec.joint = "clamped"``) the rows
+    are ``w(0) = w'(0) = 0`` (fixed on the link, Eqs 22-23) and the mouth bearing ``w(L - W) = 0``
+    (Eq 24).
 
 The Lagrangian pieces, the constraint algebra and the runner are shared with the telescoping pair
 (:mod:`flexctrl.dynamics.fem.full_coupling`).
@@ -68,14 +70,14 @@ class RPArmFullModel(SlidingFullModel):
     """The R-P arm with the nominal joint coordinates among the unknowns (full coupling, Eq 43).
 
     Coordinates ``z = (q, theta, W)``: the ``2 (N + 1)`` nodal ``(w, w')`` of the sliding link, the
-    housing angle (rad) and the overhang ``W`` (m) beyond the outer support (or the mouth).  ``M(z)``,
-    the velocity terms and the generalised forces come from the Lagrangian by CasADi automatic
-    differentiation (module docstring); the constraint rows and their derivatives are formed in numpy,
-    because a row follows its support from element to element as ``W`` changes.
+    housing angle (rad) and the overhang ``W`` (m) beyond the outer support (or the mouth).
+    ``M(z)``, the velocity terms and the generalised forces come from the Lagrangian by CasADi
+    automatic differentiation (module docstring); the constraint rows and their derivatives are
+    formed in numpy, because a row follows its support from element to element as ``W`` changes.
 
-    ``drive``: an :class:`RPForces` (torque and force prescribed) or an :class:`RPMotion`; the latter
-    adds the constraints ``theta - theta(t) = 0`` and ``W - W(t) = 0`` whose multipliers are minus
-    the joint torque and axial force the motion needs.
+    ``drive``: an :class:`RPForces` (torque and force prescribed) or an :class:`RPMotion`; the
+    latter adds the constraints ``theta - theta(t) = 0`` and ``W - W(t) = 0`` whose multipliers are
+    minus the joint torque and axial force the motion needs.
     """
 
     def __init__(
@@ -176,8 +178,9 @@ def simulate_rp_arm_full(
     Parameters
     ----------
     drive
-        :class:`RPForces` (joint torque and axial force prescribed, ``theta`` and ``W`` solved for) or
-        :class:`RPMotion` (both prescribed through constraints; reports the torque and force needed).
+        :class:`RPForces` (joint torque and axial force prescribed, ``theta`` and ``W`` solved for)
+        or :class:`RPMotion` (both prescribed through constraints; reports the torque and force
+        needed).
     n_elements, dt, duration
         Hermite elements over the link; step and simulated time, s.
     gamma, beta, alpha, delta
@@ -191,10 +194,11 @@ def simulate_rp_arm_full(
     newton_tol, max_iterations
         Newton stopping rule of :func:`flexctrl.dynamics.fem.newmark_dae.simulate`.
     initial_q
-        Initial nodal values (m, rad), e.g. :meth:`flexctrl.dynamics.fem.rp_arm.RPArmModel.initial_shape`; default undeformed.
-        Must satisfy the constraints (checked, 1e-9 m).  If the link slides (``Wd0 != 0``) the
-        nodal velocities start as the smallest (mass-weighted) ones that keep the supports
-        at rest on the deflected link, ``w_t(x_k) = W' w'(x_k)``, so that ``Phidot = 0``.
+        Initial nodal values (m, rad), e.g.
+        :meth:`flexctrl.dynamics.fem.rp_arm.RPArmModel.initial_shape`; default undeformed.  Must
+        satisfy the constraints (checked, 1e-9 m).  If the link slides (``Wd0 != 0``) the nodal
+        velocities start as the smallest (mass-weighted) ones that keep the supports at rest on the
+        deflected link, ``w_t(x_k) = W' w'(x_k)``, so that ``Phidot = 0``.
 
     Raises
     ------

@@ -27,17 +27,18 @@ Contacts (the compatibility conditions of Eqs 26-28)
 
 Frame, loads, axial force
     Both links are measured in the frame turning with ``theta``; each has the partial-coupling
-    terms of :class:`~flexctrl.dynamics.fem.moving_frame.FrameLink`: ``-theta'^2 M`` softening, loads
-    ``-int rho N^T (theta'' (r + x) + 2 theta' r' - g_perp)``, and (axial shortening, Eqs 16-18)
-    ``K_g`` from the rigid-motion axial force.  The axial drive is anchored at the hub and
+    terms of :class:`~flexctrl.dynamics.fem.moving_frame.FrameLink`: ``-theta'^2 M`` softening,
+    loads ``-int rho N^T (theta'' (r + x) + 2 theta' r' - g_perp)``, and (axial shortening, Eqs
+    16-18) ``K_g`` from the rigid-motion axial force.  The axial drive is anchored at the hub and
     pushes the inner link at E, so the inner link carries Eq 18 with the reaction at E, and the
-    outer link only its own inertia (reaction at its clamped root).  Axial displacements are
-    not modelled (Eq 26's axial component is the prescribed ``s(t)``).
+    outer link only its own inertia (reaction at its clamped root).  Axial displacements are not
+    modelled (Eq 26's axial component is the prescribed ``s(t)``).
 
-Solution: Newmark + Baumgarte (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`); the DAE is linear.
+Solution: Newmark + Baumgarte (:func:`flexctrl.dynamics.fem.newmark_dae.simulate`); the DAE is
+linear.
 
-Description and model file: :class:`~flexctrl.spec.fem_models.TelescopingSpec` (``models/telescoping.toml``,
-read by :func:`~flexctrl.spec.fem_models.load_telescoping`).
+Description and model file: :class:`~flexctrl.spec.fem_models.TelescopingSpec`
+(``models/telescoping.toml``, read by :func:`~flexctrl.spec.fem_models.load_telescoping`).
 """
 
 from __future__ import annotations

@@ -9,10 +9,10 @@ Coordinates ``z = (q1, q2, theta, W)``: the tube's nodal ``(w, w')`` without its
 the inner link's, then the joint coordinates.  Each link's ``T`` and ``V`` are
 :func:`~flexctrl.dynamics.fem.full_coupling.link_energies` in the frame turning with ``theta``: the
 tube with its root at ``r0`` fixed, the inner link with E at ``r0 + L1 - L2 + W`` moving at ``W'``,
-both with their axial shortening measured from their driven (tube: clamped) root; plus the payload at
-the inner tip, the hub inertia and the carriage.  A contact row ``w1(x1_k) - w2(x2_k)`` (or of the
-slopes) has a part on each link whose material point moves with ``W`` at ``dx1/dW = 1`` (a bearing on
-the inner link) or ``dx2/dW = -1`` (a bearing on the tube); the constraint algebra is
+both with their axial shortening measured from their driven (tube: clamped) root; plus the payload
+at the inner tip, the hub inertia and the carriage.  A contact row ``w1(x1_k) - w2(x2_k)`` (or of
+the slopes) has a part on each link whose material point moves with ``W`` at ``dx1/dW = 1`` (a
+bearing on the inner link) or ``dx2/dW = -1`` (a bearing on the tube); the constraint algebra is
 :class:`~flexctrl.dynamics.fem.full_coupling.SlidingFullModel`'s.
 
 With ``theta(t)``, ``W(t)`` imposed (an :class:`~flexctrl.dynamics.fem.moving_frame.RPMotion` drive)
