@@ -1,4 +1,4 @@
-"""CasADi Functions whose numeric constants become an input, so one compiled library serves many models.
+"""CasADi Functions whose numeric constants become an input: one compiled library, many models.
 
 A frozen-modes model bakes its modal constants (which depend on the payload and on
 the configuration the modes were computed at) into ``f``; C code generated from it
@@ -40,7 +40,7 @@ class Memo:
         self._lock = threading.Lock()  # a Dask worker may run two runs in threads
 
     def get(self, key: str, build: Callable[[], Any]) -> tuple[Any, bool]:
-        """``(value, reused)``: ``build()`` the first time ``key`` is asked for, the kept value after."""
+        """``(value, reused)``: ``build()`` when ``key`` is first asked for, then the kept value."""
         value = self.lookup(key)
         if value is not None:
             return value, True
@@ -120,7 +120,7 @@ def try_expand(fun: ca.Function) -> ca.Function:
 
 
 def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
-    """:func:`constants_as_parameters` of ``fun()`` (a Function of ``model`` called ``name``), once per model.
+    """:func:`constants_as_parameters` of ``fun()``, ``model``'s Function ``name``, once per model.
 
     Kept with the model (:func:`~flexctrl.dynamics.model.derived`): every plant step count,
     output-map length and reference table of one model lifts its constants once (the lift
@@ -139,7 +139,7 @@ LIFTED = Memo(16)
 
 
 def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
-    """A hash of an SX Function's operation sequence, its input and output sparsities and ``per_use``.
+    """A hash of an SX Function's operations, its input and output sparsities and ``per_use``.
 
     It leaves out the operands' wiring, which costs a Python call per instruction to read
     (most of a lift's time): a kept lift found by this key is used only after it reproduces

@@ -1,4 +1,4 @@
-"""Kinematics, mass matrix and energies of the finite-element arm (see :mod:`flexctrl.dynamics.fem.fem_arm`).
+"""Kinematics, mass matrix and energies of the finite-element arm (:mod:`.fem_arm`).
 
 Kinematics and kinetic energy of link i (Eqs 2-6, 30)
     In the frame ``(r_i, R(alpha_i))`` a material point ``x`` is at
@@ -94,7 +94,7 @@ class _Layout:
 
 
 def _link_gram(lm: LinkMatrices, mass: float, inertia: float, qw, qu):
-    """``G`` of ``T = 1/2 nu^T G nu``, ``nu = (v_bx, v_by, omega, q_w', q_u')`` (module docstring)."""
+    """``G`` of ``T = 1/2 nu^T G nu``, ``nu = (v_bx, v_by, omega, q_w', q_u')`` (module doc)."""
     L, nw, nu = lm.length, lm.n_w, lm.n_u
     C = ca.DM(lm.C_wu)
     g_vx_om = -ca.dot(ca.DM(lm.s0w), qw)
@@ -167,8 +167,8 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
     for i, joint in enumerate(arm.joints):
         if joint.type != "revolute":
             raise SpecError(
-                f"value {joint.type!r} is not supported by the finite-element arm; allowed: 'revolute' "
-                "(prismatic joints: flexctrl.dynamics.fem.rp_arm)",
+                f"value {joint.type!r} is not supported by the finite-element arm; allowed: "
+                "'revolute' (prismatic joints: flexctrl.dynamics.fem.rp_arm)",
                 source=arm.source,
                 key=f"joints[{i + 1}].type",
             )
@@ -176,7 +176,7 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
 
 @dataclass(frozen=True)
 class FemExpressions:
-    """Symbolic pieces of the finite-element arm (CasADi SX in ``q``), before Lagrange's equations."""
+    """Symbolic pieces of the finite-element arm (SX in ``q``), before Lagrange's equations."""
 
     layout: _Layout
     mats: tuple[LinkMatrices, ...]
@@ -281,7 +281,7 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
 def locked_matrices(
     arm: ArmSpec, n_elements: int, q_r: Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(M_ff, K_ff)`` of the elastic dofs with the joints clamped at ``q_r`` and the links straight.
+    """``(M_ff, K_ff)`` of the elastic dofs, the joints clamped at ``q_r``, the links straight.
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint
     natural frequencies are ``sqrt(eig(K_ff, M_ff))``.

@@ -224,9 +224,10 @@ def _fem_functions(
 def locked_frequencies(
     functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int
 ) -> np.ndarray:
-    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``, elastic dofs at zero.
+    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``.
 
-    The joints clamped, no gravity preload; see :func:`generalized_frequencies`.
+    The joints clamped, the elastic dofs at zero, no gravity preload; see
+    :func:`generalized_frequencies`.
     """
     nq = K.shape[0]
     q0 = np.concatenate([np.asarray(q_r, dtype=float), np.zeros(nq - n_joints)])
@@ -236,7 +237,7 @@ def locked_frequencies(
 
 
 def generalized_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` positive definite.
+    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` definite.
 
     Solved as ``M v = mu K v``, ``lambda = 1/mu``: with the stiff axial elements
     ``||K||`` exceeds the lowest eigenvalues by 1e7 and more, and the direct

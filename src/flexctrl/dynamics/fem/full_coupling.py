@@ -1,4 +1,4 @@
-"""Full coupling (Pan et al. 1990, Eq 43) of links sliding along a turning axis: the shared machinery.
+"""Full coupling (Pan et al. 1990, Eq 43) of links sliding along a turning axis: shared parts.
 
 The nominal joint coordinates ``theta`` (rad, joint 1) and ``W`` (m, the prismatic stroke) are
 unknowns beside the nodal values; the inputs are a joint torque and an axial force.  Used by
@@ -54,7 +54,7 @@ class RPForces:
     def sine(
         cls, torque_amplitude: float, force_amplitude: float, T: float, **initial: float
     ) -> RPForces:
-        """One full sine period over ``[0, T]`` (s), zero afterwards: ``A sin(2 pi t / T)`` (N m and N)."""
+        """One sine period ``A sin(2 pi t / T)`` over ``[0, T]`` (s), zero after (N m and N)."""
         if not T > 0:
             raise SpecError(f"value {T!r} is not allowed; allowed: T > 0 s", key="T")
 
@@ -67,7 +67,7 @@ class RPForces:
     def from_samples(
         cls, t: ArrayLike, torque: ArrayLike, force: ArrayLike, **initial: float
     ) -> RPForces:
-        """Inputs interpolated linearly between samples (s, N m, N), e.g. the multipliers of a motion run."""
+        """Inputs interpolated linearly between samples (s, N m, N), e.g. a motion's multipliers."""
         t, tau, F = (np.asarray(a, dtype=float).copy() for a in (t, torque, force))
         return cls(
             torque=lambda s: float(np.interp(s, t, tau)),
@@ -77,8 +77,11 @@ class RPForces:
 
 
 def shortening_matrices(link: FrameLink) -> tuple[Array, Array]:
-    """``Gs = rho int (L - x) N'^T N'`` (``int rho s dx = 1/2 q.Gs q``) and ``Gx = rho int (L^2 - x^2)/2
-    N'^T N'`` (``int rho x s dx = 1/2 q.Gx q``), ``s(x) = 1/2 int_0^x w'^2``."""
+    """``(Gs, Gx)``: the matrices of the shortening's integrals, ``s(x) = 1/2 int_0^x w'^2``.
+
+    ``Gs = rho int (L - x) N'^T N'`` (``int rho s dx = 1/2 q.Gs q``) and
+    ``Gx = rho int (L^2 - x^2)/2 N'^T N'`` (``int rho x s dx = 1/2 q.Gx q``).
+    """
     L, rho = link.length, link.rho
     return rho * (L * link.G_c - link.G_1), rho * (0.5 * L * L * link.G_c - 0.5 * link.G_2)
 
@@ -141,7 +144,7 @@ def payload_energies(
     g_perp: Any,
     shortening: bool,
 ) -> tuple[Any, Any]:
-    """``(T, V)`` of a point mass (kg) at the tip H of ``link`` (same expansion as :func:`link_energies`)."""
+    """``(T, V)`` of a point mass (kg) at the tip H of ``link``, as in :func:`link_energies`."""
     import casadi as ca
 
     sh = 1.0 if shortening else 0.0
@@ -199,7 +202,7 @@ class FullCouplingResult:
 
 
 class SlidingFullModel:
-    """Base of the fully coupled models: coordinates ``z = (q, theta, W)``, ``ne`` nodal values first.
+    """Base of the fully coupled models: ``z = (q, theta, W)``, the ``ne`` nodal values first.
 
     A subclass sets ``ne``, ``drive`` and calls :meth:`_build` with the symbols and ``T``, ``V``;
     it provides :meth:`contact_parts` (the constraint rows as parts per link) and :meth:`check_W`.
@@ -231,7 +234,10 @@ class SlidingFullModel:
 
     # -- to provide --------------------------------------------------------------------------------
     def _parts(self, W: float) -> list[tuple[Array, Array]]:
-        """``[(R, v), ...]``: per link part, ``R[d]`` (``d = 0..3``, rows x ``ne``) and ``v = dx/dW`` per row."""
+        """``[(R, v), ...]`` per link part: ``R[d]`` (``d = 0..3``, rows x ``ne``), ``v = dx/dW``.
+
+        To be provided by the subclass.
+        """
         raise NotImplementedError
 
     def check_W(self, W: float, t: float) -> None:
@@ -257,7 +263,7 @@ class SlidingFullModel:
         return self._eval("M", z)
 
     def internal_force(self, z: Array, zd: Array) -> Array:
-        """``dL/dz - (d^2 T / dzd dz) zd``: everything but the actuator inputs and constraint forces."""
+        """``dL/dz - (d^2 T / dzd dz) zd``: all but the actuator inputs and constraint forces."""
         return self._eval("f", z, zd).ravel()
 
     def energies(self, z: Array, zd: Array) -> tuple[float, float]:
@@ -266,11 +272,11 @@ class SlidingFullModel:
         return float(T), float(V)
 
     def momentum(self, z: Array, zd: Array) -> Array:
-        """Generalised momenta ``dT/dzd``; entry ``ith`` is the angular momentum about joint 1 (kg m^2/s)."""
+        """Momenta ``dT/dzd``; entry ``ith``: angular momentum about joint 1 (kg m^2/s)."""
         return self._eval("momentum", z, zd).ravel()
 
     def inputs(self, t: float) -> tuple[float, float]:
-        """Applied ``(torque, force)`` (N m, N); zero under a motion drive (the multipliers carry them)."""
+        """Applied ``(torque, force)`` (N m, N); zero under a motion drive (the multipliers)."""
         if self.motion_driven:
             return 0.0, 0.0
         return float(self.drive.torque(t)), float(self.drive.force(t))
@@ -295,7 +301,7 @@ class SlidingFullModel:
         return z, zd
 
     def consistent_rates(self, z: Array, Wd: float) -> Array:
-        """Smallest (mass-weighted) nodal rates with ``Phidot = 0`` when the links slide at ``Wd`` (m/s)."""
+        """Smallest (mass-weighted) nodal rates with ``Phidot = 0``, sliding at ``Wd`` (m/s)."""
         ne = self.ne
         parts = self.contact_parts(z[self.iW])
         A = sum(R[0] for R, _ in parts)
@@ -345,7 +351,7 @@ class SlidingFullModel:
             return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))] if nj else contact
 
         def h_tangents(z: Array, zd: Array, t: float) -> tuple[Array, Array]:
-            """``(dh/dz, dh/dzd)`` of the contact rows (the joint rows of a motion drive have none)."""
+            """``(dh/dz, dh/dzd)`` of the contact rows (a motion drive's joint rows have none)."""
             q, qd, Wd = z[:ne], zd[:ne], zd[iW]
             parts = self.contact_parts(z[iW], t)
             m = parts[0][0].shape[1]
@@ -375,8 +381,10 @@ class SlidingFullModel:
     def run(
         self, dt: float, duration: float, initial_q: ArrayLike | None = None, **options: Any
     ) -> tuple[DAEResult, Array, Array, Array, Array]:
-        """Newmark + Baumgarte from :meth:`initial_state` (``initial_q`` replaces the nodal values; must
-        satisfy the contacts to 1e-9 m, rates made consistent); ``options`` go to
+        """Newmark + Baumgarte from :meth:`initial_state`.
+
+        ``initial_q`` replaces the nodal values (it must satisfy the contacts to 1e-9 m; the
+        rates are made consistent); ``options`` go to
         :func:`~flexctrl.dynamics.fem.newmark_dae.simulate`.  Returns the result, the torque and
         force (applied, or needed by a motion drive: minus the joint multipliers) and the contact
         violations."""

@@ -1,4 +1,4 @@
-"""The prescribed-motion sliding-link problems integrated by IDAS, a variable-order BDF (Gear-type) DAE code.
+"""The prescribed-motion sliding links integrated by IDAS, a variable-order BDF (Gear-type) code.
 
 Pan, Scott & Ulsoy (1990, Sec. 4) write: "Computer runs showed the current method [Newmark with
 Baumgarte stabilisation] to be more efficient than existing codes based on Gear's algorithm."  To
@@ -35,8 +35,10 @@ Array = NDArray[np.float64]
 
 
 def _hermite_coefficients(le: float) -> Array:
-    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i] zeta^k``
-    (exact: the cubic through four samples of :func:`~flexctrl.beam.elements.hermite_shape`)."""
+    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i] z^k``.
+
+    Exact: the cubic through four samples of :func:`~flexctrl.beam.elements.hermite_shape`.
+    """
     zs = le * np.array([0.0, 1 / 3, 2 / 3, 1.0])
     C0 = np.linalg.solve(np.vander(zs, 4, increasing=True), hermite_shape(zs, le, 0))
     C = np.zeros((4, 4, 4))
@@ -47,9 +49,11 @@ def _hermite_coefficients(le: float) -> Array:
 
 
 def symbolic_point_row(x, order: int, n_elements: int, length: float):
-    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` for a symbolic material point ``x``
-    (m) on a uniform mesh of Hermite elements (an interior node belongs to the element on its
-    right)."""
+    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` at a symbolic point ``x``.
+
+    ``x`` is a material point (m) on a uniform mesh of Hermite elements; an interior node
+    belongs to the element on its right.
+    """
     import casadi as ca  # only here: the numpy models of this layer do without CasADi
 
     le = length / n_elements
@@ -67,10 +71,13 @@ def symbolic_point_row(x, order: int, n_elements: int, length: float):
 
 @dataclass(frozen=True)
 class IdasResult:
-    """An IDAS run on the output grid ``t`` (s): nodal values ``q`` and rates ``qd``, the tracked-end
-    deflection ``tip_y`` (m), constraint violations ``phi_violation`` (m) and ``phidot_violation``
-    (m/s) evaluated independently from the numpy rows, ``wall_time`` (s) of the integration and the
-    solver statistics ``stats`` (steps, residual evaluations)."""
+    """An IDAS run on the output grid ``t`` (s).
+
+    Nodal values ``q`` and rates ``qd``, the tracked-end deflection ``tip_y`` (m), constraint
+    violations ``phi_violation`` (m) and ``phidot_violation`` (m/s) evaluated independently from
+    the numpy rows, ``wall_time`` (s) of the integration and the solver statistics ``stats``
+    (steps, residual evaluations).
+    """
 
     t: Array
     q: Array
@@ -100,7 +107,7 @@ def simulate_idas(
     suppress_algebraic: bool = True,
     max_order: int = 5,
 ) -> IdasResult:
-    """Integrate ``model`` from ``q0`` at rest with IDAS; outputs every ``grid_dt`` seconds to ``t_end``.
+    """Integrate ``model`` from ``q0`` at rest with IDAS, output every ``grid_dt`` s to ``t_end``.
 
     Parameters
     ----------

@@ -1,5 +1,7 @@
-"""Frequencies of a model: locked-joint frequencies of the FE arm and of the assumed-modes model, the
-free-joint spectral radius, and the fixed RK4 step they allow.
+"""Frequencies of a model and the fixed RK4 step they allow.
+
+The locked-joint frequencies of the finite-element arm and of the assumed-modes model, and the
+free-joint spectral radius.
 
 Computed from the models' ``M`` and ``K`` (:func:`flexctrl.dynamics.fem.fem_arm.locked_matrices`)
 and the Jacobian of ``f``; used by :mod:`flexctrl.analysis.fem_report` (the figures of
@@ -29,7 +31,7 @@ def locked_fem_hz(
 def locked_amm_hz(
     arm: ArmSpec, n_modes_per_link: int, q_deg: Sequence[float], n_modes: int = 6
 ) -> np.ndarray:
-    """Lowest locked-joint frequencies (Hz) of the assumed-modes model with modes frozen at ``q``."""
+    """Lowest locked-joint frequencies (Hz) of the assumed-modes model, modes frozen at ``q``."""
     from flexctrl.dynamics.build import build_model
 
     q = np.radians(q_deg)
@@ -56,7 +58,10 @@ def free_joint_radius(model) -> float:
 
 
 def rk4_step_for(model, sample: float, safety: float = 2.4) -> int:
-    """Substeps per sample so that ``omega h <= safety`` for the larger of the locked ``omega_max`` and
-    the free-joint spectral radius (RK4's limit on the imaginary axis is 2.83)."""
+    """Substeps per sample with ``omega h <= safety`` at the model's fastest frequency.
+
+    That is the larger of the locked ``omega_max`` and the free-joint spectral radius (RK4's
+    limit on the imaginary axis is 2.83).
+    """
     omega = max(float(model.omega_max), free_joint_radius(model))
     return max(1, math.ceil(sample * omega / safety))

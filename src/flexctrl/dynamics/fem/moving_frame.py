@@ -7,8 +7,9 @@
   housing angle ``theta(t)``;
 * :func:`point_rows`: the rows giving ``w`` and its derivatives at arbitrary material points,
   which move from element to element as the supports slide;
-* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at material
-  points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus mouth bearing);
+* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at
+  material points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus
+  mouth bearing);
 * :func:`check_elements` and :data:`ENDS`, the checks the models share.
 
 Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling),
@@ -49,9 +50,12 @@ def check_elements(n_elements: object, key: str = "n_elements") -> None:
 
 
 def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: int = 2) -> Array:
-    """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q`` (``d = 0..max_derivative``) on a uniform mesh
-    of ``n_elements`` Hermite elements over ``length`` (m); each row holds the shape functions of
-    the element containing ``x_k`` (an interior node belongs to the element on its right)."""
+    """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q``, ``d = 0..max_derivative``.
+
+    On a uniform mesh of ``n_elements`` Hermite elements over ``length`` (m); each row holds the
+    shape functions of the element containing ``x_k`` (an interior node belongs to the element
+    on its right).
+    """
     xs = np.atleast_1d(np.asarray(xs, dtype=float))
     le = length / n_elements
     R = np.zeros((max_derivative + 1, xs.size, 2 * (n_elements + 1)))
@@ -85,8 +89,10 @@ class PointRows:
         return np.asarray(self.offsets) + np.asarray(self.rates) * W
 
     def at(self, W: float, n_elements: int, length: float) -> Array:
-        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``'s function,
-        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative)."""
+        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``.
+
+        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative).
+        """
         P = point_rows(self.points(W), n_elements, length, 3)
         R = np.zeros((4, self.count, P.shape[2]))
         for d in range(4):
@@ -97,7 +103,7 @@ class PointRows:
 
 
 def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
-    """The rows of an R-P arm's prismatic joint on a link of ``length`` (m), supports ``D`` (m) apart.
+    """The rows of an R-P arm's prismatic joint: a link of ``length`` (m), supports ``D`` (m) apart.
 
     ``"supports"``: ``w = 0`` at the two supports, material points ``L - D - W`` and ``L - W``
     (Eqs 24-25 at each).  ``"clamped"`` (Pan's Fig 4): ``w(0) = w'(0) = 0`` at E in the carriage
@@ -117,7 +123,7 @@ def is_symbolic(value: object) -> bool:
 
 
 def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
-    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0, T]).
+    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)``, held outside [0, T].
 
     ``t`` may be a CasADi expression (a symbolic time; :mod:`flexctrl.dynamics.fem.idas_dae`)."""
     if is_symbolic(t):
@@ -141,7 +147,7 @@ def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
 
 @dataclass(frozen=True)
 class RPMotion:
-    """Prescribed rigid motion: ``W(t) = C1 - C2 s(t)`` (m), ``theta(t) = theta0 + dtheta s(t)`` (rad).
+    """Prescribed motion ``W(t) = C1 - C2 s(t)`` (m), ``theta(t) = theta0 + dtheta s(t)`` (rad).
 
     ``s`` is Eq 57's profile over ``T`` seconds; ``C2 < 0`` extends the link.
     """
@@ -219,11 +225,11 @@ class FrameLink:
     def force_coefficients(
         self, r: dict[str, float], driven_end: str
     ) -> tuple[float, float, float]:
-        """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N, tension positive).
+        """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N).
 
-        ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at
-        E (the reaction of the whole link and payload enters at ``x = 0``):
-        ``F(x) = -int_x^L rho a~ - m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``;
+        Tension is positive.  ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s),
+        ``g_ax`` (m/s^2).  Driven at E (the reaction of the whole link and payload enters at
+        ``x = 0``): ``F(x) = -int_x^L rho a~ - m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``;
         ``a~ = r_E'' - theta'^2 (r_E + x) - g_ax``.
         """
         rho, L, m_t = self.rho, self.length, self.payload_mass

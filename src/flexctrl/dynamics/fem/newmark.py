@@ -1,4 +1,4 @@
-"""Newmark integration of a :class:`~flexctrl.dynamics.model.Model` (Pan, Scott & Ulsoy 1990, Sec. 4).
+"""Newmark integration of a :class:`~flexctrl.dynamics.model.Model` (Pan et al. 1990, Sec. 4).
 
 Finite-element models are stiff: their highest locked-joint frequency grows like
 ``N^2`` (about 0.5e6 rad/s for the three-link arm at 16 elements per link, from the

@@ -61,7 +61,7 @@ class NewtonConvergenceError(SolverError):
 
 @dataclass(frozen=True)
 class DAEProblem:
-    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables returning numpy arrays.
+    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables of numpy arrays.
 
     ``mass(q,t)`` (n,n); ``force(q,qd,t)`` (n,); ``phi(q,t)``, ``phi_t(q,t)`` (m,);
     ``phi_q(q,t)`` (m,n); ``h(q,qd,t)`` (m,), the right side of ``Phi_q qdd = h``

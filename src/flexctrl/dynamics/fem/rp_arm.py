@@ -1,4 +1,6 @@
-"""Revolute-prismatic arm: a flexible link sliding through a rotating rigid housing (Pan et al. 1990, Figs 1, 4).
+"""Revolute-prismatic arm: a flexible link sliding in a turning rigid housing (Pan et al. 1990).
+
+The arm of Pan et al.'s Figs 1 and 4.
 
 Geometry
     Joint 1 (revolute, at the origin) turns a rigid housing by ``theta(t)``.  The
@@ -82,7 +84,7 @@ INITIAL = ("rest", "static_load")
 
 
 class RPArmModel:
-    """FE model of the sliding link in the rotating housing; :meth:`problem` gives the :class:`DAEProblem`."""
+    """FE model of the sliding link in the turning housing; :meth:`problem` gives its DAE."""
 
     def __init__(
         self,
@@ -100,8 +102,8 @@ class RPArmModel:
         check_elements(n_elements)
         if spec.joint == "clamped" and driven_end != "E":
             raise SpecError(
-                f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the link "
-                "is clamped in the carriage that drives it)",
+                f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the "
+                "link is clamped in the carriage that drives it)",
                 key="driven_end",
             )
         self.spec, self.motion, self.n = spec, motion, int(n_elements)
@@ -123,8 +125,10 @@ class RPArmModel:
 
     # -- rigid motion -------------------------------------------------------------------
     def rigid(self, t: float) -> dict[str, float]:
-        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the frame
-        (CasADi expressions for a symbolic ``t``)."""
+        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity in the frame.
+
+        CasADi expressions for a symbolic ``t``.
+        """
         m, s = self.motion, self.spec
         if is_symbolic(t):
             import casadi as ca
@@ -230,8 +234,11 @@ class RPArmModel:
         tip_deflection: float = 0.01,
         tracked_end: Literal["E", "H"] = "H",
     ) -> Array:
-        """Initial nodal values: zero (``"rest"``), or the static deflection under a uniform load with
-        the t = 0 supports, scaled so that ``tracked_end`` deflects ``tip_deflection`` (m)."""
+        """Initial nodal values: zero (``"rest"``), or a static deflection.
+
+        The deflection under a uniform load with the t = 0 supports, scaled so that
+        ``tracked_end`` deflects ``tip_deflection`` (m).
+        """
         if kind == "rest":
             return np.zeros(self.ndof)
         if kind != "static_load":
@@ -244,7 +251,7 @@ class RPArmModel:
         return q * (tip_deflection / q[dof])
 
     def vibration_energy(self, q: Array, qd: Array) -> float:
-        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy relative to the frame plus strain energy."""
+        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy in the frame plus strain energy."""
         return 0.5 * float(qd @ self.M @ qd) + 0.5 * float(q @ self.K @ q)
 
 

@@ -1,4 +1,4 @@
-"""Revolute-prismatic arm, full coupling (Pan et al. 1990, Eq 43): ``theta`` and ``W`` among the unknowns.
+"""Revolute-prismatic arm, full coupling (Pan et al. 1990, Eq 43): ``theta``, ``W`` are unknowns.
 
 The arm, its geometry and the prescribed-motion model (partial coupling, Eq 42) are described in
 :mod:`flexctrl.dynamics.fem.rp_arm`; the description is
@@ -102,7 +102,8 @@ class RPArmFullModel(SlidingFullModel):
         W0 = float(drive.W(0.0)) if motion_driven else float(drive.W0)
         if not 0.0 <= W0 <= L - s.D:
             raise SpecError(
-                f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = [0, {L - s.D:g}] m",
+                f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = "
+                f"[0, {L - s.D:g}] m",
                 key="W0" if not motion_driven else "C1",
             )
         link = FrameLink(self.n, L, s.mass_per_length, s.EI)
@@ -141,7 +142,7 @@ class RPArmFullModel(SlidingFullModel):
         return [(self.rows.at(W, self.n, s.length), np.asarray(self.rows.rates))]
 
     def support_rows(self, W: float, t: float = math.nan) -> Array:
-        """``R[d, k]``: rows of the ``d``-th derivative (``d = 0..3``) of the constraint functions at ``W``."""
+        """``R[d, k]``: rows of the constraints' ``d``-th derivative (``d = 0..3``) at ``W``."""
         return self.contact_parts(W, t)[0][0]
 
 

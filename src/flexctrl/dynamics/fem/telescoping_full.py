@@ -42,7 +42,10 @@ Array = NDArray[np.float64]
 
 
 class TelescopingFullModel(SlidingFullModel):
-    """The telescoping pair with ``theta`` and ``W`` unknown; ``drive`` an :class:`RPForces` or :class:`RPMotion`."""
+    """The telescoping pair with ``theta`` and ``W`` unknown.
+
+    ``drive`` is an :class:`RPForces` or an :class:`RPMotion`.
+    """
 
     def __init__(
         self,
@@ -147,7 +150,7 @@ def simulate_telescoping_full(
     newton_tol: float = 1e-10,
     max_iterations: int = 30,
 ) -> TelescopingFullResult:
-    """Simulate the fully coupled telescoping pair with Newmark + Baumgarte (links start undeformed).
+    """Simulate the fully coupled telescoping pair by Newmark + Baumgarte, from undeformed links.
 
     Parameters as :func:`flexctrl.dynamics.fem.rp_arm_full.simulate_rp_arm_full`; ``n_outer``,
     ``n_inner`` the elements per link.
