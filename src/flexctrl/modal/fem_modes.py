@@ -1,4 +1,4 @@
-"""Per-link clamped-mass frequencies by Hermite finite elements (``flexctrl modes --fidelity fem:N``).
+"""Per-link clamped-mass frequencies by Hermite finite elements (``modes --fidelity fem:N``).
 
 The check on :func:`flexctrl.modal.arm_modes.link_modes`: the same clamped-mass
 beam (Subedi et al. 2021, Eqs 20-40) -- link ``i`` clamped at its joint, the

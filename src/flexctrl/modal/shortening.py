@@ -49,7 +49,10 @@ def axial_shapes(
     n_modes: int,
     points: int = GAUSS_POINTS,
 ) -> np.ndarray:
-    """``N_p(x)`` (1/m), shape ``(n_pairs, len(x))``; ``slope(xs)`` returns ``phi'`` (n_modes, len(xs)), 1/m."""
+    """``N_p(x)`` (1/m), shape ``(n_pairs, len(x))``.
+
+    ``slope(xs)`` returns ``phi'`` (n_modes, len(xs)), 1/m.
+    """
     t, wt = np.polynomial.legendre.leggauss(points)
     x = np.asarray(x, dtype=float)
     sub = 0.5 * x[:, None] * (t[None, :] + 1.0)  # (len(x), points) nodes on [0, x]
@@ -63,7 +66,7 @@ def axial_shapes(
 def shortening_integrals(
     shape: Callable[[np.ndarray, int], np.ndarray], length: float, rho: float, n_modes: int
 ) -> dict[str, np.ndarray]:
-    """The integrals of the module docstring for shapes ``shape(x, derivative)`` -> (n_modes, len(x)).
+    """The integrals of the module docstring for ``shape(x, derivative)`` -> (n_modes, len(x)).
 
     Returns ``{"sh_tip", "sh_v", "sh_w", "sh_y", "sh_z"}`` with shapes ``(P,)``, ``(P,)``,
     ``(P,)``, ``(n_modes, P)``, ``(P, P)``, ``P = n_modes (n_modes + 1) / 2``.
@@ -72,7 +75,8 @@ def shortening_integrals(
     --------
     A single straight-line slope ``phi' = 1/L`` (``phi = x/L``): ``N = -x / (2 L^2)``.
 
-    >>> out = shortening_integrals(lambda x, d: (np.ones_like(x) if d else x)[None, :] / 2.0, 2.0, 3.0, 1)
+    >>> line = lambda x, d: (np.ones_like(x) if d else x)[None, :] / 2.0
+    >>> out = shortening_integrals(line, 2.0, 3.0, 1)
     >>> [round(float(out[k].ravel()[0]), 12) for k in ("sh_tip", "sh_v", "sh_w", "sh_z")]
     [-0.25, -0.75, -1.0, 0.125]
     """

@@ -1,4 +1,4 @@
-"""Clamped-mass modes augmented by a static-correction shape for a tip moment (modal truncation augmentation).
+"""Clamped-mass modes and a static-correction shape for a tip moment (truncation augmentation).
 
 A link's clamped-mass modes (:mod:`flexctrl.beam.clamped_mass`) treat everything outboard as
 one rigid body fixed to the link's tip, with the tip inertia ``J_D`` of the whole outboard arm
@@ -48,7 +48,7 @@ def _poly(x: np.ndarray, length: float, derivative: int) -> np.ndarray:
 
 
 def tip_moment_shape(length: float):
-    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, as one row."""
+    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, one row."""
     return lambda x, d: _poly(np.asarray(x, dtype=float), length, d)[None, :]
 
 
@@ -100,7 +100,7 @@ class CorrectedModes:
 
     @cached_property
     def _coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(C, A, omega)`` with the corrections ``phi_c = A^T (psi - C phi)`` (rows) and their frequencies."""
+        """``(C, A, omega)``: corrections ``phi_c = A^T (psi - C phi)`` (rows) and frequencies."""
         b, L = self.base, self.length
         x, wt = self._nodes
         end = np.array([L])
@@ -177,12 +177,12 @@ class CorrectedModes:
 
 
 def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PANELS):
-    """``psi(x, d)`` of ``count`` rows: the link's modes with its root *pinned* on its hub's rotor, less their root rotation.
+    """``psi(x, d)`` of ``count`` rows: the link's modes, root pinned, less their root rotation.
 
-    The link (0-based ``link``) as a Hermite-cubic beam of ``n_elements`` elements with
-    ``w(0) = 0``, the rotor inertia of its hub on the root slope and the clamped-mass tip body
-    (:func:`flexctrl.modal.boundary.boundary_values`) at the tip; its flexible modes ``W_k``
-    (the zero-frequency rotation skipped) give the clamped-admissible shapes
+    The root is *pinned* on its hub's rotor.  The link (0-based ``link``) as a Hermite-cubic beam of
+    ``n_elements`` elements with ``w(0) = 0``, the rotor inertia of its hub on the root slope and
+    the clamped-mass tip body (:func:`flexctrl.modal.boundary.boundary_values`) at the tip; its
+    flexible modes ``W_k`` (the zero-frequency rotation skipped) give the clamped-admissible shapes
     ``W_k(x) - W_k'(0) x``: in the link's root frame, the motion of the link when the hub turns
     against it.
     """

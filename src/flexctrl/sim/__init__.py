@@ -5,7 +5,8 @@ chosen by name or class, like scipy's ``solve_ivp(method=...)``:
 
 ``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
 ``euler``   fixed-step explicit Euler, compiled like rk4 (:mod:`.euler`; unstable on undamped modes)
-``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop) (:mod:`.newmark_model`)
+``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop;
+            :mod:`.newmark_model`)
 ``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`)
 ``idas``    SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`)
 ``scipy``   ``scipy.integrate.solve_ivp`` (RK45, DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
@@ -42,7 +43,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 
 
 def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
-    """The integrator class for a name (see :data:`INTEGRATORS`) or an :class:`Integrator` subclass."""
+    """The integrator class of a name (see :data:`INTEGRATORS`), or an :class:`Integrator` class."""
     if isinstance(method, type) and issubclass(method, Integrator):
         return method
     if isinstance(method, str) and method in INTEGRATORS:
@@ -80,7 +81,8 @@ def simulate(
     dt : float
         Step / output interval and torque hold period (s).
     method : str or Integrator subclass
-        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or a class.
+        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or
+        a class.
     u : array_like, optional
         Held joint torques (N m), shape (n_steps, n_u) or (n_u,).
     **options

@@ -115,14 +115,14 @@ class BoundFunction:
         return [r.copy() for r in self._outputs]
 
     def evaluate(self) -> None:
-        """Evaluate on the bound inputs as they are, into the bound outputs (raises as the Function does)."""
+        """Evaluate on the bound inputs as they are, into the bound outputs (raising as it does)."""
         if self.renew:
             self._buffer, self._trigger = self.function.buffer()
             self._bind_buffer()
         self._trigger()
 
     def stats(self) -> dict:
-        """The Function's statistics of the last evaluation (a QP solver's ``success``, ``iter_count``, ...)."""
+        """The last evaluation's statistics (a QP solver's ``success``, ``iter_count``, ...)."""
         return self._buffer.stats()
 
 

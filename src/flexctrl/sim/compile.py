@@ -114,7 +114,7 @@ def compile_disabled_by_env() -> bool:
 
 
 def trusted_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is the user's alone: owned by the effective user, not writable by group or others.
+    """Whether ``path`` is the user's alone: the effective user's, not writable by group or others.
 
     A symbolic link is never trusted (its target could change); a folder must be one.
     """
@@ -128,7 +128,7 @@ def trusted_file(path: str | os.PathLike) -> bool:
 
 
 def private_directory(directory: Path) -> Path:
-    """``directory``, created owner-only if missing, when it is the user's alone; else a private temporary folder.
+    """``directory`` (created owner-only if missing) if it is the user's alone, else a private one.
 
     The temporary folder (mode 0700, one per process and untrusted folder) keeps this
     process's libraries out of reach of the folder's other writers; a warning names the
@@ -156,9 +156,9 @@ def _fallback_directory(untrusted: str) -> Path:
         why = str(exc)
     fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
     warnings.warn(
-        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries that others "
-        f"could write are never loaded: compiling into the private folder '{fallback}' for this process "
-        f"instead (set ${ENV_CACHE} to a folder only you can write)",
+        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries "
+        f"that others could write are never loaded: compiling into the private folder "
+        f"'{fallback}' for this process instead (set ${ENV_CACHE} to a folder only you can write)",
         stacklevel=3,
     )
     return fallback
@@ -204,7 +204,7 @@ def host_identity() -> str:
 
 
 def content_key(*parts: Any) -> str:
-    """SHA-256 (hex) of ``parts``, strings as they are and everything else by ``repr``, each ended by a NUL."""
+    """SHA-256 (hex) of ``parts``: strings as they are, the rest by ``repr``, each NUL-ended."""
     digest = hashlib.sha256()
     for part in parts:
         digest.update((part if isinstance(part, str) else repr(part)).encode())
@@ -276,7 +276,10 @@ def compile_function(
         if isinstance(result, CompiledFunction):
             return result
         failure = result
-    message = f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's virtual machine"
+    message = (
+        f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's virtual "
+        "machine"
+    )
     warnings.warn(message, stacklevel=2)
     return CompiledFunction(fun, compiled=False, reason=message)
 
@@ -291,7 +294,7 @@ def compile_by_recipe(
     flags: Sequence[str] = DEFAULT_FLAGS,
     check: Callable[[ca.Function], bool] | None = None,
 ) -> CompiledFunction:
-    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it exists.
+    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build``.
 
     Parameters
     ----------
@@ -394,7 +397,7 @@ def compile_for(
     enabled: bool | None = None,
     flags: Sequence[str] = DEFAULT_FLAGS,
 ) -> CompiledFunction:
-    """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function) and ``tag``.
+    """:func:`compile_function` of ``build()``, kept per ``owner`` object and ``tag``.
 
     For a Function built from ``owner`` alone (a plant step of the lifted ``f``, say): the
     first model of a structure builds and compiles (or loads) it, later models of the
@@ -434,8 +437,8 @@ def _compile_or_load(
     library = directory / f"{name}_{cache_key(fun, flags, compiler)}.so"
     if library.is_file() and not trusted_file(library):
         log.warning(
-            "cached library %s is not the user's alone (owner or write permission of others); rebuilding "
-            "it instead of loading it",
+            "cached library %s is not the user's alone (owner or write permission of others); "
+            "rebuilding it instead of loading it",
             library,
         )
     elif library.is_file():

@@ -35,7 +35,7 @@ class DivergenceMonitor:
         self.work_abs = 0.0
 
     def check(self, times: np.ndarray, X: np.ndarray, Y: np.ndarray, U: np.ndarray) -> None:
-        """``X`` holds the chunk's start state then its k states; ``Y`` and ``times`` the k new samples."""
+        """``X``: the chunk's start state and its k states; ``Y``, ``times``: the k new samples."""
         with np.errstate(
             over="ignore", invalid="ignore"
         ):  # huge but finite states are what we look for
@@ -62,7 +62,8 @@ class DivergenceMonitor:
             self._fail(
                 times[i],
                 f"kinetic plus elastic energy grew to {energy[i]:.3g} J, more than "
-                f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can account for",
+                f"{self.integrator.energy_factor:g} times the {available[i]:.3g} J the run can "
+                "account for",
             )
         if bad.any():
             self._fail(times[first_bad], "the state became non-finite (NaN or inf)")

@@ -36,7 +36,10 @@ from flexctrl.sim.rk4 import RK4
 
 
 def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Function:
-    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`~flexctrl.sim.integrator.output_function`)."""
+    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model``.
+
+    ``y`` as :func:`~flexctrl.sim.integrator.output_function` gives it.
+    """
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -107,9 +110,10 @@ class Euler(RK4):
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w, *radii])
         return (
-            f"Explicit Euler amplifies every undamped mode at every step (|1 + i omega dt| > 1); the fastest mode "
-            f"here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = {0.5 * (w * self.dt) ** 2:.3g} per step "
-            f"at dt = {self.dt:g} s. A mode with damping ratio zeta is stable only for omega dt <= 2 zeta. "
-            "Use 'rk4' (stable for omega dt < 2.83), 'newmark' (unconditionally stable) or an implicit "
-            "integrator ('idas', 'cvodes')."
+            "Explicit Euler amplifies every undamped mode at every step (|1 + i omega dt| > 1); "
+            f"the fastest mode here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = "
+            f"{0.5 * (w * self.dt) ** 2:.3g} per step at dt = {self.dt:g} s. A mode with damping "
+            "ratio zeta is stable only for omega dt <= 2 zeta. Use 'rk4' (stable for omega dt < "
+            "2.83), 'newmark' (unconditionally stable) or an implicit integrator ('idas', "
+            "'cvodes')."
         )

@@ -71,7 +71,8 @@ def check_input_function(fun: ca.Function | None, n_u: int) -> ca.Function | Non
         )
     if fun.n_in() != 1 or fun.numel_in(0) != 1 or fun.n_out() < 1 or fun.numel_out(0) != n_u:
         raise SpecError(
-            f"u_function has signature {fun}; expected one scalar input t and a first output of {n_u} torques",
+            f"u_function has signature {fun}; expected one scalar input t and a first output of "
+            f"{n_u} torques",
             key="u_function",
         )
     return fun
@@ -275,7 +276,7 @@ class Integrator:
         return arr
 
     def jacobian_radius(self, x: np.ndarray, u: np.ndarray | None = None) -> float:
-        """Largest eigenvalue magnitude of ``df/dx`` at state ``x`` (rad/s; free joints, current torque).
+        """Largest eigenvalue magnitude of ``df/dx`` at ``x`` (rad/s; free joints, current torque).
 
         ``Model.omega_max`` is the highest frequency of the linearisation at the build
         configuration (free joints, about 330 Hz for the three-link arm with two
@@ -290,32 +291,38 @@ class Integrator:
         return float(np.max(np.abs(np.linalg.eigvals(np.asarray(self._jac_fn(x, u), dtype=float)))))
 
     def stability_advice(self, states: tuple[np.ndarray, ...] = ()) -> str:
-        """What step or integrator would be stable, from ``omega_max`` and the Jacobian at ``states``."""
+        """The stable step or integrator, from ``omega_max`` and the Jacobian at ``states``."""
         w_model = float(self.model.omega_max)
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w_model, *radii])
         facts = (
-            f"The model's highest natural frequency (linearised, free joints) is omega_max = {w_model:.4g} rad/s "
-            f"({w_model / (2 * math.pi):.4g} Hz), omega_max*dt = {w_model * self.dt:.3g}"
+            "The model's highest natural frequency (linearised, free joints) is omega_max = "
+            f"{w_model:.4g} rad/s ({w_model / (2 * math.pi):.4g} Hz), "
+            f"omega_max*dt = {w_model * self.dt:.3g}"
         )
         if radii:
             facts += (
-                f"; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = {max(radii):.4g} rad/s "
-                f"({max(radii) / (2 * math.pi):.4g} Hz), |lambda|*dt = {max(radii) * self.dt:.3g}"
+                "; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = "
+                f"{max(radii):.4g} rad/s ({max(radii) / (2 * math.pi):.4g} Hz), "
+                f"|lambda|*dt = {max(radii) * self.dt:.3g}"
             )
         facts += "."
         if math.isfinite(self.stability_limit) and w > 0:
             stable = 0.9 * self.stability_limit / w
             if w * self.dt > self.stability_limit:
                 return (
-                    f"{facts} {self.name} is stable only for omega*dt < {self.stability_limit:g}: use dt <= {stable:.3g} s, "
-                    "or an implicit integrator ('idas', 'cvodes', or 'scipy' with method 'Radau' or 'BDF')."
+                    f"{facts} {self.name} is stable only for omega*dt < {self.stability_limit:g}: "
+                    f"use dt <= {stable:.3g} s, or an implicit integrator ('idas', 'cvodes', or "
+                    "'scipy' with method 'Radau' or 'BDF')."
                 )
             return (
                 f"{facts} That is inside {self.name}'s limit omega*dt < {self.stability_limit:g}; "
                 f"try dt <= {0.5 * stable:.3g} s or an implicit integrator ('idas', 'cvodes')."
             )
-        return f"{facts} Try tighter tolerances (rtol, atol) or a smaller dt, and check the model and initial state."
+        return (
+            f"{facts} Try tighter tolerances (rtol, atol) or a smaller dt, and check the model and "
+            "initial state."
+        )
 
     def _trajectory(self, times, X, Y, applied, wall) -> Trajectory:
         model = self.model

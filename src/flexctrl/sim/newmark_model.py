@@ -1,4 +1,4 @@
-"""Newmark's method for any :class:`~flexctrl.dynamics.model.Model`, behind the common :class:`~flexctrl.sim.integrator.Integrator`.
+"""Newmark's method for any model, behind the common :class:`~flexctrl.sim.integrator.Integrator`.
 
 This adapter runs :func:`flexctrl.dynamics.fem.newmark.simulate_model_newmark`'s
 machinery (the model as a :class:`~flexctrl.dynamics.fem.newmark_dae.DAEProblem`, built
@@ -24,10 +24,10 @@ Stability
     undamped modes for every step: no numerical damping, only a period error.
     For ``delta >= 1/2`` and ``2 alpha < delta`` the step is stable only for
     ``omega h <= Omega_crit`` with
-    ``Omega_crit = (zeta (delta - 1/2) + sqrt(delta/2 - alpha + zeta^2 (delta - 1/2)^2)) / (delta/2 - alpha)``
-    (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the central-difference choice
-    ``alpha = 0, delta = 1/2`` undamped; ``delta < 1/2`` makes it unstable.
-    :attr:`Newmark.stability_limit` is the undamped value.
+    ``Omega_crit = (zeta d + sqrt(delta/2 - alpha + zeta^2 d^2)) / (delta/2 - alpha)``,
+    ``d = delta - 1/2`` (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the
+    central-difference choice ``alpha = 0, delta = 1/2`` undamped; ``delta < 1/2`` makes it
+    unstable.  :attr:`Newmark.stability_limit` is the undamped value.
 
 Torque inputs
     The residual at the end of step ``i`` uses that step's held torque sample (plus
@@ -226,8 +226,9 @@ class Newmark(Integrator):
         """Newmark-specific advice (see module docstring)."""
         if math.isinf(self.stability_limit):
             return (
-                f"Newmark with alpha = {self.alpha:g}, delta = {self.delta:g} is unconditionally stable on linear modes, "
-                "so this is not a step-size instability of the method: check the model, the initial state and the "
-                "torques, or reduce dt so Newton converges on the nonlinear terms."
+                f"Newmark with alpha = {self.alpha:g}, delta = {self.delta:g} is unconditionally "
+                "stable on linear modes, so this is not a step-size instability of the method: "
+                "check the model, the initial state and the torques, or reduce dt so Newton "
+                "converges on the nonlinear terms."
             )
         return super().stability_advice(states)

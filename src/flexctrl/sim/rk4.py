@@ -54,7 +54,7 @@ def _rk4_combine(x, h, k1, k2, k3, k4):
 
 
 def rk4_next(f: Callable, x, h, t=None, *, k1=None):
-    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given) of length ``h``.
+    """The state after one classical RK4 step of length ``h`` of ``xdot = f(x)`` (or ``f(x, t)``).
 
     The one place RK4's stages are written; symbolic (CasADi) or numeric.  The
     expression is, in this order of floating-point operations,
@@ -93,7 +93,7 @@ def rk4_next(f: Callable, x, h, t=None, *, k1=None):
 def rk4_step_function(
     model, u_function: ca.Function | None = None, *, expand: bool = False
 ) -> ca.Function:
-    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`output_function`)."""
+    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` of ``model``; ``y``: :func:`output_function`."""
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -117,7 +117,10 @@ def rk4_step_function(
 
 
 def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca.Function:
-    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining any one-step map ``step(x, t, u, h)``."""
+    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])``: ``n`` steps chained.
+
+    ``step(x, t, u, h)`` is any one-step map.
+    """
     acc = step.mapaccum(n_steps)
     x0 = ca.MX.sym("x0", step.size1_in(0))
     T = ca.MX.sym("T", 1, n_steps)
@@ -135,10 +138,11 @@ def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
 def held_sample_loop(
     model, h: float, substeps: int, chunk: int, name: str = "held_rk4"
 ) -> ca.Function:
-    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h`` (s), torque held.
+    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: ``substeps`` RK4 steps of ``h`` per sample.
 
-    The sample-level building block of the FEM timing report and the speed/accuracy
-    study: the output is the state at the end of each of ``chunk`` samples.
+    The torque is held over a sample; ``h`` in s.  The sample-level building block of the FEM timing
+    report and the speed/accuracy study: the output is the state at the end of each of ``chunk``
+    samples.
     """
     f = model.functions["f"]
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
@@ -232,7 +236,7 @@ class RK4(Integrator):
         return out
 
     def step_function(self) -> ca.Function:
-        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` that :meth:`_setup` chains and compiles."""
+        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` chained by :meth:`_setup`."""
         return rk4_step_function(self.model, self.u_function, expand=self.expand)
 
     def _setup(self) -> None:
