@@ -1,4 +1,5 @@
-"""Helpers shared by the model tests: a link alone, the spinning-beam frequency, RK4's energy drift."""
+"""Helpers shared by the model tests: a link alone, the spinning-beam frequency, RK4's energy
+drift."""
 
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ def one_link(arm, payload: float, gravity=(0.0, 0.0), link: int = 2):
 
 
 def rotating_frequency(model, spin):
-    """Lowest transverse frequency (rad/s) of a one-link model spun at ``spin`` rad/s about its joint."""
+    """Lowest transverse frequency (rad/s) of a one-link model spun at ``spin`` rad/s about its
+    joint."""
     n = model.n_q
     q, qd = ca.SX.sym("q", n), ca.SX.sym("qd", n)
     F = (
@@ -49,7 +51,8 @@ def rotating_frequency(model, spin):
 
 
 def energy_drift(model, x0, h, duration=0.2):
-    """Relative energy change of an undamped RK4 run at step ``h`` (s) and the swing of joint 1 (rad)."""
+    """Relative energy change of an undamped RK4 run at step ``h`` (s) and the swing of joint 1
+    (rad)."""
     stepper = make_stepper(model, parse_method(f"{model.fidelity}/rk4@{h}"), 1e-3, compile=False)
     run = run_open_loop(stepper, x0, np.zeros((int(round(duration / 1e-3)), model.n_u)))
     n = model.n_q

@@ -91,7 +91,10 @@ def test_rigid_modes_and_total_mass():
 
 def cantilever_roots() -> np.ndarray:
     """beta L of a clamped-free beam from cos x cosh x = -1."""
-    f = lambda x: np.cos(x) * np.cosh(x) + 1.0
+
+    def f(x):
+        return np.cos(x) * np.cosh(x) + 1.0
+
     return np.array([brentq(f, a, b, xtol=1e-14) for a, b in [(1, 3), (4, 6), (7, 9)]])
 
 
@@ -151,7 +154,8 @@ def test_buckling_loads_converge_to_euler():
 
 
 def test_column_under_own_weight_linear_axial_force():
-    """Greenhill: clamped base, free top, compression q (L - x): q_cr L^3 / EI = 9/4 j^2, J_{-1/3}(j) = 0."""
+    """Greenhill: clamped base, free top, compression q (L - x): q_cr L^3 / EI = 9/4 j^2,
+    J_{-1/3}(j) = 0."""
     j = brentq(lambda x: jv(-1.0 / 3.0, x), 1.0, 2.5, xtol=1e-14)
     exact = 2.25 * j**2  # 7.837...
     L, EI, n = 1.0, 1.0, 16
@@ -164,7 +168,8 @@ def test_column_under_own_weight_linear_axial_force():
 
 
 def test_rotating_cantilever_quadratic_axial_force():
-    """Centrifugal stiffening, F = rho Omega^2 (L^2 - x^2)/2; Wright et al. (1982): 3.6816, 22.181 at Omega = 1."""
+    """Centrifugal stiffening, F = rho Omega^2 (L^2 - x^2)/2; Wright et al. (1982): 3.6816,
+    22.181 at Omega = 1."""
     n = 16
     b = el.assemble_beam(n, 1.0, 1.0, 1.0)
     G = el.assemble_geometric_stiffness(n, 1.0, lambda x: 0.5 * (1.0 - x**2))

@@ -183,7 +183,6 @@ def _christoffel_check(model, rng, count=4):
     dM = ca.Function("dM", [qs], [ca.jacobian(ca.vec(model.functions["M"](qs)), qs)])
     for _ in range(count):
         q, qd = _state(rng, model, deflection=0.03)
-        M = model.mass_matrix(q)
         D = np.array(dM(q)).reshape(N, N, N, order="F")  # D[i, j, k] = dM_ij / dq_k
         gamma = 0.5 * (D + D.transpose(0, 2, 1) - D.transpose(2, 1, 0))  # Gamma_ijk
         C = gamma @ qd

@@ -44,7 +44,8 @@ def _arm(model_path, n_links):
 
 
 def locked_frequencies(model, q_r):
-    """Natural frequencies (rad/s) of the model linearised at rest at ``q_r`` with the joints clamped."""
+    """Natural frequencies (rad/s) of the model linearised at rest at ``q_r`` with the joints
+    clamped."""
     n, N = model.n_joints, model.n_q
     q0 = np.concatenate([q_r, np.zeros(N - n)])
     qs = ca.MX.sym("q", N)

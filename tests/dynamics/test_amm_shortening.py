@@ -27,7 +27,8 @@ def arm(model_path):
 
 
 def static_elastic(model, q_joints):
-    """Elastic coordinates of the static equilibrium with the joints clamped at ``q_joints`` (Newton)."""
+    """Elastic coordinates of the static equilibrium with the joints clamped at ``q_joints``
+    (Newton)."""
     n, N = model.n_joints, model.n_q
     q = ca.SX.sym("q", N)
     F = (model.functions["g"](q) + ca.mtimes(model.functions["K"]()["K"], q))[n:]
@@ -68,8 +69,9 @@ def test_static_foreshortening_under_tip_load_matches_closed_form(arm, n_modes, 
 
 @pytest.mark.parametrize("shortening, coefficient", [(True, 0.1933), (False, -1.0)])
 def test_spinning_link_follows_southwell(arm, shortening, coefficient):
-    """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2 (Southwell;
-    -1 is the frame's softening alone, which is all the model has without the effect)."""
+    """In-plane bending of a spinning cantilever: omega^2 = omega_0^2 + (1.1933 - 1) Omega^2
+    (Southwell; -1 is the frame's softening alone, which is all the model has without the
+    effect)."""
     m = build_amm(one_link(arm, 0.0), 4, axial_shortening=shortening)
     w0 = rotating_frequency(m, 0.0)
     spin = 0.1 * w0
@@ -159,7 +161,8 @@ def test_switch_reaches_the_model_from_files_and_scenes(model_path, tmp_path):
         load_arm(model_path, ["axial_shortening=1"])
     scene_file = tmp_path / "s.toml"
     scene_file.write_text(
-        f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\naxial_shortening = false\n'
+        f'kind = "arm"\nmodel = "{model_path}"\ndt = 1e-3\nduration = 0.01\n'
+        "axial_shortening = false\n"
     )
     scene = load_scene(scene_file)
     assert scene.axial_shortening is False and scene_arm(scene).axial_shortening is False

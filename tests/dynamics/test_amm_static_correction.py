@@ -17,7 +17,8 @@ def arm():
 
 
 def _gram(modes, corrected, derivative):
-    """Gram matrix of the shapes by the trapezoid rule on 40001 points (not the module's Gauss rule)."""
+    """Gram matrix of the shapes by the trapezoid rule on 40001 points (not the module's Gauss
+    rule)."""
     x = np.linspace(0.0, modes.length, 40001)
     f = corrected.shape(x, derivative)
     return np.trapezoid(f[:, None] * f[None], x, axis=-1)
@@ -54,7 +55,8 @@ def test_corrected_shapes_are_mass_and_stiffness_orthonormal(arm, link, kind):
 
 
 def test_tip_moment_correction_gives_the_closed_form_static_deflection(arm):
-    """Static answer to a tip moment M0 in the corrected basis: w(L) = M0 L^2 / (2 EI), w'(L) = M0 L / EI."""
+    """Static answer to a tip moment M0 in the corrected basis: w(L) = M0 L^2 / (2 EI), w'(L) =
+    M0 L / EI."""
     base = link_modes(arm, None, 1, 2)
     M0 = 50.0
     for c, exact in ((CorrectedModes(base), True), (base, False)):
@@ -63,7 +65,7 @@ def test_tip_moment_correction_gives_the_closed_form_static_deflection(arm):
         w_exact, dw_exact = M0 * base.length**2 / (2 * base.EI), M0 * base.length / base.EI
         if exact:
             assert w == pytest.approx(w_exact, rel=1e-9) and dw == pytest.approx(dw_exact, rel=1e-9)
-        else:  # the clamped-mass modes alone already hold it closely (docs/amm.md section 13): 1.2e-4
+        else:  # the clamped-mass modes alone hold it closely (docs/amm.md section 13): 1.2e-4
             assert 1e-6 < abs(dw / dw_exact - 1) < 1e-3
 
 

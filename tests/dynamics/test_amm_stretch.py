@@ -102,8 +102,8 @@ def test_bent_arm_frequencies_meet_the_finite_elements(arm, q_deg):
 
 
 def test_energy_conserved_at_rk4_order(arm):
-    """Undamped free swing under gravity with shortening and stretch: the energy error of RK4 falls by
-    at least 2^3.5 when the step halves."""
+    """Undamped free swing under gravity with shortening and stretch: the energy error of RK4
+    falls by at least 2^3.5 when the step halves."""
     a = dataclasses.replace(
         arm.with_payload(2.0),
         links=tuple(dataclasses.replace(l, damping_ratios=(0.0,)) for l in arm.links),
@@ -148,7 +148,8 @@ def test_switch_reaches_the_model_and_bad_values_are_refused(model_path, tmp_pat
 
 
 def _damped_locked(model, q, count):
-    """Frequencies (rad/s) and damping ratios of the ``count`` slowest locked-joint modes of ``model`` at ``q``."""
+    """Frequencies (rad/s) and damping ratios of the ``count`` slowest locked-joint modes of
+    ``model`` at ``q``."""
     n = model.n_joints
     x = np.concatenate([q, np.zeros(model.n_q - n)])
     M = model.mass_matrix(x)[n:, n:]
@@ -179,7 +180,8 @@ def test_stiffness_damping_form_damps_like_the_finite_elements(arm):
 
 
 def test_links_without_modes_stay_rigid(arm):
-    """``rigid`` (amm:0) is unchanged by the switch, and only links with elastic modes get an elongation."""
+    """``rigid`` (amm:0) is unchanged by the switch, and only links with elastic modes get an
+    elongation."""
     loaded = arm.with_payload(2.0)
     rigid_on, rigid_off = (build_amm(loaded, 0, axial_stretch=flag) for flag in (True, False))
     assert rigid_on.coordinate_names == rigid_off.coordinate_names == ("q1", "q2", "q3")

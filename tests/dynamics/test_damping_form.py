@@ -1,4 +1,5 @@
-"""Modal damping form: Eq 68 of Subedi et al. as printed beside the ratio form, from files and scenes."""
+"""Modal damping form: Eq 68 of Subedi et al. as printed beside the ratio form, from files and
+scenes."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The Jacobian kept once per lifted model structure gives the per-model Jacobian to the last bit."""
+"""The Jacobian kept once per lifted model structure gives the per-model Jacobian to the last
+bit."""
 
 from types import SimpleNamespace
 
@@ -68,7 +69,7 @@ def test_dynamics_without_constants_to_lift_keep_their_own_jacobian():
     A, B = _at(jacobian_function(model, inputs=True, shared=True), model)
     assert len(SHARED._built) == 0
     rng = np.random.default_rng(0)
-    x0, u0 = rng.uniform(-0.2, 0.2, 2), rng.uniform(-5, 5, 1)
+    x0, _u0 = rng.uniform(-0.2, 0.2, 2), rng.uniform(-5, 5, 1)  # as _at draws them
     assert np.array_equal(A, [[0.0, 1.0], [-x0[1], -x0[0]]]) and np.array_equal(B, [[0.0], [1.0]])
 
 

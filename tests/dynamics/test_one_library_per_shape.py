@@ -1,4 +1,5 @@
-"""One compiled library per model shape for every configuration: the long-substep plant step and the output map.
+"""One compiled library per model shape for every configuration: the long-substep plant step and the
+output map.
 
 A frozen-modes model bakes its modal constants (functions of the configuration) into its
 graph; code generated from it would differ per configuration and every configuration of

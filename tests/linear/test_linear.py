@@ -1,4 +1,5 @@
-"""Operating points, linearisation, discretisation and modal facts, checked against independent computations."""
+"""Operating points, linearisation, discretisation and modal facts, checked against independent
+computations."""
 
 from __future__ import annotations
 
@@ -8,20 +9,21 @@ import control
 import numpy as np
 import pytest
 import scipy.linalg
+from support_models import spring_pendulum
 
 from flexctrl import linear as L
 from flexctrl.beam.clamped_mass import clamped_mass_modes
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.errors import SpecError
 from flexctrl.scenes.model_files import load_model
-from support_models import spring_pendulum
 from flexctrl.spec.arm import arm_from_document
 
 
 def one_link_arm(
     n_modes: int = 3, payload: float = 0.8, gravity: float = -9.81, damping: float = 0.0
 ):
-    """A single flexible link on a hub (joint angle + modal coordinates), built by the assumed-modes code."""
+    """A single flexible link on a hub (joint angle + modal coordinates), built by the
+    assumed-modes code."""
     doc = {
         "name": "onelink",
         "gravity": [0.0, gravity],

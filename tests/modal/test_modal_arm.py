@@ -39,7 +39,7 @@ def test_link3_rows_need_no_hub_mass(arm):
             "joints": tuple(j.__class__(**{**j.__dict__, "hub_mass": 0.0}) for j in arm.joints),
         }
     )
-    for (p, l, m, ref, model, res), (_, _, _, _, model0, _) in zip(
+    for (_, _, _, _, model, res), (_, _, _, _, model0, _) in zip(
         table3_residuals(arm, (3,)), table3_residuals(stripped, (3,))
     ):
         assert model == pytest.approx(model0, abs=1e-12)

@@ -1,4 +1,5 @@
-"""A compiled library found on disk by what its Function is built from, before the Function is built.
+"""A compiled library found on disk by what its Function is built from, before the Function is
+built.
 
 ``compile_by_recipe`` must call ``build`` only when no library is linked under the recipe,
 never load a library for another recipe, flags or name, and refuse an untrusted link; the

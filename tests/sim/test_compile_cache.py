@@ -1,4 +1,5 @@
-"""The compiled-library cache loads only libraries that are the user's alone (a shared library runs as its loader)."""
+"""The compiled-library cache loads only libraries that are the user's alone (a shared library
+runs as its loader)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,8 @@ def _function(factor: float, name: str = "scaled") -> ca.Function:
 
 
 def _plant(tmp_path, cache, name):
-    """Plant a library computing 3 x where the library of ``name`` (2 x) is looked for; return its path.
+    """Plant a library computing 3 x where the library of ``name`` (2 x) is looked for; return its
+    path.
 
     Each test uses its own function name: a process never opens the same library path twice
     (the dynamic loader would hand back the first one).

@@ -1,4 +1,5 @@
-"""What is built from a kept lifted Function alone is kept with it (``compile_for``, ``FROM_LIFTED``).
+"""What is built from a kept lifted Function alone is kept with it (``compile_for``,
+``FROM_LIFTED``).
 
 A later configuration of one model shape gets the plant step, the output map's point, the
 reference's compiled forces and the dynamics Jacobian without building, serializing or
@@ -49,7 +50,8 @@ def _point(model, seed=0):
 
 
 def _everything(model):
-    """The plant step over 3 substeps, the output map's point, the reference forces and the Jacobians, evaluated."""
+    """The plant step over 3 substeps, the output map's point, the reference forces and the
+    Jacobians, evaluated."""
     x, u = _point(model)
     advance, _ = advance_function(model, 3)
     outputs = output_map(model, 1, energies=False)

@@ -12,6 +12,7 @@ import os
 import casadi as ca
 import numpy as np
 import pytest
+from support_models import spring_pendulum
 
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.sim import (
@@ -25,7 +26,6 @@ from flexctrl.sim import (
     simulate,
 )
 from flexctrl.sim.compile import compile_function
-from support_models import spring_pendulum
 
 X0 = np.array([0.4, -0.3, 0.02, 0.5, 0.0, 0.0])
 

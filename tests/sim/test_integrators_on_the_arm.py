@@ -1,4 +1,5 @@
-"""Simulation of the three-link assumed-modes arm (Subedi et al. 2021): energy, stability, agreement.
+"""Simulation of the three-link assumed-modes arm (Subedi et al. 2021): energy, stability,
+agreement.
 
 Checks use physics (energy conservation and dissipation, work of the joint
 torques) and cross-checks between integrators, never stored trajectories.
@@ -38,7 +39,8 @@ def test_damped_free_vibration_energy_never_increases(root):
 
 
 def test_energy_drift_at_the_papers_step_is_rk4_damping_the_fast_free_joint_modes(root):
-    """At 1 ms the free-joint arm's fastest mode has |lambda| dt near RK4's limit: energy is lost, early.
+    """At 1 ms the free-joint arm's fastest mode has |lambda| dt near RK4's limit: energy is lost,
+    early.
 
     Measured (recorded in studies/scenes/free_vibration.toml): at dt = 1 ms the total
     energy falls by about 1.1 J within 50 ms (of 5.6 J initial elastic energy)

@@ -1,4 +1,5 @@
-"""Floating-frame finite-element arm (flexctrl.dynamics.fem.fem_arm) and the per-link FE modal check.
+"""Floating-frame finite-element arm (flexctrl.dynamics.fem.fem_arm) and the per-link FE modal
+check.
 
 Reference values are independent solutions or limits, never stored output: the
 closed-form clamped-mass frequencies, mesh refinement (h^4 eigenvalue
@@ -210,8 +211,11 @@ def test_rigid_limit_matches_the_rigid_arm(arm):
         dataclasses.replace(a, links=tuple(dataclasses.replace(l, EI=l.EI * 1e4) for l in a.links))
     )
     fem, rig = build_fem_model(stiff, 2), build_model(no_gravity(a), "rigid")
+
     # a smooth torque: Newmark's endpoint sampling of a bang-bang step would shift its impulse
-    torque = lambda t: np.array([0.0, 0.0, 50.0 * math.sin(10 * math.pi * t) if t < 0.2 else 0.0])  # noqa: E731
+    def torque(t):
+        return np.array([0.0, 0.0, 50.0 * math.sin(10 * math.pi * t) if t < 0.2 else 0.0])
+
     res = simulate_model_newmark(fem, np.zeros(fem.n_x), 0.3, 1e-3, torque=torque)
     sol = solve_ivp(
         lambda t, y: np.r_[y[3:], rig.forward_dynamics(y[:3], y[3:], torque(t))],
@@ -285,8 +289,8 @@ def test_free_motion_conserves_energy(arm):
 
 
 def test_locked_free_vibration_energy_with_newmark(arm):
-    """Trapezoidal Newmark conserves the energy of linear systems exactly; the locked arm is linear up
-    to its geometric nonlinearity, where the rule's energy error is second order in dt."""
+    """Trapezoidal Newmark conserves the energy of linear systems exactly; the locked arm is
+    linear up to its geometric nonlinearity, where the rule's energy error is second order in dt."""
     a = no_gravity(arm)
     m = build_fem_model(a, 4)
     q_r = np.radians([0.0, 45.0, -90.0])

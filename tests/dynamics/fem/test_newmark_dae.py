@@ -1,4 +1,5 @@
-"""Newmark + Baumgarte DAE solver (flexctrl.dynamics.fem.newmark_dae) against independent references."""
+"""Newmark + Baumgarte DAE solver (flexctrl.dynamics.fem.newmark_dae) against independent
+references."""
 
 from __future__ import annotations
 
@@ -101,7 +102,8 @@ def test_fd_jacobian_and_casadi_backend_agree_with_hand_tangents():
 
 
 def test_casadi_time_dependent_constraint_derives_h():
-    """Bead on a rod moving as y = x tan(w t): h from AD must match the hand derivation via the motion."""
+    """Bead on a rod moving as y = x tan(w t): h from AD must match the hand derivation via the
+    motion."""
     q, qd, t = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("t")
     w = 0.7
     prob = casadi_problem(

@@ -1,5 +1,6 @@
-"""Pan et al. (1990) Fig 4 prismatic joint: the link clamped at E in the carriage (Eqs 22-23) and held at
-the housing mouth D' (Eq 24); prescribed motion (Eq 42) and prescribed torque/force (Eq 43)."""
+"""Pan et al. (1990) Fig 4 prismatic joint: the link clamped at E in the carriage (Eqs 22-23) and
+held at the housing mouth D' (Eq 24); prescribed motion (Eq 42) and prescribed torque/force (Eq
+43)."""
 
 from __future__ import annotations
 

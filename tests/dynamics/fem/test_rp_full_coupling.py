@@ -86,7 +86,6 @@ def _independent_momentum_energy(model, z, zd):
         zeta = 0.5 * le * (gx + 1)
         idx = slice(2 * j, 2 * j + 4)
         w, wt = hermite_shape(zeta, le, 0) @ q[idx], hermite_shape(zeta, le, 0) @ qd[idx]
-        dw, dwt = hermite_shape(zeta, le, 1) @ q[idx], hermite_shape(zeta, le, 1) @ qd[idx]
         # s(x) within the element by cumulative quadrature on a fine sub-grid
         fine = np.linspace(0, le, 401)
         d_f, dt_f = hermite_shape(fine, le, 1) @ q[idx], hermite_shape(fine, le, 1) @ qd[idx]
@@ -159,7 +158,8 @@ def test_free_motion_conserves_angular_momentum_and_energy():
 
 
 def test_constraint_derivatives_match_finite_differences():
-    """h (Eq 47), h_z, h_zd and Phi_z of the W-dependent support rows against central differences."""
+    """h (Eq 47), h_z, h_zd and Phi_z of the W-dependent support rows against central
+    differences."""
     model = RPArmFullModel(SPEC, RPForces.sine(1.0, 1.0, 1.0, W0=0.33), 4)
     check_constraint_derivatives(model, W=0.33, seed=1)
     z = np.r_[np.zeros(model.ne), 0.4, 0.33]

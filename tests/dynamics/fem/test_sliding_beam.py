@@ -46,9 +46,12 @@ def closed_form_static(x, xs1, xs2, L=1.0):
     """Free-free beam on two simple supports under a uniform load (EI = p = 1), by statics."""
     # EI w'' = x^2/2 - R1 <x - xs1> - R2 <x - xs2>; w''(L) = 0 and w'''(L) = 0 fix R1, R2.
     R1, R2 = np.linalg.solve([[1.0, 1.0], [L - xs1, L - xs2]], [L, L**2 / 2])
-    part = lambda z: (
-        z**4 / 24 - R1 * np.maximum(z - xs1, 0) ** 3 / 6 - R2 * np.maximum(z - xs2, 0) ** 3 / 6
-    )
+
+    def part(z):
+        return (
+            z**4 / 24 - R1 * np.maximum(z - xs1, 0) ** 3 / 6 - R2 * np.maximum(z - xs2, 0) ** 3 / 6
+        )
+
     c1 = -(part(xs2) - part(xs1)) / (xs2 - xs1)
     c0 = -part(xs1) - c1 * xs1
     return part(x) + c0 + c1 * x
@@ -80,10 +83,16 @@ def test_constraint_rows_switch_elements_and_h_matches_finite_differences():
         for k, xk in enumerate(xs):  # row lives on the 4 dofs of the element holding x_k
             j = min(int(xk // 0.25), 3)
             assert set(np.flatnonzero(prob.phi_q(q, t)[k])) <= set(range(2 * j, 2 * j + 4))
+
         # Phi along q(s) = q + (s-t) v + (s-t)^2 a/2: Phidot and Phidd by central differences
-        qs = lambda s: q + (s - t) * v + 0.5 * (s - t) ** 2 * a
+        def qs(s, t=t):
+            return q + (s - t) * v + 0.5 * (s - t) ** 2 * a
+
         e = 1e-4
-        ph = lambda s: prob.phi(qs(s), s)
+
+        def ph(s, qs=qs):
+            return prob.phi(qs(s), s)
+
         pd = (ph(t + e / 100) - ph(t - e / 100)) / (2 * e / 100)
         pdd = (ph(t + e) - 2 * ph(t) + ph(t - e)) / e**2
         np.testing.assert_allclose(

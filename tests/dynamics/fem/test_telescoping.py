@@ -1,4 +1,5 @@
-"""Telescoping prismatic joint, two flexible links (flexctrl.dynamics.fem.telescoping; Pan et al. Fig 5)."""
+"""Telescoping prismatic joint, two flexible links (flexctrl.dynamics.fem.telescoping; Pan et al.
+Fig 5)."""
 
 from __future__ import annotations
 
