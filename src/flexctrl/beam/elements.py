@@ -305,10 +305,15 @@ def assemble_geometric_stiffness(
     n = int(n_elements)
     le = _check_length(length) / n
     if callable(force):
-        blocks = [geometric_stiffness(lambda z, x0=j * le: force(x0 + z), le) for j in range(n)]
+        blocks = [geometric_stiffness(_shifted(force, j * le), le) for j in range(n)]
     else:
         fn = np.asarray(force, dtype=float)
         if fn.shape != (n + 1,):
             raise ValueError(f"nodal forces must have shape ({n + 1},), got {fn.shape}")
         blocks = [geometric_stiffness_linear(fn[j], fn[j + 1], le) for j in range(n)]
     return _assemble(blocks, 2, 2 * (n + 1))
+
+
+def _shifted(force: Callable[[Array], ArrayLike], x0: float) -> Callable[[Array], ArrayLike]:
+    """``z -> force(x0 + z)``: an axial force along the link seen from an element's left node."""
+    return lambda z: force(x0 + z)

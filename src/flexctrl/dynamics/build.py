@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Literal
 
+import numpy as np
+
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.fem.fem_arm import build_fem_model
 from flexctrl.dynamics.model import Model
@@ -29,7 +31,7 @@ def build_model(
     fidelity: str | Fidelity | None = "amm:2",
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
-    reference_q: Sequence[float] | None = None,
+    reference_q: Sequence[float] | np.ndarray | None = None,
     damping: Literal["ratio", "paper", "stiffness"] | None = None,
 ) -> Model:
     """Build the model of ``arm`` at ``fidelity``.
@@ -95,7 +97,7 @@ def _build_fem(
     fid: Fidelity,
     *,
     modes: str,
-    reference_q: Sequence[float] | None,
+    reference_q: Sequence[float] | np.ndarray | None,
     damping: str | None,
 ) -> Model:
     """The finite-element model of ``arm`` at ``fid`` (``fem:N``), its options checked."""

@@ -18,7 +18,7 @@ import bisect
 import hashlib
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any
 
 import casadi as ca
@@ -36,10 +36,10 @@ class Memo:
 
     def __init__(self, size: int):
         self.size = size
-        self._built: OrderedDict[Any, Any] = OrderedDict()
+        self._built: OrderedDict[Hashable, Any] = OrderedDict()
         self._lock = threading.Lock()  # a Dask worker may run two runs in threads
 
-    def get(self, key: str, build: Callable[[], Any]) -> tuple[Any, bool]:
+    def get(self, key: Hashable, build: Callable[[], Any]) -> tuple[Any, bool]:
         """``(value, reused)``: ``build()`` when ``key`` is first asked for, then the kept value."""
         value = self.lookup(key)
         if value is not None:
@@ -48,7 +48,7 @@ class Memo:
         self.keep(key, value)
         return value, False
 
-    def lookup(self, key: str) -> Any:
+    def lookup(self, key: Hashable) -> Any:
         """The value kept for ``key`` (now the most recently used), or None."""
         with self._lock:
             if key not in self._built:
@@ -56,7 +56,7 @@ class Memo:
             self._built.move_to_end(key)
             return self._built[key]
 
-    def keep(self, key: str, value: Any) -> None:
+    def keep(self, key: Hashable, value: Any) -> None:
         """Keep ``value`` for ``key``, forgetting the least recently used beyond ``size``."""
         with self._lock:
             self._built[key] = value
@@ -324,9 +324,9 @@ def _reproduces(f: ca.Function, fp: ca.Function, const: np.ndarray) -> bool:
         f(*args) if f.n_out() > 1 else [f(*args)],
         fp(*args, const) if f.n_out() > 1 else [fp(*args, const)],
     ):
-        a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+        va, vb = np.array(a, dtype=float), np.array(b, dtype=float)
         if not np.allclose(
-            a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))
+            va, vb, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(va), initial=0.0)))
         ):
             return False
     return True

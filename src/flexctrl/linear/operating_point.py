@@ -127,11 +127,11 @@ def _static_functions(model: Model) -> ca.Function:
 
 def equilibrium(
     model: Model,
-    q_joints: Sequence[float],
+    q_joints: Sequence[float] | np.ndarray,
     *,
     tol: float = 1e-12,
     max_iter: int = 50,
-    q_flex0: Sequence[float] | None = None,
+    q_flex0: Sequence[float] | np.ndarray | None = None,
 ) -> OperatingPoint:
     """The static equilibrium with the joints at ``q_joints`` (rad), held by joint torques.
 

@@ -27,13 +27,18 @@ frequencies are unchanged.  Integrals of the correction are by Gauss-Legendre qu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from flexctrl.beam.clamped_mass import ClampedMassModes
+from flexctrl.beam.elements import assemble_beam, hermite_shape, locate
+from flexctrl.modal.boundary import boundary_values
+from flexctrl.spec.arm import ArmSpec
 
 #: Composite Gauss-Legendre rule for the corrections' integrals: ``QUAD_PANELS`` equal panels
 #: (aligned with the elements of :func:`pinned_root_shapes`, so piecewise cubics integrate
@@ -176,7 +181,13 @@ class CorrectedModes:
         return self.link_mass * self.omega**2
 
 
-def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PANELS):
+def pinned_root_shapes(
+    arm: ArmSpec,
+    q: Sequence[float] | np.ndarray | None,
+    link: int,
+    count: int,
+    n_elements: int = QUAD_PANELS,
+) -> PinnedRootShapes:
     """``psi(x, d)`` of ``count`` rows: the link's modes, root pinned, less their root rotation.
 
     The root is *pinned* on its hub's rotor.  The link (0-based ``link``) as a Hermite-cubic beam of
@@ -186,9 +197,6 @@ def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PAN
     ``W_k(x) - W_k'(0) x``: in the link's root frame, the motion of the link when the hub turns
     against it.
     """
-    from flexctrl.beam.elements import assemble_beam, hermite_shape, locate
-    from flexctrl.modal.boundary import boundary_values
-
     spec = arm.links[link]
     L = spec.length
     mats = assemble_beam(n_elements, L, spec.mass_per_length, spec.EI)
@@ -200,20 +208,42 @@ def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PAN
     lam, V = scipy.linalg.eigh(K[np.ix_(keep, keep)], M[np.ix_(keep, keep)])
     modes = np.zeros((M.shape[0], count))
     modes[keep] = V[:, 1 : count + 1]  # skip the rotation about the pin
-    le = L / n_elements
+    return PinnedRootShapes(modes, L, n_elements, np.sqrt(np.abs(lam[1 : count + 1])))
 
-    def shapes(x, d):
-        x = np.asarray(x, dtype=float).ravel()
-        out = np.empty((count, x.size))
-        for i, xi in enumerate(x):
+
+@dataclass(frozen=True)
+class PinnedRootShapes:
+    """The shapes of :func:`pinned_root_shapes`, callable as ``psi(x, d)`` (rows, one per shape).
+
+    Attributes
+    ----------
+    modes : ndarray
+        Nodal values of the pinned-root modes ``W_k`` (dofs x count).
+    length : float
+        Link length, m.
+    n_elements : int
+        Hermite elements of the mesh.
+    frequencies : ndarray
+        The modes' natural frequencies, rad/s.
+    """
+
+    modes: np.ndarray
+    length: float
+    n_elements: int
+    frequencies: np.ndarray
+
+    def __call__(self, x: ArrayLike, d: int) -> np.ndarray:
+        """The ``d``-th derivative (0..2) of the shapes at ``x`` (m), ``(count, len(x))``."""
+        L, n_elements, modes = self.length, self.n_elements, self.modes
+        le = L / n_elements
+        xs = np.asarray(x, dtype=float).ravel()
+        out = np.empty((modes.shape[1], xs.size))
+        for i, xi in enumerate(xs):
             j, zeta = locate(min(xi, L), n_elements, L)
             out[:, i] = hermite_shape(zeta, le, d) @ modes[2 * j : 2 * j + 4]
         rot = modes[1]  # W_k'(0)
         return (
             out
             - rot[:, None]
-            * (x if d == 0 else (np.ones_like(x) if d == 1 else np.zeros_like(x)))[None, :]
+            * (xs if d == 0 else (np.ones_like(xs) if d == 1 else np.zeros_like(xs)))[None, :]
         )
-
-    shapes.frequencies = np.sqrt(np.abs(lam[1 : count + 1]))
-    return shapes

@@ -9,7 +9,7 @@ get results as rows.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
@@ -25,12 +25,28 @@ def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
         for i, a in enumerate(args)
     ]
     outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
-    for i, a in enumerate(inputs):
-        buffer.set_arg(i, memoryview(a))
-    for i, r in enumerate(outputs):
-        buffer.set_res(i, memoryview(r))
+    bind_buffer(buffer, inputs, outputs)
     trigger()
     return outputs
+
+
+def bind_buffer(
+    buffer: ca.FunctionBuffer, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
+) -> list[memoryview]:
+    """Bind ``buffer``'s inputs and outputs to numpy arrays (C-ordered float64, kept alive).
+
+    Returns the memory views bound; the arrays must outlive the binding.
+    """
+    views = [_view(a) for a in (*inputs, *outputs)]
+    for i, view in enumerate(views[: len(inputs)]):
+        buffer.set_arg(i, view)  # type: ignore[call-arg]  # stub has C's (ptr, size)
+    for i, view in enumerate(views[len(inputs) :]):
+        buffer.set_res(i, view)  # type: ignore[call-arg]  # stub has C's (ptr, size)
+    return views
+
+
+def _view(array: np.ndarray) -> memoryview:
+    return memoryview(array)  # type: ignore[arg-type]  # numpy stubs: __buffer__ on 3.12+ only
 
 
 class BoundFunction:
@@ -82,18 +98,8 @@ class BoundFunction:
             )
             for i in range(fun.n_out())
         ]
-        self._views = (
-            [memoryview(a) for a in self._inputs],
-            [memoryview(r) for r in self._outputs],
-        )
-        self._bind_buffer()
+        self._views = bind_buffer(self._buffer, self._inputs, self._outputs)
         self.arrays = dict(zip(fun.name_in() + fun.name_out(), self._inputs + self._outputs))
-
-    def _bind_buffer(self) -> None:
-        for i, a in enumerate(self._views[0]):
-            self._buffer.set_arg(i, a)
-        for i, r in enumerate(self._views[1]):
-            self._buffer.set_res(i, r)
 
     def _bind(
         self, shared: Mapping[str, np.ndarray], name: str, nnz: int, shape: tuple
@@ -118,7 +124,7 @@ class BoundFunction:
         """Evaluate on the bound inputs as they are, into the bound outputs (raising as it does)."""
         if self.renew:
             self._buffer, self._trigger = self.function.buffer()
-            self._bind_buffer()
+            self._views = bind_buffer(self._buffer, self._inputs, self._outputs)
         self._trigger()
 
     def stats(self) -> dict:

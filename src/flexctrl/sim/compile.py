@@ -227,9 +227,8 @@ def library_key(what: str, flags: Sequence[str], compiler: str) -> str:
     ``-march=native`` is among the flags.
     """
     host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    return content_key(what, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[
-        :24
-    ]
+    version = ca.__version__  # type: ignore[attr-defined]  # casadi's stubs lack __version__
+    return content_key(what, " ".join(flags), compiler_identity(compiler), version, host)[:24]
 
 
 def compile_function(

@@ -73,7 +73,7 @@ class Euler(RK4):
 
     name: ClassVar[str] = "euler"
     #: Largest stable ``omega * dt`` on the imaginary axis: none (undamped modes always grow).
-    stability_limit: ClassVar[float] = 0.0
+    stability_limit: float = 0.0
 
     def __init__(
         self,

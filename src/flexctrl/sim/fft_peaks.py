@@ -71,5 +71,5 @@ def dominant_frequencies(
         return []
     peaks = peaks[np.argsort(amp[peaks])[::-1]]
     strongest = amp[peaks[0]]
-    peaks = [p for p in peaks if amp[p] >= floor * strongest]
-    return [float(freq[p]) for p in peaks[:count]]
+    strong = [p for p in peaks if amp[p] >= floor * strongest]
+    return [float(freq[p]) for p in strong[:count]]

@@ -98,7 +98,7 @@ class Integrator:
     #: Name used by :func:`flexctrl.sim.get_integrator` and in results.
     name: ClassVar[str] = ""
     #: Largest stable ``omega * dt`` on the imaginary axis (explicit methods).
-    stability_limit: ClassVar[float] = math.inf
+    stability_limit: float = math.inf
 
     def __init__(
         self,

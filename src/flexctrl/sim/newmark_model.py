@@ -111,7 +111,7 @@ class Newmark(Integrator):
     """
 
     name: ClassVar[str] = "newmark"
-    stability_limit: ClassVar[float] = math.inf
+    stability_limit: float = math.inf
 
     def __init__(
         self,

@@ -35,6 +35,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.bound import bind_buffer
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
 from flexctrl.sim.integrator import Integrator, output_function
 
@@ -197,7 +198,7 @@ class RK4(Integrator):
     """
 
     name: ClassVar[str] = "rk4"
-    stability_limit: ClassVar[float] = RK4_STABILITY_LIMIT
+    stability_limit: float = RK4_STABILITY_LIMIT
 
     def __init__(
         self,
@@ -256,10 +257,7 @@ class RK4(Integrator):
         ]
         self._res = [np.zeros((n, self.model.n_x)), np.zeros((n, loop.size1_out(1)))]
         self._buffer, self._evaluate = self.compiled.function.buffer()
-        for i, a in enumerate(self._args):
-            self._buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self._res):
-            self._buffer.set_res(i, memoryview(r))
+        bind_buffer(self._buffer, self._args, self._res)
 
     def _advance(
         self, x0: np.ndarray, times: np.ndarray, U: np.ndarray

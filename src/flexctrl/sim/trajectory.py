@@ -47,7 +47,7 @@ class LazyEnergies(Mapping):
     """
 
     def __init__(self, compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]]):
-        self._compute = compute
+        self._compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = compute
         self._values: dict[str, np.ndarray] | None = None
 
     @property
@@ -57,6 +57,8 @@ class LazyEnergies(Mapping):
 
     def _get(self) -> dict[str, np.ndarray]:
         if self._values is None:
+            if self._compute is None:
+                raise RuntimeError("the energies were neither computed nor computable")
             self._values = energy_dict(*self._compute())
             self._compute = None
         return self._values

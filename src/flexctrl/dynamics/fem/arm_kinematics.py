@@ -34,11 +34,11 @@ Axial shortening (Eqs 11-18), switchable
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.fem.link_matrices import LinkMatrices, link_matrices
 from flexctrl.errors import SpecError
@@ -278,9 +278,7 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     )
 
 
-def locked_matrices(
-    arm: ArmSpec, n_elements: int, q_r: Sequence[float]
-) -> tuple[np.ndarray, np.ndarray]:
+def locked_matrices(arm: ArmSpec, n_elements: int, q_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """``(M_ff, K_ff)`` of the elastic dofs, the joints clamped at ``q_r``, the links straight.
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint

@@ -54,6 +54,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.fem.arm_kinematics import (
     MAX_ELEMENTS,
@@ -86,7 +87,7 @@ def build_fem_model(
     n_elements: int,
     *,
     axial_shortening: bool = True,
-    reference_q: Sequence[float] | None = None,
+    reference_q: Sequence[float] | np.ndarray | None = None,
 ) -> Model:
     """Build the floating-frame finite-element model of a planar revolute arm.
 
@@ -221,9 +222,7 @@ def _fem_functions(
     }
 
 
-def locked_frequencies(
-    functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int
-) -> np.ndarray:
+def locked_frequencies(functions: dict, K: np.ndarray, q_r: ArrayLike, n_joints: int) -> np.ndarray:
     """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``.
 
     The joints clamped, the elastic dofs at zero, no gravity preload; see
@@ -249,14 +248,14 @@ def generalized_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
     return np.sort(np.sqrt(1.0 / mu))
 
 
-def relax_axial(model: Model, q: Sequence[float]) -> np.ndarray:
+def relax_axial(model: Model, q: ArrayLike) -> np.ndarray:
     """``q`` with its axial dofs set to minimise the elastic energy for the given bending dofs.
 
     With axial shortening this makes the links inextensible (``u = -s``, zero
     membrane strain): the consistent way to start from a bent shape without
     loading the stiff axial elements.  Without axial shortening it sets ``u = 0``.
     """
-    q = np.asarray(q, dtype=float).copy()
+    relaxed = np.asarray(q, dtype=float).copy()
     idx = np.array(
         [k for k, name in enumerate(model.coordinate_names) if name.startswith("u")], dtype=int
     )
@@ -265,6 +264,6 @@ def relax_axial(model: Model, q: Sequence[float]) -> np.ndarray:
     grad = ca.gradient(E_el, qs)[idx]
     fun = ca.Function("axial", [qs], [grad, ca.jacobian(grad, qs)[:, idx]])
     for _ in range(3):  # quadratic in u: one step is exact up to rounding
-        g, H = (np.asarray(v, dtype=float) for v in fun(q))
-        q[idx] -= np.linalg.solve(H, g.ravel())
-    return q
+        g, H = (np.asarray(v, dtype=float) for v in fun(relaxed))
+        relaxed[idx] -= np.linalg.solve(H, g.ravel())
+    return relaxed

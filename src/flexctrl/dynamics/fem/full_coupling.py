@@ -277,7 +277,7 @@ class SlidingFullModel:
 
     def inputs(self, t: float) -> tuple[float, float]:
         """Applied ``(torque, force)`` (N m, N); zero under a motion drive (the multipliers)."""
-        if self.motion_driven:
+        if isinstance(self.drive, RPMotion):
             return 0.0, 0.0
         return float(self.drive.torque(t)), float(self.drive.force(t))
 
@@ -293,7 +293,7 @@ class SlidingFullModel:
         """Undeformed links at rest relative to the frame, rigid state from the drive."""
         z, zd = np.zeros(self.nz), np.zeros(self.nz)
         d = self.drive
-        if self.motion_driven:
+        if isinstance(d, RPMotion):
             z[self.ith], z[self.iW] = float(d.theta(0.0)), float(d.W(0.0))
             zd[self.ith], zd[self.iW] = float(d.thetad(0.0)), float(d.Wd(0.0))
         else:
@@ -312,7 +312,7 @@ class SlidingFullModel:
     def problem(self) -> DAEProblem:
         """``M(z) zdd + Phi_z^T lam = f(z, zd) + Q(t)`` with the contact (and joint) constraints."""
         ne, ith, iW, nz, nj = self.ne, self.ith, self.iW, self.nz, self.n_joint_rows
-        d = self.drive
+        d = self.drive if isinstance(self.drive, RPMotion) else None  # the joint rows' motion
 
         def force(z: Array, zd: Array, t: float) -> Array:
             out = self.internal_force(z, zd)
@@ -323,7 +323,7 @@ class SlidingFullModel:
 
         def phi(z: Array, t: float) -> Array:
             contact = sum(R[0] @ z[:ne] for R, _ in self.contact_parts(z[iW], t))
-            if not nj:
+            if d is None:
                 return contact
             return np.r_[contact, z[ith] - float(d.theta(t)), z[iW] - float(d.W(t))]
 
@@ -340,7 +340,9 @@ class SlidingFullModel:
 
         def phi_t(z: Array, t: float) -> Array:
             m = self.contact_parts(z[iW], t)[0][0].shape[1]
-            return np.r_[np.zeros(m), -float(d.thetad(t)), -float(d.Wd(t))] if nj else np.zeros(m)
+            if d is None:
+                return np.zeros(m)
+            return np.r_[np.zeros(m), -float(d.thetad(t)), -float(d.Wd(t))]
 
         def h(z: Array, zd: Array, t: float) -> Array:
             q, qd, Wd = z[:ne], zd[:ne], zd[iW]
@@ -348,7 +350,9 @@ class SlidingFullModel:
                 2 * Wd * v * (R[1] @ qd) + Wd**2 * v**2 * (R[2] @ q)
                 for R, v in self.contact_parts(z[iW], t)
             )
-            return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))] if nj else contact
+            if d is None:
+                return contact
+            return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))]
 
         def h_tangents(z: Array, zd: Array, t: float) -> tuple[Array, Array]:
             """``(dh/dz, dh/dzd)`` of the contact rows (a motion drive's joint rows have none)."""

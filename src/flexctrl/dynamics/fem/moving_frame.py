@@ -19,7 +19,9 @@ Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling),
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +35,9 @@ from flexctrl.beam.elements import (
 from flexctrl.errors import SpecError
 
 Array = NDArray[np.float64]
+#: A number, a numpy array or a CasADi expression: the rigid motion and the terms built from it
+#: are numeric for the Newmark models and symbolic for IDAS (:mod:`.idas_dae`), one code for both.
+NumOrSym = Any
 #: The ends of a sliding link: E (material coordinate 0) and H (the tip).
 ENDS = ("E", "H")
 
@@ -122,10 +127,14 @@ def is_symbolic(value: object) -> bool:
     return type(value).__module__.startswith("casadi")
 
 
-def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
+def _profile(t: NumOrSym, T: float, derivative: int) -> NumOrSym:
     """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)``, held outside [0, T].
 
     ``t`` may be a CasADi expression (a symbolic time; :mod:`flexctrl.dynamics.fem.idas_dae`)."""
+    sin: Callable[[Any], Any]
+    cos: Callable[[Any], Any]
+    clip: Callable[[Any], Any]
+    where: Callable[..., Any]
     if is_symbolic(t):
         import casadi as ca
 
@@ -158,24 +167,24 @@ class RPMotion:
     theta0: float = 0.0
     dtheta: float = 0.0
 
-    def W(self, t: ArrayLike) -> Array:
+    def W(self, t: NumOrSym) -> NumOrSym:
         """Overhang beyond the outer support, m."""
         return self.C1 - self.C2 * _profile(t, self.T, 0)
 
-    def Wd(self, t: ArrayLike) -> Array:
+    def Wd(self, t: NumOrSym) -> NumOrSym:
         return -self.C2 * _profile(t, self.T, 1)
 
-    def Wdd(self, t: ArrayLike) -> Array:
+    def Wdd(self, t: NumOrSym) -> NumOrSym:
         return -self.C2 * _profile(t, self.T, 2)
 
-    def theta(self, t: ArrayLike) -> Array:
+    def theta(self, t: NumOrSym) -> NumOrSym:
         """Housing angle, rad."""
         return self.theta0 + self.dtheta * _profile(t, self.T, 0)
 
-    def thetad(self, t: ArrayLike) -> Array:
+    def thetad(self, t: NumOrSym) -> NumOrSym:
         return self.dtheta * _profile(t, self.T, 1)
 
-    def thetadd(self, t: ArrayLike) -> Array:
+    def thetadd(self, t: NumOrSym) -> NumOrSym:
         return self.dtheta * _profile(t, self.T, 2)
 
 
@@ -223,8 +232,8 @@ class FrameLink:
         self.G_2 = assemble_geometric_stiffness(self.n, length, lambda z: z * z)
 
     def force_coefficients(
-        self, r: dict[str, float], driven_end: str
-    ) -> tuple[float, float, float]:
+        self, r: Mapping[str, NumOrSym], driven_end: str
+    ) -> tuple[NumOrSym, NumOrSym, NumOrSym]:
         """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N).
 
         Tension is positive.  ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s),
@@ -242,12 +251,12 @@ class FrameLink:
         return 0.0, rho * b0, -0.5 * rho * w2  # F = int_0^x rho a~
 
     def terms(
-        self, r: dict[str, float], driven_end: str, axial_shortening: bool
-    ) -> tuple[Array, Array]:
+        self, r: Mapping[str, NumOrSym], driven_end: str, axial_shortening: bool
+    ) -> tuple[NumOrSym, NumOrSym]:
         """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
         also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2).  Numbers give numpy arrays; CasADi
         expressions (a symbolic rigid motion) give CasADi matrices."""
-        mats = (
+        mats: tuple[Any, ...] = (
             self.K,
             self.M,
             self.G_c,

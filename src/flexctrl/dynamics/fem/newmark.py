@@ -44,16 +44,20 @@ class _Evaluator:
 
     def __init__(self, fun: ca.Function):
         ins = [ca.SX.sym(f"i{k}", fun.size_in(k)) for k in range(fun.n_in())]
-        outs = fun(*ins)
-        outs = outs if isinstance(outs, (list, tuple)) else [outs]
+        called = fun(*ins)
+        outs = called if isinstance(called, (list, tuple)) else [called]
         self.fun = ca.Function(f"{fun.name()}_dense", ins, [ca.densify(o) for o in outs])
         self.args = [np.zeros(int(np.prod(fun.size_in(k)))) for k in range(fun.n_in())]
         self.res = [np.zeros(fun.size_out(k)[::-1]) for k in range(fun.n_out())]
         self.buffer, self.evaluate = self.fun.buffer()
+        # the stubs are wrong twice: casadi's give set_arg C's (pointer, size), numpy's give
+        # ndarray __buffer__ on Python 3.12+ only
         for k, arr in enumerate(self.args):
-            self.buffer.set_arg(k, memoryview(arr))
+            view = memoryview(arr)  # type: ignore[arg-type]  # numpy stubs: see above
+            self.buffer.set_arg(k, view)  # type: ignore[call-arg]  # casadi stubs: see above
         for k, arr in enumerate(self.res):
-            self.buffer.set_res(k, memoryview(arr))
+            view = memoryview(arr)  # type: ignore[arg-type]  # numpy stubs: see above
+            self.buffer.set_res(k, view)  # type: ignore[call-arg]  # casadi stubs: see above
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         for dst, src in zip(self.args, args):

@@ -61,8 +61,9 @@ Full coupling (Eq 43: prescribed torque and force, ``theta`` and ``W`` unknowns)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -70,6 +71,7 @@ from numpy.typing import ArrayLike, NDArray
 from flexctrl.dynamics.fem.moving_frame import (
     ENDS,
     FrameLink,
+    NumOrSym,
     RPMotion,
     check_elements,
     is_symbolic,
@@ -124,12 +126,15 @@ class RPArmModel:
         self._cache_t: float | None = None
 
     # -- rigid motion -------------------------------------------------------------------
-    def rigid(self, t: float) -> dict[str, float]:
+    def rigid(self, t: NumOrSym) -> dict[str, NumOrSym]:
         """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity in the frame.
 
         CasADi expressions for a symbolic ``t``.
         """
         m, s = self.motion, self.spec
+        val: Callable[[Any], Any]
+        cos: Callable[[Any], Any]
+        sin: Callable[[Any], Any]
         if is_symbolic(t):
             import casadi as ca
 

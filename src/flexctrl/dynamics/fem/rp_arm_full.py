@@ -99,7 +99,7 @@ class RPArmFullModel(SlidingFullModel):
         self.axial_shortening = bool(axial_shortening)
         s, L = spec, spec.length
         motion_driven = isinstance(drive, RPMotion)
-        W0 = float(drive.W(0.0)) if motion_driven else float(drive.W0)
+        W0 = float(drive.W(0.0)) if isinstance(drive, RPMotion) else float(drive.W0)
         if not 0.0 <= W0 <= L - s.D:
             raise SpecError(
                 f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = "
