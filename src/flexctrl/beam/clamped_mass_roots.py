@@ -60,11 +60,40 @@ def _delta_parts(
 
 
 def delta(lam: float, mu: float, eta: float, kappa: float) -> float:
+    """The scaled characteristic function at one ``lam`` (:func:`frequency_determinant`).
+
+    Parameters
+    ----------
+    lam : float
+        ``beta L``, dimensionless, >= 0.
+    mu, eta, kappa : float
+        Tip mass, inertia and first moment, ``m_D / (rho L)``, ``J_D / (rho L^3)``,
+        ``M_D / (rho L^2)``, dimensionless.
+
+    Returns
+    -------
+    float
+        ``Delta(lam) / (cosh(lam) W(lam))``, at most 2 in magnitude.
+    """
     return _delta_parts(lam, mu, eta, kappa)[0]
 
 
 def eigenvalue_count(lam: float, mu: float, eta: float, kappa: float) -> int:
-    """Number of eigenvalues (``omega^2 > 0``) strictly below ``lam`` (Wittrick-Williams)."""
+    """Number of eigenvalues (``omega^2 > 0``) strictly below ``lam`` (Wittrick-Williams).
+
+    Parameters
+    ----------
+    lam : float
+        ``beta L``, dimensionless.
+    mu, eta, kappa : float
+        Tip mass, inertia and first moment, ``m_D / (rho L)``, ``J_D / (rho L^3)``,
+        ``M_D / (rho L^2)``, dimensionless.
+
+    Returns
+    -------
+    int
+        The count of roots ``beta_j L < lam``.
+    """
     if lam <= 0.0:
         return 0
     f, e2, e3, e5 = _delta_parts(lam, mu, eta, kappa)
@@ -81,7 +110,21 @@ def eigenvalue_count(lam: float, mu: float, eta: float, kappa: float) -> int:
 
 
 def frequency_roots(n: int, mu: float, eta: float, kappa: float) -> list[float]:
-    """First ``n`` positive roots of ``Delta``, ascending, isolated by counting."""
+    """First ``n`` positive roots of ``Delta``, ascending, isolated by counting.
+
+    Parameters
+    ----------
+    n : int
+        Number of roots.
+    mu, eta, kappa : float
+        Tip mass, inertia and first moment, ``m_D / (rho L)``, ``J_D / (rho L^3)``,
+        ``M_D / (rho L^2)``, dimensionless.
+
+    Returns
+    -------
+    list of float
+        ``beta_j L``, dimensionless.
+    """
     if n == 0:
         return []
     hi = (n - 0.5) * math.pi + 0.5  # above the n-th clamped-free root, a bound if T >= 0

@@ -18,7 +18,22 @@ Array = NDArray[np.float64]
 
 
 def krylov_series(lam: float, xi: Array, m: int) -> Array:
-    """Krylov series ``K_m(xi) = sum_k lam^{4k} xi^{4k+m} / (4k+m)!``; ``K_{-1} = lam^4 K_3``."""
+    """Krylov series ``K_m(xi) = sum_k lam^{4k} xi^{4k+m} / (4k+m)!``; ``K_{-1} = lam^4 K_3``.
+
+    Parameters
+    ----------
+    lam : float
+        ``beta L``, dimensionless.
+    xi : numpy.ndarray
+        Positions along the link over its length, dimensionless.
+    m : int
+        Index of the series, ``m >= -1``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``K_m`` at ``xi``.
+    """
     if m < 0:
         return lam**4 * krylov_series(lam, xi, m + 4)
     return np.power.outer(xi, (K_POWERS + m).astype(float)) @ (
@@ -32,12 +47,42 @@ def _ksum(lam: float, m: int, p: int = 0) -> float:
 
 
 def krylov_coefficients(lam: float, c1: float, c2: float) -> tuple[float, float]:
-    """``(A, B)`` with ``phi = A K_2 + B K_3``."""
+    """``(A, B)`` with ``phi = A K_2 + B K_3``.
+
+    Parameters
+    ----------
+    lam : float
+        The mode's root ``beta L``, dimensionless.
+    c1, c2 : float
+        The mode's coefficients (module docstring).
+
+    Returns
+    -------
+    tuple of float
+        The Krylov coefficients.
+    """
     return -2.0 * lam**2 * c2, -2.0 * lam**3 * c1
 
 
 def mode_derivative(lam: float, c1: float, c2: float, tail: float, xi: Array, d: int) -> Array:
-    """``d``-th ``xi``-derivative of one mode at ``xi``."""
+    """``d``-th ``xi``-derivative of one mode at ``xi``.
+
+    Parameters
+    ----------
+    lam : float
+        The mode's root ``beta L``, dimensionless.
+    c1, c2, tail : float
+        The mode's coefficients (module docstring).
+    xi : numpy.ndarray
+        Positions over the link's length, dimensionless.
+    d : int
+        Order of the derivative, 0 to 3.
+
+    Returns
+    -------
+    numpy.ndarray
+        The derivative at ``xi``.
+    """
     if lam < SERIES_MAX:
         a, b = krylov_coefficients(lam, c1, c2)
         return a * krylov_series(lam, xi, 2 - d) + b * krylov_series(lam, xi, 3 - d)
@@ -52,7 +97,20 @@ def mode_derivative(lam: float, c1: float, c2: float, tail: float, xi: Array, d:
 
 
 def end_values(lam: float, c1: float, c2: float, tail: float) -> Array:
-    """``[[phi, phi', phi'', phi''']`` at ``xi = 0``, same at ``xi = 1]``."""
+    """``[[phi, phi', phi'', phi''']`` at ``xi = 0``, same at ``xi = 1]``.
+
+    Parameters
+    ----------
+    lam : float
+        The mode's root ``beta L``, dimensionless.
+    c1, c2, tail : float
+        The mode's coefficients (module docstring).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (2, 4).
+    """
     xi = np.array([0.0, 1.0])
     return np.array([mode_derivative(lam, c1, c2, tail, xi, d) for d in range(4)]).T
 
@@ -72,7 +130,21 @@ def _null(rows: Array, units: tuple[float, float], weight: Array) -> Array:
 
 
 def raw_mode(lam: float, mu: float, eta: float, kappa: float) -> tuple[float, float, float]:
-    """Unnormalised ``(c1, c2, tail)`` satisfying the tip conditions at root ``lam``."""
+    """Unnormalised ``(c1, c2, tail)`` satisfying the tip conditions at root ``lam``.
+
+    Parameters
+    ----------
+    lam : float
+        A root ``beta L`` of the frequency equation, dimensionless.
+    mu, eta, kappa : float
+        Tip mass, inertia and first moment, ``m_D / (rho L)``, ``J_D / (rho L^3)``,
+        ``M_D / (rho L^2)``, dimensionless.
+
+    Returns
+    -------
+    tuple of float
+        ``(c1, c2, tail)``.
+    """
     ev, vec = np.linalg.eigh(np.array([[mu, kappa], [kappa, eta]]))
     weight = (vec * np.abs(ev)) @ vec.T + np.diag([0.25, 0.25 / max(lam, 1.0) ** 2])
     l4 = lam**4
@@ -118,7 +190,20 @@ def _pair_series(lj: float, abj: tuple[float, float], lk: float, abk: tuple[floa
 
 
 def mode_integrals(lam: float, c1: float, c2: float, tail: float) -> tuple[float, float, float]:
-    """``int phi``, ``int xi phi`` and ``int phi^2`` over ``0 <= xi <= 1``."""
+    """``int phi``, ``int xi phi`` and ``int phi^2`` over ``0 <= xi <= 1``.
+
+    Parameters
+    ----------
+    lam : float
+        The mode's root ``beta L``, dimensionless.
+    c1, c2, tail : float
+        The mode's coefficients (module docstring).
+
+    Returns
+    -------
+    tuple of float
+        The three integrals, dimensionless.
+    """
     if lam < SERIES_MAX:
         a, b = krylov_coefficients(lam, c1, c2)
         return (
@@ -133,7 +218,22 @@ def mode_integrals(lam: float, c1: float, c2: float, tail: float) -> tuple[float
 
 
 def cross_integral(lj: float, mj: tuple, gj: Array, lk: float, mk: tuple, gk: Array) -> float:
-    """``int_0^1 phi_j phi_k`` for distinct roots; ``g`` = derivatives 0..3 at ``xi = 1``."""
+    """``int_0^1 phi_j phi_k`` for distinct roots.
+
+    Parameters
+    ----------
+    lj, lk : float
+        The two modes' roots ``beta L``, dimensionless.
+    mj, mk : tuple
+        The two modes' ``(c1, c2, tail)``.
+    gj, gk : numpy.ndarray
+        The two modes' derivatives 0..3 at ``xi = 1``.
+
+    Returns
+    -------
+    float
+        The integral, dimensionless.
+    """
     if lj < SERIES_MAX and lk < SERIES_MAX:
         return _pair_series(
             lj, krylov_coefficients(lj, *mj[:2]), lk, krylov_coefficients(lk, *mk[:2])

@@ -33,7 +33,18 @@ def state_names(model: Model) -> tuple[str, ...]:
 
 
 def input_names(model: Model) -> tuple[str, ...]:
-    """The inputs' names ``tau1..taun`` (joint torques, N m), one per joint of ``model``."""
+    """The inputs' names ``tau1..taun`` (joint torques, N m), one per joint of ``model``.
+
+    Parameters
+    ----------
+    model : Model
+        The arm.
+
+    Returns
+    -------
+    tuple of str
+        One name per input.
+    """
     return tuple(f"tau{i + 1}" for i in range(model.n_u))
 
 
@@ -97,5 +108,16 @@ def torque_limits(model: Model, default: float = math.inf) -> np.ndarray:
 
 
 def flexible_index(model: Model) -> np.ndarray:
-    """Indices of the elastic coordinates in ``q`` (those after the ``n`` joint angles)."""
+    """Indices of the elastic coordinates in ``q`` (those after the ``n`` joint angles).
+
+    Parameters
+    ----------
+    model : Model
+        The arm.
+
+    Returns
+    -------
+    numpy.ndarray
+        Integer indices into ``q``.
+    """
     return np.arange(model.n_u, model.n_q)

@@ -43,7 +43,23 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 
 
 def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
-    """The integrator class of a name (see :data:`INTEGRATORS`), or an :class:`Integrator` class."""
+    """The integrator class of a name (see :data:`INTEGRATORS`), or an :class:`Integrator` class.
+
+    Parameters
+    ----------
+    method : str or type
+        A name of :data:`INTEGRATORS` or an :class:`Integrator` subclass (returned as is).
+
+    Returns
+    -------
+    type
+        The integrator class.
+
+    Raises
+    ------
+    SpecError
+        When the name is not known.
+    """
     if isinstance(method, type) and issubclass(method, Integrator):
         return method
     if isinstance(method, str) and method in INTEGRATORS:

@@ -16,7 +16,20 @@ import numpy as np
 
 
 def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
-    """``fun(*args)`` through a buffer bound to numpy arrays for this one call (results as rows)."""
+    """``fun(*args)`` through a buffer bound to numpy arrays for this one call (results as rows).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The Function to evaluate.
+    *args : numpy.ndarray
+        Its inputs, each broadcast to the input's number of nonzeros.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The outputs, an output of shape (rows, cols) as (cols, rows).
+    """
     buffer, trigger = fun.buffer()
     inputs = [
         np.ascontiguousarray(
@@ -35,7 +48,17 @@ def bind_buffer(
 ) -> list[memoryview]:
     """Bind ``buffer``'s inputs and outputs to numpy arrays (C-ordered float64, kept alive).
 
-    Returns the memory views bound; the arrays must outlive the binding.
+    Parameters
+    ----------
+    buffer : casadi.FunctionBuffer
+        The buffer of a Function (``fun.buffer()[0]``).
+    inputs, outputs : sequence of numpy.ndarray
+        One array per input and per output, in order.
+
+    Returns
+    -------
+    list of memoryview
+        The views bound; the arrays must outlive the binding.
     """
     views = [_view(a) for a in (*inputs, *outputs)]
     for i, view in enumerate(views[: len(inputs)]):
@@ -68,6 +91,15 @@ class BoundFunction:
     Functions read it: CasADi's HPIPM interface, warm-started, then takes the previous
     solve's multipliers and slacks from it (other iterates from the second sample on),
     where an ordinary call starts them afresh.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The Function to bind.
+    shared : mapping of str to numpy.ndarray, optional
+        Arrays the caller owns, bound to the inputs or outputs of these names.
+    renew : bool
+        A new buffer (fresh work memory) for every evaluation.
     """
 
     def __init__(

@@ -23,7 +23,17 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 class DivergenceMonitor:
-    """Per-chunk checks: finite states and outputs, bounded kinetic plus elastic energy."""
+    """Per-chunk checks: finite states and outputs, bounded kinetic plus elastic energy.
+
+    Parameters
+    ----------
+    integrator : Integrator
+        The integrator checked (its ``energy_factor`` sets the bound).
+    x0 : numpy.ndarray
+        Initial state.
+    y0 : numpy.ndarray
+        Initial outputs; the first three rows are ``E_kin``, ``E_el``, ``E_grav`` (J).
+    """
 
     FLOOR_J = 1e-6
 

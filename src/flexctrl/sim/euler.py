@@ -39,6 +39,18 @@ def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Func
     """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model``.
 
     ``y`` as :func:`~flexctrl.sim.integrator.output_function` gives it.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    u_function : casadi.Function, optional
+        ``u(t)`` (N m) added to the step's ``u``.
+
+    Returns
+    -------
+    casadi.Function
+        The step; ``t`` and ``h`` in s.
     """
     f = try_expand(model.functions["f"])
     outputs = output_function(model)

@@ -48,8 +48,20 @@ OUTPUT_ROWS = ("E_kin", "E_el", "E_grav", "tip_x", "tip_y")  # then w1..w_nlinks
 def output_function(model, energies: bool = True) -> ca.Function:
     """``y(x) = (E_kin, E_el, E_grav, tip_x, tip_y, w_1..w_n)`` of a model, as one Function.
 
-    ``energies=False``: ``(tip_x, tip_y, w_1..w_n)`` alone (named ``kinematic_outputs``).  The
-    kinetic energy needs the mass matrix, so it costs most of the outputs.
+    The kinetic energy needs the mass matrix, so it costs most of the outputs.
+
+    Parameters
+    ----------
+    model : Model
+        The arm.
+    energies : bool
+        Include the energies (J); ``False`` gives ``(tip_x, tip_y, w_1..w_n)`` (m) alone,
+        named ``kinematic_outputs``.
+
+    Returns
+    -------
+    casadi.Function
+        ``y(x)``, energies in J, tip position and tip deflections in m.
     """
     x = ca.MX.sym("x", model.n_x)
     q, qd = x[: model.n_q], x[model.n_q :]
@@ -61,7 +73,25 @@ def output_function(model, energies: bool = True) -> ca.Function:
 
 
 def check_input_function(fun: ca.Function | None, n_u: int) -> ca.Function | None:
-    """Validate a time-function input ``u(t) -> (n_u,)``."""
+    """Validate a time-function input ``u(t) -> (n_u,)``.
+
+    Parameters
+    ----------
+    fun : casadi.Function or None
+        Torques (N m) as a function of time (s); ``None`` passes through.
+    n_u : int
+        Number of torques the model takes.
+
+    Returns
+    -------
+    casadi.Function or None
+        ``fun`` unchanged.
+
+    Raises
+    ------
+    SpecError
+        When ``fun`` is not a Function of one scalar with ``n_u`` torques as first output.
+    """
     if fun is None:
         return None
     if not isinstance(fun, ca.Function):

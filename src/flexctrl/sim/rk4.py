@@ -94,7 +94,22 @@ def rk4_next(f: Callable, x, h, t=None, *, k1=None):
 def rk4_step_function(
     model, u_function: ca.Function | None = None, *, expand: bool = False
 ) -> ca.Function:
-    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` of ``model``; ``y``: :func:`output_function`."""
+    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` of ``model``; ``y``: :func:`output_function`.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    u_function : casadi.Function, optional
+        ``u(t)`` (N m) added to the step's ``u``; none by default.
+    expand : bool
+        Expand the step into one SX expression.
+
+    Returns
+    -------
+    casadi.Function
+        The step; ``t`` and ``h`` in s.
+    """
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -120,7 +135,19 @@ def rk4_step_function(
 def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca.Function:
     """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])``: ``n`` steps chained.
 
-    ``step(x, t, u, h)`` is any one-step map.
+    Parameters
+    ----------
+    step : casadi.Function
+        Any one-step map ``step(x, t, u, h) -> (x_next, y_next)``; ``t`` and ``h`` in s.
+    n_steps : int
+        Number of steps ``n`` chained.
+    name : str
+        Prefix of the Function's name (``n`` is appended).
+
+    Returns
+    -------
+    casadi.Function
+        The chained loop.
     """
     acc = step.mapaccum(n_steps)
     x0 = ca.MX.sym("x0", step.size1_in(0))
@@ -132,7 +159,20 @@ def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca
 
 
 def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
-    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
+    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        The RK4 step of :func:`rk4_step_function`.
+    n_steps : int
+        Number of steps chained.
+
+    Returns
+    -------
+    casadi.Function
+        :func:`loop_function` named ``rk4_loop<n_steps>``.
+    """
     return loop_function(step, n_steps, "rk4_loop")
 
 
@@ -141,9 +181,26 @@ def held_sample_loop(
 ) -> ca.Function:
     """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: ``substeps`` RK4 steps of ``h`` per sample.
 
-    The torque is held over a sample; ``h`` in s.  The sample-level building block of the FEM timing
-    report and the speed/accuracy study: the output is the state at the end of each of ``chunk``
-    samples.
+    The torque is held over a sample.  The sample-level building block of the FEM timing report
+    and the speed/accuracy study: the output is the state at the end of each of ``chunk`` samples.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    h : float
+        RK4 step (s).
+    substeps : int
+        RK4 steps per sample.
+    chunk : int
+        Samples per call.
+    name : str
+        Name of the Function.
+
+    Returns
+    -------
+    casadi.Function
+        ``loop(x0, U) -> X``; ``U`` in N m.
     """
     f = model.functions["f"]
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
@@ -170,6 +227,20 @@ def rk4_step(omega_max: float, scene_dt: float, margin: float = RK4_MARGIN) -> f
     """The scene's step divided by the smallest whole number that makes RK4 stable (s).
 
     ``omega_max * dt <= margin * RK4_STABILITY_LIMIT``; the scene's step itself when it already is.
+
+    Parameters
+    ----------
+    omega_max : float
+        Largest natural frequency of the model (rad/s); a value <= 0 keeps the scene's step.
+    scene_dt : float
+        The scene's sample time (s).
+    margin : float
+        Share of :data:`RK4_STABILITY_LIMIT` the step may use.
+
+    Returns
+    -------
+    float
+        The step (s), ``scene_dt / k`` for a whole ``k >= 1``.
     """
     if omega_max <= 0:
         return scene_dt

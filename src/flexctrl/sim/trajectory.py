@@ -32,7 +32,18 @@ ENERGY_NAMES = ("E_kin", "E_el", "E_grav", "E_total")
 
 
 def energy_dict(kin: np.ndarray, el: np.ndarray, grav: np.ndarray) -> dict[str, np.ndarray]:
-    """``{E_kin, E_el, E_grav, E_total}`` (J) from the three energies; ``E_total`` is their sum."""
+    """``{E_kin, E_el, E_grav, E_total}`` (J) from the three energies; ``E_total`` is their sum.
+
+    Parameters
+    ----------
+    kin, el, grav : numpy.ndarray
+        Kinetic, elastic and gravitational energy (J), each of shape (T,).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        The three energies and their sum.
+    """
     return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
 
 
@@ -44,6 +55,11 @@ class LazyEnergies(Mapping):
     energy (the mass matrix at every plant step) costs most of the outputs, so the
     closed loop leaves it to whoever reads it (the CSV, the plots, the energy figures).
     Copied or pickled, it is evaluated and becomes a plain dict.
+
+    Parameters
+    ----------
+    compute : callable
+        ``compute() -> (E_kin, E_el, E_grav)`` (J, each of shape (T,)), called once.
     """
 
     def __init__(self, compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]]):
@@ -272,7 +288,18 @@ class Trajectory:
 
 
 def jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays and non-finite floats into JSON-safe values."""
+    """Convert numpy scalars/arrays and non-finite floats into JSON-safe values.
+
+    Parameters
+    ----------
+    value : object
+        A scalar, array, list, tuple or dict (nested); non-finite floats become strings.
+
+    Returns
+    -------
+    object
+        The same value made of plain Python types.
+    """
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
