@@ -53,7 +53,18 @@ def _poly(x: np.ndarray, length: float, derivative: int) -> np.ndarray:
 
 
 def tip_moment_shape(length: float):
-    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, one row."""
+    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, one row.
+
+    Parameters
+    ----------
+    length : float
+        Link length ``L`` (m).
+
+    Returns
+    -------
+    callable
+        ``psi(x, d)``: the ``d``-th derivative at ``x`` (m), shape (1, len(x)).
+    """
     return lambda x, d: _poly(np.asarray(x, dtype=float), length, d)[None, :]
 
 
@@ -67,6 +78,13 @@ class CorrectedModes:
     Has the fields of :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` that the
     assumed-modes model reads (``omega``, ``tip_deflection``, ``tip_slope``, ``v``, ``w``,
     ``z``, ``shape``, ``length``, ``rho``, ``n_modes``), in the same units.
+
+    Parameters
+    ----------
+    base : ClampedMassModes
+        The link's clamped-mass modes.
+    extra : callable
+        ``extra(x, d)``: the raw correction shapes' ``d``-th derivatives at ``x`` (m).
     """
 
     base: ClampedMassModes
@@ -196,6 +214,24 @@ def pinned_root_shapes(
     flexible modes ``W_k`` (the zero-frequency rotation skipped) give the clamped-admissible shapes
     ``W_k(x) - W_k'(0) x``: in the link's root frame, the motion of the link when the hub turns
     against it.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    q : sequence of float or None
+        Joint angles (rad) that set the tip body; ``None``: the arm's configuration.
+    link : int
+        The link, 0-based.
+    count : int
+        Number of shapes.
+    n_elements : int
+        Elements of the beam model.
+
+    Returns
+    -------
+    PinnedRootShapes
+        The shapes and the pinned modes' frequencies (rad/s).
     """
     spec = arm.links[link]
     L = spec.length
