@@ -24,7 +24,31 @@ def lagrange_equations(
     solver: str,
     scheduled: bool,
 ) -> dict[str, ca.SX]:
-    """Lagrange's equations, solved for ``qdd``, and the model's other outputs, by name."""
+    """Lagrange's equations, solved for ``qdd``, and the model's other outputs, by name.
+
+    Parameters
+    ----------
+    ex : ArmExpressions
+        Mass matrix, energies, hub positions and tip deflections of the arm.
+    K, D : casadi.SX
+        Modal stiffness (N/m per modal coordinate) and damping of the elastic coordinates.
+    E_el : casadi.SX
+        Elastic energy (J).
+    symbols : tuple of casadi.SX
+        ``(q, qd, u)``: coordinates (rad, m), rates, joint torques (N m).
+    solver : {"ldl", "qr"}
+        How ``M qdd = rhs`` is solved: the dense LDL of :mod:`.dense_ldl` or ``casadi.solve``
+        (QR).
+    scheduled : bool
+        Modes scheduled on the configuration: the elastic force comes from the gradient of
+        ``ex.elastic_energy`` rather than from ``K q`` alone.
+
+    Returns
+    -------
+    dict of str to casadi.SX
+        ``M``, ``c``, ``g``, ``K``, ``D``, ``xdot``, the energies (J), the tip position and
+        velocity (m, m/s), the hub positions (m) and the tip deflections and slopes.
+    """
     q, qd, u = symbols
     n, N = u.shape[0], q.shape[0]
     M = ex.mass_matrix
@@ -67,7 +91,28 @@ def model_functions(
     scheduled: bool,
     expansion: Expansion | None,
 ) -> dict[str, ca.Function]:
-    """The model's named Functions (:mod:`flexctrl.dynamics.model`) of the expressions."""
+    """The model's named Functions (:mod:`flexctrl.dynamics.model`) of the expressions.
+
+    Parameters
+    ----------
+    expr : dict of str to casadi.SX
+        The expressions of :func:`lagrange_equations`.
+    K, D : casadi.SX
+        Modal stiffness and damping, constant Functions when the modes are frozen.
+    symbols : tuple of casadi.SX
+        ``(q, qd, u)``.
+    scheduled : bool
+        Modes scheduled on the configuration (``K`` and ``D`` depend on ``q``).
+    expansion : tuple of lists of casadi.SX, optional
+        Symbols and the values substituted for them in every expression (the scheduled
+        tables' expansion point).
+
+    Returns
+    -------
+    dict of str to casadi.Function
+        ``M``, ``c``, ``g``, ``K``, ``D``, ``f``, ``energies``, ``tip``, ``hubs``,
+        ``deflection``.
+    """
     q, qd, u = symbols
     if expansion is not None:  # the tables' expansion point is the current configuration
         expr = dict(zip(expr, ca.substitute(list(expr.values()), *expansion)))

@@ -79,8 +79,16 @@ MODAL_FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
 class LinkModal:
     """Modal parameters of one link as CasADi column vectors / matrices (SX, MX or DM).
 
-    ``omega`` (rad/s), ``tip_deflection`` phi(L) (-), ``tip_slope`` phi'(L) (1/m),
-    ``v`` (kg), ``w`` (kg m), ``z`` (kg); mass-orthonormal to the link mass (Eq 40).
+    The modes are mass-orthonormal to the link mass (Eq 40).
+
+    Attributes
+    ----------
+    omega : Expression
+        Natural frequencies (rad/s).
+    tip_deflection, tip_slope : Expression
+        ``phi(L)`` (dimensionless) and ``phi'(L)`` (1/m).
+    v, w, z : Expression
+        ``int rho phi dx`` (kg), ``int rho x phi dx`` (kg m), ``int rho phi_j phi_k dx`` (kg).
     """
 
     omega: Expression
@@ -190,7 +198,20 @@ class ArmExpressions:
 
 
 def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
-    """Index of the first elastic coordinate of each link in ``q`` (joints first)."""
+    """Index of the first elastic coordinate of each link in ``q`` (joints first).
+
+    Parameters
+    ----------
+    n_links : int
+        Number of links (and joints).
+    n_modes : sequence of int
+        Modes per link.
+
+    Returns
+    -------
+    list of int
+        One index per link.
+    """
     offsets, k = [], n_links
     for nf in n_modes:
         offsets.append(k)
@@ -199,12 +220,31 @@ def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
 
 
 def stretched_links(n_modes: Sequence[int]) -> list[int]:
-    """The links that ``axial_stretch`` makes axially compliant: those with elastic modes."""
+    """The links that ``axial_stretch`` makes axially compliant: those with elastic modes.
+
+    Parameters
+    ----------
+    n_modes : sequence of int
+        Modes per link.
+    """
     return [i for i, nf in enumerate(n_modes) if nf > 0]
 
 
 def coordinate_names(n_links: int, n_modes: Sequence[int]) -> tuple[str, ...]:
-    """``q1..qn`` then ``qf11, qf12, ...`` (link, mode)."""
+    """``q1..qn`` then ``qf11, qf12, ...`` (link, mode).
+
+    Parameters
+    ----------
+    n_links : int
+        Number of links (and joints).
+    n_modes : sequence of int
+        Modes per link.
+
+    Returns
+    -------
+    tuple of str
+        The coordinate names.
+    """
     names = [f"q{i + 1}" for i in range(n_links)]
     for i, nf in enumerate(n_modes):
         names += [f"qf{i + 1}{j + 1}" for j in range(nf)]

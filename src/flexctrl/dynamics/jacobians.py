@@ -152,7 +152,22 @@ def _lifted_jacobians(
 
 
 def content_key(lifted: ca.Function, value: bool, inputs: bool) -> str:
-    """The key of :data:`SHARED`: a hash of the lifted Function's form and the outputs asked for."""
+    """The key of :data:`SHARED`: a hash of the lifted Function's form and the outputs asked for.
+
+    Parameters
+    ----------
+    lifted : casadi.Function
+        The lifted dynamics ``fp(x, u, c)``.
+    value : bool
+        Whether the Jacobian Function also returns ``f``.
+    inputs : bool
+        Whether it also returns the Jacobian with respect to the inputs.
+
+    Returns
+    -------
+    str
+        The key.
+    """
     digest = hashlib.sha256(lifted.serialize().encode()).hexdigest()
     return f"{digest}|value={value}|inputs={inputs}"
 

@@ -122,6 +122,20 @@ def derived(model: Any, key: Hashable, build: Callable[[], T]) -> T:
     """``build()`` once per model, kept in ``model.derived`` under ``key``.
 
     A model without that store (a stand-in with the same functions) gets it built anew.
+
+    Parameters
+    ----------
+    model : Model
+        The model the value is kept with.
+    key : hashable
+        What the value is kept under.
+    build : callable
+        ``build()`` makes the value, called once per model and key.
+
+    Returns
+    -------
+    object
+        The kept value.
     """
     store = getattr(model, "derived", None)
     if store is None:

@@ -32,6 +32,11 @@ class Memo:
 
     For what is a pure function of its key's content (a Function built from another's
     serialized form): the value for one model serves every other of the same structure.
+
+    Parameters
+    ----------
+    size : int
+        Entries kept.
     """
 
     def __init__(self, size: int):
@@ -78,6 +83,11 @@ class ObjectMemo:
     Jacobian) can be kept with it: a later model skips building, serializing and loading
     again.  The object is held with its value, so its ``id`` cannot pass to another object
     while the entry lasts; least recently used beyond ``size``.
+
+    Parameters
+    ----------
+    size : int
+        Entries kept.
     """
 
     def __init__(self, size: int):
@@ -110,7 +120,18 @@ FROM_LIFTED = ObjectMemo(32)
 
 
 def try_expand(fun: ca.Function) -> ca.Function:
-    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile)."""
+    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        An MX or SX Function.
+
+    Returns
+    -------
+    casadi.Function
+        The SX form, or ``fun`` itself when it cannot be expanded.
+    """
     if fun.is_a("SXFunction"):
         return fun
     try:
@@ -125,6 +146,22 @@ def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Func
     Kept with the model (:func:`~flexctrl.dynamics.model.derived`): every plant step count,
     output-map length and reference table of one model lifts its constants once (the lift
     walks the whole expression graph in Python).
+
+    Parameters
+    ----------
+    model : Model
+        The model the lift is kept with.
+    name : str
+        The Function's name, part of the key it is kept under.
+    fun : callable
+        ``fun()`` builds the Function, called only when no lift is kept.
+    per_use : bool
+        One constant per use, as in :func:`constants_as_parameters`.
+
+    Returns
+    -------
+    tuple
+        ``(fp, c)`` as :func:`constants_as_parameters` returns them.
     """
     return derived(
         model,
@@ -147,6 +184,20 @@ def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
     Per use, the constant nodes are left out too: common subexpression elimination merges
     constants whose values coincide, so their count moves with the configuration while the
     lifted Function does not.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        An SX Function.
+    ops : list of int
+        The operation code of each of its instructions.
+    per_use : bool
+        One constant per use (constant nodes left out of the key).
+
+    Returns
+    -------
+    str
+        A hexadecimal digest.
     """
     if (
         per_use
