@@ -23,6 +23,7 @@ from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.modal.arm_modes import link_modes
 from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.arm import load_arm
+from flexctrl.spec.fidelity import Fidelity
 
 
 # -- arms ---------------------------------------------------------------------------------
@@ -562,3 +563,26 @@ def test_build_model_interface(model_path):
         build_model(rigid.spec, "amm:9")
     with pytest.raises(SpecError, match="'frozen', 'scheduled'"):
         build_model(rigid.spec, "amm:1", modes="schedule")
+    with pytest.raises(SpecError, match="fidelity amm has no mode count"):
+        build_model(rigid.spec, Fidelity("amm"))
+    with pytest.raises(SpecError, match="fidelity fem has no element count"):
+        build_model(rigid.spec, Fidelity("fem"))
+
+
+def test_the_model_name_says_only_what_differs_from_the_default_kinematics(model_path):
+    """The name carries the modes and the options off their defaults, never the default rotation."""
+    arm = load_arm(model_path)
+    names = {
+        "plain": build_amm(arm, 1).name,
+        "shortening": build_amm(arm, 1, axial_shortening=True).name,
+        "exact": build_amm(arm, 1, tip_rotation="exact").name,
+        "shortening_linearized": build_amm(
+            arm, 1, axial_shortening=True, tip_rotation="linearized"
+        ).name,
+    }
+    assert names == {
+        "plain": "subedi3link amm 1/1/1 frozen no-shortening",
+        "shortening": "subedi3link amm 1/1/1 frozen",
+        "exact": "subedi3link amm 1/1/1 frozen no-shortening exact-rotation",
+        "shortening_linearized": "subedi3link amm 1/1/1 frozen linearized-rotation",
+    }

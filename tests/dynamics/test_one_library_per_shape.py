@@ -92,26 +92,3 @@ def test_output_map_values_are_the_models_outputs(models):
     X = np.random.default_rng(2).normal(0, 0.3, (m.n_x, 5))
     Y = np.array(output_map(m, 5, compile=False)(X))
     assert np.array_equal(Y, np.array(output_function(m).map(5)(X)))
-
-
-def test_a_bound_function_gives_the_calls_values_as_rows_and_copies():
-    import casadi as ca
-
-    from flexctrl.sim.bound import BoundFunction
-
-    x, u = ca.MX.sym("x", 3), ca.MX.sym("u", 2)
-    fun = ca.Function("f", [x, u], [ca.horzcat(x * u[0], ca.sin(x) + u[1]), ca.sumsqr(x)])
-    bound = BoundFunction(fun)
-    rng = np.random.default_rng(1)
-    got, wanted = [], []
-    for _ in range(3):
-        xv, uv = rng.standard_normal(3), rng.standard_normal(2)
-        got.append(bound(xv, uv))
-        wanted.append(fun(xv, uv))
-    for (block, square), want in zip(
-        got, wanted
-    ):  # earlier results are the caller's: later calls leave them
-        np.testing.assert_array_equal(
-            block, np.asarray(want[0]).T
-        )  # (3 x 2) comes back as 2 rows of 3
-        assert block.shape == (2, 3) and square.item() == float(want[1])

@@ -19,7 +19,8 @@ import pytest
 import flexctrl.control.nmpc.interval as nmpc_interval
 from flexctrl.control.nmpc.controller import design_nmpc
 from flexctrl.dynamics.parametric import Memo
-from flexctrl.sim.compile import ENV_CACHE, compile_by_recipe, find_compiler
+from flexctrl.sim.compile import compile_by_recipe, find_compiler
+from flexctrl.user_cache import ENV_CACHE
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 

@@ -10,13 +10,8 @@ import stat
 import casadi as ca
 import pytest
 
-from flexctrl.sim.compile import (
-    DEFAULT_FLAGS,
-    cache_key,
-    compile_function,
-    find_compiler,
-    trusted_file,
-)
+from flexctrl.sim.compile import DEFAULT_FLAGS, cache_key, compile_function, find_compiler
+from flexctrl.user_cache import trusted_file
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 OTHER_UID = 4242
