@@ -89,6 +89,15 @@ class LinkModal:
         ``phi(L)`` (dimensionless) and ``phi'(L)`` (1/m).
     v, w, z : Expression
         ``int rho phi dx`` (kg), ``int rho x phi dx`` (kg m), ``int rho phi_j phi_k dx`` (kg).
+    shape_cross, shape_gram : Expression, optional
+        Scheduled modes only: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad) and
+        ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2).
+    sh_tip, sh_v, sh_w, sh_y, sh_z : Expression, optional
+        Axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1) in 1/m,
+        ``int rho N_p`` (P, 1) in kg/m, ``int rho x N_p`` (P, 1) in kg, ``int rho phi_l N_p``
+        (n_f, P) in kg/m, ``int rho N_p N_p'`` (P, P) in kg/m^2.
+    sh_psi : Expression, optional
+        ``int rho dphi_j/dq_r N_p`` (n_f n, P) in kg/(m rad), scheduled modes only.
     """
 
     omega: Expression
@@ -97,22 +106,13 @@ class LinkModal:
     v: Expression
     w: Expression
     z: Expression
-    #: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad), scheduled modes only
     shape_cross: Expression = None
-    #: ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes
-    #: only
     shape_gram: Expression = None
-    #: axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1), 1/m
     sh_tip: Expression = None
-    #: ``int rho N_p`` (P, 1), kg/m
     sh_v: Expression = None
-    #: ``int rho x N_p`` (P, 1), kg
     sh_w: Expression = None
-    #: ``int rho phi_l N_p`` (n_f, P), kg/m
     sh_y: Expression = None
-    #: ``int rho N_p N_p'`` (P, P), kg/m^2
     sh_z: Expression = None
-    #: ``int rho dphi_j/dq_r N_p`` (n_f n, P), kg/(m rad), scheduled modes only
     sh_psi: Expression = None
 
     @property

@@ -42,11 +42,19 @@ class DynamicsOwner(Protocol):
     """What the Jacobian builder reads of a model: ``functions["f"]``, ``n_x`` and ``n_u``."""
 
     @property
-    def functions(self) -> Mapping[str, ca.Function]: ...
+    def functions(self) -> Mapping[str, ca.Function]:
+        """The model's Functions by name."""
+        ...
+
     @property
-    def n_x(self) -> int: ...
+    def n_x(self) -> int:
+        """State dimension."""
+        ...
+
     @property
-    def n_u(self) -> int: ...
+    def n_u(self) -> int:
+        """Input dimension."""
+        ...
 
 
 def jacobian_function(

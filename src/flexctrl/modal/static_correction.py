@@ -92,18 +92,22 @@ class CorrectedModes:
 
     @property
     def length(self) -> float:
+        """Link length, m."""
         return self.base.length
 
     @property
     def rho(self) -> float:
+        """Mass per length, kg/m."""
         return self.base.rho
 
     @property
     def EI(self) -> float:
+        """Flexural rigidity, N m^2."""
         return self.base.EI
 
     @property
     def link_mass(self) -> float:
+        """Link mass, kg."""
         return self.base.link_mass
 
     def _raw(self, x, d):
@@ -160,24 +164,29 @@ class CorrectedModes:
 
     @property
     def tip_deflection(self) -> np.ndarray:
+        """``phi_j(L)`` of every shape, dimensionless."""
         return np.append(self.base.tip_deflection, self._tip[0])
 
     @property
     def tip_slope(self) -> np.ndarray:
+        """``phi_j'(L)`` of every shape, 1/m."""
         return np.append(self.base.tip_slope, self._tip[1])
 
     @property
     def v(self) -> np.ndarray:
+        """``int rho phi_j dx``, kg."""
         x, wt = self._nodes
         return np.append(self.base.v, self.rho * self._correction(x, 0) @ wt)
 
     @property
     def w(self) -> np.ndarray:
+        """``int rho x phi_j dx``, kg m."""
         x, wt = self._nodes
         return np.append(self.base.w, self.rho * self._correction(x, 0) @ (wt * x))
 
     @property
     def z(self) -> np.ndarray:
+        """``int rho phi_j phi_k dx``, kg."""
         x, wt = self._nodes
         n = self.base.n_modes
         phi = self.shape(x)
@@ -192,10 +201,12 @@ class CorrectedModes:
 
     @property
     def frequency_hz(self) -> np.ndarray:
+        """Frequencies, Hz."""
         return self.omega / (2 * np.pi)
 
     @property
     def stiffness(self) -> np.ndarray:
+        """``m_l omega_j^2``, N/m."""
         return self.link_mass * self.omega**2
 
 

@@ -53,7 +53,21 @@ def _rot(angle):
 
 
 def fem_coordinate_names(n_links: int, n_elements: int) -> tuple[str, ...]:
-    """``q1..qn``, then per link ``w<i>_<k>, th<i>_<k>`` for ``k = 1..N`` and ``u<i>_<k>``."""
+    """``q1..qn``, then per link ``w<i>_<k>, th<i>_<k>`` for ``k = 1..N`` and ``u<i>_<k>``.
+
+    Parameters
+    ----------
+    n_links : int
+        Links, hence joints.
+    n_elements : int
+        Elements per link ``N``.
+
+    Returns
+    -------
+    tuple of str
+        Joint angles (rad), then each link's nodal deflections (m), slopes (rad) and axial
+        displacements (m).
+    """
     names = [f"q{i + 1}" for i in range(n_links)]
     for i in range(n_links):
         for k in range(1, n_elements + 1):
@@ -200,7 +214,22 @@ class FemExpressions:
 
 
 def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True) -> FemExpressions:
-    """Kinematics, mass matrix and potential energies of the arm (see module docstring)."""
+    """Kinematics, mass matrix and potential energies of the arm (see module docstring).
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm (revolute joints).
+    n_elements : int
+        Elements per link, 1..64.
+    axial_shortening : bool
+        The membrane strain ``u' + 1/2 w'^2`` instead of ``u'``.
+
+    Returns
+    -------
+    FemExpressions
+        SX expressions in the coordinates ``q``.
+    """
     _check(arm, n_elements)
     n, N = arm.n_links, int(n_elements)
     lay = _Layout(n, N)
@@ -283,6 +312,20 @@ def locked_matrices(arm: ArmSpec, n_elements: int, q_r: ArrayLike) -> tuple[np.n
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint
     natural frequencies are ``sqrt(eig(K_ff, M_ff))``.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm.
+    n_elements : int
+        Elements per link.
+    q_r : array_like
+        Joint angles, rad.
+
+    Returns
+    -------
+    M_ff, K_ff : ndarray
+        Mass (kg, kg m, kg m^2) and stiffness (N/m, N, N m) of the elastic dofs.
     """
     ex = fem_expressions(arm, n_elements)
     n, nq = arm.n_links, ex.layout.size

@@ -227,6 +227,22 @@ def locked_frequencies(functions: dict, K: np.ndarray, q_r: ArrayLike, n_joints:
 
     The joints clamped, the elastic dofs at zero, no gravity preload; see
     :func:`generalized_frequencies`.
+
+    Parameters
+    ----------
+    functions : dict of str to casadi.Function
+        The model's Functions (``M`` is read).
+    K : ndarray
+        The stiffness (N x N).
+    q_r : array_like
+        Joint angles, rad.
+    n_joints : int
+        Joint coordinates first in ``q``.
+
+    Returns
+    -------
+    ndarray
+        Frequencies, rad/s, ascending.
     """
     nq = K.shape[0]
     q0 = np.concatenate([np.asarray(q_r, dtype=float), np.zeros(nq - n_joints)])
@@ -242,6 +258,18 @@ def generalized_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
     ``||K||`` exceeds the lowest eigenvalues by 1e7 and more, and the direct
     ``eigh(K, M)`` loses the lowest frequencies to rounding (relative errors ~1e-7
     instead of ~1e-10, which hides the h^4 convergence).
+
+    Parameters
+    ----------
+    K : ndarray
+        Stiffness, positive definite.
+    M : ndarray
+        Mass, symmetric.
+
+    Returns
+    -------
+    ndarray
+        Frequencies, rad/s, ascending (positive ``mu`` only).
     """
     mu = scipy.linalg.eigh(M, K, eigvals_only=True)
     mu = mu[mu > 0.0]
@@ -254,6 +282,18 @@ def relax_axial(model: Model, q: ArrayLike) -> np.ndarray:
     With axial shortening this makes the links inextensible (``u = -s``, zero
     membrane strain): the consistent way to start from a bent shape without
     loading the stiff axial elements.  Without axial shortening it sets ``u = 0``.
+
+    Parameters
+    ----------
+    model : Model
+        A finite-element model (its axial dofs are the coordinates named ``u*``).
+    q : array_like
+        Coordinates (rad, m).
+
+    Returns
+    -------
+    ndarray
+        ``q`` with the axial dofs relaxed, m.
     """
     relaxed = np.asarray(q, dtype=float).copy()
     idx = np.array(

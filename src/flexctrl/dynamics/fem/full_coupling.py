@@ -99,9 +99,27 @@ def link_energies(
 ) -> tuple[Any, Any]:
     """``(T, V)`` of one link (CasADi expressions; no payload), to second order in ``(q, qd)``.
 
-    ``q``, ``qd`` the link's ``2 (N + 1)`` nodal values and rates; ``rE``, ``rEd`` radius of its
-    root E and its rate (m, m/s); ``thd`` (rad/s); ``g_ax``, ``g_perp`` gravity along and across the
-    axis (m/s^2).  ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
+    ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
+
+    Parameters
+    ----------
+    link : FrameLink
+        The link's element matrices.
+    q, qd : casadi.SX
+        The link's ``2 (N + 1)`` nodal values and rates (m, rad; m/s, rad/s).
+    rE, rEd : casadi.SX
+        Radius of its root E and its rate, m and m/s.
+    thd : casadi.SX
+        Angular rate of the frame, rad/s.
+    g_ax, g_perp : casadi.SX or float
+        Gravity along and across the axis, m/s^2.
+    shortening : bool
+        Keep the axial shortening ``1/2 int w'^2`` in the kinematics.
+
+    Returns
+    -------
+    T, V : casadi.SX
+        Kinetic and potential energy, J.
     """
     import casadi as ca
 
@@ -144,7 +162,22 @@ def payload_energies(
     g_perp: Any,
     shortening: bool,
 ) -> tuple[Any, Any]:
-    """``(T, V)`` of a point mass (kg) at the tip H of ``link``, as in :func:`link_energies`."""
+    """``(T, V)`` of a point mass at the tip H of ``link``, expanded as :func:`link_energies`.
+
+    Parameters
+    ----------
+    link : FrameLink
+        The link carrying the mass.
+    mass : float
+        The point mass, kg.
+    q, qd, rE, rEd, thd, g_ax, g_perp, shortening
+        As for :func:`link_energies`.
+
+    Returns
+    -------
+    T, V : casadi.SX
+        Kinetic and potential energy, J.
+    """
     import casadi as ca
 
     sh = 1.0 if shortening else 0.0

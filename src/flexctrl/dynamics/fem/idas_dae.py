@@ -48,11 +48,27 @@ def _hermite_coefficients(le: float) -> Array:
     return C
 
 
-def symbolic_point_row(x, order: int, n_elements: int, length: float):
+def symbolic_point_row(x: Any, order: int, n_elements: int, length: float) -> Any:
     """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` at a symbolic point ``x``.
 
     ``x`` is a material point (m) on a uniform mesh of Hermite elements; an interior node
     belongs to the element on its right.
+
+    Parameters
+    ----------
+    x : casadi.SX
+        The material point, m.
+    order : int
+        Derivative of ``w`` along the link, 0..3.
+    n_elements : int
+        Elements of the mesh.
+    length : float
+        Link length, m.
+
+    Returns
+    -------
+    casadi.SX
+        The row (units of ``w^(order)`` per unit of ``q``).
     """
     import casadi as ca  # only here: the numpy models of this layer do without CasADi
 

@@ -23,7 +23,24 @@ from flexctrl.spec.arm import ArmSpec
 def locked_fem_hz(
     arm: ArmSpec, n_elements: int, q_deg: Sequence[float], n_modes: int = 6
 ) -> np.ndarray:
-    """Lowest locked-joint frequencies (Hz) of the FE arm, links straight, no gravity."""
+    """Lowest locked-joint frequencies (Hz) of the FE arm, links straight, no gravity.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm.
+    n_elements : int
+        Elements per link.
+    q_deg : sequence of float
+        Joint angles, degrees.
+    n_modes : int
+        Frequencies returned.
+
+    Returns
+    -------
+    ndarray
+        ``n_modes`` frequencies, Hz, ascending.
+    """
     M, K = locked_matrices(arm, n_elements, np.radians(q_deg))
     return generalized_frequencies(K, M)[:n_modes] / (2 * math.pi)
 
@@ -31,7 +48,24 @@ def locked_fem_hz(
 def locked_amm_hz(
     arm: ArmSpec, n_modes_per_link: int, q_deg: Sequence[float], n_modes: int = 6
 ) -> np.ndarray:
-    """Lowest locked-joint frequencies (Hz) of the assumed-modes model, modes frozen at ``q``."""
+    """Lowest locked-joint frequencies (Hz) of the assumed-modes model, modes frozen at ``q``.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm.
+    n_modes_per_link : int
+        Assumed modes per link.
+    q_deg : sequence of float
+        Joint angles, degrees.
+    n_modes : int
+        Frequencies returned.
+
+    Returns
+    -------
+    ndarray
+        ``n_modes`` frequencies, Hz, ascending.
+    """
     from flexctrl.dynamics.build import build_model
 
     q = np.radians(q_deg)
@@ -62,6 +96,20 @@ def rk4_step_for(model, sample: float, safety: float = 2.4) -> int:
 
     That is the larger of the locked ``omega_max`` and the free-joint spectral radius (RK4's
     limit on the imaginary axis is 2.83).
+
+    Parameters
+    ----------
+    model : Model
+        The model stepped.
+    sample : float
+        Output sample, s.
+    safety : float
+        The largest ``omega h`` allowed.
+
+    Returns
+    -------
+    int
+        Substeps per sample, >= 1.
     """
     omega = max(float(model.omega_max), free_joint_radius(model))
     return max(1, math.ceil(sample * omega / safety))

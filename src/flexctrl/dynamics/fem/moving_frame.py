@@ -43,7 +43,15 @@ ENDS = ("E", "H")
 
 
 def check_elements(n_elements: object, key: str = "n_elements") -> None:
-    """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256."""
+    """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256.
+
+    Parameters
+    ----------
+    n_elements : object
+        The element count asked for.
+    key : str
+        The key the error names.
+    """
     if (
         isinstance(n_elements, bool)
         or not isinstance(n_elements, (int, np.integer))
@@ -60,6 +68,22 @@ def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: in
     On a uniform mesh of ``n_elements`` Hermite elements over ``length`` (m); each row holds the
     shape functions of the element containing ``x_k`` (an interior node belongs to the element
     on its right).
+
+    Parameters
+    ----------
+    xs : array_like
+        Material points, m.
+    n_elements : int
+        Elements of the mesh.
+    length : float
+        Link length, m.
+    max_derivative : int
+        Highest derivative along the link.
+
+    Returns
+    -------
+    ndarray
+        ``(max_derivative + 1, len(xs), 2 (n_elements + 1))``.
     """
     xs = np.atleast_1d(np.asarray(xs, dtype=float))
     le = length / n_elements
@@ -87,6 +111,7 @@ class PointRows:
 
     @property
     def count(self) -> int:
+        """Number of rows."""
         return len(self.orders)
 
     def points(self, W: float) -> Array:
@@ -114,6 +139,20 @@ def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
     (Eqs 24-25 at each).  ``"clamped"`` (Pan's Fig 4): ``w(0) = w'(0) = 0`` at E in the carriage
     (Eqs 22-23, fixed on the link) and ``w = 0`` at the mouth bearing D', material point ``L - W``
     (Eq 24).
+
+    Parameters
+    ----------
+    joint : {"supports", "clamped"}
+        The joint's kind.
+    length : float
+        Link length, m.
+    D : float
+        Distance of the supports, m.
+
+    Returns
+    -------
+    PointRows
+        The rows' derivative orders, material offsets (m) and their rates ``dx/dW``.
     """
     if joint == "supports":
         return PointRows((0, 0), (length - D, length), (-1.0, -1.0))
@@ -172,9 +211,11 @@ class RPMotion:
         return self.C1 - self.C2 * _profile(t, self.T, 0)
 
     def Wd(self, t: NumOrSym) -> NumOrSym:
+        """Rate of the overhang, m/s."""
         return -self.C2 * _profile(t, self.T, 1)
 
     def Wdd(self, t: NumOrSym) -> NumOrSym:
+        """Acceleration of the overhang, m/s^2."""
         return -self.C2 * _profile(t, self.T, 2)
 
     def theta(self, t: NumOrSym) -> NumOrSym:
@@ -182,9 +223,11 @@ class RPMotion:
         return self.theta0 + self.dtheta * _profile(t, self.T, 0)
 
     def thetad(self, t: NumOrSym) -> NumOrSym:
+        """Housing rate, rad/s."""
         return self.dtheta * _profile(t, self.T, 1)
 
     def thetadd(self, t: NumOrSym) -> NumOrSym:
+        """Housing acceleration, rad/s^2."""
         return self.dtheta * _profile(t, self.T, 2)
 
 

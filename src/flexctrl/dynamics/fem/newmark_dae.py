@@ -89,6 +89,7 @@ class DAEProblem:
 
     @property
     def has_tangents(self) -> bool:
+        """Whether all four Newton tangents are given."""
         return all(g is not None for g in (self.force_q, self.force_qd, self.h_q, self.h_qd))
 
 

@@ -128,6 +128,7 @@ class RPArmFullModel(SlidingFullModel):
         self._build(z, zd, T, V)
 
     def check_W(self, W: float, t: float) -> None:
+        """Raise :class:`SimulationError` when the overhang ``W`` (m) leaves the stroke at ``t``."""
         s = self.spec
         if not -1e-12 <= W <= s.length - s.D + 1e-12:
             raise SimulationError(

@@ -241,6 +241,20 @@ def static_tip_deflection(spec: TelescopingSpec, s: float, P: float) -> float:
     * one contact with slope (Pan's literal Eqs 26-28) at the mouth: tube cantilever with tip
       force ``P`` and moment ``P c``, inner overhang cantilevered from it:
       ``w1(L1) + w1'(L1) c + P c^3 / (3 EI2)``.
+
+    Parameters
+    ----------
+    spec : TelescopingSpec
+        The pair and its contact layout.
+    s : float
+        Tube coordinate of the inner link's end E, m.
+    P : float
+        Tip force, N.
+
+    Returns
+    -------
+    float
+        Tip deflection, m.
     """
     L1, L2, EI1, EI2 = spec.outer.length, spec.inner.length, spec.outer.EI, spec.inner.EI
     a = L1 - s

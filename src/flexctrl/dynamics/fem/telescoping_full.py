@@ -106,6 +106,7 @@ class TelescopingFullModel(SlidingFullModel):
         self._build(z, zd, T, V)
 
     def check_W(self, W: float, t: float) -> None:
+        """Raise :class:`SimulationError` when the overhang ``W`` (m) leaves the stroke at ``t``."""
         try:
             self.spec.check_stroke([self.ds + W], key="W")
         except SpecError as exc:
