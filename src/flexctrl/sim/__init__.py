@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import difflib
 from typing import Any
 
 from flexctrl.errors import SpecError
@@ -64,8 +65,6 @@ def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
         return method
     if isinstance(method, str) and method in INTEGRATORS:
         return INTEGRATORS[method]
-    import difflib
-
     hint = difflib.get_close_matches(str(method), list(INTEGRATORS), n=1)
     extra = f" (did you mean '{hint[0]}'?)" if hint else ""
     raise SpecError(

@@ -57,6 +57,7 @@ from typing import Any
 
 import casadi as ca
 
+from flexctrl.dynamics.parametric import FROM_LIFTED
 from flexctrl.sim.library_keys import NATIVE, cache_key, content_key, find_compiler, library_key
 from flexctrl.user_cache import cache_directory, private_directory, trusted_file
 
@@ -303,8 +304,6 @@ def compile_for(
     CompiledFunction
         As :func:`compile_function` returns it.
     """
-    from flexctrl.dynamics.parametric import FROM_LIFTED
-
     if enabled is None:
         enabled = not compile_disabled_by_env()
     settings = (

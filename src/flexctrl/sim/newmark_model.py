@@ -50,6 +50,8 @@ from typing import Any, ClassVar, Literal
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.fem.newmark import model_dae_problem
+from flexctrl.dynamics.fem.newmark_dae import simulate
 from flexctrl.errors import SpecError
 from flexctrl.sim.integrator import Integrator
 
@@ -194,13 +196,9 @@ class Newmark(Integrator):
         return tau
 
     def _setup(self) -> None:
-        from flexctrl.dynamics.fem.newmark import model_dae_problem
-
         self._problem = model_dae_problem(self.model, self._torque, tangent=self.tangent)
 
     def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, None]:
-        from flexctrl.dynamics.fem.newmark_dae import simulate
-
         k = U.shape[0]
         n = self.model.n_q
         self._held, self._t0 = U, float(times[0])

@@ -17,6 +17,7 @@ row repeats the last applied torque).  Units: s, rad, m, J, N m.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from collections.abc import Callable, Iterator, Mapping
@@ -97,8 +98,6 @@ class LazyEnergies(Mapping):
         return dict, (self._get(),)
 
     def __deepcopy__(self, memo):
-        import copy
-
         return copy.deepcopy(self._get(), memo)
 
     def __repr__(self) -> str:
@@ -239,7 +238,7 @@ class Trajectory:
     def to_pandas(self):
         """A ``pandas.DataFrame`` with the CSV columns, indexed by time (needs pandas)."""
         try:
-            import pandas as pd
+            import pandas as pd  # optional: only this method needs it
         except ImportError as exc:  # pragma: no cover - pandas is a dev dependency
             raise ImportError("Trajectory.to_pandas needs pandas (pip install pandas)") from exc
         names, matrix = self.columns()
@@ -282,6 +281,7 @@ class Trajectory:
 
         Uses matplotlib's Agg canvas directly (no pyplot state, no window).
         """
+        # lazily: the plots import matplotlib, which a run without figures never needs
         from flexctrl.sim.trajectory_plots import plot_trajectory
 
         return plot_trajectory(self, Path(directory), prefix)

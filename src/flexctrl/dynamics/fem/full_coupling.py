@@ -121,7 +121,7 @@ def link_energies(
     T, V : casadi.SX
         Kinetic and potential energy, J.
     """
-    import casadi as ca
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     DM = ca.DM
     rho, L = link.rho, link.length
@@ -178,7 +178,7 @@ def payload_energies(
     T, V : casadi.SX
         Kinetic and potential energy, J.
     """
-    import casadi as ca
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     sh = 1.0 if shortening else 0.0
     Gc = ca.DM(link.G_c)
@@ -245,9 +245,9 @@ class SlidingFullModel:
     drive: RPForces | RPMotion
 
     def _build(self, z: Any, zd: Any, T: Any, V: Any) -> None:
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
-        from flexctrl.dynamics.fem.newmark import _Evaluator
+        from flexctrl.dynamics.fem.newmark import DenseEvaluator  # imports CasADi
 
         self.ith, self.iW, self.nz = self.ne, self.ne + 1, self.ne + 2
         self.motion_driven = isinstance(self.drive, RPMotion)
@@ -262,7 +262,7 @@ class SlidingFullModel:
             "energy": ca.Function("energy", [z, zd], [T, V]),
             "momentum": ca.Function("p", [z, zd], [p]),
         }
-        self._fast = {k: _Evaluator(self._fun[k]) for k in ("M", "f", "f_z", "f_zd")}
+        self._fast = {k: DenseEvaluator(self._fun[k]) for k in ("M", "f", "f_z", "f_zd")}
         self._parts_W: float | None = None
 
     # -- to provide --------------------------------------------------------------------------------

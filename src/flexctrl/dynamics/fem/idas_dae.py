@@ -70,7 +70,7 @@ def symbolic_point_row(x: Any, order: int, n_elements: int, length: float) -> An
     casadi.SX
         The row (units of ``w^(order)`` per unit of ``q``).
     """
-    import casadi as ca  # only here: the numpy models of this layer do without CasADi
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     le = length / n_elements
     C = _hermite_coefficients(le)[order]
@@ -147,7 +147,7 @@ def simulate_idas(
     SolverError
         IDAS failed (names the tolerance and the message).
     """
-    import casadi as ca  # only here: the numpy models of this layer do without CasADi
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     n = model.ndof
     n_out = int(round(t_end / grid_dt))
@@ -211,7 +211,7 @@ def _result(
 
 def _index1_dae(model: RPArmModel, gamma: float, beta: float) -> dict[str, Any]:
     """The semi-explicit index-1 DAE of ``model`` for ``casadi.integrator`` (module docstring)."""
-    import casadi as ca  # only here: the numpy models of this layer do without CasADi
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     n, rows, link = model.ndof, model.rows, model.link
     t = ca.SX.sym("t")

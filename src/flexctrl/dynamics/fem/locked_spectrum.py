@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.build import build_model
 from flexctrl.dynamics.fem.fem_arm import generalized_frequencies, locked_matrices
 from flexctrl.spec.arm import ArmSpec
 
@@ -66,8 +67,6 @@ def locked_amm_hz(
     ndarray
         ``n_modes`` frequencies, Hz, ascending.
     """
-    from flexctrl.dynamics.build import build_model
-
     q = np.radians(q_deg)
     model = build_model(arm, f"amm:{n_modes_per_link}", reference_q=q)
     n = model.n_joints

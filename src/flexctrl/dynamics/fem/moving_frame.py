@@ -175,7 +175,7 @@ def _profile(t: NumOrSym, T: float, derivative: int) -> NumOrSym:
     clip: Callable[[Any], Any]
     where: Callable[..., Any]
     if is_symbolic(t):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         sin, cos, clip = ca.sin, ca.cos, lambda x: ca.fmin(ca.fmax(x, 0.0), T)
         where = ca.if_else
@@ -310,7 +310,7 @@ class FrameLink:
             np.eye(self.ndof)[self.tip],
         )
         if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in r.values()):
-            import casadi as ca
+            import casadi as ca  # lazily: the numpy models never need CasADi
 
             mats = tuple(ca.DM(m) for m in mats)
         K, M, G_c, G_1, G_2, S0, S1, e_tip = mats

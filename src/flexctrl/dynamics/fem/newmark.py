@@ -35,7 +35,7 @@ from flexctrl.dynamics.fem.newmark_dae import DAEProblem, DAEResult, simulate
 Torque = Callable[[float], np.ndarray]
 
 
-class _Evaluator:
+class DenseEvaluator:
     """A CasADi Function evaluated into preallocated numpy arrays (no DM conversions).
 
     Outputs are densified; matrices come back column-major, so only symmetric
@@ -102,9 +102,9 @@ def model_dae_problem(
         d_q, d_qd = ca.jacobian(fn["g"](q) + ca.mtimes(K, q), q), D + ca.SX.zeros(n_q, n_q)
     else:
         d_q, d_qd = K + ca.SX.zeros(n_q, n_q), D + ca.SX.zeros(n_q, n_q)
-    mass = _Evaluator(ca.Function("M", [q], [fn["M"](q)]))
-    internal = _Evaluator(ca.Function("internal", [q, qd], [inner]))
-    tangents = _Evaluator(ca.Function("tangents", [q, qd], [d_q, d_qd]))
+    mass = DenseEvaluator(ca.Function("M", [q], [fn["M"](q)]))
+    internal = DenseEvaluator(ca.Function("internal", [q, qd], [inner]))
+    tangents = DenseEvaluator(ca.Function("tangents", [q, qd], [d_q, d_qd]))
     B = np.zeros(n_q)
     cache: dict[str, tuple] = {}
 

@@ -136,7 +136,7 @@ class RPArmModel:
         cos: Callable[[Any], Any]
         sin: Callable[[Any], Any]
         if is_symbolic(t):
-            import casadi as ca
+            import casadi as ca  # lazily: the numpy models never need CasADi
 
             val, cos, sin = (lambda v: v), ca.cos, ca.sin
         else:

@@ -88,7 +88,7 @@ class RPArmFullModel(SlidingFullModel):
         *,
         axial_shortening: bool = True,
     ):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         check_elements(n_elements)
         if not isinstance(drive, (RPForces, RPMotion)):

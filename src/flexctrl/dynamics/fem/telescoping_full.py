@@ -56,7 +56,7 @@ class TelescopingFullModel(SlidingFullModel):
         *,
         axial_shortening: bool = True,
     ):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         check_elements(n_outer, "n_outer")
         check_elements(n_inner, "n_inner")
