@@ -242,19 +242,6 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     q = ca.SX.sym("q", nq)
     M = ca.SX(nq, nq)
     U_g = ca.SX(0)
-
-    def add_point(mass: float, r) -> None:
-        nonlocal M
-        if mass != 0.0:
-            Jr = ca.jacobian(r, q)
-            M = M + mass * ca.mtimes(Jr.T, Jr)
-
-    def add_rotor(inertia: float, angle) -> None:
-        nonlocal M
-        if inertia != 0.0:
-            Ja = ca.jacobian(angle, q)
-            M = M + inertia * ca.mtimes(Ja.T, Ja)
-
     r = ca.SX.zeros(2, 1)
     alpha_hat = ca.SX(0)
     positions, tip_w, tip_dw = [r], [], []
@@ -264,8 +251,8 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         alpha = alpha_hat + q[i]
         R = _rot(alpha)
         # hub i: point mass on the joint, rotor turning with link i
-        add_point(joint.hub_mass, r)
-        add_rotor(joint.hub_inertia, alpha)
+        M = _add_inertia(M, q, joint.hub_mass, r)
+        M = _add_inertia(M, q, joint.hub_inertia, alpha)
         U_g -= joint.hub_mass * ca.dot(gvec, r)
         # link i in its frame: T = 1/2 nu^T G nu
         J_nu = ca.vertcat(
@@ -290,8 +277,8 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         tip_w.append(w_N)
         tip_dw.append(th_N)
         alpha_hat = alpha + th_N
-    add_point(arm.payload.mass, r)
-    add_rotor(arm.payload.effective_inertia, alpha_hat)
+    M = _add_inertia(M, q, arm.payload.mass, r)
+    M = _add_inertia(M, q, arm.payload.effective_inertia, alpha_hat)
     U_g -= arm.payload.mass * ca.dot(gvec, r)
     return FemExpressions(
         layout=lay,
@@ -305,6 +292,14 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         tip_deflection=ca.vertcat(*tip_w),
         tip_slope=ca.vertcat(*tip_dw),
     )
+
+
+def _add_inertia(M: ca.SX, q: ca.SX, inertia: float, coordinate: ca.SX) -> ca.SX:
+    """``M + m J^T J`` of a point mass at ``coordinate`` (m) or a rotor turning with it (rad)."""
+    if inertia == 0.0:
+        return M
+    J = ca.jacobian(coordinate, q)
+    return M + inertia * ca.mtimes(J.T, J)
 
 
 def locked_matrices(arm: ArmSpec, n_elements: int, q_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
