@@ -1,6 +1,5 @@
 """Checks shared by the tests of the full-coupling models: the rigid R-P arm written out by hand
-(the
-reference of the rigid limit) and the constraint derivatives against central differences."""
+(the reference of the rigid limit) and the constraint derivatives against central differences."""
 
 from __future__ import annotations
 
@@ -51,9 +50,8 @@ def rigid_rp(spec, forces, t_eval):
 
 def check_rigid_limit(spec, W0: float) -> None:
     """Prescribed torque and force (2 N m, 2 N sines over 1 s, gravity 1 m/s^2, payload 0.3 kg):
-    with EI x 1e4 theta and W follow :func:`rigid_rp` to the Newmark error, which halving dt cuts by
-    ~4;
-    with the file's EI the flexible arm is measurably different (the check can fail)."""
+    with EI x 1e4 theta and W follow :func:`rigid_rp` to the Newmark error, which halving dt cuts
+    by ~4; with the file's EI the flexible arm is measurably different (the check can fail)."""
     from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
 
     spec = dataclasses.replace(spec, gravity=(0.0, -1.0), payload_mass=0.3)
@@ -76,8 +74,7 @@ def check_rigid_limit(spec, W0: float) -> None:
 
 def check_constraint_derivatives(model, W: float, seed: int) -> None:
     """Phi_z, h (Eq 47), h_z and h_zd of the W-dependent rows against central differences at a
-    random
-    state with overhang ``W`` (m); ``M`` symmetric positive definite there."""
+    random state with overhang ``W`` (m); ``M`` symmetric positive definite there."""
     prob = model.problem()
     rng = np.random.default_rng(seed)
     z = np.r_[1e-3 * rng.standard_normal(model.ne), 0.4, W]

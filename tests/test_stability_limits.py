@@ -38,7 +38,7 @@ from flexctrl.linear import equilibrium, stiffness_matrix
 from flexctrl.sim import INTEGRATORS, simulate
 from flexctrl.sim.newmark_model import newmark_critical_step
 from flexctrl.sim.rk4 import RK4, RK4_STABILITY_LIMIT
-from flexctrl.sim.toymodel import spring_pendulum
+from support_models import spring_pendulum
 
 STUDY = DATA / "studies" / "stability_limits.toml"
 

@@ -6,7 +6,11 @@ working folder and every clone; ``$FLEXCTRL_CACHE`` names another.  Entries are 
 their content, so sharing them is safe.
 """
 
+import functools
 import os
+import stat
+import tempfile
+import warnings
 from pathlib import Path
 
 #: The environment variable that names another cache folder.
@@ -24,7 +28,7 @@ def cache_directory(explicit: str | os.PathLike | None = None) -> Path:
     Returns
     -------
     Path
-        The folder (not created here; :func:`flexctrl.sim.compile.private_directory` creates
+        The folder (not created here; :func:`private_directory` creates
         it owner-only).
     """
     if explicit is not None:
@@ -37,4 +41,75 @@ def cache_directory(explicit: str | os.PathLike | None = None) -> Path:
     return Path(user_cache_dir("flexctrl", appauthor=False))
 
 
-__all__ = ["ENV_CACHE", "cache_directory"]
+def trusted_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is the user's alone: the effective user's, not writable by group or others.
+
+    A symbolic link is never trusted (its target could change); a folder must be one.
+
+    Parameters
+    ----------
+    path : path
+        A file or folder.
+
+    Returns
+    -------
+    bool
+        ``False`` too when ``path`` does not exist.
+    """
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    if stat.S_ISLNK(info.st_mode) or not (stat.S_ISREG(info.st_mode) or stat.S_ISDIR(info.st_mode)):
+        return False
+    return info.st_uid == os.geteuid() and not info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def private_directory(directory: Path) -> Path:
+    """``directory`` (created owner-only if missing) if it is the user's alone, else a private one.
+
+    The temporary folder (mode 0700, one per process and untrusted folder) keeps this
+    process's libraries out of reach of the folder's other writers; a warning names the
+    folder and why it was not used.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        The cache folder asked for.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder to use.
+    """
+    if not directory.exists():
+        directory.mkdir(parents=True, exist_ok=True, mode=0o700)
+        if os.stat(directory).st_uid == os.geteuid():
+            os.chmod(directory, 0o700)
+    if trusted_file(directory):
+        return directory
+    return _fallback_directory(str(directory))
+
+
+@functools.cache
+def _fallback_directory(untrusted: str) -> Path:
+    try:
+        info = os.lstat(untrusted)
+        why = (
+            f"owned by uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}"
+            if not stat.S_ISLNK(info.st_mode)
+            else "a symbolic link"
+        )
+    except OSError as exc:
+        why = str(exc)
+    fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
+    warnings.warn(
+        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries "
+        f"that others could write are never loaded: compiling into the private folder "
+        f"'{fallback}' for this process instead (set ${ENV_CACHE} to a folder only you can write)",
+        stacklevel=3,
+    )
+    return fallback
+
+
+__all__ = ["ENV_CACHE", "cache_directory", "private_directory", "trusted_file"]

@@ -5,8 +5,8 @@ from flexctrl.beam.clamped_mass import (
     ClampedMassModes,
     IndefiniteTipInertiaWarning,
     clamped_mass_modes,
-    frequency_determinant,
 )
+from flexctrl.beam.clamped_mass_roots import frequency_determinant
 
 __all__ = [
     "MAX_MODES",

@@ -60,8 +60,15 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq
 
+from flexctrl.beam.clamped_mass_roots import frequency_roots
+from flexctrl.beam.clamped_mass_shapes import (
+    cross_integral,
+    end_values,
+    mode_derivative,
+    mode_integrals,
+    raw_mode,
+)
 from flexctrl.errors import SolverError
 
 __all__ = [
@@ -69,245 +76,14 @@ __all__ = [
     "IndefiniteTipInertiaWarning",
     "MAX_MODES",
     "clamped_mass_modes",
-    "frequency_determinant",
 ]
 
 Array = NDArray[np.float64]
 MAX_MODES = 6
-_SERIES_MAX = 3.0  # lam below which power series are used
-_NT = 12  # series terms (lam^{4k}/(4k)! < 1e-30 at lam = 3, k = 12)
-_KPOW = 4 * np.arange(_NT)
-_INV_FACT = np.array([1.0 / math.factorial(i) for i in range(4 * _NT + 8)])
 
 
 class IndefiniteTipInertiaWarning(RuntimeWarning):
     """The tip inertia matrix ``[[m_D, M_D], [M_D, J_D]]`` is not positive semidefinite."""
-
-
-def _combos(lam: float) -> tuple[float, float, float, float, float]:
-    """``(1 + cC, cS - sC, cS + sC, sS, 1 - cC) / cosh(lam)`` without cancellation."""
-    if lam < _SERIES_MAX:
-        u, t, sums = -4.0 * lam**4, 1.0, [0.0, 0.0, 0.0, 0.0]
-        for k in range(_NT):
-            for m in range(4):
-                sums[m] += t * _INV_FACT[4 * k + m]
-            t *= u
-        ch, omc = math.cosh(lam), 1.0 - sums[0]
-        if lam < 1.5:  # 1 - cC ~ lam^4/6: sum it without the k = 0 term
-            omc, t = 0.0, -u
-            for k in range(1, _NT):
-                omc += t * _INV_FACT[4 * k]
-                t *= u
-        return (
-            (1.0 + sums[0]) / ch,
-            -4.0 * lam**3 * sums[3] / ch,
-            2.0 * lam * sums[1] / ch,
-            2.0 * lam**2 * sums[2] / ch,
-            omc / ch,
-        )
-    c, s, th, e = math.cos(lam), math.sin(lam), math.tanh(lam), math.exp(-lam)
-    sech = 2.0 * e / (1.0 + e * e)
-    return sech + c, c * th - s, c * th + s, s * th, sech - c
-
-
-def _delta_parts(
-    lam: float, mu: float, eta: float, kappa: float
-) -> tuple[float, float, float, float]:
-    e1, e2, e3, e4, e5 = _combos(lam)
-    d, l2 = mu * eta - kappa * kappa, lam * lam
-    num = e1 + mu * lam * e2 - eta * lam * l2 * e3 - 2.0 * kappa * l2 * e4 + d * l2 * l2 * e5
-    w = 1.0 + mu * lam + 2.0 * abs(kappa) * l2 + eta * lam * l2 + abs(d) * l2 * l2
-    return num / w, e2, e3, e5
-
-
-def _delta(lam: float, mu: float, eta: float, kappa: float) -> float:
-    return _delta_parts(lam, mu, eta, kappa)[0]
-
-
-def _count(lam: float, mu: float, eta: float, kappa: float) -> int:
-    """Number of eigenvalues (``omega^2 > 0``) strictly below ``lam`` (Wittrick-Williams)."""
-    if lam <= 0.0:
-        return 0
-    f, e2, e3, e5 = _delta_parts(lam, mu, eta, kappa)
-    j0 = 0  # clamped-clamped roots below lam; sign(cos - sech) = -sign(e5)
-    if lam > math.pi:
-        k = int(lam // math.pi)
-        j0 = k - 1 + (1 if e5 * (-1) ** k > 0.0 else 0)
-    e5 = e5 if e5 != 0.0 else 1e-300
-    trace = (lam**3 * e3 - lam * e2) / e5 - lam**4 * (mu + eta)  # of Kb - lam^4 T
-    det = f if e5 > 0.0 else -f  # has the sign of det(Kb - lam^4 T)
-    if det < 0.0:
-        return j0 + 1
-    return j0 + (0 if trace >= 0.0 else 2 if det > 0.0 else 1)
-
-
-def _roots(n: int, mu: float, eta: float, kappa: float) -> list[float]:
-    """First ``n`` positive roots of ``Delta``, ascending, isolated by counting."""
-    if n == 0:
-        return []
-    hi = (n - 0.5) * math.pi + 0.5  # above the n-th clamped-free root, a bound if T >= 0
-    n_hi = _count(hi, mu, eta, kappa)
-    for _ in range(1000):  # an indefinite T can raise frequencies
-        if n_hi >= n:
-            break
-        hi += math.pi
-        n_hi = _count(hi, mu, eta, kappa)
-    else:
-        raise SolverError(f"could not bracket {n} roots (mu={mu}, eta={eta}, kappa={kappa})")
-    roots: list[float] = []
-    stack = [(0.0, hi, 0, n_hi)]
-    while stack:
-        a, b, na, nb = stack.pop()
-        if na >= n or nb == na:
-            continue
-        if nb - na == 1:
-            roots.append(_polish(a, b, na, mu, eta, kappa))
-        elif b - a <= 4e-16 * b:  # a multiple eigenvalue
-            roots.extend([0.5 * (a + b)] * (nb - na))
-        else:
-            m = 0.5 * (a + b)
-            nm = _count(m, mu, eta, kappa)
-            stack += [(m, b, nm, nb), (a, m, na, nm)]
-    return sorted(roots)[:n]
-
-
-#: brentq's relative tolerance on a root ``lam`` (4 eps, the smallest it accepts).
-ROOT_RTOL = 8.9e-16
-
-
-def _polish(a: float, b: float, na: int, mu: float, eta: float, kappa: float) -> float:
-    """The single eigenvalue in ``[a, b)``: brentq on the sign change, else count-bisection."""
-    fa, fb = _delta(a, mu, eta, kappa), _delta(b, mu, eta, kappa)
-    if fa == 0.0:
-        return a
-    if fa * fb < 0.0:
-        return brentq(_delta, a, b, args=(mu, eta, kappa), xtol=1e-300, rtol=ROOT_RTOL)
-    while b - a > 4e-16 * b:  # no sign change seen (root within rounding of b)
-        m = 0.5 * (a + b)
-        if _count(m, mu, eta, kappa) > na:
-            b = m
-        else:
-            a = m
-    return 0.5 * (a + b)
-
-
-# --- one mode: phi(xi) from (lam, c1, c2, tail) ------------------------------------------
-def _kfun(lam: float, xi: Array, m: int) -> Array:
-    """Krylov series ``K_m(xi) = sum_k lam^{4k} xi^{4k+m} / (4k+m)!``; ``K_{-1} = lam^4 K_3``."""
-    if m < 0:
-        return lam**4 * _kfun(lam, xi, m + 4)
-    return np.power.outer(xi, (_KPOW + m).astype(float)) @ (lam**_KPOW * _INV_FACT[_KPOW + m])
-
-
-def _ksum(lam: float, m: int, p: int = 0) -> float:
-    """``int_0^1 xi^p K_m dxi`` term by term."""
-    return float(np.sum(lam**_KPOW * _INV_FACT[_KPOW + m] / (_KPOW + m + p + 1)))
-
-
-def _krylov(lam: float, c1: float, c2: float) -> tuple[float, float]:
-    """``(A, B)`` with ``phi = A K_2 + B K_3``."""
-    return -2.0 * lam**2 * c2, -2.0 * lam**3 * c1
-
-
-def _phi(lam: float, c1: float, c2: float, tail: float, xi: Array, d: int) -> Array:
-    """``d``-th ``xi``-derivative of one mode at ``xi``."""
-    if lam < _SERIES_MAX:
-        a, b = _krylov(lam, c1, c2)
-        return a * _kfun(lam, xi, 2 - d) + b * _kfun(lam, xi, 3 - d)
-    s = c1 + tail * math.exp(-lam)
-    ts, tc = [(c1, c2), (-c2, c1), (-c1, -c2), (c2, -c1)][d]
-    return lam**d * (
-        ts * np.sin(lam * xi)
-        + tc * np.cos(lam * xi)
-        + tail * np.exp(lam * (xi - 1.0))
-        + (-1) ** d * s * np.exp(-lam * xi)
-    )
-
-
-def _ends(lam: float, c1: float, c2: float, tail: float) -> Array:
-    """``[[phi, phi', phi'', phi''']`` at ``xi = 0``, same at ``xi = 1]``."""
-    xi = np.array([0.0, 1.0])
-    return np.array([_phi(lam, c1, c2, tail, xi, d) for d in range(4)]).T
-
-
-def _null(rows: Array, units: tuple[float, float], weight: Array) -> Array:
-    """Unit ``n`` minimising the work norm of the tip-condition residual ``rows @ n``.
-
-    ``rows`` are the ``phi''`` and ``phi'''`` residuals in ``units``; as a tip force
-    ``f = (phi''', -phi'')`` they do work ``f . u_k`` on another mode's tip displacement
-    ``u_k`` (Lagrange identity), and ``u_k`` is bounded by ``u^T weight u <~ 1``.  So
-    ``n`` minimises ``f^T weight^-1 f``: the rounding error of ``lam`` goes where it
-    spoils Eq 40 least.
-    """
-    force = np.array([[0.0, units[1]], [-units[0], 0.0]]) @ rows
-    ev, vec = np.linalg.eigh(weight)
-    return np.linalg.svd((vec / np.sqrt(ev)).T @ force)[2][-1]
-
-
-def _raw_mode(lam: float, mu: float, eta: float, kappa: float) -> tuple[float, float, float]:
-    """Unnormalised ``(c1, c2, tail)`` satisfying the tip conditions at root ``lam``."""
-    ev, vec = np.linalg.eigh(np.array([[mu, kappa], [kappa, eta]]))
-    weight = (vec * np.abs(ev)) @ vec.T + np.diag([0.25, 0.25 / max(lam, 1.0) ** 2])
-    l4 = lam**4
-    if lam < _SERIES_MAX:  # phi'' and phi''' residuals over (A, B), phi = A K2 + B K3
-        k0, k1, k2, k3 = (float(_kfun(lam, np.ones(1), m)[0]) for m in range(4))
-        rows = np.array(
-            [
-                [k0 - l4 * (eta * k1 + kappa * k2), k1 - l4 * (eta * k2 + kappa * k3)],
-                [l4 * (k3 + mu * k2 + kappa * k1), k0 + l4 * (mu * k3 + kappa * k2)],
-            ]
-        )
-        a, b = _null(rows, (1.0, 1.0), weight)
-        c1, c2 = -b / (2.0 * lam**3), -a / (2.0 * lam**2)
-        return c1, c2, -0.5 * (c1 + c2) * math.exp(lam)
-    c, s, e = math.cos(lam), math.sin(lam), math.exp(-lam)
-    # (phi, phi'/lam, phi''/lam^2, phi'''/lam^3) at xi = 1 over (c1, tail)
-    p = np.array(
-        [
-            [s - c + e, 1 - 2 * e * c + e * e],
-            [c + s - e, 1 + 2 * e * s - e * e],
-            [c - s + e, 1 + 2 * e * c + e * e],
-            [-c - s - e, 1 - 2 * e * s - e * e],
-        ]
-    )
-    g1, g2 = eta * lam**3, kappa * lam**2
-    rows = np.array([p[2] - g1 * p[1] - g2 * p[0], p[3] + mu * lam * p[0] + g2 * p[1]])
-    c1, tail = _null(rows, (lam**2, lam**3), weight)
-    return c1, -c1 - 2.0 * tail * e, tail
-
-
-def _pair_series(lj: float, abj: tuple[float, float], lk: float, abk: tuple[float, float]) -> float:
-    """``int_0^1 phi_j phi_k`` for two Krylov-form modes (double series)."""
-    den = _KPOW[:, None] + _KPOW[None, :]
-    tot = 0.0
-    for m, cm in zip((2, 3), abj):
-        for n, cn in zip((2, 3), abk):
-            terms = np.outer(lj**_KPOW * _INV_FACT[_KPOW + m], lk**_KPOW * _INV_FACT[_KPOW + n])
-            tot += cm * cn * float(np.sum(terms / (den + m + n + 1)))
-    return tot
-
-
-def _integrals(lam: float, c1: float, c2: float, tail: float) -> tuple[float, float, float]:
-    """``int phi``, ``int xi phi`` and ``int phi^2`` over ``0 <= xi <= 1``."""
-    if lam < _SERIES_MAX:
-        a, b = _krylov(lam, c1, c2)
-        return (
-            a * _ksum(lam, 2) + b * _ksum(lam, 3),
-            a * _ksum(lam, 2, 1) + b * _ksum(lam, 3, 1),
-            _pair_series(lam, (a, b), lam, (a, b)),
-        )
-    (_, _, f2, f3), (g0, g1, g2, g3) = _ends(lam, c1, c2, tail)
-    l4 = lam**4
-    sq = (3 * g0 * g3 - g1 * g2 + l4 * g0 * g0 - 2 * g1 * g3 + g2 * g2) / (4 * l4)
-    return (g3 - f3) / l4, (g3 - g2 + f2) / l4, sq
-
-
-def _cross(lj: float, mj: tuple, gj: Array, lk: float, mk: tuple, gk: Array) -> float:
-    """``int_0^1 phi_j phi_k`` for distinct roots; ``g`` = derivatives 0..3 at ``xi = 1``."""
-    if lj < _SERIES_MAX and lk < _SERIES_MAX:
-        return _pair_series(lj, _krylov(lj, *mj[:2]), lk, _krylov(lk, *mk[:2]))
-    lagrange = gj[3] * gk[0] - gj[2] * gk[1] + gj[1] * gk[2] - gj[0] * gk[3]
-    return lagrange / (lj**4 - lk**4)
 
 
 # --- public API ------------------------------------------------------------------------
@@ -409,12 +185,12 @@ class ClampedMassModes:
         xi = np.minimum(xa.ravel() / self.length, 1.0)
         out = np.empty((self.n_modes, xi.size))
         for j, (lam, m) in enumerate(self._modes()):
-            out[j] = _phi(lam, *m, xi, derivative)
+            out[j] = mode_derivative(lam, *m, xi, derivative)
         return out.reshape((self.n_modes,) + xa.shape) / self.length**derivative
 
     @cached_property
     def _end_values(self) -> Array:
-        vals = [_ends(lam, *m)[1] for lam, m in self._modes()]
+        vals = [end_values(lam, *m)[1] for lam, m in self._modes()]
         return np.array(vals).reshape(self.n_modes, 4)
 
     @property
@@ -429,7 +205,9 @@ class ClampedMassModes:
 
     @cached_property
     def _self_integrals(self) -> Array:
-        return np.array([_integrals(lam, *m) for lam, m in self._modes()]).reshape(self.n_modes, 3)
+        return np.array([mode_integrals(lam, *m) for lam, m in self._modes()]).reshape(
+            self.n_modes, 3
+        )
 
     @property
     def v(self) -> Array:
@@ -447,7 +225,7 @@ class ClampedMassModes:
         z = np.diag(self._self_integrals[:, 2]) if n else np.zeros((0, 0))
         for j in range(n):
             for k in range(j + 1, n):
-                z[j, k] = z[k, j] = _cross(*modes[j], g[j], *modes[k], g[k])
+                z[j, k] = z[k, j] = cross_integral(*modes[j], g[j], *modes[k], g[k])
         return self.rho * self.length * z
 
     @property
@@ -515,6 +293,39 @@ def clamped_mass_modes(
     >>> modes.frequency_hz.round(4).tolist()
     [0.5596, 3.5069]
     """
+    L, rho, EI, m_d, j_d, m_c, n = _checked(length, rho, EI, n_modes, m_tip, J_tip, M_tip)
+    if m_c * m_c - m_d * j_d > 1e-9 * (m_c * m_c + m_d * j_d):
+        warnings.warn(
+            f"tip inertia [[m_tip, M_tip], [M_tip, J_tip]] = [[{m_d}, {m_c}], [{m_c}, {j_d}]] "
+            f"is indefinite (M_tip**2 > m_tip*J_tip): unphysical body; returning the "
+            f"positive-frequency modes",
+            IndefiniteTipInertiaWarning,
+            stacklevel=2,
+        )
+    ml = rho * L
+    mu, eta, kappa = m_d / ml, j_d / (ml * L * L), m_c / (ml * L)
+    lams = frequency_roots(n, mu, eta, kappa)
+    coef, tails = np.zeros((n, 4)), np.zeros(n)
+    for j, lam in enumerate(lams):
+        c1, c2, r = _normalised_mode(lam, mu, eta, kappa)
+        coef[j] = (c1, c2, -c1, -c2)
+        tails[j] = r
+    beta = np.array(lams, dtype=float) / L
+    for a in (beta, coef, tails):
+        a.setflags(write=False)
+    return ClampedMassModes(L, rho, EI, m_d, j_d, m_c, beta, coef, tails)
+
+
+def _checked(
+    length: float,
+    rho: float,
+    EI: float,
+    n_modes: int,
+    m_tip: float,
+    J_tip: float,
+    M_tip: float,
+) -> tuple[float, float, float, float, float, float, int]:
+    """The arguments of :func:`clamped_mass_modes` as floats and an int, refused if out of range."""
     L = _positive("length", length, False)
     rho = _positive("rho", rho, False)
     EI = _positive("EI", EI, False)
@@ -528,65 +339,24 @@ def clamped_mass_modes(
     n = operator.index(n_modes)
     if not 0 <= n <= MAX_MODES:
         raise ValueError(f"n_modes must be an integer 0..{MAX_MODES}, got {n_modes!r}")
-    if m_c * m_c - m_d * j_d > 1e-9 * (m_c * m_c + m_d * j_d):
-        warnings.warn(
-            f"tip inertia [[m_tip, M_tip], [M_tip, J_tip]] = [[{m_d}, {m_c}], [{m_c}, {j_d}]] "
-            f"is indefinite (M_tip**2 > m_tip*J_tip): unphysical body; returning the "
-            f"positive-frequency modes",
-            IndefiniteTipInertiaWarning,
-            stacklevel=2,
-        )
-    ml = rho * L
-    mu, eta, kappa = m_d / ml, j_d / (ml * L * L), m_c / (ml * L)
-    lams = _roots(n, mu, eta, kappa)
-    coef, tails = np.zeros((n, 4)), np.zeros(n)
-    for j, lam in enumerate(lams):
-        c1, c2, r = _raw_mode(lam, mu, eta, kappa)
-        g = _ends(lam, c1, c2, r)[1]
-        norm2 = (
-            _integrals(lam, c1, c2, r)[2]
-            + mu * g[0] ** 2
-            + 2 * kappa * g[0] * g[1]
-            + eta * g[1] ** 2
-        )
-        if not norm2 > 0.0:
-            raise SolverError(f"non-positive modal mass {norm2} for beta L = {lam}")
-        pivot = g[0] if abs(g[0]) > 1e-8 * abs(g[1]) else g[1]
-        scale = math.copysign(1.0 / math.sqrt(norm2), pivot)
-        c1, c2, r = c1 * scale, c2 * scale, r * scale
-        coef[j] = (c1, c2, -c1, -c2)
-        tails[j] = r
-    beta = np.array(lams, dtype=float) / L
-    for a in (beta, coef, tails):
-        a.setflags(write=False)
-    return ClampedMassModes(L, rho, EI, m_d, j_d, m_c, beta, coef, tails)
+    return L, rho, EI, m_d, j_d, m_c, n
 
 
-def frequency_determinant(lam: ArrayLike, mu: float, eta: float, kappa: float) -> float | Array:
-    """Scaled characteristic function of the clamped-mass beam.
+def _normalised_mode(lam: float, mu: float, eta: float, kappa: float) -> tuple[float, float, float]:
+    """``(c1, c2, tail)`` of the mode at root ``lam``, normalised by Eq 40 to the link mass.
 
-    ``Delta(lam) / (cosh(lam) W(lam))`` with ``Delta`` and ``W > 0`` as in the module
-    docstring; its positive zeros are ``beta_j L``.  Bounded by 2 in magnitude.
-
-    Parameters
-    ----------
-    lam
-        ``beta L``, dimensionless, >= 0 (scalar or array).
-    mu, eta, kappa
-        ``m_D / (rho L)``, ``J_D / (rho L^3)``, ``M_D / (rho L^2)``, dimensionless.
-
-    Returns
-    -------
-    float or ndarray shaped like ``lam``
+    The sign makes ``phi(L) > 0`` (``phi'(L) > 0`` when ``phi(L)`` is about zero).
     """
-    for name, val in (("mu", mu), ("eta", eta), ("kappa", kappa)):
-        if not math.isfinite(float(val)):
-            raise ValueError(f"{name} must be finite, got {val!r}")
-    la = np.asarray(lam, dtype=float)
-    if not np.all(la >= 0.0) or not np.all(np.isfinite(la)):
-        raise ValueError(f"lam must be finite and >= 0, got {lam!r}")
-    f = np.vectorize(
-        lambda x: _delta(float(x), float(mu), float(eta), float(kappa)), otypes=[float]
+    c1, c2, r = raw_mode(lam, mu, eta, kappa)
+    g = end_values(lam, c1, c2, r)[1]
+    norm2 = (
+        mode_integrals(lam, c1, c2, r)[2]
+        + mu * g[0] ** 2
+        + 2 * kappa * g[0] * g[1]
+        + eta * g[1] ** 2
     )
-    out = f(la)
-    return float(out) if out.ndim == 0 else out
+    if not norm2 > 0.0:
+        raise SolverError(f"non-positive modal mass {norm2} for beta L = {lam}")
+    pivot = g[0] if abs(g[0]) > 1e-8 * abs(g[1]) else g[1]
+    scale = math.copysign(1.0 / math.sqrt(norm2), pivot)
+    return c1 * scale, c2 * scale, r * scale

@@ -87,7 +87,20 @@ def hermite_shape(zeta: ArrayLike, l: float, derivative: int = 0) -> Array:
 
 
 def beam_mass(rho: float, l: float) -> Array:
-    """Consistent mass of a Hermite bending element, ``rho l / 420 [...]`` (kg, kg m, kg m^2)."""
+    """Consistent mass of a Hermite bending element, ``rho l / 420 [...]`` (kg, kg m, kg m^2).
+
+    Parameters
+    ----------
+    rho : float
+        Mass per length (kg/m).
+    l : float
+        Element length (m).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (4, 4), over ``(w1, w1', w2, w2')``.
+    """
     l = _check_length(l)
     return (
         rho
@@ -105,7 +118,20 @@ def beam_mass(rho: float, l: float) -> Array:
 
 
 def beam_stiffness(EI: float, l: float) -> Array:
-    """Bending stiffness ``EI / l^3 [...]`` of a Hermite element (N/m, N, N m)."""
+    """Bending stiffness ``EI / l^3 [...]`` of a Hermite element (N/m, N, N m).
+
+    Parameters
+    ----------
+    EI : float
+        Bending stiffness (N m^2).
+    l : float
+        Element length (m).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (4, 4), over ``(w1, w1', w2, w2')``.
+    """
     l = _check_length(l)
     return (
         EI
@@ -124,8 +150,19 @@ def beam_stiffness(EI: float, l: float) -> Array:
 def geometric_stiffness_linear(F1: float, F2: float, l: float) -> Array:
     """Geometric stiffness ``int F N'^T N' dzeta`` for ``F = F1 + (F2 - F1) zeta / l``.
 
-    ``F1``, ``F2`` are the axial forces (N, tension positive) at the left and right
-    node.  For ``F1 == F2 == P`` this is the classical ``P/(30 l) [36, 3l, ...]``.
+    For ``F1 == F2 == P`` this is the classical ``P/(30 l) [36, 3l, ...]``.
+
+    Parameters
+    ----------
+    F1, F2 : float
+        Axial forces at the left and right node (N, tension positive).
+    l : float
+        Element length (m).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (4, 4) (N/m, N, N m).
     """
     l = _check_length(l)
     a = np.array(
@@ -168,13 +205,39 @@ def geometric_stiffness(force: Callable[[Array], ArrayLike], l: float) -> Array:
 
 
 def axial_mass(rho: float, l: float) -> Array:
-    """Consistent mass ``rho l / 6 [[2, 1], [1, 2]]`` of the linear axial element (kg)."""
+    """Consistent mass ``rho l / 6 [[2, 1], [1, 2]]`` of the linear axial element (kg).
+
+    Parameters
+    ----------
+    rho : float
+        Mass per length (kg/m).
+    l : float
+        Element length (m).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (2, 2).
+    """
     l = _check_length(l)
     return rho * l / 6.0 * np.array([[2.0, 1.0], [1.0, 2.0]])
 
 
 def axial_stiffness(EA: float, l: float) -> Array:
-    """Axial stiffness ``EA / l [[1, -1], [-1, 1]]`` (N/m)."""
+    """Axial stiffness ``EA / l [[1, -1], [-1, 1]]`` (N/m).
+
+    Parameters
+    ----------
+    EA : float
+        Axial stiffness (N).
+    l : float
+        Element length (m).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (2, 2).
+    """
     l = _check_length(l)
     return EA / l * np.array([[1.0, -1.0], [-1.0, 1.0]])
 
@@ -182,10 +245,23 @@ def axial_stiffness(EA: float, l: float) -> Array:
 def mass_integrals(rho: float, l: float, x0: float = 0.0) -> tuple[Array, Array]:
     """Mass-weighted shape-function integrals for floating-frame coupling terms.
 
-    Returns ``(S0, S1)`` with ``S0 = int rho N dzeta`` (kg, kg m) and
-    ``S1 = int rho (x0 + zeta) N dzeta`` (kg m, kg m^2), where ``x0`` (m) is the
-    position of the element's left node in the link frame.  ``S0 @ q_e`` is the
-    first moment of transverse deflection, ``S1 @ q_e`` its moment about the origin.
+    ``S0 @ q_e`` is the first moment of transverse deflection, ``S1 @ q_e`` its moment about
+    the origin.
+
+    Parameters
+    ----------
+    rho : float
+        Mass per length (kg/m).
+    l : float
+        Element length (m).
+    x0 : float
+        Position of the element's left node in the link frame (m).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``S0 = int rho N dzeta`` (kg, kg m) and ``S1 = int rho (x0 + zeta) N dzeta``
+        (kg m, kg m^2), each of shape (4,).
     """
     l = _check_length(l)
     s0 = rho * np.array([l / 2, l**2 / 12, l / 2, -(l**2) / 12])
@@ -197,8 +273,26 @@ def locate(x: float, n_elements: int, length: float) -> tuple[int, float]:
     """Element index ``j`` (0-based) and local ``zeta`` of position ``x`` on a uniform mesh.
 
     A point on an interior node is assigned to the element on its right (the last
-    node to the last element).  Raises ``ValueError`` outside ``[0, length]``
-    (a tolerance of 1e-12 length is clamped).
+    node to the last element).  A tolerance of 1e-12 length outside the beam is clamped.
+
+    Parameters
+    ----------
+    x : float
+        Position along the beam (m).
+    n_elements : int
+        Number of equal elements.
+    length : float
+        Beam length (m).
+
+    Returns
+    -------
+    tuple
+        ``(j, zeta)``, ``zeta`` in m from the element's left node.
+
+    Raises
+    ------
+    ValueError
+        When ``x`` lies outside ``[0, length]``.
     """
     le = length / n_elements
     tol = 1e-12 * length
@@ -210,7 +304,24 @@ def locate(x: float, n_elements: int, length: float) -> tuple[int, float]:
 
 
 def interpolation_row(x: float, n_elements: int, length: float, derivative: int = 0) -> Array:
-    """Global row ``r`` with ``w^(derivative)(x) = r @ q`` on a uniform mesh (see module doc)."""
+    """Global row ``r`` with ``w^(derivative)(x) = r @ q`` on a uniform mesh (see module doc).
+
+    Parameters
+    ----------
+    x : float
+        Position along the beam (m).
+    n_elements : int
+        Number of equal elements.
+    length : float
+        Beam length (m).
+    derivative : int
+        Order of the ``x``-derivative, 0 to 3.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(2 (n_elements + 1),)``.
+    """
     j, zeta = locate(x, n_elements, length)
     row = np.zeros(2 * (n_elements + 1))
     row[2 * j : 2 * j + 4] = hermite_shape(zeta, length / n_elements, derivative)
@@ -219,7 +330,21 @@ def interpolation_row(x: float, n_elements: int, length: float, derivative: int 
 
 @dataclass(frozen=True)
 class BeamMatrices:
-    """Global matrices of a uniform beam (see :func:`assemble_beam`)."""
+    """Global matrices of a uniform beam (see :func:`assemble_beam`).
+
+    Attributes
+    ----------
+    M, K : numpy.ndarray
+        Bending mass and stiffness over the nodal ``(w, w')``.
+    node_x : numpy.ndarray
+        Node positions (m).
+    element_length : float
+        Element length (m).
+    S0, S1 : numpy.ndarray
+        ``int rho N dx`` (kg, kg m) and ``int rho x N dx`` (kg m, kg m^2).
+    M_axial, K_axial : numpy.ndarray or None
+        Axial mass (kg) and stiffness (N/m), when an ``EA`` was given.
+    """
 
     M: Array
     K: Array
@@ -296,6 +421,10 @@ def assemble_geometric_stiffness(
 
     Parameters
     ----------
+    n_elements : int
+        Number of equal elements.
+    length : float
+        Beam length (m).
     force
         Either nodal axial forces, shape ``(n+1,)`` (N, tension positive), taken
         piecewise linear (closed form, exact for linear ``F``), or a vectorised
@@ -305,10 +434,15 @@ def assemble_geometric_stiffness(
     n = int(n_elements)
     le = _check_length(length) / n
     if callable(force):
-        blocks = [geometric_stiffness(lambda z, x0=j * le: force(x0 + z), le) for j in range(n)]
+        blocks = [geometric_stiffness(_shifted(force, j * le), le) for j in range(n)]
     else:
         fn = np.asarray(force, dtype=float)
         if fn.shape != (n + 1,):
             raise ValueError(f"nodal forces must have shape ({n + 1},), got {fn.shape}")
         blocks = [geometric_stiffness_linear(fn[j], fn[j + 1], le) for j in range(n)]
     return _assemble(blocks, 2, 2 * (n + 1))
+
+
+def _shifted(force: Callable[[Array], ArrayLike], x0: float) -> Callable[[Array], ArrayLike]:
+    """``z -> force(x0 + z)``: an axial force along the link seen from an element's left node."""
+    return lambda z: force(x0 + z)

@@ -54,13 +54,22 @@ Shapes that move with the configuration (``shape_rates=True``)
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from flexctrl.modal.shortening import mode_pairs
-from flexctrl.spec.arm import ArmSpec
+from flexctrl.beam.clamped_mass import ClampedMassModes
+from flexctrl.modal.shortening import link_shortening, mode_pairs
+from flexctrl.modal.static_correction import CorrectedModes
+from flexctrl.spec.arm import ArmSpec, JointSpec, LinkSpec
+
+#: A CasADi matrix: ``SX`` or ``MX`` built by the kinematics (the code is generic over both),
+#: or ``DM`` for frozen modal constants.  CasADi's operators mix the three, which the overloads
+#: of its type stubs cannot express for code generic over them.
+Expression = Any
 
 #: Modal fields per link, in packing order; ``z`` is (n_f, n_f), the others (n_f, 1).
 MODAL_FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
@@ -70,33 +79,41 @@ MODAL_FIELDS = ("omega", "tip_deflection", "tip_slope", "v", "w", "z")
 class LinkModal:
     """Modal parameters of one link as CasADi column vectors / matrices (SX, MX or DM).
 
-    ``omega`` (rad/s), ``tip_deflection`` phi(L) (-), ``tip_slope`` phi'(L) (1/m),
-    ``v`` (kg), ``w`` (kg m), ``z`` (kg); mass-orthonormal to the link mass (Eq 40).
+    The modes are mass-orthonormal to the link mass (Eq 40).
+
+    Attributes
+    ----------
+    omega : Expression
+        Natural frequencies (rad/s).
+    tip_deflection, tip_slope : Expression
+        ``phi(L)`` (dimensionless) and ``phi'(L)`` (1/m).
+    v, w, z : Expression
+        ``int rho phi dx`` (kg), ``int rho x phi dx`` (kg m), ``int rho phi_j phi_k dx`` (kg).
+    shape_cross, shape_gram : Expression, optional
+        Scheduled modes only: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad) and
+        ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2).
+    sh_tip, sh_v, sh_w, sh_y, sh_z : Expression, optional
+        Axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1) in 1/m,
+        ``int rho N_p`` (P, 1) in kg/m, ``int rho x N_p`` (P, 1) in kg, ``int rho phi_l N_p``
+        (n_f, P) in kg/m, ``int rho N_p N_p'`` (P, P) in kg/m^2.
+    sh_psi : Expression, optional
+        ``int rho dphi_j/dq_r N_p`` (n_f n, P) in kg/(m rad), scheduled modes only.
     """
 
-    omega: object
-    tip_deflection: object
-    tip_slope: object
-    v: object
-    w: object
-    z: object
-    #: ``y[k, r n_f + j] = int rho phi_k dphi_j/dq_r`` (kg/rad), scheduled modes only
-    shape_cross: object = None
-    # : ``s[r n_f + j, t n_f + k] = int rho dphi_j/dq_r dphi_k/dq_t`` (kg/rad^2), scheduled modes
-    # only
-    shape_gram: object = None
-    #: axial shortening (:mod:`flexctrl.modal.shortening`): ``N_p(L)`` (P, 1), 1/m
-    sh_tip: object = None
-    #: ``int rho N_p`` (P, 1), kg/m
-    sh_v: object = None
-    #: ``int rho x N_p`` (P, 1), kg
-    sh_w: object = None
-    #: ``int rho phi_l N_p`` (n_f, P), kg/m
-    sh_y: object = None
-    #: ``int rho N_p N_p'`` (P, P), kg/m^2
-    sh_z: object = None
-    #: ``int rho dphi_j/dq_r N_p`` (n_f n, P), kg/(m rad), scheduled modes only
-    sh_psi: object = None
+    omega: Expression
+    tip_deflection: Expression
+    tip_slope: Expression
+    v: Expression
+    w: Expression
+    z: Expression
+    shape_cross: Expression = None
+    shape_gram: Expression = None
+    sh_tip: Expression = None
+    sh_v: Expression = None
+    sh_w: Expression = None
+    sh_y: Expression = None
+    sh_z: Expression = None
+    sh_psi: Expression = None
 
     @property
     def n_modes(self) -> int:
@@ -109,13 +126,14 @@ class LinkModal:
         return self.sh_v is not None and self.n_modes > 0
 
     @staticmethod
-    def from_modes(modes, n_modes: int) -> LinkModal:
-        """Numeric constants from a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` (or None
-        if n_f = 0),
-        with the axial-shortening integrals of :func:`flexctrl.modal.shortening.link_shortening`."""
-        from flexctrl.modal.shortening import link_shortening
+    def from_modes(modes: ClampedMassModes | CorrectedModes | None, n_modes: int) -> LinkModal:
+        """Numeric constants from a link's modes (None if n_f = 0).
 
-        if n_modes == 0:
+        The modes are :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` or
+        :class:`~flexctrl.modal.static_correction.CorrectedModes`; the axial-shortening
+        integrals come from :func:`flexctrl.modal.shortening.link_shortening`.
+        """
+        if n_modes == 0 or modes is None:
             empty = ca.DM.zeros(0, 1)
             return LinkModal(empty, empty, empty, empty, empty, ca.DM.zeros(0, 0))
         fields = {
@@ -143,8 +161,8 @@ def _elastic_rotation(slope):
     return ca.vertcat(ca.horzcat(1, -slope), ca.horzcat(slope, 1))
 
 
-# : How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by
-# ``w'``.
+#: How the next link's frame turns with the tip slope ``w'``: Eq 7 as printed, or the rotation by
+#: ``w'``.
 TIP_ROTATIONS = ("linearized", "exact")
 
 
@@ -169,18 +187,31 @@ class ArmExpressions:
         ``c(q, qd)`` when ``qd`` was given; valid only for constant modal parameters.
     """
 
-    positions: object
-    tip_deflection: object
-    tip_slope: object
-    orientations: object
-    mass_matrix: object
-    gravity_energy: object
-    elastic_energy: object
-    coriolis: object = None
+    positions: Expression
+    tip_deflection: Expression
+    tip_slope: Expression
+    orientations: Expression
+    mass_matrix: Expression
+    gravity_energy: Expression
+    elastic_energy: Expression
+    coriolis: Expression = None
 
 
 def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
-    """Index of the first elastic coordinate of each link in ``q`` (joints first)."""
+    """Index of the first elastic coordinate of each link in ``q`` (joints first).
+
+    Parameters
+    ----------
+    n_links : int
+        Number of links (and joints).
+    n_modes : sequence of int
+        Modes per link.
+
+    Returns
+    -------
+    list of int
+        One index per link.
+    """
     offsets, k = [], n_links
     for nf in n_modes:
         offsets.append(k)
@@ -189,12 +220,31 @@ def flexible_offsets(n_links: int, n_modes: Sequence[int]) -> list[int]:
 
 
 def stretched_links(n_modes: Sequence[int]) -> list[int]:
-    """The links that ``axial_stretch`` makes axially compliant: those with elastic modes."""
+    """The links that ``axial_stretch`` makes axially compliant: those with elastic modes.
+
+    Parameters
+    ----------
+    n_modes : sequence of int
+        Modes per link.
+    """
     return [i for i, nf in enumerate(n_modes) if nf > 0]
 
 
 def coordinate_names(n_links: int, n_modes: Sequence[int]) -> tuple[str, ...]:
-    """``q1..qn`` then ``qf11, qf12, ...`` (link, mode)."""
+    """``q1..qn`` then ``qf11, qf12, ...`` (link, mode).
+
+    Parameters
+    ----------
+    n_links : int
+        Number of links (and joints).
+    n_modes : sequence of int
+        Modes per link.
+
+    Returns
+    -------
+    tuple of str
+        The coordinate names.
+    """
     names = [f"q{i + 1}" for i in range(n_links)]
     for i, nf in enumerate(n_modes):
         names += [f"qf{i + 1}{j + 1}" for j in range(nf)]
@@ -253,8 +303,8 @@ class _Inertia:
 def arm_expressions(
     arm: ArmSpec,
     modal: Sequence[LinkModal],
-    q,
-    qd=None,
+    q: Expression,
+    qd: Expression = None,
     *,
     shape_rates: bool = False,
     axial_shortening: bool = False,
@@ -296,83 +346,150 @@ def arm_expressions(
     stretch_index = {i: q.shape[0] - len(stretched) + k for k, i in enumerate(stretched)}
     gravity = ca.DM(np.asarray(arm.gravity, dtype=float).reshape(2, 1))
     sym = type(q)
-    zero_dm = ca.DM.zeros(2, 1)
     inertia = _Inertia(q, qd)
-    U_g = sym(0)
-    U_el = sym(0)
-    r = sym(zero_dm)
-    W_hat = sym(ca.DM.eye(2))  # \hat W_{i-1} = W_{i-1} E_{i-1}
-    alpha_hat = sym(0)  # \hat alpha_i (Eq 9)
-    positions, deflections, slopes, orientations = [r], [], [], []
-    e1, e2 = ca.DM([1.0, 0.0]), ca.DM([0.0, 1.0])
+    walk = _Walk(sym)
     for i, (link, joint, md) in enumerate(zip(arm.links, arm.joints, modal)):
         nf = md.n_modes
         qf = q[offsets[i] : offsets[i] + nf] if nf else sym.zeros(0, 1)
-        W = ca.mtimes(W_hat, _rotation(q[i]))  # Eq 5
-        alpha = alpha_hat + q[i]  # Eq 8
-        orientations.append(alpha)
-        # hub i (Eq 42, 47): point mass at r_i, rotor inertia turning with alpha_i
-        inertia.add_scalar(joint.hub_mass, r)
-        inertia.add_scalar(joint.hub_inertia, alpha)
-        U_g = U_g - joint.hub_mass * ca.dot(gravity, r)
-        # link i (Eq 43, 48): generalised positions P_a and their Gram matrix
-        m, length = link.mass, link.length
-        frame_x, frame_y = ca.mtimes(W, e1), ca.mtimes(W, e2)
+        W = ca.mtimes(walk.W_hat, _rotation(q[i]))  # Eq 5
+        alpha = walk.alpha_hat + q[i]  # Eq 8
+        walk.orientations.append(alpha)
+        _add_hub(walk, inertia, joint, gravity, alpha)
         # uniform strain: the point at x sits at x (1 + e / L) along the link (flexible links only)
-        stretch = 1 + q[stretch_index[i]] / length if i in stretch_index else 1
-        pieces = [r, frame_x * stretch] + [frame_y * qf[j] for j in range(nf)]
-        rigid = ca.DM(
-            [[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]]
-        )
-        moments = sym(ca.horzcat(md.v, md.w))
-        gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
-        shortening = axial_shortening and nf > 0
-        if shortening:  # s(x) = sum_p N_p(x) q_j q_k along -W e_1: pieces W e_1 sigma_p
-            if not md.has_shortening:
-                raise ValueError(
-                    "axial_shortening needs the modes' shortening integrals (LinkModal.sh_*)"
-                )
-            sigma = [qf[j] * qf[k] for j, k in mode_pairs(nf)]
-            pieces += [frame_x * s_p for s_p in sigma]
-            edge = sym(ca.vertcat(md.sh_v.T, md.sh_w.T, md.sh_y))
-            gram = ca.blockcat([[gram, edge], [edge.T, sym(0.5 * (md.sh_z + md.sh_z.T))]])
-        P = ca.vertcat(*pieces)
-        if shape_rates and nf and md.shape_gram is not None and md.shape_gram.shape[0]:
-            inertia.add_moving_shapes(P, gram, md, qf, frame_y)
-        else:
-            inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
-        first_moment = m * r + 0.5 * m * length * frame_x * stretch
-        if nf:
-            first_moment = first_moment + frame_y * ca.dot(md.v, qf)
-        if shortening:
-            first_moment = first_moment + frame_x * ca.dot(md.sh_v, ca.vertcat(*sigma))
-        U_g = U_g - ca.dot(gravity, first_moment)
-        if nf:
-            U_el = U_el + 0.5 * link.mass * ca.sumsqr(md.omega * qf)  # Eqs 46, 53
-        # tip of link i (Eqs 2, 4, 7, 9)
-        w_e = ca.dot(md.tip_deflection, qf) if nf else sym(0)
-        dw_e = ca.dot(md.tip_slope, qf) if nf else sym(0)
-        deflections.append(w_e)
-        slopes.append(dw_e)
-        r = r + ca.mtimes(W, ca.vertcat(length * stretch, w_e))
-        if shortening:
-            r = r + frame_x * ca.dot(md.sh_tip, ca.vertcat(*sigma))
-        positions.append(r)
-        turn = _rotation(dw_e) if tip_rotation == "exact" else _elastic_rotation(dw_e)
-        W_hat = ca.mtimes(W, turn) if nf else W
-        alpha_hat = alpha + dw_e
-    orientations.append(alpha_hat)
+        stretch = 1 + q[stretch_index[i]] / link.length if i in stretch_index else 1
+        link_frame = _LinkFrame(W, qf, stretch, axial_shortening and nf > 0)
+        _add_link(walk, inertia, link, md, link_frame, gravity, shape_rates)
+        _to_tip(walk, md, link_frame, link.length, alpha, tip_rotation)
+    walk.orientations.append(walk.alpha_hat)
     # payload (Eqs 44, 49): mass at r_{n+1}, inertia turning with alpha-hat_{n+1}
-    inertia.add_scalar(arm.payload.mass, r)
-    inertia.add_scalar(arm.payload.effective_inertia, alpha_hat)
-    U_g = U_g - arm.payload.mass * ca.dot(gravity, r)
+    inertia.add_scalar(arm.payload.mass, walk.r)
+    inertia.add_scalar(arm.payload.effective_inertia, walk.alpha_hat)
+    walk.U_g = walk.U_g - arm.payload.mass * ca.dot(gravity, walk.r)
     return ArmExpressions(
-        positions=ca.horzcat(*positions),
-        tip_deflection=ca.vertcat(*deflections),
-        tip_slope=ca.vertcat(*slopes),
-        orientations=ca.vertcat(*orientations),
+        positions=ca.horzcat(*walk.positions),
+        tip_deflection=ca.vertcat(*walk.deflections),
+        tip_slope=ca.vertcat(*walk.slopes),
+        orientations=ca.vertcat(*walk.orientations),
         mass_matrix=inertia.M,
         coriolis=inertia.c,
-        gravity_energy=U_g,
-        elastic_energy=U_el,
+        gravity_energy=walk.U_g,
+        elastic_energy=walk.U_el,
     )
+
+
+@dataclass
+class _Walk:
+    """The state of the walk from the base out, link by link (Eqs 2-9)."""
+
+    sym: type
+    r: Expression = None
+    W_hat: Expression = None  # \hat W_{i-1} = W_{i-1} E_{i-1}
+    alpha_hat: Expression = None  # \hat alpha_i (Eq 9)
+    U_g: Expression = None
+    U_el: Expression = None
+    positions: list[Expression] = field(default_factory=list)
+    deflections: list[Expression] = field(default_factory=list)
+    slopes: list[Expression] = field(default_factory=list)
+    orientations: list[Expression] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.U_g = self.sym(0)
+        self.U_el = self.sym(0)
+        self.r = self.sym(ca.DM.zeros(2, 1))
+        self.W_hat = self.sym(ca.DM.eye(2))
+        self.alpha_hat = self.sym(0)
+        self.positions.append(self.r)
+
+
+@dataclass(frozen=True)
+class _LinkFrame:
+    """Link i's frame ``W``, its elastic coordinates and what its kinematics include."""
+
+    W: Expression
+    qf: Expression
+    stretch: Expression  # 1, or 1 + e_i / L_i
+    shortening: bool
+    sigma: list[Expression] = field(default_factory=list)  # q_j q_k of the mode pairs
+
+    @cached_property
+    def x(self) -> Expression:
+        """``W e_1``: along the link."""
+        return ca.mtimes(self.W, ca.DM([1.0, 0.0]))
+
+    @cached_property
+    def y(self) -> Expression:
+        """``W e_2``: across the link."""
+        return ca.mtimes(self.W, ca.DM([0.0, 1.0]))
+
+
+def _add_hub(
+    walk: _Walk, inertia: _Inertia, joint: JointSpec, gravity: ca.DM, alpha: Expression
+) -> None:
+    """Hub i (Eqs 42, 47): a point mass at ``r_i``, a rotor inertia turning with ``alpha_i``."""
+    inertia.add_scalar(joint.hub_mass, walk.r)
+    inertia.add_scalar(joint.hub_inertia, alpha)
+    walk.U_g = walk.U_g - joint.hub_mass * ca.dot(gravity, walk.r)
+
+
+def _add_link(
+    walk: _Walk,
+    inertia: _Inertia,
+    link: LinkSpec,
+    md: LinkModal,
+    frame: _LinkFrame,
+    gravity: ca.DM,
+    shape_rates: bool,
+) -> None:
+    """Link i's mass (Eqs 43, 48): generalised positions ``P_a``, their Gram matrix, energies."""
+    sym, qf, nf = walk.sym, frame.qf, md.n_modes
+    m, length = link.mass, link.length
+    frame_x, frame_y = frame.x, frame.y
+    pieces = [walk.r, frame_x * frame.stretch] + [frame_y * qf[j] for j in range(nf)]
+    rigid = ca.DM([[m, 0.5 * m * length], [0.5 * m * length, link.inertia + 0.25 * m * length**2]])
+    moments = sym(ca.horzcat(md.v, md.w))
+    gram = ca.blockcat([[sym(rigid), moments.T], [moments, sym(0.5 * (md.z + md.z.T))]])
+    if frame.shortening:  # s(x) = sum_p N_p(x) q_j q_k along -W e_1: pieces W e_1 sigma_p
+        if not md.has_shortening:
+            raise ValueError(
+                "axial_shortening needs the modes' shortening integrals (LinkModal.sh_*)"
+            )
+        frame.sigma.extend(qf[j] * qf[k] for j, k in mode_pairs(nf))
+        pieces += [frame_x * s_p for s_p in frame.sigma]
+        edge = sym(ca.vertcat(md.sh_v.T, md.sh_w.T, md.sh_y))
+        gram = ca.blockcat([[gram, edge], [edge.T, sym(0.5 * (md.sh_z + md.sh_z.T))]])
+    P = ca.vertcat(*pieces)
+    if shape_rates and nf and md.shape_gram is not None and md.shape_gram.shape[0]:
+        inertia.add_moving_shapes(P, gram, md, qf, frame_y)
+    else:
+        inertia.add(P, ca.kron(gram, ca.DM.eye(2)))
+    first_moment = m * walk.r + 0.5 * m * length * frame_x * frame.stretch
+    if nf:
+        first_moment = first_moment + frame_y * ca.dot(md.v, qf)
+    if frame.shortening:
+        first_moment = first_moment + frame_x * ca.dot(md.sh_v, ca.vertcat(*frame.sigma))
+    walk.U_g = walk.U_g - ca.dot(gravity, first_moment)
+    if nf:
+        walk.U_el = walk.U_el + 0.5 * link.mass * ca.sumsqr(md.omega * qf)  # Eqs 46, 53
+
+
+def _to_tip(
+    walk: _Walk,
+    md: LinkModal,
+    frame: _LinkFrame,
+    length: float,
+    alpha: Expression,
+    tip_rotation: str,
+) -> None:
+    """Move the walk to the tip of link i (Eqs 2, 4, 7, 9): its position, deflection, frame."""
+    nf, qf, W = md.n_modes, frame.qf, frame.W
+    w_e = ca.dot(md.tip_deflection, qf) if nf else walk.sym(0)
+    dw_e = ca.dot(md.tip_slope, qf) if nf else walk.sym(0)
+    walk.deflections.append(w_e)
+    walk.slopes.append(dw_e)
+    walk.r = walk.r + ca.mtimes(W, ca.vertcat(length * frame.stretch, w_e))
+    if frame.shortening:
+        walk.r = walk.r + frame.x * ca.dot(md.sh_tip, ca.vertcat(*frame.sigma))
+    walk.positions.append(walk.r)
+    turn = _rotation(dw_e) if tip_rotation == "exact" else _elastic_rotation(dw_e)
+    walk.W_hat = ca.mtimes(W, turn) if nf else W
+    walk.alpha_hat = alpha + dw_e

@@ -12,6 +12,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Literal
 
+import numpy as np
+
+from flexctrl.dynamics.amm import build_amm
+from flexctrl.dynamics.fem.fem_arm import build_fem_model
 from flexctrl.dynamics.model import Model
 from flexctrl.errors import FlexctrlError, SpecError
 from flexctrl.spec.arm import ArmSpec
@@ -27,7 +31,7 @@ def build_model(
     fidelity: str | Fidelity | None = "amm:2",
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
-    reference_q: Sequence[float] | None = None,
+    reference_q: Sequence[float] | np.ndarray | None = None,
     damping: Literal["ratio", "paper", "stiffness"] | None = None,
 ) -> Model:
     """Build the model of ``arm`` at ``fidelity``.
@@ -59,8 +63,6 @@ def build_model(
     ModelFamilyUnavailable
         For ``auto``, and for ``modes="scheduled"`` with ``fem:N``.
     """
-    from flexctrl.dynamics.amm import build_amm
-
     if fidelity is None:
         return build_amm(
             arm,
@@ -69,33 +71,9 @@ def build_model(
             reference_q=reference_q,
             damping=damping,
         )
-    fid = parse_fidelity(fidelity)
+    fid = fidelity if isinstance(fidelity, Fidelity) else parse_fidelity(fidelity)
     if fid.kind == "fem":
-        from flexctrl.dynamics.fem.fem_arm import build_fem_model
-
-        if modes != "frozen":
-            raise ModelFamilyUnavailable(
-                f"modes '{modes}' applies to assumed modes only; a finite-element model has no "
-                "mode option"
-            )
-        if (arm.damping_form if damping is None else damping) == "paper":
-            raise ModelFamilyUnavailable(
-                "damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
-                "modes only; a finite-element model takes its damping from damping_ratio "
-                "stiffness-proportionally, (2 zeta / omega_1) K (use damping form 'ratio' or "
-                "'stiffness', or an 'amm:N' fidelity)"
-            )
-        if arm.axial_stretch is False:
-            raise SpecError(
-                "axial_stretch = false is not allowed with a finite-element fidelity: its links "
-                "are always "
-                "axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity",
-                key="axial_stretch",
-            )
-        shortening = (
-            True if arm.axial_shortening is None else arm.axial_shortening
-        )  # membrane strain, validated
-        return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=shortening)
+        return _build_fem(arm, fid, modes=modes, reference_q=reference_q, damping=damping)
     if fid.kind == "auto":
         raise ModelFamilyUnavailable(
             "fidelity 'auto' is resolved per scene from an accuracy tolerance, not by build_model: "
@@ -103,6 +81,46 @@ def build_model(
             "--tol METRES` or flexctrl.scenes.auto.choose_fidelity; here give 'rigid', "
             "'amm:N' or 'fem:N'"
         )
+    modes_per_link = fid.modes_per_link
+    if modes_per_link is None:
+        raise SpecError(
+            f"fidelity {fid} has no mode count; allowed: 'rigid', 'amm:N' or 'fem:N'",
+            key="fidelity",
+        )
     return build_amm(
-        arm, fid.modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid
+        arm, modes_per_link, modes=modes, reference_q=reference_q, damping=damping, fidelity=fid
     )
+
+
+def _build_fem(
+    arm: ArmSpec,
+    fid: Fidelity,
+    *,
+    modes: str,
+    reference_q: Sequence[float] | np.ndarray | None,
+    damping: str | None,
+) -> Model:
+    """The finite-element model of ``arm`` at ``fid`` (``fem:N``), its options checked."""
+    if modes != "frozen":
+        raise ModelFamilyUnavailable(
+            f"modes '{modes}' applies to assumed modes only; a finite-element model has no "
+            "mode option"
+        )
+    if (arm.damping_form if damping is None else damping) == "paper":
+        raise ModelFamilyUnavailable(
+            "damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "
+            "modes only; a finite-element model takes its damping from damping_ratio "
+            "stiffness-proportionally, (2 zeta / omega_1) K (use damping form 'ratio' or "
+            "'stiffness', or an 'amm:N' fidelity)"
+        )
+    if arm.axial_stretch is False:
+        raise SpecError(
+            "axial_stretch = false is not allowed with a finite-element fidelity: its links are "
+            "always axially compliant (EA); allowed: true or unset, or an 'amm:N' fidelity",
+            key="axial_stretch",
+        )
+    if fid.count is None:
+        raise SpecError(f"fidelity {fid} has no element count; allowed: 'fem:N'", key="fidelity")
+    # membrane strain, validated
+    shortening = True if arm.axial_shortening is None else arm.axial_shortening
+    return build_fem_model(arm, fid.count, reference_q=reference_q, axial_shortening=shortening)

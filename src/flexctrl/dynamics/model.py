@@ -14,20 +14,23 @@ Required functions (``functions[name]``), with their input and output names:
 ``D``         () -> (D)                 damping, (N, N) (scheduled modes: (q) -> (D))
 ``f``         (x, u) -> (xdot)          forward dynamics, x = (q, qd), u = joint torques (n,)
 ``energies``  (q, qd) -> (E_kin, E_el, E_grav)   J
-``tip``       (q, qd) -> (p, v)         last link's tip position and velocity in the world frame
-(2,) ``hubs``      (q) -> (p)                joint positions in the world frame, (2, n+1) incl. the
-tip ``deflection``(q) -> (w, dw)            tip deflection (m) and slope (rad) of every link, (n,)
+``tip``       (q, qd) -> (p, v)         last link's tip position and velocity, world frame (2,)
+``hubs``      (q) -> (p)                joint positions in the world frame, (2, n+1) incl. the tip
+``deflection``(q) -> (w, dw)            tip deflection (m) and slope (rad) of every link, (n,)
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import casadi as ca
 import numpy as np
 
 from flexctrl.spec.fidelity import Fidelity
+
+T = TypeVar("T")
 
 REQUIRED_FUNCTIONS = ("M", "c", "g", "f", "energies", "tip", "hubs", "deflection")
 
@@ -115,8 +118,25 @@ class Model:
         return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
 
 
-def derived(model, key, build):
-    """``build()`` once per model, kept in ``model.derived`` under ``key`` (built anew for a model without that store)."""
+def derived(model: Any, key: Hashable, build: Callable[[], T]) -> T:
+    """``build()`` once per model, kept in ``model.derived`` under ``key``.
+
+    A model without that store (a stand-in with the same functions) gets it built anew.
+
+    Parameters
+    ----------
+    model : Model
+        The model the value is kept with.
+    key : hashable
+        What the value is kept under.
+    build : callable
+        ``build()`` makes the value, called once per model and key.
+
+    Returns
+    -------
+    object
+        The kept value.
+    """
     store = getattr(model, "derived", None)
     if store is None:
         return build()

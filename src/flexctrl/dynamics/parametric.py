@@ -1,5 +1,4 @@
-"""CasADi Functions whose numeric constants become an input, so one compiled library serves many
-models.
+"""CasADi Functions whose numeric constants become an input: one compiled library, many models.
 
 A frozen-modes model bakes its modal constants (which depend on the payload and on
 the configuration the modes were computed at) into ``f``; C code generated from it
@@ -9,8 +8,8 @@ vector input: models whose graphs differ only in constant values then share one
 compiled library (the cache key is a hash of the generated code).  Used by the NMPC
 (:mod:`flexctrl.control.nmpc.controller`), the closed-loop plant step
 (:mod:`flexctrl.loop.plant_step`) and the Jacobians shared by a model structure
-(:mod:`flexctrl.dynamics.jacobians`).
-:class:`Memo` keeps what is built from such a lifted Function once per process.
+(:mod:`flexctrl.dynamics.jacobians`).  :class:`Memo` keeps what is built from such a lifted Function
+once per process.
 """
 
 from __future__ import annotations
@@ -19,7 +18,7 @@ import bisect
 import hashlib
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any
 
 import casadi as ca
@@ -33,15 +32,20 @@ class Memo:
 
     For what is a pure function of its key's content (a Function built from another's
     serialized form): the value for one model serves every other of the same structure.
+
+    Parameters
+    ----------
+    size : int
+        Entries kept.
     """
 
     def __init__(self, size: int):
         self.size = size
-        self._built: OrderedDict[Any, Any] = OrderedDict()
+        self._built: OrderedDict[Hashable, Any] = OrderedDict()
         self._lock = threading.Lock()  # a Dask worker may run two runs in threads
 
-    def get(self, key: str, build: Callable[[], Any]) -> tuple[Any, bool]:
-        """``(value, reused)``: ``build()`` the first time ``key`` is asked for, the kept value after."""
+    def get(self, key: Hashable, build: Callable[[], Any]) -> tuple[Any, bool]:
+        """``(value, reused)``: ``build()`` when ``key`` is first asked for, then the kept value."""
         value = self.lookup(key)
         if value is not None:
             return value, True
@@ -49,7 +53,7 @@ class Memo:
         self.keep(key, value)
         return value, False
 
-    def lookup(self, key: str) -> Any:
+    def lookup(self, key: Hashable) -> Any:
         """The value kept for ``key`` (now the most recently used), or None."""
         with self._lock:
             if key not in self._built:
@@ -57,7 +61,7 @@ class Memo:
             self._built.move_to_end(key)
             return self._built[key]
 
-    def keep(self, key: str, value: Any) -> None:
+    def keep(self, key: Hashable, value: Any) -> None:
         """Keep ``value`` for ``key``, forgetting the least recently used beyond ``size``."""
         with self._lock:
             self._built[key] = value
@@ -79,6 +83,11 @@ class ObjectMemo:
     Jacobian) can be kept with it: a later model skips building, serializing and loading
     again.  The object is held with its value, so its ``id`` cannot pass to another object
     while the entry lasts; least recently used beyond ``size``.
+
+    Parameters
+    ----------
+    size : int
+        Entries kept.
     """
 
     def __init__(self, size: int):
@@ -111,7 +120,18 @@ FROM_LIFTED = ObjectMemo(32)
 
 
 def try_expand(fun: ca.Function) -> ca.Function:
-    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile)."""
+    """``fun`` rewritten as an SX Function when possible (faster to evaluate and compile).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        An MX or SX Function.
+
+    Returns
+    -------
+    casadi.Function
+        The SX form, or ``fun`` itself when it cannot be expanded.
+    """
     if fun.is_a("SXFunction"):
         return fun
     try:
@@ -121,12 +141,27 @@ def try_expand(fun: ca.Function) -> ca.Function:
 
 
 def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Function, np.ndarray]:
-    """:func:`constants_as_parameters` of ``fun()`` (a Function of ``model`` called ``name``), once
-    per model.
+    """:func:`constants_as_parameters` of ``fun()``, ``model``'s Function ``name``, once per model.
 
     Kept with the model (:func:`~flexctrl.dynamics.model.derived`): every plant step count,
     output-map length and reference table of one model lifts its constants once (the lift
     walks the whole expression graph in Python).
+
+    Parameters
+    ----------
+    model : Model
+        The model the lift is kept with.
+    name : str
+        The Function's name, part of the key it is kept under.
+    fun : callable
+        ``fun()`` builds the Function, called only when no lift is kept.
+    per_use : bool
+        One constant per use, as in :func:`constants_as_parameters`.
+
+    Returns
+    -------
+    tuple
+        ``(fp, c)`` as :func:`constants_as_parameters` returns them.
     """
     return derived(
         model,
@@ -135,21 +170,34 @@ def parametric(model, name: str, fun, *, per_use: bool = False) -> tuple[ca.Func
     )
 
 
-# : Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used
-# beyond 16.
+#: Lifted Functions by structure (:func:`structure_key`): ``(fp, sources)``, least recently used
+#: beyond 16.
 LIFTED = Memo(16)
 
 
 def structure_key(f: ca.Function, ops: list[int], per_use: bool) -> str:
-    """A hash of an SX Function's operation sequence, its input and output sparsities and
-    ``per_use``.
+    """A hash of an SX Function's operations, its input and output sparsities and ``per_use``.
 
     It leaves out the operands' wiring, which costs a Python call per instruction to read
-    (0.17 s of the 0.38 s lift of the NMPC's 42,000-instruction equation terms): a kept
-    lift found by this key is used only after it reproduces the Function (:func:`_reproduces`).
+    (most of a lift's time): a kept lift found by this key is used only after it reproduces
+    the Function (:func:`_reproduces`).
     Per use, the constant nodes are left out too: common subexpression elimination merges
     constants whose values coincide, so their count moves with the configuration while the
     lifted Function does not.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        An SX Function.
+    ops : list of int
+        The operation code of each of its instructions.
+    per_use : bool
+        One constant per use (constant nodes left out of the key).
+
+    Returns
+    -------
+    str
+        A hexadecimal digest.
     """
     if (
         per_use
@@ -175,6 +223,12 @@ def constants_as_parameters(
     the same operations in the same order with ``c`` the vector of the graph's constants,
     so two models whose graphs differ only in constant values share one compiled
     library.
+
+    A lift kept in this process (:data:`LIFTED`) serves every later Function with the same
+    :func:`structure_key`: its constants are read from the instructions the kept lift
+    records (one call per constant, not a walk of the graph and a rebuild), and the kept
+    ``fp`` is returned once it reproduces ``fun`` at a generic point; otherwise the graph is
+    lifted anew.  Either way ``fp`` has the same structure and ``c`` the same values.
 
     Parameters
     ----------
@@ -253,7 +307,8 @@ def _lift(
 ) -> tuple[ca.Function, list[int], list] | None:
     """``(fp, sources, uses)``: ``f`` rebuilt with its constants as the last input, the constant
     instruction that gives each entry of ``c`` and, per use, where each entry is read (the
-    ``j``-th non-constant instruction's operand ``pos``); None when an instruction cannot be rebuilt."""
+    ``j``-th non-constant instruction's operand ``pos``); None when an instruction cannot be
+    rebuilt."""
     n_const = (
         sum(
             len(f.instruction_input(k))
@@ -320,9 +375,9 @@ def _reproduces(f: ca.Function, fp: ca.Function, const: np.ndarray) -> bool:
         f(*args) if f.n_out() > 1 else [f(*args)],
         fp(*args, const) if f.n_out() > 1 else [fp(*args, const)],
     ):
-        a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+        va, vb = np.array(a, dtype=float), np.array(b, dtype=float)
         if not np.allclose(
-            a, b, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(a), initial=0.0)))
+            va, vb, rtol=1e-12, atol=1e-12 * max(1.0, float(np.max(np.abs(va), initial=0.0)))
         ):
             return False
     return True

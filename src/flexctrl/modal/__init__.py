@@ -1,1 +1,1 @@
-"""Modes of an arm's links: boundary values from the configuration, lookup tables, identification, figures."""
+"""Modes of an arm's links: boundary values, lookup tables, identification, figures."""

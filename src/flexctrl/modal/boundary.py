@@ -121,5 +121,17 @@ def scheduling_joints(arm: ArmSpec, link: int) -> tuple[int, ...]:
 
     ``M_D`` of link i depends on ``q_{i+1}..q_n`` (0-based ``i+1..n-1``) and
     ``J_D`` on ``q_{i+2}..q_n``; a link with fewer than one outboard link has none.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    link : int
+        The link, 0-based.
+
+    Returns
+    -------
+    tuple of int
+        The joints, 0-based.
     """
     return tuple(range(link + 1, arm.n_links))

@@ -1,5 +1,4 @@
-"""Per-link clamped-mass frequencies by Hermite finite elements (``flexctrl modes --fidelity
-fem:N``).
+"""Per-link clamped-mass frequencies by Hermite finite elements (``modes --fidelity fem:N``).
 
 The check on :func:`flexctrl.modal.arm_modes.link_modes`: the same clamped-mass
 beam (Subedi et al. 2021, Eqs 20-40) -- link ``i`` clamped at its joint, the
@@ -106,29 +105,7 @@ def link_frequencies_fem(
     >>> link_frequencies_fem(arm, [0.0, 0.0, 0.0], 2, 2, 16).round(2)
     array([14.17, 88.82])
     """
-    if not 0 <= link < arm.n_links:
-        raise SpecError(
-            f"link {link!r} is out of range; allowed: 0 to {arm.n_links - 1} (0-based)", key="link"
-        )
-    if (
-        isinstance(n_elements, bool)
-        or not isinstance(n_elements, (int, np.integer))
-        or n_elements < 1
-    ):
-        raise SpecError(
-            f"value {n_elements!r} is not allowed; allowed: an integer >= 1 (elements per link)",
-            key="n_elements",
-        )
-    if (
-        isinstance(n_modes, bool)
-        or not isinstance(n_modes, (int, np.integer))
-        or not 0 <= n_modes <= 2 * n_elements
-    ):
-        raise SpecError(
-            f"value {n_modes!r} is out of range; allowed: 0 to {2 * n_elements} "
-            f"(a mesh of {n_elements} elements has {2 * n_elements} bending dofs)",
-            key="n_modes",
-        )
+    _check_counts(arm, link, n_modes, n_elements)
     spec = arm.links[link]
     bv = boundary_values(arm, np.asarray(q, dtype=float), link)
     m_D, J_D, M_D = float(bv.m), float(bv.J), float(bv.M)
@@ -155,3 +132,30 @@ def link_frequencies_fem(
             key="n_modes",
         )
     return np.sqrt(1.0 / mu[:n_modes]) / (2.0 * math.pi)
+
+
+def _check_counts(arm: ArmSpec, link: int, n_modes: int, n_elements: int) -> None:
+    """Refuse a link index, element count or mode count out of range (:class:`SpecError`)."""
+    if not 0 <= link < arm.n_links:
+        raise SpecError(
+            f"link {link!r} is out of range; allowed: 0 to {arm.n_links - 1} (0-based)", key="link"
+        )
+    if (
+        isinstance(n_elements, bool)
+        or not isinstance(n_elements, (int, np.integer))
+        or n_elements < 1
+    ):
+        raise SpecError(
+            f"value {n_elements!r} is not allowed; allowed: an integer >= 1 (elements per link)",
+            key="n_elements",
+        )
+    if (
+        isinstance(n_modes, bool)
+        or not isinstance(n_modes, (int, np.integer))
+        or not 0 <= n_modes <= 2 * n_elements
+    ):
+        raise SpecError(
+            f"value {n_modes!r} is out of range; allowed: 0 to {2 * n_elements} "
+            f"(a mesh of {n_elements} elements has {2 * n_elements} bending dofs)",
+            key="n_modes",
+        )

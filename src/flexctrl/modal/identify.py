@@ -52,7 +52,20 @@ def _with_hub_masses(arm: ArmSpec, masses: dict[int, float]) -> ArmSpec:
 def table3_residuals(
     arm: ArmSpec, links: tuple[int, ...] = (1, 2, 3)
 ) -> list[tuple[float, int, int, float, float, float]]:
-    """Model-minus-table residuals of Table 3 for ``links`` (1-based) at q = 0."""
+    """Model-minus-table residuals of Table 3 for ``links`` (1-based) at q = 0.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described (its payload is replaced by each of the table's).
+    links : tuple of int
+        The links compared, 1-based.
+
+    Returns
+    -------
+    list of tuple
+        ``(payload kg, link, mode, table Hz, model Hz, model - table Hz)`` per entry.
+    """
     rows = []
     q = np.zeros(arm.n_links)
     for payload, table in SUBEDI_TABLE3_HZ.items():

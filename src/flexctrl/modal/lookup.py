@@ -219,7 +219,10 @@ def _shape_rate_integrals(
     x: np.ndarray,
     weights: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``y[k, j, r]``, ``s[j, r, k, t]`` and the shape rates ``psi[j, r, x]`` at ``q`` (``shapes``: the modes at ``q`` on the nodes ``x``)."""
+    """``y[k, j, r]``, ``s[j, r, k, t]`` and the shape rates ``psi[j, r, x]`` at ``q``.
+
+    ``shapes`` are the modes at ``q`` on the nodes ``x``.
+    """
     psi = np.zeros((n_modes, len(joints), x.size))
     for rl, joint in enumerate(joints):
         step = np.zeros(arm.n_links)
@@ -233,7 +236,10 @@ def _shape_rate_integrals(
 
 
 def _shortening_fields(modes, signs: np.ndarray, psi: np.ndarray | None) -> dict[str, np.ndarray]:
-    """The axial-shortening integrals of the signed modes; ``sh_psi`` from the shape rates on the Gauss nodes."""
+    """The axial-shortening integrals of the signed modes.
+
+    ``sh_psi`` comes from the shape rates on the Gauss nodes.
+    """
     nf = modes.n_modes
     shape = lambda x, d: modes.shape(x, d) * signs[:, None]  # noqa: E731
     out = shortening_integrals(shape, modes.length, modes.rho, nf)
@@ -357,7 +363,24 @@ def modal_lookup(
 def interpolation_error_hz(
     arm: ArmSpec, lookup: ModalLookup, samples: int = 200, seed: int = 0
 ) -> float:
-    """Worst |interpolated - exact| natural frequency (Hz) at random configurations."""
+    """Worst |interpolated - exact| natural frequency (Hz) at random configurations.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    lookup : ModalLookup
+        The table checked.
+    samples : int
+        Random configurations drawn.
+    seed : int
+        Seed of the generator.
+
+    Returns
+    -------
+    float
+        The largest error (Hz); 0 for a table without scheduling joints.
+    """
     if not lookup.joints:
         return 0.0
     rng = np.random.default_rng(seed)

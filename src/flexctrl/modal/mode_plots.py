@@ -24,7 +24,24 @@ from flexctrl.spec.arm import ArmSpec  # noqa: E402
 def plot_mode_shapes(
     arm: ArmSpec, payloads: tuple[float, ...], path: Path, n_modes: int = 2
 ) -> Path:
-    """Mode shapes phi_ij(x) of every link at the arm's configuration, one row per payload."""
+    """Mode shapes phi_ij(x) of every link at the arm's configuration, one row per payload.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    payloads : tuple of float
+        Payload masses (kg), one row of plots each.
+    path : pathlib.Path
+        The PNG written.
+    n_modes : int
+        Modes per link plotted.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     fig, axes = plt.subplots(
         len(payloads), arm.n_links, figsize=(4 * arm.n_links, 3 * len(payloads)), squeeze=False
     )
@@ -47,12 +64,38 @@ def plot_mode_shapes(
 
 
 def configuration_grid(step_deg: float = 10.0) -> np.ndarray:
-    """Angles (degrees) from -180 to 180 with ``step_deg``."""
+    """Angles (degrees) from -180 to 180 with ``step_deg``.
+
+    Parameters
+    ----------
+    step_deg : float
+        Grid step (degrees).
+
+    Returns
+    -------
+    numpy.ndarray
+        The angles (degrees).
+    """
     return np.arange(-180.0, 180.0 + step_deg / 2, step_deg)
 
 
 def plot_boundary_values(arm: ArmSpec, path: Path, step_deg: float = 10.0) -> Path:
-    """J_D1 and M_D1 over (q2, q3) and M_D2 over q3, for both inertia conventions (3-link arms)."""
+    """J_D1 and M_D1 over (q2, q3) and M_D2 over q3, for both inertia conventions (3-link arms).
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    path : pathlib.Path
+        The PNG written.
+    step_deg : float
+        Grid step (degrees).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     grid = configuration_grid(step_deg)
     Q2, Q3 = np.meshgrid(grid, grid, indexing="ij")
     q = np.zeros(Q2.shape + (arm.n_links,))
@@ -87,7 +130,22 @@ def plot_boundary_values(arm: ArmSpec, path: Path, step_deg: float = 10.0) -> Pa
 def frequency_maps(
     arm: ArmSpec, step_deg: float = 15.0, convention: str | None = None
 ) -> dict[str, np.ndarray]:
-    """f11, f12 over (q2, q3) and f21, f22 over q3 (Hz), by exact solves on a grid."""
+    """f11, f12 over (q2, q3) and f21, f22 over q3 (Hz), by exact solves on a grid.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    step_deg : float
+        Grid step (degrees).
+    convention : {"exact", "paper"}, optional
+        Tip-inertia convention (default the arm's ``boundary_inertia``).
+
+    Returns
+    -------
+    dict
+        ``grid_deg`` (degrees), ``link1`` (Hz, shape (n, n, 2)), ``link2`` (Hz, shape (n, 2)).
+    """
     grid = configuration_grid(step_deg)
     f1 = np.zeros((grid.size, grid.size, 2))
     f2 = np.zeros((grid.size, 2))
@@ -101,7 +159,22 @@ def frequency_maps(
 
 
 def plot_frequency_maps(arm: ArmSpec, path: Path, step_deg: float = 15.0) -> tuple[Path, dict]:
-    """Frequency maps of links 1-2 with the exact and the paper's J_D, and their difference."""
+    """Frequency maps of links 1-2 with the exact and the paper's J_D, and their difference.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    path : pathlib.Path
+        The PNG written.
+    step_deg : float
+        Grid step (degrees).
+
+    Returns
+    -------
+    tuple
+        ``path`` and the exact convention's maps (:func:`frequency_maps`).
+    """
     exact = frequency_maps(arm, step_deg, "exact")
     paper = frequency_maps(arm, step_deg, "paper")
     grid = exact["grid_deg"]

@@ -23,22 +23,48 @@ from collections.abc import Callable
 
 import numpy as np
 
-# : Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate
-# integrals).
+#: Gauss-Legendre nodes on the link and on each partial length (as the lookup's shape-rate
+#: integrals).
 GAUSS_POINTS = 24
 #: Field names, in the order the kinematics and the lookup tables carry them.
 SHORTENING_FIELDS = ("sh_tip", "sh_v", "sh_w", "sh_y", "sh_z")
 
 
 def mode_pairs(n_modes: int) -> list[tuple[int, int]]:
-    """Mode pairs ``(j, k)``, ``j <= k``, row by row: the order of ``sigma_p = q_j q_k``."""
+    """Mode pairs ``(j, k)``, ``j <= k``, row by row: the order of ``sigma_p = q_j q_k``.
+
+    Parameters
+    ----------
+    n_modes : int
+        Modes of the link.
+
+    Returns
+    -------
+    list of tuple of int
+        ``n_modes (n_modes + 1) / 2`` pairs.
+    """
     return [(j, k) for j in range(n_modes) for k in range(j, n_modes)]
 
 
 def gauss_nodes(
     length: float, rho: float, points: int = GAUSS_POINTS
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes (m) and mass weights (kg) of the Gauss-Legendre rule on ``[0, length]``."""
+    """Nodes (m) and mass weights (kg) of the Gauss-Legendre rule on ``[0, length]``.
+
+    Parameters
+    ----------
+    length : float
+        Link length (m).
+    rho : float
+        Mass per length (kg/m).
+    points : int
+        Points of the rule.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Nodes (m) and weights (kg).
+    """
     t, wt = np.polynomial.legendre.leggauss(points)
     return 0.5 * length * (t + 1.0), 0.5 * length * wt * rho
 
@@ -49,7 +75,24 @@ def axial_shapes(
     n_modes: int,
     points: int = GAUSS_POINTS,
 ) -> np.ndarray:
-    """``N_p(x)`` (1/m), shape ``(n_pairs, len(x))``; ``slope(xs)`` returns ``phi'`` (n_modes, len(xs)), 1/m."""
+    """``N_p(x)`` (1/m), shape ``(n_pairs, len(x))``.
+
+    Parameters
+    ----------
+    slope : callable
+        ``slope(xs)`` returns ``phi'`` (n_modes, len(xs)), 1/m.
+    x : numpy.ndarray
+        Positions along the link (m).
+    n_modes : int
+        Modes of the link.
+    points : int
+        Gauss points per integral ``int_0^x``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``N_p(x)`` (1/m).
+    """
     t, wt = np.polynomial.legendre.leggauss(points)
     x = np.asarray(x, dtype=float)
     sub = 0.5 * x[:, None] * (t[None, :] + 1.0)  # (len(x), points) nodes on [0, x]
@@ -63,17 +106,31 @@ def axial_shapes(
 def shortening_integrals(
     shape: Callable[[np.ndarray, int], np.ndarray], length: float, rho: float, n_modes: int
 ) -> dict[str, np.ndarray]:
-    """The integrals of the module docstring for shapes ``shape(x, derivative)`` -> (n_modes,
-    len(x)).
+    """The integrals of the module docstring for ``shape(x, derivative)`` -> (n_modes, len(x)).
 
-    Returns ``{"sh_tip", "sh_v", "sh_w", "sh_y", "sh_z"}`` with shapes ``(P,)``, ``(P,)``,
-    ``(P,)``, ``(n_modes, P)``, ``(P, P)``, ``P = n_modes (n_modes + 1) / 2``.
+    Parameters
+    ----------
+    shape : callable
+        ``shape(x, derivative)`` of the modes, ``x`` in m.
+    length : float
+        Link length (m).
+    rho : float
+        Mass per length (kg/m).
+    n_modes : int
+        Modes of the link.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        ``{"sh_tip", "sh_v", "sh_w", "sh_y", "sh_z"}`` with shapes ``(P,)``, ``(P,)``,
+        ``(P,)``, ``(n_modes, P)``, ``(P, P)``, ``P = n_modes (n_modes + 1) / 2``.
 
     Examples
     --------
     A single straight-line slope ``phi' = 1/L`` (``phi = x/L``): ``N = -x / (2 L^2)``.
 
-    >>> out = shortening_integrals(lambda x, d: (np.ones_like(x) if d else x)[None, :] / 2.0, 2.0, 3.0, 1)
+    >>> line = lambda x, d: (np.ones_like(x) if d else x)[None, :] / 2.0
+    >>> out = shortening_integrals(line, 2.0, 3.0, 1)
     >>> [round(float(out[k].ravel()[0]), 12) for k in ("sh_tip", "sh_v", "sh_w", "sh_z")]
     [-0.25, -0.75, -1.0, 0.125]
     """
@@ -92,5 +149,16 @@ def shortening_integrals(
 
 
 def link_shortening(modes) -> dict[str, np.ndarray]:
-    """:func:`shortening_integrals` of a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes`."""
+    """:func:`shortening_integrals` of a :class:`~flexctrl.beam.clamped_mass.ClampedMassModes`.
+
+    Parameters
+    ----------
+    modes : ClampedMassModes
+        The link's modes (or any object with ``shape``, ``length``, ``rho``, ``n_modes``).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        As :func:`shortening_integrals`.
+    """
     return shortening_integrals(modes.shape, modes.length, modes.rho, modes.n_modes)

@@ -1,5 +1,4 @@
-"""Clamped-mass modes augmented by a static-correction shape for a tip moment (modal truncation
-augmentation).
+"""Clamped-mass modes and a static-correction shape for a tip moment (truncation augmentation).
 
 A link's clamped-mass modes (:mod:`flexctrl.beam.clamped_mass`) treat everything outboard as
 one rigid body fixed to the link's tip, with the tip inertia ``J_D`` of the whole outboard arm
@@ -28,13 +27,18 @@ frequencies are unchanged.  Integrals of the correction are by Gauss-Legendre qu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from flexctrl.beam.clamped_mass import ClampedMassModes
+from flexctrl.beam.elements import assemble_beam, hermite_shape, locate
+from flexctrl.modal.boundary import boundary_values
+from flexctrl.spec.arm import ArmSpec
 
 #: Composite Gauss-Legendre rule for the corrections' integrals: ``QUAD_PANELS`` equal panels
 #: (aligned with the elements of :func:`pinned_root_shapes`, so piecewise cubics integrate
@@ -49,7 +53,18 @@ def _poly(x: np.ndarray, length: float, derivative: int) -> np.ndarray:
 
 
 def tip_moment_shape(length: float):
-    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, as one row."""
+    """``psi(x, d)``: the cantilever's static shape under a tip moment, ``(x / L)^2``, one row.
+
+    Parameters
+    ----------
+    length : float
+        Link length ``L`` (m).
+
+    Returns
+    -------
+    callable
+        ``psi(x, d)``: the ``d``-th derivative at ``x`` (m), shape (1, len(x)).
+    """
     return lambda x, d: _poly(np.asarray(x, dtype=float), length, d)[None, :]
 
 
@@ -63,6 +78,13 @@ class CorrectedModes:
     Has the fields of :class:`~flexctrl.beam.clamped_mass.ClampedMassModes` that the
     assumed-modes model reads (``omega``, ``tip_deflection``, ``tip_slope``, ``v``, ``w``,
     ``z``, ``shape``, ``length``, ``rho``, ``n_modes``), in the same units.
+
+    Parameters
+    ----------
+    base : ClampedMassModes
+        The link's clamped-mass modes.
+    extra : callable
+        ``extra(x, d)``: the raw correction shapes' ``d``-th derivatives at ``x`` (m).
     """
 
     base: ClampedMassModes
@@ -70,18 +92,22 @@ class CorrectedModes:
 
     @property
     def length(self) -> float:
+        """Link length, m."""
         return self.base.length
 
     @property
     def rho(self) -> float:
+        """Mass per length, kg/m."""
         return self.base.rho
 
     @property
     def EI(self) -> float:
+        """Flexural rigidity, N m^2."""
         return self.base.EI
 
     @property
     def link_mass(self) -> float:
+        """Link mass, kg."""
         return self.base.link_mass
 
     def _raw(self, x, d):
@@ -101,7 +127,7 @@ class CorrectedModes:
 
     @cached_property
     def _coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(C, A, omega)`` with the corrections ``phi_c = A^T (psi - C phi)`` (rows) and their frequencies."""
+        """``(C, A, omega)``: corrections ``phi_c = A^T (psi - C phi)`` (rows) and frequencies."""
         b, L = self.base, self.length
         x, wt = self._nodes
         end = np.array([L])
@@ -138,24 +164,29 @@ class CorrectedModes:
 
     @property
     def tip_deflection(self) -> np.ndarray:
+        """``phi_j(L)`` of every shape, dimensionless."""
         return np.append(self.base.tip_deflection, self._tip[0])
 
     @property
     def tip_slope(self) -> np.ndarray:
+        """``phi_j'(L)`` of every shape, 1/m."""
         return np.append(self.base.tip_slope, self._tip[1])
 
     @property
     def v(self) -> np.ndarray:
+        """``int rho phi_j dx``, kg."""
         x, wt = self._nodes
         return np.append(self.base.v, self.rho * self._correction(x, 0) @ wt)
 
     @property
     def w(self) -> np.ndarray:
+        """``int rho x phi_j dx``, kg m."""
         x, wt = self._nodes
         return np.append(self.base.w, self.rho * self._correction(x, 0) @ (wt * x))
 
     @property
     def z(self) -> np.ndarray:
+        """``int rho phi_j phi_k dx``, kg."""
         x, wt = self._nodes
         n = self.base.n_modes
         phi = self.shape(x)
@@ -170,27 +201,49 @@ class CorrectedModes:
 
     @property
     def frequency_hz(self) -> np.ndarray:
+        """Frequencies, Hz."""
         return self.omega / (2 * np.pi)
 
     @property
     def stiffness(self) -> np.ndarray:
+        """``m_l omega_j^2``, N/m."""
         return self.link_mass * self.omega**2
 
 
-def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PANELS):
-    """``psi(x, d)`` of ``count`` rows: the link's modes with its root *pinned* on its hub's rotor,
-    less their root rotation.
+def pinned_root_shapes(
+    arm: ArmSpec,
+    q: Sequence[float] | np.ndarray | None,
+    link: int,
+    count: int,
+    n_elements: int = QUAD_PANELS,
+) -> PinnedRootShapes:
+    """``psi(x, d)`` of ``count`` rows: the link's modes, root pinned, less their root rotation.
 
-    The link (0-based ``link``) as a Hermite-cubic beam of ``n_elements`` elements with
-    ``w(0) = 0``, the rotor inertia of its hub on the root slope and the clamped-mass tip body
-    (:func:`flexctrl.modal.boundary.boundary_values`) at the tip; its flexible modes ``W_k``
-    (the zero-frequency rotation skipped) give the clamped-admissible shapes
+    The root is *pinned* on its hub's rotor.  The link (0-based ``link``) as a Hermite-cubic beam of
+    ``n_elements`` elements with ``w(0) = 0``, the rotor inertia of its hub on the root slope and
+    the clamped-mass tip body (:func:`flexctrl.modal.boundary.boundary_values`) at the tip; its
+    flexible modes ``W_k`` (the zero-frequency rotation skipped) give the clamped-admissible shapes
     ``W_k(x) - W_k'(0) x``: in the link's root frame, the motion of the link when the hub turns
     against it.
-    """
-    from flexctrl.beam.elements import assemble_beam, hermite_shape, locate
-    from flexctrl.modal.boundary import boundary_values
 
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm described.
+    q : sequence of float or None
+        Joint angles (rad) that set the tip body; ``None``: the arm's configuration.
+    link : int
+        The link, 0-based.
+    count : int
+        Number of shapes.
+    n_elements : int
+        Elements of the beam model.
+
+    Returns
+    -------
+    PinnedRootShapes
+        The shapes and the pinned modes' frequencies (rad/s).
+    """
     spec = arm.links[link]
     L = spec.length
     mats = assemble_beam(n_elements, L, spec.mass_per_length, spec.EI)
@@ -202,20 +255,42 @@ def pinned_root_shapes(arm, q, link: int, count: int, n_elements: int = QUAD_PAN
     lam, V = scipy.linalg.eigh(K[np.ix_(keep, keep)], M[np.ix_(keep, keep)])
     modes = np.zeros((M.shape[0], count))
     modes[keep] = V[:, 1 : count + 1]  # skip the rotation about the pin
-    le = L / n_elements
+    return PinnedRootShapes(modes, L, n_elements, np.sqrt(np.abs(lam[1 : count + 1])))
 
-    def shapes(x, d):
-        x = np.asarray(x, dtype=float).ravel()
-        out = np.empty((count, x.size))
-        for i, xi in enumerate(x):
+
+@dataclass(frozen=True)
+class PinnedRootShapes:
+    """The shapes of :func:`pinned_root_shapes`, callable as ``psi(x, d)`` (rows, one per shape).
+
+    Attributes
+    ----------
+    modes : ndarray
+        Nodal values of the pinned-root modes ``W_k`` (dofs x count).
+    length : float
+        Link length, m.
+    n_elements : int
+        Hermite elements of the mesh.
+    frequencies : ndarray
+        The modes' natural frequencies, rad/s.
+    """
+
+    modes: np.ndarray
+    length: float
+    n_elements: int
+    frequencies: np.ndarray
+
+    def __call__(self, x: ArrayLike, d: int) -> np.ndarray:
+        """The ``d``-th derivative (0..2) of the shapes at ``x`` (m), ``(count, len(x))``."""
+        L, n_elements, modes = self.length, self.n_elements, self.modes
+        le = L / n_elements
+        xs = np.asarray(x, dtype=float).ravel()
+        out = np.empty((modes.shape[1], xs.size))
+        for i, xi in enumerate(xs):
             j, zeta = locate(min(xi, L), n_elements, L)
             out[:, i] = hermite_shape(zeta, le, d) @ modes[2 * j : 2 * j + 4]
         rot = modes[1]  # W_k'(0)
         return (
             out
             - rot[:, None]
-            * (x if d == 0 else (np.ones_like(x) if d == 1 else np.zeros_like(x)))[None, :]
+            * (xs if d == 0 else (np.ones_like(xs) if d == 1 else np.zeros_like(xs)))[None, :]
         )
-
-    shapes.frequencies = np.sqrt(np.abs(lam[1 : count + 1]))
-    return shapes

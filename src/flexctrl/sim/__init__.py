@@ -5,24 +5,27 @@ chosen by name or class, like scipy's ``solve_ivp(method=...)``:
 
 ``rk4``     fixed-step classical Runge-Kutta, whole horizon in compiled C (:mod:`.rk4`)
 ``euler``   fixed-step explicit Euler, compiled like rk4 (:mod:`.euler`; unstable on undamped modes)
-``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop)
-(:mod:`.newmark_model`) ``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`) ``idas``
-SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`) ``scipy``   ``scipy.integrate.solve_ivp`` (RK45,
-DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
+``newmark`` fixed-step Newmark (average acceleration by default; implicit, Python loop;
+            :mod:`.newmark_model`)
+``cvodes``  SUNDIALS CVODES, adaptive BDF (:mod:`.implicit`)
+``idas``    SUNDIALS IDAS, adaptive BDF (:mod:`.implicit`)
+``scipy``   ``scipy.integrate.solve_ivp`` (RK45, DOP853, Radau, BDF, ...) (:mod:`.scipy_adapter`)
 
 Every run returns a :class:`~flexctrl.sim.trajectory.Trajectory`.
 
 Examples
 --------
+>>> import flexctrl as fc
 >>> from flexctrl.sim import simulate
->>> from flexctrl.sim.toymodel import spring_pendulum
->>> traj = simulate(spring_pendulum(), [0.3, 0, 0, 0, 0, 0], 0.1, dt=1e-3, compile=False)
+>>> model = fc.load_model("subedi3link", fidelity="rigid", gravity=[0.0, 0.0])
+>>> traj = simulate(model, [0.3, 0, 0, 0, 0, 0], 0.1, dt=1e-3, compile=False)
 >>> traj.states.shape
 (101, 6)
 """
 
 from __future__ import annotations
 
+import difflib
 from typing import Any
 
 from flexctrl.errors import SpecError
@@ -41,13 +44,27 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 
 
 def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
-    """The integrator class for a name (see :data:`INTEGRATORS`) or an :class:`Integrator` subclass."""
+    """The integrator class of a name (see :data:`INTEGRATORS`), or an :class:`Integrator` class.
+
+    Parameters
+    ----------
+    method : str or type
+        A name of :data:`INTEGRATORS` or an :class:`Integrator` subclass (returned as is).
+
+    Returns
+    -------
+    type
+        The integrator class.
+
+    Raises
+    ------
+    SpecError
+        When the name is not known.
+    """
     if isinstance(method, type) and issubclass(method, Integrator):
         return method
     if isinstance(method, str) and method in INTEGRATORS:
         return INTEGRATORS[method]
-    import difflib
-
     hint = difflib.get_close_matches(str(method), list(INTEGRATORS), n=1)
     extra = f" (did you mean '{hint[0]}'?)" if hint else ""
     raise SpecError(
@@ -79,8 +96,8 @@ def simulate(
     dt : float
         Step / output interval and torque hold period (s).
     method : str or Integrator subclass
-        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or a
-        class.
+        ``"rk4"`` (default), ``"cvodes"``, ``"idas"``, ``"scipy"``, ``"euler"``, ``"newmark"`` or
+        a class.
     u : array_like, optional
         Held joint torques (N m), shape (n_steps, n_u) or (n_u,).
     **options

@@ -1,23 +1,35 @@
 """CasADi Functions called through buffers bound to numpy arrays: no DM conversions per call.
 
 Calling a CasADi Function from Python converts every numpy input to a ``DM`` and every
-output back (about 130 ns per entry here: 50 us for one vector of 372 entries), which
-dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its inputs
-from and writes its outputs to memory bound once.  CasADi is column-major, so an input or
-output of shape (rows, cols) is a C-ordered numpy array of shape (cols, rows): pass states
-as rows, get results as rows.
+output back, which dominates small compiled calls made every sample.  A ``FunctionBuffer`` reads its
+inputs from and writes its outputs to memory bound once.  CasADi is column-major, so an input or
+output of shape (rows, cols) is a C-ordered numpy array of shape (cols, rows): pass states as rows,
+get results as rows.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
 
 def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
-    """``fun(*args)`` through a buffer bound to numpy arrays for this one call (results as rows)."""
+    """``fun(*args)`` through a buffer bound to numpy arrays for this one call (results as rows).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The Function to evaluate.
+    *args : numpy.ndarray
+        Its inputs, each broadcast to the input's number of nonzeros.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The outputs, an output of shape (rows, cols) as (cols, rows).
+    """
     buffer, trigger = fun.buffer()
     inputs = [
         np.ascontiguousarray(
@@ -26,12 +38,38 @@ def evaluate(fun: ca.Function, *args: np.ndarray) -> list[np.ndarray]:
         for i, a in enumerate(args)
     ]
     outputs = [np.zeros((fun.size2_out(i), fun.size1_out(i))) for i in range(fun.n_out())]
-    for i, a in enumerate(inputs):
-        buffer.set_arg(i, memoryview(a))
-    for i, r in enumerate(outputs):
-        buffer.set_res(i, memoryview(r))
+    bind_buffer(buffer, inputs, outputs)
     trigger()
     return outputs
+
+
+def bind_buffer(
+    buffer: ca.FunctionBuffer, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
+) -> list[memoryview]:
+    """Bind ``buffer``'s inputs and outputs to numpy arrays (C-ordered float64, kept alive).
+
+    Parameters
+    ----------
+    buffer : casadi.FunctionBuffer
+        The buffer of a Function (``fun.buffer()[0]``).
+    inputs, outputs : sequence of numpy.ndarray
+        One array per input and per output, in order.
+
+    Returns
+    -------
+    list of memoryview
+        The views bound; the arrays must outlive the binding.
+    """
+    views = [_view(a) for a in (*inputs, *outputs)]
+    for i, view in enumerate(views[: len(inputs)]):
+        buffer.set_arg(i, view)  # type: ignore[call-arg]  # stub has C's (ptr, size)
+    for i, view in enumerate(views[len(inputs) :]):
+        buffer.set_res(i, view)  # type: ignore[call-arg]  # stub has C's (ptr, size)
+    return views
+
+
+def _view(array: np.ndarray) -> memoryview:
+    return memoryview(array)  # type: ignore[arg-type]  # numpy stubs: __buffer__ on 3.12+ only
 
 
 class BoundFunction:
@@ -39,9 +77,8 @@ class BoundFunction:
 
     ``bound(*args)`` copies the inputs into the bound arrays, evaluates and returns copies of
     the outputs as rows (an output of shape (rows, cols) comes back as (cols, rows), as from
-    :func:`evaluate`).  Measured on the Python loop's per-sample calls (amm:2, 17 RK4 steps
-    per sample): the plant's advance 150 -> 55 us, the sensors and the deflection monitor
-    about 60 -> 5 us each, under load; the same values (the same compiled code).
+    :func:`evaluate`).  No CasADi matrices are made per call, which is most of the cost of a
+    small Function's ordinary call; the values are the same (the same compiled code).
 
     ``shared`` binds named inputs or outputs to arrays the caller owns (C-ordered float64
     with the entries of the Function's sparsity, stored nonzeros only), so one Function's
@@ -49,11 +86,20 @@ class BoundFunction:
     arrays hold and :attr:`arrays` gives every bound array by name.  Not picklable: make
     one per run (or per controller, dropped when it is pickled).
 
-    ``renew``: a new buffer, so fresh work memory, for every evaluation (about 21 us here).  A
-    buffer keeps its work vector between calls where an ordinary call starts from new
-    memory, and some Functions read it: CasADi's HPIPM interface, warm-started, then takes
-    the previous solve's multipliers and slacks from it (measured on the NMPC: other
-    iterates from the second sample on), where an ordinary call starts them afresh.
+    ``renew``: a new buffer, so fresh work memory, for every evaluation.  A buffer keeps
+    its work vector between calls where an ordinary call starts from new memory, and some
+    Functions read it: CasADi's HPIPM interface, warm-started, then takes the previous
+    solve's multipliers and slacks from it (other iterates from the second sample on),
+    where an ordinary call starts them afresh.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The Function to bind.
+    shared : mapping of str to numpy.ndarray, optional
+        Arrays the caller owns, bound to the inputs or outputs of these names.
+    renew : bool
+        A new buffer (fresh work memory) for every evaluation.
     """
 
     def __init__(
@@ -84,18 +130,8 @@ class BoundFunction:
             )
             for i in range(fun.n_out())
         ]
-        self._views = (
-            [memoryview(a) for a in self._inputs],
-            [memoryview(r) for r in self._outputs],
-        )
-        self._bind_buffer()
+        self._views = bind_buffer(self._buffer, self._inputs, self._outputs)
         self.arrays = dict(zip(fun.name_in() + fun.name_out(), self._inputs + self._outputs))
-
-    def _bind_buffer(self) -> None:
-        for i, a in enumerate(self._views[0]):
-            self._buffer.set_arg(i, a)
-        for i, r in enumerate(self._views[1]):
-            self._buffer.set_res(i, r)
 
     def _bind(
         self, shared: Mapping[str, np.ndarray], name: str, nnz: int, shape: tuple
@@ -117,14 +153,14 @@ class BoundFunction:
         return [r.copy() for r in self._outputs]
 
     def evaluate(self) -> None:
-        """Evaluate on the bound inputs as they are, into the bound outputs (raises as the Function does)."""
+        """Evaluate on the bound inputs as they are, into the bound outputs (raising as it does)."""
         if self.renew:
             self._buffer, self._trigger = self.function.buffer()
-            self._bind_buffer()
+            self._views = bind_buffer(self._buffer, self._inputs, self._outputs)
         self._trigger()
 
     def stats(self) -> dict:
-        """The Function's statistics of the last evaluation (a QP solver's ``success``, ``iter_count``, ...)."""
+        """The last evaluation's statistics (a QP solver's ``success``, ``iter_count``, ...)."""
         return self._buffer.stats()
 
 

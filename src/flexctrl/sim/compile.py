@@ -12,24 +12,21 @@ sharing a cache never load a half-written file.
 A shared library runs with the rights of whoever loads it, so the cache is trusted only
 when it is the user's alone: the folder is created owner-only (mode 0700), and a library
 is loaded only if it is a regular file the user owns that nobody else may write
-(:func:`trusted_file`); any other is rebuilt in its place.  A cache folder that another
-user owns, or that others may write, is not used at all: libraries then go to a private
-temporary folder for this process (with a warning saying why).
+(:func:`~flexctrl.user_cache.trusted_file`); any other is rebuilt in its place.  A cache
+folder that another user owns, or that others may write, is not used at all: libraries then
+go to a private temporary folder for this process (with a warning saying why).
 
 When no compiler is found, compilation fails, ``compile=False`` is passed or the
 environment variable ``FLEXCTRL_NO_COMPILE`` is set to anything but ``""``/``"0"``,
 the Function itself is returned and CasADi's virtual machine evaluates it
 (a warning says why when a compiler was expected but failed).
 
-Flags: ``-O2 -march=native`` by default.  Measured on the RK4 loop of the
-three-link arm with two modes per link (1000 steps, AMD EPYC with AVX-512, gcc 12;
-best of 15): ``-O1``/``-O2``/``-O3`` all compile in 1-2 s and run in 4.4 ms;
-adding ``-march=native`` (FMA, AVX-512) brings that to 3.0 ms, again in about
-1.3 s of compilation.  Code generated for the *expanded* step (one SX expression
-instead of four calls of ``f``) took 5.7 s to compile for no gain.  Because
-``-march=native`` code only runs on the CPU it was built for, the cache key
-includes the host's CPU identity; if the compiler rejects the flags, the
-portable ``-O2`` is tried before giving up.
+Flags: ``-O2 -march=native`` by default, for the Functions evaluated at every step (the
+integrators' loops, the closed loop's plant step).  ``-march=native`` lets the compiler use
+the host's vector and fused multiply-add instructions; such code only runs on the CPU it was
+built for, so the cache key includes the host's CPU identity, and if the compiler rejects
+the flags the portable ``-O2`` is tried before giving up.  :data:`QUICK_FLAGS` serve large
+Functions evaluated in bulk a few times per run, where the compile time dominates.
 
 :func:`compile_by_recipe` finds a library without building its Function: for a Function whose
 symbolic construction costs more than loading it (the NMPC's horizon linearisation), the
@@ -45,13 +42,9 @@ it, serializing it for its key or loading the library again.
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import logging
 import os
-import platform
 import shutil
-import stat
 import subprocess
 import tempfile
 import time
@@ -64,20 +57,20 @@ from typing import Any
 
 import casadi as ca
 
-from flexctrl.user_cache import ENV_CACHE, cache_directory
+from flexctrl.dynamics.parametric import FROM_LIFTED
+from flexctrl.sim.library_keys import NATIVE, cache_key, content_key, find_compiler, library_key
+from flexctrl.user_cache import cache_directory, private_directory, trusted_file
 
 log = logging.getLogger(__name__)
 
 ENV_NO_COMPILE = "FLEXCTRL_NO_COMPILE"
 DEFAULT_FLAGS: tuple[str, ...] = ("-O2", "-march=native")
 PORTABLE_FLAGS: tuple[str, ...] = ("-O2",)
-# : For large Functions evaluated in bulk rather than per step (the reference tables' Newton): half
-# the
-# : compile time of ``-O2`` for the same evaluation speed (measured on the three-link arm's
-# ``amm:2``: 21 s
-#: against 39 s to compile, 0.28 s against 0.26 s per table at load 7).
-QUICK_FLAGS: tuple[str, ...] = ("-O1", "-march=native")
-NATIVE = ("-march=native", "-mcpu=native", "-mtune=native")
+#: For large Functions evaluated in bulk a few times per run rather than per step (the reference
+#: tables' Newton): GCC's ``-Og`` runs the cheap optimisations of ``-O1`` without the costly
+#: register allocation over one huge function body, so a generated file of tens of thousands of
+#: lines compiles in seconds instead of tens of seconds and evaluates as fast.
+QUICK_FLAGS: tuple[str, ...] = ("-Og", "-march=native")
 COMPILE_TIMEOUT_S = 900.0
 
 
@@ -115,129 +108,6 @@ class CompiledFunction:
 def compile_disabled_by_env() -> bool:
     """Whether ``FLEXCTRL_NO_COMPILE`` asks for the virtual machine."""
     return os.environ.get(ENV_NO_COMPILE, "").strip() not in ("", "0")
-
-
-def trusted_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is the user's alone: owned by the effective user, not writable by group or
-    others.
-
-    A symbolic link is never trusted (its target could change); a folder must be one.
-    """
-    try:
-        info = os.lstat(path)
-    except OSError:
-        return False
-    if stat.S_ISLNK(info.st_mode) or not (stat.S_ISREG(info.st_mode) or stat.S_ISDIR(info.st_mode)):
-        return False
-    return info.st_uid == os.geteuid() and not info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
-
-
-def private_directory(directory: Path) -> Path:
-    """``directory``, created owner-only if missing, when it is the user's alone; else a private
-    temporary folder.
-
-    The temporary folder (mode 0700, one per process and untrusted folder) keeps this
-    process's libraries out of reach of the folder's other writers; a warning names the
-    folder and why it was not used.
-    """
-    if not directory.exists():
-        directory.mkdir(parents=True, exist_ok=True, mode=0o700)
-        if os.stat(directory).st_uid == os.geteuid():
-            os.chmod(directory, 0o700)
-    if trusted_file(directory):
-        return directory
-    return _fallback_directory(str(directory))
-
-
-@functools.cache
-def _fallback_directory(untrusted: str) -> Path:
-    try:
-        info = os.lstat(untrusted)
-        why = (
-            f"owned by uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}"
-            if not stat.S_ISLNK(info.st_mode)
-            else "a symbolic link"
-        )
-    except OSError as exc:
-        why = str(exc)
-    fallback = Path(tempfile.mkdtemp(prefix="flexctrl-cache-"))
-    warnings.warn(
-        f"the compiled-library cache '{untrusted}' is not the user's alone ({why}); libraries "
-        "that others "
-        f"could write are never loaded: compiling into the private folder '{fallback}' for this "
-        "process "
-        f"instead (set ${ENV_CACHE} to a folder only you can write)",
-        stacklevel=3,
-    )
-    return fallback
-
-
-def find_compiler() -> str | None:
-    """Path of the C compiler: ``$CC``, else ``gcc``, else ``cc``; None when there is none."""
-    candidates = [os.environ.get("CC", "").strip(), "gcc", "cc"]
-    for name in candidates:
-        if name:
-            path = shutil.which(name)
-            if path:
-                return path
-    return None
-
-
-@functools.lru_cache(maxsize=8)
-def compiler_identity(compiler: str) -> str:
-    """First line of ``compiler --version`` (part of the cache key)."""
-    try:
-        out = subprocess.run(
-            [compiler, "--version"], capture_output=True, text=True, timeout=30, check=False
-        )
-        return (out.stdout.splitlines() or [""])[0].strip() + f" @ {compiler}"
-    except (OSError, subprocess.SubprocessError):
-        return compiler
-
-
-@functools.lru_cache(maxsize=1)
-def host_identity() -> str:
-    """Machine type and CPU model and feature flags (part of the key for ``-march=native`` code)."""
-    parts = [platform.machine(), platform.processor()]
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if line.startswith(("model name", "flags", "Features")):
-                    parts.append(line.strip())
-                if len(parts) >= 4:
-                    break
-    except OSError:
-        pass
-    return "|".join(parts)
-
-
-def content_key(*parts: Any) -> str:
-    """SHA-256 (hex) of ``parts``, strings as they are and everything else by ``repr``, each ended by a NUL."""
-    digest = hashlib.sha256()
-    for part in parts:
-        digest.update((part if isinstance(part, str) else repr(part)).encode())
-        digest.update(b"\0")
-    return digest.hexdigest()
-
-
-def cache_key(fun: ca.Function, flags: Sequence[str], compiler: str) -> str:
-    """Hash of the Function's serialized form, the flags, the compiler and CasADi's version.
-
-    With ``-march=native`` among the flags the host's CPU identity is hashed too.
-    """
-    return library_key(fun.serialize(), flags, compiler)
-
-
-def library_key(what: str, flags: Sequence[str], compiler: str) -> str:
-    """24 hex digits of ``what`` (a Function's serialized form, or a recipe) with what compiled it.
-
-    The flags, the compiler's identity, CasADi's version, and the host's CPU identity when
-    ``-march=native`` is among the flags.
-    """
-    host = host_identity() if any(f.startswith(NATIVE) for f in flags) else ""
-    return content_key(what, " ".join(flags), compiler_identity(compiler), ca.__version__, host)[
-        :24
-    ]
 
 
 def compile_function(
@@ -285,8 +155,8 @@ def compile_function(
             return result
         failure = result
     message = (
-        f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's "
-        "virtual machine"
+        f"compiling '{fun.name()}' with {compiler} failed ({failure}); using CasADi's virtual "
+        "machine"
     )
     warnings.warn(message, stacklevel=2)
     return CompiledFunction(fun, compiled=False, reason=message)
@@ -302,8 +172,7 @@ def compile_by_recipe(
     flags: Sequence[str] = DEFAULT_FLAGS,
     check: Callable[[ca.Function], bool] | None = None,
 ) -> CompiledFunction:
-    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build`` when it
-    exists.
+    """The library of ``build()``'s Function, found by ``recipe`` without calling ``build``.
 
     Parameters
     ----------
@@ -406,8 +275,7 @@ def compile_for(
     enabled: bool | None = None,
     flags: Sequence[str] = DEFAULT_FLAGS,
 ) -> CompiledFunction:
-    """:func:`compile_function` of ``build()``, kept per ``owner`` object (a kept lifted Function)
-    and ``tag``.
+    """:func:`compile_function` of ``build()``, kept per ``owner`` object and ``tag``.
 
     For a Function built from ``owner`` alone (a plant step of the lifted ``f``, say): the
     first model of a structure builds and compiles (or loads) it, later models of the
@@ -417,9 +285,25 @@ def compile_for(
     switching compilation off, pointing ``FLEXCTRL_CACHE`` elsewhere or changing ``$CC``
     builds anew.  A compilation that failed (the virtual machine's Function returned, with
     a warning) is not kept: the next model tries again, as it would without this.
-    """
-    from flexctrl.dynamics.parametric import FROM_LIFTED
 
+    Parameters
+    ----------
+    owner : object
+        What the Function is built from; the result is kept while it lives.
+    tag : hashable
+        Which of the owner's Functions (e.g. a step count).
+    build : callable
+        ``build()`` makes the Function, called only when nothing is kept.
+    enabled : bool, optional
+        ``False``: the virtual machine; ``None``: compile unless ``FLEXCTRL_NO_COMPILE`` is set.
+    flags : sequence of str
+        The C compiler's flags.
+
+    Returns
+    -------
+    CompiledFunction
+        As :func:`compile_function` returns it.
+    """
     if enabled is None:
         enabled = not compile_disabled_by_env()
     settings = (
@@ -448,8 +332,7 @@ def _compile_or_load(
     if library.is_file() and not trusted_file(library):
         log.warning(
             "cached library %s is not the user's alone (owner or write permission of others); "
-            "rebuilding "
-            "it instead of loading it",
+            "rebuilding it instead of loading it",
             library,
         )
     elif library.is_file():
@@ -504,3 +387,21 @@ def _build(fun: ca.Function, library: Path, compiler: str, flags: tuple[str, ...
             raise RuntimeError(result.stderr or result.stdout or f"exit status {result.returncode}")
         os.chmod(target, 0o700)
         os.replace(target, library)
+
+
+#: The keys are :mod:`flexctrl.sim.library_keys`'s, re-exported for the callers that compile.
+__all__ = [
+    "DEFAULT_FLAGS",
+    "ENV_NO_COMPILE",
+    "PORTABLE_FLAGS",
+    "QUICK_FLAGS",
+    "CompiledFunction",
+    "cache_key",
+    "compile_by_recipe",
+    "compile_disabled_by_env",
+    "compile_for",
+    "compile_function",
+    "content_key",
+    "find_compiler",
+    "library_key",
+]

@@ -23,7 +23,17 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 class DivergenceMonitor:
-    """Per-chunk checks: finite states and outputs, bounded kinetic plus elastic energy."""
+    """Per-chunk checks: finite states and outputs, bounded kinetic plus elastic energy.
+
+    Parameters
+    ----------
+    integrator : Integrator
+        The integrator checked (its ``energy_factor`` sets the bound).
+    x0 : numpy.ndarray
+        Initial state.
+    y0 : numpy.ndarray
+        Initial outputs; the first three rows are ``E_kin``, ``E_el``, ``E_grav`` (J).
+    """
 
     FLOOR_J = 1e-6
 
@@ -35,7 +45,7 @@ class DivergenceMonitor:
         self.work_abs = 0.0
 
     def check(self, times: np.ndarray, X: np.ndarray, Y: np.ndarray, U: np.ndarray) -> None:
-        """``X`` holds the chunk's start state then its k states; ``Y`` and ``times`` the k new samples."""
+        """``X``: the chunk's start state and its k states; ``Y``, ``times``: the k new samples."""
         with np.errstate(
             over="ignore", invalid="ignore"
         ):  # huge but finite states are what we look for

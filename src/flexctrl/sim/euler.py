@@ -36,7 +36,22 @@ from flexctrl.sim.rk4 import RK4
 
 
 def euler_step_function(model, u_function: ca.Function | None = None) -> ca.Function:
-    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`~flexctrl.sim.integrator.output_function`)."""
+    """``euler_step(x, t, u, h) -> (x_next, y_next)`` for ``model``.
+
+    ``y`` as :func:`~flexctrl.sim.integrator.output_function` gives it.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    u_function : casadi.Function, optional
+        ``u(t)`` (N m) added to the step's ``u``.
+
+    Returns
+    -------
+    casadi.Function
+        The step; ``t`` and ``h`` in s.
+    """
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -70,7 +85,7 @@ class Euler(RK4):
 
     name: ClassVar[str] = "euler"
     #: Largest stable ``omega * dt`` on the imaginary axis: none (undamped modes always grow).
-    stability_limit: ClassVar[float] = 0.0
+    stability_limit: float = 0.0
 
     def __init__(
         self,
@@ -108,12 +123,9 @@ class Euler(RK4):
         w = max([w, *radii])
         return (
             "Explicit Euler amplifies every undamped mode at every step (|1 + i omega dt| > 1); "
-            "the fastest mode "
-            f"here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = "
-            f"{0.5 * (w * self.dt) ** 2:.3g} per step "
-            f"at dt = {self.dt:g} s. A mode with damping ratio zeta is stable only for omega dt "
-            "<= 2 zeta. "
-            "Use 'rk4' (stable for omega dt < 2.83), 'newmark' (unconditionally stable) or an "
-            "implicit "
-            "integrator ('idas', 'cvodes')."
+            f"the fastest mode here, omega = {w:.4g} rad/s, grows by about (omega dt)^2/2 = "
+            f"{0.5 * (w * self.dt) ** 2:.3g} per step at dt = {self.dt:g} s. A mode with damping "
+            "ratio zeta is stable only for omega dt <= 2 zeta. Use 'rk4' (stable for omega dt < "
+            "2.83), 'newmark' (unconditionally stable) or an implicit integrator ('idas', "
+            "'cvodes')."
         )

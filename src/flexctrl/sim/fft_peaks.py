@@ -51,8 +51,25 @@ def dominant_frequencies(
 
     A peak is a bin larger than both neighbours (the zero-frequency bin is left
     out); peaks weaker than ``floor`` times the strongest are dropped, so a
-    signal that is identically zero has no dominant frequency.  ``n_fft`` zero-pads as in
-    :func:`amplitude_spectrum`.
+    signal that is identically zero has no dominant frequency.
+
+    Parameters
+    ----------
+    signal : numpy.ndarray
+        Samples, shape (N,).
+    dt : float
+        Sample time (s).
+    count : int
+        Number of peaks returned at most.
+    floor : float
+        Share of the strongest peak below which a peak is dropped.
+    n_fft : int, optional
+        Zero-padded transform length, as in :func:`amplitude_spectrum`.
+
+    Returns
+    -------
+    list of float
+        Peak frequencies (Hz), strongest first.
 
     Examples
     --------
@@ -71,5 +88,5 @@ def dominant_frequencies(
         return []
     peaks = peaks[np.argsort(amp[peaks])[::-1]]
     strongest = amp[peaks[0]]
-    peaks = [p for p in peaks if amp[p] >= floor * strongest]
-    return [float(freq[p]) for p in peaks[:count]]
+    strong = [p for p in peaks if amp[p] >= floor * strongest]
+    return [float(freq[p]) for p in strong[:count]]

@@ -128,14 +128,26 @@ class Sundials(Integrator):
 
 
 class CVODES(Sundials):
-    """SUNDIALS CVODES (BDF for ODEs)."""
+    """SUNDIALS CVODES (BDF for ODEs).
+
+    Parameters
+    ----------
+    model, dt, u_function, chunk, energy_factor, rtol, atol, max_num_steps, options
+        See :class:`Sundials`.
+    """
 
     name: ClassVar[str] = "cvodes"
     solver: ClassVar[str] = "cvodes"
 
 
 class IDAS(Sundials):
-    """SUNDIALS IDAS (BDF for DAEs; here the ODE as an index-0 DAE)."""
+    """SUNDIALS IDAS (BDF for DAEs; here the ODE as an index-0 DAE).
+
+    Parameters
+    ----------
+    model, dt, u_function, chunk, energy_factor, rtol, atol, max_num_steps, options
+        See :class:`Sundials`.
+    """
 
     name: ClassVar[str] = "idas"
     solver: ClassVar[str] = "idas"

@@ -48,9 +48,20 @@ OUTPUT_ROWS = ("E_kin", "E_el", "E_grav", "tip_x", "tip_y")  # then w1..w_nlinks
 def output_function(model, energies: bool = True) -> ca.Function:
     """``y(x) = (E_kin, E_el, E_grav, tip_x, tip_y, w_1..w_n)`` of a model, as one Function.
 
-    ``energies=False``: ``(tip_x, tip_y, w_1..w_n)`` alone (named ``kinematic_outputs``).  The
-    kinetic energy needs the mass matrix, so it costs most of the outputs: 0.54 s against
-    0.04 s over 48,000 states of ``amm:5`` here, compiled.
+    The kinetic energy needs the mass matrix, so it costs most of the outputs.
+
+    Parameters
+    ----------
+    model : Model
+        The arm.
+    energies : bool
+        Include the energies (J); ``False`` gives ``(tip_x, tip_y, w_1..w_n)`` (m) alone,
+        named ``kinematic_outputs``.
+
+    Returns
+    -------
+    casadi.Function
+        ``y(x)``, energies in J, tip position and tip deflections in m.
     """
     x = ca.MX.sym("x", model.n_x)
     q, qd = x[: model.n_q], x[model.n_q :]
@@ -62,7 +73,25 @@ def output_function(model, energies: bool = True) -> ca.Function:
 
 
 def check_input_function(fun: ca.Function | None, n_u: int) -> ca.Function | None:
-    """Validate a time-function input ``u(t) -> (n_u,)``."""
+    """Validate a time-function input ``u(t) -> (n_u,)``.
+
+    Parameters
+    ----------
+    fun : casadi.Function or None
+        Torques (N m) as a function of time (s); ``None`` passes through.
+    n_u : int
+        Number of torques the model takes.
+
+    Returns
+    -------
+    casadi.Function or None
+        ``fun`` unchanged.
+
+    Raises
+    ------
+    SpecError
+        When ``fun`` is not a Function of one scalar with ``n_u`` torques as first output.
+    """
     if fun is None:
         return None
     if not isinstance(fun, ca.Function):
@@ -99,7 +128,7 @@ class Integrator:
     #: Name used by :func:`flexctrl.sim.get_integrator` and in results.
     name: ClassVar[str] = ""
     #: Largest stable ``omega * dt`` on the imaginary axis (explicit methods).
-    stability_limit: ClassVar[float] = math.inf
+    stability_limit: float = math.inf
 
     def __init__(
         self,
@@ -277,8 +306,7 @@ class Integrator:
         return arr
 
     def jacobian_radius(self, x: np.ndarray, u: np.ndarray | None = None) -> float:
-        """Largest eigenvalue magnitude of ``df/dx`` at state ``x`` (rad/s; free joints, current
-        torque).
+        """Largest eigenvalue magnitude of ``df/dx`` at ``x`` (rad/s; free joints, current torque).
 
         ``Model.omega_max`` is the highest frequency of the linearisation at the build
         configuration (free joints, about 330 Hz for the three-link arm with two
@@ -293,38 +321,37 @@ class Integrator:
         return float(np.max(np.abs(np.linalg.eigvals(np.asarray(self._jac_fn(x, u), dtype=float)))))
 
     def stability_advice(self, states: tuple[np.ndarray, ...] = ()) -> str:
-        """What step or integrator would be stable, from ``omega_max`` and the Jacobian at ``states``."""
+        """The stable step or integrator, from ``omega_max`` and the Jacobian at ``states``."""
         w_model = float(self.model.omega_max)
         radii = [r for r in (self.jacobian_radius(x) for x in states) if math.isfinite(r)]
         w = max([w_model, *radii])
         facts = (
             "The model's highest natural frequency (linearised, free joints) is omega_max = "
-            f"{w_model:.4g} rad/s "
-            f"({w_model / (2 * math.pi):.4g} Hz), omega_max*dt = {w_model * self.dt:.3g}"
+            f"{w_model:.4g} rad/s ({w_model / (2 * math.pi):.4g} Hz), "
+            f"omega_max*dt = {w_model * self.dt:.3g}"
         )
         if radii:
             facts += (
                 "; at the failing state the Jacobian df/dx (free joints) reaches |lambda| = "
-                f"{max(radii):.4g} rad/s "
-                f"({max(radii) / (2 * math.pi):.4g} Hz), |lambda|*dt = {max(radii) * self.dt:.3g}"
+                f"{max(radii):.4g} rad/s ({max(radii) / (2 * math.pi):.4g} Hz), "
+                f"|lambda|*dt = {max(radii) * self.dt:.3g}"
             )
         facts += "."
         if math.isfinite(self.stability_limit) and w > 0:
             stable = 0.9 * self.stability_limit / w
             if w * self.dt > self.stability_limit:
                 return (
-                    f"{facts} {self.name} is stable only for omega*dt < "
-                    f"{self.stability_limit:g}: use dt <= {stable:.3g} s, "
-                    "or an implicit integrator ('idas', 'cvodes', or 'scipy' with method 'Radau' "
-                    "or 'BDF')."
+                    f"{facts} {self.name} is stable only for omega*dt < {self.stability_limit:g}: "
+                    f"use dt <= {stable:.3g} s, or an implicit integrator ('idas', 'cvodes', or "
+                    "'scipy' with method 'Radau' or 'BDF')."
                 )
             return (
                 f"{facts} That is inside {self.name}'s limit omega*dt < {self.stability_limit:g}; "
                 f"try dt <= {0.5 * stable:.3g} s or an implicit integrator ('idas', 'cvodes')."
             )
         return (
-            f"{facts} Try tighter tolerances (rtol, atol) or a smaller dt, and check the "
-            "model and initial state."
+            f"{facts} Try tighter tolerances (rtol, atol) or a smaller dt, and check the model and "
+            "initial state."
         )
 
     def _trajectory(self, times, X, Y, applied, wall) -> Trajectory:

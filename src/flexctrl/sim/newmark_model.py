@@ -1,5 +1,4 @@
-"""Newmark's method for any :class:`~flexctrl.dynamics.model.Model`, behind the common
-:class:`~flexctrl.sim.integrator.Integrator`.
+"""Newmark's method for any model, behind the common :class:`~flexctrl.sim.integrator.Integrator`.
 
 This adapter runs :func:`flexctrl.dynamics.fem.newmark.simulate_model_newmark`'s
 machinery (the model as a :class:`~flexctrl.dynamics.fem.newmark_dae.DAEProblem`, built
@@ -25,8 +24,8 @@ Stability
     undamped modes for every step: no numerical damping, only a period error.
     For ``delta >= 1/2`` and ``2 alpha < delta`` the step is stable only for
     ``omega h <= Omega_crit`` with
-    ``Omega_crit = (zeta (delta - 1/2) + sqrt(delta/2 - alpha + zeta^2 (delta - 1/2)^2)) / (delta/2
-    - alpha)`` (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the
+    ``Omega_crit = (zeta d + sqrt(delta/2 - alpha + zeta^2 d^2)) / (delta/2 - alpha)``,
+    ``d = delta - 1/2`` (Hughes, *The Finite Element Method*, 2000, Sec. 9.1), e.g. 2 for the
     central-difference choice ``alpha = 0, delta = 1/2`` undamped; ``delta < 1/2`` makes it
     unstable.  :attr:`Newmark.stability_limit` is the undamped value.
 
@@ -39,9 +38,8 @@ Torque inputs
 
 Cost
     The steps run in Python with numpy linear algebra (a few CasADi evaluations
-    and one dense solve per Newton iteration), about 0.1 to 1 ms per step for
-    the three-link arm, so Newmark pays off only where its step can be much
-    longer than an explicit method's (stiff finite-element models).
+    and one dense solve per Newton iteration), so Newmark pays off only where its
+    step can be much longer than an explicit method's (stiff finite-element models).
 """
 
 from __future__ import annotations
@@ -52,6 +50,8 @@ from typing import Any, ClassVar, Literal
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics.fem.newmark import model_dae_problem
+from flexctrl.dynamics.fem.newmark_dae import simulate
 from flexctrl.errors import SpecError
 from flexctrl.sim.integrator import Integrator
 
@@ -113,7 +113,7 @@ class Newmark(Integrator):
     """
 
     name: ClassVar[str] = "newmark"
-    stability_limit: ClassVar[float] = math.inf
+    stability_limit: float = math.inf
 
     def __init__(
         self,
@@ -196,13 +196,9 @@ class Newmark(Integrator):
         return tau
 
     def _setup(self) -> None:
-        from flexctrl.dynamics.fem.newmark import model_dae_problem
-
         self._problem = model_dae_problem(self.model, self._torque, tangent=self.tangent)
 
     def _advance(self, x0: np.ndarray, times: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, None]:
-        from flexctrl.dynamics.fem.newmark_dae import simulate
-
         k = U.shape[0]
         n = self.model.n_q
         self._held, self._t0 = U, float(times[0])
@@ -229,9 +225,8 @@ class Newmark(Integrator):
         if math.isinf(self.stability_limit):
             return (
                 f"Newmark with alpha = {self.alpha:g}, delta = {self.delta:g} is unconditionally "
-                "stable on linear modes, "
-                "so this is not a step-size instability of the method: check the model, the "
-                "initial state and the "
-                "torques, or reduce dt so Newton converges on the nonlinear terms."
+                "stable on linear modes, so this is not a step-size instability of the method: "
+                "check the model, the initial state and the torques, or reduce dt so Newton "
+                "converges on the nonlinear terms."
             )
         return super().stability_advice(states)

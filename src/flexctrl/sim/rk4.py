@@ -18,24 +18,10 @@ Stability and numerical damping
     y = 1.65 and 0.52 at y = 2.05.  High modes are therefore damped out
     numerically while low ones are kept almost exactly.
 
-Measured on the paper's free-vibration scene (``studies/scenes/free_vibration.toml``:
-three links, two modes each, 2 kg payload, gravity, q = 0, q_f31 = 0.1 m,
-q_f32 = 0.002 m, no damping) at the paper's 1 ms step
-    ``Model.omega_max`` (joints locked) is 1188 rad/s (189 Hz, y = 1.19), but with the
-    joints free the Jacobian at the initial state has modes at 263 Hz (y = 1.65) and
-    325 Hz (y = 2.05; |R| = 0.72, its energy falls a thousandfold in 10 steps).
-    The initial deformation of link 3 puts part of its 5.63 J of elastic energy
-    into those modes, and RK4 removes it: the total energy (7.29 J at t = 0) is
-    0.36 J lower after 10 ms, 1.06 J after 50 ms, 1.15 J after 0.1 s; the
-    swinging arm keeps re-exciting the fast modes slightly, so the loss reaches
-    1.31 J at 1 s and 2.17 J at 5 s (0.22 % of the 987 J exchanged between gravity
-    and motion).  At 0.5 ms the 5 s loss is 1.32 J, at 0.1 ms 0.0074 J
-    (7.5e-6 of the exchanged energy); a 0.2 s run at 20 us keeps it to 1e-9
-    (tests/test_sim_arm.py).  So the paper's 1 ms RK4 runs are stable but have the
-    fast free-joint modes damped away.  The low-frequency content is unaffected:
-    the FFT peaks of the damped scene over 2 s (Section 4.4) are link 1: 0.50 and
-    1.50 Hz, link 2: 0.50 and 42.5 Hz, link 3: 42.5 and 1.00 Hz at both 1 ms and
-    0.1 ms (the paper: 0.49/1.47, 0.88/42.48, 0.98/42.48 Hz at 0.49 Hz resolution).
+    On the arm an initial deflection puts energy into the fast modes of the free-joint
+    Jacobian; at steps near the limit RK4 damps it away while the slow modes (the
+    frequencies the studies look at) are kept, and the energy is conserved to round-off
+    only at steps well below the limit (``tests/sim/test_integrators_on_the_arm.py``).
 """
 
 from __future__ import annotations
@@ -49,6 +35,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.dynamics.parametric import try_expand
+from flexctrl.sim.bound import bind_buffer
 from flexctrl.sim.compile import DEFAULT_FLAGS, CompiledFunction, compile_function
 from flexctrl.sim.integrator import Integrator, output_function
 
@@ -68,8 +55,7 @@ def _rk4_combine(x, h, k1, k2, k3, k4):
 
 
 def rk4_next(f: Callable, x, h, t=None, *, k1=None):
-    """The state after one classical RK4 step of ``xdot = f(x)`` (``f(x, t)`` when ``t`` is given)
-    of length ``h``.
+    """The state after one classical RK4 step of length ``h`` of ``xdot = f(x)`` (or ``f(x, t)``).
 
     The one place RK4's stages are written; symbolic (CasADi) or numeric.  The
     expression is, in this order of floating-point operations,
@@ -108,7 +94,22 @@ def rk4_next(f: Callable, x, h, t=None, *, k1=None):
 def rk4_step_function(
     model, u_function: ca.Function | None = None, *, expand: bool = False
 ) -> ca.Function:
-    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` for ``model`` (y: see :func:`output_function`)."""
+    """``rk4_step(x, t, u, h) -> (x_next, y_next)`` of ``model``; ``y``: :func:`output_function`.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    u_function : casadi.Function, optional
+        ``u(t)`` (N m) added to the step's ``u``; none by default.
+    expand : bool
+        Expand the step into one SX expression.
+
+    Returns
+    -------
+    casadi.Function
+        The step; ``t`` and ``h`` in s.
+    """
     f = try_expand(model.functions["f"])
     outputs = output_function(model)
     x = ca.MX.sym("x", model.n_x)
@@ -132,7 +133,22 @@ def rk4_step_function(
 
 
 def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca.Function:
-    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining any one-step map ``step(x, t, u, h)``."""
+    """``loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])``: ``n`` steps chained.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        Any one-step map ``step(x, t, u, h) -> (x_next, y_next)``; ``t`` and ``h`` in s.
+    n_steps : int
+        Number of steps ``n`` chained.
+    name : str
+        Prefix of the Function's name (``n`` is appended).
+
+    Returns
+    -------
+    casadi.Function
+        The chained loop.
+    """
     acc = step.mapaccum(n_steps)
     x0 = ca.MX.sym("x0", step.size1_in(0))
     T = ca.MX.sym("T", 1, n_steps)
@@ -143,18 +159,48 @@ def loop_function(step: ca.Function, n_steps: int, name: str = "rk4_loop") -> ca
 
 
 def rk4_loop_function(step: ca.Function, n_steps: int) -> ca.Function:
-    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``."""
+    """``rk4_loop(x0, T[1 x n], U[n_u x n], h) -> (X[n_x x n], Y[n_y x n])`` chaining ``step``.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        The RK4 step of :func:`rk4_step_function`.
+    n_steps : int
+        Number of steps chained.
+
+    Returns
+    -------
+    casadi.Function
+        :func:`loop_function` named ``rk4_loop<n_steps>``.
+    """
     return loop_function(step, n_steps, "rk4_loop")
 
 
 def held_sample_loop(
     model, h: float, substeps: int, chunk: int, name: str = "held_rk4"
 ) -> ca.Function:
-    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: per sample ``substeps`` RK4 steps of ``h``
-    (s), torque held.
+    """``loop(x0, U[n_u x chunk]) -> X[n_x x chunk]``: ``substeps`` RK4 steps of ``h`` per sample.
 
-    The sample-level building block of the FEM timing report and the speed/accuracy
-    study: the output is the state at the end of each of ``chunk`` samples.
+    The torque is held over a sample.  The sample-level building block of the FEM timing report
+    and the speed/accuracy study: the output is the state at the end of each of ``chunk`` samples.
+
+    Parameters
+    ----------
+    model : Model
+        The arm; its ``f(x, u)`` gives the state derivative.
+    h : float
+        RK4 step (s).
+    substeps : int
+        RK4 steps per sample.
+    chunk : int
+        Samples per call.
+    name : str
+        Name of the Function.
+
+    Returns
+    -------
+    casadi.Function
+        ``loop(x0, U) -> X``; ``U`` in N m.
     """
     f = model.functions["f"]
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.n_u)
@@ -168,10 +214,9 @@ def held_sample_loop(
     return ca.Function(name, args, loop.call(args))
 
 
-# : The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the
-# imaginary-axis
-# : limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both from the
-# polynomial).  The one copy.
+#: The largest ``omega * h`` at which RK4 is offered as stable: the real-axis limit 2.785 (the
+#: imaginary-axis limit is 2 sqrt 2 = 2.828; :mod:`flexctrl.analysis.stability.theory` computes both
+#: from the polynomial).  The one copy.
 RK4_STABILITY_LIMIT = 2.785
 
 #: Share of :data:`RK4_STABILITY_LIMIT` a step chosen by :func:`rk4_step` may use.
@@ -182,6 +227,20 @@ def rk4_step(omega_max: float, scene_dt: float, margin: float = RK4_MARGIN) -> f
     """The scene's step divided by the smallest whole number that makes RK4 stable (s).
 
     ``omega_max * dt <= margin * RK4_STABILITY_LIMIT``; the scene's step itself when it already is.
+
+    Parameters
+    ----------
+    omega_max : float
+        Largest natural frequency of the model (rad/s); a value <= 0 keeps the scene's step.
+    scene_dt : float
+        The scene's sample time (s).
+    margin : float
+        Share of :data:`RK4_STABILITY_LIMIT` the step may use.
+
+    Returns
+    -------
+    float
+        The step (s), ``scene_dt / k`` for a whole ``k >= 1``.
     """
     if omega_max <= 0:
         return scene_dt
@@ -210,7 +269,7 @@ class RK4(Integrator):
     """
 
     name: ClassVar[str] = "rk4"
-    stability_limit: ClassVar[float] = RK4_STABILITY_LIMIT
+    stability_limit: float = RK4_STABILITY_LIMIT
 
     def __init__(
         self,
@@ -249,7 +308,7 @@ class RK4(Integrator):
         return out
 
     def step_function(self) -> ca.Function:
-        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` that :meth:`_setup` chains and compiles."""
+        """The one-step map ``step(x, t, u, h) -> (x_next, y_next)`` chained by :meth:`_setup`."""
         return rk4_step_function(self.model, self.u_function, expand=self.expand)
 
     def _setup(self) -> None:
@@ -258,9 +317,8 @@ class RK4(Integrator):
             loop, enabled=self.compile, cache_dir=self.cache_dir, flags=self.flags
         )
         # Evaluate through a CasADi FunctionBuffer bound to numpy arrays: no DM conversions per
-        # chunk.
-        # CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk, n_rows)
-        # array.
+        # chunk.  CasADi is column-major, so an (n_rows x chunk) matrix is a C-ordered (chunk,
+        # n_rows) array.
         n = self.chunk
         self._args = [
             np.zeros(self.model.n_x),
@@ -270,10 +328,7 @@ class RK4(Integrator):
         ]
         self._res = [np.zeros((n, self.model.n_x)), np.zeros((n, loop.size1_out(1)))]
         self._buffer, self._evaluate = self.compiled.function.buffer()
-        for i, a in enumerate(self._args):
-            self._buffer.set_arg(i, memoryview(a))
-        for i, r in enumerate(self._res):
-            self._buffer.set_res(i, memoryview(r))
+        bind_buffer(self._buffer, self._args, self._res)
 
     def _advance(
         self, x0: np.ndarray, times: np.ndarray, U: np.ndarray

@@ -108,9 +108,8 @@ class ScipyIntegrator(Integrator):
             ) + int(res.njev)
             if res.status != 0 or res.y.shape[1] != b - a:
                 raise SimulationError(
-                    f"scipy {self.method} failed between t = {times[a]:.6g} s and {times[b]:.6g} "
-                    "s: "
-                    f"{res.message}. " + self.stability_advice()
+                    f"scipy {self.method} failed between t = {times[a]:.6g} s and "
+                    f"{times[b]:.6g} s: {res.message}. " + self.stability_advice()
                 )
             out[a:b] = res.y.T
             x = out[b - 1]

@@ -62,8 +62,8 @@ def tip_error(
     inside = reference_time <= end + 1e-12
     if inside.sum() < 2:
         raise SimulationError(
-            f"the runs share no time span (reference ends at {reference_time[-1]} s, candidate "
-            f"at {time[-1]} s)"
+            f"the runs share no time span (reference ends at {reference_time[-1]} s, candidate at "
+            f"{time[-1]} s)"
         )
     t = reference_time[inside]
     moved = np.column_stack([np.interp(t, time, tip[:, k]) for k in range(tip.shape[1])])

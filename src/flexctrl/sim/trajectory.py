@@ -17,6 +17,7 @@ row repeats the last applied torque).  Units: s, rad, m, J, N m.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from collections.abc import Callable, Iterator, Mapping
@@ -32,7 +33,18 @@ ENERGY_NAMES = ("E_kin", "E_el", "E_grav", "E_total")
 
 
 def energy_dict(kin: np.ndarray, el: np.ndarray, grav: np.ndarray) -> dict[str, np.ndarray]:
-    """``{E_kin, E_el, E_grav, E_total}`` (J) from the three energies; ``E_total`` is their sum."""
+    """``{E_kin, E_el, E_grav, E_total}`` (J) from the three energies; ``E_total`` is their sum.
+
+    Parameters
+    ----------
+    kin, el, grav : numpy.ndarray
+        Kinetic, elastic and gravitational energy (J), each of shape (T,).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        The three energies and their sum.
+    """
     return {"E_kin": kin, "E_el": el, "E_grav": grav, "E_total": kin + el + grav}
 
 
@@ -44,10 +56,15 @@ class LazyEnergies(Mapping):
     energy (the mass matrix at every plant step) costs most of the outputs, so the
     closed loop leaves it to whoever reads it (the CSV, the plots, the energy figures).
     Copied or pickled, it is evaluated and becomes a plain dict.
+
+    Parameters
+    ----------
+    compute : callable
+        ``compute() -> (E_kin, E_el, E_grav)`` (J, each of shape (T,)), called once.
     """
 
     def __init__(self, compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]]):
-        self._compute = compute
+        self._compute: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = compute
         self._values: dict[str, np.ndarray] | None = None
 
     @property
@@ -57,6 +74,8 @@ class LazyEnergies(Mapping):
 
     def _get(self) -> dict[str, np.ndarray]:
         if self._values is None:
+            if self._compute is None:
+                raise RuntimeError("the energies were neither computed nor computable")
             self._values = energy_dict(*self._compute())
             self._compute = None
         return self._values
@@ -79,8 +98,6 @@ class LazyEnergies(Mapping):
         return dict, (self._get(),)
 
     def __deepcopy__(self, memo):
-        import copy
-
         return copy.deepcopy(self._get(), memo)
 
     def __repr__(self) -> str:
@@ -221,7 +238,7 @@ class Trajectory:
     def to_pandas(self):
         """A ``pandas.DataFrame`` with the CSV columns, indexed by time (needs pandas)."""
         try:
-            import pandas as pd
+            import pandas as pd  # optional: only this method needs it
         except ImportError as exc:  # pragma: no cover - pandas is a dev dependency
             raise ImportError("Trajectory.to_pandas needs pandas (pip install pandas)") from exc
         names, matrix = self.columns()
@@ -264,13 +281,25 @@ class Trajectory:
 
         Uses matplotlib's Agg canvas directly (no pyplot state, no window).
         """
+        # lazily: the plots import matplotlib, which a run without figures never needs
         from flexctrl.sim.trajectory_plots import plot_trajectory
 
         return plot_trajectory(self, Path(directory), prefix)
 
 
 def jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays and non-finite floats into JSON-safe values."""
+    """Convert numpy scalars/arrays and non-finite floats into JSON-safe values.
+
+    Parameters
+    ----------
+    value : object
+        A scalar, array, list, tuple or dict (nested); non-finite floats become strings.
+
+    Returns
+    -------
+    object
+        The same value made of plain Python types.
+    """
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

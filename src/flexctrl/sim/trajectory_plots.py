@@ -28,7 +28,22 @@ def _figure(rows: int = 1, cols: int = 1, height: float = 3.0):
 
 
 def plot_trajectory(traj: Trajectory, directory: Path, prefix: str = "") -> list[Path]:
-    """Write the four PNGs into ``directory``; returns their paths."""
+    """Write the four PNGs into ``directory``; returns their paths.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The simulated trajectory.
+    directory : pathlib.Path
+        Folder written to (made if missing).
+    prefix : str
+        Prefix of the file names.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
     directory.mkdir(parents=True, exist_ok=True)
     t = traj.time
     n_u = traj.inputs.shape[1]

@@ -418,10 +418,10 @@ class StabilityProbe:
 
     Examples
     --------
-    >>> from flexctrl.sim.toymodel import spring_pendulum
+    >>> import flexctrl as fc
     >>> from flexctrl.linear import equilibrium
-    >>> model = spring_pendulum(k=1.0e4, gravity=(0.0, 0.0))
-    >>> op = equilibrium(model, [0.3, -0.2])
+    >>> model = fc.load_model("subedi3link", fidelity="amm:1", gravity=[0.0, 0.0])
+    >>> op = equilibrium(model, [0.3, -0.2, 0.1])
     >>> probe = StabilityProbe(model, "rk4", op.x, op.u, integrator_options={"compile": False})
     >>> probe(2.7 / probe.omega_max).stable, probe(2.9 / probe.omega_max).stable
     (True, False)

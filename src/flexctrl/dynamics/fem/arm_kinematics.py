@@ -1,5 +1,4 @@
-"""Kinematics, mass matrix and energies of the finite-element arm (see
-:mod:`flexctrl.dynamics.fem.fem_arm`).
+"""Kinematics, mass matrix and energies of the finite-element arm (:mod:`.fem_arm`).
 
 Kinematics and kinetic energy of link i (Eqs 2-6, 30)
     In the frame ``(r_i, R(alpha_i))`` a material point ``x`` is at
@@ -26,20 +25,20 @@ Axial shortening (Eqs 11-18), switchable
     exact and quadratic in the velocities, so ``M`` is positive definite at every
     state, the undamped model conserves ``T + U``, and under full coupling the joint
     accelerations enter the axial force through the equations themselves.  (A
-    Lagrangian term built from the *nominal* rigid motion was tried first: being a
-    second-order truncation of ``T`` it left ``M`` indefinite at tip slopes of a few
-    milliradians; see ``docs/fem.md``.)  ``axial_shortening=False`` uses the linear
+    Lagrangian term built from the *nominal* rigid motion instead is a second-order
+    truncation of ``T`` and leaves ``M`` indefinite at tip slopes of a few milliradians;
+    see ``docs/fem.md``.)  ``axial_shortening=False`` uses the linear
     strain ``eps = u'``.  ``K`` is the stiffness at ``q = 0`` (the Hessian of
     ``U_el``); ``g`` carries the rest: ``g = dU_g/dq + dU_el/dq - K q``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.fem.link_matrices import LinkMatrices, link_matrices
 from flexctrl.errors import SpecError
@@ -54,7 +53,21 @@ def _rot(angle):
 
 
 def fem_coordinate_names(n_links: int, n_elements: int) -> tuple[str, ...]:
-    """``q1..qn``, then per link ``w<i>_<k>, th<i>_<k>`` for ``k = 1..N`` and ``u<i>_<k>``."""
+    """``q1..qn``, then per link ``w<i>_<k>, th<i>_<k>`` for ``k = 1..N`` and ``u<i>_<k>``.
+
+    Parameters
+    ----------
+    n_links : int
+        Links, hence joints.
+    n_elements : int
+        Elements per link ``N``.
+
+    Returns
+    -------
+    tuple of str
+        Joint angles (rad), then each link's nodal deflections (m), slopes (rad) and axial
+        displacements (m).
+    """
     names = [f"q{i + 1}" for i in range(n_links)]
     for i in range(n_links):
         for k in range(1, n_elements + 1):
@@ -95,7 +108,7 @@ class _Layout:
 
 
 def _link_gram(lm: LinkMatrices, mass: float, inertia: float, qw, qu):
-    """``G`` of ``T = 1/2 nu^T G nu``, ``nu = (v_bx, v_by, omega, q_w', q_u')`` (module docstring)."""
+    """``G`` of ``T = 1/2 nu^T G nu``, ``nu = (v_bx, v_by, omega, q_w', q_u')`` (module doc)."""
     L, nw, nu = lm.length, lm.n_w, lm.n_u
     C = ca.DM(lm.C_wu)
     g_vx_om = -ca.dot(ca.DM(lm.s0w), qw)
@@ -169,8 +182,7 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
         if joint.type != "revolute":
             raise SpecError(
                 f"value {joint.type!r} is not supported by the finite-element arm; allowed: "
-                "'revolute' "
-                "(prismatic joints: flexctrl.dynamics.fem.rp_arm)",
+                "'revolute' (prismatic joints: flexctrl.dynamics.fem.rp_arm)",
                 source=arm.source,
                 key=f"joints[{i + 1}].type",
             )
@@ -178,7 +190,7 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
 
 @dataclass(frozen=True)
 class FemExpressions:
-    """Symbolic pieces of the finite-element arm (CasADi SX in ``q``), before Lagrange's equations."""
+    """Symbolic pieces of the finite-element arm (SX in ``q``), before Lagrange's equations."""
 
     layout: _Layout
     mats: tuple[LinkMatrices, ...]
@@ -202,7 +214,22 @@ class FemExpressions:
 
 
 def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True) -> FemExpressions:
-    """Kinematics, mass matrix and potential energies of the arm (see module docstring)."""
+    """Kinematics, mass matrix and potential energies of the arm (see module docstring).
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm (revolute joints).
+    n_elements : int
+        Elements per link, 1..64.
+    axial_shortening : bool
+        The membrane strain ``u' + 1/2 w'^2`` instead of ``u'``.
+
+    Returns
+    -------
+    FemExpressions
+        SX expressions in the coordinates ``q``.
+    """
     _check(arm, n_elements)
     n, N = arm.n_links, int(n_elements)
     lay = _Layout(n, N)
@@ -215,19 +242,6 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     q = ca.SX.sym("q", nq)
     M = ca.SX(nq, nq)
     U_g = ca.SX(0)
-
-    def add_point(mass: float, r) -> None:
-        nonlocal M
-        if mass != 0.0:
-            Jr = ca.jacobian(r, q)
-            M = M + mass * ca.mtimes(Jr.T, Jr)
-
-    def add_rotor(inertia: float, angle) -> None:
-        nonlocal M
-        if inertia != 0.0:
-            Ja = ca.jacobian(angle, q)
-            M = M + inertia * ca.mtimes(Ja.T, Ja)
-
     r = ca.SX.zeros(2, 1)
     alpha_hat = ca.SX(0)
     positions, tip_w, tip_dw = [r], [], []
@@ -237,8 +251,8 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         alpha = alpha_hat + q[i]
         R = _rot(alpha)
         # hub i: point mass on the joint, rotor turning with link i
-        add_point(joint.hub_mass, r)
-        add_rotor(joint.hub_inertia, alpha)
+        M = _add_inertia(M, q, joint.hub_mass, r)
+        M = _add_inertia(M, q, joint.hub_inertia, alpha)
         U_g -= joint.hub_mass * ca.dot(gvec, r)
         # link i in its frame: T = 1/2 nu^T G nu
         J_nu = ca.vertcat(
@@ -263,8 +277,8 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
         tip_w.append(w_N)
         tip_dw.append(th_N)
         alpha_hat = alpha + th_N
-    add_point(arm.payload.mass, r)
-    add_rotor(arm.payload.effective_inertia, alpha_hat)
+    M = _add_inertia(M, q, arm.payload.mass, r)
+    M = _add_inertia(M, q, arm.payload.effective_inertia, alpha_hat)
     U_g -= arm.payload.mass * ca.dot(gvec, r)
     return FemExpressions(
         layout=lay,
@@ -280,14 +294,33 @@ def fem_expressions(arm: ArmSpec, n_elements: int, axial_shortening: bool = True
     )
 
 
-def locked_matrices(
-    arm: ArmSpec, n_elements: int, q_r: Sequence[float]
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(M_ff, K_ff)`` of the elastic dofs with the joints clamped at ``q_r`` and the links
-    straight.
+def _add_inertia(M: ca.SX, q: ca.SX, inertia: float, coordinate: ca.SX) -> ca.SX:
+    """``M + m J^T J`` of a point mass at ``coordinate`` (m) or a rotor turning with it (rad)."""
+    if inertia == 0.0:
+        return M
+    J = ca.jacobian(coordinate, q)
+    return M + inertia * ca.mtimes(J.T, J)
+
+
+def locked_matrices(arm: ArmSpec, n_elements: int, q_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """``(M_ff, K_ff)`` of the elastic dofs, the joints clamped at ``q_r``, the links straight.
 
     Cheaper than :func:`build_fem_model` (no dynamics are formed); the locked-joint
     natural frequencies are ``sqrt(eig(K_ff, M_ff))``.
+
+    Parameters
+    ----------
+    arm : ArmSpec
+        The arm.
+    n_elements : int
+        Elements per link.
+    q_r : array_like
+        Joint angles, rad.
+
+    Returns
+    -------
+    M_ff, K_ff : ndarray
+        Mass (kg, kg m, kg m^2) and stiffness (N/m, N, N m) of the elastic dofs.
     """
     ex = fem_expressions(arm, n_elements)
     n, nq = arm.n_links, ex.layout.size

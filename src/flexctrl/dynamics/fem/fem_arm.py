@@ -54,6 +54,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.fem.arm_kinematics import (
     MAX_ELEMENTS,
@@ -86,7 +87,7 @@ def build_fem_model(
     n_elements: int,
     *,
     axial_shortening: bool = True,
-    reference_q: Sequence[float] | None = None,
+    reference_q: Sequence[float] | np.ndarray | None = None,
 ) -> Model:
     """Build the floating-frame finite-element model of a planar revolute arm.
 
@@ -124,59 +125,10 @@ def build_fem_model(
     """
     start = time.perf_counter()
     ex = fem_expressions(arm, n_elements, axial_shortening)
-    n, N, lay = arm.n_links, int(n_elements), ex.layout
-    nq = lay.size
-    names = fem_coordinate_names(n, N)
+    n, N = arm.n_links, int(n_elements)
     q_ref = arm.configuration_or_default(reference_q)
-    q, M, U_g, U_el = ex.q, ex.mass_matrix, ex.gravity_energy, ex.elastic_energy
-    qd, u = ca.SX.sym("qd", nq), ca.SX.sym("u", n)
-
-    # -- stiffness, damping ---------------------------------------------------------------
-    K_np = ex.stiffness()
-    D_np = np.diag([j.friction for j in arm.joints] + [0.0] * (nq - n))
-    link_omega1 = []
-    for i, link in enumerate(arm.links):
-        w1 = 2 * math.pi * float(link_frequencies_fem(arm, q_ref, i, 1, N)[0])
-        link_omega1.append(w1)
-        zeta = link.damping_ratio(0)
-        if zeta > 0.0:
-            idx = np.concatenate([lay.w[i], lay.u[i]])
-            D_np[np.ix_(idx, idx)] += (2.0 * zeta / w1) * K_np[np.ix_(idx, idx)]
-    K, D = ca.sparsify(ca.DM(K_np)), ca.sparsify(ca.DM(D_np))
-
-    # -- Lagrange's equations -------------------------------------------------------------
-    Mqd = ca.mtimes(M, qd)
-    E_kin = 0.5 * ca.dot(qd, Mqd)
-    c = ca.jtimes(Mqd, q, qd) - ca.gradient(E_kin, q)
-    g = ca.gradient(U_g, q)
-    if axial_shortening:
-        g = g + ca.gradient(U_el, q) - ca.mtimes(K, q)
-    B = ca.vertcat(ca.SX.eye(n), ca.SX.zeros(nq - n, n))
-    rhs = ca.mtimes(B, u) - c - g - ca.mtimes(K, q) - ca.mtimes(D, qd)
-    qdd = ldl_solve_sparse(M, rhs, lay.elimination_order())
-    E_el = U_el
-    x = ca.vertcat(q, qd)
-    hubs = ex.positions
-    tip = hubs[:, n]
-    opts = {"cse": True}
-    functions = {
-        "M": ca.Function("M", [q], [M], ["q"], ["M"], opts),
-        "c": ca.Function("c", [q, qd], [c], ["q", "qd"], ["c"], opts),
-        "g": ca.Function("g", [q], [g], ["q"], ["g"], opts),
-        "K": ca.Function("K", [], [K], [], ["K"]),
-        "D": ca.Function("D", [], [D], [], ["D"]),
-        "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
-        "energies": ca.Function(
-            "energies", [q, qd], [E_kin, E_el, U_g], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
-        ),
-        "tip": ca.Function(
-            "tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts
-        ),
-        "hubs": ca.Function("hubs", [q], [hubs], ["q"], ["p"], opts),
-        "deflection": ca.Function(
-            "deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts
-        ),
-    }
+    K_np, D_np, link_omega1 = _stiffness_and_damping(arm, ex, q_ref, N)
+    functions = _fem_functions(ex, K_np, D_np, n, axial_shortening)
     locked = locked_frequencies(functions, K_np, q_ref, n)
     info = {
         "family": "fem",
@@ -200,7 +152,7 @@ def build_fem_model(
         name=f"{arm.name} fem {N}{'' if axial_shortening else ' no-shortening'}",
         fidelity=Fidelity("fem", N),
         n_joints=n,
-        coordinate_names=names,
+        coordinate_names=fem_coordinate_names(n, N),
         functions=functions,
         omega_max=float(locked.max()),
         spec=arm,
@@ -208,13 +160,89 @@ def build_fem_model(
     )
 
 
-def locked_frequencies(
-    functions: dict, K: np.ndarray, q_r: Sequence[float], n_joints: int
-) -> np.ndarray:
-    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``, elastic dofs at
-    zero.
+def _stiffness_and_damping(
+    arm: ArmSpec, ex: FemExpressions, q_ref: np.ndarray, n_elements: int
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """``(K, D, omega_1)``: the stiffness at ``q = 0``, the damping (joint friction, and per
+    link ``(2 zeta / omega_1) K``) and each link's first clamped-mass frequency (rad/s)."""
+    n, lay = arm.n_links, ex.layout
+    K_np = ex.stiffness()
+    D_np = np.diag([j.friction for j in arm.joints] + [0.0] * (lay.size - n))
+    link_omega1 = []
+    for i, link in enumerate(arm.links):
+        w1 = 2 * math.pi * float(link_frequencies_fem(arm, q_ref, i, 1, n_elements)[0])
+        link_omega1.append(w1)
+        zeta = link.damping_ratio(0)
+        if zeta > 0.0:
+            idx = np.concatenate([lay.w[i], lay.u[i]])
+            D_np[np.ix_(idx, idx)] += (2.0 * zeta / w1) * K_np[np.ix_(idx, idx)]
+    return K_np, D_np, link_omega1
 
-    The joints clamped, no gravity preload; see :func:`generalized_frequencies`.
+
+def _fem_functions(
+    ex: FemExpressions, K_np: np.ndarray, D_np: np.ndarray, n: int, axial_shortening: bool
+) -> dict[str, ca.Function]:
+    """Lagrange's equations solved for ``qdd`` and the model's named Functions."""
+    lay = ex.layout
+    nq = lay.size
+    q, M, U_g, U_el = ex.q, ex.mass_matrix, ex.gravity_energy, ex.elastic_energy
+    qd, u = ca.SX.sym("qd", nq), ca.SX.sym("u", n)
+    K, D = ca.sparsify(ca.DM(K_np)), ca.sparsify(ca.DM(D_np))
+    Mqd = ca.mtimes(M, qd)
+    E_kin = 0.5 * ca.dot(qd, Mqd)
+    c = ca.jtimes(Mqd, q, qd) - ca.gradient(E_kin, q)
+    g = ca.gradient(U_g, q)
+    if axial_shortening:
+        g = g + ca.gradient(U_el, q) - ca.mtimes(K, q)
+    B = ca.vertcat(ca.SX.eye(n), ca.SX.zeros(nq - n, n))
+    rhs = ca.mtimes(B, u) - c - g - ca.mtimes(K, q) - ca.mtimes(D, qd)
+    qdd = ldl_solve_sparse(M, rhs, lay.elimination_order())
+    E_el = U_el
+    x = ca.vertcat(q, qd)
+    hubs = ex.positions
+    tip = hubs[:, n]
+    opts = {"cse": True}
+    return {
+        "M": ca.Function("M", [q], [M], ["q"], ["M"], opts),
+        "c": ca.Function("c", [q, qd], [c], ["q", "qd"], ["c"], opts),
+        "g": ca.Function("g", [q], [g], ["q"], ["g"], opts),
+        "K": ca.Function("K", [], [K], [], ["K"]),
+        "D": ca.Function("D", [], [D], [], ["D"]),
+        "f": ca.Function("f", [x, u], [ca.vertcat(qd, qdd)], ["x", "u"], ["xdot"], opts),
+        "energies": ca.Function(
+            "energies", [q, qd], [E_kin, E_el, U_g], ["q", "qd"], ["E_kin", "E_el", "E_grav"], opts
+        ),
+        "tip": ca.Function(
+            "tip", [q, qd], [tip, ca.jtimes(tip, q, qd)], ["q", "qd"], ["p", "v"], opts
+        ),
+        "hubs": ca.Function("hubs", [q], [hubs], ["q"], ["p"], opts),
+        "deflection": ca.Function(
+            "deflection", [q], [ex.tip_deflection, ex.tip_slope], ["q"], ["w", "dw"], opts
+        ),
+    }
+
+
+def locked_frequencies(functions: dict, K: np.ndarray, q_r: ArrayLike, n_joints: int) -> np.ndarray:
+    """Locked-joint natural frequencies (rad/s, ascending) at joint angles ``q_r``.
+
+    The joints clamped, the elastic dofs at zero, no gravity preload; see
+    :func:`generalized_frequencies`.
+
+    Parameters
+    ----------
+    functions : dict of str to casadi.Function
+        The model's Functions (``M`` is read).
+    K : ndarray
+        The stiffness (N x N).
+    q_r : array_like
+        Joint angles, rad.
+    n_joints : int
+        Joint coordinates first in ``q``.
+
+    Returns
+    -------
+    ndarray
+        Frequencies, rad/s, ascending.
     """
     nq = K.shape[0]
     q0 = np.concatenate([np.asarray(q_r, dtype=float), np.zeros(nq - n_joints)])
@@ -224,27 +252,50 @@ def locked_frequencies(
 
 
 def generalized_frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` positive
-    definite.
+    """``sqrt`` of the eigenvalues of ``K v = lambda M v`` (rad/s, ascending), ``K`` definite.
 
     Solved as ``M v = mu K v``, ``lambda = 1/mu``: with the stiff axial elements
     ``||K||`` exceeds the lowest eigenvalues by 1e7 and more, and the direct
     ``eigh(K, M)`` loses the lowest frequencies to rounding (relative errors ~1e-7
     instead of ~1e-10, which hides the h^4 convergence).
+
+    Parameters
+    ----------
+    K : ndarray
+        Stiffness, positive definite.
+    M : ndarray
+        Mass, symmetric.
+
+    Returns
+    -------
+    ndarray
+        Frequencies, rad/s, ascending (positive ``mu`` only).
     """
     mu = scipy.linalg.eigh(M, K, eigvals_only=True)
     mu = mu[mu > 0.0]
     return np.sort(np.sqrt(1.0 / mu))
 
 
-def relax_axial(model: Model, q: Sequence[float]) -> np.ndarray:
+def relax_axial(model: Model, q: ArrayLike) -> np.ndarray:
     """``q`` with its axial dofs set to minimise the elastic energy for the given bending dofs.
 
     With axial shortening this makes the links inextensible (``u = -s``, zero
     membrane strain): the consistent way to start from a bent shape without
     loading the stiff axial elements.  Without axial shortening it sets ``u = 0``.
+
+    Parameters
+    ----------
+    model : Model
+        A finite-element model (its axial dofs are the coordinates named ``u*``).
+    q : array_like
+        Coordinates (rad, m).
+
+    Returns
+    -------
+    ndarray
+        ``q`` with the axial dofs relaxed, m.
     """
-    q = np.asarray(q, dtype=float).copy()
+    relaxed = np.asarray(q, dtype=float).copy()
     idx = np.array(
         [k for k, name in enumerate(model.coordinate_names) if name.startswith("u")], dtype=int
     )
@@ -253,6 +304,6 @@ def relax_axial(model: Model, q: Sequence[float]) -> np.ndarray:
     grad = ca.gradient(E_el, qs)[idx]
     fun = ca.Function("axial", [qs], [grad, ca.jacobian(grad, qs)[:, idx]])
     for _ in range(3):  # quadratic in u: one step is exact up to rounding
-        g, H = (np.asarray(v, dtype=float) for v in fun(q))
-        q[idx] -= np.linalg.solve(H, g.ravel())
-    return q
+        g, H = (np.asarray(v, dtype=float) for v in fun(relaxed))
+        relaxed[idx] -= np.linalg.solve(H, g.ravel())
+    return relaxed

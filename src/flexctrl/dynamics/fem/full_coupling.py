@@ -1,5 +1,4 @@
-"""Full coupling (Pan et al. 1990, Eq 43) of links sliding along a turning axis: the shared
-machinery.
+"""Full coupling (Pan et al. 1990, Eq 43) of links sliding along a turning axis: shared parts.
 
 The nominal joint coordinates ``theta`` (rad, joint 1) and ``W`` (m, the prismatic stroke) are
 unknowns beside the nodal values; the inputs are a joint torque and an axial force.  Used by
@@ -55,7 +54,7 @@ class RPForces:
     def sine(
         cls, torque_amplitude: float, force_amplitude: float, T: float, **initial: float
     ) -> RPForces:
-        """One full sine period over ``[0, T]`` (s), zero afterwards: ``A sin(2 pi t / T)`` (N m and N)."""
+        """One sine period ``A sin(2 pi t / T)`` over ``[0, T]`` (s), zero after (N m and N)."""
         if not T > 0:
             raise SpecError(f"value {T!r} is not allowed; allowed: T > 0 s", key="T")
 
@@ -68,7 +67,7 @@ class RPForces:
     def from_samples(
         cls, t: ArrayLike, torque: ArrayLike, force: ArrayLike, **initial: float
     ) -> RPForces:
-        """Inputs interpolated linearly between samples (s, N m, N), e.g. the multipliers of a motion run."""
+        """Inputs interpolated linearly between samples (s, N m, N), e.g. a motion's multipliers."""
         t, tau, F = (np.asarray(a, dtype=float).copy() for a in (t, torque, force))
         return cls(
             torque=lambda s: float(np.interp(s, t, tau)),
@@ -78,9 +77,11 @@ class RPForces:
 
 
 def shortening_matrices(link: FrameLink) -> tuple[Array, Array]:
-    """``Gs = rho int (L - x) N'^T N'`` (``int rho s dx = 1/2 q.Gs q``) and ``Gx = rho int (L^2 -
-    x^2)/2
-    N'^T N'`` (``int rho x s dx = 1/2 q.Gx q``), ``s(x) = 1/2 int_0^x w'^2``."""
+    """``(Gs, Gx)``: the matrices of the shortening's integrals, ``s(x) = 1/2 int_0^x w'^2``.
+
+    ``Gs = rho int (L - x) N'^T N'`` (``int rho s dx = 1/2 q.Gs q``) and
+    ``Gx = rho int (L^2 - x^2)/2 N'^T N'`` (``int rho x s dx = 1/2 q.Gx q``).
+    """
     L, rho = link.length, link.rho
     return rho * (L * link.G_c - link.G_1), rho * (0.5 * L * L * link.G_c - 0.5 * link.G_2)
 
@@ -98,11 +99,29 @@ def link_energies(
 ) -> tuple[Any, Any]:
     """``(T, V)`` of one link (CasADi expressions; no payload), to second order in ``(q, qd)``.
 
-    ``q``, ``qd`` the link's ``2 (N + 1)`` nodal values and rates; ``rE``, ``rEd`` radius of its
-    root E and its rate (m, m/s); ``thd`` (rad/s); ``g_ax``, ``g_perp`` gravity along and across the
-    axis (m/s^2).  ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
+    ``V`` holds strain and gravity (zero at ``q = 0``, ``r_E = 0``).
+
+    Parameters
+    ----------
+    link : FrameLink
+        The link's element matrices.
+    q, qd : casadi.SX
+        The link's ``2 (N + 1)`` nodal values and rates (m, rad; m/s, rad/s).
+    rE, rEd : casadi.SX
+        Radius of its root E and its rate, m and m/s.
+    thd : casadi.SX
+        Angular rate of the frame, rad/s.
+    g_ax, g_perp : casadi.SX or float
+        Gravity along and across the axis, m/s^2.
+    shortening : bool
+        Keep the axial shortening ``1/2 int w'^2`` in the kinematics.
+
+    Returns
+    -------
+    T, V : casadi.SX
+        Kinetic and potential energy, J.
     """
-    import casadi as ca
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     DM = ca.DM
     rho, L = link.rho, link.length
@@ -143,8 +162,23 @@ def payload_energies(
     g_perp: Any,
     shortening: bool,
 ) -> tuple[Any, Any]:
-    """``(T, V)`` of a point mass (kg) at the tip H of ``link`` (same expansion as :func:`link_energies`)."""
-    import casadi as ca
+    """``(T, V)`` of a point mass at the tip H of ``link``, expanded as :func:`link_energies`.
+
+    Parameters
+    ----------
+    link : FrameLink
+        The link carrying the mass.
+    mass : float
+        The point mass, kg.
+    q, qd, rE, rEd, thd, g_ax, g_perp, shortening
+        As for :func:`link_energies`.
+
+    Returns
+    -------
+    T, V : casadi.SX
+        Kinetic and potential energy, J.
+    """
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     sh = 1.0 if shortening else 0.0
     Gc = ca.DM(link.G_c)
@@ -201,8 +235,7 @@ class FullCouplingResult:
 
 
 class SlidingFullModel:
-    """Base of the fully coupled models: coordinates ``z = (q, theta, W)``, ``ne`` nodal values
-    first.
+    """Base of the fully coupled models: ``z = (q, theta, W)``, the ``ne`` nodal values first.
 
     A subclass sets ``ne``, ``drive`` and calls :meth:`_build` with the symbols and ``T``, ``V``;
     it provides :meth:`contact_parts` (the constraint rows as parts per link) and :meth:`check_W`.
@@ -212,9 +245,9 @@ class SlidingFullModel:
     drive: RPForces | RPMotion
 
     def _build(self, z: Any, zd: Any, T: Any, V: Any) -> None:
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
-        from flexctrl.dynamics.fem.newmark import _Evaluator
+        from flexctrl.dynamics.fem.newmark import DenseEvaluator  # imports CasADi
 
         self.ith, self.iW, self.nz = self.ne, self.ne + 1, self.ne + 2
         self.motion_driven = isinstance(self.drive, RPMotion)
@@ -229,21 +262,22 @@ class SlidingFullModel:
             "energy": ca.Function("energy", [z, zd], [T, V]),
             "momentum": ca.Function("p", [z, zd], [p]),
         }
-        self._fast = {k: _Evaluator(self._fun[k]) for k in ("M", "f", "f_z", "f_zd")}
+        self._fast = {k: DenseEvaluator(self._fun[k]) for k in ("M", "f", "f_z", "f_zd")}
         self._parts_W: float | None = None
 
-    # -- to provide
-    # ----------------------------------------------------------------------------------
+    # -- to provide --------------------------------------------------------------------------------
     def _parts(self, W: float) -> list[tuple[Array, Array]]:
-        """``[(R, v), ...]``: per link part, ``R[d]`` (``d = 0..3``, rows x ``ne``) and ``v = dx/dW`` per row."""
+        """``[(R, v), ...]`` per link part: ``R[d]`` (``d = 0..3``, rows x ``ne``), ``v = dx/dW``.
+
+        To be provided by the subclass.
+        """
         raise NotImplementedError
 
     def check_W(self, W: float, t: float) -> None:
         """Raise :class:`~flexctrl.errors.SimulationError` when ``W`` (m) leaves the stroke."""
         raise NotImplementedError
 
-    # -- evaluation
-    # ----------------------------------------------------------------------------------
+    # -- evaluation --------------------------------------------------------------------------------
     def contact_parts(self, W: float, t: float = math.nan) -> list[tuple[Array, Array]]:
         """The constraint rows at overhang ``W`` (cached per ``W``); see :meth:`_parts`."""
         self.check_W(W, t)
@@ -262,7 +296,7 @@ class SlidingFullModel:
         return self._eval("M", z)
 
     def internal_force(self, z: Array, zd: Array) -> Array:
-        """``dL/dz - (d^2 T / dzd dz) zd``: everything but the actuator inputs and constraint forces."""
+        """``dL/dz - (d^2 T / dzd dz) zd``: all but the actuator inputs and constraint forces."""
         return self._eval("f", z, zd).ravel()
 
     def energies(self, z: Array, zd: Array) -> tuple[float, float]:
@@ -271,12 +305,12 @@ class SlidingFullModel:
         return float(T), float(V)
 
     def momentum(self, z: Array, zd: Array) -> Array:
-        """Generalised momenta ``dT/dzd``; entry ``ith`` is the angular momentum about joint 1 (kg m^2/s)."""
+        """Momenta ``dT/dzd``; entry ``ith``: angular momentum about joint 1 (kg m^2/s)."""
         return self._eval("momentum", z, zd).ravel()
 
     def inputs(self, t: float) -> tuple[float, float]:
-        """Applied ``(torque, force)`` (N m, N); zero under a motion drive (the multipliers carry them)."""
-        if self.motion_driven:
+        """Applied ``(torque, force)`` (N m, N); zero under a motion drive (the multipliers)."""
+        if isinstance(self.drive, RPMotion):
             return 0.0, 0.0
         return float(self.drive.torque(t)), float(self.drive.force(t))
 
@@ -292,7 +326,7 @@ class SlidingFullModel:
         """Undeformed links at rest relative to the frame, rigid state from the drive."""
         z, zd = np.zeros(self.nz), np.zeros(self.nz)
         d = self.drive
-        if self.motion_driven:
+        if isinstance(d, RPMotion):
             z[self.ith], z[self.iW] = float(d.theta(0.0)), float(d.W(0.0))
             zd[self.ith], zd[self.iW] = float(d.thetad(0.0)), float(d.Wd(0.0))
         else:
@@ -300,7 +334,7 @@ class SlidingFullModel:
         return z, zd
 
     def consistent_rates(self, z: Array, Wd: float) -> Array:
-        """Smallest (mass-weighted) nodal rates with ``Phidot = 0`` when the links slide at ``Wd`` (m/s)."""
+        """Smallest (mass-weighted) nodal rates with ``Phidot = 0``, sliding at ``Wd`` (m/s)."""
         ne = self.ne
         parts = self.contact_parts(z[self.iW])
         A = sum(R[0] for R, _ in parts)
@@ -311,7 +345,7 @@ class SlidingFullModel:
     def problem(self) -> DAEProblem:
         """``M(z) zdd + Phi_z^T lam = f(z, zd) + Q(t)`` with the contact (and joint) constraints."""
         ne, ith, iW, nz, nj = self.ne, self.ith, self.iW, self.nz, self.n_joint_rows
-        d = self.drive
+        d = self.drive if isinstance(self.drive, RPMotion) else None  # the joint rows' motion
 
         def force(z: Array, zd: Array, t: float) -> Array:
             out = self.internal_force(z, zd)
@@ -322,7 +356,7 @@ class SlidingFullModel:
 
         def phi(z: Array, t: float) -> Array:
             contact = sum(R[0] @ z[:ne] for R, _ in self.contact_parts(z[iW], t))
-            if not nj:
+            if d is None:
                 return contact
             return np.r_[contact, z[ith] - float(d.theta(t)), z[iW] - float(d.W(t))]
 
@@ -339,7 +373,9 @@ class SlidingFullModel:
 
         def phi_t(z: Array, t: float) -> Array:
             m = self.contact_parts(z[iW], t)[0][0].shape[1]
-            return np.r_[np.zeros(m), -float(d.thetad(t)), -float(d.Wd(t))] if nj else np.zeros(m)
+            if d is None:
+                return np.zeros(m)
+            return np.r_[np.zeros(m), -float(d.thetad(t)), -float(d.Wd(t))]
 
         def h(z: Array, zd: Array, t: float) -> Array:
             q, qd, Wd = z[:ne], zd[:ne], zd[iW]
@@ -347,10 +383,12 @@ class SlidingFullModel:
                 2 * Wd * v * (R[1] @ qd) + Wd**2 * v**2 * (R[2] @ q)
                 for R, v in self.contact_parts(z[iW], t)
             )
-            return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))] if nj else contact
+            if d is None:
+                return contact
+            return np.r_[contact, float(d.thetadd(t)), float(d.Wdd(t))]
 
         def h_tangents(z: Array, zd: Array, t: float) -> tuple[Array, Array]:
-            """``(dh/dz, dh/dzd)`` of the contact rows (the joint rows of a motion drive have none)."""
+            """``(dh/dz, dh/dzd)`` of the contact rows (a motion drive's joint rows have none)."""
             q, qd, Wd = z[:ne], zd[:ne], zd[iW]
             parts = self.contact_parts(z[iW], t)
             m = parts[0][0].shape[1]
@@ -380,11 +418,13 @@ class SlidingFullModel:
     def run(
         self, dt: float, duration: float, initial_q: ArrayLike | None = None, **options: Any
     ) -> tuple[DAEResult, Array, Array, Array, Array]:
-        """Newmark + Baumgarte from :meth:`initial_state` (``initial_q`` replaces the nodal values;
-        must satisfy the contacts to 1e-9 m, rates made consistent); ``options`` go to
+        """Newmark + Baumgarte from :meth:`initial_state`.
+
+        ``initial_q`` replaces the nodal values (it must satisfy the contacts to 1e-9 m; the
+        rates are made consistent); ``options`` go to
         :func:`~flexctrl.dynamics.fem.newmark_dae.simulate`.  Returns the result, the torque and
-        force
-        (applied, or needed by a motion drive: minus the joint multipliers) and the contact violations."""
+        force (applied, or needed by a motion drive: minus the joint multipliers) and the contact
+        violations."""
         z0, zd0 = self.initial_state()
         if initial_q is not None:
             q0 = np.asarray(initial_q, dtype=float)

@@ -1,5 +1,4 @@
-"""The prescribed-motion sliding-link problems integrated by IDAS, a variable-order BDF (Gear-type)
-DAE code.
+"""The prescribed-motion sliding links integrated by IDAS, a variable-order BDF (Gear-type) code.
 
 Pan, Scott & Ulsoy (1990, Sec. 4) write: "Computer runs showed the current method [Newmark with
 Baumgarte stabilisation] to be more efficient than existing codes based on Gear's algorithm."  To
@@ -23,6 +22,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,9 +35,10 @@ Array = NDArray[np.float64]
 
 
 def _hermite_coefficients(le: float) -> Array:
-    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i]
-    zeta^k``
-    (exact: the cubic through four samples of :func:`~flexctrl.beam.elements.hermite_shape`)."""
+    """``C[d, k, i]``: the ``d``-th derivative of shape function ``i`` is ``sum_k C[d, k, i] z^k``.
+
+    Exact: the cubic through four samples of :func:`~flexctrl.beam.elements.hermite_shape`.
+    """
     zs = le * np.array([0.0, 1 / 3, 2 / 3, 1.0])
     C0 = np.linalg.solve(np.vander(zs, 4, increasing=True), hermite_shape(zs, le, 0))
     C = np.zeros((4, 4, 4))
@@ -47,11 +48,29 @@ def _hermite_coefficients(le: float) -> Array:
     return C
 
 
-def symbolic_point_row(x, order: int, n_elements: int, length: float):
-    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` for a symbolic material point
-    ``x``
-    (m) on a uniform mesh of Hermite elements (an interior node belongs to the element on its right)."""
-    import casadi as ca
+def symbolic_point_row(x: Any, order: int, n_elements: int, length: float) -> Any:
+    """CasADi row (1 x ``2 (N + 1)``) with ``w^(order)(x) = row @ q`` at a symbolic point ``x``.
+
+    ``x`` is a material point (m) on a uniform mesh of Hermite elements; an interior node
+    belongs to the element on its right.
+
+    Parameters
+    ----------
+    x : casadi.SX
+        The material point, m.
+    order : int
+        Derivative of ``w`` along the link, 0..3.
+    n_elements : int
+        Elements of the mesh.
+    length : float
+        Link length, m.
+
+    Returns
+    -------
+    casadi.SX
+        The row (units of ``w^(order)`` per unit of ``q``).
+    """
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     le = length / n_elements
     C = _hermite_coefficients(le)[order]
@@ -68,11 +87,13 @@ def symbolic_point_row(x, order: int, n_elements: int, length: float):
 
 @dataclass(frozen=True)
 class IdasResult:
-    """An IDAS run on the output grid ``t`` (s): nodal values ``q`` and rates ``qd``, the
-    tracked-end deflection ``tip_y`` (m), constraint violations ``phi_violation`` (m) and
-    ``phidot_violation`` (m/s) evaluated independently from the numpy rows, ``wall_time`` (s) of the
-    integration and the
-    solver statistics ``stats`` (steps, residual evaluations)."""
+    """An IDAS run on the output grid ``t`` (s).
+
+    Nodal values ``q`` and rates ``qd``, the tracked-end deflection ``tip_y`` (m), constraint
+    violations ``phi_violation`` (m) and ``phidot_violation`` (m/s) evaluated independently from
+    the numpy rows, ``wall_time`` (s) of the integration and the solver statistics ``stats``
+    (steps, residual evaluations).
+    """
 
     t: Array
     q: Array
@@ -102,8 +123,7 @@ def simulate_idas(
     suppress_algebraic: bool = True,
     max_order: int = 5,
 ) -> IdasResult:
-    """Integrate ``model`` from ``q0`` at rest with IDAS; outputs every ``grid_dt`` seconds to
-    ``t_end``.
+    """Integrate ``model`` from ``q0`` at rest with IDAS, output every ``grid_dt`` s to ``t_end``.
 
     Parameters
     ----------
@@ -127,7 +147,71 @@ def simulate_idas(
     SolverError
         IDAS failed (names the tolerance and the message).
     """
-    import casadi as ca
+    import casadi as ca  # lazily: the numpy models never need CasADi
+
+    n = model.ndof
+    n_out = int(round(t_end / grid_dt))
+    grid = grid_dt * np.arange(1, n_out + 1)
+    atol = 1e-3 * rtol if atol is None else atol
+    opts = {
+        "reltol": rtol,
+        "abstol": atol,
+        "max_num_steps": max_num_steps,
+        "calc_ic": True,
+        "suppress_algebraic": suppress_algebraic,
+        "max_order": max_order,
+    }
+    F = ca.integrator("F", "idas", _index1_dae(model, gamma, beta), 0.0, list(grid), opts)
+    x0 = np.concatenate([q0, np.zeros(n)])
+    z0 = _consistent_start(model, q0)
+    start = time.perf_counter()
+    try:
+        out = F(x0=x0, z0=z0)
+    except RuntimeError as exc:
+        raise SolverError(
+            f"IDAS failed (rtol = {rtol:g}, atol = {atol:g}): {str(exc).splitlines()[-1]}"
+        ) from exc
+    wall = time.perf_counter() - start
+    X = np.concatenate([x0[:, None], np.asarray(out["xf"])], axis=1).T
+    stats = {k: v for k, v in F.stats().items() if isinstance(v, (int, float, bool))}
+    return _result(model, X, np.concatenate([[0.0], grid]), tracked_dof, wall, stats, opts)
+
+
+def _result(
+    model: RPArmModel,
+    X: Array,
+    tt: Array,
+    tracked_dof: int | None,
+    wall: float,
+    stats: dict,
+    opts: dict[str, Any],
+) -> IdasResult:
+    """The states ``X`` at ``tt`` as an :class:`IdasResult`, the violations from the numpy rows."""
+    n, prob = model.ndof, model.problem()
+    Q, QD = X[:, :n], X[:, n:]
+    vp = np.array([np.abs(prob.phi(a, s)).max() for a, s in zip(Q, tt)])
+    vv = np.array(
+        [np.abs(prob.phi_q(a, s) @ b + prob.phi_t(a, s)).max() for a, b, s in zip(Q, QD, tt)]
+    )
+    dof = model.tip if tracked_dof is None else tracked_dof
+    return IdasResult(
+        t=tt,
+        q=Q,
+        qd=QD,
+        tip_y=Q[:, dof],
+        phi_violation=vp,
+        phidot_violation=vv,
+        wall_time=wall,
+        rtol=opts["reltol"],
+        atol=opts["abstol"],
+        max_order=opts["max_order"],
+        stats=stats,
+    )
+
+
+def _index1_dae(model: RPArmModel, gamma: float, beta: float) -> dict[str, Any]:
+    """The semi-explicit index-1 DAE of ``model`` for ``casadi.integrator`` (module docstring)."""
+    import casadi as ca  # lazily: the numpy models never need CasADi
 
     n, rows, link = model.ndof, model.rows, model.link
     t = ca.SX.sym("t")
@@ -148,64 +232,25 @@ def simulate_idas(
         ca.mtimes(ca.DM(model.M), qdd) + ca.mtimes(A.T, lam) - (f - ca.mtimes(Kt, q)),
         ca.mtimes(A, qdd) - h + 2 * gamma * phidot + beta**2 * phi,
     )
-    dae = {
+    return {
         "x": ca.vertcat(q, qd),
         "z": ca.vertcat(qdd, lam),
         "t": t,
         "ode": ca.vertcat(qd, qdd),
         "alg": alg,
     }
-    n_out = int(round(t_end / grid_dt))
-    grid = grid_dt * np.arange(1, n_out + 1)
-    atol = 1e-3 * rtol if atol is None else atol
-    opts = {
-        "reltol": rtol,
-        "abstol": atol,
-        "max_num_steps": max_num_steps,
-        "calc_ic": True,
-        "suppress_algebraic": suppress_algebraic,
-        "max_order": max_order,
-    }
-    F = ca.integrator("F", "idas", dae, 0.0, list(grid), opts)
-    x0 = np.concatenate([q0, np.zeros(n)])
+
+
+def _consistent_start(model: RPArmModel, q0: Array) -> Array:
+    """``(qdd, lam)`` at rest at ``q0`` (Eqs 55-56): IDAS's initial guess for the algebraic part."""
+    n, m = model.ndof, model.rows.count
     prob = model.problem()
-    # consistent algebraic start (Eqs 55-56) as the initial guess
     S = np.block(
         [
             [model.M, prob.phi_q(q0, 0.0).T],
-            [prob.phi_q(q0, 0.0), np.zeros((rows.count, rows.count))],
+            [prob.phi_q(q0, 0.0), np.zeros((m, m))],
         ]
     )
-    z0 = np.linalg.solve(
+    return np.linalg.solve(
         S, np.concatenate([prob.force(q0, np.zeros(n), 0.0), prob.h(q0, np.zeros(n), 0.0)])
-    )
-    start = time.perf_counter()
-    try:
-        out = F(x0=x0, z0=z0)
-    except RuntimeError as exc:
-        raise SolverError(
-            f"IDAS failed (rtol = {rtol:g}, atol = {atol:g}): {str(exc).splitlines()[-1]}"
-        ) from exc
-    wall = time.perf_counter() - start
-    X = np.concatenate([x0[:, None], np.asarray(out["xf"])], axis=1).T
-    tt = np.concatenate([[0.0], grid])
-    Q, QD = X[:, :n], X[:, n:]
-    vp = np.array([np.abs(prob.phi(a, s)).max() for a, s in zip(Q, tt)])
-    vv = np.array(
-        [np.abs(prob.phi_q(a, s) @ b + prob.phi_t(a, s)).max() for a, b, s in zip(Q, QD, tt)]
-    )
-    stats = {k: v for k, v in F.stats().items() if isinstance(v, (int, float, bool))}
-    dof = model.tip if tracked_dof is None else tracked_dof
-    return IdasResult(
-        t=tt,
-        q=Q,
-        qd=QD,
-        tip_y=Q[:, dof],
-        phi_violation=vp,
-        phidot_violation=vv,
-        wall_time=wall,
-        rtol=rtol,
-        atol=atol,
-        max_order=max_order,
-        stats=stats,
     )

@@ -1,5 +1,4 @@
-"""Finite-element integrals of one clamped link in its floating frame (Pan, Scott & Ulsoy 1990, Eqs
-29-34).
+"""Finite-element integrals of one clamped link in its floating frame (Pan et al. 1990, Eqs 29-34).
 
 A link of length ``L`` is cut into ``N`` equal elements: Hermite cubics for the
 transverse deflection ``w(x) = N_w(x) q_w`` and linear elements for the axial

@@ -7,8 +7,9 @@
   housing angle ``theta(t)``;
 * :func:`point_rows`: the rows giving ``w`` and its derivatives at arbitrary material points,
   which move from element to element as the supports slide;
-* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at material
-  points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus mouth bearing);
+* :class:`PointRows` and :func:`prismatic_rows`: the constraint rows of a prismatic joint, at
+  material points that move with the overhang ``W`` (two supports, or Pan's Fig 4 clamp plus
+  mouth bearing);
 * :func:`check_elements` and :data:`ENDS`, the checks the models share.
 
 Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling),
@@ -18,7 +19,9 @@ Used by :mod:`flexctrl.dynamics.fem.rp_arm` (partial coupling),
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,12 +35,23 @@ from flexctrl.beam.elements import (
 from flexctrl.errors import SpecError
 
 Array = NDArray[np.float64]
+#: A number, a numpy array or a CasADi expression: the rigid motion and the terms built from it
+#: are numeric for the Newmark models and symbolic for IDAS (:mod:`.idas_dae`), one code for both.
+NumOrSym = Any
 #: The ends of a sliding link: E (material coordinate 0) and H (the tip).
 ENDS = ("E", "H")
 
 
 def check_elements(n_elements: object, key: str = "n_elements") -> None:
-    """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256."""
+    """Raise :class:`SpecError` unless ``n_elements`` is an integer from 1 to 256.
+
+    Parameters
+    ----------
+    n_elements : object
+        The element count asked for.
+    key : str
+        The key the error names.
+    """
     if (
         isinstance(n_elements, bool)
         or not isinstance(n_elements, (int, np.integer))
@@ -49,10 +63,28 @@ def check_elements(n_elements: object, key: str = "n_elements") -> None:
 
 
 def point_rows(xs: ArrayLike, n_elements: int, length: float, max_derivative: int = 2) -> Array:
-    """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q`` (``d = 0..max_derivative``) on a uniform
-    mesh of ``n_elements`` Hermite elements over ``length`` (m); each row holds the shape functions
-    of the
-    element containing ``x_k`` (an interior node belongs to the element on its right)."""
+    """Rows ``R[d, k]`` with ``w^(d)(x_k) = R[d, k] @ q``, ``d = 0..max_derivative``.
+
+    On a uniform mesh of ``n_elements`` Hermite elements over ``length`` (m); each row holds the
+    shape functions of the element containing ``x_k`` (an interior node belongs to the element
+    on its right).
+
+    Parameters
+    ----------
+    xs : array_like
+        Material points, m.
+    n_elements : int
+        Elements of the mesh.
+    length : float
+        Link length, m.
+    max_derivative : int
+        Highest derivative along the link.
+
+    Returns
+    -------
+    ndarray
+        ``(max_derivative + 1, len(xs), 2 (n_elements + 1))``.
+    """
     xs = np.atleast_1d(np.asarray(xs, dtype=float))
     le = length / n_elements
     R = np.zeros((max_derivative + 1, xs.size, 2 * (n_elements + 1)))
@@ -79,6 +111,7 @@ class PointRows:
 
     @property
     def count(self) -> int:
+        """Number of rows."""
         return len(self.orders)
 
     def points(self, W: float) -> Array:
@@ -86,9 +119,10 @@ class PointRows:
         return np.asarray(self.offsets) + np.asarray(self.rates) * W
 
     def at(self, W: float, n_elements: int, length: float) -> Array:
-        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``'s
-        function,
-        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative)."""
+        """``R[d, k]`` (``d = 0..3``): the ``d``-th derivative along the link of row ``k``.
+
+        ``w^(o_k + d)(x_k) = R[d, k] @ q`` (zero beyond the cubic's third derivative).
+        """
         P = point_rows(self.points(W), n_elements, length, 3)
         R = np.zeros((4, self.count, P.shape[2]))
         for d in range(4):
@@ -99,13 +133,26 @@ class PointRows:
 
 
 def prismatic_rows(joint: str, length: float, D: float) -> PointRows:
-    """The rows of an R-P arm's prismatic joint on a link of ``length`` (m), supports ``D`` (m)
-    apart.
+    """The rows of an R-P arm's prismatic joint: a link of ``length`` (m), supports ``D`` (m) apart.
 
     ``"supports"``: ``w = 0`` at the two supports, material points ``L - D - W`` and ``L - W``
     (Eqs 24-25 at each).  ``"clamped"`` (Pan's Fig 4): ``w(0) = w'(0) = 0`` at E in the carriage
     (Eqs 22-23, fixed on the link) and ``w = 0`` at the mouth bearing D', material point ``L - W``
     (Eq 24).
+
+    Parameters
+    ----------
+    joint : {"supports", "clamped"}
+        The joint's kind.
+    length : float
+        Link length, m.
+    D : float
+        Distance of the supports, m.
+
+    Returns
+    -------
+    PointRows
+        The rows' derivative orders, material offsets (m) and their rates ``dx/dW``.
     """
     if joint == "supports":
         return PointRows((0, 0), (length - D, length), (-1.0, -1.0))
@@ -119,13 +166,16 @@ def is_symbolic(value: object) -> bool:
     return type(value).__module__.startswith("casadi")
 
 
-def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
-    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)`` (held outside [0,
-    T]).
+def _profile(t: NumOrSym, T: float, derivative: int) -> NumOrSym:
+    """Eq 57's unit rest-to-rest profile ``s(t) = t/T - sin(2 pi t/T)/(2 pi)``, held outside [0, T].
 
     ``t`` may be a CasADi expression (a symbolic time; :mod:`flexctrl.dynamics.fem.idas_dae`)."""
+    sin: Callable[[Any], Any]
+    cos: Callable[[Any], Any]
+    clip: Callable[[Any], Any]
+    where: Callable[..., Any]
     if is_symbolic(t):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         sin, cos, clip = ca.sin, ca.cos, lambda x: ca.fmin(ca.fmax(x, 0.0), T)
         where = ca.if_else
@@ -145,8 +195,7 @@ def _profile(t: ArrayLike, T: float, derivative: int) -> Array:
 
 @dataclass(frozen=True)
 class RPMotion:
-    """Prescribed rigid motion: ``W(t) = C1 - C2 s(t)`` (m), ``theta(t) = theta0 + dtheta s(t)``
-    (rad).
+    """Prescribed motion ``W(t) = C1 - C2 s(t)`` (m), ``theta(t) = theta0 + dtheta s(t)`` (rad).
 
     ``s`` is Eq 57's profile over ``T`` seconds; ``C2 < 0`` extends the link.
     """
@@ -157,24 +206,28 @@ class RPMotion:
     theta0: float = 0.0
     dtheta: float = 0.0
 
-    def W(self, t: ArrayLike) -> Array:
+    def W(self, t: NumOrSym) -> NumOrSym:
         """Overhang beyond the outer support, m."""
         return self.C1 - self.C2 * _profile(t, self.T, 0)
 
-    def Wd(self, t: ArrayLike) -> Array:
+    def Wd(self, t: NumOrSym) -> NumOrSym:
+        """Rate of the overhang, m/s."""
         return -self.C2 * _profile(t, self.T, 1)
 
-    def Wdd(self, t: ArrayLike) -> Array:
+    def Wdd(self, t: NumOrSym) -> NumOrSym:
+        """Acceleration of the overhang, m/s^2."""
         return -self.C2 * _profile(t, self.T, 2)
 
-    def theta(self, t: ArrayLike) -> Array:
+    def theta(self, t: NumOrSym) -> NumOrSym:
         """Housing angle, rad."""
         return self.theta0 + self.dtheta * _profile(t, self.T, 0)
 
-    def thetad(self, t: ArrayLike) -> Array:
+    def thetad(self, t: NumOrSym) -> NumOrSym:
+        """Housing rate, rad/s."""
         return self.dtheta * _profile(t, self.T, 1)
 
-    def thetadd(self, t: ArrayLike) -> Array:
+    def thetadd(self, t: NumOrSym) -> NumOrSym:
+        """Housing acceleration, rad/s^2."""
         return self.dtheta * _profile(t, self.T, 2)
 
 
@@ -222,15 +275,14 @@ class FrameLink:
         self.G_2 = assemble_geometric_stiffness(self.n, length, lambda z: z * z)
 
     def force_coefficients(
-        self, r: dict[str, float], driven_end: str
-    ) -> tuple[float, float, float]:
-        """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N, tension
-        positive).
+        self, r: Mapping[str, NumOrSym], driven_end: str
+    ) -> tuple[NumOrSym, NumOrSym, NumOrSym]:
+        """``(c0, c1, c2)`` of the rigid-motion axial force ``F = c0 + c1 x + c2 x^2`` (N).
 
-        ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s), ``g_ax`` (m/s^2).  Driven at
-        E (the reaction of the whole link and payload enters at ``x = 0``): ``F(x) = -int_x^L rho a~
-        - m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``; ``a~ = r_E'' - theta'^2 (r_E + x) -
-        g_ax``.
+        Tension is positive.  ``r`` holds ``rE, rEd, rEdd`` (m, m/s, m/s^2), ``thd`` (rad/s),
+        ``g_ax`` (m/s^2).  Driven at E (the reaction of the whole link and payload enters at
+        ``x = 0``): ``F(x) = -int_x^L rho a~ - m_t a~(L)``; driven at H: ``F(x) = int_0^x rho a~``;
+        ``a~ = r_E'' - theta'^2 (r_E + x) - g_ax``.
         """
         rho, L, m_t = self.rho, self.length, self.payload_mass
         # a~(x) = b0 - w2 x  with b0 = rE'' - th'^2 rE - g_ax, w2 = th'^2
@@ -242,12 +294,12 @@ class FrameLink:
         return 0.0, rho * b0, -0.5 * rho * w2  # F = int_0^x rho a~
 
     def terms(
-        self, r: dict[str, float], driven_end: str, axial_shortening: bool
-    ) -> tuple[Array, Array]:
+        self, r: Mapping[str, NumOrSym], driven_end: str, axial_shortening: bool
+    ) -> tuple[NumOrSym, NumOrSym]:
         """``(K + K_g - theta'^2 M, f)`` for the rigid state ``r`` (see :meth:`force_coefficients`;
         also ``thdd`` in rad/s^2 and ``g_perp`` in m/s^2).  Numbers give numpy arrays; CasADi
         expressions (a symbolic rigid motion) give CasADi matrices."""
-        mats = (
+        mats: tuple[Any, ...] = (
             self.K,
             self.M,
             self.G_c,
@@ -258,7 +310,7 @@ class FrameLink:
             np.eye(self.ndof)[self.tip],
         )
         if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in r.values()):
-            import casadi as ca
+            import casadi as ca  # lazily: the numpy models never need CasADi
 
             mats = tuple(ca.DM(m) for m in mats)
         K, M, G_c, G_1, G_2, S0, S1, e_tip = mats

@@ -1,5 +1,4 @@
-"""Newmark integration of a :class:`~flexctrl.dynamics.model.Model` (Pan, Scott & Ulsoy 1990, Sec.
-4).
+"""Newmark integration of a :class:`~flexctrl.dynamics.model.Model` (Pan et al. 1990, Sec. 4).
 
 Finite-element models are stiff: their highest locked-joint frequency grows like
 ``N^2`` (about 0.5e6 rad/s for the three-link arm at 16 elements per link, from the
@@ -36,7 +35,7 @@ from flexctrl.dynamics.fem.newmark_dae import DAEProblem, DAEResult, simulate
 Torque = Callable[[float], np.ndarray]
 
 
-class _Evaluator:
+class DenseEvaluator:
     """A CasADi Function evaluated into preallocated numpy arrays (no DM conversions).
 
     Outputs are densified; matrices come back column-major, so only symmetric
@@ -45,16 +44,20 @@ class _Evaluator:
 
     def __init__(self, fun: ca.Function):
         ins = [ca.SX.sym(f"i{k}", fun.size_in(k)) for k in range(fun.n_in())]
-        outs = fun(*ins)
-        outs = outs if isinstance(outs, (list, tuple)) else [outs]
+        called = fun(*ins)
+        outs = called if isinstance(called, (list, tuple)) else [called]
         self.fun = ca.Function(f"{fun.name()}_dense", ins, [ca.densify(o) for o in outs])
         self.args = [np.zeros(int(np.prod(fun.size_in(k)))) for k in range(fun.n_in())]
         self.res = [np.zeros(fun.size_out(k)[::-1]) for k in range(fun.n_out())]
         self.buffer, self.evaluate = self.fun.buffer()
+        # the stubs are wrong twice: casadi's give set_arg C's (pointer, size), numpy's give
+        # ndarray __buffer__ on Python 3.12+ only
         for k, arr in enumerate(self.args):
-            self.buffer.set_arg(k, memoryview(arr))
+            view = memoryview(arr)  # type: ignore[arg-type]  # numpy stubs: see above
+            self.buffer.set_arg(k, view)  # type: ignore[call-arg]  # casadi stubs: see above
         for k, arr in enumerate(self.res):
-            self.buffer.set_res(k, memoryview(arr))
+            view = memoryview(arr)  # type: ignore[arg-type]  # numpy stubs: see above
+            self.buffer.set_res(k, view)  # type: ignore[call-arg]  # casadi stubs: see above
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         for dst, src in zip(self.args, args):
@@ -99,9 +102,9 @@ def model_dae_problem(
         d_q, d_qd = ca.jacobian(fn["g"](q) + ca.mtimes(K, q), q), D + ca.SX.zeros(n_q, n_q)
     else:
         d_q, d_qd = K + ca.SX.zeros(n_q, n_q), D + ca.SX.zeros(n_q, n_q)
-    mass = _Evaluator(ca.Function("M", [q], [fn["M"](q)]))
-    internal = _Evaluator(ca.Function("internal", [q, qd], [inner]))
-    tangents = _Evaluator(ca.Function("tangents", [q, qd], [d_q, d_qd]))
+    mass = DenseEvaluator(ca.Function("M", [q], [fn["M"](q)]))
+    internal = DenseEvaluator(ca.Function("internal", [q, qd], [inner]))
+    tangents = DenseEvaluator(ca.Function("tangents", [q, qd], [d_q, d_qd]))
     B = np.zeros(n_q)
     cache: dict[str, tuple] = {}
 

@@ -61,8 +61,7 @@ class NewtonConvergenceError(SolverError):
 
 @dataclass(frozen=True)
 class DAEProblem:
-    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables returning numpy
-    arrays.
+    """``M(q,t) qdd + Phi_q^T lam = f(q,qd,t)``, ``Phi(q,t) = 0`` as callables of numpy arrays.
 
     ``mass(q,t)`` (n,n); ``force(q,qd,t)`` (n,); ``phi(q,t)``, ``phi_t(q,t)`` (m,);
     ``phi_q(q,t)`` (m,n); ``h(q,qd,t)`` (m,), the right side of ``Phi_q qdd = h``
@@ -70,7 +69,8 @@ class DAEProblem:
     ``h_qd`` (m,n) give the Newton matrix directly; without all four it is formed
     by finite differences.  ``linear=True`` promises that M and Phi_q do not depend
     on q and that f and h are affine in (q, qd) with exact tangents.
-    See :func:`casadi_problem` for building one from CasADi expressions.
+    See :func:`flexctrl.dynamics.fem.casadi_dae.casadi_problem` for building one from CasADi
+    expressions.
     """
 
     n_q: int
@@ -89,6 +89,7 @@ class DAEProblem:
 
     @property
     def has_tangents(self) -> bool:
+        """Whether all four Newton tangents are given."""
         return all(g is not None for g in (self.force_q, self.force_qd, self.h_q, self.h_qd))
 
 
@@ -125,6 +126,252 @@ def _fd_jac(fun: Callable[[Array], Array], x: Array, f0: Array) -> Array:
         xp[k] += step
         jac[:, k] = (fun(xp) - f0) / step
     return jac
+
+
+class _Newmark:
+    """The Newmark scheme with Baumgarte feedback on one :class:`DAEProblem` (module docstring)."""
+
+    def __init__(
+        self,
+        problem: DAEProblem,
+        *,
+        dt: float,
+        alpha: float,
+        delta: float,
+        gamma: float,
+        beta: float,
+        baumgarte_form: str,
+        feedback: str,
+        use_fd: bool,
+    ):
+        self.problem, self.n, self.m = problem, problem.n_q, problem.n_c
+        self.dt, self.alpha, self.delta, self.gamma, self.beta = dt, alpha, delta, gamma, beta
+        self.kb = -(beta**2) if baumgarte_form == "eq54_printed" else beta**2
+        self.c0, self.c1 = 1.0 / (alpha * dt * dt), delta / (alpha * dt)
+        self.feedback, self.use_fd = feedback, use_fd
+
+    def violations(self, q: Array, qd: Array, t: float) -> tuple[Array, Array]:
+        """``(Phi, Phidot)`` at ``(q, qd, t)``."""
+        p = self.problem
+        return (
+            np.asarray(p.phi(q, t), float),
+            np.asarray(p.phi_q(q, t), float) @ qd + np.asarray(p.phi_t(q, t), float),
+        )
+
+    def initial(self, q: Array, qd: Array, t0: float) -> tuple[Array, Array, Array, Array]:
+        """``(qdd, lam, Phi, Phidot)``: consistent initial accelerations and multipliers.
+
+        From the augmented system of Eqs 55-56 (module docstring).
+        """
+        p, n, m = self.problem, self.n, self.m
+        phi, phid = self.violations(q, qd, t0)
+        A = np.zeros((n + m, n + m))
+        A[:n, :n] = p.mass(q, t0)
+        Pq = np.asarray(p.phi_q(q, t0), float).reshape(m, n)
+        A[:n, n:], A[n:, :n] = Pq.T, Pq
+        rhs = np.concatenate(
+            [
+                np.asarray(p.force(q, qd, t0), float),
+                np.asarray(p.h(q, qd, t0), float) - 2 * self.gamma * phid - self.kb * phi,
+            ]
+        )
+        try:
+            sol = np.linalg.solve(A, rhs)
+        except np.linalg.LinAlgError as exc:
+            raise NewtonConvergenceError(
+                f"singular augmented matrix for the initial accelerations at "
+                f"t = {t0:g} s (dependent constraints?)"
+            ) from exc
+        return sol[:n], sol[n:], phi, phid
+
+    def run(
+        self,
+        q: Array,
+        qd: Array,
+        tgrid: Array,
+        *,
+        newton: tuple[float, int],
+        bounds: tuple[float, float | None],
+        labels: str,
+    ) -> DAEResult:
+        """Integrate from ``(q, qd)`` at ``tgrid[0]`` over ``tgrid``; see :func:`simulate`."""
+        n, m, n_steps = self.n, self.m, tgrid.size - 1
+        Q, QD, QDD = (np.empty((n_steps + 1, n)) for _ in range(3))
+        LAM = np.empty((n_steps + 1, m))
+        VP, VV = np.zeros(n_steps + 1), np.zeros(n_steps + 1)
+        ITS = np.zeros(n_steps + 1, dtype=int)
+        start = time.perf_counter()
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            qdd, lam, phi, phid = self.initial(q, qd, tgrid[0])
+            Q[0], QD[0], QDD[0], LAM[0] = q, qd, qdd, lam
+            VP[0] = np.max(np.abs(phi), initial=0.0)
+            VV[0] = np.max(np.abs(phid), initial=0.0)
+            for k in range(1, n_steps + 1):
+                t = tgrid[k]
+                step = self.step_from(t, q, qd, qdd, phi, phid)
+                q, lam, its = step.solve(k, lam, *newton)
+                qdd, qd = step.states(q)
+                phi, phid = self.violations(q, qd, t)
+                vp, vv = self._checked(k, t, q, phi, phid, bounds, labels)
+                Q[k], QD[k], QDD[k], LAM[k], VP[k], VV[k], ITS[k] = q, qd, qdd, lam, vp, vv, its
+        return DAEResult(
+            t=tgrid,
+            q=Q,
+            qd=QD,
+            qdd=QDD,
+            lam=LAM,
+            phi_violation=VP,
+            phidot_violation=VV,
+            newton_iterations=ITS,
+            wall_time=time.perf_counter() - start,
+            dt=self.dt,
+            gamma=float(self.gamma),
+            beta=float(self.beta),
+            alpha=float(self.alpha),
+            delta=float(self.delta),
+        )
+
+    def _checked(
+        self,
+        k: int,
+        t: float,
+        q: Array,
+        phi: Array,
+        phid: Array,
+        bounds: tuple[float, float | None],
+        labels: str,
+    ) -> tuple[float, float]:
+        """``(max|Phi|, max|Phidot|)`` after step ``k``, refused beyond ``bounds`` or non-finite."""
+        max_violation, max_velocity_violation = bounds
+        vp = np.max(np.abs(phi), initial=0.0)
+        vv = np.max(np.abs(phid), initial=0.0)
+        bad_v = max_velocity_violation is not None and not vv <= max_velocity_violation
+        if not (vp <= max_violation and np.isfinite(vv)) or bad_v or not np.all(np.isfinite(q)):
+            raise ConstraintViolationError(
+                f"constraint violation grew without bound at step {k} (t = {t:.6g} s, "
+                f"dt = {self.dt:.3g} s, {labels}): max|Phi| = {vp:.3g} "
+                f"(bound {max_violation:g}), max|Phidot| = {vv:.3g} "
+                f"(bound {max_velocity_violation})"
+            )
+        return vp, vv
+
+    def step_from(
+        self, t: float, q: Array, qd: Array, qdd: Array, phi: Array, phid: Array
+    ) -> _Step:
+        """The step that ends at ``t`` from the state ``(q, qd, qdd)`` and its violations."""
+        dt, alpha, delta = self.dt, self.alpha, self.delta
+        return _Step(
+            self,
+            t,
+            q,
+            qd,
+            qdd,
+            acc0=-qd / (alpha * dt) - (0.5 / alpha - 1.0) * qdd,
+            vel0=qd + dt * (1.0 - delta) * qdd,
+            fb_old=2 * self.gamma * phid + self.kb * phi,  # step-i violations (Eq 54)
+        )
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One Newmark step: the state at its start and the Newton iteration for its end."""
+
+    scheme: _Newmark
+    t: float
+    qi: Array
+    qdi: Array
+    qddi: Array
+    acc0: Array
+    vel0: Array
+    fb_old: Array
+
+    def states(self, qn: Array) -> tuple[Array, Array]:
+        """``(qdd, qd)`` at the end of the step for the coordinates ``qn`` (Eqs 50-51)."""
+        s = self.scheme
+        acc = s.c0 * (qn - self.qi) + self.acc0
+        return acc, self.vel0 + s.dt * s.delta * acc
+
+    def residual(self, z: Array) -> Array:
+        """The dynamics and the stabilised constraint at ``z = (q, lam)`` of the step's end."""
+        s, t = self.scheme, self.t
+        p, n, m = s.problem, s.n, s.m
+        qn, ln = z[:n], z[n:]
+        acc, vel = self.states(qn)
+        Pq_ = np.asarray(p.phi_q(qn, t), float).reshape(m, n)
+        r1 = (
+            np.asarray(p.mass(qn, t), float) @ acc
+            + Pq_.T @ ln
+            - np.asarray(p.force(qn, vel, t), float)
+        )
+        if s.feedback == "explicit":
+            fb = self.fb_old
+        else:
+            p_, pd_ = s.violations(qn, vel, t)
+            fb = 2 * s.gamma * pd_ + s.kb * p_
+        r2 = Pq_ @ acc - np.asarray(p.h(qn, vel, t), float) + fb
+        return np.concatenate([r1, r2])
+
+    def newton_matrix(self, z: Array, r: Array) -> Array:
+        """The Newton matrix at ``z`` (module docstring), or finite differences of the residual."""
+        s, t = self.scheme, self.t
+        if s.use_fd:
+            return _fd_jac(self.residual, z, r)
+        p, n, m, c0, c1 = s.problem, s.n, s.m, s.c0, s.c1
+        # has_tangents was checked when the scheme was chosen
+        force_q, force_qd, h_q, h_qd = p.force_q, p.force_qd, p.h_q, p.h_qd
+        if force_q is None or force_qd is None or h_q is None or h_qd is None:
+            raise ValueError("the problem gives no tangents; use jacobian='fd'")
+        qn = z[:n]
+        acc, vel = self.states(qn)
+        J = np.zeros((n + m, n + m))
+        Pq_ = np.asarray(p.phi_q(qn, t), float).reshape(m, n)
+        J[:n, :n] = (
+            c0 * np.asarray(p.mass(qn, t), float)
+            - np.asarray(force_q(qn, vel, t), float)
+            - c1 * np.asarray(force_qd(qn, vel, t), float)
+        )
+        J[:n, n:] = Pq_.T
+        hq = np.asarray(h_q(qn, vel, t), float).reshape(m, n)
+        hqd = np.asarray(h_qd(qn, vel, t), float).reshape(m, n)
+        J[n:, :n] = c0 * Pq_ - hq - c1 * hqd
+        if s.feedback == "implicit":  # d(Phidot)/dq at fixed qd equals -h_qd / 2
+            J[n:, :n] += 2 * s.gamma * (c1 * Pq_ - 0.5 * hqd) + s.kb * Pq_
+        return J
+
+    def solve(
+        self, k: int, lam: Array, newton_tol: float, max_iterations: int
+    ) -> tuple[Array, Array, int]:
+        """``(q, lam, iterations)`` at the end of step ``k``: a constant-acceleration guess,
+        then Newton on ``(q, lam)``."""
+        s, t, n, dt = self.scheme, self.t, self.scheme.n, self.scheme.dt
+        z = np.concatenate([self.qi + dt * self.qdi + 0.5 * dt * dt * self.qddi, lam])
+        its, converged, size = 0, False, np.inf
+        while its < max_iterations:
+            its += 1
+            r = self.residual(z)
+            try:
+                dz = np.linalg.solve(self.newton_matrix(z, r), -r)
+            except np.linalg.LinAlgError as exc:
+                raise NewtonConvergenceError(
+                    f"singular Newton matrix at step {k} (t = {t:.6g} s, dt = {dt:.3g} s)"
+                ) from exc
+            z = z + dz
+            size = np.max(np.abs(dz[:n]))
+            if not np.all(np.isfinite(z)):
+                break
+            if s.problem.linear and not s.use_fd:
+                converged = True
+                break
+            if size <= newton_tol * (1.0 + np.max(np.abs(z[:n]))):
+                converged = True
+                break
+        if not converged:
+            raise NewtonConvergenceError(
+                f"Newton iteration did not converge at step {k} (t = {t:.6g} s, "
+                f"dt = {dt:.3g} s) after {its} iterations: max|dq| = {size:.3g}, "
+                f"tol = {newton_tol:.3g}"
+            )
+        return z[:n], z[n:], its
 
 
 def simulate(
@@ -179,6 +426,41 @@ def simulate(
         A violation exceeded its bound or became non-finite (names time, step
         size, gamma/beta and the violation).
     """
+    _check_settings(problem, (t0, t_end, dt), (alpha, delta), feedback, baumgarte_form, jacobian)
+    n = problem.n_q
+    n_steps = max(1, int(np.ceil((t_end - t0) / dt - 1e-9)))
+    scheme = _Newmark(
+        problem,
+        dt=(t_end - t0) / n_steps,
+        alpha=alpha,
+        delta=delta,
+        gamma=gamma,
+        beta=beta,
+        baumgarte_form=baumgarte_form,
+        feedback=feedback,
+        use_fd=jacobian == "fd" or (jacobian == "auto" and not problem.has_tangents),
+    )
+    return scheme.run(
+        np.asarray(q0, dtype=float).reshape(n).copy(),
+        np.asarray(qd0, dtype=float).reshape(n).copy(),
+        t0 + scheme.dt * np.arange(n_steps + 1, dtype=np.float64),
+        newton=(newton_tol, max_iterations),
+        bounds=(max_violation, max_velocity_violation),
+        labels=f"gamma = {gamma:g}, beta = {beta:g}, form = {baumgarte_form}, "
+        f"feedback = {feedback}",
+    )
+
+
+def _check_settings(
+    problem: DAEProblem,
+    times: tuple[float, float, float],
+    newmark: tuple[float, float],
+    feedback: str,
+    baumgarte_form: str,
+    jacobian: str,
+) -> None:
+    """Refuse settings :func:`simulate` cannot run with (``ValueError`` naming them)."""
+    (t0, t_end, dt), (alpha, delta) = times, newmark
     if not (0 < alpha and 0 < delta and dt > 0 and t_end > t0):
         raise ValueError(
             f"need alpha, delta, dt > 0 and t_end > t0; got alpha={alpha}, "
@@ -188,212 +470,3 @@ def simulate(
         raise ValueError(f"unknown feedback={feedback!r} or baumgarte_form={baumgarte_form!r}")
     if jacobian == "tangent" and not problem.has_tangents:
         raise ValueError("jacobian='tangent' needs force_q, force_qd, h_q and h_qd")
-    use_fd = jacobian == "fd" or (jacobian == "auto" and not problem.has_tangents)
-    n, m = problem.n_q, problem.n_c
-    n_steps = max(1, int(np.ceil((t_end - t0) / dt - 1e-9)))
-    dt = (t_end - t0) / n_steps
-    c0, c1 = 1.0 / (alpha * dt * dt), delta / (alpha * dt)
-    kb = -(beta**2) if baumgarte_form == "eq54_printed" else beta**2
-    tgrid = t0 + dt * np.arange(n_steps + 1)
-
-    def violations(q: Array, qd: Array, t: float) -> tuple[Array, Array]:
-        return (
-            np.asarray(problem.phi(q, t), float),
-            np.asarray(problem.phi_q(q, t), float) @ qd + np.asarray(problem.phi_t(q, t), float),
-        )
-
-    q = np.asarray(q0, dtype=float).reshape(n).copy()
-    qd = np.asarray(qd0, dtype=float).reshape(n).copy()
-    Q, QD, QDD = (np.empty((n_steps + 1, n)) for _ in range(3))
-    LAM = np.empty((n_steps + 1, m))
-    VP, VV = np.zeros(n_steps + 1), np.zeros(n_steps + 1)
-    ITS = np.zeros(n_steps + 1, dtype=int)
-    start = time.perf_counter()
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        # Consistent initial accelerations and multipliers (Eqs 55-56).
-        phi, phid = violations(q, qd, t0)
-        A = np.zeros((n + m, n + m))
-        A[:n, :n] = problem.mass(q, t0)
-        Pq = np.asarray(problem.phi_q(q, t0), float).reshape(m, n)
-        A[:n, n:], A[n:, :n] = Pq.T, Pq
-        rhs = np.concatenate(
-            [
-                np.asarray(problem.force(q, qd, t0), float),
-                np.asarray(problem.h(q, qd, t0), float) - 2 * gamma * phid - kb * phi,
-            ]
-        )
-        try:
-            sol = np.linalg.solve(A, rhs)
-        except np.linalg.LinAlgError as exc:
-            raise NewtonConvergenceError(
-                f"singular augmented matrix for the initial accelerations at "
-                f"t = {t0:g} s (dependent constraints?)"
-            ) from exc
-        qdd, lam = sol[:n], sol[n:]
-        Q[0], QD[0], QDD[0], LAM[0] = q, qd, qdd, lam
-        VP[0] = np.max(np.abs(phi), initial=0.0)
-        VV[0] = np.max(np.abs(phid), initial=0.0)
-
-        for k in range(1, n_steps + 1):
-            t = tgrid[k]
-            qi, qdi, qddi = q, qd, qdd
-            acc0 = -qdi / (alpha * dt) - (0.5 / alpha - 1.0) * qddi
-            vel0 = qdi + dt * (1.0 - delta) * qddi
-            fb_old = 2 * gamma * phid + kb * phi  # step-i violations (Eq 54)
-
-            def states(qn: Array) -> tuple[Array, Array]:
-                acc = c0 * (qn - qi) + acc0
-                return acc, vel0 + dt * delta * acc
-
-            def residual(z: Array) -> Array:
-                qn, ln = z[:n], z[n:]
-                acc, vel = states(qn)
-                Pq_ = np.asarray(problem.phi_q(qn, t), float).reshape(m, n)
-                r1 = (
-                    np.asarray(problem.mass(qn, t), float) @ acc
-                    + Pq_.T @ ln
-                    - np.asarray(problem.force(qn, vel, t), float)
-                )
-                if feedback == "explicit":
-                    fb = fb_old
-                else:
-                    p_, pd_ = violations(qn, vel, t)
-                    fb = 2 * gamma * pd_ + kb * p_
-                r2 = Pq_ @ acc - np.asarray(problem.h(qn, vel, t), float) + fb
-                return np.concatenate([r1, r2])
-
-            def newton_matrix(z: Array, r: Array) -> Array:
-                if use_fd:
-                    return _fd_jac(residual, z, r)
-                qn = z[:n]
-                acc, vel = states(qn)
-                J = np.zeros((n + m, n + m))
-                Pq_ = np.asarray(problem.phi_q(qn, t), float).reshape(m, n)
-                J[:n, :n] = (
-                    c0 * np.asarray(problem.mass(qn, t), float)
-                    - np.asarray(problem.force_q(qn, vel, t), float)
-                    - c1 * np.asarray(problem.force_qd(qn, vel, t), float)
-                )
-                J[:n, n:] = Pq_.T
-                hq = np.asarray(problem.h_q(qn, vel, t), float).reshape(m, n)
-                hqd = np.asarray(problem.h_qd(qn, vel, t), float).reshape(m, n)
-                J[n:, :n] = c0 * Pq_ - hq - c1 * hqd
-                if feedback == "implicit":  # d(Phidot)/dq at fixed qd equals -h_qd / 2
-                    J[n:, :n] += 2 * gamma * (c1 * Pq_ - 0.5 * hqd) + kb * Pq_
-                return J
-
-            # Predictor: constant-acceleration guess, then Newton on (q, lam).
-            z = np.concatenate([qi + dt * qdi + 0.5 * dt * dt * qddi, lam])
-            its, converged, size = 0, False, np.inf
-            while its < max_iterations:
-                its += 1
-                r = residual(z)
-                try:
-                    dz = np.linalg.solve(newton_matrix(z, r), -r)
-                except np.linalg.LinAlgError as exc:
-                    raise NewtonConvergenceError(
-                        f"singular Newton matrix at step {k} (t = {t:.6g} s, dt = {dt:.3g} s)"
-                    ) from exc
-                z = z + dz
-                size = np.max(np.abs(dz[:n]))
-                if not np.all(np.isfinite(z)):
-                    break
-                if problem.linear and not use_fd:
-                    converged = True
-                    break
-                if size <= newton_tol * (1.0 + np.max(np.abs(z[:n]))):
-                    converged = True
-                    break
-            if not converged:
-                raise NewtonConvergenceError(
-                    f"Newton iteration did not converge at step {k} (t = {t:.6g} s, dt = "
-                    f"{dt:.3g} s) "
-                    f"after {its} iterations: max|dq| = {size:.3g}, tol = {newton_tol:.3g}"
-                )
-            q, lam = z[:n], z[n:]
-            qdd, qd = states(q)
-            phi, phid = violations(q, qd, t)
-            vp = np.max(np.abs(phi), initial=0.0)
-            vv = np.max(np.abs(phid), initial=0.0)
-            bad_v = max_velocity_violation is not None and not vv <= max_velocity_violation
-            if not (vp <= max_violation and np.isfinite(vv)) or bad_v or not np.all(np.isfinite(q)):
-                raise ConstraintViolationError(
-                    f"constraint violation grew without bound at step {k} (t = {t:.6g} s, "
-                    f"dt = {dt:.3g} s, gamma = {gamma:g}, beta = {beta:g}, form = "
-                    f"{baumgarte_form}, "
-                    f"feedback = {feedback}): max|Phi| = {vp:.3g} (bound {max_violation:g}), "
-                    f"max|Phidot| = {vv:.3g} (bound {max_velocity_violation})"
-                )
-            Q[k], QD[k], QDD[k], LAM[k], VP[k], VV[k], ITS[k] = q, qd, qdd, lam, vp, vv, its
-    wall = time.perf_counter() - start
-    return DAEResult(
-        t=tgrid,
-        q=Q,
-        qd=QD,
-        qdd=QDD,
-        lam=LAM,
-        phi_violation=VP,
-        phidot_violation=VV,
-        newton_iterations=ITS,
-        wall_time=wall,
-        dt=dt,
-        gamma=float(gamma),
-        beta=float(beta),
-        alpha=float(alpha),
-        delta=float(delta),
-    )
-
-
-def casadi_problem(
-    q: Any, qd: Any, t: Any, mass: Any, force: Any, phi: Any, *, linear: bool = False
-) -> DAEProblem:
-    """Build a :class:`DAEProblem` from CasADi symbols and expressions.
-
-    Parameters
-    ----------
-    q, qd, t
-        CasADi ``SX``/``MX`` symbols (n x 1, n x 1, scalar).
-    mass, force, phi
-        Expressions for ``M(q,t)`` (n x n), ``f(q,qd,t)`` (n x 1), ``Phi(q,t)`` (m x 1, m
-        may be 0).  ``Phi_q``, ``Phi_t``, ``h`` and all Newton tangents are derived by
-        automatic differentiation, so the model supplies only M, f and Phi.
-    """
-    import casadi as ca
-
-    n = int(q.numel())
-    m = int(phi.numel())
-    phi = ca.reshape(phi, m, 1)
-    phi_q = ca.jacobian(phi, q)
-    phi_t = ca.jacobian(phi, t)
-    phidot = ca.mtimes(phi_q, qd) + phi_t
-    h = -(ca.mtimes(ca.jacobian(phidot, q), qd) + ca.jacobian(phidot, t))
-    funcs = {
-        "mass": ca.Function("M", [q, t], [mass]),
-        "phi": ca.Function("Phi", [q, t], [phi]),
-        "phi_q": ca.Function("Phi_q", [q, t], [phi_q]),
-        "phi_t": ca.Function("Phi_t", [q, t], [phi_t]),
-        "force": ca.Function("f", [q, qd, t], [force]),
-        "force_q": ca.Function("f_q", [q, qd, t], [ca.jacobian(force, q)]),
-        "force_qd": ca.Function("f_qd", [q, qd, t], [ca.jacobian(force, qd)]),
-        "h": ca.Function("h", [q, qd, t], [h]),
-        "h_q": ca.Function("h_q", [q, qd, t], [ca.jacobian(h, q)]),
-        "h_qd": ca.Function("h_qd", [q, qd, t], [ca.jacobian(h, qd)]),
-    }
-    shapes = {
-        "mass": (n, n),
-        "phi": (m,),
-        "phi_q": (m, n),
-        "phi_t": (m,),
-        "force": (n,),
-        "force_q": (n, n),
-        "force_qd": (n, n),
-        "h": (m,),
-        "h_q": (m, n),
-        "h_qd": (m, n),
-    }
-
-    def wrap(name: str) -> Callable[..., Array]:
-        fun, shape = funcs[name], shapes[name]
-        return lambda *args: np.asarray(fun(*args).full(), dtype=float).reshape(shape)
-
-    return DAEProblem(n_q=n, n_c=m, linear=linear, **{k: wrap(k) for k in funcs})

@@ -1,5 +1,6 @@
-"""Revolute-prismatic arm: a flexible link sliding through a rotating rigid housing (Pan et al.
-1990, Figs 1, 4).
+"""Revolute-prismatic arm: a flexible link sliding in a turning rigid housing (Pan et al. 1990).
+
+The arm of Pan et al.'s Figs 1 and 4.
 
 Geometry
     Joint 1 (revolute, at the origin) turns a rigid housing by ``theta(t)``.  The
@@ -60,8 +61,9 @@ Full coupling (Eq 43: prescribed torque and force, ``theta`` and ``W`` unknowns)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -69,6 +71,7 @@ from numpy.typing import ArrayLike, NDArray
 from flexctrl.dynamics.fem.moving_frame import (
     ENDS,
     FrameLink,
+    NumOrSym,
     RPMotion,
     check_elements,
     is_symbolic,
@@ -83,7 +86,7 @@ INITIAL = ("rest", "static_load")
 
 
 class RPArmModel:
-    """FE model of the sliding link in the rotating housing; :meth:`problem` gives the :class:`DAEProblem`."""
+    """FE model of the sliding link in the turning housing; :meth:`problem` gives its DAE."""
 
     def __init__(
         self,
@@ -102,8 +105,7 @@ class RPArmModel:
         if spec.joint == "clamped" and driven_end != "E":
             raise SpecError(
                 f"value {driven_end!r} is not allowed with joint = 'clamped'; allowed: 'E' (the "
-                "link "
-                "is clamped in the carriage that drives it)",
+                "link is clamped in the carriage that drives it)",
                 key="driven_end",
             )
         self.spec, self.motion, self.n = spec, motion, int(n_elements)
@@ -124,13 +126,17 @@ class RPArmModel:
         self._cache_t: float | None = None
 
     # -- rigid motion -------------------------------------------------------------------
-    def rigid(self, t: float) -> dict[str, float]:
-        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity components in the
-        frame
-        (CasADi expressions for a symbolic ``t``)."""
+    def rigid(self, t: NumOrSym) -> dict[str, NumOrSym]:
+        """``r_E`` and its rates (m, m/s, m/s^2), ``theta`` and its rates, gravity in the frame.
+
+        CasADi expressions for a symbolic ``t``.
+        """
         m, s = self.motion, self.spec
+        val: Callable[[Any], Any]
+        cos: Callable[[Any], Any]
+        sin: Callable[[Any], Any]
         if is_symbolic(t):
-            import casadi as ca
+            import casadi as ca  # lazily: the numpy models never need CasADi
 
             val, cos, sin = (lambda v: v), ca.cos, ca.sin
         else:
@@ -160,7 +166,8 @@ class RPArmModel:
 
     def support_positions(self, t: float) -> tuple[Array, Array, Array]:
         """Material positions of the constraint points (m) and their first/second time derivatives
-        (the two supports; with ``joint = "clamped"`` E twice, for ``w`` and ``w'``, then the mouth)."""
+        (the two supports; with ``joint = "clamped"`` E twice, for ``w`` and ``w'``, then the
+        mouth)."""
         m = self.motion
         v = np.asarray(self.rows.rates)
         return self.rows.points(float(m.W(t))), v * float(m.Wd(t)), v * float(m.Wdd(t))
@@ -176,7 +183,8 @@ class RPArmModel:
 
     def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
         """Static deflection under a transverse force ``tip_force`` (N) at H with the constraints of
-        time ``t`` and no frame loads: ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``; returns ``(q, lam)``."""
+        time ``t`` and no frame loads: ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``; returns
+        ``(q, lam)``."""
         f = np.zeros(self.ndof)
         f[self.tip] = tip_force
         return self._constrained_static(f, t)
@@ -231,9 +239,11 @@ class RPArmModel:
         tip_deflection: float = 0.01,
         tracked_end: Literal["E", "H"] = "H",
     ) -> Array:
-        """Initial nodal values: zero (``"rest"``), or the static deflection under a uniform load
-        with
-        the t = 0 supports, scaled so that ``tracked_end`` deflects ``tip_deflection`` (m)."""
+        """Initial nodal values: zero (``"rest"``), or a static deflection.
+
+        The deflection under a uniform load with the t = 0 supports, scaled so that
+        ``tracked_end`` deflects ``tip_deflection`` (m).
+        """
         if kind == "rest":
             return np.zeros(self.ndof)
         if kind != "static_load":
@@ -246,7 +256,7 @@ class RPArmModel:
         return q * (tip_deflection / q[dof])
 
     def vibration_energy(self, q: Array, qd: Array) -> float:
-        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy relative to the frame plus strain energy."""
+        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy in the frame plus strain energy."""
         return 0.5 * float(qd @ self.M @ qd) + 0.5 * float(q @ self.K @ q)
 
 

@@ -1,5 +1,4 @@
-"""Revolute-prismatic arm, full coupling (Pan et al. 1990, Eq 43): ``theta`` and ``W`` among the
-unknowns.
+"""Revolute-prismatic arm, full coupling (Pan et al. 1990, Eq 43): ``theta``, ``W`` are unknowns.
 
 The arm, its geometry and the prescribed-motion model (partial coupling, Eq 42) are described in
 :mod:`flexctrl.dynamics.fem.rp_arm`; the description is
@@ -27,10 +26,10 @@ Equations (:class:`RPArmFullModel`, :func:`simulate_rp_arm_full`)
     ``K_g`` included (the ``- W' qd.Gs q`` and ``- theta'^2 ... Gs`` terms produce it), which a test
     checks; unlike Pan's ``K_g`` with the nominal axial force, the shortening here stays a
     conservative part of ``T``, so ``M`` is symmetric and the free arm conserves ``T + V``.  The
-    supports ``w(L - W - d_k) = 0`` now depend on the unknown ``W``: ``Phi_z = (R0, 0, -R1 q)``, ``h
-    = 2 W' R1 qd - W'^2 R2 q``. With Pan's Fig 4 joint (``spec.joint = "clamped"``) the rows are
-    ``w(0) = w'(0) = 0`` (fixed on the link, Eqs 22-23) and the mouth bearing ``w(L - W) = 0`` (Eq
-    24).
+    supports ``w(L - W - d_k) = 0`` now depend on the unknown ``W``: ``Phi_z = (R0, 0, -R1 q)``,
+    ``h = 2 W' R1 qd - W'^2 R2 q``.  With Pan's Fig 4 joint (``spec.joint = "clamped"``) the rows
+    are ``w(0) = w'(0) = 0`` (fixed on the link, Eqs 22-23) and the mouth bearing ``w(L - W) = 0``
+    (Eq 24).
 
 The Lagrangian pieces, the constraint algebra and the runner are shared with the telescoping pair
 (:mod:`flexctrl.dynamics.fem.full_coupling`).
@@ -59,6 +58,7 @@ from flexctrl.dynamics.fem.moving_frame import (
     check_elements,
     prismatic_rows,
 )
+from flexctrl.dynamics.fem.newmark_dae import DAEResult
 from flexctrl.errors import SimulationError, SpecError
 from flexctrl.spec.fem_models import RPArmSpec
 
@@ -88,7 +88,7 @@ class RPArmFullModel(SlidingFullModel):
         *,
         axial_shortening: bool = True,
     ):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         check_elements(n_elements)
         if not isinstance(drive, (RPForces, RPMotion)):
@@ -99,11 +99,11 @@ class RPArmFullModel(SlidingFullModel):
         self.axial_shortening = bool(axial_shortening)
         s, L = spec, spec.length
         motion_driven = isinstance(drive, RPMotion)
-        W0 = float(drive.W(0.0)) if motion_driven else float(drive.W0)
+        W0 = float(drive.W(0.0)) if isinstance(drive, RPMotion) else float(drive.W0)
         if not 0.0 <= W0 <= L - s.D:
             raise SpecError(
-                f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = [0, "
-                f"{L - s.D:g}] m",
+                f"value W(0) = {W0!r} m is not allowed; allowed: within [0, L - D] = "
+                f"[0, {L - s.D:g}] m",
                 key="W0" if not motion_driven else "C1",
             )
         link = FrameLink(self.n, L, s.mass_per_length, s.EI)
@@ -128,6 +128,7 @@ class RPArmFullModel(SlidingFullModel):
         self._build(z, zd, T, V)
 
     def check_W(self, W: float, t: float) -> None:
+        """Raise :class:`SimulationError` when the overhang ``W`` (m) leaves the stroke at ``t``."""
         s = self.spec
         if not -1e-12 <= W <= s.length - s.D + 1e-12:
             raise SimulationError(
@@ -142,7 +143,7 @@ class RPArmFullModel(SlidingFullModel):
         return [(self.rows.at(W, self.n, s.length), np.asarray(self.rows.rates))]
 
     def support_rows(self, W: float, t: float = math.nan) -> Array:
-        """``R[d, k]``: rows of the ``d``-th derivative (``d = 0..3``) of the constraint functions at ``W``."""
+        """``R[d, k]``: rows of the constraints' ``d``-th derivative (``d = 0..3``) at ``W``."""
         return self.contact_parts(W, t)[0][0]
 
 
@@ -196,7 +197,7 @@ def simulate_rp_arm_full(
         Newton stopping rule of :func:`flexctrl.dynamics.fem.newmark_dae.simulate`.
     initial_q
         Initial nodal values (m, rad), e.g.
-        :meth:`flexctrl.dynamics.fem.rp_arm.RPArmModel.initial_shape`; default undeformed. Must
+        :meth:`flexctrl.dynamics.fem.rp_arm.RPArmModel.initial_shape`; default undeformed.  Must
         satisfy the constraints (checked, 1e-9 m).  If the link slides (``Wd0 != 0``) the nodal
         velocities start as the smallest (mass-weighted) ones that keep the supports at rest on the
         deflected link, ``w_t(x_k) = W' w'(x_k)``, so that ``Phidot = 0``.
@@ -225,6 +226,20 @@ def simulate_rp_arm_full(
         newton_tol=newton_tol,
         max_iterations=max_iterations,
     )
+    return _result(spec, model, res, (torque, force), (vp, vv), tracked_end)
+
+
+def _result(
+    spec: RPArmSpec,
+    model: RPArmFullModel,
+    res: DAEResult,
+    inputs: tuple[Array, Array],
+    violations: tuple[Array, Array],
+    tracked_end: str,
+) -> RPArmFullResult:
+    """The run ``res`` of ``model`` as an :class:`RPArmFullResult` (the tip in the world frame)."""
+    torque, force = inputs
+    vp, vv = violations
     ne, ith, iW = model.ne, model.ith, model.iW
     theta, W = res.q[:, ith], res.q[:, iW]
     radius = spec.support_outer + W

@@ -139,7 +139,7 @@ class SlidingBeamModel:
         return (np.array([c.L - c.D - W, c.L - W]), np.array([-Wd, -Wd]), np.array([-Wdd, -Wdd]))
 
     def _rows(self, t: float) -> tuple[Array, Array, Array, Array, Array, Array]:
-        """Rows of w, w', w'' at the supports, support speeds/accelerations, K + K_g (cached per t)."""
+        """Rows of w, w', w'' at the supports, their speeds and accelerations, K + K_g (per t)."""
         if self._cache_t != t:
             xs, xsd, xsdd = self.support_positions(t)
             R = np.zeros((3, 2, self.ndof))

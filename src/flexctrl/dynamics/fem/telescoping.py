@@ -1,5 +1,6 @@
-"""Telescoping prismatic joint: two flexible links sliding on each other (Pan et al. 1990, Fig 5,
-Eqs 26-28).
+"""Telescoping prismatic joint: two flexible links sliding on each other (Pan et al. 1990).
+
+Pan et al.'s Fig 5 and Eqs 26-28.
 
 Geometry
     Joint 1 (revolute, at the origin) turns the pair by ``theta(t)``.  The *outer* link (a
@@ -129,11 +130,13 @@ class TelescopingModel:
         return outer, inner
 
     def contact_rows(self, t: float) -> tuple[Array, Array, Array]:
-        """``(R, xd, xdd)``: ``R[d]`` (rows x ndof) the derivative-``d`` rows of ``w1(x1_k) -
-        w2(x2_k)`` (or of the slopes for slope rows) for ``d = 0, 1, 2`` (derivatives along the
-        links), and the sliding speeds/accelerations of the contact points along the outer (column
-        0) and inner
-        (column 1) link (m/s, m/s^2)."""
+        """``(R, xd, xdd)``: the contact rows and the contact points' sliding speeds, accelerations.
+
+        ``R[d]`` (rows x ndof) are the derivative-``d`` rows of ``w1(x1_k) - w2(x2_k)`` (or of the
+        slopes for slope rows) for ``d = 0, 1, 2`` (derivatives along the links); ``xd`` and
+        ``xdd`` the contact points' speeds and accelerations along the outer (column 0) and inner
+        (column 1) link (m/s, m/s^2).
+        """
         sp = self.spec
         x1, x2 = sp.contact_points(self.s(t))
         Wd, Wdd = float(self.motion.Wd(t)), float(self.motion.Wdd(t))
@@ -198,9 +201,11 @@ class TelescopingModel:
         )
 
     def static(self, tip_force: float, t: float = 0.0) -> tuple[Array, Array]:
-        """Static deflection under a transverse force (N) at the inner tip H, contacts at time
-        ``t``,
-        no frame loads: solves ``K q + Phi_q^T lam = f``, ``Phi_q q = 0``.  Returns ``(q, lam)``."""
+        """Static deflection ``(q, lam)`` under a transverse force (N) at the inner tip H.
+
+        The contacts at time ``t``, no frame loads: solves ``K q + Phi_q^T lam = f``,
+        ``Phi_q q = 0``.
+        """
         A = self._terms(t)[0]
         n, m = self.ndof, self.n_c
         S = np.zeros((n + m, n + m))
@@ -218,7 +223,7 @@ class TelescopingModel:
         return sol[:n], sol[n:]
 
     def vibration_energy(self, q: Array, qd: Array) -> float:
-        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy relative to the frames plus strain energy."""
+        """``1/2 qd^T M qd + 1/2 q^T K q`` (J): kinetic energy in the frames plus strain energy."""
         return 0.5 * float(qd @ self.M @ qd) + 0.5 * float(q @ self.K @ q)
 
 
@@ -236,6 +241,20 @@ def static_tip_deflection(spec: TelescopingSpec, s: float, P: float) -> float:
     * one contact with slope (Pan's literal Eqs 26-28) at the mouth: tube cantilever with tip
       force ``P`` and moment ``P c``, inner overhang cantilevered from it:
       ``w1(L1) + w1'(L1) c + P c^3 / (3 EI2)``.
+
+    Parameters
+    ----------
+    spec : TelescopingSpec
+        The pair and its contact layout.
+    s : float
+        Tube coordinate of the inner link's end E, m.
+    P : float
+        Tip force, N.
+
+    Returns
+    -------
+    float
+        Tip deflection, m.
     """
     L1, L2, EI1, EI2 = spec.outer.length, spec.inner.length, spec.outer.EI, spec.inner.EI
     a = L1 - s

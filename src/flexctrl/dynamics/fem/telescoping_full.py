@@ -42,7 +42,10 @@ Array = NDArray[np.float64]
 
 
 class TelescopingFullModel(SlidingFullModel):
-    """The telescoping pair with ``theta`` and ``W`` unknown; ``drive`` an :class:`RPForces` or :class:`RPMotion`."""
+    """The telescoping pair with ``theta`` and ``W`` unknown.
+
+    ``drive`` is an :class:`RPForces` or an :class:`RPMotion`.
+    """
 
     def __init__(
         self,
@@ -53,7 +56,7 @@ class TelescopingFullModel(SlidingFullModel):
         *,
         axial_shortening: bool = True,
     ):
-        import casadi as ca
+        import casadi as ca  # lazily: the numpy models never need CasADi
 
         check_elements(n_outer, "n_outer")
         check_elements(n_inner, "n_inner")
@@ -103,6 +106,7 @@ class TelescopingFullModel(SlidingFullModel):
         self._build(z, zd, T, V)
 
     def check_W(self, W: float, t: float) -> None:
+        """Raise :class:`SimulationError` when the overhang ``W`` (m) leaves the stroke at ``t``."""
         try:
             self.spec.check_stroke([self.ds + W], key="W")
         except SpecError as exc:
@@ -147,8 +151,7 @@ def simulate_telescoping_full(
     newton_tol: float = 1e-10,
     max_iterations: int = 30,
 ) -> TelescopingFullResult:
-    """Simulate the fully coupled telescoping pair with Newmark + Baumgarte (links start
-    undeformed).
+    """Simulate the fully coupled telescoping pair by Newmark + Baumgarte, from undeformed links.
 
     Parameters as :func:`flexctrl.dynamics.fem.rp_arm_full.simulate_rp_arm_full`; ``n_outer``,
     ``n_inner`` the elements per link.
