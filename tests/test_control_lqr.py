@@ -38,7 +38,8 @@ def op3(arm3):
 
 @pytest.fixture(scope="module")
 def plant3(arm3):
-    """Nonlinear sampled plant: RK4 over one 10 ms sample, 30 substeps (omega h < 0.7 for the stiffest mode).
+    """Nonlinear sampled plant: RK4 over one 10 ms sample, 30 substeps (omega h < 0.7 for the
+    stiffest mode).
 
     Fewer substeps (9 is the RK4 stability bound) distort the 200-330 Hz modes enough to
     break the LQG estimator, whose model has them exact and undamped.
@@ -131,7 +132,8 @@ def test_measurement_of_wrong_size_is_rejected(arm3, op3):
 
 
 def test_gain_schedule_reproduces_node_gains_and_interpolates(arm3, op3):
-    # nodes whose holding torques the limits allow (at q2 = -30 deg joint 2 would need 110 N m > 100: design refuses it)
+    # nodes whose holding torques the limits allow (at q2 = -30 deg joint 2 would need 110 N m >
+    # 100: design refuses it)
     grid = (math.radians(-20.0), math.radians(-10.0), math.radians(10.0))
     settings = LQRSettings(schedule=ScheduleSettings(joints=(2,), grid=(grid,)))
     ctrl = design(arm3, op3, settings)

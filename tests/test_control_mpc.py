@@ -198,7 +198,8 @@ def test_sparsity_never_changes_between_steps(arm3, op3):
 
 @pytest.mark.parametrize("formulation, backend", [("sparse", "osqp"), ("condensed", "qpoases")])
 def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formulation, backend):
-    # A study reuses a design across runs and resets it: the solver's own state (OSQP's last iterates and
+    # A study reuses a design across runs and resets it: the solver's own state (OSQP's last
+    # iterates and
     # adapted rho, qpOASES's working set) must not carry one run into the next.
     ctrl = design(arm3, op3, MPCSettings(formulation=formulation, backend=backend))
     dx0 = np.r_[np.radians([-8.0, 3.0, 2.0]), np.zeros(15)]

@@ -78,9 +78,8 @@ def test_rti_closed_loop_reaches_the_target_within_torque_limits(onelink):
 
 def test_qp_failure_falls_back_to_the_shifted_plan_then_lqr(onelink):
     model, op = onelink
-    ctrl = design_nmpc(
-        model, op, NMPCSettings(**SMALL), screen=False
-    )  # the whole QP, the one made to fail
+    ctrl = design_nmpc(model, op, NMPCSettings(**SMALL))
+    ctrl.screen = False  # always the whole QP: the one made to fail
     ctrl.reset()
     x = op.x.copy()
     x[0] -= 0.05
@@ -127,7 +126,8 @@ def test_auto_substeps_respect_the_rk4_bound(onelink):
 
 @pytest.mark.slow
 def test_rti_on_the_three_link_arm_converges_without_fallbacks():
-    # the step time is a benchmark figure (`flexctrl bench mpc`), not a timed test: this machine is shared
+    # the step time is a benchmark figure (`flexctrl bench mpc`), not a timed test: this machine is
+    # shared
     from flexctrl.scenes.model_files import load_model
 
     model = load_model("models/subedi3link.toml", fidelity="amm:2")
@@ -153,7 +153,7 @@ def test_compiled_linearization_is_independent_of_the_operating_point_and_the_mo
     (A payload mass of 0 or of a value CasADi keeps as a shared constant, 0.5 here, changes the
     structure; a stiffer link and another payload inertia do not.)
     """
-    from flexctrl.control.nmpc.controller import constants_as_parameters
+    from flexctrl.dynamics.parametric import constants_as_parameters
 
     model, op = onelink
     fp, const = constants_as_parameters(model.functions["f"])
@@ -237,7 +237,8 @@ def test_non_finite_qp_data_and_qp_exceptions_fall_back_and_reset_the_warm_start
 
 def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     """Payload 0, q0 = (0, -150, -30) deg, 30 deg step of joint 1: the RTI with one Jacobian per
-    sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or one per
+    sample at its start diverged and HPIPM aborted on NaN bounds; with one Jacobian per RK4 step, or
+    one per
     sample at its middle node (controllers/nmpc.toml now), NMPC settles."""
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
@@ -260,8 +261,10 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
 
 
 def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
-    # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of consecutive
-    # samples: every variant has its own plant and is reset, so the order may change the times, not the runs
+    # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of
+    # consecutive
+    # samples: every variant has its own plant and is reset, so the order may change the times, not
+    # the runs
     from flexctrl.bench.mpc_step import _run_nmpcs
 
     model, op = onelink

@@ -32,7 +32,8 @@ def test_zv_and_zvd_match_the_analytic_formulas(f, zeta):
 
 
 def oscillator_after(shaper: Shaper, f: float, zeta: float) -> np.ndarray:
-    """State (x - 1, xd) of x'' + 2 zeta w x' + w^2 x = w^2 r(t) right after the last impulse of the shaped unit step.
+    """State (x - 1, xd) of x'' + 2 zeta w x' + w^2 x = w^2 r(t) right after the last impulse of the
+    shaped unit step.
 
     Exact: the reference is constant between impulses, so each segment is a matrix exponential.
     """

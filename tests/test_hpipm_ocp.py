@@ -81,7 +81,8 @@ def test_direct_hpipm_solves_the_unbounded_qp_as_its_kkt_system_does():
     K = np.block([[H, F.T], [F, np.zeros((F.shape[0], F.shape[0]))]])
     exact = np.linalg.solve(K, np.r_[-g, f])[:nw]
     # bounds far from the optimum (|u| < 2 here) but not huge: with +-1e6 the complementarity of the
-    # inactive bounds stops short of 1e-11 (HPIPM reports MAX_ITER), an interior point's limit, not the data's
+    # inactive bounds stops short of 1e-11 (HPIPM reports MAX_ITER), an interior point's limit, not
+    # the data's
     w, stats = _direct(*data, bound=1e3)
     assert np.abs(exact).max() < 1e2
     assert stats["success"] and stats["return_status"] == "SUCCESS"

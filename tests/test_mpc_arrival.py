@@ -10,7 +10,8 @@ from support import DATA
 
 import flexctrl as fc
 from flexctrl.control.mpc.arrival_search import shortest_arrival
-from flexctrl.control.mpc.qp import ScaledProblem, condensed_qp
+from flexctrl.control.mpc.problem import ScaledProblem
+from flexctrl.control.mpc.qp import condensed_qp
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import MPCSettings
@@ -50,7 +51,8 @@ def double_integrator(
 @pytest.mark.parametrize("angle", [0.2, 0.5, 1.0])
 @pytest.mark.parametrize("stride", [1, 4])
 def test_shortest_arrival_is_the_bang_bang_time(angle, stride):
-    # accelerate at full torque for half the time, brake for the other half: t* = 2 sqrt(angle I / tau)
+    # accelerate at full torque for half the time, brake for the other half: t* = 2 sqrt(angle I /
+    # tau)
     inertia, torque, Ts = 2.0, 1.0, 0.02
     t_star = 2.0 * math.sqrt(angle * inertia / torque)
     pb = double_integrator(inertia, torque, Ts, horizon=int(1.5 * t_star / Ts) + 10, band=1e-5)

@@ -1,4 +1,5 @@
-"""One interval Jacobian per group of shooting intervals (``stages_per_jacobian``), against one per interval.
+"""One interval Jacobian per group of shooting intervals (``stages_per_jacobian``), against one per
+interval.
 
 The grouped linearisation must give every interval its own nonlinear shooting end and, for
 its sensitivities, exactly those of the group's middle interval; the RTI built on it keeps

@@ -110,7 +110,8 @@ def test_reduced_warm_started_nmpc_regulates_the_full_arm_like_the_cold_one(arms
     assert (
         cold.substeps == warm.substeps == 2 and cold.problem.n == 12
     )  # the first modes need 2 RK4 steps
-    # the prediction's own equilibrium: the same joints, nearly the design model's first-mode deflections
+    # the prediction's own equilibrium: the same joints, nearly the design model's first-mode
+    # deflections
     np.testing.assert_array_equal(cold.pred_op.x[:3], op.x[:3])
     assert np.max(np.abs(cold.pred_op.x - op.x[cold.keep])) < 1e-3
     F, _ = interval_functions(two, 0.01, 9, None)  # the plant: the whole 18-state arm

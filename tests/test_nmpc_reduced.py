@@ -49,7 +49,8 @@ def _gain_on_design_state(ctrl):
 
 
 def test_coupled_basis_keeps_the_slowest_frequencies_the_assumed_modes_do_not(reduced_setups):
-    # undamped frequencies of the linearisations at the target (the damping, zeta per assumed mode, is not
+    # undamped frequencies of the linearisations at the target (the damping, zeta per assumed mode,
+    # is not
     # proportional to the coupled modes, so the damped eigenvalues differ by ~0.2 %)
     def frequencies(ctrl, model, x_op):
         n = model.n_q
@@ -88,7 +89,8 @@ def test_modal_map_removes_the_fast_modes_and_keeps_the_slow_ones():
 
 
 def test_modal_map_is_what_keeps_the_tuned_reduced_loop_stable(reduced_setups):
-    # the sampled state-feedback loop of the 18-state arm under the reduced design's gain, about the target
+    # the sampled state-feedback loop of the 18-state arm under the reduced design's gain, about the
+    # target
     radius = {}
     for name, setup in reduced_setups.items():
         c = setup.controller
@@ -172,7 +174,8 @@ def test_reduced_prediction_settings_are_checked():
 
 
 def test_one_compiled_linearization_serves_every_configuration_of_the_reduced_prediction():
-    # the coupled basis's values coincide with other constants at some configurations; lifted per use,
+    # the coupled basis's values coincide with other constants at some configurations; lifted per
+    # use,
     # the generated code (its cache key) is the same at the straight and the folded arm
     from flexctrl.sim.compile import cache_key
 
@@ -190,7 +193,8 @@ def test_one_compiled_linearization_serves_every_configuration_of_the_reduced_pr
 
 def test_a_configuration_of_the_same_structure_reuses_the_linearization_and_gets_the_same_numbers():
     # the horizon linearisation is memoised by the content of the lifted f and the recipe: a second
-    # configuration reuses it; built afresh (memo emptied) it gives the same shooting ends and Jacobians
+    # configuration reuses it; built afresh (memo emptied) it gives the same shooting ends and
+    # Jacobians
     from flexctrl.control.nmpc import interval as nmpc_interval
 
     def setup(q):

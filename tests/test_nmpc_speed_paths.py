@@ -1,4 +1,5 @@
-"""The NMPC's cheaper samples, each against the path it replaced: midpoint sensitivities, bound calls, the screened QP."""
+"""The NMPC's sample: midpoint sensitivities against exact ones, the screened QP against the
+whole QP, HPIPM called directly against casadi.conic's, the bound buffers."""
 
 from __future__ import annotations
 
@@ -6,7 +7,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from flexctrl.control.nmpc.calls import BoundRTICalls
 from flexctrl.control.nmpc.controller import design_nmpc, interval_functions
+from flexctrl.control.nmpc.screened_qp import ScreenedQP
 from flexctrl.sim.bound import BoundFunction
 from flexctrl.spec.controller_settings import NMPCSettings
 
@@ -25,8 +28,10 @@ def _transition_error(model, x, u, dt, recipe, every=1):
 
 
 def test_midpoint_sensitivities_are_third_order_in_the_sample_time_the_start_point_second(onelink):
-    # one Jacobian per interval (2 RK4 steps): at its start the transition A = dx_next/dx is wrong by
-    # O(h^2) (J' h^2 / 2), at its middle node by O(h^3) (the midpoint rule); halving the sample divides
+    # one Jacobian per interval (2 RK4 steps): at its start the transition A = dx_next/dx is wrong
+    # by
+    # O(h^2) (J' h^2 / 2), at its middle node by O(h^3) (the midpoint rule); halving the sample
+    # divides
     # the errors by ~4 and ~8 (measured 3.8 and 9.7 at 1 -> 0.5 ms)
     model, op = onelink
     x = op.x + np.array([-0.4, 0.01, 3.0, -2.0])
@@ -41,9 +46,25 @@ def test_midpoint_sensitivities_are_third_order_in_the_sample_time_the_start_poi
     assert mid < per_step
 
 
-def _closed_loop(model, op, samples=40, limit=0.02, **design_args):
+def _closed_loop(model, op, samples=40, limit=0.02, screen=True, direct=True):
+    """The NMPC's torques over ``samples`` of a closed loop; ``screen=False`` always solves the
+    whole QP, ``direct=False`` solves the screened QP through ``casadi.conic``."""
     settings = NMPCSettings(sensitivities="midpoint", **{**SMALL, "deflection_limit": limit})
-    ctrl = design_nmpc(model, op, settings, **design_args)
+    ctrl = design_nmpc(model, op, settings)
+    ctrl.screen = ctrl.screen and screen
+    if ctrl.screen and not direct:
+        fn, pb = ctrl.functions, ctrl.problem
+        qp = ScreenedQP(
+            ctrl.layout,
+            fn["Hnp"].toarray(),
+            fn["prepare"].sparsity_out(0),
+            pb.C,
+            pb.c_lo,
+            pb.c_hi,
+            ctrl.settings.qp_warm_start,
+            direct=False,
+        )
+        ctrl._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], qp)
     F, _ = interval_functions(model, ctrl.sample_time, 4, None)
     x = op.x.copy()
     x[0] -= 0.3  # saturates the torque and bends the link past the deflection limit
@@ -54,15 +75,6 @@ def _closed_loop(model, op, samples=40, limit=0.02, **design_args):
         U.append(u)
         x = np.asarray(F(x, u), dtype=float).ravel()
     return np.array(U), ctrl
-
-
-def test_bound_calls_give_the_dm_calls_numbers_to_the_bit(onelink):
-    model, op = onelink
-    # (with the soft rows binding: a buffer kept between solves would warm-start HPIPM's multipliers)
-    bound, ctrl = _closed_loop(*onelink, limit=LIMIT, bound_calls=True, screen=False)
-    plain, _ = _closed_loop(*onelink, limit=LIMIT, bound_calls=False)
-    assert ctrl.stats.summary()["fallbacks"] == 0
-    np.testing.assert_array_equal(bound, plain)
 
 
 def test_the_screened_qp_gives_the_whole_qps_optimum_and_declines_when_a_limit_binds(onelink):
@@ -96,14 +108,15 @@ def test_a_bound_function_shares_arrays_and_renews_its_memory_on_request():
 
 
 def test_the_screened_qp_through_hpipm_directly_gives_casadi_conics_optimum(onelink):
-    direct, ctrl = _closed_loop(*onelink, limit=LIMIT, direct_qp=True)
-    conic, other = _closed_loop(*onelink, limit=LIMIT, direct_qp=False)
+    direct, ctrl = _closed_loop(*onelink, limit=LIMIT)
+    conic, other = _closed_loop(*onelink, limit=LIMIT, direct=False)
     calls, slow = ctrl._calls(), other._calls()
     assert calls.screen.backend == "hpipm (direct)" and slow.screen.backend == "casadi.conic hpipm"
     # the same samples are screened (the soft rows bind in the transient, then hold) and none fails
     assert 0 < calls.screened == slow.screened < calls.solves
     assert ctrl.stats.summary()["fallbacks"] == other.stats.summary()["fallbacks"] == 0
-    # one optimum to the interior point's tolerance: HPIPM sees no +-1e8 state boxes here, so other iterates
+    # one optimum to the interior point's tolerance: HPIPM sees no +-1e8 state boxes here, so other
+    # iterates
     np.testing.assert_allclose(direct, conic, rtol=0, atol=1e-5 * 15.0)
     assert not np.array_equal(direct, conic)  # really the other path
 

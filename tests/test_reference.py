@@ -83,7 +83,8 @@ def test_reference_state_is_consistent_with_the_model(request, model_name):
     _q, _qd, qdd = path.derivatives(t)
     np.testing.assert_allclose(acc[:, : model.n_u], qdd, atol=1e-7 * np.max(np.abs(qdd)))
     assert np.max(np.abs(acc[:, model.n_u :])) < 1e-6 * np.max(np.abs(qdd))
-    # u_static is the holding torque of the static equilibrium at q_ref (equilibrium() independently)
+    # u_static is the holding torque of the static equilibrium at q_ref (equilibrium()
+    # independently)
     for i in (0, 30, 60):
         op = equilibrium(model, X[i, : model.n_u])
         np.testing.assert_allclose(Us[i], op.u, atol=1e-8 * max(1.0, np.max(np.abs(op.u))))
@@ -103,7 +104,8 @@ def test_quasi_static_rates_match_finite_differences_of_the_deflection(horizonta
     X = ref.evaluate(t)[0]
     fd = (ref.evaluate(t + h)[0] - ref.evaluate(t - h)[0]) / (2 * h)
     # qd_f* is the implicit-function derivative with the elastic accelerations neglected in the
-    # rates' own time derivative (the quasi-static assumption): 1e-3 of its scale bounds that term here
+    # rates' own time derivative (the quasi-static assumption): 1e-3 of its scale bounds that term
+    # here
     np.testing.assert_allclose(fd[:, n:N], X[:, N + n :], atol=1e-3 * np.max(np.abs(X[:, N + n :])))
     np.testing.assert_allclose(fd[:, :n], X[:, N : N + n], atol=1e-7)
 

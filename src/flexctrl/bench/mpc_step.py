@@ -15,7 +15,8 @@ records the CPU count and load average.
 
 Example
 -------
-``python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; print(json.dumps(mpc_benchmark(), indent=1))"``
+``python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json;
+print(json.dumps(mpc_benchmark(), indent=1))"``
 """
 
 from __future__ import annotations
@@ -149,35 +150,22 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
-#: NMPC variant keys that are arguments of :func:`~flexctrl.control.nmpc.controller.design_nmpc`, not settings.
-DESIGN_ARGUMENTS = ("jacobian", "bound_calls", "screen", "direct_qp")
-
-
 def default_nmpc_variants() -> dict[str, dict[str, Any]]:
-    """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`), stepped interleaved.
+    """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`),
+    stepped interleaved.
 
     ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
     per sample, at the middle RK4 node of the horizon's middle interval, held over the whole
-    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started from the shifted previous solution, the QP without
-    its soft rows tried first (through HPIPM called directly), the RTI's calls through bound buffers, predicting with the
-    joints and the three slowest coupled modes at the target, the estimate's fast modes
-    removed (12 states, 2 RK4 substeps).  Against it, one change each:
-    ``rti_frozen_per_interval`` one Jacobian per interval of the horizon (the setting before);
-    ``rti_frozen_conic_qp`` the QP without soft rows through ``casadi.conic`` (``direct_qp``, an
-    argument of ``design_nmpc``); ``rti_frozen_dm_calls`` the RTI's calls as before, through CasADi's DM conversions and
-    the whole QP every sample (``bound_calls``, an argument of ``design_nmpc``);
-    ``rti_frozen_whole_qp`` always the whole QP (``screen``, an argument of ``design_nmpc``;
-    the same optimum to the solver's tolerance); ``rti_frozen_per_step`` one Jacobian per
-    RK4 step at its start (``sensitivities = "frozen"``, the setting before the midpoint).
-    The others predict with the whole design model (18 states, 9 substeps):
-    ``rti_frozen_full`` the setting before (``controllers/nmpc_full.toml``);
-    ``rti_frozen_cold`` with HPIPM's default start; ``rti_frozen_factored`` with the
-    Jacobian of ``f`` through one factorisation of the mass matrix (the key ``jacobian`` is
-    an argument of :func:`~flexctrl.control.nmpc.controller.design_nmpc`, not a setting);
-    ``rti_exact`` cold with exact sensitivities; ``rti_frozen_every3`` one Jacobian of
-    ``f`` per three RK4 steps.  ``rti_first_modes`` predicts with the first assumed mode
-    of every link, the estimate selected (12 states, 2 substeps; destabilises the full arm
-    with the tuned weights).  ``docs/control.md``, "NMPC speed".
+    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started
+    from the shifted previous solution, predicting with the joints and the three slowest
+    coupled modes at the target, the estimate's fast modes removed (12 states, 2 RK4
+    substeps).  Against it, one setting changed each: ``rti_frozen_per_interval`` one Jacobian
+    per interval of the horizon; ``rti_frozen_per_step`` one Jacobian per RK4 step at its start
+    (``sensitivities = "frozen"``).  The others predict with the whole design model (18 states,
+    9 substeps): ``rti_frozen_full`` (``controllers/nmpc_full.toml``); ``rti_frozen_cold`` with
+    HPIPM's default start; ``rti_exact`` cold with exact sensitivities; ``rti_frozen_every3``
+    one Jacobian of ``f`` per three RK4 steps.  ``rti_first_modes`` predicts with the first
+    assumed mode of every link, the estimate selected (12 states, 2 substeps).
     """
     reduced = {"prediction_modes": 1, "qp_warm_start": True}
     per_interval = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
@@ -185,12 +173,8 @@ def default_nmpc_variants() -> dict[str, dict[str, Any]]:
     return {
         "rti_frozen": {**shipped, "sensitivities": "midpoint"},
         "rti_frozen_per_interval": {**per_interval, "sensitivities": "midpoint"},
-        "rti_frozen_conic_qp": {**shipped, "sensitivities": "midpoint", "direct_qp": False},
-        "rti_frozen_dm_calls": {**shipped, "sensitivities": "midpoint", "bound_calls": False},
-        "rti_frozen_whole_qp": {**shipped, "sensitivities": "midpoint", "screen": False},
         "rti_frozen_per_step": {**per_interval},
         "rti_frozen_full": {"qp_warm_start": True},
-        "rti_frozen_factored": {"qp_warm_start": True, "jacobian": "factored"},
         "rti_frozen_cold": {},
         "rti_exact": {"sensitivities": "exact"},
         "rti_frozen_every3": {"qp_warm_start": True, "jacobian_every": 3},
@@ -208,7 +192,8 @@ def _run_nmpcs(
     variants: dict[str, dict[str, Any]],
     block_rounds: int = 3,
 ) -> dict[str, Any]:
-    """Every NMPC variant against its own copy of the nonlinear plant, twice: per sample and in blocks.
+    """Every NMPC variant against its own copy of the nonlinear plant, twice: per sample and in
+    blocks.
 
     ``"sample"``: one sample of each variant in turn.  Interleaving puts the variants under
     the same load (the machine may be shared), so their ratios are meaningful even when the
@@ -224,7 +209,7 @@ def _run_nmpcs(
     """
     from flexctrl.control import design
     from flexctrl.control.lqr import build_sensors, linear_plant
-    from flexctrl.control.nmpc.controller import auto_substeps, design_nmpc, interval_functions
+    from flexctrl.control.nmpc.controller import auto_substeps, interval_functions
     from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
     plant_substeps = auto_substeps(
@@ -234,17 +219,8 @@ def _run_nmpcs(
     controllers, builds = {}, {}
     for name, overrides in variants.items():
         start = time.perf_counter()
-        settings = NMPCSettings(
-            horizon=horizon,
-            sample_time=sample_time,
-            **{k: v for k, v in overrides.items() if k not in DESIGN_ARGUMENTS},
-        )
-        arguments = {k: v for k, v in overrides.items() if k in DESIGN_ARGUMENTS}
-        controllers[name] = (
-            design_nmpc(model, op, settings, **arguments)
-            if arguments
-            else design(model, op, settings)
-        )
+        settings = NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides)
+        controllers[name] = design(model, op, settings)
         builds[name] = time.perf_counter() - start
 
     def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:
@@ -305,6 +281,38 @@ def _nmpc_summary(
     }
 
 
+def _header(model, model_path, fidelity, base, steps, target_deg, offset_deg) -> dict[str, Any]:
+    """The benchmark's problem and environment, and an empty table of variants."""
+    import casadi
+    import control
+    import osqp
+
+    horizon, sample_time = base.horizon, base.sample_time
+    return {
+        "problem": {
+            "model": str(model_path),
+            "fidelity": fidelity,
+            "states": model.n_x,
+            "inputs": model.n_u,
+            "horizon": horizon,
+            "sample_time_s": sample_time,
+            "steps": steps,
+            "target_deg": list(target_deg),
+            "offset_deg": list(offset_deg),
+            "soft_constraint": f"{base.soft} <= {base.deflection_limit} m",
+        },
+        "environment": {
+            "cpu_count": os.cpu_count(),
+            "load_average": list(os.getloadavg()),
+            "osqp": osqp.__version__,
+            "casadi": casadi.__version__,
+            "control": control.__version__,
+        },
+        "variants": {},
+        "command": COMMAND,
+    }
+
+
 def mpc_benchmark(
     model_path: str = "models/subedi3link.toml",
     *,
@@ -352,10 +360,6 @@ def mpc_benchmark(
         ``nmpc`` (the variants stepped one sample each in turn), ``nmpc_blocks`` (the same
         runs in blocks of consecutive samples, see :func:`_run_nmpcs`) and ``command``.
     """
-    import casadi
-    import control
-    import osqp
-
     from flexctrl import linear as L
     from flexctrl.scenes.model_files import load_model
     from flexctrl.spec.controller_settings import MPCSettings
@@ -365,29 +369,8 @@ def mpc_benchmark(
     dx0 = np.zeros(model.n_x)
     dx0[: model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
     base = MPCSettings(horizon=horizon, sample_time=sample_time)
-    result: dict[str, Any] = {
-        "problem": {
-            "model": str(model_path),
-            "fidelity": fidelity,
-            "states": model.n_x,
-            "inputs": model.n_u,
-            "horizon": horizon,
-            "sample_time_s": sample_time,
-            "steps": steps,
-            "target_deg": list(target_deg),
-            "offset_deg": list(offset_deg),
-            "soft_constraint": f"{base.soft} <= {base.deflection_limit} m",
-        },
-        "environment": {
-            "cpu_count": os.cpu_count(),
-            "load_average": list(os.getloadavg()),
-            "osqp": osqp.__version__,
-            "casadi": casadi.__version__,
-            "control": control.__version__,
-        },
-        "variants": {},
-        "command": COMMAND,
-    }
+    result = _header(model, model_path, fidelity, base, steps, target_deg, offset_deg)
+
     for name, overrides in (variants if variants is not None else default_variants()).items():
         try:
             result["variants"][name] = _run_linear(
@@ -428,10 +411,14 @@ def mpc_benchmark(
 def format_benchmark(result: dict[str, Any]) -> str:
     """A short text table of :func:`mpc_benchmark`'s figures."""
     lines = [
-        f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} inputs, "
-        f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} ms; "
-        f"load {result['environment']['load_average'][0]:.2f} on {result['environment']['cpu_count']} CPUs",
-        f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} {'iter med':>9s}  status",
+        f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} "
+        "inputs, "
+        f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} "
+        "ms; "
+        f"load {result['environment']['load_average'][0]:.2f} on "
+        f"{result['environment']['cpu_count']} CPUs",
+        f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} "
+        f"{'iter med':>9s}  status",
     ]
     for name, v in result["variants"].items():
         if "error" in v:
@@ -439,25 +426,29 @@ def format_benchmark(result: dict[str, Any]) -> str:
             continue
         it = v["iterations"]["median"] if v["iterations"] else float("nan")
         lines.append(
-            f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} {v['solve_ms']['max']:8.3f} "
+            f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} "
+            f"{v['solve_ms']['max']:8.3f} "
             f"{v['step_ms']['median']:9.3f} {it:9.0f}  {v['status']}"
         )
     if "python_control" in result:
         pc = result["python_control"]
         lines.append(
-            f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x OSQP sparse "
+            f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x "
+            "OSQP sparse "
             f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)"
         )
     for name, v in result.get("nmpc", {}).items():
         block = result.get("nmpc_blocks", {}).get(name)
         if block:
             lines.append(
-                f"NMPC {name} in blocks of consecutive samples: step median {block['step_ms']['median']:.2f} ms, "
+                f"NMPC {name} in blocks of consecutive samples: step median "
+                f"{block['step_ms']['median']:.2f} ms, "
                 f"p95 {block['step_ms']['p95']:.2f} (linearise+assemble "
                 f"{block['linearize_and_assemble_ms']['median']:.2f}, QP {block['qp_ms']['median']:.2f})"
             )
         lines.append(
-            f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 {v['step_ms']['p95']:.2f}, "
+            f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 "
+            f"{v['step_ms']['p95']:.2f}, "
             f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
             f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
             f"QP {v['qp_ms']['median']:.2f}, {v['qp_iterations_median']:.0f} iterations; "

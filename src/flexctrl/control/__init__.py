@@ -1,4 +1,5 @@
-"""Controllers for flexible arms, all with one small protocol (:class:`~flexctrl.control.controller.Controller`).
+"""Controllers for flexible arms, all with one small protocol
+(:class:`~flexctrl.control.controller.Controller`).
 
 ``design(model, op, settings)`` builds the controller named by the settings type,
 regulating ``model`` to the target equilibrium ``op``
@@ -24,8 +25,16 @@ Closed loop (sampled, zero-order hold)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from flexctrl.control.controller import Controller, ControllerStats
+from flexctrl.control.lqr import LQRController, design_lqr
+from flexctrl.control.mpc.controller import MPCController, design_mpc
+from flexctrl.control.nmpc.controller import NMPCController, design_nmpc
+from flexctrl.control.pd import PDController, design_pd
+from flexctrl.control.shaping import ShapedController, design_shaped
 from flexctrl.errors import SpecError
+from flexctrl.linear import holding_torque_excess
 from flexctrl.spec.controller_settings import (
     SETTINGS,
     EstimatorSettings,
@@ -42,48 +51,51 @@ from flexctrl.spec.controller_settings import (
 
 
 def _check_holding_torque(model, op) -> None:
-    from flexctrl.linear import holding_torque_excess
-
     excess = holding_torque_excess(model, op)
     if excess:
         raise SpecError(
-            f"{excess}; allowed: a target whose holding torques are within the limits (check gravity, "
+            f"{excess}; allowed: a target whose holding torques are within the limits (check "
+            "gravity, "
             "the payload and the target)",
             source=getattr(model.spec, "source", None) or None,
             key="target",
         )
 
 
-#: Controller kind -> ``"module:designer"`` (``designer(model, op, settings) -> Controller``).
-DESIGNERS: dict[str, str] = {
-    "pd": "flexctrl.control.pd:design_pd",
-    "lqr": "flexctrl.control.lqr:design_lqr",
-    "mpc": "flexctrl.control.mpc.controller:design_mpc",
-    "nmpc": "flexctrl.control.nmpc.controller:design_nmpc",
-    "shaped": "flexctrl.control.shaping:design_shaped",
+#: Settings type -> the function that designs its controller,
+#: ``designer(model, op, settings) -> Controller``.
+DESIGNERS: dict[type, Callable[..., Controller]] = {
+    PDSettings: design_pd,
+    LQRSettings: design_lqr,
+    MPCSettings: design_mpc,
+    NMPCSettings: design_nmpc,
+    ShapedSettings: design_shaped,
 }
 
-
-#: Controller kind -> ``"module:Class"`` of the controller its designer returns.
-CONTROLLER_CLASSES: dict[str, str] = {
-    "pd": "flexctrl.control.pd:PDController",
-    "lqr": "flexctrl.control.lqr:LQRController",
-    "mpc": "flexctrl.control.mpc.controller:MPCController",
-    "nmpc": "flexctrl.control.nmpc.controller:NMPCController",
-    "shaped": "flexctrl.control.shaping:ShapedController",
+#: Controller kind -> the class of the controllers its designer returns.
+CONTROLLER_CLASSES: dict[str, type[Controller]] = {
+    "pd": PDController,
+    "lqr": LQRController,
+    "mpc": MPCController,
+    "nmpc": NMPCController,
+    "shaped": ShapedController,
 }
 
 
 def has_linear_law(kind: str) -> bool:
-    """Whether controllers of ``kind`` give a ``linear_law`` (the linear verdict of :mod:`flexctrl.loop.verdict`)."""
-    import importlib
-
-    module, _, name = CONTROLLER_CLASSES[kind].partition(":")
-    return callable(getattr(getattr(importlib.import_module(module), name), "linear_law", None))
+    """Whether controllers of ``kind`` give a ``linear_law`` (the linear verdict of
+    :mod:`flexctrl.loop.verdict`)."""
+    return callable(getattr(CONTROLLER_CLASSES[kind], "linear_law", None))
 
 
 def design(model, op, settings) -> Controller:
-    """Build the controller described by ``settings`` for ``model``, regulating to ``op``.
+    """Build the controller that ``settings`` describe for ``model``, regulating to ``op``.
+
+    The settings' type names the controller: :class:`PDSettings` designs a
+    :class:`PDController`, :class:`LQRSettings` an :class:`LQRController` (LQG with a Kalman
+    filter, scheduled with a schedule), :class:`MPCSettings` an :class:`MPCController`,
+    :class:`NMPCSettings` an :class:`NMPCController` and :class:`ShapedSettings` a
+    :class:`ShapedController` (the table :data:`DESIGNERS`).
 
     Parameters
     ----------
@@ -92,29 +104,28 @@ def design(model, op, settings) -> Controller:
         builds the controller's reference on it).
     op : flexctrl.linear.OperatingPoint
         Target (usually :func:`flexctrl.linear.equilibrium` at the target joint angles).
-    settings
-        One of the settings dataclasses (see the table in the module docstring), e.g.
-        from :func:`flexctrl.spec.controller_reader.load_controller`.
+    settings : PDSettings, LQRSettings, MPCSettings, NMPCSettings or ShapedSettings
+        E.g. from :func:`flexctrl.spec.controller_reader.load_controller`.
 
     Returns
     -------
     Controller
         ``step(t, y) -> u`` (N m) for measurements ordered as ``measurement_names``.
-    """
-    import importlib
 
-    kind = getattr(settings, "kind", None)
-    if kind not in DESIGNERS:
+    Raises
+    ------
+    SpecError
+        For settings of another type, or a target the torque limits cannot hold.
+    """
+    designer = DESIGNERS.get(type(settings))
+    if designer is None:
         raise SpecError(
             f"value of type {type(settings).__name__} names no controller; allowed: one of "
-            f"{', '.join(cls.__name__ for cls in SETTINGS.values())}",
+            f"{', '.join(cls.__name__ for cls in DESIGNERS)}",
             key="settings",
         )
     _check_holding_torque(model, op)
-    module, _, name = DESIGNERS[kind].partition(":")
-    controller = getattr(importlib.import_module(module), name)(model, op, settings)
-    controller.design_model = model
-    return controller
+    return designer(model, op, settings)
 
 
 __all__ = [

@@ -38,7 +38,8 @@ from flexctrl.linear import OperatingPoint, Sensors
 
 @dataclass(frozen=True, eq=False)
 class SampledLaw:
-    """A controller's law as one CasADi map, for running many samples in one call (:mod:`flexctrl.loop.compiled`).
+    """A controller's law as one CasADi map, for running many samples in one call
+    (:mod:`flexctrl.loop.compiled`).
 
     Per sample ``k``: ``(xi_k, u_k) = function(xi_{k-1}, y_k, u_{k-1}, r_k)`` with ``xi`` the
     controller's memory, ``y`` the measurement, ``u_{k-1}`` the torque held during the
@@ -135,6 +136,9 @@ class Controller(ABC):
         Torque limits per joint, N m (``inf`` for none).
     saturate : bool
         Clip torques at ``limits``.
+    design_model : Model, optional
+        The model the controller was designed on; the closed loop builds the controller's
+        reference (:meth:`set_reference`) on it.
     """
 
     kind: ClassVar[str] = ""
@@ -147,6 +151,7 @@ class Controller(ABC):
         limits: np.ndarray,
         *,
         saturate: bool = True,
+        design_model=None,
     ):
         self.settings = settings
         self.op = op
@@ -154,8 +159,8 @@ class Controller(ABC):
         self.limits = np.asarray(limits, dtype=float)
         self.saturate = saturate
         self.n_u = self.limits.size
-        #: The model the controller was designed on (set by :func:`flexctrl.control.design`).
-        self.design_model = None
+        #: The model the controller was designed on.
+        self.design_model = design_model
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
         from flexctrl.control.reference_trajectory import HoldReference
@@ -163,7 +168,8 @@ class Controller(ABC):
         self.reference = HoldReference(op)
 
     def set_reference(self, reference) -> None:
-        """Track ``reference`` (a :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`) from now on.
+        """Track ``reference`` (a
+        :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`) from now on.
 
         Parameters
         ----------
@@ -240,7 +246,8 @@ class Controller(ABC):
         """Subclass part of :meth:`reset`."""
 
     def sampled_law(self) -> SampledLaw | None:
-        """The law as one CasADi map from the current state (:class:`SampledLaw`), or None when it is not one.
+        """The law as one CasADi map from the current state (:class:`SampledLaw`), or None when it
+        is not one.
 
         Called after at least one :meth:`step` (memories such as a Kalman filter's start
         from the first measurement).  Controllers that solve an optimisation per sample
@@ -249,7 +256,8 @@ class Controller(ABC):
         return None
 
     def has_sampled_law(self) -> bool:
-        """Whether :meth:`sampled_law` gives a law once the controller has stepped (known before any step).
+        """Whether :meth:`sampled_law` gives a law once the controller has stepped (known before any
+        step).
 
         Override it together with :meth:`sampled_law`: a controller that gives a law but
         says False here is only walked more slowly by the fidelity chooser, never wrongly.

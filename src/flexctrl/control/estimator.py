@@ -8,14 +8,13 @@ taken at ``t_k``, so a controller can act on it in the same sample)::
     predict   dx- = A dx + B du_{k-1}
     correct   dx  = dx- + M (dy_k - C dx- - D du_{k-1})      M = P C' (C P C' + R)^-1
 
-``P`` is the a-priori covariance from the filter DARE ``P = A P A' - A P C'(C P C' + R)^-1 C P A' + W``;
-``python-control``'s ``dlqe`` returns the predictor gain ``L = A M`` of the same filter.
-``du_{k-1}`` is the torque held during the sample that just ended (it also drives the
-feed-through of tip accelerometers).  Process noise ``W`` comes from generalised-force
-disturbances held over a sample (torques on the joints, forces on the elastic
-coordinates), mapped through the exact ZOH input matrix of ``[0; M(q)^-1]``.
-The first estimate after :meth:`KalmanEstimator.reset` is the least-squares fit of
-the first measurement, ``dx = C^+ (dy - D du)``.
+``P`` is the a-priori covariance from the filter DARE ``P = A P A' - A P C'(C P C' + R)^-1 C P A' +
+W``; ``python-control``'s ``dlqe`` returns the predictor gain ``L = A M`` of the same filter.
+``du_{k-1}`` is the torque held during the sample that just ended (it also drives the feed-through
+of tip accelerometers).  Process noise ``W`` comes from generalised-force disturbances held over a
+sample (torques on the joints, forces on the elastic coordinates), mapped through the exact ZOH
+input matrix of ``[0; M(q)^-1]``. The first estimate after :meth:`KalmanEstimator.reset` is the
+least-squares fit of the first measurement, ``dx = C^+ (dy - D du)``.
 """
 
 from __future__ import annotations
@@ -165,8 +164,8 @@ class KalmanEstimator:
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(E, F, G)`` of the estimate in deviations, ``dx_k = E dx_{k-1} + F dy_k + G du_{k-1}``.
 
-        From the current-estimate form: ``dx_k = T (A dx_{k-1} + B du_{k-1}) + M (dy_k - D du_{k-1})``
-        with ``T = I - M C``.
+        From the current-estimate form: ``dx_k = T (A dx_{k-1} + B du_{k-1}) + M (dy_k - D
+        du_{k-1})`` with ``T = I - M C``.
         """
         T = np.eye(self.A.shape[0]) - self.M @ self.C
         return T @ self.A, self.M, T @ self.B - self.M @ self.D

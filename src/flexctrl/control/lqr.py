@@ -146,7 +146,30 @@ class GainSchedule:
 
 
 class LQRController(Controller):
-    """``u = u_ref - K (x_hat - x_ref)``; see the module docstring."""
+    """``u = u_ref - K (x_hat - x_ref)``; see the module docstring.
+
+    Built by :func:`design_lqr` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : LQRSettings
+        Sample time, weights, sensors, estimator and schedule.
+    plant : LinearPlant
+        The linearization at the design point with the controller's sensors, continuous and
+        discretized.
+    limits : ndarray
+        Torque limits per joint, N m.
+    K : ndarray
+        The gain (n_u x n_x) at the design point.
+    S : ndarray
+        The discrete Riccati equation's solution.
+    observer
+        The state estimator (full state or a Kalman filter, :mod:`flexctrl.control.estimator`).
+    schedule : GainSchedule, optional
+        Gains interpolated in scheduling joint angles instead of ``K``.
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "lqr"
 
@@ -159,8 +182,17 @@ class LQRController(Controller):
         S: np.ndarray,
         observer,
         schedule: GainSchedule | None = None,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, plant.op, plant.sensors, limits, saturate=settings.saturate)
+        super().__init__(
+            settings,
+            plant.op,
+            plant.sensors,
+            limits,
+            saturate=settings.saturate,
+            design_model=design_model,
+        )
         self.plant = plant
         self.K = K
         self.S = S
@@ -174,9 +206,9 @@ class LQRController(Controller):
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
 
-        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
-        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the state estimate
-        and ``H = -K`` (the scheduled gain at ``q_joints``).
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J
+        dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the state
+        estimate and ``H = -K`` (the scheduled gain at ``q_joints``).
         """
         x = np.array(self.op.x, dtype=float)
         x[: self.n_u] = np.asarray(q_joints, dtype=float)
@@ -196,7 +228,8 @@ class LQRController(Controller):
         return self.schedule is None
 
     def sampled_law(self) -> SampledLaw | None:
-        """The law and its estimator as one CasADi map (None with a gain schedule); see :class:`SampledLaw`.
+        """The law and its estimator as one CasADi map (None with a gain schedule); see
+        :class:`SampledLaw`.
 
         Reference rows ``r = (x_ref, u_ref)``; memory the estimator's (the Kalman
         deviation estimate, nothing for full-state sensors).
@@ -259,7 +292,7 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
             sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), settings.sample_time)
             gains[index] = lqr_gain(np.asarray(sysd.A), np.asarray(sysd.B), Q, R)[0]
         schedule = GainSchedule(sched.joints, sched.grid, gains)
-    return LQRController(settings, plant, limits, K, S, observer, schedule)
+    return LQRController(settings, plant, limits, K, S, observer, schedule, design_model=model)
 
 
 __all__ = [

@@ -54,7 +54,8 @@ def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarra
     if settings.kp:
         if len(settings.kp) != n:
             raise SpecError(
-                f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one per joint)",
+                f"value {list(settings.kp)!r} has {len(settings.kp)} gains; expected {n} (one "
+                "per joint)",
                 key="kp",
             )
         return np.asarray(settings.kp, dtype=float), np.asarray(settings.kd, dtype=float)
@@ -72,7 +73,27 @@ def static_torque_function(model, q_flex: np.ndarray) -> ca.Function:
 
 
 class PDController(Controller):
-    """PD on the joints with gravity compensation (see the module docstring)."""
+    """PD on the joints with gravity compensation (see the module docstring).
+
+    Built by :func:`design_pd` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : PDSettings
+        Sample time, bandwidth, damping, torque filter, gravity compensation, sensors.
+    op : OperatingPoint
+        The target equilibrium.
+    sensors : Sensors
+        Joint encoders (and rates).
+    limits : ndarray
+        Torque limits per joint, N m.
+    kp, kd : ndarray
+        Proportional (N m/rad) and derivative (N m s/rad) gains per joint.
+    gravity : casadi.Function or None
+        The gravity torque compensated, or None.
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "pd"
 
@@ -85,8 +106,12 @@ class PDController(Controller):
         kp: np.ndarray,
         kd: np.ndarray,
         gravity: ca.Function | None,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, op, sensors, limits, saturate=settings.saturate)
+        super().__init__(
+            settings, op, sensors, limits, saturate=settings.saturate, design_model=design_model
+        )
         self.pd_settings = settings
         self.kp, self.kd = kp, kd
         self.gravity = gravity
@@ -147,10 +172,10 @@ class PDController(Controller):
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
 
-        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J dy_k``
-        (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
-        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation
-        adds its Jacobian through ``J``.
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J
+        dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
+        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation adds
+        its Jacobian through ``J``.
         """
         n, n_y = self.n_u, self.sensors.n_y
         Sq, Sqd = np.zeros((n, n_y)), np.zeros((n, n_y))
@@ -166,7 +191,8 @@ class PDController(Controller):
         if not self.strain_gain.size:
             return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
         # memory (filtered torque, last curvatures, filtered curvature rate):
-        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r + J dy
+        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r +
+        # J dy
         Sk = np.zeros((n, n_y))
         Sk[np.arange(n), self._ik] = 1.0
         b, Ts, Z, I = self.strain_pole, self.sample_time, np.zeros((n, n)), np.eye(n)
@@ -200,7 +226,8 @@ class PDController(Controller):
         return True
 
     def sampled_law(self) -> SampledLaw:
-        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same order.
+        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same
+        order.
 
         Memory: the filtered PD torque, then (with strain-rate damping) the last root
         curvatures and their filtered rate.  Reference rows: :meth:`reference_table`.
@@ -277,7 +304,7 @@ def pd_parts(model, op: OperatingPoint, settings: PDSettings):
 
 def design_pd(model, op: OperatingPoint, settings: PDSettings) -> PDController:
     """Build the PD controller holding ``model`` at ``op``."""
-    return PDController(settings, op, *pd_parts(model, op, settings))
+    return PDController(settings, op, *pd_parts(model, op, settings), design_model=model)
 
 
 __all__ = ["PDController", "design_pd", "pd_gains", "static_torque_function", "pd_parts"]

@@ -1,6 +1,7 @@
 """Reference trajectories: a joint path and the state and feed-forward torque that go with it.
 
-:class:`~flexctrl.spec.reference.JointReference` (plain data) is the joint path ``q_ref(t)`` from ``q_start`` to ``q_target``
+:class:`~flexctrl.spec.reference.JointReference` (plain data) is the joint path ``q_ref(t)`` from
+``q_start`` to ``q_target``
 (rad), either a step at ``t_start`` or a quintic over ``move_time`` (s)::
 
     q_ref(t) = q_start + (q_target - q_start) s(tau),   tau = clip((t - t_start) / move_time, 0, 1)
@@ -64,7 +65,8 @@ def _damping_matrix(model, q):
 
 def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function]:
     """CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``: ``rj -> (r_f, J_qf)``,
-    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module docstring).
+    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module
+    docstring).
 
     Built once per model and ``compile`` (kept with the model,
     :func:`~flexctrl.dynamics.model.derived`).  ``compile=False``: SX Functions evaluated
@@ -76,8 +78,8 @@ def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function
     sizes alone: every configuration and payload of one model shape shares one library.
     The compiled Function is kept with the lifted forces (:func:`flexctrl.sim.compile.compile_for`),
     so a new configuration pays the lift alone, not the Jacobians, the cache key or the load.
-    The three Functions bind the model's constants to it.  When the constants cannot be lifted or nothing compiles, the
-    virtual machine's Functions are returned.  Compiled values differ from the
+    The three Functions bind the model's constants to it.  When the constants cannot be lifted or
+    nothing compiles, the virtual machine's Functions are returned.  Compiled values differ from the
     virtual machine's in the last digits (fused multiply-adds, no constant folding).
     """
     return derived(model, ("reference_functions", compile), lambda: _path_functions(model, compile))
@@ -117,7 +119,8 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
             ["r", "J_qf", "J_qr", "J_qdr", "J_qddr", "tau", "tau_static"],
         )
 
-    # kept with the lifted forces: a later configuration of the model shape skips the Jacobians and the load
+    # kept with the lifted forces: a later configuration of the model shape skips the Jacobians and
+    # the load
     compiled = compile_for(fp, "reference", one, enabled=compile, flags=QUICK_FLAGS)
     if not compiled.compiled:
         return path_functions(model, False)
@@ -296,7 +299,8 @@ class ReferenceTrajectory:
     def window(
         self, t: float, Ts: float, count: int, *, elastic: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``count`` samples ``t, t + Ts, ...``: ``(x_ref (count, 2N), u_ref (count, n), u_static (count, n))``.
+        """``count`` samples ``t, t + Ts, ...``: ``(x_ref (count, 2N), u_ref (count, n), u_static
+        (count, n))``.
 
         On the grid ``k Ts`` the values come from a table computed once (up to the end
         of the move; constant after it); elsewhere they are evaluated.

@@ -85,7 +85,8 @@ def solve_dare(
     max_iter: int = 200,
     what: str = "DARE",
 ) -> np.ndarray:
-    """Stabilising solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA, see module docstring).
+    """Stabilising solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA, see module
+    docstring).
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Input shaping (ZV, ZVD) of joint references: the classical open-loop way to move without vibration.
+"""Input shaping (ZV, ZVD) of joint references: the classical open-loop way to move without
+vibration.
 
 A shaper is a train of impulses ``(A_i, t_i)`` with ``sum A_i = 1``; convolving a
 reference with it cancels the residual vibration of a mode of natural frequency
@@ -12,8 +13,8 @@ Several modes are handled by convolving their shapers.  :class:`ShapedController
 tracks the shaped reference with PD; the shaper is designed from the lowest
 vibration modes of the arm at the target, either under the PD loop
 (``frequency_source = "closed_loop"``: the lightly damped complex pairs, damping
-< 0.3, of the linearisation closed with the continuous PD law and its torque filter) or of the locked-joint
-structure (``"locked"``: :func:`flexctrl.linear.locked_frequencies`, undamped).
+< 0.3, of the linearisation closed with the continuous PD law and its torque filter) or of the
+locked-joint structure (``"locked"``: :func:`flexctrl.linear.locked_frequencies`, undamped).
 """
 
 from __future__ import annotations
@@ -182,6 +183,21 @@ class ShapedController(PDController):
     joint 1 in a horizontal plane).  With a step or no reference it shapes its own
     profile from the joint angles of the first measurement to the target: a step, or a
     ramp over ``move_time`` (the classical shaped step).
+
+    Built by :func:`design_shaped` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : ShapedSettings
+        The shaper and its PD (``settings.pd``).
+    op, sensors, limits, kp, kd, gravity
+        As for :class:`~flexctrl.control.pd.PDController`.
+    shaper : Shaper
+        The impulse sequence (times s, amplitudes summing to 1).
+    modes : list of (float, float)
+        The shaped modes: (frequency rad/s, damping ratio).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
     """
 
     kind = "shaped"
@@ -197,8 +213,12 @@ class ShapedController(PDController):
         gravity,
         shaper: Shaper,
         modes: list[tuple[float, float]],
+        *,
+        design_model=None,
     ):
-        super().__init__(settings.pd, op, sensors, limits, kp, kd, gravity)
+        super().__init__(
+            settings.pd, op, sensors, limits, kp, kd, gravity, design_model=design_model
+        )
         self.settings = settings
         self.pd_settings = settings.pd
         self.shaper = shaper
@@ -230,7 +250,8 @@ class ShapedController(PDController):
         return row[:n], row[n : 2 * n], row[2 * n : 3 * n], row[3 * n :]
 
     def reference_table(self, times: np.ndarray) -> np.ndarray:
-        """Rows ``(q_s, qd_s, u_ref, u_static)`` of the shaped reference at the sample ``times`` (s).
+        """Rows ``(q_s, qd_s, u_ref, u_static)`` of the shaped reference at the sample ``times``
+        (s).
 
         A step or no reference is shaped from the joint angles of the first measurement
         (so this needs a :meth:`step` first).
@@ -278,8 +299,9 @@ def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> Shaped
     """Build the shaped-reference PD controller moving ``model`` to ``op``."""
     sensors, limits, kp, kd, gravity = pd_parts(model, op, settings.pd)
     modes = [] if settings.shaper == "none" else shaping_modes(model, op, settings, kp, kd)
+    shaper = design_shaper(modes, settings.shaper)
     return ShapedController(
-        settings, op, sensors, limits, kp, kd, gravity, design_shaper(modes, settings.shaper), modes
+        settings, op, sensors, limits, kp, kd, gravity, shaper, modes, design_model=model
     )
 
 

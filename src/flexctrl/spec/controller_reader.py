@@ -1,4 +1,5 @@
-"""Controller descriptions (``controllers/*.toml``) read into the typed settings of :mod:`flexctrl.spec.controller_settings`.
+"""Controller descriptions (``controllers/*.toml``) read into the typed settings of
+:mod:`flexctrl.spec.controller_settings`.
 
 Every file has ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"``, optional free-text
 ``name``, ``notes`` and ``source``, the controller's scalar keys and sub-tables
@@ -8,8 +9,9 @@ and every key that holds one says so in its name (``joint_deg``, ``joint_rate_de
 ``joints_deg``, ``q2_deg``): the settings classes hold the same quantities in radians
 under the plain names (``Weights.joint``), so no name means two units.  The old
 spellings (``joint``, ``joint_rate``, ``joints``, ``joint_rates``, ``q2``) are refused
-with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the file, the dotted key,
-the value and what is allowed; unknown keys are rejected with a "did you mean".
+with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the
+file, the dotted key, the value and what is allowed; unknown keys are rejected with a "did you
+mean".
 
 >>> from flexctrl.spec.controller_reader import load_controller
 >>> load_controller("controllers/lqr.toml").kind
@@ -169,7 +171,8 @@ def _schedule(reader: TableReader) -> ScheduleSettings | None:
             r.raw(key)
             raise r.error(
                 key,
-                f"unknown key (value {r.table[key]!r}); allowed: joints 'q1_deg', 'q2_deg', ... each "
+                f"unknown key (value {r.table[key]!r}); allowed: joints 'q1_deg', 'q2_deg', ... "
+                "each "
                 "with a list of angles (deg)",
             )
         if not key.endswith("_deg"):

@@ -72,7 +72,8 @@ class SensorSettings:
             raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
         if "state" in self.outputs and len(self.outputs) > 1:
             raise SpecError(
-                f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and stands alone",
+                f"value {list(self.outputs)!r} is not allowed; 'state' measures everything and "
+                "stands alone",
                 key="outputs",
             )
         for name in ("joints", "joint_rates", "strain", "tip", "tip_acc", "deflection"):
@@ -132,6 +133,8 @@ class EstimatorSettings:
 
     Attributes
     ----------
+    kind : str
+        ``"kalman"``, the estimator this describes.
     torque_noise : float
         Standard deviation of an unmeasured torque disturbance on each joint, N m
         (held over a sample).

@@ -11,7 +11,7 @@ a different question, and a linear programme answers it exactly on the predictio
                                       |C_a z_j| <= band         for j >= k  (arrival rows)
 
 where ``z_j = Phi_j z_0 + Gamma_j T b`` is the condensed prediction (move blocking ``T``)
-and ``C_a`` are the arrival rows of :func:`flexctrl.control.mpc.qp.arrival_rows` (the tip
+and ``C_a`` are the arrival rows of :func:`flexctrl.control.mpc.problem.arrival_rows` (the tip
 position error and each joint's error as tip motion, m).  Feasibility is monotone in ``k``
 (a plan that stays in the band from ``k`` on also does from ``k + 1``), so bisection over
 the constrained stages needs ``log2(S)`` linear programmes (HiGHS through

@@ -8,14 +8,13 @@ Problem (deviations from the reference over the horizon, scaled, see below)::
          lo - c_op - C r_k+1 - s_k <= C z_{k+1} <= hi - c_op - C r_k+1 + s_k,  s_k >= 0
                                                                  (soft: deflection or tip error)
 
-with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) - x_op``
-(:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection and the
-feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The
-prediction ``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the
-Jacobians of the design point along the reference: exact for a reference that is a
-trajectory of the linear model, and without steady-state offset at a target
-equilibrium away from the design point (the target's holding torque is ``u_ref``).
-Only the bounds depend on the reference, so between samples only vectors change.
+with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) -
+x_op`` (:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection
+and the feed-forward torque; with no reference ``x_ref = x_op``, ``u_ref = u_op``).  The prediction
+``x_k+1 - x_ref,k+1 = A (x_k - x_ref,k) + B (u_k - u_ref,k)`` uses the Jacobians of the design point
+along the reference: exact for a reference that is a trajectory of the linear model, and without
+steady-state offset at a target equilibrium away from the design point (the target's holding torque
+is ``u_ref``). Only the bounds depend on the reference, so between samples only vectors change.
 
 ``P`` is the DARE solution (``terminal = "dare"``), so without active constraints the
 first move is the LQR move ``-K z(t)``.  The slack makes the QP feasible for any
@@ -66,7 +65,8 @@ from flexctrl.control.controller import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc.arrival_search import shortest_arrival, stage_times
-from flexctrl.control.mpc.qp import QP, ScaledProblem, condensed_qp, scaled_problem, sparse_qp
+from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
+from flexctrl.control.mpc.qp import QP, condensed_qp, sparse_qp
 from flexctrl.control.mpc.qp_backends import Solution, make_backend
 from flexctrl.linear import OperatingPoint, torque_limits
 from flexctrl.spec.controller_settings import MPCSettings
@@ -78,7 +78,29 @@ OSQP_OK = {1: "solved", 2: "solved_inaccurate"}
 # controller
 # --------------------------------------------------------------------------------------
 class MPCController(Controller):
-    """Linear MPC (see the module docstring)."""
+    """Linear MPC (see the module docstring).
+
+    Built by :func:`design_mpc` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : MPCSettings
+        Sample time, horizon, weights, constraints, QP backend, sensors, estimator.
+    plant : LinearPlant
+        The linearization at the design point with the controller's sensors.
+    limits : ndarray
+        Torque limits per joint, N m.
+    problem : ScaledProblem
+        The scaled prediction model, weights and constraint rows.
+    qp : QP
+        The quadratic programme, built once.
+    backend
+        Its solver (:mod:`flexctrl.control.mpc.qp_backends`).
+    observer
+        The state estimator (:mod:`flexctrl.control.estimator`).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "mpc"
 
@@ -91,8 +113,12 @@ class MPCController(Controller):
         qp: QP,
         backend,
         observer,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
+        super().__init__(
+            settings, plant.op, plant.sensors, limits, saturate=True, design_model=design_model
+        )
         self.plant = plant
         self.problem = problem
         self.qp = qp
@@ -149,7 +175,8 @@ class MPCController(Controller):
     def arrival_release(
         self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray
     ) -> np.ndarray | None:
-        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival rows).
+        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival
+        rows).
 
         The first call after a reset or a new reference plans the arrival time
         (:func:`~flexctrl.control.mpc.arrival_search.shortest_arrival` plus the margin) and records
@@ -177,7 +204,8 @@ class MPCController(Controller):
         return None if self._plan_u is None else self._plan_u.copy()
 
     def reference_shifts(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N, m), dc (N, ns))``.
+        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N,
+        m), dc (N, ns))``.
 
         ``r_k = (x_ref,k - x_op) / S_x``; ``dv``, ``dc`` shift the input and soft-row bounds.
         """
@@ -189,7 +217,8 @@ class MPCController(Controller):
         return r, U[:-1], dv, dc
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
-        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw :class:`Solution`.
+        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw
+        :class:`Solution`.
 
         For inspection: the plan and the statistics are not updated (OSQP's internal
         warm start is).
@@ -249,7 +278,9 @@ def design_mpc(model, op: OperatingPoint, settings: MPCSettings) -> MPCControlle
         qp = condensed_qp(problem, settings.blocks, settings.constraint_stride)
     backend = make_backend(qp, settings)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
-    return MPCController(settings, plant, limits, problem, qp, backend, observer)
+    return MPCController(
+        settings, plant, limits, problem, qp, backend, observer, design_model=model
+    )
 
 
 __all__ = ["MPCController", "design_mpc"]

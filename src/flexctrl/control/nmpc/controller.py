@@ -97,51 +97,54 @@ import numpy as np
 from flexctrl.control.controller import Controller
 from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
-from flexctrl.control.mpc.qp import ScaledProblem, _shift_blocks, scaled_problem
+from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
 from flexctrl.control.mpc.qp_backends import Solution
-from flexctrl.control.nmpc.calls import BoundRTICalls, DMRTICalls
+from flexctrl.control.nmpc.build import Layout as _Layout
+from flexctrl.control.nmpc.build import build_functions
+from flexctrl.control.nmpc.calls import BoundRTICalls
 from flexctrl.control.nmpc.interval import (
     RK4_BOUND,
     auto_substeps,
-    horizon_linearization,
-    interval_core,
     interval_functions,
-    memoised,
 )
-from flexctrl.control.nmpc.jacobian import factored_dynamics
-from flexctrl.control.nmpc.nlp import lqr_rollout, nlp_functions
 from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
-from flexctrl.control.nmpc.screened_qp import ScreenedQP, hpipm_options
-from flexctrl.dynamics.parametric import constants_as_parameters
-from flexctrl.dynamics.parametric import try_expand as _expanded
+from flexctrl.control.nmpc.screened_qp import ScreenedQP
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
-from flexctrl.sim.compile import content_key
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
 
 
-class _Layout:
-    """Index bookkeeping of ``w = [z_0, v_0, s_0, ..., z_N]``."""
-
-    def __init__(self, n: int, m: int, ns: int, N: int):
-        self.n, self.m, self.ns, self.N = n, m, ns, N
-        self.blk = n + m + ns
-        self.nw = N * self.blk + n
-        self.z = np.array(
-            [k * self.blk + np.arange(n) for k in range(N)] + [N * self.blk + np.arange(n)]
-        )
-        self.v = np.array([k * self.blk + n + np.arange(m) for k in range(N)])
-        self.s = np.array([k * self.blk + n + m + np.arange(ns) for k in range(N)]).reshape(N, ns)
-        self.shift = _shift_blocks(0, self.blk, N, N * self.blk + np.arange(n))
-
-    def split(self, w):
-        """(Z (n x N+1), V (m x N), S (ns x N)) of a symbolic or numeric ``w``."""
-        head = ca.reshape(w[: self.N * self.blk], self.blk, self.N)
-        Z = ca.horzcat(head[: self.n, :], w[self.N * self.blk :])
-        return Z, head[self.n : self.n + self.m, :], head[self.n + self.m :, :]
-
-
 class NMPCController(Controller):
-    """Nonlinear MPC (see the module docstring)."""
+    """Nonlinear MPC (see the module docstring).
+
+    Built by :func:`design_nmpc` (through :func:`flexctrl.design`).
+
+    Parameters
+    ----------
+    settings : NMPCSettings
+        Sample time, horizon, weights, sensitivities, prediction model, QP solver.
+    plant : LinearPlant
+        The design model's linearization at the target with the controller's sensors.
+    limits : ndarray
+        Torque limits per joint, N m.
+    problem : ScaledProblem
+        The scaled prediction model, weights and constraint rows.
+    observer
+        The state estimator (:mod:`flexctrl.control.estimator`).
+    functions : dict
+        The CasADi Functions of the real-time iteration (``prepare``, ``qp``, ``H``, ...).
+    layout : _Layout
+        Where states, inputs and slacks sit in the QP's variables.
+    substeps : int
+        RK4 steps per sample of the prediction.
+    compiled : bool
+        Whether the linearization is a compiled library.
+    prediction : Prediction, optional
+        The prediction model (the design model or its truncation) and its state map.
+    prediction_plant : LinearPlant, optional
+        The prediction model's linearization (default ``plant``).
+    design_model : Model, optional
+        The model designed on (:class:`~flexctrl.control.controller.Controller`).
+    """
 
     kind = "nmpc"
 
@@ -158,11 +161,12 @@ class NMPCController(Controller):
         compiled: bool,
         prediction: Prediction | None = None,
         prediction_plant: LinearPlant | None = None,
-        bound_calls: bool = True,
-        screen: bool = True,
-        direct_qp: bool = True,
+        *,
+        design_model=None,
     ):
-        super().__init__(settings, plant.op, plant.sensors, limits, saturate=True)
+        super().__init__(
+            settings, plant.op, plant.sensors, limits, saturate=True, design_model=design_model
+        )
         self.plant = plant
         #: the model predicted with and the selection ``x[keep]`` of the design state it sees
         self.prediction = prediction or Prediction(None, np.arange(plant.sys.A.shape[0]), False)
@@ -170,7 +174,8 @@ class NMPCController(Controller):
         self.keep = self.prediction.keep
         #: the prediction model's operating point (the design one unless the model is truncated)
         self.pred_op = self.prediction_plant.op
-        #: the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with a modal map)
+        # : the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with
+        # a modal map)
         self.u_out = self.pred_op.u if self.prediction.state_map is None else plant.op.u
         self.problem = problem
         self.observer = observer
@@ -187,12 +192,9 @@ class NMPCController(Controller):
         self._w_ref: np.ndarray | None = None
         #: the last reference window's bytes and its ``(w_ref, g)`` (a settled reference repeats it)
         self._cost_window: tuple | None = None
-        #: the RTI's calls through bound buffers (else CasADi's DM calls; :mod:`flexctrl.control.nmpc.calls`)
-        self.bound_calls = bound_calls
-        #: try the QP without its soft rows first (HPIPM, bound calls; :mod:`flexctrl.control.nmpc.screened_qp`)
-        self.screen = screen and bound_calls and layout.ns > 0 and settings.qp_solver == "hpipm"
-        #: the screened QP through HPIPM called directly (:mod:`flexctrl.control.nmpc.hpipm_ocp`), else ``casadi.conic``
-        self.direct_qp = direct_qp
+        #: try the QP without its soft rows first and keep that answer when they hold (HPIPM;
+        #: :mod:`flexctrl.control.nmpc.screened_qp`): the same optimum to the solver's tolerance
+        self.screen = layout.ns > 0 and settings.qp_solver == "hpipm"
         self._rti_calls = None
 
     def __getstate__(self) -> dict:
@@ -204,24 +206,20 @@ class NMPCController(Controller):
     def _calls(self):
         if self._rti_calls is None:
             fn, pb = self.functions, self.problem
-            if not self.bound_calls:
-                self._rti_calls = DMRTICalls(fn["prepare"], fn["qp"], fn["H"])
-            else:
-                screen = (
-                    ScreenedQP(
-                        self.layout,
-                        fn["Hnp"].toarray(),
-                        fn["prepare"].sparsity_out(0),
-                        pb.C,
-                        pb.c_lo,
-                        pb.c_hi,
-                        self.settings.qp_warm_start,
-                        self.direct_qp,
-                    )
-                    if self.screen
-                    else None
+            screen = (
+                ScreenedQP(
+                    self.layout,
+                    fn["Hnp"].toarray(),
+                    fn["prepare"].sparsity_out(0),
+                    pb.C,
+                    pb.c_lo,
+                    pb.c_hi,
+                    self.settings.qp_warm_start,
                 )
-                self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
+                if self.screen
+                else None
+            )
+            self._rti_calls = BoundRTICalls(fn["prepare"], fn["qp"], fn["H"], screen)
         return self._rti_calls
 
     def _reset(self) -> None:
@@ -283,7 +281,8 @@ class NMPCController(Controller):
         ):  # e.g. the reference has arrived
             w_ref, g = self._cost_window[1]
         else:
-            # row by row, as the state is mapped in the loop (one matrix product would round differently)
+            # row by row, as the state is mapped in the loop (one matrix product would round
+            # differently)
             w_ref = np.zeros(lay.nw)
             w_ref[lay.z.ravel()] = (
                 (np.array([self.to_prediction(x) for x in X]) - self.pred_op.x) / pb.Sx
@@ -462,227 +461,17 @@ def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
     return ""
 
 
-def _build(
-    model,
-    plant: LinearPlant,
-    settings: NMPCSettings,
-    pb: ScaledProblem,
-    substeps: int,
-    jacobian: str = "symbolic",
-    per_use: bool = False,
-    by_recipe: bool = True,
-):
-    """The CasADi Functions of the NMPC (see the module docstring and :func:`design_nmpc`).
-
-    ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
-    constants coincide by value at some configurations (the reduced prediction's basis).
-    ``by_recipe``: the compiled linearisation found on disk by its recipe before it is built
-    (:func:`~flexctrl.control.nmpc.interval.horizon_linearisation`).
-    """
-    n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
-    lay = _Layout(n, m, ns, N)
-    F, _ = interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
-    # The compiled part sees the operating point, the scales and the model's constants
-    # as inputs, so one library serves every operating point, reference and (frozen-modes)
-    # configuration whose model graph has the same structure.
-    if jacobian == "factored":
-        fp, f_jac, const = factored_dynamics(model)
-    else:
-        (fp, const), f_jac = constants_as_parameters(model.functions["f"], per_use=per_use), None
-    nc = const.size
-    params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
-    P = ca.DM(params)
-    xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
-    zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    Fz = ca.Function(
-        "nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d]
-    )
-    # The linearisation depends on the lifted f, its Jacobian, the sizes and the recipe alone:
-    # built (and compiled) once per worker for every configuration of one model structure.
-    try:
-        key = content_key(
-            fp.serialize(),
-            f_jac.serialize() if f_jac is not None else "",
-            n,
-            m,
-            nc,
-            N,
-            plant.dt,
-            substeps,
-            settings.sensitivities,
-            settings.jacobian_every,
-            settings.compile,
-            # named only when grouped: the per-interval key (and its library on disk) stays as it was
-            *([settings.stages_per_jacobian] if settings.stages_per_jacobian > 1 else []),
-        )
-    except RuntimeError:  # a Function CasADi cannot serialize: built for this design alone
-        key = None
-
-    def reproduces_the_model(linmap: ca.Function) -> bool:
-        # the first interval's shooting end at a generic point against the model's own RK4
-        z, v = 1e-3 * np.sin(np.arange(1, n + 1)), 1e-3 * np.cos(np.arange(1, m + 1))
-        ends = np.array(linmap(np.tile(z[:, None], N), np.tile(v[:, None], N), P)[0])[:, 0]
-        expected = np.array(Fz(z, v)).ravel()
-        return bool(np.max(np.abs(ends - expected)) <= 1e-9 * (1.0 + np.max(np.abs(expected))))
-
-    build = lambda: horizon_linearization(
-        fp,
-        f_jac,
-        nc,
-        n,
-        m,
-        N,
-        plant.dt,
-        substeps,
-        settings,  # noqa: E731
-        recipe=key if by_recipe else None,
-        check=reproduces_the_model,
-    )
-    linmap, compiled, compile_seconds, cache_hit, reused = (
-        memoised(key, build) if key is not None else (*build(), False)
-    )
-    # QP assembly in the virtual machine around the compiled linearisation, one Function of (z0, w).
-    # (Generating it into the same C function was measured at 9 % less time for this call on
-    # the three-link arm, for a second compilation per model structure: not done.)
-    z0, w = ca.MX.sym("z0", n), ca.MX.sym("w", lay.nw)
-    prepare = ca.Function(
-        "nmpc_prepare",
-        [z0, w],
-        _assembly(linmap, lay, w, P, ca.DM(pb.C), ca.DM(pb.c_lo), ca.DM(pb.c_hi)),
-        ["z0", "w"],
-        ["a", "lba", "uba"],
-    )
-    # bounds, cost
-    lbx0, ubx0 = np.full(lay.nw, -np.inf), np.full(lay.nw, np.inf)
-    for k in range(N):
-        lbx0[lay.v[k]], ubx0[lay.v[k]] = pb.v_lo, pb.v_hi
-        if ns:
-            lbx0[lay.s[k]] = 0.0
-    H = np.zeros((lay.nw, lay.nw))
-    g = np.zeros(lay.nw)
-    for k in range(N):
-        H[np.ix_(lay.z[k], lay.z[k])] = pb.Q
-        H[np.ix_(lay.v[k], lay.v[k])] = pb.R
-        if ns:
-            H[np.ix_(lay.s[k], lay.s[k])] = pb.l2 * np.eye(ns)
-            g[lay.s[k]] = pb.l1
-    H[np.ix_(lay.z[N], lay.z[N])] = pb.P
-    Hs = ca.DM(H)
-    Hs = ca.DM(ca.sparsify(Hs))
-    opts: dict = {"error_on_fail": False}
-    a_sp = prepare.sparsity_out(0)
-    if settings.qp_solver == "hpipm":
-        opts.update(hpipm_options(N, n, m + ns, 2 * ns, settings.qp_warm_start))
-    elif settings.qp_solver == "qpoases":
-        opts.update({"printLevel": "none", "sparse": True})
-    elif settings.qp_solver == "osqp":
-        opts.update(
-            {
-                "osqp": {
-                    "verbose": False,
-                    "eps_abs": 1e-5,
-                    "eps_rel": 1e-5,
-                    "max_iter": 4000,
-                    "polishing": True,
-                }
-            }
-        )
-    qp = ca.conic("nmpc_qp", settings.qp_solver, {"h": Hs.sparsity(), "a": a_sp}, opts)
-    # rollout under saturated LQR (initial guess)
-    zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
-    vr = ca.fmin(ca.fmax(vref - ca.mtimes(ca.DM(pb.K), zr - zref), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
-    step = ca.Function("nmpc_lqr_step", [zr, zref, vref], [Fz(zr, vr), vr])
-    rollout = lqr_rollout(step, N, n, m)
-    import scipy.sparse as sp
-
-    functions = {
-        "prepare": prepare,
-        "lbx0": lbx0,
-        "ubx0": ubx0,
-        "qp": qp,
-        "H": Hs,
-        "g0": g,
-        "Hnp": sp.csr_matrix(H),
-        "rollout": rollout,
-        "linmap": linmap,
-        "F": Fz,
-        "params": params,
-        "build": {
-            "compile_seconds": compile_seconds,
-            "cache_hit": cache_hit,
-            "n_constants": nc,
-            "reused": reused,
-        },
-    }
-    # full NLP (also the RTI initialisation)
-    if settings.mode == "full" or settings.init_iter > 0:
-        functions.update(nlp_functions(settings, pb, lay, Fz, H, g))
-    return functions, lay, compiled
-
-
-def _assembly(linmap: ca.Function, lay: _Layout, w, p, C, c_lo, c_hi) -> list:
-    """``[A, lba, uba]`` of the RTI's QP along ``w`` (MX): shooting rows, then the stage's soft rows."""
-    n, m, ns, N = lay.n, lay.m, lay.ns, lay.N
-    Z, V, _S = lay.split(w)
-    Fk, Ak, Bk = linmap(Z[:, :N], V, p)
-    rows, lba, uba = [], [], []
-    for k in range(N):
-        A_k = Ak[:, k * n : (k + 1) * n]
-        B_k = Bk[:, k * m : (k + 1) * m]
-        b_k = ca.mtimes(A_k, Z[:, k]) + ca.mtimes(B_k, V[:, k]) - Fk[:, k]
-        left = k * lay.blk
-        right = lay.nw - left - lay.blk - n
-        rows.append(
-            ca.horzcat(ca.MX(n, left), A_k, B_k, ca.MX(n, ns), -ca.MX.eye(n), ca.MX(n, right))
-        )
-        lba.append(b_k)
-        uba.append(b_k)
-        if ns:
-            CA, CB = ca.mtimes(C, A_k), ca.mtimes(C, B_k)
-            Cb = ca.mtimes(C, b_k)
-            I_s = ca.MX.eye(ns)
-            for sign, lo, hi in (
-                (-1.0, -ca.inf * ca.DM.ones(ns), c_hi + Cb),
-                (1.0, c_lo + Cb, ca.inf * ca.DM.ones(ns)),
-            ):
-                rows.append(ca.horzcat(ca.MX(ns, left), CA, CB, sign * I_s, ca.MX(ns, n + right)))
-                lba.append(lo)
-                uba.append(hi)
-    return [ca.vertcat(*rows), ca.vertcat(*lba), ca.vertcat(*uba)]
-
-
 def design_nmpc(
     model,
     op: OperatingPoint,
     settings: NMPCSettings,
-    *,
-    jacobian: str = "symbolic",
-    bound_calls: bool = True,
-    screen: bool = True,
-    direct_qp: bool = True,
-    library_by_recipe: bool = True,
 ) -> NMPCController:
     """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
-
-    ``jacobian``: how the sensitivities differentiate ``f``, CasADi's Jacobian of ``f``
-    (``"symbolic"``) or through one factorisation of the mass matrix (``"factored"``,
-    :mod:`flexctrl.control.nmpc.jacobian`: equal to rounding, not faster; ``docs/control.md``).
-    ``bound_calls``: the RTI's two calls per sample through buffers bound once (default) or
-    CasADi's DM calls (the slower path, same values; :mod:`flexctrl.control.nmpc.calls`).
-    ``screen``: solve the QP without its soft rows first and keep that answer when they hold
-    (HPIPM with bound calls; the same optimum to the solver's tolerance,
-    :mod:`flexctrl.control.nmpc.screened_qp`); False always solves the whole QP.
-    ``direct_qp``: that smaller QP through HPIPM called directly, its memory made once
-    (:mod:`flexctrl.control.nmpc.hpipm_ocp`; default), or through ``casadi.conic`` (the slower path).
-    ``library_by_recipe``: the compiled linearisation looked up on disk by what it is built
-    from before it is built (default), or always built and then looked up by its content.
 
     The compiled linearisation is shared (disk cache) by every ``op`` and every model with
     the same expression-graph structure; ``functions["build"]`` reports the compile time,
     whether the library came from the cache and how many model constants were lifted.
     """
-    if jacobian not in ("symbolic", "factored"):
-        raise ValueError(f"jacobian {jacobian!r} is not allowed; allowed: 'symbolic', 'factored'")
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)
@@ -706,8 +495,8 @@ def design_nmpc(
     substeps = settings.substeps or auto_substeps(pplant)
     # the reduced basis's values merge by coincidence at some configurations: lift per use, so one
     # compiled library serves every configuration of a payload (as for the design model)
-    functions, layout, compiled = _build(
-        pm, pplant, settings, problem, substeps, jacobian, prediction.reduced, library_by_recipe
+    functions, layout, compiled = build_functions(
+        pm, pplant, settings, problem, substeps, prediction.reduced
     )
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     return NMPCController(
@@ -722,9 +511,7 @@ def design_nmpc(
         compiled,
         prediction,
         pplant,
-        bound_calls,
-        screen,
-        direct_qp,
+        design_model=model,
     )
 
 

@@ -36,7 +36,8 @@ import numpy as np
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 #: HPIPM's ``enum hpipm_status``
 STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
-#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their HPIPM setters
+# : the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their
+# HPIPM setters
 _TOLERANCES = {
     "res_g_max": "tol_stat",
     "res_b_max": "tol_eq",
@@ -105,8 +106,23 @@ def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
     return (ctypes.c_void_p * len(sizes))(*[base + int(o) * step for o in offsets])
 
 
+def _checked_mode(options: dict) -> str:
+    """HPIPM's mode, after the options are checked against those interfaced."""
+    unknown = set(options) - {"mode", "iter_max", "warm_start", *_TOLERANCES}
+    if unknown:
+        raise ValueError(
+            f"HPIPM options {sorted(unknown)} are not interfaced; allowed: "
+            f"{sorted({'mode', 'iter_max', 'warm_start', *_TOLERANCES})}"
+        )
+    mode = options.get("mode", "speed")
+    if mode not in MODES:
+        raise ValueError(f"HPIPM mode {mode!r} is not allowed; allowed: {sorted(MODES)}")
+    return mode
+
+
 class HpipmOCP:
-    """HPIPM on the problem of the module docstring; one per controller (not picklable, not thread-safe).
+    """HPIPM on the problem of the module docstring; one per controller (not picklable, not
+    thread-safe).
 
     Parameters
     ----------
@@ -126,48 +142,48 @@ class HpipmOCP:
     def __init__(self, N: int, nx: int, nu: int, options: dict):
         lib = library()
         self.lib, self.N, self.nx, self.nu = lib, N, nx, nu
-        unknown = set(options) - {"mode", "iter_max", "warm_start", *_TOLERANCES}
-        if unknown:
-            raise ValueError(
-                f"HPIPM options {sorted(unknown)} are not interfaced; allowed: "
-                f"{sorted({'mode', 'iter_max', 'warm_start', *_TOLERANCES})}"
-            )
-        mode = options.get("mode", "speed")
-        if mode not in MODES:
-            raise ValueError(f"HPIPM mode {mode!r} is not allowed; allowed: {sorted(MODES)}")
+        mode = _checked_mode(options)
+        self._mem: list = []  # every buffer HPIPM points into, kept alive with the solver
+        self._create_structures(mode, options)
+        self._bind_data()
+
+    def _struct(self, name: str) -> ctypes.Array:
+        memory = ctypes.create_string_buffer(int(getattr(self.lib, f"{name}_strsize")()))
+        self._mem.append(memory)
+        return memory
+
+    def _memory(self, size: int) -> ctypes.c_void_p:
+        block = ctypes.create_string_buffer(int(size) + 64)
+        self._mem.append(block)
+        return ctypes.c_void_p((ctypes.addressof(block) + 63) // 64 * 64)  # aligned as HPIPM asks
+
+    def _create_structures(self, mode: str, options: dict) -> None:
+        """HPIPM's dimensions, QP, solution, solver arguments and workspace."""
+        lib, N, nx, nu = self.lib, self.N, self.nx, self.nu
         # stage sizes: stage 0 has no state (x_0 eliminated), the last no input
         nxs = np.array([0] + [nx] * N, dtype=np.int32)
         nus = np.array([nu] * N + [0], dtype=np.int32)
         zeros = np.zeros(N + 1, dtype=np.int32)
         self._ints = (nxs, nus, zeros)
-        self._mem: list = []  # every buffer HPIPM points into, kept alive with the solver
+        self._dim = self._struct("d_ocp_qp_dim")
+        lib.d_ocp_qp_dim_create(N, self._dim, self._memory(lib.d_ocp_qp_dim_memsize(N)))
 
-        def struct(name: str) -> ctypes.Array:
-            memory = ctypes.create_string_buffer(int(getattr(lib, f"{name}_strsize")()))
-            self._mem.append(memory)
-            return memory
+        def ptr(a):
+            return a.ctypes.data_as(ctypes.c_void_p)
 
-        def memory(size: int) -> ctypes.Array:
-            block = ctypes.create_string_buffer(int(size) + 64)
-            self._mem.append(block)
-            return ctypes.c_void_p(
-                (ctypes.addressof(block) + 63) // 64 * 64
-            )  # aligned as HPIPM asks
-
-        self._dim = struct("d_ocp_qp_dim")
-        lib.d_ocp_qp_dim_create(N, self._dim, memory(lib.d_ocp_qp_dim_memsize(N)))
-        ptr = lambda a: a.ctypes.data_as(ctypes.c_void_p)  # noqa: E731
         # nx, nu, nbx, nbu, ng, ns
         lib.d_ocp_qp_dim_set_all(
             ptr(nxs), ptr(nus), ptr(zeros), ptr(nus), ptr(zeros), ptr(zeros), self._dim
         )
-        self._qp = struct("d_ocp_qp")
-        lib.d_ocp_qp_create(self._dim, self._qp, memory(lib.d_ocp_qp_memsize(self._dim)))
-        self._sol = struct("d_ocp_qp_sol")
-        lib.d_ocp_qp_sol_create(self._dim, self._sol, memory(lib.d_ocp_qp_sol_memsize(self._dim)))
-        self._arg = struct("d_ocp_qp_ipm_arg")
+        self._qp = self._struct("d_ocp_qp")
+        lib.d_ocp_qp_create(self._dim, self._qp, self._memory(lib.d_ocp_qp_memsize(self._dim)))
+        self._sol = self._struct("d_ocp_qp_sol")
+        lib.d_ocp_qp_sol_create(
+            self._dim, self._sol, self._memory(lib.d_ocp_qp_sol_memsize(self._dim))
+        )
+        self._arg = self._struct("d_ocp_qp_ipm_arg")
         lib.d_ocp_qp_ipm_arg_create(
-            self._dim, self._arg, memory(lib.d_ocp_qp_ipm_arg_memsize(self._dim))
+            self._dim, self._arg, self._memory(lib.d_ocp_qp_ipm_arg_memsize(self._dim))
         )
         lib.d_ocp_qp_ipm_arg_set_default(MODES[mode], self._arg)
         if "iter_max" in options:
@@ -182,14 +198,19 @@ class HpipmOCP:
         lib.d_ocp_qp_ipm_arg_set_warm_start(
             ctypes.byref(ctypes.c_int(int(options.get("warm_start", 0)))), self._arg
         )
-        self._ws = struct("d_ocp_qp_ipm_ws")
+        self._ws = self._struct("d_ocp_qp_ipm_ws")
         lib.d_ocp_qp_ipm_ws_create(
             self._dim,
             self._arg,
             self._ws,
-            memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)),
+            self._memory(lib.d_ocp_qp_ipm_ws_memsize(self._dim, self._arg)),
         )
-        # data arrays, HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered (cols, rows) array
+
+    def _bind_data(self) -> None:
+        """The data and solution arrays, and the pointer lists HPIPM reads them through."""
+        N, nx, nu = self.N, self.nx, self.nu
+        # HPIPM's column-major blocks: a stage's (rows, cols) matrix is a C-ordered (cols, rows)
+        # array
         self.A = np.zeros((N, nx, nx))  # stage 0's A has no columns (x_0 eliminated): A[0] unused
         self.B = np.zeros((N, nu, nx))
         self.b = np.zeros((N, nx))
@@ -204,71 +225,56 @@ class HpipmOCP:
         self.x = np.zeros((N + 1, nx))  # x[0] unused
         idxbu = np.tile(np.arange(nu, dtype=np.int32), N + 1)
         spare = np.zeros(1)  # what the fields of size 0 point at (never read or written)
-        self._keep = (idxbu, spare)
+        no_slack = np.full((N + 1) * nu, -1, dtype=np.int32)  # idxs_rev: no constraint has a slack
+        multipliers = np.zeros(2 * (N + 1) * (nx + nu) + N * nx)
+        self._keep = (idxbu, spare, no_slack, multipliers)
         P = _pointers
-        A_p = P(self.A, [nx * nx] * N)
-        B_p = P(self.B, [nu * nx] * N)
-        b_p = P(self.b, [nx] * N)
-        Q_p, S_p, R_p = (
+        none = P(spare, [0] * (N + 1))  # fields of size 0 (no state bounds, general rows, slacks)
+        # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns
+        # of them
+        self._set_all = (
+            P(self.A, [nx * nx] * N),
+            P(self.B, [nu * nx] * N),
+            P(self.b, [nx] * N),
             P(self.Q, [nx * nx] * (N + 1)),
             P(self.S, [nx * nu] * (N + 1)),
             P(self.R, [nu * nu] * (N + 1)),
-        )
-        q_p, r_p = P(self.q, [nx] * (N + 1)), P(self.r, [nu] * (N + 1))
-        lbu_p, ubu_p = P(self.lbu, [nu] * (N + 1)), P(self.ubu, [nu] * (N + 1))
-        idx_p = P(idxbu, [nu] * (N + 1))
-        no_slack = np.full((N + 1) * nu, -1, dtype=np.int32)  # idxs_rev: no constraint has a slack
-        self._keep += (no_slack,)
-        rev_p = P(no_slack, [nu] * (N + 1))
-        none = P(spare, [0] * (N + 1))  # fields of size 0 (no state bounds, general rows or slacks)
-        # stage 0's A, S, Q and x blocks exist but are never read: HPIPM takes nx[0] = 0 columns of them
-        self._set_all = (
-            A_p,
-            B_p,
-            b_p,
-            Q_p,
-            S_p,
-            R_p,
-            q_p,
-            r_p,
+            P(self.q, [nx] * (N + 1)),
+            P(self.r, [nu] * (N + 1)),
             none,
             none,
             none,
-            idx_p,
-            lbu_p,
-            ubu_p,
-            none,
-            none,
-            none,
-            none,
-            none,
-            none,
-            none,
-            none,
-            none,
-            rev_p,
+            P(idxbu, [nu] * (N + 1)),
+            P(self.lbu, [nu] * (N + 1)),
+            P(self.ubu, [nu] * (N + 1)),
+            *[none] * 9,
+            P(no_slack, [nu] * (N + 1)),
             none,
             none,
             self._qp,
         )
-        u_p, x_p = P(self.u, [nu] * (N + 1)), P(self.x, [nx] * (N + 1))
-        multipliers = np.zeros(2 * (N + 1) * (nx + nu) + N * nx)
-        self._keep += (multipliers,)
-        pi_p = P(multipliers, [nx] * N)
-        lb_p = P(multipliers[N * nx :], [nu] * (N + 1))
-        ub_p = P(multipliers[N * nx + (N + 1) * nu :], [nu] * (N + 1))
         # u, x, ls, us, pi, lam_lb, lam_ub, lam_lg, lam_ug, lam_ls, lam_us
-        self._sol_all = (u_p, x_p, none, none, pi_p, lb_p, ub_p, none, none, none, none)
+        self._sol_all = (
+            P(self.u, [nu] * (N + 1)),
+            P(self.x, [nx] * (N + 1)),
+            none,
+            none,
+            P(multipliers, [nx] * N),
+            P(multipliers[N * nx :], [nu] * (N + 1)),
+            P(multipliers[N * nx + (N + 1) * nu :], [nu] * (N + 1)),
+            *[none] * 4,
+        )
         self._status, self._iter = ctypes.c_int(-1), ctypes.c_int(-1)
 
     def solve(self) -> dict:
-        """Solve on the data in the bound arrays from the primal start in :attr:`u`, :attr:`x`; the solution replaces them.
+        """Solve on the data in the bound arrays from the primal start in :attr:`u`, :attr:`x`; the
+        solution replaces them.
 
         Returns
         -------
         dict
-            ``success`` (HPIPM's status is SUCCESS), ``return_status`` (its name) and ``iter_count``,
-            the keys of ``casadi.conic``'s statistics that the NMPC reads.
+            ``success`` (HPIPM's status is SUCCESS), ``return_status`` (its name) and
+            ``iter_count``, the keys of ``casadi.conic``'s statistics that the NMPC reads.
         """
         lib = self.lib
         lib.d_ocp_qp_set_all(*self._set_all)

@@ -40,7 +40,8 @@ from flexctrl.dynamics.parametric import Memo
 from flexctrl.dynamics.parametric import try_expand as _expanded
 from flexctrl.sim.rk4 import rk4_next
 
-#: RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the imaginary axis).
+# : RK4 step bound ``|lambda|_max h`` used to choose the substeps (stability limit 2.83 on the
+# imaginary axis).
 RK4_BOUND = 2.5
 
 
@@ -74,7 +75,8 @@ def interval_core(
     f_jac: ca.Function | None = None,
     jacobian_every: int = 1,
 ) -> tuple[ca.Function, ca.Function | None]:
-    """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see the module docstring).
+    """``F(x, u, *extra)`` and ``FJ(x, u, *extra)`` of ``f(x, u, *extra)`` (see the module
+    docstring).
 
     ``sensitivities=None`` builds ``F`` only (``FJ`` is None).  ``f_jac(x, u, *extra) ->
     (f, f_x, f_u)``: default CasADi's Jacobian of ``f``.  ``jacobian_every``: RK4 steps
@@ -308,7 +310,8 @@ def horizon_linearization(
     return result.function, result.compiled, result.compile_seconds, result.cache_hit
 
 
-#: Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least recently used beyond ``MEMO_SIZE``).
+# : Horizon linearisations built in this process, by :func:`flexctrl.sim.compile.content_key` (least
+# recently used beyond ``MEMO_SIZE``).
 MEMO_SIZE = 8
 _BUILT = Memo(MEMO_SIZE)
 

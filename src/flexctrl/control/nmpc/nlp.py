@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.mpc.qp import ScaledProblem
+from flexctrl.control.mpc.problem import ScaledProblem
 from flexctrl.spec.controller_settings import NMPCSettings
 
 
@@ -31,7 +31,8 @@ def lqr_rollout(step: ca.Function, N: int, n: int, m: int) -> ca.Function:
 def nlp_functions(
     settings: NMPCSettings, pb: ScaledProblem, lay, Fz: ca.Function, H: np.ndarray, g: np.ndarray
 ) -> dict:
-    """``{"nlp", "lbg", "ubg"}``: IPOPT on ``min 1/2 w'Hw + p_g'w`` s.t. the nonlinear shooting and soft rows.
+    """``{"nlp", "lbg", "ubg"}``: IPOPT on ``min 1/2 w'Hw + p_g'w`` s.t. the nonlinear shooting and
+    soft rows.
 
     ``lay`` is the QP's layout (``nmpc._Layout``), ``Fz`` the scaled shooting map; the
     parameter ``p`` is the scaled initial state followed by the linear cost.

@@ -1,4 +1,5 @@
-"""The NMPC's prediction model: the design model, or its Galerkin truncation to fewer modes per link.
+"""The NMPC's prediction model: the design model, or its Galerkin truncation to fewer modes per
+link.
 
 The NMPC predicts with RK4, whose stable step is bounded by the fastest mode: on the
 three-link arm with two assumed modes per link (``amm:2``, 18 states) the second modes
@@ -188,7 +189,8 @@ def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: 
 
 
 def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic: int) -> np.ndarray:
-    """``q = P q_r``: the joints, and the elastic parts of the design model's slowest modes at the target.
+    """``q = P q_r``: the joints, and the elastic parts of the design model's slowest modes at the
+    target.
 
     ``P = blockdiag(I, E)`` with ``E`` (orthonormal columns, ``n_elastic`` of them) the
     dominant directions of the elastic components of the ``n_joints + n_elastic``

@@ -103,7 +103,8 @@ class ScreenedQP:
         #: the smaller QP's ``z_1 .. z_N`` in its own ``w``
         self._z_next = np.array([self.keep.searchsorted(layout.z[k + 1]) for k in range(N)])
         options = hpipm_options(N, n, m, 0, warm_start)
-        #: how the smaller QP is solved: ``"hpipm (direct)"`` or ``"casadi.conic hpipm"`` (and why, if not direct)
+        # : how the smaller QP is solved: ``"hpipm (direct)"`` or ``"casadi.conic hpipm"`` (and why,
+        # if not direct)
         self.backend = "casadi.conic hpipm"
         self.direct: HpipmStages | None = None
         if direct:
@@ -139,7 +140,8 @@ class ScreenedQP:
         ubx: np.ndarray,
         w0: np.ndarray,
     ) -> tuple[np.ndarray | None, dict]:
-        """The whole QP's solution with zero slacks if the smaller QP's satisfies the soft rows, else None; its stats.
+        """The whole QP's solution with zero slacks if the smaller QP's satisfies the soft rows,
+        else None; its stats.
 
         Arguments are the whole QP's data (``a`` the nonzeros of its constraint matrix).
         Raises as the QP solver does (CasADi's checks).
@@ -173,7 +175,8 @@ class ScreenedQP:
 
 
 class HpipmStages:
-    """The smaller QP's data moved from the whole QP's arrays into :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
+    """The smaller QP's data moved from the whole QP's arrays into
+    :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
 
     The whole QP's shooting rows read ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's
     ``x_{k+1} = A_k x_k + B_k u_k + b_k`` has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds
@@ -190,7 +193,8 @@ class HpipmStages:
         self.ocp = HpipmOCP(N, n, m, options)
         self.z_index = np.array([layout.z[k] for k in range(N + 1)])  # (N + 1, n)
         self.v_index = np.array([layout.v[k] for k in range(N)])  # (N, m)
-        # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a structural zero)
+        # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a
+        # structural zero)
         nnz = numbered.nnz()
         numbered = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
         numbered[numbered < 0] = nnz  # the sentinel entry: 0
@@ -215,7 +219,8 @@ class HpipmStages:
         kept[self.z_index.ravel()] = kept[self.v_index.ravel()] = True
         if np.any(H[np.ix_(kept, kept)][~blocks[np.ix_(kept, kept)]] != 0.0):
             raise ValueError(
-                "the direct HPIPM path takes a Hessian without cross terms between stages, states and "
+                "the direct HPIPM path takes a Hessian without cross terms between stages, "
+                "states and "
                 "inputs (the NMPC's); use ScreenedQP(..., direct=False)"
             )
         state_bounds = np.ones(layout.nw, dtype=bool)

@@ -1,0 +1,207 @@
+"""The linear MPC's problem data: the scaled prediction model, weights, bounds and the soft
+and arrival rows, built once from the design model's linearization (see
+:mod:`flexctrl.control.mpc.controller` for the formulations and the scaling)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from flexctrl.control.lqr import LinearPlant, lqr_gain, weight_matrices
+from flexctrl.linear import OperatingPoint
+
+
+@dataclass(frozen=True, eq=False)
+class ScaledProblem:
+    """The MPC data in scaled deviation variables.
+
+    Attributes
+    ----------
+    A, B, Q, R, P : ndarray
+        Scaled dynamics and weights (``P``: terminal).
+    K : ndarray
+        Scaled LQR gain (``v = -K z``).
+    Sx, Su : ndarray
+        Scales: ``dx = Sx * z``, ``du = Su * v``.
+    v_lo, v_hi : ndarray
+        Scaled input bounds.
+    C, c_lo, c_hi : ndarray
+        Scaled soft rows and their bounds (``C z in [c_lo, c_hi]``); zero rows if none.
+    h : float
+        Soft-row scale (m): physical violation = ``h * s``.
+    l1, l2 : float
+        Scaled slack penalties.
+    horizon : int
+    n_arrival : int
+        The last ``n_arrival`` soft rows are the arrival rows (:func:`arrival_rows`).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    K: np.ndarray
+    Sx: np.ndarray
+    Su: np.ndarray
+    v_lo: np.ndarray
+    v_hi: np.ndarray
+    C: np.ndarray
+    c_lo: np.ndarray
+    c_hi: np.ndarray
+    h: float
+    l1: float
+    l2: float
+    horizon: int
+    n_arrival: int = 0
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def ns(self) -> int:
+        return self.C.shape[0]
+
+
+def state_scales(
+    plant: LinearPlant,
+    K: np.ndarray,
+    Q: np.ndarray,
+    n_u: int,
+    kind: str,
+    joint_error: float,
+    duration: float = 5.0,
+) -> np.ndarray:
+    """State scales ``S_x`` (see the module docstring)."""
+    nx = plant.Ad.shape[0]
+    if kind == "none":
+        return np.ones(nx)
+    bryson = 1.0 / np.sqrt(np.diag(Q))
+    if kind == "bryson":
+        return bryson
+    Acl = plant.Ad - plant.Bd @ K
+    steps = max(1, int(round(duration / plant.dt)))
+    peak = np.zeros(nx)
+    for j in range(n_u):
+        x = np.zeros(nx)
+        x[j] = joint_error
+        for _ in range(steps):
+            peak = np.maximum(peak, np.abs(x))
+            x = Acl @ x
+    N = nx // 2
+    groups = [np.arange(n_u), np.arange(n_u, N), N + np.arange(n_u), np.arange(N + n_u, nx)]
+    for g in groups:
+        if g.size:
+            peak[g] = np.maximum(
+                peak[g], 1e-2 * np.max(peak[g]) if np.max(peak[g]) > 0 else bryson[g]
+            )
+    return peak
+
+
+def soft_rows(
+    model, op: OperatingPoint, settings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Physical soft rows ``C_s`` (on the state), their values at ``op`` and the limits (m), and the row scale."""
+    N = model.n_q
+    q = ca.SX.sym("q", N)
+    if settings.soft == "deflection":
+        expr = model.functions["deflection"](q)[0]
+        limit = settings.deflection_limit
+    elif settings.soft == "tip":
+        expr = model.functions["tip"](q, ca.SX.zeros(N))[0]
+        limit = settings.tip_limit
+    else:
+        return np.zeros((0, 2 * N)), np.zeros(0), np.zeros(0), 1.0
+    fun = ca.Function("soft", [q], [expr, ca.jacobian(expr, q)])
+    value, jac = (np.array(v, dtype=float) for v in fun(op.q))
+    value = value.ravel()
+    rows = np.hstack([jac, np.zeros_like(jac)])
+    keep = (
+        np.any(rows != 0, axis=1) if settings.soft == "deflection" else np.ones(rows.shape[0], bool)
+    )
+    if settings.soft == "tip":
+        value = np.zeros_like(value)  # the error from the target tip position
+    scale = limit if limit > 0 else settings.weights.modal
+    return rows[keep], value[keep], np.full(int(keep.sum()), limit), scale
+
+
+def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
+    """Physical arrival rows (m) on the state: the tip position error, then each joint's error as
+    tip motion.
+
+    Row ``j`` of the joint part is ``|d tip / d q_j| e_j``: the tip displacement that joint
+    ``j``'s error alone causes at ``op`` (a tip inside the band with the joints off
+    target would be another, redundant configuration of the arm).
+    """
+    N = model.n_q
+    q = ca.SX.sym("q", N)
+    tip = model.functions["tip"](q, ca.SX.zeros(N))[0]
+    jac = np.array(ca.Function("tip_jacobian", [q], [ca.jacobian(tip, q)])(op.q), dtype=float)
+    joints = np.zeros((model.n_u, 2 * N))
+    joints[np.arange(model.n_u), np.arange(model.n_u)] = np.linalg.norm(jac[:, : model.n_u], axis=0)
+    return np.vstack([np.hstack([jac, np.zeros_like(jac)]), joints])
+
+
+def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> ScaledProblem:
+    """Weights, terminal cost, scaling and constraints of the MPC at ``plant.op``."""
+    Q, R = weight_matrices(model, settings.weights, limits)
+    K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
+    scale_u = np.where(np.isfinite(limits), limits, 1.0) * settings.weights.torque
+    Sx = state_scales(
+        plant, K, Q, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
+    )
+    Sxi = 1.0 / Sx
+    A = Sxi[:, None] * plant.Ad * Sx[None, :]
+    B = Sxi[:, None] * plant.Bd * scale_u[None, :]
+    Qs = Sx[:, None] * Q * Sx[None, :]
+    Rs = scale_u[:, None] * R * scale_u[None, :]
+    Pt = S if getattr(settings, "terminal", "dare") == "dare" else Q
+    Ps = Sx[:, None] * Pt * Sx[None, :]
+    Ks = (1.0 / scale_u)[:, None] * K * Sx[None, :]
+    u_op = plant.op.u
+    v_lo = (-limits - u_op) / scale_u
+    v_hi = (limits - u_op) / scale_u
+    rows, value, limit, h = soft_rows(model, plant.op, settings)
+    arrival = getattr(settings, "arrival", None)
+    n_arrival = 0
+    if (
+        arrival is not None and arrival.enabled
+    ):  # the arrival rows after the soft rows, error from the target
+        extra = arrival_rows(model, plant.op)
+        n_arrival = extra.shape[0]
+        rows, value, limit = (
+            np.vstack([rows, extra]),
+            np.r_[value, np.zeros(n_arrival)],
+            np.r_[limit, np.full(n_arrival, arrival.band)],
+        )
+    C = rows * Sx[None, :] / h
+    return ScaledProblem(
+        A,
+        B,
+        Qs,
+        Rs,
+        0.5 * (Ps + Ps.T),
+        Ks,
+        Sx,
+        scale_u,
+        v_lo,
+        v_hi,
+        C,
+        (-limit - value) / h,
+        (limit - value) / h,
+        h,
+        settings.slack_l1 * h,
+        settings.slack_l2 * h * h,
+        settings.horizon,
+        n_arrival,
+    )
+
+
+__all__ = ["ScaledProblem", "arrival_rows", "scaled_problem", "soft_rows", "state_scales"]
