@@ -124,7 +124,6 @@ def _linearization(fp, nc: int, plant, settings, lay: Layout, substeps: int, P, 
     try:
         key = content_key(
             fp.serialize(),
-            "",
             n,
             m,
             nc,
@@ -150,7 +149,6 @@ def _linearization(fp, nc: int, plant, settings, lay: Layout, substeps: int, P, 
     def build():
         return horizon_linearization(
             fp,
-            None,
             nc,
             n,
             m,
