@@ -12,7 +12,6 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.nmpc.controller import interval_functions
 from flexctrl.control.shaping import Shaper, design_shaper, residual_vibration, zv, zvd
-from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import ShapedSettings
 
 
@@ -85,15 +84,6 @@ def test_convolved_shapers_cancel_both_modes():
     for f, zeta in [(2.0, 0.01), (7.5, 0.03)]:
         assert amplitude(oscillator_after(shaper, f, zeta), f, zeta) < 1e-10
     assert design_shaper([], "zvd").times.tolist() == [0.0]
-
-
-@pytest.fixture(scope="module")
-def damped3():
-    return load_model(
-        "models/subedi3link.toml",
-        fidelity="amm:2",
-        overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)],
-    )
 
 
 def test_shaped_controller_reference_steps_through_the_impulses(damped3):

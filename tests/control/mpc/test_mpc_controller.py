@@ -5,24 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
-from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=True)
-
-
-@pytest.fixture(scope="module")
-def arm3():
-    return load_model("models/subedi3link.toml", fidelity="amm:2")
-
-
-@pytest.fixture(scope="module")
-def op3(arm3):
-    return L.equilibrium(arm3, TARGET)
 
 
 def closed_form_first_move(Ad, Bd, Q, R, P, N, dx0):
@@ -209,23 +197,6 @@ def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formula
         runs.append(_linear_closed_loop(ctrl, dx0, 60)[0])
     assert np.any(np.abs(runs[0] - op3.u) > 1.0)  # the move is large enough to exercise the solver
     np.testing.assert_array_equal(runs[1], runs[0])
-
-
-def test_benchmark_reports_every_variant():
-    from flexctrl.bench.mpc_step import default_variants, format_benchmark, mpc_benchmark
-
-    variants = {
-        k: v for k, v in default_variants().items() if k in ("osqp_sparse", "osqp_condensed")
-    }
-    result = mpc_benchmark(
-        steps=5, horizon=5, variants=variants, python_control_solves=0, nmpc=False
-    )
-    assert set(result["variants"]) == {"osqp_sparse", "osqp_condensed"}
-    for v in result["variants"].values():
-        assert v["solve_ms"]["median"] > 0 and v["status"] and v["fallbacks"] == 0
-        assert v["solve_ms"]["median"] <= v["solve_ms"]["p95"] <= v["solve_ms"]["max"]
-    assert result["problem"]["states"] == 18 and "mpc_benchmark" in result["command"]
-    assert "osqp_condensed" in format_benchmark(result)
 
 
 def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
