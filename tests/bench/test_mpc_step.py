@@ -7,19 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from flexctrl.bench.mpc_step import (
-    _run_nmpcs,
-    _stats,
-    default_variants,
-    format_benchmark,
-    mpc_benchmark,
-)
+from flexctrl.bench.mpc_step import default_variants, format_benchmark, mpc_benchmark
+from flexctrl.bench.nmpc_step import _run_nmpcs, ms_stats
 
 
 def test_the_statistics_are_in_milliseconds_and_leave_out_what_is_not_finite():
-    stats = _stats([0.003, 0.001, math.nan, 0.002, math.inf])
+    stats = ms_stats([0.003, 0.001, math.nan, 0.002, math.inf])
     assert stats == pytest.approx({"median": 2.0, "p95": 2.9, "max": 3.0})
-    assert all(math.isnan(v) for v in _stats([math.nan]).values())
+    assert all(math.isnan(v) for v in ms_stats([math.nan]).values())
 
 
 def test_benchmark_reports_every_variant_with_its_qp_and_a_step_that_contains_the_solve():

@@ -1,5 +1,7 @@
-"""The NMPC's CasADi Functions, built once per design: the linearization and QP assembly,
-the QP solver, the cost, the bounds, the initial guess's rollout and the full NLP.
+"""The NMPC's CasADi Functions, built once per design, and the layout of its variables.
+
+The linearization and QP assembly, the QP solver, the cost, the bounds, the first guess's
+rollout and the full NLP.
 
 The compiled part (the horizon's linearization,
 :func:`~flexctrl.control.nmpc.interval.horizon_linearization`) sees the operating point, the
@@ -28,7 +30,15 @@ from flexctrl.spec.controller_settings import NMPCSettings
 
 
 class Layout:
-    """Index bookkeeping of ``w = [z_0, v_0, s_0, ..., z_N]``."""
+    """Index bookkeeping of ``w = [z_0, v_0, s_0, ..., z_N]``.
+
+    Parameters
+    ----------
+    n, m, ns : int
+        States, inputs and soft rows (slacks) per stage.
+    N : int
+        Shooting intervals.
+    """
 
     def __init__(self, n: int, m: int, ns: int, N: int):
         self.n, self.m, self.ns, self.N = n, m, ns, N
@@ -58,20 +68,36 @@ def build_functions(
 ):
     """The CasADi Functions of the NMPC, its layout and whether the linearization is compiled.
 
-    ``per_use``: lift one constant per use (:func:`constants_as_parameters`), for models whose
-    constants coincide by value at some configurations (the reduced prediction's basis).
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model predicted with.
+    plant : LinearPlant
+        Its linearization at the target (operating point, sample time).
+    settings : NMPCSettings
+        The controller's settings.
+    pb : ScaledProblem
+        The scales, weights and soft rows.
+    substeps : int
+        RK4 steps per sample.
+    per_use : bool
+        Lift one constant per use (:func:`constants_as_parameters`), for models whose
+        constants coincide by value at some configurations (the reduced prediction's basis).
+
+    Returns
+    -------
+    tuple
+        ``(functions, layout, compiled)``: the Functions and arrays by name (``prepare``,
+        ``qp``, ``H``, ``g0``, ``lbx0``, ``ubx0``, ``rollout``, ``linmap``, ``F``, ``params``,
+        ``build`` and, for the full NLP, ``nlp``, ``lbg``, ``ubg``), the :class:`Layout` and
+        whether the linearization is a compiled library.
     """
     n, m, ns, N = pb.n, pb.m, pb.ns, pb.horizon
     lay = Layout(n, m, ns, N)
-    F, _ = interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
+    Fz = _scaled_shooting(model, plant, pb, substeps)
     fp, const = constants_as_parameters(model.functions["f"], per_use=per_use)
     params = np.concatenate([plant.op.x, plant.op.u, pb.Sx, pb.Su, const])
     P = ca.DM(params)
-    xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
-    zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
-    Fz = ca.Function(
-        "nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d]
-    )
     linmap, compiled, compile_seconds, cache_hit, reused = _linearization(
         fp, const.size, plant, settings, lay, substeps, P, Fz
     )
@@ -86,10 +112,6 @@ def build_functions(
     lbx0, ubx0, H, g = _bounds_and_cost(pb, lay)
     Hs = ca.DM(ca.sparsify(ca.DM(H)))
     qp = _qp_solver(settings, lay, Hs, prepare.sparsity_out(0))
-    # rollout under saturated LQR (initial guess)
-    zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
-    vr = ca.fmin(ca.fmax(vref - ca.mtimes(ca.DM(pb.K), zr - zref), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
-    step = ca.Function("nmpc_lqr_step", [zr, zref, vref], [Fz(zr, vr), vr])
     functions = {
         "prepare": prepare,
         "lbx0": lbx0,
@@ -98,7 +120,7 @@ def build_functions(
         "H": Hs,
         "g0": g,
         "Hnp": sp.csr_matrix(H),
-        "rollout": lqr_rollout(step, N, n, m),
+        "rollout": lqr_rollout(_lqr_step(pb, Fz), N, n, m),
         "linmap": linmap,
         "F": Fz,
         "params": params,
@@ -115,9 +137,30 @@ def build_functions(
     return functions, lay, compiled
 
 
+def _scaled_shooting(model, plant: LinearPlant, pb: ScaledProblem, substeps: int):
+    """``Fz(z, v) -> z_next``: the model's RK4 shooting map in scaled deviations."""
+    n, m = pb.n, pb.m
+    F, _ = interval_core(_expanded(model.functions["f"]), n, m, plant.dt, substeps, None)
+    xop_d, uop_d, Sx_d, Su_d = (ca.DM(a) for a in (plant.op.x, plant.op.u, pb.Sx, pb.Su))
+    zz_, vv_ = ca.MX.sym("z", n), ca.MX.sym("v", m)
+    return ca.Function(
+        "nmpc_F", [zz_, vv_], [(F(xop_d + Sx_d * zz_, uop_d + Su_d * vv_) - xop_d) / Sx_d]
+    )
+
+
+def _lqr_step(pb: ScaledProblem, Fz: ca.Function) -> ca.Function:
+    """One sample under the saturated LQR law about the reference (the first guess's rollout)."""
+    n, m = pb.n, pb.m
+    zr, zref, vref = ca.MX.sym("z", n), ca.MX.sym("z_ref", n), ca.MX.sym("v_ref", m)
+    vr = ca.fmin(ca.fmax(vref - ca.mtimes(ca.DM(pb.K), zr - zref), ca.DM(pb.v_lo)), ca.DM(pb.v_hi))
+    return ca.Function("nmpc_lqr_step", [zr, zref, vref], [Fz(zr, vr), vr])
+
+
 def _linearization(fp, nc: int, plant, settings, lay: Layout, substeps: int, P, Fz):
-    """The horizon's compiled linearization (found by its recipe, or built), checked against
-    the model's own RK4 at a generic point."""
+    """The horizon's compiled linearization, found by its recipe or built.
+
+    A library found by its recipe is checked against the model's own RK4 at a generic point.
+    """
     n, m, N = lay.n, lay.m, lay.N
     # it depends on the lifted f, the sizes and the recipe alone: built (and compiled) once per
     # worker for every configuration of one model structure
@@ -206,7 +249,7 @@ def _qp_solver(settings: NMPCSettings, lay: Layout, Hs, a_sp) -> ca.Function:
 
 
 def _assembly(linmap: ca.Function, lay: Layout, w, p, C, c_lo, c_hi) -> list:
-    """``[A, lba, uba]`` of the RTI's QP along ``w`` (MX): shooting rows, then the stage's soft rows."""
+    """``[A, lba, uba]`` of the RTI's QP along ``w`` (MX): shooting rows, then soft rows."""
     n, m, ns, N = lay.n, lay.m, lay.ns, lay.N
     Z, V, _S = lay.split(w)
     Fk, Ak, Bk = linmap(Z[:, :N], V, p)

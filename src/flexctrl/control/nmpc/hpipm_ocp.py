@@ -99,7 +99,10 @@ def library() -> ctypes.CDLL:
 
 
 def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
-    """A C array of pointers to consecutive blocks of ``sizes`` entries of the contiguous ``array``."""
+    """A C array of pointers to consecutive blocks of ``sizes`` entries of ``array``.
+
+    ``array`` is contiguous.
+    """
     base, step = array.ctypes.data, array.itemsize
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
     return (ctypes.c_void_p * len(sizes))(*[base + int(o) * step for o in offsets])
@@ -120,8 +123,9 @@ def _checked_mode(options: dict) -> str:
 
 
 class HpipmOCP:
-    """HPIPM on the problem of the module docstring; one per controller (not picklable, not
-    thread-safe).
+    """HPIPM on the problem of the module docstring; one per controller.
+
+    Not picklable and not thread-safe: its memory is HPIPM's.
 
     Parameters
     ----------

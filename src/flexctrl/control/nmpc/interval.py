@@ -209,14 +209,8 @@ def interval_functions(
     ----------
     model : flexctrl.dynamics.model.Model
         Its ``f(x, u)``.
-    dt : float
-        The sample, s.
-    substeps : int
-        RK4 steps per sample.
-    sensitivities : {"midpoint", "exact", "frozen"} or None
-        How ``FJ`` differentiates; None builds ``F`` only.
-    jacobian_every : int
-        RK4 steps per Jacobian of ``f`` (``"frozen"`` only).
+    dt, substeps, sensitivities, jacobian_every
+        As for :func:`interval_core` (``dt`` in s).
 
     Returns
     -------
@@ -230,10 +224,21 @@ def interval_functions(
 
 
 def group_centres(N: int, stages: int) -> list[int]:
-    """The interval whose Jacobian serves each group of ``stages`` consecutive intervals of ``N``.
+    """The interval whose Jacobian serves each group of ``stages`` consecutive intervals.
 
     The middle one of each group (the earlier of two middles), the last group shorter when
     ``stages`` does not divide ``N``.
+
+    Parameters
+    ----------
+    N : int
+        Intervals of the horizon.
+    stages : int
+        Intervals per group.
+
+    Returns
+    -------
+    list of int
     """
     return [j + (min(stages, N - j) - 1) // 2 for j in range(0, N, stages)]
 
@@ -248,6 +253,17 @@ def grouped_sensitivities(
     group: the RTI keeps the fixed points of the nonlinear shooting equations (the ends
     are exact), with sensitivities frozen along the horizon for ``stages`` samples.  The
     outputs have the layout of ``lin.map(N)``, so the QP assembly is unchanged.
+
+    Parameters
+    ----------
+    shoot, lin : casadi.Function
+        ``shoot(z, v, p) -> F`` and ``lin(z, v, p) -> (F, A, B)``.
+    n, m, N, stages : int
+        States, inputs, intervals, and intervals per Jacobian.
+
+    Returns
+    -------
+    casadi.Function
     """
     centres = group_centres(N, stages)
     Z, V, p = ca.MX.sym("Z", n, N), ca.MX.sym("V", m, N), ca.MX.sym("p", lin.sparsity_in(2))
@@ -266,7 +282,17 @@ def grouped_sensitivities(
 
 
 def linearization_name(N: int, stages: int) -> str:
-    """The name of the horizon linearization's Function (and of its library's symbol)."""
+    """The name of the horizon linearization's Function (and of its library's symbol).
+
+    Parameters
+    ----------
+    N, stages : int
+        Intervals, and intervals per Jacobian.
+
+    Returns
+    -------
+    str
+    """
     return f"nmpc_linearize_{N}_by_{stages}" if stages > 1 else f"nmpc_linearize_{N}"
 
 
@@ -371,13 +397,24 @@ def horizon_linearization(
 ) -> tuple:
     """:func:`symbolic_linearization`, compiled to C when ``settings.compile``.
 
-    The arguments up to ``settings`` are :func:`symbolic_linearization`'s.  The library comes
-    from the disk cache when its code was built before.  With ``recipe`` (a key naming
-    ``fp``, the sizes and the settings: the caller's memo key) the library is looked up by the
-    recipe and :func:`builder_source_digest` before anything is built, so a worker whose cache
-    holds it skips the symbolic construction and the serialization that finds a library by its
-    content.  A library found by its recipe must pass ``check`` (the caller's comparison with
-    the model at a generic point); one that fails is removed, with a warning, and built again.
+    The library comes from the disk cache when its code was built before.  With ``recipe``
+    (a key naming ``fp``, the sizes and the settings: the caller's memo key) the library is
+    looked up by the recipe and :func:`builder_source_digest` before anything is built, so a
+    worker whose cache holds it skips the symbolic construction and the serialization that
+    finds a library by its content.  A library found by its recipe must pass ``check`` (the
+    caller's comparison with the model at a generic point); one that fails is removed, with a
+    warning, and built again.
+
+    Parameters
+    ----------
+    fp, nc, n, m, N, dt, substeps
+        As for :func:`symbolic_linearization`.
+    settings : flexctrl.spec.mpc_settings.NMPCSettings
+        Its ``compile``, ``sensitivities``, ``jacobian_every`` and ``stages_per_jacobian``.
+    recipe : str, optional
+        The key the library is found by before it is built.
+    check : callable, optional
+        ``check(linmap) -> bool``: whether a library found by its recipe is the right one.
 
     Returns
     -------

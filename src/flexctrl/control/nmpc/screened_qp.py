@@ -29,7 +29,21 @@ from flexctrl.sim.bound import BoundFunction
 
 
 def hpipm_options(N: int, n: int, nu: int, ng: int, warm_start: bool) -> dict:
-    """``casadi.conic`` options of HPIPM for ``N`` stages of ``n`` states, ``nu`` inputs and ``ng`` rows each."""
+    """``casadi.conic`` options of HPIPM for ``N`` stages.
+
+    Parameters
+    ----------
+    N : int
+        Stages.
+    n, nu, ng : int
+        States, inputs and general rows per stage.
+    warm_start : bool
+        Start from the primal guess given.
+
+    Returns
+    -------
+    dict
+    """
     return {
         "N": N,
         "nx": [n] * (N + 1),
@@ -180,16 +194,34 @@ class ScreenedQP:
 
 
 class HpipmStages:
-    """The smaller QP's data moved from the whole QP's arrays into
-    :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
+    """The smaller QP solved by :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
 
-    The whole QP's shooting rows read ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's
-    ``x_{k+1} = A_k x_k + B_k u_k + b_k`` has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds
-    (``lbx = ubx = z_0``) and eliminated.  The stage costs are the Hessian's diagonal blocks
-    ``Q_k = H[z_k, z_k]``, ``R_k = H[v_k, v_k]`` (the NMPC's has no cross terms; one with them is
-    refused), halved as ``casadi.conic`` hands them to HPIPM; the inputs' bounds are read from
-    ``lbx, ubx`` every solve.  Any other bound on a state (there is
-    none in the NMPC's QP) is refused when the data are read, not dropped.
+    Its data are moved from the whole QP's arrays.  The whole QP's shooting rows read
+    ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's ``x_{k+1} = A_k x_k + B_k u_k + b_k``
+    has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds (``lbx = ubx = z_0``) and eliminated.
+    The stage costs are the Hessian's diagonal blocks ``Q_k = H[z_k, z_k]``,
+    ``R_k = H[v_k, v_k]`` (the NMPC's has no cross terms; one with them is refused), halved as
+    ``casadi.conic`` hands them to HPIPM; the inputs' bounds are read from ``lbx, ubx`` every
+    solve.  Any other bound on a state (there is none in the NMPC's QP) is refused when the
+    data are read, not dropped.
+
+    Parameters
+    ----------
+    layout : flexctrl.control.nmpc.casadi_functions.Layout
+        The whole QP's variables.
+    H : ndarray
+        The whole QP's Hessian (dense).
+    numbered : casadi.DM
+        The whole constraint matrix's sparsity holding its nonzeros' numbers (1-based).
+    rows : ndarray of int
+        The whole QP's shooting rows.
+    options : dict
+        HPIPM's options (:func:`hpipm_options`' ``"hpipm"`` entry).
+
+    Raises
+    ------
+    HpipmUnavailable
+        When CasADi's ``libhpipm`` cannot be loaded.
     """
 
     def __init__(self, layout, H: np.ndarray, numbered: ca.DM, rows: np.ndarray, options: dict):
