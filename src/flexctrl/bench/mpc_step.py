@@ -26,12 +26,11 @@ import math
 import os
 import time
 from collections.abc import Sequence
+from importlib.metadata import version
 from typing import Any, cast
 
-import casadi
 import control
 import numpy as np
-import osqp
 
 from flexctrl.bench.nmpc_step import default_nmpc_variants, ms_stats, nmpc_lines, nmpc_rows
 from flexctrl.control import MPCController, design
@@ -160,9 +159,9 @@ def _header(model, model_path, fidelity, base, steps, target_deg, offset_deg) ->
         "environment": {
             "cpu_count": os.cpu_count(),
             "load_average": list(os.getloadavg()),
-            "osqp": osqp.__version__,
-            "casadi": casadi.__version__,
-            "control": getattr(control, "__version__", "?"),
+            "osqp": version("osqp"),
+            "casadi": version("casadi"),
+            "control": version("control"),
         },
         "variants": {},
         "command": COMMAND,

@@ -181,7 +181,7 @@ class PDController(Controller):
             self.strain_pole = (
                 math.exp(-2 * math.pi * corner * settings.sample_time) if corner > 0 else 0.0
             )
-        self._kappa = None
+        self._kappa: np.ndarray | None = None
         self._rate = np.zeros(n)
 
     def _reset(self) -> None:
@@ -217,7 +217,7 @@ class PDController(Controller):
         a = self.filter_pole
         F = -(1.0 - a) * (np.diag(self.kp) @ Sq + np.diag(self.kd) @ Sqd)
         J = np.zeros((n, n_y))
-        if self.gravity_mode == "measured":
+        if self.gravity_mode == "measured" and self.gravity is not None:
             qr = ca.SX.sym("qr", n)
             jac = ca.Function("dtau_g", [qr], [ca.jacobian(self.gravity(qr), qr)])
             J = np.array(jac(np.asarray(q_joints, dtype=float)), dtype=float) @ Sq
@@ -310,10 +310,11 @@ class PDController(Controller):
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[self._iq], y[self._iqd]
         q_ref, qd_ref, u_ref, u_static = self.reference_terms(t, q)
+        tau_g: np.ndarray | float
         if self.gravity_mode == "target":
             tau_g = u_static
-        elif self.gravity_mode == "measured":
-            tau_g = np.array(self.gravity(q), dtype=float).ravel()
+        elif self.gravity_mode == "measured" and self.gravity is not None:
+            tau_g = np.asarray(self.gravity(q), dtype=float).ravel()
         else:
             tau_g = 0.0
         tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0

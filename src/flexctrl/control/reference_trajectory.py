@@ -122,7 +122,8 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
 
     def one() -> ca.Function:
         c = ca.SX.sym("c", constants.size)
-        outs = _outputs(*fp(*args, c), qr, qdr, qddr, qf, n)
+        lifted_force, lifted_static = fp(*args, c)
+        outs = _outputs(lifted_force, lifted_static, qr, qdr, qddr, qf, n)
         return ca.Function(
             f"reference_p_{n}_{N}_{constants.size}",
             [*args, c],
@@ -215,7 +216,8 @@ class ReferenceTrajectory:
         self.tol, self.max_iter = tol, max_iter
         self.n_u, self.n_q = model.n_u, model.n_q
         self.compile = compile
-        self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        #: the tables computed so far, by ``(sample time, elastic)``
+        self._tables: dict[tuple[float, bool], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @property
     def t_arrive(self) -> float:

@@ -360,6 +360,10 @@ class ShapedController(PDController):
                     u_static,
                 ]
             )
+        if self._start is None:
+            raise RuntimeError(
+                "the shaped controller shapes a step from its first measurement: step it first"
+            )
         t0, q0 = self._start
         pos, vel = self._profile((times[:, None] - t0) - self.shaper.times[None, :])
         delta = np.asarray(self.reference.path.q_target) - q0

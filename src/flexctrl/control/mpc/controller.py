@@ -150,9 +150,11 @@ class MPCController(Controller):
             return self.K
         pb = self.problem
         qp = condensed_qp(pb, self.settings.blocks, 1)
-        nv = qp.moves.max() + 1
+        nv, Gz = qp.n_moves, qp.Gz
+        if Gz is None:  # the condensed QP's cost always depends on the initial state
+            raise ValueError("the condensed QP has no state-dependent cost")
         H = qp.H.toarray()[:nv, :nv]
-        Kz = np.linalg.solve(H, qp.Gz[:nv])[qp.first_move]  # v_0 = -Kz z
+        Kz = np.linalg.solve(H, Gz[:nv])[qp.first_move]  # v_0 = -Kz z
         return pb.Su[:, None] * Kz / pb.Sx[None, :]
 
     def _reset(self) -> None:

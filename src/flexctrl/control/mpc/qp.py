@@ -114,13 +114,14 @@ class QP:
         if self.ix0.size:
             lbx[self.ix0] = z
             ubx[self.ix0] = z
-        if dv is not None and self.block_starts is None:
+        starts = self.block_starts
+        if dv is not None and starts is None:
             lbx[self.moves] -= dv
             ubx[self.moves] -= dv
-        elif dv is not None:  # a held block must respect the bound of every stage it covers
-            starts = self.block_starts
+        elif dv is not None and starts is not None:
+            # a held block must respect the bound of every stage it covers:
+            # lo - dv_k for every k of the block is lo - min dv; hi - dv_k is hi - max dv
             blocks = self.moves[starts]
-            # lo - dv_k for every k of the block: lo - min dv; hi - dv_k: hi - max dv
             lbx[blocks] -= np.minimum.reduceat(dv, starts, axis=0)
             ubx[blocks] -= np.maximum.reduceat(dv, starts, axis=0)
         if dc is not None and self.soft_rows.size:

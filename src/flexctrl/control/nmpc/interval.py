@@ -341,6 +341,11 @@ def symbolic_linearization(
         extra,
         settings.jacobian_every,
     )
+    if FJp is None:
+        raise ValueError(
+            "the horizon's linearization needs sensitivities; allowed: "
+            "'midpoint', 'exact', 'frozen'"
+        )
     p = ca.MX.sym("p", 2 * n + 2 * m + nc)
     xop, uop = p[:n], p[n : n + m]
     Sx, Su = p[n + m : 2 * n + m], p[2 * n + m : 2 * n + 2 * m]

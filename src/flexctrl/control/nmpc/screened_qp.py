@@ -233,12 +233,12 @@ class HpipmStages:
         # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a
         # structural zero)
         nnz = numbered.nnz()
-        numbered = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
-        numbered[numbered < 0] = nnz  # the sentinel entry: 0
+        index = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
+        index[index < 0] = nnz  # the sentinel entry: 0
         shooting = rows.reshape(N, n)
         # HPIPM's column-major blocks as C-ordered (cols, rows) arrays: A_k[i, j] at [k, j, i]
-        self._ia = np.stack([numbered[np.ix_(shooting[k], self.z_index[k])].T for k in range(N)])
-        self._ib = np.stack([numbered[np.ix_(shooting[k], self.v_index[k])].T for k in range(N)])
+        self._ia = np.stack([index[np.ix_(shooting[k], self.z_index[k])].T for k in range(N)])
+        self._ib = np.stack([index[np.ix_(shooting[k], self.v_index[k])].T for k in range(N)])
         self._shooting = shooting
         self._a = np.zeros(nnz + 1)
         ocp = self.ocp
