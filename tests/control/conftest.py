@@ -1,4 +1,4 @@
-"""The three-link arm the controller tests design on: ``amm:2``, gravity, target (80, -10, -10) deg."""
+"""The three-link arm the controller tests design on: ``amm:2``, gravity, (80, -10, -10) deg."""
 
 import numpy as np
 import pytest

@@ -119,7 +119,7 @@ def test_gain_schedule_reproduces_node_gains_and_interpolates(arm3, op3):
 
 @pytest.mark.parametrize("target_deg", [[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
 def test_lqg_designs_in_the_horizontal_plane_and_settles_the_move(target_deg):
-    """The move scene's LQG: the filter DARE the Schur method failed on at [30, 0, 0] (free rigid modes at z = 1)."""
+    """The move scene's LQG: its filter DARE has the free rigid modes' Jordan blocks at z = 1."""
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
     from flexctrl.spec.scene import load_scene
 

@@ -1,4 +1,4 @@
-"""Joint PD: automatic gains, gravity compensation, the torque filter light hubs need, and a move."""
+"""Joint PD: automatic gains, gravity compensation, the torque filter light hubs need, a move."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def test_pd_with_measured_gravity_compensation_matches_static_torque(arm3, op3):
 
 
 def _sampled_pd_radius(model, op, settings):
-    """Spectral radius of the ZOH-sampled linear loop with the filtered PD (built here, independently)."""
+    """Spectral radius of the ZOH-sampled linear loop with the filtered PD, built independently."""
     from flexctrl.control.pd import pd_gains
 
     sysd = L.discretize(L.linearize(model, op, ("state",)), settings.sample_time)

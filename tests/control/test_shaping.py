@@ -1,4 +1,4 @@
-"""Input shaping: analytic impulse trains, zero residual vibration of an independently simulated oscillator."""
+"""Input shaping: analytic impulse trains; no residual vibration of a simulated oscillator."""
 
 from __future__ import annotations
 
@@ -109,7 +109,7 @@ def test_locked_frequency_source_uses_the_locked_structure(damped3):
 
 
 def test_shaped_move_deflects_the_links_less_than_the_unshaped_step(damped3):
-    """The classical comparison on the nonlinear arm: the same PD, a step reference vs a ZVD-shaped one."""
+    """The classical comparison on the nonlinear arm: the same PD, a step or a ZVD-shaped one."""
     op = L.equilibrium(damped3, np.radians([80.0, -10.0, -10.0]))
     F, _ = interval_functions(damped3, 0.001, 3, "frozen")
     start = L.equilibrium(damped3, np.radians([76.0, -8.0, -12.0]))

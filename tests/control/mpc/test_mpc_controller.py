@@ -1,4 +1,7 @@
-"""Linear MPC: unconstrained = LQR = closed-form QP; hard torque limits; soft limits never infeasible; fallbacks."""
+"""Linear MPC: unconstrained = LQR = closed-form QP; hard torque limits; soft limits; fallbacks.
+
+Soft limits never make the QP infeasible.
+"""
 
 from __future__ import annotations
 
@@ -14,7 +17,7 @@ TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=Tru
 
 
 def closed_form_first_move(Ad, Bd, Q, R, P, N, dx0):
-    """Minimise sum x'Qx + u'Ru + x_N'P x_N s.t. x_{k+1} = A x_k + B u_k by one KKT solve (states kept)."""
+    """Minimise sum x'Qx + u'Ru + x_N'P x_N s.t. x_{k+1} = A x_k + B u_k: one KKT solve."""
     n, m = Bd.shape
     nz = N * (n + m)  # w = [u_0..u_{N-1}, x_1..x_N]
     H = np.zeros((nz, nz))
@@ -225,7 +228,10 @@ def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
 def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(
     arm3, op3, formulation
 ):
-    """Reference in the bounds only: MPC's first move = LQR's u_ref - K (x - x_ref), and the QP pattern is unchanged."""
+    """Reference in the bounds only: the first move is LQR's u_ref - K (x - x_ref).
+
+    The QP's pattern is unchanged.
+    """
     from flexctrl.control.lqr import LQRSettings
     from flexctrl.control.reference_trajectory import ReferenceTrajectory
     from flexctrl.spec.reference import JointReference

@@ -1,4 +1,4 @@
-"""Nonlinear MPC: RTI iterates converge to the IPOPT optimum; closed loop; fallbacks; timing (slow)."""
+"""Nonlinear MPC: RTI iterates converge to the IPOPT optimum; closed loop; fallbacks."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The NMPC's cheaper samples: a reduced prediction model that keeps the loop stable, and sparser Jacobians."""
+"""The NMPC with a reduced prediction model: the loop stays stable; one library per structure."""
 
 from __future__ import annotations
 
