@@ -29,6 +29,7 @@ import functools
 import glob
 import os
 
+import casadi
 import numpy as np
 
 #: HPIPM's ``enum hpipm_mode``
@@ -58,8 +59,6 @@ def library() -> ctypes.CDLL:
     HpipmUnavailable
         No loadable ``libhpipm`` in CasADi's package folder.
     """
-    import casadi
-
     folder = os.path.dirname(casadi.__file__)
     names = sorted(
         glob.glob(os.path.join(folder, "libhpipm.*")) + glob.glob(os.path.join(folder, "hpipm.dll"))

@@ -45,8 +45,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from flexctrl.dynamics import parametric
 from flexctrl.dynamics.parametric import Memo
 from flexctrl.dynamics.parametric import try_expand as _expanded
+from flexctrl.sim import rk4
+from flexctrl.sim.compile import compile_by_recipe, compile_function
 from flexctrl.sim.rk4 import rk4_next
 
 #: RK4 step bound ``|lambda|_max h`` used to choose the substeps (below the stability limit
@@ -365,9 +368,6 @@ def symbolic_linearization(
 
 
 def _source_digest() -> str:
-    from flexctrl.dynamics import parametric
-    from flexctrl.sim import rk4
-
     digest = hashlib.sha256()
     for module in (sys.modules[__name__], rk4, parametric):
         digest.update(Path(inspect.getfile(module)).read_bytes())
@@ -430,8 +430,6 @@ def horizon_linearization(
     build = lambda: symbolic_linearization(fp, nc, n, m, N, dt, substeps, settings)  # noqa: E731
     if not settings.compile:
         return build(), False, 0.0, False
-    from flexctrl.sim.compile import compile_by_recipe, compile_function
-
     if recipe is None:
         result = compile_function(build())
     else:
