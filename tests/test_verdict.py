@@ -96,9 +96,10 @@ def test_verdict_and_simulation_agree_off_the_design_payload():
 
 
 def test_nmpc_has_no_linear_verdict(nominal):
+    """The NMPC solves a nonlinear programme per sample: no linear law, no linear verdict."""
+    from flexctrl.control import has_linear_law
+
     model, op = nominal
-
-    class Nonlinear:  # a controller without a linear law
-        sensors = None
-
-    assert linear_closed_loop_radius(model, Nonlinear(), TARGET) is None
+    nmpc = fc.design(model, op, fc.NMPCSettings(compile=False, horizon=5))
+    assert linear_closed_loop_radius(model, nmpc, TARGET) is None
+    assert not has_linear_law("nmpc") and has_linear_law("mpc")

@@ -26,9 +26,18 @@ import math
 import os
 import time
 from collections.abc import Sequence
-from typing import Any
+from importlib.metadata import version
+from typing import Any, cast
 
+import control
 import numpy as np
+
+from flexctrl.bench.nmpc_step import default_nmpc_variants, ms_stats, nmpc_lines, nmpc_rows
+from flexctrl.control import MPCController, design
+from flexctrl.control.mpc.qp_backends import Solution
+from flexctrl.linear import equilibrium
+from flexctrl.scenes.model_files import load_model
+from flexctrl.spec.mpc_settings import MPCSettings, OSQPSettings
 
 COMMAND = (
     'python -c "from flexctrl.bench.mpc_step import mpc_benchmark; import json; '
@@ -36,22 +45,14 @@ COMMAND = (
 )
 
 
-def _stats(values_s: Sequence[float]) -> dict[str, float]:
-    a = np.asarray(values_s, dtype=float) * 1e3
-    a = a[np.isfinite(a)]
-    if not a.size:
-        return {"median": math.nan, "p95": math.nan, "max": math.nan}
-    return {
-        "median": float(np.median(a)),
-        "p95": float(np.percentile(a, 95)),
-        "max": float(a.max()),
-    }
-
-
 def default_variants() -> dict[str, dict[str, Any]]:
-    """Settings overrides per variant (on top of :class:`~flexctrl.spec.controller_settings.MPCSettings`)."""
-    from flexctrl.spec.controller_settings import OSQPSettings
+    """Settings overrides per linear-MPC variant, on top of :class:`MPCSettings`.
 
+    Returns
+    -------
+    dict
+        Variant name -> keyword overrides of :class:`MPCSettings`.
+    """
     return {
         "osqp_sparse": {},
         "osqp_sparse_ruiz": {"osqp": OSQPSettings(scaling=10)},
@@ -64,38 +65,39 @@ def default_variants() -> dict[str, dict[str, Any]]:
     }
 
 
-def _run_linear(model, op, settings, dx0: np.ndarray, steps: int) -> dict[str, Any]:
-    from flexctrl.control import design
+def _mpc(model, op, settings: MPCSettings) -> MPCController:
+    """The linear MPC of ``settings`` (:func:`flexctrl.design` of MPC settings)."""
+    return cast(MPCController, design(model, op, settings))
 
+
+def _run_linear(model, op, settings, dx0: np.ndarray, steps: int) -> dict[str, Any]:
+    """One linear-MPC variant regulating its own ZOH model for ``steps`` samples."""
     start = time.perf_counter()
-    ctrl = design(model, op, settings)
+    ctrl = _mpc(model, op, settings)
     build = time.perf_counter() - start
     ctrl.reset()
     Ad, Bd = ctrl.plant.Ad, ctrl.plant.Bd
     dx = dx0.copy()
-    solve, iters, dev = [], [], []
-    K = ctrl.K
+    solve, iters = [], []
     for k in range(steps):
         u = ctrl.step(k * ctrl.sample_time, op.x + dx)
-        solve.append(ctrl.last.solve_time)
-        iters.append(ctrl.last.iterations)
-        du_lqr = np.clip(op.u - K @ dx, -ctrl.limits, ctrl.limits)
-        dev.append(float(np.max(np.abs(u - du_lqr) / ctrl.problem.Su)))
+        last = cast(Solution, ctrl.last)  # every step solves a QP
+        solve.append(last.solve_time)
+        iters.append(last.iterations)
         dx = Ad @ dx + Bd @ (u - op.u)
     summary = ctrl.stats.summary()
     it = np.asarray(iters, dtype=float)
+    iterations = {
+        "median": float(np.median(it)),
+        "p95": float(np.percentile(it, 95)),
+        "max": float(it.max()),
+    }
     return {
         "build_s": build,
         "first_solve_ms": float(solve[0] * 1e3),
-        "solve_ms": _stats(solve[1:]),
-        "step_ms": _stats(ctrl.stats.step_times[1:]),
-        "iterations": {
-            "median": float(np.median(it)),
-            "p95": float(np.percentile(it, 95)),
-            "max": float(it.max()),
-        }
-        if np.all(it >= 0)
-        else None,
+        "solve_ms": ms_stats(solve[1:]),
+        "step_ms": ms_stats(ctrl.stats.step_times[1:]),
+        "iterations": iterations if np.all(it >= 0) else None,
         "status": summary["status"],
         "fallbacks": summary["fallbacks"],
         "slack_max_m": summary["slack_max"],
@@ -105,13 +107,11 @@ def _run_linear(model, op, settings, dx0: np.ndarray, steps: int) -> dict[str, A
 
 
 def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[str, Any]:
-    """python-control's ``create_mpc_iosystem`` on the same scaled problem (no soft constraints), a few solves."""
-    import control
+    """python-control's ``create_mpc_iosystem`` on the same scaled problem (no soft rows)."""
+    # python-control's optimal-control module, needed by this comparison alone
     import control.optimal as opt
 
-    from flexctrl.control import design
-
-    ctrl = design(model, op, dataclasses.replace(settings, soft="none"))
+    ctrl = _mpc(model, op, dataclasses.replace(settings, soft="none"))
     pb = ctrl.problem
     sysd = control.ss(pb.A, pb.B, np.eye(pb.n), 0, dt=ctrl.sample_time)
     timepts = np.arange(pb.horizon + 1) * ctrl.sample_time
@@ -128,17 +128,8 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
         times.append(time.perf_counter() - start)
         moves.append(v)
     # the same first move from our OSQP controller (tight tolerance) for the comparison
-    from flexctrl.spec.controller_settings import OSQPSettings
-
-    tight = design(
-        model,
-        op,
-        dataclasses.replace(
-            settings,
-            soft="none",
-            osqp=OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000, polishing=True),
-        ),
-    )
+    tight_osqp = OSQPSettings(eps_abs=1e-8, eps_rel=1e-8, max_iter=20000, polishing=True)
+    tight = design(model, op, dataclasses.replace(settings, soft="none", osqp=tight_osqp))
     tight.reset()
     u = tight.step(0.0, op.x + dx0)
     v_ours = (u - op.u) / pb.Su
@@ -150,152 +141,16 @@ def _python_control(model, op, settings, dx0: np.ndarray, solves: int) -> dict[s
     }
 
 
-def default_nmpc_variants() -> dict[str, dict[str, Any]]:
-    """NMPC variants (overrides of :class:`~flexctrl.spec.controller_settings.NMPCSettings`),
-    stepped interleaved.
-
-    ``rti_frozen`` is the shipped setting (``controllers/nmpc.toml``): one Jacobian of ``f``
-    per sample, at the middle RK4 node of the horizon's middle interval, held over the whole
-    horizon (``sensitivities = "midpoint"``, ``stages_per_jacobian = 20``), HPIPM warm-started
-    from the shifted previous solution, predicting with the joints and the three slowest
-    coupled modes at the target, the estimate's fast modes removed (12 states, 2 RK4
-    substeps).  Against it, one setting changed each: ``rti_frozen_per_interval`` one Jacobian
-    per interval of the horizon; ``rti_frozen_per_step`` one Jacobian per RK4 step at its start
-    (``sensitivities = "frozen"``).  The others predict with the whole design model (18 states,
-    9 substeps): ``rti_frozen_full`` (``controllers/nmpc_full.toml``); ``rti_frozen_cold`` with
-    HPIPM's default start; ``rti_exact`` cold with exact sensitivities; ``rti_frozen_every3``
-    one Jacobian of ``f`` per three RK4 steps.  ``rti_first_modes`` predicts with the first
-    assumed mode of every link, the estimate selected (12 states, 2 substeps).
-    """
-    reduced = {"prediction_modes": 1, "qp_warm_start": True}
-    per_interval = {**reduced, "prediction_basis": "coupled", "prediction_map": "modal"}
-    shipped = {**per_interval, "stages_per_jacobian": 20}
-    return {
-        "rti_frozen": {**shipped, "sensitivities": "midpoint"},
-        "rti_frozen_per_interval": {**per_interval, "sensitivities": "midpoint"},
-        "rti_frozen_per_step": {**per_interval},
-        "rti_frozen_full": {"qp_warm_start": True},
-        "rti_frozen_cold": {},
-        "rti_exact": {"sensitivities": "exact"},
-        "rti_frozen_every3": {"qp_warm_start": True, "jacobian_every": 3},
-        "rti_first_modes": {**reduced, "prediction_basis": "assumed", "prediction_map": "select"},
-    }
-
-
-def _run_nmpcs(
-    model,
-    op,
-    dx0: np.ndarray,
-    steps: int,
-    horizon: int,
-    sample_time: float,
-    variants: dict[str, dict[str, Any]],
-    block_rounds: int = 3,
-) -> dict[str, Any]:
-    """Every NMPC variant against its own copy of the nonlinear plant, twice: per sample and in
-    blocks.
-
-    ``"sample"``: one sample of each variant in turn.  Interleaving puts the variants under
-    the same load (the machine may be shared), so their ratios are meaningful even when the
-    absolute times are not; but every call then finds the caches full of the other
-    variants' code and data (seven compiled linearisations of 0.1-1 MB each).
-    ``"block"``: the same runs again from the start (each controller reset), in
-    ``block_rounds`` rounds of ``steps / block_rounds`` consecutive samples per variant, the
-    order of the variants rotated every round: what a controller that runs alone sees (as in
-    a study), with the load still shared at the scale of a block.  Each variant has its own
-    plant, so the order changes no number but the times.  The plant is the design model's
-    RK4 map with the substeps its own fastest mode needs (whatever model a variant
-    predicts with).
-    """
-    from flexctrl.control import design
-    from flexctrl.control.lqr import build_sensors, linear_plant
-    from flexctrl.control.nmpc.controller import auto_substeps, interval_functions
-    from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
-
-    plant_substeps = auto_substeps(
-        linear_plant(model, op, build_sensors(model, SensorSettings(), op), sample_time)
-    )
-    F, _ = interval_functions(model, sample_time, plant_substeps, None)
-    controllers, builds = {}, {}
-    for name, overrides in variants.items():
-        start = time.perf_counter()
-        settings = NMPCSettings(horizon=horizon, sample_time=sample_time, **overrides)
-        controllers[name] = design(model, op, settings)
-        builds[name] = time.perf_counter() - start
-
-    def run(schedule: list[tuple[str, range]]) -> dict[str, Any]:
-        for ctrl in controllers.values():
-            ctrl.reset()
-        states = {name: op.x + dx0 for name in variants}
-        cpu: dict[str, list[float]] = {name: [] for name in variants}
-        for name, samples in schedule:
-            ctrl = controllers[name]
-            for k in samples:
-                start = time.thread_time()
-                u = ctrl.step(k * ctrl.sample_time, states[name])
-                cpu[name].append(time.thread_time() - start)
-                states[name] = np.array(F(states[name], u), dtype=float).ravel()
-        return {
-            name: _nmpc_summary(
-                ctrl, variants[name], builds[name], cpu[name], states[name], op, model.n_u
-            )
-            for name, ctrl in controllers.items()
-        }
-
-    names = list(variants)
-    per_sample = [(name, range(k, k + 1)) for k in range(steps) for name in names]
-    size = -(-steps // block_rounds)
-    blocks = [
-        (names[(i + r) % len(names)], range(r * size, min(steps, (r + 1) * size)))
-        for r in range(block_rounds)
-        for i in range(len(names))
-    ]
-    return {
-        "sample": run(per_sample),
-        "block": run(blocks),
-        "plant_substeps": plant_substeps,
-        "block_rounds": block_rounds,
-    }
-
-
-def _nmpc_summary(
-    ctrl, settings: dict, build_s: float, cpu: list[float], state: np.ndarray, op, n_u: int
-) -> dict:
-    """The figures of one NMPC variant's run (the first sample, which starts from a rollout, left out)."""
-    summary = ctrl.stats.summary()
-    it = np.asarray(ctrl.stats.iterations[1:], dtype=float)
-    return {
-        "settings": settings,
-        "build_s": build_s,
-        "compiled": ctrl.compiled,
-        "prediction_states": int(ctrl.problem.n),
-        "substeps": ctrl.substeps,
-        "step_ms": _stats(ctrl.stats.step_times[1:]),
-        "step_cpu_ms": _stats(cpu[1:]),
-        "linearize_and_assemble_ms": _stats(ctrl.timing["linearize_qp"][1:]),
-        "qp_ms": _stats(ctrl.timing["qp"][1:]),
-        "qp_iterations_median": float(np.median(it)) if it.size else math.nan,
-        "status": summary["status"],
-        "fallbacks": summary["fallbacks"],
-        "final_joint_error_deg": float(np.degrees(np.max(np.abs((state - op.x)[:n_u])))),
-    }
-
-
 def _header(model, model_path, fidelity, base, steps, target_deg, offset_deg) -> dict[str, Any]:
     """The benchmark's problem and environment, and an empty table of variants."""
-    import casadi
-    import control
-    import osqp
-
-    horizon, sample_time = base.horizon, base.sample_time
     return {
         "problem": {
             "model": str(model_path),
             "fidelity": fidelity,
             "states": model.n_x,
             "inputs": model.n_u,
-            "horizon": horizon,
-            "sample_time_s": sample_time,
+            "horizon": base.horizon,
+            "sample_time_s": base.sample_time,
             "steps": steps,
             "target_deg": list(target_deg),
             "offset_deg": list(offset_deg),
@@ -304,13 +159,33 @@ def _header(model, model_path, fidelity, base, steps, target_deg, offset_deg) ->
         "environment": {
             "cpu_count": os.cpu_count(),
             "load_average": list(os.getloadavg()),
-            "osqp": osqp.__version__,
-            "casadi": casadi.__version__,
-            "control": control.__version__,
+            "osqp": version("osqp"),
+            "casadi": version("casadi"),
+            "control": version("control"),
         },
         "variants": {},
         "command": COMMAND,
     }
+
+
+def _linear_variants(model, op, base, dx0, steps, variants) -> dict[str, Any]:
+    """Every linear-MPC variant's figures; a variant that cannot be built reports its error."""
+    rows: dict[str, Any] = {}
+    for name, overrides in variants.items():
+        try:
+            rows[name] = _run_linear(model, op, dataclasses.replace(base, **overrides), dx0, steps)
+        except Exception as exc:  # a missing plugin must not sink the whole benchmark
+            rows[name] = {"error": f"{type(exc).__name__}: {exc}"}
+    return rows
+
+
+def _python_control_row(model, op, base, dx0, steps, solves: int) -> dict[str, Any]:
+    """python-control's solves, with the ratio of its median to OSQP's on the same problem."""
+    pc = _python_control(model, op, base, dx0, solves)
+    ours = _run_linear(model, op, dataclasses.replace(base, soft="none"), dx0, steps)
+    pc["osqp_sparse_no_soft_solve_ms"] = ours["solve_ms"]
+    pc["ratio_median"] = pc["median_s"] * 1e3 / ours["solve_ms"]["median"]
+    return pc
 
 
 def mpc_benchmark(
@@ -332,24 +207,29 @@ def mpc_benchmark(
 
     Parameters
     ----------
-    model_path, fidelity
-        The arm.
-    horizon, sample_time
-        MPC horizon (samples) and sample time (s).
-    steps
+    model_path : str
+        The arm's model file (a shipped name or a path).
+    fidelity : str
+        The model's fidelity.
+    horizon : int
+        MPC horizon, samples.
+    sample_time : float
+        Sample time, s.
+    steps : int
         Closed-loop samples per linear-MPC variant.
-    target_deg, offset_deg
-        Target joint angles and the initial offset from them (degrees).
-    variants
-        Name -> :class:`~flexctrl.spec.controller_settings.MPCSettings` overrides
-        (default :func:`default_variants`).
-    python_control_solves
+    target_deg, offset_deg : sequence of float
+        Target joint angles and the initial offset from them, degrees.
+    variants : dict, optional
+        Name -> :class:`MPCSettings` overrides (default :func:`default_variants`).
+    python_control_solves : int
         Solves of python-control's MPC to time (0 skips it; each takes seconds).
-    nmpc, nmpc_steps
-        Whether to time the NMPC and for how many samples.
-    nmpc_variants
-        Name -> :class:`~flexctrl.spec.controller_settings.NMPCSettings` overrides, stepped
-        interleaved (default :func:`default_nmpc_variants`).
+    nmpc : bool
+        Whether to time the NMPC.
+    nmpc_steps : int
+        Closed-loop samples per NMPC variant.
+    nmpc_variants : dict, optional
+        Name -> :class:`~flexctrl.spec.mpc_settings.NMPCSettings` overrides (default
+        :func:`~flexctrl.bench.nmpc_step.default_nmpc_variants`).
 
     Returns
     -------
@@ -358,65 +238,45 @@ def mpc_benchmark(
         ``step_ms`` as median/p95/max, iterations, status counts, fallbacks),
         ``python_control`` (seconds per solve and the ratio to ``osqp_sparse``),
         ``nmpc`` (the variants stepped one sample each in turn), ``nmpc_blocks`` (the same
-        runs in blocks of consecutive samples, see :func:`_run_nmpcs`) and ``command``.
+        runs in blocks of consecutive samples, :mod:`flexctrl.bench.nmpc_step`) and
+        ``command``.
     """
-    from flexctrl import linear as L
-    from flexctrl.scenes.model_files import load_model
-    from flexctrl.spec.controller_settings import MPCSettings
-
     model = load_model(model_path, fidelity=fidelity)
-    op = L.equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))
+    op = equilibrium(model, np.radians(np.asarray(target_deg, dtype=float)))
     dx0 = np.zeros(model.n_x)
     dx0[: model.n_u] = np.radians(np.asarray(offset_deg, dtype=float))
     base = MPCSettings(horizon=horizon, sample_time=sample_time)
     result = _header(model, model_path, fidelity, base, steps, target_deg, offset_deg)
-
-    for name, overrides in (variants if variants is not None else default_variants()).items():
-        try:
-            result["variants"][name] = _run_linear(
-                model, op, dataclasses.replace(base, **overrides), dx0, steps
-            )
-        except Exception as exc:  # a missing plugin must not sink the whole benchmark
-            result["variants"][name] = {"error": f"{type(exc).__name__}: {exc}"}
+    linear = variants if variants is not None else default_variants()
+    result["variants"] = _linear_variants(model, op, base, dx0, steps, linear)
     if python_control_solves > 0:
-        pc = _python_control(model, op, base, dx0, python_control_solves)
-        ours = _run_linear(model, op, dataclasses.replace(base, soft="none"), dx0, steps)
-        pc["osqp_sparse_no_soft_solve_ms"] = ours["solve_ms"]
-        pc["ratio_median"] = pc["median_s"] * 1e3 / ours["solve_ms"]["median"]
-        result["python_control"] = pc
-    if nmpc:
-        runs = _run_nmpcs(
-            model,
-            op,
-            dx0,
-            nmpc_steps,
-            horizon,
-            sample_time,
-            nmpc_variants if nmpc_variants is not None else default_nmpc_variants(),
+        result["python_control"] = _python_control_row(
+            model, op, base, dx0, steps, python_control_solves
         )
-        result["nmpc_plant_substeps"] = runs["plant_substeps"]
-        result["nmpc"] = runs["sample"]
-        result["nmpc_blocks"] = runs["block"]
-        result["nmpc_block_rounds"] = runs["block_rounds"]
-        if "rti_frozen" in runs["sample"] and "rti_frozen_full" in runs["sample"]:
-            fast, full = runs["sample"]["rti_frozen"], runs["sample"]["rti_frozen_full"]
-            result["nmpc_speedup"] = {
-                "against": "rti_frozen_full",
-                "step_median": full["step_ms"]["median"] / fast["step_ms"]["median"],
-                "step_cpu_median": full["step_cpu_ms"]["median"] / fast["step_cpu_ms"]["median"],
-            }
+    if nmpc:
+        nonlinear = nmpc_variants if nmpc_variants is not None else default_nmpc_variants()
+        result.update(nmpc_rows(model, op, dx0, nmpc_steps, horizon, sample_time, nonlinear))
     return result
 
 
 def format_benchmark(result: dict[str, Any]) -> str:
-    """A short text table of :func:`mpc_benchmark`'s figures."""
+    """A short text table of :func:`mpc_benchmark`'s figures.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`mpc_benchmark` returned.
+
+    Returns
+    -------
+    str
+        One line per variant, times in ms.
+    """
+    problem, env = result["problem"], result["environment"]
     lines = [
-        f"MPC benchmark: {result['problem']['states']} states, {result['problem']['inputs']} "
-        "inputs, "
-        f"N = {result['problem']['horizon']}, dt = {result['problem']['sample_time_s'] * 1e3:g} "
-        "ms; "
-        f"load {result['environment']['load_average'][0]:.2f} on "
-        f"{result['environment']['cpu_count']} CPUs",
+        f"MPC benchmark: {problem['states']} states, {problem['inputs']} inputs, "
+        f"N = {problem['horizon']}, dt = {problem['sample_time_s'] * 1e3:g} ms; "
+        f"load {env['load_average'][0]:.2f} on {env['cpu_count']} CPUs",
         f"{'variant':24s} {'solve med':>10s} {'p95':>8s} {'max':>8s} {'step med':>9s} "
         f"{'iter med':>9s}  status",
     ]
@@ -425,42 +285,19 @@ def format_benchmark(result: dict[str, Any]) -> str:
             lines.append(f"{name:24s} {v['error']}")
             continue
         it = v["iterations"]["median"] if v["iterations"] else float("nan")
+        solve = v["solve_ms"]
         lines.append(
-            f"{name:24s} {v['solve_ms']['median']:10.3f} {v['solve_ms']['p95']:8.3f} "
-            f"{v['solve_ms']['max']:8.3f} "
+            f"{name:24s} {solve['median']:10.3f} {solve['p95']:8.3f} {solve['max']:8.3f} "
             f"{v['step_ms']['median']:9.3f} {it:9.0f}  {v['status']}"
         )
     if "python_control" in result:
         pc = result["python_control"]
         lines.append(
             f"python-control MPC: {pc['median_s']:.2f} s per solve = {pc['ratio_median']:.0f} x "
-            "OSQP sparse "
-            f"(first moves differ by {pc['first_move_difference']:.1e} in scaled units)"
+            f"OSQP sparse (first moves differ by {pc['first_move_difference']:.1e} in scaled "
+            "units)"
         )
-    for name, v in result.get("nmpc", {}).items():
-        block = result.get("nmpc_blocks", {}).get(name)
-        if block:
-            lines.append(
-                f"NMPC {name} in blocks of consecutive samples: step median "
-                f"{block['step_ms']['median']:.2f} ms, "
-                f"p95 {block['step_ms']['p95']:.2f} (linearise+assemble "
-                f"{block['linearize_and_assemble_ms']['median']:.2f}, QP {block['qp_ms']['median']:.2f})"
-            )
-        lines.append(
-            f"NMPC {name}: step median {v['step_ms']['median']:.2f} ms, p95 "
-            f"{v['step_ms']['p95']:.2f}, "
-            f"max {v['step_ms']['max']:.2f}, CPU median {v['step_cpu_ms']['median']:.2f} "
-            f"(linearise+assemble {v['linearize_and_assemble_ms']['median']:.2f}, "
-            f"QP {v['qp_ms']['median']:.2f}, {v['qp_iterations_median']:.0f} iterations; "
-            f"{v['prediction_states']} states, {v['substeps']} RK4 substeps, compiled {v['compiled']})"
-        )
-    if "nmpc_speedup" in result:
-        sp = result["nmpc_speedup"]
-        lines.append(
-            f"NMPC rti_frozen against {sp['against']} (interleaved): {sp['step_median']:.2f}x "
-            f"faster by the median step, {sp['step_cpu_median']:.2f}x by CPU time"
-        )
-    return "\n".join(lines)
+    return "\n".join(lines + nmpc_lines(result))
 
 
 __all__ = [

@@ -1,5 +1,4 @@
-"""Controllers for flexible arms, all with one small protocol
-(:class:`~flexctrl.control.controller.Controller`).
+"""Controllers for flexible arms, all with one small protocol (:class:`.Controller`).
 
 ``design(model, op, settings)`` builds the controller named by the settings type,
 regulating ``model`` to the target equilibrium ``op``
@@ -29,8 +28,8 @@ from collections.abc import Callable
 
 from flexctrl.control.controller import Controller, ControllerStats
 from flexctrl.control.lqr import LQRController, design_lqr
-from flexctrl.control.mpc.controller import MPCController, design_mpc
-from flexctrl.control.nmpc.controller import NMPCController, design_nmpc
+from flexctrl.control.mpc import MPCController, design_mpc
+from flexctrl.control.nmpc import NMPCController, design_nmpc
 from flexctrl.control.pd import PDController, design_pd
 from flexctrl.control.shaping import ShapedController, design_shaped
 from flexctrl.errors import SpecError
@@ -54,9 +53,8 @@ def _check_holding_torque(model, op) -> None:
     excess = holding_torque_excess(model, op)
     if excess:
         raise SpecError(
-            f"{excess}; allowed: a target whose holding torques are within the limits (check "
-            "gravity, "
-            "the payload and the target)",
+            f"{excess}; allowed: a target whose holding torques are within the limits "
+            "(check gravity, the payload and the target)",
             source=getattr(model.spec, "source", None) or None,
             key="target",
         )
@@ -83,8 +81,19 @@ CONTROLLER_CLASSES: dict[str, type[Controller]] = {
 
 
 def has_linear_law(kind: str) -> bool:
-    """Whether controllers of ``kind`` give a ``linear_law`` (the linear verdict of
-    :mod:`flexctrl.loop.verdict`)."""
+    """Whether controllers of ``kind`` give a ``linear_law``.
+
+    The law the linear verdict of :mod:`flexctrl.loop.verdict` closes with the plant.
+
+    Parameters
+    ----------
+    kind : {"pd", "lqr", "mpc", "nmpc", "shaped"}
+        A controller kind (the settings' ``kind``).
+
+    Returns
+    -------
+    bool
+    """
     return callable(getattr(CONTROLLER_CLASSES[kind], "linear_law", None))
 
 
@@ -131,9 +140,20 @@ def design(model, op, settings) -> Controller:
 __all__ = [
     "design",
     "has_linear_law",
+    "DESIGNERS",
     "CONTROLLER_CLASSES",
     "Controller",
     "ControllerStats",
+    "PDController",
+    "LQRController",
+    "MPCController",
+    "NMPCController",
+    "ShapedController",
+    "design_pd",
+    "design_lqr",
+    "design_mpc",
+    "design_nmpc",
+    "design_shaped",
     "SETTINGS",
     "PDSettings",
     "LQRSettings",

@@ -32,14 +32,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from flexctrl.control.reference_trajectory import HoldReference
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors
 
 
 @dataclass(frozen=True, eq=False)
 class SampledLaw:
-    """A controller's law as one CasADi map, for running many samples in one call
-    (:mod:`flexctrl.loop.compiled`).
+    """A controller's law as one CasADi map, to run many samples in one call.
+
+    The compiled closed loop (:mod:`flexctrl.loop.compiled`) chains it with the plant step.
 
     Per sample ``k``: ``(xi_k, u_k) = function(xi_{k-1}, y_k, u_{k-1}, r_k)`` with ``xi`` the
     controller's memory, ``y`` the measurement, ``u_{k-1}`` the torque held during the
@@ -54,9 +56,11 @@ class SampledLaw:
     memory : ndarray
         ``xi`` now (after the steps taken so far).
     references : callable
-        ``references(times) -> (T, n_r)`` array: the reference rows at sample times (s) from now on.
+        ``references(times) -> (T, n_r)`` array: the reference rows at sample times (s) from
+        now on.
     restore : callable
-        ``restore(xi)``: put the controller into the state of memory ``xi`` (after a compiled run).
+        ``restore(xi)``: put the controller into the state of memory ``xi`` (after a compiled
+        run).
     status : str
         What each step records in :attr:`ControllerStats.status`.
     """
@@ -163,8 +167,6 @@ class Controller(ABC):
         self.design_model = design_model
         self.stats = ControllerStats()
         self.u_previous = np.array(op.u, dtype=float)
-        from flexctrl.control.reference_trajectory import HoldReference
-
         self.reference = HoldReference(op)
 
     def set_reference(self, reference) -> None:
@@ -177,17 +179,16 @@ class Controller(ABC):
             Built on the controller's design model; ``None`` restores regulation to the
             operating point.  The reference survives :meth:`reset`.
         """
-        from flexctrl.control.reference_trajectory import HoldReference
-
         if reference is not None and len(reference.path.q_target) != self.n_u:
             raise SpecError(
-                f"the reference has {len(reference.path.q_target)} joint angles; expected {self.n_u}",
+                f"the reference has {len(reference.path.q_target)} joint angles; "
+                f"expected {self.n_u}",
                 key="reference",
             )
         self.reference = HoldReference(self.op) if reference is None else reference
         self._reference_changed()
 
-    def _reference_changed(self) -> None:
+    def _reference_changed(self) -> None:  # noqa: B027 (an optional hook, empty by design)
         """Subclass hook: the reference was replaced."""
 
     @property
@@ -207,7 +208,29 @@ class Controller(ABC):
         self._reset()
 
     def step(self, t: float, measurement) -> np.ndarray:
-        """Joint torques (N m, one per joint) for the measurement taken at time ``t`` (s)."""
+        """Joint torques for the measurement taken at time ``t``.
+
+        Checks the measurement, times the call, clips to the torque limits (when the
+        controller saturates) and records; the subclass's ``_step`` computes the law.
+
+        Parameters
+        ----------
+        t : float
+            The time of the measurement, s.
+        measurement : array_like
+            The values named by :attr:`measurement_names`, in their units (rad, rad/s, 1/m,
+            m, m/s^2).
+
+        Returns
+        -------
+        ndarray
+            One torque per joint, N m, to hold until the next sample.
+
+        Raises
+        ------
+        SpecError
+            When the measurement has the wrong number of entries.
+        """
         start = time.perf_counter()
         y = np.asarray(measurement, dtype=float).ravel()
         if y.size != self.sensors.n_y:
@@ -242,12 +265,11 @@ class Controller(ABC):
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         """Torques for measurement ``y`` (before clipping)."""
 
-    def _reset(self) -> None:
+    def _reset(self) -> None:  # noqa: B027 (an optional hook, empty by design)
         """Subclass part of :meth:`reset`."""
 
     def sampled_law(self) -> SampledLaw | None:
-        """The law as one CasADi map from the current state (:class:`SampledLaw`), or None when it
-        is not one.
+        """The law as one CasADi map from the current state (:class:`SampledLaw`), or None.
 
         Called after at least one :meth:`step` (memories such as a Kalman filter's start
         from the first measurement).  Controllers that solve an optimisation per sample
@@ -256,8 +278,9 @@ class Controller(ABC):
         return None
 
     def has_sampled_law(self) -> bool:
-        """Whether :meth:`sampled_law` gives a law once the controller has stepped (known before any
-        step).
+        """Whether :meth:`sampled_law` gives a law once the controller has stepped.
+
+        Known before any step.
 
         Override it together with :meth:`sampled_law`: a controller that gives a law but
         says False here is only walked more slowly by the fidelity chooser, never wrongly.
@@ -269,7 +292,8 @@ class Controller(ABC):
         return False
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={list(self.sensors.names)})"
+        names = list(self.sensors.names)
+        return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={names})"
 
 
 __all__ = ["Controller", "ControllerStats", "SampledLaw"]

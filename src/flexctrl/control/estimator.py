@@ -55,7 +55,21 @@ class FullState:
 
 
 def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
-    """``int_0^dt exp(A s) ds G``: the exact discrete input matrix of a held input."""
+    """``int_0^dt exp(A s) ds G``: the exact discrete input matrix of a held input.
+
+    Parameters
+    ----------
+    A : ndarray
+        The continuous state matrix, 1/s.
+    G : ndarray
+        The continuous input matrix.
+    dt : float
+        The hold, s.
+
+    Returns
+    -------
+    ndarray
+    """
     n, m = G.shape
     aug = np.zeros((n + m, n + m))
     aug[:n, :n], aug[:n, n:] = A * dt, G * dt
@@ -70,7 +84,31 @@ def process_noise(
     torque_noise: float,
     modal_force_noise: float,
 ) -> np.ndarray:
-    """Discrete process-noise covariance of held generalised-force disturbances (see module docstring)."""
+    """Discrete process-noise covariance of held generalized-force disturbances.
+
+    See the module docstring: torques on the joints and forces on the elastic coordinates,
+    held over a sample, through the exact ZOH input matrix of ``[0; M(q)^-1]``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its mass matrix at ``op``.
+    op : OperatingPoint
+        Where the filter is designed.
+    A : ndarray
+        The continuous state matrix of the linearization, 1/s.
+    dt : float
+        The sample time, s.
+    torque_noise : float
+        Standard deviation of the joint torque disturbances, N m.
+    modal_force_noise : float
+        Standard deviation of the forces on the elastic coordinates (their units).
+
+    Returns
+    -------
+    ndarray
+        The symmetric covariance ``W`` (2N x 2N).
+    """
     N, n = model.n_q, model.n_u
     Minv = np.linalg.inv(model.mass_matrix(op.q))
     G = np.vstack([np.zeros((N, N)), Minv])
@@ -87,8 +125,20 @@ def kalman_gain(
 
     The filter DARE is the dual of the control one, ``(A, B, Q, R) -> (A', C', W, R)``,
     solved by the doubling algorithm of :func:`flexctrl.control.riccati.solve_dare`:
-    the Schur method's eigenvalue reordering is ill-conditioned for flexible arms
-    (it failed at the horizontal move target ``[30, 0, 0]`` deg; see that module).
+    the Schur method's eigenvalue reordering is ill-conditioned for flexible arms (see that
+    module).
+
+    Parameters
+    ----------
+    Ad, Cd : ndarray
+        The discrete state and output matrices.
+    W, R : ndarray
+        Process and measurement noise covariances.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(M, P)``.
 
     Raises
     ------
@@ -153,7 +203,10 @@ class KalmanEstimator:
         self.dx = np.array(memory, dtype=float)
 
     def symbolic(self, memory, y, u_previous):
-        """``(dx_next, x)``: one :meth:`estimate` after the first, on CasADi symbols (the same operations)."""
+        """``(dx_next, x)``: one :meth:`estimate` after the first, on CasADi symbols.
+
+        The same operations as :meth:`estimate`.
+        """
         A, B, C, D, M = (ca.DM(m) for m in (self.A, self.B, self.C, self.D, self.M))
         du = u_previous - ca.DM(self.op.u)
         dy = y - ca.DM(self.y_op) - ca.mtimes(D, du)
@@ -162,10 +215,10 @@ class KalmanEstimator:
         return dx, ca.DM(self.op.x) + dx
 
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(E, F, G)`` of the estimate in deviations, ``dx_k = E dx_{k-1} + F dy_k + G du_{k-1}``.
+        """``(E, F, G)`` of the estimate in deviations: ``dx_k = E dx_{k-1} + F dy_k + G du_{k-1}``.
 
-        From the current-estimate form: ``dx_k = T (A dx_{k-1} + B du_{k-1}) + M (dy_k - D
-        du_{k-1})`` with ``T = I - M C``.
+        From the current-estimate form: ``dx_k = T (A dx_{k-1} + B du_{k-1}) +
+        M (dy_k - D du_{k-1})`` with ``T = I - M C``.
         """
         T = np.eye(self.A.shape[0]) - self.M @ self.C
         return T @ self.A, self.M, T @ self.B - self.M @ self.D
@@ -181,8 +234,24 @@ def make_observer(
 ):
     """:class:`FullState` for a full-state sensor, else the :class:`KalmanEstimator` of ``sysd``.
 
-    ``Ac`` is the continuous state matrix of the linearisation (for the process noise),
-    ``sysd`` its ZOH discretisation with the sensors as outputs.
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target.
+    sensors : Sensors
+        The controller's sensors.
+    Ac : ndarray
+        The continuous state matrix of the linearization (for the process noise), 1/s.
+    sysd : control.StateSpace
+        Its ZOH discretization with the sensors as outputs.
+    estimator_settings : EstimatorSettings
+        The process noise levels.
+
+    Returns
+    -------
+    FullState or KalmanEstimator
     """
     if sensors.full_state:
         return FullState()

@@ -39,19 +39,26 @@ from flexctrl.linear import (
     equilibrium,
     torque_limits,
 )
-from flexctrl.spec.controller_settings import LQRSettings, SensorSettings, Weights
+from flexctrl.spec.controller_settings import (
+    LQRSettings,
+    ScheduleSettings,
+    SensorSettings,
+    Weights,
+)
 
 
 @dataclass(frozen=True, eq=False)
 class LinearPlant:
-    """The linearisation at ``op`` with the controller's sensors, continuous and ZOH-discretised.
+    """The linearization at ``op`` with the controller's sensors, continuous and ZOH-sampled.
 
     Attributes
     ----------
     sys, sysd : control.StateSpace
         Continuous and discrete (sample time ``dt``) systems in deviation variables.
     op : OperatingPoint
+        The operating point linearized at.
     sensors : Sensors
+        The outputs of ``sys`` and ``sysd``.
     """
 
     sys: control.StateSpace
@@ -66,15 +73,36 @@ class LinearPlant:
 
     @property
     def Ad(self) -> np.ndarray:
+        """The discrete state matrix."""
         return np.asarray(self.sysd.A, dtype=float)
 
     @property
     def Bd(self) -> np.ndarray:
+        """The discrete input matrix (per N m)."""
         return np.asarray(self.sysd.B, dtype=float)
 
 
 def build_sensors(model, settings: SensorSettings, op: OperatingPoint) -> Sensors:
-    """The :class:`~flexctrl.linear.Sensors` described by ``settings``."""
+    """The :class:`~flexctrl.linear.Sensors` described by ``settings``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model the sensors read.
+    settings : SensorSettings
+        Sensor kinds and noise levels.
+    op : OperatingPoint
+        The target (the joint angles the strain gauges' map is taken at).
+
+    Returns
+    -------
+    Sensors
+
+    Raises
+    ------
+    SpecError
+        For a sensor the model cannot give, named under the key ``sensors.outputs``.
+    """
     try:
         return Sensors.build(model, settings.outputs, settings.noise(), q_joints=op.joints)
     except SpecError as exc:
@@ -84,7 +112,25 @@ def build_sensors(model, settings: SensorSettings, op: OperatingPoint) -> Sensor
 def linear_plant(
     model, op: OperatingPoint, sensors: Sensors, dt: float, linearizer: Linearizer | None = None
 ) -> LinearPlant:
-    """Linearise at ``op`` with ``sensors`` and discretise at ``dt``."""
+    """Linearize at ``op`` with ``sensors`` and discretize at ``dt``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model.
+    op : OperatingPoint
+        Where to linearize.
+    sensors : Sensors
+        The outputs.
+    dt : float
+        The sample time, s.
+    linearizer : Linearizer, optional
+        One already built for ``model`` and ``sensors`` (default: built here).
+
+    Returns
+    -------
+    LinearPlant
+    """
     lin = linearizer or Linearizer(model, sensors)
     sys = lin(op)
     return LinearPlant(sys, discretize(sys, dt), op, sensors)
@@ -97,6 +143,20 @@ def weight_matrices(
 
     Torque magnitudes are ``weights.torque`` times the joint torque limits (1 N m where
     there is no limit).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its joints and elastic coordinates.
+    weights : Weights
+        The acceptable magnitudes (rad, rad/s, and the modal coordinates' units).
+    limits : ndarray, optional
+        Torque limits per joint, N m (default: the model's).
+
+    Returns
+    -------
+    tuple of ndarray
+        ``Q`` and ``R``.
     """
     n, N = model.n_u, model.n_q
     limits = torque_limits(model) if limits is None else np.asarray(limits, dtype=float)
@@ -115,9 +175,26 @@ def lqr_gain(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S``.
 
-    The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`, checked
-    against ``scipy.linalg.solve_discrete_are`` in the tests), which needs no eigenvalue
-    reordering and so does not fail on the ill-conditioned pencils of flexible arms.
+    The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`), which
+    needs no eigenvalue reordering and so does not fail on the ill-conditioned pencils of
+    flexible arms.
+
+    Parameters
+    ----------
+    Ad, Bd : ndarray
+        The discrete system.
+    Q, R : ndarray
+        State and input weights.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(K, S)``.
+
+    Raises
+    ------
+    SolverError
+        When no stabilizing solution is found.
     """
     S = solve_dare(Ad, Bd, Q, R, what="LQR")
     K = np.linalg.solve(R + Bd.T @ S @ Bd, Bd.T @ S @ Ad)
@@ -125,7 +202,19 @@ def lqr_gain(
 
 
 class GainSchedule:
-    """Gains on a grid of scheduling joint angles, interpolated multilinearly (clamped at the edges)."""
+    """Gains on a grid of scheduling joint angles, interpolated multilinearly.
+
+    Outside the grid the gains of the nearest edge are used.
+
+    Parameters
+    ----------
+    joints : tuple of int
+        The scheduling joints, 1-based.
+    grid : tuple of tuple of float
+        The grid's joint angles per scheduling joint, rad, increasing.
+    gains : ndarray
+        The gains at the grid's nodes, shape ``grid shape + (n_u, n_x)``.
+    """
 
     def __init__(
         self, joints: tuple[int, ...], grid: tuple[tuple[float, ...], ...], gains: np.ndarray
@@ -263,8 +352,48 @@ class LQRController(Controller):
         return u_ref - self.gain(x) @ (x - x_ref)
 
 
+def _gain_schedule(
+    model, op: OperatingPoint, sched: ScheduleSettings, sample_time: float, Q, R, shape
+) -> GainSchedule:
+    """The LQR gains (each of ``shape``) at the equilibria of the schedule's grid.
+
+    The joints not scheduled stay at ``op``.
+    """
+    if max(sched.joints) > model.n_u:
+        raise SpecError(
+            f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
+            f"allowed: q1..q{model.n_u}",
+            key="schedule",
+        )
+    state_lin = Linearizer(model, ("joints",))
+    gains = np.empty(tuple(len(g) for g in sched.grid) + tuple(shape))
+    for index in itertools.product(*(range(len(g)) for g in sched.grid)):
+        q = np.array(op.joints, dtype=float)
+        for joint, values, i in zip(sched.joints, sched.grid, index):
+            q[joint - 1] = values[i]
+        A, B, _C, _D = state_lin.matrices(equilibrium(model, q))
+        sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), sample_time)
+        gains[index] = lqr_gain(np.asarray(sysd.A), np.asarray(sysd.B), Q, R)[0]
+    return GainSchedule(sched.joints, sched.grid, gains)
+
+
 def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRController:
-    """Build the (scheduled) LQR or LQG controller regulating ``model`` to ``op``."""
+    """Build the (scheduled) LQR or LQG controller regulating ``model`` to ``op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target equilibrium.
+    settings : LQRSettings
+        Weights, sensors (LQG with a Kalman filter unless the whole state is measured),
+        estimator and schedule.
+
+    Returns
+    -------
+    LQRController
+    """
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     lin = Linearizer(model, sensors)
@@ -272,26 +401,11 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
     Q, R = weight_matrices(model, settings.weights, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
-    schedule = None
-    if settings.schedule is not None:
-        sched = settings.schedule
-        if max(sched.joints) > model.n_u:
-            raise SpecError(
-                f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
-                f"allowed: q1..q{model.n_u}",
-                key="schedule",
-            )
-        state_lin = Linearizer(model, ("joints",))
-        gains = np.empty(tuple(len(g) for g in sched.grid) + K.shape)
-        for index in itertools.product(*(range(len(g)) for g in sched.grid)):
-            q = np.array(op.joints, dtype=float)
-            for joint, values, i in zip(sched.joints, sched.grid, index):
-                q[joint - 1] = values[i]
-            op_g = equilibrium(model, q)
-            A, B, _C, _D = state_lin.matrices(op_g)
-            sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), settings.sample_time)
-            gains[index] = lqr_gain(np.asarray(sysd.A), np.asarray(sysd.B), Q, R)[0]
-        schedule = GainSchedule(sched.joints, sched.grid, gains)
+    schedule = (
+        None
+        if settings.schedule is None
+        else _gain_schedule(model, op, settings.schedule, settings.sample_time, Q, R, K.shape)
+    )
     return LQRController(settings, plant, limits, K, S, observer, schedule, design_model=model)
 
 

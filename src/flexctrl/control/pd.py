@@ -28,11 +28,10 @@ which change with the payload and the pose.
 ``F(s)`` is a first-order low-pass of corner ``torque_filter`` (Hz; exact
 discretisation, ``f_k = a f_{k-1} + (1 - a) tau_pd,k``, ``a = exp(-2 pi fc dt)``, started
 at zero; 0 switches it off).  It is needed on arms whose hubs are light: the torque
-first accelerates the hub against the bending links (inertia ``J_hub``, e.g.
-7e-5 kg m^2 on joint 3 of the Subedi arm), so the sampled loop sees the gains
-``kd dt / J_hub`` and ``kp dt^2 / J_hub``, far beyond the ZOH stability bound at any
-practical rate.  Continuous PD is stable for any gains (collocated and passive);
-the sampled, unfiltered one is not (spectral radius 14-35 at 1 ms on that arm).
+first accelerates the hub against the bending links (inertia ``J_hub``), so the sampled
+loop sees the gains ``kd dt / J_hub`` and ``kp dt^2 / J_hub``, far beyond the ZOH stability
+bound at any practical rate.  Continuous PD is stable for any gains (collocated and
+passive); the sampled, unfiltered one is not.
 """
 
 from __future__ import annotations
@@ -43,13 +42,34 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.control.controller import Controller, SampledLaw
+from flexctrl.control.lqr import build_sensors
 from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint, Sensors, stiffness_matrix, torque_limits
 from flexctrl.spec.controller_settings import PDSettings
 
 
 def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarray, np.ndarray]:
-    """``(kp, kd)`` per joint, explicit from the settings or automatic (see module docstring)."""
+    """``(kp, kd)`` per joint, explicit from the settings or automatic (module docstring).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model (its mass matrix gives the automatic gains).
+    op : OperatingPoint
+        The target.
+    settings : PDSettings
+        Explicit gains, or the bandwidth (Hz) and damping ratio of the automatic ones.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``kp`` (N m/rad) and ``kd`` (N m s/rad), one per joint.
+
+    Raises
+    ------
+    SpecError
+        When explicit gains are not one per joint.
+    """
     n = model.n_u
     if settings.kp:
         if len(settings.kp) != n:
@@ -65,7 +85,20 @@ def pd_gains(model, op: OperatingPoint, settings: PDSettings) -> tuple[np.ndarra
 
 
 def static_torque_function(model, q_flex: np.ndarray) -> ca.Function:
-    """``(qr) -> tau``: joint rows of ``g(q) + K q`` with the elastic coordinates fixed at ``q_flex``."""
+    """``(qr) -> tau``: joint rows of ``g(q) + K q``, the elastic coordinates held at ``q_flex``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its ``g`` and stiffness.
+    q_flex : ndarray
+        The elastic coordinates (the target's static deflection).
+
+    Returns
+    -------
+    casadi.Function
+        Joint angles (rad) to the static joint torques (N m).
+    """
     qr = ca.SX.sym("qr", model.n_u)
     q = ca.vertcat(qr, ca.DM(np.asarray(q_flex, dtype=float)))
     static = model.functions["g"](q) + ca.mtimes(stiffness_matrix(model, q), q)
@@ -148,7 +181,7 @@ class PDController(Controller):
             self.strain_pole = (
                 math.exp(-2 * math.pi * corner * settings.sample_time) if corner > 0 else 0.0
             )
-        self._kappa = None
+        self._kappa: np.ndarray | None = None
         self._rate = np.zeros(n)
 
     def _reset(self) -> None:
@@ -157,7 +190,7 @@ class PDController(Controller):
         self._rate = np.zeros(self.n_u)
 
     def _strain_damping(self, y: np.ndarray) -> np.ndarray | float:
-        """``-g r``, with ``r`` the filtered rate of the root curvatures (zero on the first sample)."""
+        """``-g r``, ``r`` the filtered rate of the root curvatures (zero at the first sample)."""
         if not self.strain_gain.size:
             return 0.0
         kappa = y[self._ik]
@@ -172,10 +205,10 @@ class PDController(Controller):
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The law about the reference at rest at ``q_joints`` (rad), for the linear verdict.
 
-        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``, ``du_k = H xi_k + J
-        dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`): ``xi`` is the filtered PD
-        torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``; measured gravity compensation adds
-        its Jacobian through ``J``.
+        ``(E, F, G, H, J)`` of ``xi_k = E xi_{k-1} + F dy_k + G du_{k-1}``,
+        ``du_k = H xi_k + J dy_k`` (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`):
+        ``xi`` is the filtered PD torque, ``E = a I``, ``F = -(1 - a) (Kp S_q + Kd S_qd)``;
+        measured gravity compensation adds its Jacobian through ``J``.
         """
         n, n_y = self.n_u, self.sensors.n_y
         Sq, Sqd = np.zeros((n, n_y)), np.zeros((n, n_y))
@@ -184,15 +217,15 @@ class PDController(Controller):
         a = self.filter_pole
         F = -(1.0 - a) * (np.diag(self.kp) @ Sq + np.diag(self.kd) @ Sqd)
         J = np.zeros((n, n_y))
-        if self.gravity_mode == "measured":
+        if self.gravity_mode == "measured" and self.gravity is not None:
             qr = ca.SX.sym("qr", n)
             jac = ca.Function("dtau_g", [qr], [ca.jacobian(self.gravity(qr), qr)])
             J = np.array(jac(np.asarray(q_joints, dtype=float)), dtype=float) @ Sq
         if not self.strain_gain.size:
             return a * np.eye(n), F, np.zeros((n, n)), np.eye(n), J
         # memory (filtered torque, last curvatures, filtered curvature rate):
-        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts, du = f - g r +
-        # J dy
+        # kappa_k = Sk dy_k, r_k = b r_{k-1} + (1 - b) (kappa_k - kappa_{k-1}) / Ts,
+        # du = f - g r + J dy
         Sk = np.zeros((n, n_y))
         Sk[np.arange(n), self._ik] = 1.0
         b, Ts, Z, I = self.strain_pole, self.sample_time, np.zeros((n, n)), np.eye(n)
@@ -214,7 +247,10 @@ class PDController(Controller):
         return x[: self.n_u], x[N : N + self.n_u], u_ref, u_static
 
     def reference_table(self, times: np.ndarray) -> np.ndarray:
-        """Rows ``(q_ref, qd_ref, u_ref, u_static)`` of :meth:`reference_terms` at the sample ``times`` (s), from now on."""
+        """Rows ``(q_ref, qd_ref, u_ref, u_static)`` of :meth:`reference_terms` at ``times``.
+
+        ``times`` are sample times (s) from now on.
+        """
         X, U, Us = self.reference.window(
             float(times[0]), self.sample_time, len(times), elastic=False
         )
@@ -226,8 +262,7 @@ class PDController(Controller):
         return True
 
     def sampled_law(self) -> SampledLaw:
-        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in the same
-        order.
+        """:meth:`_step` as one CasADi map (:class:`SampledLaw`), the same operations in order.
 
         Memory: the filtered PD torque, then (with strain-rate damping) the last root
         curvatures and their filtered rate.  Reference rows: :meth:`reference_table`.
@@ -275,10 +310,11 @@ class PDController(Controller):
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[self._iq], y[self._iqd]
         q_ref, qd_ref, u_ref, u_static = self.reference_terms(t, q)
+        tau_g: np.ndarray | float
         if self.gravity_mode == "target":
             tau_g = u_static
-        elif self.gravity_mode == "measured":
-            tau_g = np.array(self.gravity(q), dtype=float).ravel()
+        elif self.gravity_mode == "measured" and self.gravity is not None:
+            tau_g = np.asarray(self.gravity(q), dtype=float).ravel()
         else:
             tau_g = 0.0
         tau_ff = u_ref - u_static if self.pd_settings.feedforward else 0.0
@@ -291,9 +327,23 @@ class PDController(Controller):
 
 
 def pd_parts(model, op: OperatingPoint, settings: PDSettings):
-    """Sensors, limits, gains and gravity Function shared by PD and the shaped controller."""
-    from flexctrl.control.lqr import build_sensors
+    """Sensors, limits, gains and gravity Function shared by PD and the shaped controller.
 
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target.
+    settings : PDSettings
+        The PD's settings.
+
+    Returns
+    -------
+    tuple
+        ``(sensors, limits (N m), kp, kd, gravity)``: the arguments of :class:`PDController`
+        after the settings and the target.
+    """
     sensors = build_sensors(model, settings.sensors, op)
     kp, kd = pd_gains(model, op, settings)
     gravity = (
@@ -303,7 +353,21 @@ def pd_parts(model, op: OperatingPoint, settings: PDSettings):
 
 
 def design_pd(model, op: OperatingPoint, settings: PDSettings) -> PDController:
-    """Build the PD controller holding ``model`` at ``op``."""
+    """Build the PD controller holding ``model`` at ``op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target.
+    settings : PDSettings
+        The PD's settings.
+
+    Returns
+    -------
+    PDController
+    """
     return PDController(settings, op, *pd_parts(model, op, settings), design_model=model)
 
 

@@ -22,11 +22,10 @@ the feed-forward joint torque ``u_ref``.  The elastic coordinates follow one of
     Jacobians), and ``qd_f*`` is its exact time derivative (implicit-function theorem
     with the path's jerk).  Then ``u_ref = [M(q*) (qdd_ref, 0) + c + g + K q*]_r`` is the
     torque for which the model, at ``x_ref``, accelerates the joints exactly along the
-    path with no elastic acceleration (damping forces are left out: the elastic rates
-    are small and the joint rows carry no damping).  Why this one: an LQR or MPC
-    regulating to a zero (static) deflection fights the bending every acceleration
-    must cause, which is itself a torque input that excites the modes; measured on the
-    30 degree move, see ``docs/control.md``.
+    path with no elastic acceleration (the forces include the damping of the elastic
+    rates ``qd_f*``).  Why this one: an LQR or MPC regulating to a zero (static) deflection
+    fights the bending every acceleration must cause, which is itself a torque input that
+    excites the modes (``docs/control.md`` compares the two on a move).
 ``"static"``
     the static equilibrium deflection at ``q_ref(t)`` (gravity only: zero in a
     horizontal plane); ``u_ref`` is the same rigid feed-forward evaluated there.
@@ -64,23 +63,36 @@ def _damping_matrix(model, q):
 
 
 def path_functions(model, compile: bool | None = False) -> dict[str, ca.Function]:
-    """CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``: ``rj -> (r_f, J_qf)``,
-    ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)``, ``tau -> (tau, tau_static)`` (see the module
-    docstring).
+    """The reference's CasADi Functions of ``(qr, qdr, qddr, qf, qdf, qddf)``.
 
-    Built once per model and ``compile`` (kept with the model,
-    :func:`~flexctrl.dynamics.model.derived`).  ``compile=False``: SX Functions evaluated
-    in CasADi's virtual machine.  Otherwise (``None``: unless switched off, as
-    :func:`flexctrl.sim.compile.compile_function`) the generalised forces are rebuilt with
-    their numeric constants as an input, one per use
-    (:func:`flexctrl.dynamics.parametric.constants_as_parameters`), differentiated with the
-    constants symbolic and compiled as ONE Function of all seven outputs, named by the
-    sizes alone: every configuration and payload of one model shape shares one library.
-    The compiled Function is kept with the lifted forces (:func:`flexctrl.sim.compile.compile_for`),
-    so a new configuration pays the lift alone, not the Jacobians, the cache key or the load.
-    The three Functions bind the model's constants to it.  When the constants cannot be lifted or
-    nothing compiles, the virtual machine's Functions are returned.  Compiled values differ from the
-    virtual machine's in the last digits (fused multiply-adds, no constant folding).
+    ``rj -> (r_f, J_qf)``, ``all -> (r_f, J_qf, J_qr, J_qdr, J_qddr)`` and
+    ``tau -> (tau, tau_static)`` (see the module docstring).  Built once per model and
+    ``compile`` (kept with the model, :func:`~flexctrl.dynamics.model.derived`).
+
+    Compiled, the generalized forces are rebuilt with their numeric constants as an input,
+    one per use (:func:`flexctrl.dynamics.parametric.constants_as_parameters`),
+    differentiated with the constants symbolic and compiled as ONE Function of all seven
+    outputs, named by the sizes alone: every configuration and payload of one model shape
+    shares one library.  The compiled Function is kept with the lifted forces
+    (:func:`flexctrl.sim.compile.compile_for`), so a new configuration pays the lift alone,
+    not the Jacobians, the cache key or the load.  The three Functions bind the model's
+    constants to it.  When the constants cannot be lifted or nothing compiles, the virtual
+    machine's Functions are returned.  Compiled values differ from the virtual machine's in
+    the last digits (fused multiply-adds, no constant folding).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    compile : bool or None
+        ``False``: SX Functions evaluated in CasADi's virtual machine (where there is no
+        compiler); ``None``: compiled unless compilation is switched off (as
+        :func:`flexctrl.sim.compile.compile_function`); ``True``: compiled.
+
+    Returns
+    -------
+    dict
+        ``{"rj", "all", "tau"}``.
     """
     return derived(model, ("reference_functions", compile), lambda: _path_functions(model, compile))
 
@@ -110,7 +122,8 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
 
     def one() -> ca.Function:
         c = ca.SX.sym("c", constants.size)
-        outs = _outputs(*fp(*args, c), qr, qdr, qddr, qf, n)
+        lifted_force, lifted_static = fp(*args, c)
+        outs = _outputs(lifted_force, lifted_static, qr, qdr, qddr, qf, n)
         return ca.Function(
             f"reference_p_{n}_{N}_{constants.size}",
             [*args, c],
@@ -129,7 +142,7 @@ def _path_functions(model, compile: bool | None) -> dict[str, ca.Function]:
 
 
 def _outputs(force, static, qr, qdr, qddr, qf, n: int) -> list:
-    """``[r_f, J_qf, J_qr, J_qdr, J_qddr, tau, tau_static]`` of the generalised forces (module docstring)."""
+    """``[r_f, J_qf, J_qr, J_qdr, J_qddr, tau, tau_static]`` of the generalized forces."""
     r = force[n:]
     return [
         r,
@@ -143,7 +156,7 @@ def _outputs(force, static, qr, qdr, qddr, qf, n: int) -> list:
 
 
 def _functions(args, names, outs) -> dict[str, ca.Function]:
-    """``rj``, ``all`` and ``tau`` (:func:`path_functions`) of the outputs of :func:`_outputs` at ``args``."""
+    """``rj``, ``all`` and ``tau`` (:func:`path_functions`) of :func:`_outputs` at ``args``."""
     return {
         "rj": ca.Function("reference_rj", args, outs[:2], names, ["r", "J_qf"]),
         "all": ca.Function(
@@ -161,9 +174,13 @@ class ReferenceTrajectory:
     model : flexctrl.dynamics.model.Model
         The controller's design model.
     path : JointReference
+        The joint path (rad, s).
     deflection : {"quasi_static", "static"}
+        How the elastic coordinates follow the path (module docstring).
     tol : float
         Newton tolerance on the elastic coordinates (relative to ``1 + |q_f|``).
+    max_iter : int
+        Newton passes before :class:`~flexctrl.errors.SolverError`.
     compile : bool or None
         How the equations of motion are evaluated in the Newton iteration and the
         feed-forward (:func:`path_functions`): ``False`` (default) CasADi's virtual
@@ -184,7 +201,8 @@ class ReferenceTrajectory:
     ):
         if deflection not in DEFLECTIONS:
             raise SpecError(
-                f"value {deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                f"value {deflection!r} is not allowed; allowed: "
+                f"{', '.join(map(repr, DEFLECTIONS))}",
                 key="deflection",
             )
         if len(path.q_target) != model.n_u:
@@ -198,7 +216,8 @@ class ReferenceTrajectory:
         self.tol, self.max_iter = tol, max_iter
         self.n_u, self.n_q = model.n_u, model.n_q
         self.compile = compile
-        self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        #: the tables computed so far, by ``(sample time, elastic)``
+        self._tables: dict[tuple[float, bool], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @property
     def t_arrive(self) -> float:
@@ -212,7 +231,10 @@ class ReferenceTrajectory:
     def _elastic(
         self, derivs, moving: bool, elastic: bool, qddf: np.ndarray, qf: np.ndarray, qdf: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``(q_f, qd_f)`` at the path points ``derivs = (q, qd, qdd, qddd)`` (T, n) for given elastic accelerations."""
+        """``(q_f, qd_f)`` at the path points ``derivs = (q, qd, qdd, qddd)`` (each T x n).
+
+        For the given elastic accelerations ``qddf``, from the start ``(qf, qdf)``.
+        """
         q, qd, qdd, qddd = derivs
         T, n = q.shape
         nf = self.n_q - n
@@ -271,9 +293,9 @@ class ReferenceTrajectory:
         moving = self.deflection == "quasi_static" and elastic
         qddf = np.zeros((T, nf))
         qf, qdf = self._elastic(derivs, moving, elastic, qddf, np.zeros((T, nf)), np.zeros((T, nf)))
-        # (a second pass with the elastic accelerations d^2 q_f*/dt^2 in the elastic rows was tried:
-        # on the Subedi arm the first locked mode is only ~4x the path's frequency, the series does
-        # not settle in one step, and the open-loop joint drift grew from 0.5 to 4 degrees)
+        # the elastic accelerations stay zero: correcting them with d^2 q_f*/dt^2 is a series in
+        # the path's frequency over the first locked mode's, which does not settle in one step
+        # when the two are only a few times apart
         ftau = self._fun["tau"].map(T)
         out = ftau(q.T, qd.T, qdd.T, qf.T, qdf.T, qddf.T)
         tau, tau_static = np.array(out[0], dtype=float).T, np.array(out[1], dtype=float).T
@@ -315,13 +337,22 @@ class ReferenceTrajectory:
     def at(
         self, t: float, Ts: float, *, elastic: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(x_ref, u_ref, u_static)`` at ``t`` (s), from the table of sample time ``Ts`` when ``t`` is on its grid."""
+        """``(x_ref, u_ref, u_static)`` at ``t`` (s).
+
+        From the table of sample time ``Ts`` (s) when ``t`` is on its grid.
+        """
         X, U, Us = self.window(t, Ts, 1, elastic=elastic)
         return X[0], U[0], Us[0]
 
 
 class HoldReference:
-    """The constant reference of a controller regulating to its operating point ``op`` (the default)."""
+    """The constant reference of a controller regulating to its operating point (the default).
+
+    Parameters
+    ----------
+    op : OperatingPoint
+        The operating point.
+    """
 
     deflection = "static"
 
@@ -331,11 +362,13 @@ class HoldReference:
 
     @property
     def t_arrive(self) -> float:
+        """End of the move, s: none, so 0."""
         return 0.0
 
     def window(
         self, t: float, Ts: float, count: int, *, elastic: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``count`` rows of the operating point (as :meth:`ReferenceTrajectory.window`)."""
         return (
             np.tile(self.op.x, (count, 1)),
             np.tile(self.op.u, (count, 1)),
@@ -345,6 +378,7 @@ class HoldReference:
     def at(
         self, t: float, Ts: float, *, elastic: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x_op, u_op, u_op)`` (as :meth:`ReferenceTrajectory.at`)."""
         return self.op.x, self.op.u, self.op.u
 
 

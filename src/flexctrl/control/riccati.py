@@ -6,11 +6,8 @@ eigenvalues spread over many decades (heavily damped local modes of the light hu
 at ``|z| ~ 0.06``, their reciprocals at ~17, and, in a horizontal plane, three
 Jordan blocks of the free rigid-body double integrators at ``z = 1``) while the
 process noise is rank-deficient.  The QZ *reordering* step is then ill-conditioned
-and fails or succeeds with round-off: on the Subedi arm it failed at the move
-target ``[30, 0, 0]`` deg and, across 30 targets, payloads and gravity settings,
-every one of four diagonal scalings of the same problem failed somewhere (a
-different somewhere each).  The solution itself is well conditioned (relative
-residual 1e-14, estimator spectral radius 0.937).
+and fails or succeeds with round-off, whatever diagonal scaling is applied first,
+although the solution itself is well conditioned.
 
 SDA (Chu, Fan, Lin and Wang, "Structure-preserving algorithms for periodic discrete-time
 algebraic Riccati equations", Int. J. Control 77, 2004; for the time-invariant case
@@ -70,7 +67,7 @@ def _doubling(
             )
         change = np.linalg.norm(H_next - Hk, 1)
         Hk, Gk = H_next, 0.5 * (G_next + G_next.T)
-        if change <= tol * max(1.0, np.linalg.norm(Hk, 1)):
+        if change <= tol * max(1.0, float(np.linalg.norm(Hk, 1))):
             return Hk
     raise SolverError(f"{what}: the doubling iteration did not converge in {max_iter} steps")
 
@@ -85,13 +82,16 @@ def solve_dare(
     max_iter: int = 200,
     what: str = "DARE",
 ) -> np.ndarray:
-    """Stabilising solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA, see module
-    docstring).
+    """Stabilizing solution ``X`` of ``X = A'XA - A'XB (R + B'XB)^-1 B'XA + Q`` (SDA).
+
+    See the module docstring for the method.
 
     Parameters
     ----------
     A : (n, n) ndarray
+        The state matrix.
     B : (n, m) ndarray
+        The input matrix.
     Q : (n, n) ndarray
         Symmetric positive semidefinite.
     R : (m, m) ndarray
@@ -102,6 +102,11 @@ def solve_dare(
         Doubling steps (each squares the closed-loop contraction).
     what : str
         Name used in error messages (e.g. "LQR", "Kalman filter").
+
+    Returns
+    -------
+    ndarray
+        ``X``, symmetric.
 
     Raises
     ------
@@ -116,21 +121,21 @@ def solve_dare(
     Gk = B @ np.linalg.solve(0.5 * (R + R.T), B.T)
     Gk = 0.5 * (Gk + Gk.T)
     Hk = 0.5 * (Q + Q.T)
-    with np.errstate(
-        over="ignore", invalid="ignore"
-    ):  # divergence is detected below, as non-finite H_k
+    # divergence is detected in the iteration, as a non-finite H_k
+    with np.errstate(over="ignore", invalid="ignore"):
         Hk = _doubling(Ak, Gk, Hk, eye, tol, max_iter, what)
     X = Hk
     S = R + B.T @ X @ B
     residual = A.T @ X @ A - A.T @ X @ B @ np.linalg.solve(S, B.T @ X @ A) + Q - X
-    rel = float(np.linalg.norm(residual) / max(1.0, np.linalg.norm(X)))
+    rel = float(np.linalg.norm(residual)) / max(1.0, float(np.linalg.norm(X)))
     if rel > RESIDUAL_TOL:
         raise SolverError(f"{what}: Riccati residual {rel:.3g} above {RESIDUAL_TOL:g}")
     K = np.linalg.solve(S, B.T @ X @ A)
     rho = float(np.max(np.abs(np.linalg.eigvals(A - B @ K))))
     if not rho < 1.0:
         raise SolverError(
-            f"{what}: the Riccati solution does not stabilise (closed-loop spectral radius {rho:.6g})"
+            f"{what}: the Riccati solution does not stabilise (closed-loop spectral radius "
+            f"{rho:.6g})"
         )
     return X
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import control
 import numpy as np
 
 from flexctrl.control.pd import PDController, pd_parts
@@ -35,7 +36,15 @@ VIBRATION_DAMPING = 0.3
 
 @dataclass(frozen=True, eq=False)
 class Shaper:
-    """Impulse amplitudes (sum 1) and times (s, ascending, first 0)."""
+    """A train of impulses: amplitudes (sum 1) and times (s, ascending, first 0).
+
+    Parameters
+    ----------
+    amplitudes : array_like
+        The impulses' amplitudes (stored read-only).
+    times : array_like
+        Their times, s.
+    """
 
     amplitudes: np.ndarray
     times: np.ndarray
@@ -52,7 +61,7 @@ class Shaper:
         return float(self.times[-1]) if self.times.size else 0.0
 
     def convolve(self, other: Shaper) -> Shaper:
-        """The shaper of both (impulse times added, amplitudes multiplied, coincident impulses merged)."""
+        """The shaper of both: impulse times added, amplitudes multiplied, coincident merged."""
         t = (self.times[:, None] + other.times[None, :]).ravel()
         a = (self.amplitudes[:, None] * other.amplitudes[None, :]).ravel()
         order = np.argsort(t, kind="stable")
@@ -67,7 +76,10 @@ class Shaper:
         return Shaper(np.array(keep_a), np.array(keep_t))
 
     def apply(self, signal, t: np.ndarray | float) -> np.ndarray:
-        """``sum A_i signal(t - t_i)`` for a callable ``signal`` of time (zero before 0 is the caller's business)."""
+        """``sum A_i signal(t - t_i)`` for a callable ``signal`` of time (s).
+
+        What ``signal`` gives before time 0 is the caller's business.
+        """
         return sum(
             a * np.asarray(signal(np.asarray(t) - ti)) for a, ti in zip(self.amplitudes, self.times)
         )
@@ -86,7 +98,20 @@ def _check(frequency_hz: float, zeta: float) -> tuple[float, float]:
 
 
 def zv(frequency_hz: float, zeta: float = 0.0) -> Shaper:
-    """Zero-vibration shaper for a mode of ``frequency_hz`` (undamped natural, Hz) and damping ``zeta``."""
+    """Zero-vibration shaper for a mode of natural frequency ``frequency_hz`` and damping ``zeta``.
+
+    Parameters
+    ----------
+    frequency_hz : float
+        The undamped natural frequency, Hz (> 0).
+    zeta : float
+        The damping ratio, in [0, 1).
+
+    Returns
+    -------
+    Shaper
+        Two impulses half a damped period apart.
+    """
     f, z = _check(frequency_hz, zeta)
     K = math.exp(-z * math.pi / math.sqrt(1 - z * z))
     half = 0.5 / (f * math.sqrt(1 - z * z))
@@ -94,7 +119,20 @@ def zv(frequency_hz: float, zeta: float = 0.0) -> Shaper:
 
 
 def zvd(frequency_hz: float, zeta: float = 0.0) -> Shaper:
-    """Zero-vibration-and-derivative shaper (robust to frequency error)."""
+    """Zero-vibration-and-derivative shaper (robust to frequency error).
+
+    Parameters
+    ----------
+    frequency_hz : float
+        The undamped natural frequency, Hz (> 0).
+    zeta : float
+        The damping ratio, in [0, 1).
+
+    Returns
+    -------
+    Shaper
+        Three impulses half a damped period apart.
+    """
     f, z = _check(frequency_hz, zeta)
     K = math.exp(-z * math.pi / math.sqrt(1 - z * z))
     half = 0.5 / (f * math.sqrt(1 - z * z))
@@ -110,7 +148,22 @@ def identity_shaper() -> Shaper:
 
 
 def residual_vibration(shaper: Shaper, frequency_hz: float, zeta: float = 0.0) -> float:
-    """Residual vibration ratio (shaped / unshaped impulse response amplitude) of a mode (analytic)."""
+    """Residual vibration of a mode: shaped over unshaped impulse response amplitude (analytic).
+
+    Parameters
+    ----------
+    shaper : Shaper
+        The shaper.
+    frequency_hz : float
+        The mode's undamped natural frequency, Hz.
+    zeta : float
+        Its damping ratio.
+
+    Returns
+    -------
+    float
+        0 when the shaper cancels the mode, 1 when it does nothing.
+    """
     w = 2 * math.pi * frequency_hz
     wd = w * math.sqrt(1 - zeta * zeta)
     tn = shaper.duration
@@ -125,7 +178,29 @@ def residual_vibration(shaper: Shaper, frequency_hz: float, zeta: float = 0.0) -
 def shaping_modes(
     model, op: OperatingPoint, settings: ShapedSettings, kp: np.ndarray, kd: np.ndarray
 ) -> list[tuple[float, float]]:
-    """``(frequency_hz, zeta)`` of the modes to shape (see the module docstring)."""
+    """``(frequency_hz, zeta)`` of the modes to shape (see the module docstring).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target.
+    settings : ShapedSettings
+        How many modes, and where their frequencies come from.
+    kp, kd : ndarray
+        The PD's gains (N m/rad, N m s/rad), for the modes under the PD loop.
+
+    Returns
+    -------
+    list of (float, float)
+        Frequency (Hz) and damping ratio of each mode, the lowest first.
+
+    Raises
+    ------
+    SpecError
+        When the model or the loop has fewer vibration modes than asked for.
+    """
     if settings.frequency_source == "locked":
         freqs = locked_frequencies(model, op)
         if freqs.size < settings.modes:
@@ -144,8 +219,6 @@ def shaping_modes(
         Acl = np.block([[A, B], [-wc * gain, -wc * np.eye(n)]])
     else:
         Acl = A - B @ gain
-    import control
-
     summary = modal_summary(
         control.ss(Acl, np.zeros((Acl.shape[0], 1)), np.zeros((1, Acl.shape[0])), 0)
     )
@@ -156,15 +229,27 @@ def shaping_modes(
     ]
     if len(picks) < settings.modes:
         raise SpecError(
-            f"value {settings.modes} is not allowed; the PD loop has {len(picks)} vibration modes "
-            f"(complex pairs with damping < {VIBRATION_DAMPING})",
+            f"value {settings.modes} is not allowed; the PD loop has {len(picks)} vibration "
+            f"modes (complex pairs with damping < {VIBRATION_DAMPING})",
             key="modes",
         )
     return picks[: settings.modes]
 
 
 def design_shaper(modes: list[tuple[float, float]], kind: str) -> Shaper:
-    """The convolution of one ``kind`` shaper per ``(frequency_hz, zeta)``."""
+    """The convolution of one ``kind`` shaper per mode.
+
+    Parameters
+    ----------
+    modes : list of (float, float)
+        Frequency (Hz) and damping ratio of each mode.
+    kind : {"zv", "zvd", "none"}
+        The shaper per mode; ``"none"``: one unit impulse.
+
+    Returns
+    -------
+    Shaper
+    """
     shaper = identity_shaper()
     if kind == "none":
         return shaper
@@ -195,7 +280,7 @@ class ShapedController(PDController):
     shaper : Shaper
         The impulse sequence (times s, amplitudes summing to 1).
     modes : list of (float, float)
-        The shaped modes: (frequency rad/s, damping ratio).
+        The shaped modes: (frequency Hz, damping ratio).
     design_model : Model, optional
         The model designed on (:class:`~flexctrl.control.controller.Controller`).
     """
@@ -237,7 +322,7 @@ class ShapedController(PDController):
 
     @property
     def shapes_reference(self) -> bool:
-        """Whether the controller's reference is a smooth path (shaped as given) rather than a step."""
+        """Whether the reference is a smooth path (shaped as given) rather than a step."""
         return self.reference.path.profile != "step"
 
     def reference_terms(
@@ -275,6 +360,10 @@ class ShapedController(PDController):
                     u_static,
                 ]
             )
+        if self._start is None:
+            raise RuntimeError(
+                "the shaped controller shapes a step from its first measurement: step it first"
+            )
         t0, q0 = self._start
         pos, vel = self._profile((times[:, None] - t0) - self.shaper.times[None, :])
         delta = np.asarray(self.reference.path.q_target) - q0
@@ -286,7 +375,10 @@ class ShapedController(PDController):
         )
 
     def _torques(self, times: np.ndarray, which: int) -> np.ndarray:
-        """Reference torques (u_ref: 1, u_static: 2) at ``times`` (any shape), linearly interpolated on the sample grid."""
+        """Reference torques (u_ref: 1, u_static: 2) at ``times`` (any shape).
+
+        Linearly interpolated on the sample grid.
+        """
         Ts = self.sample_time
         k = np.maximum(times, 0.0) / Ts
         k0 = np.floor(k).astype(int)
@@ -296,7 +388,21 @@ class ShapedController(PDController):
 
 
 def design_shaped(model, op: OperatingPoint, settings: ShapedSettings) -> ShapedController:
-    """Build the shaped-reference PD controller moving ``model`` to ``op``."""
+    """Build the shaped-reference PD controller moving ``model`` to ``op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target.
+    settings : ShapedSettings
+        The shaper and its PD.
+
+    Returns
+    -------
+    ShapedController
+    """
     sensors, limits, kp, kd, gravity = pd_parts(model, op, settings.pd)
     modes = [] if settings.shaper == "none" else shaping_modes(model, op, settings, kp, kd)
     shaper = design_shaper(modes, settings.shaper)

@@ -381,7 +381,25 @@ _READERS: dict[str, Callable[[TableReader], ControllerSettings]] = {
 
 
 def controller_from_document(document: dict[str, Any], source: str) -> ControllerSettings:
-    """Validate a parsed controller document and return its settings."""
+    """Validate a parsed controller document and return its settings.
+
+    Parameters
+    ----------
+    document : dict
+        The parsed TOML (angles in degrees).
+    source : str
+        Where it came from, for the messages.
+
+    Returns
+    -------
+    PDSettings, LQRSettings, MPCSettings, NMPCSettings or ShapedSettings
+        The settings (angles in radians).
+
+    Raises
+    ------
+    SpecError
+        Naming the source, the key, the value and what is allowed.
+    """
     r = TableReader(document, source)
     kind = r.string("kind", choices=list(SETTINGS))
     _free_text(r)

@@ -11,7 +11,7 @@ from typing import Literal
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.field_checks import choice_field, number_field
-from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS
+from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
 
 ControllerKind = Literal["pd", "lqr", "mpc", "nmpc", "shaped"]
 GravityCompensation = Literal["target", "measured", "none"]
@@ -67,7 +67,7 @@ class SensorSettings:
             )
         for i, kind in enumerate(self.outputs):
             if kind not in SENSOR_KINDS:
-                choice_field(f"outputs[{i}]", kind, Literal[SENSOR_KINDS])  # type: ignore[valid-type]
+                choice_field(f"outputs[{i}]", kind, SensorKind)
         if len(set(self.outputs)) != len(self.outputs):
             raise SpecError(f"value {list(self.outputs)!r} names a sensor twice", key="outputs")
         if "state" in self.outputs and len(self.outputs) > 1:

@@ -1,6 +1,8 @@
-"""Typed, validated settings of the optimising controllers: the linear MPC (with its OSQP
-options) and the nonlinear MPC (frozen dataclasses; see :mod:`flexctrl.spec.controller_settings`
-for the conventions they share with the others)."""
+"""Typed, validated settings of the optimising controllers: linear MPC (with OSQP's) and NMPC.
+
+Frozen dataclasses checked when built; :mod:`flexctrl.spec.controller_settings` describes the
+conventions they share with the other controllers' settings (units, Bryson's-rule weights).
+"""
 
 from __future__ import annotations
 
@@ -40,11 +42,34 @@ from flexctrl.spec.field_checks import (
 
 @dataclass(frozen=True)
 class OSQPSettings:
-    """Settings passed to OSQP (names as in OSQP 1.x; ``time_limit`` 0 = none).
+    """Settings passed to OSQP (names and meanings as in OSQP 1.x).
 
     ``scaling`` (OSQP's Ruiz equilibration) is off by default: the MPC scales its states
-    itself, and on the three-link arm Ruiz scaling on top raised the cold-start
-    iterations from 70 to 1700 (sparse formulation; see :mod:`flexctrl.bench.mpc_step`).
+    itself, and Ruiz scaling on top of that multiplies OSQP's cold-start iterations on the
+    flexible arms (``flexctrl bench mpc``, variant ``osqp_sparse_ruiz``).
+
+    Attributes
+    ----------
+    eps_abs, eps_rel : float
+        Absolute and relative tolerances of the residuals (scaled units of the QP).
+    rho, sigma, alpha : float
+        ADMM step size, regularisation and relaxation (``0 < alpha < 2``).
+    adaptive_rho : bool
+        Adapt ``rho`` during the iterations.
+    adaptive_rho_interval : int
+        Iterations between adaptations (0: OSQP's automatic choice).
+    adaptive_rho_tolerance : float
+        Factor of change below which ``rho`` is kept (>= 1).
+    polishing : bool
+        Polish the solution by one linear solve on the active set.
+    max_iter : int
+        Iteration limit per solve.
+    time_limit : float
+        Wall-time limit per solve, s; 0: none.
+    check_termination : int
+        Iterations between termination checks (0: never before ``max_iter``).
+    scaling : int
+        Ruiz equilibration iterations (0: off, the default).
     """
 
     eps_abs: float = 1e-3
@@ -85,7 +110,7 @@ class OSQPSettings:
 
 @dataclass(frozen=True)
 class MPCSettings:
-    """Linear MPC on the discretised linearisation at the target, solved as one QP per sample.
+    """Linear MPC on the discretised linearization at the target, solved as one QP per sample.
 
     Attributes
     ----------
@@ -98,6 +123,7 @@ class MPCSettings:
     weights : Weights
         Stage weights; the terminal weight is the DARE solution (``terminal = "dare"``).
     terminal : {"dare", "stage"}
+        Terminal weight: the DARE solution at the target, or the stage weight.
     soft : {"none", "deflection", "tip"}
         Soft constraint: every link's tip deflection ``|w_i| <= deflection_limit``, or the
         tip position error ``|p - p_target| <= tip_limit`` per component; with slack.
@@ -114,6 +140,7 @@ class MPCSettings:
         State scaling to O(1): from the LQR response, by the weights, or none
         (see :mod:`flexctrl.control.mpc.controller`).
     warm_start : {"shift", "previous", "none"}
+        OSQP's start: the previous solution shifted by one stage, as it was, or cold.
     fallback : {"shift", "lqr", "hold"}
         When the QP is not solved: the previous plan shifted (then LQR once it runs out),
         LQR, or hold the previous torque.
@@ -128,6 +155,7 @@ class MPCSettings:
     arrival : ArrivalSettings
         Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc.arrival_search`).
     osqp : OSQPSettings
+        OSQP's settings (backend ``"osqp"``).
     sensors, estimator
         As for LQR.
     """
@@ -173,7 +201,8 @@ class MPCSettings:
         boolean_field("accept_inaccurate", self.accept_inaccurate)
         if self.backend == "hpipm" and self.formulation != "sparse":
             raise SpecError(
-                f"value {self.formulation!r} is not allowed with backend 'hpipm'; allowed: 'sparse'",
+                f"value {self.formulation!r} is not allowed with backend 'hpipm'; "
+                "allowed: 'sparse'",
                 key="formulation",
             )
         if not isinstance(self.blocks, tuple) or not all(
@@ -181,20 +210,19 @@ class MPCSettings:
         ):
             raise SpecError(
                 f"value {self.blocks!r} is not allowed; allowed: a list of whole numbers >= 1 "
-                "(samples "
-                "per block)",
+                "(samples per block)",
                 key="blocks",
             )
         if self.blocks and sum(self.blocks) != self.horizon:
             raise SpecError(
-                f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: blocks "
-                "that "
-                f"add up to the horizon ({self.horizon})",
+                f"value {list(self.blocks)!r} covers {sum(self.blocks)} samples; allowed: "
+                f"blocks that add up to the horizon ({self.horizon})",
                 key="blocks",
             )
         if self.blocks and self.formulation != "condensed":
             raise SpecError(
-                f"value {self.formulation!r} is not allowed with move blocking; allowed: 'condensed'",
+                f"value {self.formulation!r} is not allowed with move blocking; "
+                "allowed: 'condensed'",
                 key="formulation",
             )
         integer_field("constraint_stride", self.constraint_stride, low=1, high=self.horizon)
@@ -226,24 +254,21 @@ class NMPCSettings:
         Shooting intervals N.
     substeps : int
         RK4 steps per interval; 0 (default): the fewest with ``|lambda|_max h <= 2.5`` for the
-        linearisation at the target (RK4 is stable on the imaginary axis up to 2.83).
+        linearization at the target (RK4 is stable on the imaginary axis up to 2.83).
     sensitivities : {"frozen", "midpoint", "exact"}
-        RTI Jacobians of each shooting interval: of RK4 applied to the dynamics linearised
-        at the start of each RK4 step (``"frozen"``: one Jacobian of ``f`` per RK4 step; one
-        per interval at its start was 2-9 % wrong in saturated transients and drove the RTI
-        unstable); of RK4 applied to the dynamics linearised once per interval at its middle
-        RK4 node (``"midpoint"``: second order in the sample time, half the Jacobians of
-        ``"frozen"`` with 2 substeps and closer to the exact ones, ``docs/control.md``); or
-        exact derivatives of the nonlinear RK4 map (one Jacobian of ``f`` per RK4 stage).
-        The shooting gaps always use the nonlinear RK4 map.
+        RTI Jacobians of each shooting interval: of RK4 applied to the dynamics linearized
+        at the start of each RK4 step (``"frozen"``: one Jacobian of ``f`` per RK4 step); of
+        RK4 applied to the dynamics linearized once per interval at its middle RK4 node
+        (``"midpoint"``: second order in the sample time, half the Jacobians of ``"frozen"``
+        with 2 substeps); or exact derivatives of the nonlinear RK4 map (one Jacobian of
+        ``f`` per RK4 stage).  The shooting gaps always use the nonlinear RK4 map
+        (:mod:`flexctrl.control.nmpc.interval`).
     weights : Weights
         Stage weights; terminal weight from the DARE at the target.
     mode : {"rti", "full"}
         Real-time iteration (one SQP step per sample, Gauss-Newton QP) or a full NLP solve.
     nlp_solver : {"ipopt"}
-        For ``full`` and for the RTI initialisation (FATROP's structure detection rejected
-        this formulation in CasADi 3.8; see the module docs of
-        :mod:`flexctrl.control.nmpc.controller`).
+        For ``full`` and for the RTI initialisation.
     qp_solver : {"hpipm", "osqp", "qpoases"}
         QP of the RTI (through ``casadi.conic``).
     max_iter : int
@@ -267,7 +292,7 @@ class NMPCSettings:
         default; :func:`flexctrl.control.nmpc.prediction_model.coupled_basis`).
     prediction_map : {"modal", "select"}
         How a reduced prediction model (``prediction_modes > 0``) sees the design model's
-        state: ``"modal"`` (default) removes the dropped (fast) modes of the linearisation
+        state: ``"modal"`` (default) removes the dropped (fast) modes of the linearization
         at the target before selecting the kept coordinates, so the fast modes are not fed
         back (:func:`flexctrl.control.nmpc.prediction_model.modal_map`); ``"select"`` takes the kept
         coordinates as they are (their fast-mode content destabilises the tuned loop,
@@ -275,16 +300,16 @@ class NMPCSettings:
     jacobian_every : int
         ``sensitivities = "frozen"`` only: one Jacobian of ``f`` per this many RK4 steps
         (1, default: every step), frozen over them (the transition of the frozen
-        linearisation over the steps is exact).
+        linearization over the steps is exact).
     stages_per_jacobian : int
         RTI only: one interval Jacobian ``(A, B)`` per this many consecutive shooting
         intervals of the horizon, taken at the middle interval of each group and held over
         it (1, default: every interval its own); the shooting ends stay nonlinear on every
-        interval (:func:`flexctrl.control.nmpc.interval.symbolic_linearisation`).
+        interval (:func:`flexctrl.control.nmpc.interval.symbolic_linearization`).
     qp_warm_start : bool
         HPIPM only: start its interior point from the shifted previous solution
-        (HPIPM's ``warm_start = 1``) instead of its default start (about half the
-        iterations on the three-link arm).  The other QP solvers are always given it.
+        (HPIPM's ``warm_start = 1``, fewer iterations) instead of its default start.  The
+        other QP solvers are always given it.
     sensors, estimator
         As for LQR.
     """

@@ -1,4 +1,8 @@
-"""Sensor kinds and their default noise levels: plain facts the controller files and the models share."""
+"""Sensor kinds and their default noise levels.
+
+Plain facts the controller files (:mod:`flexctrl.spec.controller_shared`) and the models'
+output maps (:mod:`flexctrl.linear`) share.
+"""
 
 from __future__ import annotations
 

@@ -1,9 +1,8 @@
 """Minimum-time arrival of the linear MPC: the earliest stage the arm can be held inside a band.
 
-A quadratic tracking cost does not ask for speed: on the 30-degree step of
-``studies/scenes/fast_move_30deg.toml`` the tuned quadratic MPC overshoots and creeps back
-(2.2 s to the 1 mm band, on its own linear model as on the arm), whatever its weights,
-because ``sum z'Qz`` trades a late small error against an early large one.  Minimum time is
+A quadratic tracking cost does not ask for speed: on a fast step a quadratic MPC overshoots
+and creeps back into a tight band, whatever its weights, because ``sum z'Qz`` trades a late
+small error against an early large one.  Minimum time is
 a different question, and a linear programme answers it exactly on the prediction model:
 
     k* = min k  such that there are moves with  v_lo <= v <= v_hi          (torque limits)
@@ -15,7 +14,7 @@ and ``C_a`` are the arrival rows of :func:`flexctrl.control.mpc.problem.arrival_
 position error and each joint's error as tip motion, m).  Feasibility is monotone in ``k``
 (a plan that stays in the band from ``k`` on also does from ``k + 1``), so bisection over
 the constrained stages needs ``log2(S)`` linear programmes (HiGHS through
-:func:`scipy.optimize.linprog`; about 0.1 s for the shipped 1.5 s horizon, once per move).
+:func:`scipy.optimize.linprog`), once per move.
 
 The controller solves this when it first sees a target (its first sample after
 :meth:`~flexctrl.control.controller.Controller.reset`) and fixes the absolute arrival time
@@ -36,7 +35,7 @@ from flexctrl.control.mpc.qp import QP
 
 
 def _rows(qp: QP, lba: np.ndarray, uba: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(G (S, ns, nv), lower (S, ns), upper (S, ns))``: every soft row on the moves, with its bounds."""
+    """``(G (S, ns, nv), lower (S, ns), upper (S, ns))``: every soft row on the moves, bounded."""
     ns = qp.soft_rows.shape[1] // 2
     nv = qp.n_moves
     dense = qp.A.toarray()[:, :nv]
@@ -100,7 +99,22 @@ def shortest_arrival(
 
 
 def stage_times(qp: QP, t: float, sample_time: float) -> np.ndarray:
-    """Absolute time (s) of the predicted state of every constrained stage, for a QP solved at ``t``."""
+    """Absolute time of the predicted state of every constrained stage of a QP solved at ``t``.
+
+    Parameters
+    ----------
+    qp : QP
+        The QP (its stages with soft rows).
+    t : float
+        When it is solved, s.
+    sample_time : float
+        s.
+
+    Returns
+    -------
+    ndarray
+        One time per constrained stage, s.
+    """
     N = qp.moves.shape[0]
     steps = np.arange(N) if qp.soft_steps is None else qp.soft_steps
     return t + (steps + 1) * sample_time

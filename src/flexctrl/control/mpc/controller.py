@@ -69,14 +69,9 @@ from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
 from flexctrl.control.mpc.qp import QP, condensed_qp, sparse_qp
 from flexctrl.control.mpc.qp_backends import Solution, make_backend
 from flexctrl.linear import OperatingPoint, torque_limits
-from flexctrl.spec.controller_settings import MPCSettings
-
-OSQP_OK = {1: "solved", 2: "solved_inaccurate"}
+from flexctrl.spec.mpc_settings import MPCSettings
 
 
-# --------------------------------------------------------------------------------------
-# controller
-# --------------------------------------------------------------------------------------
 class MPCController(Controller):
     """Linear MPC (see the module docstring).
 
@@ -155,9 +150,11 @@ class MPCController(Controller):
             return self.K
         pb = self.problem
         qp = condensed_qp(pb, self.settings.blocks, 1)
-        nv = qp.moves.max() + 1
+        nv, Gz = qp.n_moves, qp.Gz
+        if Gz is None:  # the condensed QP's cost always depends on the initial state
+            raise ValueError("the condensed QP has no state-dependent cost")
         H = qp.H.toarray()[:nv, :nv]
-        Kz = np.linalg.solve(H, qp.Gz[:nv])[qp.first_move]  # v_0 = -Kz z
+        Kz = np.linalg.solve(H, Gz[:nv])[qp.first_move]  # v_0 = -Kz z
         return pb.Su[:, None] * Kz / pb.Sx[None, :]
 
     def _reset(self) -> None:
@@ -175,12 +172,26 @@ class MPCController(Controller):
     def arrival_release(
         self, t: float, z: np.ndarray, dv: np.ndarray, dc: np.ndarray
     ) -> np.ndarray | None:
-        """Which constrained stages have their arrival rows released at ``t`` (None: no arrival
-        rows).
+        """Which constrained stages have their arrival rows released at ``t`` (s).
 
         The first call after a reset or a new reference plans the arrival time
-        (:func:`~flexctrl.control.mpc.arrival_search.shortest_arrival` plus the margin) and records
-        it in :attr:`stats` (``arrival_time_s``, ``arrival_feasible``, ``arrival_search_ms``).
+        (:func:`~flexctrl.control.mpc.arrival_search.shortest_arrival` plus the margin) and
+        records it in :attr:`stats` (``arrival_time_s``, ``arrival_feasible``,
+        ``arrival_search_ms``).
+
+        Parameters
+        ----------
+        t : float
+            The time, s.
+        z : ndarray
+            The scaled initial state deviation.
+        dv, dc : ndarray
+            The reference shifts of the input and soft-row bounds (:meth:`reference_shifts`).
+
+        Returns
+        -------
+        ndarray of bool or None
+            One per constrained stage; None without arrival rows.
         """
         arrival = self.settings.arrival
         if not arrival.enabled:
@@ -204,10 +215,14 @@ class MPCController(Controller):
         return None if self._plan_u is None else self._plan_u.copy()
 
     def reference_shifts(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Scaled reference over the horizon from ``t``: ``(r (N+1, n), u_ref (N, m) in N m, dv (N,
-        m), dc (N, ns))``.
+        """Scaled reference over the horizon from ``t`` (s).
 
         ``r_k = (x_ref,k - x_op) / S_x``; ``dv``, ``dc`` shift the input and soft-row bounds.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``r`` (N+1, n), ``u_ref`` (N, m) in N m, ``dv`` (N, m) and ``dc`` (N, ns).
         """
         pb = self.problem
         X, U, _ = self.reference.window(t, self.sample_time, pb.horizon + 1)
@@ -217,11 +232,22 @@ class MPCController(Controller):
         return r, U[:-1], dv, dc
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
-        """Solve the QP for state ``x`` (absolute) at time ``t`` (s) and return the raw
-        :class:`Solution`.
+        """Solve the QP for the state ``x`` at time ``t`` and return the raw :class:`Solution`.
 
         For inspection: the plan and the statistics are not updated (OSQP's internal
         warm start is).
+
+        Parameters
+        ----------
+        x : ndarray
+            The state (absolute: rad, modal coordinates and their rates).
+        t : float
+            The time, s.
+
+        Returns
+        -------
+        Solution
+            In scaled variables.
         """
         r, _u, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
@@ -267,7 +293,21 @@ class MPCController(Controller):
 
 
 def design_mpc(model, op: OperatingPoint, settings: MPCSettings) -> MPCController:
-    """Build the linear MPC regulating ``model`` to ``op`` (the QP and its solver workspace, once)."""
+    """Build the linear MPC regulating ``model`` to ``op`` (its QP and solver workspace, once).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : OperatingPoint
+        The target equilibrium.
+    settings : MPCSettings
+        The MPC's settings.
+
+    Returns
+    -------
+    MPCController
+    """
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)
     plant = linear_plant(model, op, sensors, settings.sample_time)

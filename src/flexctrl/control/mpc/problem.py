@@ -1,6 +1,8 @@
-"""The linear MPC's problem data: the scaled prediction model, weights, bounds and the soft
-and arrival rows, built once from the design model's linearization (see
-:mod:`flexctrl.control.mpc.controller` for the formulations and the scaling)."""
+"""The linear MPC's problem data: scaled prediction model, weights, bounds, soft and arrival rows.
+
+Built once from the design model's linearization; :mod:`flexctrl.control.mpc.controller`
+describes the problem and the scaling.
+"""
 
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ class ScaledProblem:
     l1, l2 : float
         Scaled slack penalties.
     horizon : int
+        Prediction steps N.
     n_arrival : int
         The last ``n_arrival`` soft rows are the arrival rows (:func:`arrival_rows`).
     """
@@ -59,14 +62,17 @@ class ScaledProblem:
 
     @property
     def n(self) -> int:
+        """States."""
         return self.A.shape[0]
 
     @property
     def m(self) -> int:
+        """Inputs."""
         return self.B.shape[1]
 
     @property
     def ns(self) -> int:
+        """Soft rows (with the arrival rows)."""
         return self.C.shape[0]
 
 
@@ -79,7 +85,30 @@ def state_scales(
     joint_error: float,
     duration: float = 5.0,
 ) -> np.ndarray:
-    """State scales ``S_x`` (see the module docstring)."""
+    """State scales ``S_x`` (:mod:`flexctrl.control.mpc.controller`, "Scaling").
+
+    Parameters
+    ----------
+    plant : LinearPlant
+        The discrete linearization.
+    K : ndarray
+        The LQR gain whose closed-loop responses set the ``"auto"`` scales.
+    Q : ndarray
+        The state weight (Bryson's rule: ``1 / x_max^2`` on its diagonal).
+    n_u : int
+        Joints.
+    kind : {"auto", "bryson", "none"}
+        The scaling.
+    joint_error : float
+        The acceptable joint error each joint is displaced by (``"auto"``), rad.
+    duration : float
+        How long the responses are followed, s.
+
+    Returns
+    -------
+    ndarray
+        One scale per state.
+    """
     nx = plant.Ad.shape[0]
     if kind == "none":
         return np.ones(nx)
@@ -108,7 +137,24 @@ def state_scales(
 def soft_rows(
     model, op: OperatingPoint, settings
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Physical soft rows ``C_s`` (on the state), their values at ``op`` and the limits (m), and the row scale."""
+    """The soft rows on the state, their values at ``op``, their limits and their scale.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its link deflections or tip position.
+    op : OperatingPoint
+        The target.
+    settings : MPCSettings or NMPCSettings
+        Which soft constraint (``soft``) and its limit.
+
+    Returns
+    -------
+    tuple
+        ``(C_s, values, limits, scale)``: rows (per state, m), values at ``op`` (m; zero for
+        the tip error), limits (m) and the row scale (m; the limit, or the modal weight when
+        the limit is 0).
+    """
     N = model.n_q
     q = ca.SX.sym("q", N)
     if settings.soft == "deflection":
@@ -133,12 +179,23 @@ def soft_rows(
 
 
 def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
-    """Physical arrival rows (m) on the state: the tip position error, then each joint's error as
-    tip motion.
+    """Arrival rows on the state (m): the tip position error, then each joint's as tip motion.
 
     Row ``j`` of the joint part is ``|d tip / d q_j| e_j``: the tip displacement that joint
     ``j``'s error alone causes at ``op`` (a tip inside the band with the joints off
     target would be another, redundant configuration of the arm).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        Its tip position.
+    op : OperatingPoint
+        The target.
+
+    Returns
+    -------
+    ndarray
+        The rows (tip components, then one per joint) by the state.
     """
     N = model.n_q
     q = ca.SX.sym("q", N)
@@ -150,7 +207,23 @@ def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
 
 
 def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> ScaledProblem:
-    """Weights, terminal cost, scaling and constraints of the MPC at ``plant.op``."""
+    """Weights, terminal cost, scaling and constraints of the MPC at ``plant.op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model predicted with.
+    plant : LinearPlant
+        Its discrete linearization at the target.
+    settings : MPCSettings or NMPCSettings
+        Weights, terminal cost, scaling, soft constraint, slack penalties, horizon, arrival.
+    limits : ndarray
+        Torque limits per joint, N m.
+
+    Returns
+    -------
+    ScaledProblem
+    """
     Q, R = weight_matrices(model, settings.weights, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     scale_u = np.where(np.isfinite(limits), limits, 1.0) * settings.weights.torque
@@ -171,9 +244,8 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     rows, value, limit, h = soft_rows(model, plant.op, settings)
     arrival = getattr(settings, "arrival", None)
     n_arrival = 0
-    if (
-        arrival is not None and arrival.enabled
-    ):  # the arrival rows after the soft rows, error from the target
+    if arrival is not None and arrival.enabled:
+        # the arrival rows after the soft rows, the error from the target
         extra = arrival_rows(model, plant.op)
         n_arrival = extra.shape[0]
         rows, value, limit = (
@@ -183,24 +255,24 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
         )
     C = rows * Sx[None, :] / h
     return ScaledProblem(
-        A,
-        B,
-        Qs,
-        Rs,
-        0.5 * (Ps + Ps.T),
-        Ks,
-        Sx,
-        scale_u,
-        v_lo,
-        v_hi,
-        C,
-        (-limit - value) / h,
-        (limit - value) / h,
-        h,
-        settings.slack_l1 * h,
-        settings.slack_l2 * h * h,
-        settings.horizon,
-        n_arrival,
+        A=A,
+        B=B,
+        Q=Qs,
+        R=Rs,
+        P=0.5 * (Ps + Ps.T),
+        K=Ks,
+        Sx=Sx,
+        Su=scale_u,
+        v_lo=v_lo,
+        v_hi=v_hi,
+        C=C,
+        c_lo=(-limit - value) / h,
+        c_hi=(limit - value) / h,
+        h=h,
+        l1=settings.slack_l1 * h,
+        l2=settings.slack_l2 * h * h,
+        horizon=settings.horizon,
+        n_arrival=n_arrival,
     )
 
 

@@ -1,4 +1,8 @@
-"""QP solvers for the linear MPC: OSQP (warm-started, vectors updated only) or casadi.conic backends."""
+"""QP solvers for the linear MPC: OSQP (warm-started, vectors updated only) or casadi.conic.
+
+Both take the QP of :mod:`flexctrl.control.mpc.qp` once, then per sample the scaled state,
+the previous solution and the reference shifts, and give a :class:`Solution`.
+"""
 
 from __future__ import annotations
 
@@ -7,16 +11,31 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+import osqp
 import scipy.sparse as sp
 
 from flexctrl.control.mpc.qp import QP
-from flexctrl.spec.controller_settings import MPCSettings
+from flexctrl.spec.mpc_settings import MPCSettings
 
 
-# backends
-# --------------------------------------------------------------------------------------
 @dataclass
 class Solution:
+    """What a QP solver returned.
+
+    Attributes
+    ----------
+    ok : bool
+        Whether the solution may be used.
+    status : str
+        The solver's status (``"solved"`` when ``ok``).
+    w : ndarray
+        The QP's variables, scaled.
+    iterations : int
+        Solver iterations (-1 when the solver does not say).
+    solve_time : float
+        The solver's own time, s.
+    """
+
     ok: bool
     status: str
     w: np.ndarray
@@ -25,12 +44,23 @@ class Solution:
 
 
 class OSQPBackend:
-    """OSQP with the variable bounds as extra rows; only ``q``/``l``/``u`` are ever updated."""
+    """OSQP with the variable bounds as extra rows; only ``q``/``l``/``u`` are ever updated.
+
+    Parameters
+    ----------
+    qp : QP
+        The QP.
+    settings : OSQPSettings
+        OSQP's settings.
+    accept_inaccurate : bool
+        Use OSQP's "solved inaccurate" solutions.
+    warm_start : {"shift", "previous", "none"}
+        OSQP's start each sample.
+    """
 
     name = "osqp"
 
     def __init__(self, qp: QP, settings, accept_inaccurate: bool, warm_start: str):
-
         self.qp = qp
         nw = qp.H.shape[0]
         has_bound = np.isfinite(qp.lbx) | np.isfinite(qp.ubx)
@@ -71,8 +101,6 @@ class OSQPBackend:
         ``rho`` its adaptation reached in the workspace, so without this a run would
         depend on the runs solved before it with the same controller.
         """
-        import osqp
-
         args, opts = self._setup
         self.solver = osqp.OSQP()
         self.solver.setup(*args, **opts)
@@ -98,7 +126,17 @@ class OSQPBackend:
 
 
 class ConicBackend:
-    """A QP solver shipped with CasADi (``casadi.conic``): hpipm, daqp, qpoases, osqp."""
+    """A QP solver shipped with CasADi (``casadi.conic``): hpipm, daqp, qpoases, osqp.
+
+    Parameters
+    ----------
+    qp : QP
+        The QP (HPIPM needs the sparse stage-wise form).
+    name : str
+        The ``casadi.conic`` plugin.
+    options : dict, optional
+        Options of the plugin, on top of the defaults set here.
+    """
 
     def __init__(self, qp: QP, name: str, options: dict | None = None):
         self.qp = qp
@@ -129,7 +167,7 @@ class ConicBackend:
         self.reset()
 
     def reset(self) -> None:
-        """A new solver instance: qpOASES, for one, hot-starts from the working set of its last call."""
+        """A new solver instance: qpOASES, for one, hot-starts from its last working set."""
         self.solver = ca.conic(
             "mpc_qp", self.name, {"h": self.H.sparsity(), "a": self.Am.sparsity()}, self.options
         )
@@ -149,7 +187,7 @@ class ConicBackend:
         out = self.solver(**args)
         stats = self.solver.stats()
         w = np.array(out["x"], dtype=float).ravel()
-        ok = bool(stats.get("success", False)) and np.all(np.isfinite(w))
+        ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
         status = (
             "solved"
             if ok
@@ -165,7 +203,19 @@ class ConicBackend:
 
 
 def make_backend(qp: QP, settings: MPCSettings):
-    """The QP backend named by ``settings.backend``."""
+    """The QP backend named by ``settings.backend``.
+
+    Parameters
+    ----------
+    qp : QP
+        The QP.
+    settings : MPCSettings
+        Its ``backend`` and, for OSQP, its OSQP settings.
+
+    Returns
+    -------
+    OSQPBackend or ConicBackend
+    """
     if settings.backend == "osqp":
         return OSQPBackend(qp, settings.osqp, settings.accept_inaccurate, settings.warm_start)
     return ConicBackend(qp, settings.backend)

@@ -1,97 +1,69 @@
 """Nonlinear MPC in CasADi: multiple shooting with RK4, real-time iteration or full NLP.
 
-The model predicted with is the design model or a reduction of it
-(``prediction_modes``; :mod:`flexctrl.control.nmpc.prediction_model`: the joints and the slowest
-coupled modes at the target, the estimate mapped with its fast modes removed); the
-shooting interval and its sensitivities are :mod:`flexctrl.control.nmpc.interval`.
+The model predicted with is the design model or a reduction of it (``prediction_modes``;
+:mod:`flexctrl.control.nmpc.prediction_model`: the joints and the slowest coupled modes at
+the target, the estimate mapped with its fast modes removed); the shooting interval and its
+sensitivities are :mod:`flexctrl.control.nmpc.interval`.
 
 Variables are the scaled deviations of :mod:`flexctrl.control.mpc.controller` (same scales,
 weights, DARE terminal cost, torque bounds and soft constraints), stage-wise::
 
     w = [z_0, v_0, s_0, z_1, v_1, s_1, ..., z_N]
 
-Shooting map ``F``: ``substeps`` classical RK4 steps of the model's ``f(x, u)``
-over one sample (``f`` is called, not inlined, so generated code holds it once).
+Shooting map ``F``: ``substeps`` classical RK4 steps of the model's ``f(x, u)`` over one
+sample (``f`` is called, not inlined, so generated code holds it once).
 
-Real-time iteration (``mode = "rti"``, default): one Gauss-Newton SQP step per
-sample.  One CasADi Function, ``linearize(Z, V, p) -> (F, A, B)`` mapped over the N
-intervals (``Function.map``, compiled to C when ``compile``), gives the shooting
-ends and their Jacobians along the previous (shifted) trajectory; a second CasADi
-Function assembles the QP (fixed sparsity) and ``casadi.conic`` (HPIPM by default:
-Riccati-structured interior point) solves it::
+Real-time iteration (``mode = "rti"``, default): one Gauss-Newton SQP step per sample
+(:mod:`flexctrl.control.nmpc.rti`).  One CasADi Function, ``linearize(Z, V, p) -> (F, A, B)``
+mapped over the N intervals (compiled to C when ``compile``), gives the shooting ends and
+their Jacobians along the previous (shifted) trajectory; a second assembles the QP (fixed
+sparsity) and ``casadi.conic`` (HPIPM by default: Riccati-structured interior point) solves
+it::
 
     min 1/2 w'Hw + g'w   s.t.  A_k z_k + B_k v_k - z_{k+1} = A_k zb_k + B_k vb_k - F(zb_k, vb_k)
                                soft rows on C z_{k+1}, torque bounds, z_0 = z(t)
 
-The QP solution is the new trajectory (full step).  With ``sensitivities = "frozen"``
-``A_k, B_k`` are the products over the interval's RK4 steps of the exact transition
-matrices of RK4 applied to the dynamics linearised at the start of each step (one
-Jacobian of ``f`` per RK4 step, frozen over its four stages): an inexact-Jacobian SQP
-whose fixed points still satisfy the nonlinear shooting equations, since the gaps use
-the nonlinear ``F``.  ``"midpoint"`` (shipped in ``controllers/nmpc.toml``) takes one
-Jacobian per interval at its middle RK4 node, frozen over the interval: second order in
-the sample time where the start point is first order (``docs/control.md``).  ``"exact"``
-propagates the Jacobian of ``f`` through every RK4 stage (4 ``substeps`` Jacobians per
-interval).  Per sample the two calls (linearise and assemble, then the QP) go through
-buffers bound once (:mod:`flexctrl.control.nmpc.calls`), and the QP without its soft rows
-is tried first (:mod:`flexctrl.control.nmpc.screened_qp`).
+The QP solution is the new trajectory (full step).  The sensitivities ``A_k, B_k`` may be
+inexact (``sensitivities``, ``jacobian_every``, ``stages_per_jacobian``): the gaps use the
+nonlinear ``F``, so the fixed points still satisfy the nonlinear shooting equations.  Per
+sample the two calls go through buffers bound once, and the QP without its soft rows is
+tried first (:mod:`flexctrl.control.nmpc.screened_qp`).
 
-Why one Jacobian per RK4 step and not per sample (the first version): during a
-saturated transient of the three-link arm the state moves within a sample (the
-fastest elastic mode, ~2000 rad/s at no payload, turns about three times per 10 ms),
-and one Jacobian at the interval's start missed that: relative errors of 2-9 % in
-``A_k, B_k`` (2-norm, against the exact derivative) with a spurious unstable
-eigenvalue (spectral radius 1.04 against 1.007).  With the step reference the RTI fed
-on those sensitivities diverged (scaled iterates 60 -> 300 -> 1700, QP failures, NaN
-shooting ends and HPIPM's "Ill-posed problem detected" abort at payload 0,
-q0 = (0, -150, -30) deg; the plant left its bounds at (0, -60, 30) deg) where LQR and
-the linear MPC settle.  More substeps do not help (the error comes from the frozen
-state, not from h); one Jacobian per RK4 step cuts the errors 3-20 fold and the loop
-settles, at about three times the linearisation cost of the per-sample Jacobian and
-about 40 % of the exact sensitivities' (``docs/control.md``).
-
-Generated code and the operating point.  The compiled ``linearize`` takes as its
-parameter ``p`` the operating point ``(x_op, u_op)``, the scales ``(S_x, S_u)`` and every
-numeric constant of the model's ``f`` (:func:`constants_as_parameters`), and the
-reference enters only ``g``, so its code depends only on the structure of the model's
+Generated code and the operating point.  The compiled ``linearize`` takes as its parameter
+``p`` the operating point ``(x_op, u_op)``, the scales ``(S_x, S_u)`` and every numeric
+constant of the model's ``f`` (:func:`~flexctrl.dynamics.parametric.constants_as_parameters`),
+and the reference enters only ``g``, so its code depends only on the structure of the model's
 expression graph, ``dt``, ``substeps``, the horizon and the sensitivities: a study over
-targets, references and frozen-modes configurations of one payload compiles once (the
-frozen modal constants differ per configuration but the graph does not; a payload of
-0 kg, or a value CasADi shares with its own constants, gives another structure).
+targets, references and frozen-modes configurations of one payload compiles once (a payload
+of 0 kg, or a value CasADi shares with its own constants, gives another structure).
 
-Failures never raise out of :meth:`NMPCController.step`: QP data with NaN (or a
-non-finite linearisation), an exception of the QP solver (CasADi's checks) and an
-unsuccessful or non-finite QP solution are recorded as fall-backs (the shifted
-previous plan, then the LQR law about the reference) with the reason, and the next
-sample linearises along a fresh rollout from the measured state instead of the
-trajectory that failed.
+Failures never raise out of :meth:`NMPCController.step`: QP data with NaN (or a non-finite
+linearization), an exception of the QP solver and an unsuccessful or non-finite QP solution
+are recorded as fall-backs (the shifted previous plan, then the LQR law about the reference)
+with the reason, and the next sample linearizes along a fresh rollout from the measured
+state instead of the trajectory that failed.
 
-A moving reference (:mod:`flexctrl.control.reference_trajectory`) enters only the linear cost,
-``g = g0 - H w_ref`` with ``w_ref`` the scaled reference states and feed-forward torques
-over the horizon: the stage costs penalise deviations from the reference while the
+A moving reference (:mod:`flexctrl.control.reference_trajectory`) enters only the linear
+cost, ``g = g0 - H w_ref`` with ``w_ref`` the scaled reference states and feed-forward
+torques over the horizon: the stage costs penalize deviations from the reference while the
 shooting constraints stay the nonlinear model (no reference consistency is assumed).
 
-The soft rows use the output map linearised at the target; for the assumed-modes
-models the link tip deflections are linear in the elastic coordinates, so the
-deflection constraint is exact.
+The soft rows use the output map linearized at the target; for the assumed-modes models
+the link tip deflections are linear in the elastic coordinates, so the deflection
+constraint is exact.
 
-Full NLP (``mode = "full"``): the same problem with the nonlinear shooting
-constraints, solved by IPOPT (limited-memory Hessian), warm-started from the shifted
-previous solution; it is an offline reference (tens of seconds per solve on the
-18-state arm with CasADi's virtual machine).  FATROP, which ships with CasADi, was
-tried with the same stage-wise NLP: its structure detection accepted it but the
-solver raised at its first iteration (return flag 11, CasADi 3.8), so only IPOPT is
-offered.  The first sample after :meth:`reset` (and the one after a failure) starts
-from the nonlinear rollout under the saturated LQR law about the reference,
-``v_k = clip(v_ref,k - K (z_k - z_ref,k))``, optionally improved by ``init_iter`` IPOPT
-iterations.
+Full NLP (``mode = "full"``, :mod:`flexctrl.control.nmpc.nlp`): the same problem with the
+nonlinear shooting constraints, solved by IPOPT, warm-started from the shifted previous
+solution; an offline reference.  The first sample after :meth:`~NMPCController.reset` (and
+the one after a failure) starts from the nonlinear rollout under the saturated LQR law
+about the reference, ``v_k = clip(v_ref,k - K (z_k - z_ref,k))``, optionally improved by
+``init_iter`` IPOPT iterations.
 """
 
 from __future__ import annotations
 
 import time
 
-import casadi as ca
 import numpy as np
 
 from flexctrl.control.controller import Controller
@@ -99,15 +71,11 @@ from flexctrl.control.estimator import make_observer
 from flexctrl.control.lqr import LinearPlant, build_sensors, linear_plant
 from flexctrl.control.mpc.problem import ScaledProblem, scaled_problem
 from flexctrl.control.mpc.qp_backends import Solution
-from flexctrl.control.nmpc.build import Layout as _Layout
-from flexctrl.control.nmpc.build import build_functions
-from flexctrl.control.nmpc.calls import BoundRTICalls
-from flexctrl.control.nmpc.interval import (
-    RK4_BOUND,
-    auto_substeps,
-    interval_functions,
-)
+from flexctrl.control.nmpc.casadi_functions import Layout, build_functions
+from flexctrl.control.nmpc.interval import RK4_BOUND, auto_substeps, interval_functions
+from flexctrl.control.nmpc.nlp import solve_nlp
 from flexctrl.control.nmpc.prediction_model import Prediction, prediction_model
+from flexctrl.control.nmpc.rti import BoundRTICalls, rti_step
 from flexctrl.control.nmpc.screened_qp import ScreenedQP
 from flexctrl.linear import OperatingPoint, equilibrium, torque_limits
 from flexctrl.spec.controller_settings import NMPCSettings, SensorSettings
@@ -132,7 +100,7 @@ class NMPCController(Controller):
         The state estimator (:mod:`flexctrl.control.estimator`).
     functions : dict
         The CasADi Functions of the real-time iteration (``prepare``, ``qp``, ``H``, ...).
-    layout : _Layout
+    layout : Layout
         Where states, inputs and slacks sit in the QP's variables.
     substeps : int
         RK4 steps per sample of the prediction.
@@ -156,7 +124,7 @@ class NMPCController(Controller):
         problem: ScaledProblem,
         observer,
         functions: dict,
-        layout: _Layout,
+        layout: Layout,
         substeps: int,
         compiled: bool,
         prediction: Prediction | None = None,
@@ -174,8 +142,8 @@ class NMPCController(Controller):
         self.keep = self.prediction.keep
         #: the prediction model's operating point (the design one unless the model is truncated)
         self.pred_op = self.prediction_plant.op
-        # : the torque offset of the command: ``u = u_out + S_u v`` (``pred_op.u``, or ``op.u`` with
-        # a modal map)
+        #: the torque offset of the command, ``u = u_out + S_u v``: ``pred_op.u``, or ``op.u``
+        #: with a modal map
         self.u_out = self.pred_op.u if self.prediction.state_map is None else plant.op.u
         self.problem = problem
         self.observer = observer
@@ -195,15 +163,14 @@ class NMPCController(Controller):
         #: try the QP without its soft rows first and keep that answer when they hold (HPIPM;
         #: :mod:`flexctrl.control.nmpc.screened_qp`): the same optimum to the solver's tolerance
         self.screen = layout.ns > 0 and settings.qp_solver == "hpipm"
-        self._rti_calls = None
+        self._rti_calls: BoundRTICalls | None = None
 
     def __getstate__(self) -> dict:
-        return {
-            **self.__dict__,
-            "_rti_calls": None,
-        }  # buffers bound to this process's memory stay behind
+        # the buffers bound to this process's memory stay behind; made again on first use
+        return {**self.__dict__, "_rti_calls": None}
 
-    def _calls(self):
+    def _calls(self) -> BoundRTICalls:
+        """The RTI's bound calls, made on first use (and after unpickling)."""
         if self._rti_calls is None:
             fn, pb = self.functions, self.problem
             screen = (
@@ -229,9 +196,11 @@ class NMPCController(Controller):
         self._age = 0
         self.timing = {"linearize_qp": [], "qp": [], "total": []}
 
-    # -- pieces ------------------------------------------------------------------------
     def to_prediction(self, x: np.ndarray) -> np.ndarray:
-        """The prediction model's state for the design model's state ``x`` (``nmpc_model``'s module docstring)."""
+        """The prediction model's state for the design model's state ``x``.
+
+        ``x[keep]``, or the modal map of :mod:`flexctrl.control.nmpc.prediction_model`.
+        """
         T = self.prediction.state_map
         return x[self.keep] if T is None else self.pred_op.x + T @ (x - self.op.x)
 
@@ -270,16 +239,25 @@ class NMPCController(Controller):
         """Linear cost ``g = g0 - H w_ref`` of the reference over the horizon from ``t`` (s).
 
         ``w_ref`` holds the scaled reference states ``(x_ref,k - x_op) / S_x`` and inputs
-        ``(u_ref,k - u_op) / S_u``, so the stage costs penalise deviations from the
-        reference (:mod:`flexctrl.control.reference_trajectory`); ``g0`` for a reference at ``op``.
+        ``(u_ref,k - u_op) / S_u``, so the stage costs penalize deviations from the
+        reference (:mod:`flexctrl.control.reference_trajectory`); ``g0`` for a reference at
+        ``op``.
+
+        Parameters
+        ----------
+        t : float
+            The time of the horizon's first sample, s.
+
+        Returns
+        -------
+        ndarray
+            ``g`` (a copy).
         """
         lay, pb = self.layout, self.problem
         X, U, _ = self.reference.window(t, self.sample_time, lay.N + 1)
         window = (X.tobytes(), U.tobytes())
-        if (
-            self._cost_window is not None and self._cost_window[0] == window
-        ):  # e.g. the reference has arrived
-            w_ref, g = self._cost_window[1]
+        if self._cost_window is not None and self._cost_window[0] == window:
+            w_ref, g = self._cost_window[1]  # e.g. the reference has arrived
         else:
             # row by row, as the state is mapped in the loop (one matrix product would round
             # differently)
@@ -295,7 +273,7 @@ class NMPCController(Controller):
         return g.copy()
 
     def _bounds(self, z0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of ``w``: the torque bounds, slacks >= 0 and ``z_0`` fixed to the scaled state ``z0``."""
+        """Bounds of ``w``: the torque bounds, slacks >= 0 and ``z_0`` fixed to ``z0`` (scaled)."""
         lbx, ubx = self.functions["lbx0"].copy(), self.functions["ubx0"].copy()
         lbx[self.layout.z[0]] = ubx[self.layout.z[0]] = z0
         return lbx, ubx
@@ -303,78 +281,32 @@ class NMPCController(Controller):
     def _nlp(
         self, z0: np.ndarray, w0: np.ndarray, max_iter: int, g: np.ndarray | None = None
     ) -> Solution:
-        solver = self.functions["nlp"]
-        lbx, ubx = self._bounds(z0)
-        start = time.perf_counter()
+        """The full NLP from ``w0`` (:func:`~flexctrl.control.nmpc.nlp.solve_nlp`)."""
         g = self.functions["g0"] if g is None else g
-        out = solver(
-            x0=w0,
-            p=np.r_[z0, g],
-            lbx=lbx,
-            ubx=ubx,
-            lbg=self.functions["lbg"],
-            ubg=self.functions["ubg"],
-        )
-        stats = solver.stats()
-        w = np.array(out["x"], dtype=float).ravel()
-        ok = bool(stats.get("success", False)) or (
-            stats.get("return_status") == "Maximum_Iterations_Exceeded"
-            and max_iter < self.settings.max_iter
-        )
-        return Solution(
-            ok and bool(np.all(np.isfinite(w))),
-            str(stats.get("return_status", "")),
-            w,
-            int(stats.get("iter_count", -1)),
-            time.perf_counter() - start,
-        )
+        return solve_nlp(self.functions, z0, w0, g, self._bounds(z0), max_iter, self.settings)
 
     def _rti(self, z0: np.ndarray, w0: np.ndarray, g: np.ndarray | None = None) -> Solution:
-        """One RTI step: linearise along ``w0``, assemble and solve the QP.
-
-        Never raises for numerical trouble: non-finite QP data (a shooting interval or its
-        sensitivities that overflowed along ``w0``), an exception of the QP solver and an
-        unsuccessful or non-finite solution all return ``ok = False`` with the reason in
-        ``status`` (the caller falls back, see :meth:`_step`).
-        """
-        start = time.perf_counter()
-        calls = self._calls()
-        a, lba, uba = calls.linearize(z0, w0)
-        lbx, ubx = self._bounds(z0)
-        mid = time.perf_counter()
-        self.timing["linearize_qp"].append(mid - start)
-        problem = qp_data_problem(w0, a, lba, uba)
-        if problem:
-            self.timing["qp"].append(0.0)
-            return Solution(
-                False,
-                f"non-finite QP data ({problem})",
-                np.full_like(w0, np.nan),
-                0,
-                time.perf_counter() - start,
-            )
-        try:
-            w, stats = calls.solve(self.functions["g0"] if g is None else g, lbx, ubx)
-        except RuntimeError as exc:  # CasADi's checks (e.g. HPIPM's ill-posed bounds) raise
-            end = time.perf_counter()
-            self.timing["qp"].append(end - mid)
-            text = " ".join(str(exc).split())
-            return Solution(
-                False, f"QP solver error: {text[-300:]}", np.full_like(w0, np.nan), 0, end - start
-            )
-        end = time.perf_counter()
-        self.timing["qp"].append(end - mid)
-        ok = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
-        if ok:
-            status = "solved"
-        elif not np.all(np.isfinite(w)):
-            status = "non-finite QP solution"
-        else:
-            status = str(stats.get("unified_return_status", stats.get("return_status", "failed")))
-        return Solution(ok, status, w, int(stats.get("iter_count", -1) or -1), end - start)
+        """One RTI step along ``w0`` (:func:`~flexctrl.control.nmpc.rti.rti_step`)."""
+        g = self.functions["g0"] if g is None else g
+        return rti_step(self._calls(), z0, w0, g, self._bounds(z0), self.timing)
 
     def solve(self, x: np.ndarray, t: float = 0.0) -> Solution:
-        """One NMPC solve (RTI step or NLP) for the design state ``x`` (absolute) at ``t`` (s), updating the warm start."""
+        """One NMPC solve (RTI step or NLP) for the design state ``x`` at ``t``.
+
+        Updates the linearization's warm start, not the plan or the statistics.
+
+        Parameters
+        ----------
+        x : ndarray
+            The design model's state (absolute; rad, m, and their rates).
+        t : float
+            The time, s.
+
+        Returns
+        -------
+        Solution
+            The solver's answer in scaled variables.
+        """
         z0 = (self.to_prediction(x) - self.pred_op.x) / self.problem.Sx
         g = self.cost_vector(t)
         if self._w is None:
@@ -412,7 +344,7 @@ class NMPCController(Controller):
             v = self._plan[0]
         else:
             self._age += 1
-            # the linearisation trajectory led to a failed QP: start the next sample from a
+            # the linearization trajectory led to a failed QP: start the next sample from a
             # fresh rollout of the nonlinear model from the measured state
             self._w = None
             if self._plan is not None and self._age < lay.N:
@@ -431,46 +363,25 @@ class NMPCController(Controller):
         return self.u_out + self.problem.Su * v
 
 
-def _values(v) -> np.ndarray:
-    """The entries of a vector (a DM's stored entries: one list, cheaper than its numpy conversion)."""
-    return (
-        np.array(v.nonzeros(), dtype=float)
-        if isinstance(v, ca.DM)
-        else np.asarray(v, dtype=float).ravel()
-    )
+def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings) -> NMPCController:
+    """Build the nonlinear MPC regulating ``model`` to ``op`` (Functions and solvers, once).
 
-
-def qp_data_problem(w0: np.ndarray, a, lba, uba) -> str:
-    """What makes the RTI's QP data unusable, or ``""``.
-
-    Infinite bounds are legitimate (one-sided soft rows); NaN anywhere, a non-finite
-    linearisation point or constraint matrix, ``lba = +inf`` or ``uba = -inf`` are not
-    (HPIPM would abort with an assertion).
-    """
-    if not np.all(np.isfinite(w0)):
-        return "non-finite linearisation trajectory"
-    if not (
-        a.is_regular() if isinstance(a, ca.DM) else np.all(np.isfinite(np.asarray(a, dtype=float)))
-    ):
-        return "non-finite sensitivities"
-    lo, hi = _values(lba), _values(uba)
-    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
-        return "NaN in the constraint bounds"
-    if np.any(lo == np.inf) or np.any(hi == -np.inf):
-        return "infinite shooting gap"
-    return ""
-
-
-def design_nmpc(
-    model,
-    op: OperatingPoint,
-    settings: NMPCSettings,
-) -> NMPCController:
-    """Build the nonlinear MPC regulating ``model`` to ``op`` (CasADi Functions and solvers, once).
-
-    The compiled linearisation is shared (disk cache) by every ``op`` and every model with
-    the same expression-graph structure; ``functions["build"]`` reports the compile time,
+    The compiled linearization is shared (disk cache) by every ``op`` and every model with
+    the same expression-graph structure; ``functions["build"]`` reports the compile time (s),
     whether the library came from the cache and how many model constants were lifted.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    op : flexctrl.linear.OperatingPoint
+        The target equilibrium.
+    settings : NMPCSettings
+        The controller's settings.
+
+    Returns
+    -------
+    NMPCController
     """
     limits = torque_limits(model)
     sensors = build_sensors(model, settings.sensors, op)

@@ -1,26 +1,25 @@
 """HPIPM called directly (ctypes) on an input-bounded optimal-control QP, its memory made once.
 
-The problem, ``N`` stages, ``x_0`` given::
+The problem, ``N`` stages, ``x_0`` given (``k = 0..N``, no ``u_N``)::
 
-    min  sum_k 1/2 u_k' R_k u_k + x_k' S_k' u_k + 1/2 x_k' Q_k x_k + r_k' u_k + q_k' x_k  (k = 0..N, u_N none)
+    min  sum_k 1/2 u_k' R_k u_k + x_k' S_k' u_k + 1/2 x_k' Q_k x_k + r_k' u_k + q_k' x_k
     s.t. x_{k+1} = A_k x_k + B_k u_k + b_k,   lbu <= u_k <= ubu
 
-Why not ``casadi.conic("hpipm")``: on the NMPC's QP (12 states, 3 inputs, horizon 20) its call
-costs about 0.2 ms before the first iteration, because every call allocates and creates HPIPM's
-dimensions, QP, solution, arguments and workspace anew (``malloc`` and the workspace's set-up),
-projects the sparse constraint matrix and Hessian into stage blocks, and boxes every state with
-bounds of +-1e8 (CasADi gives HPIPM all variables as boxed), so HPIPM's interior point carries
-``2 (N + 1) n_x`` inequalities that never bind.  Here the structures are made once per solver,
-``x_0`` is eliminated (stage 0 has no state: ``b_0 <- A_0 x_0 + b_0``, ``r_0 <- r_0 + S_0 x_0``),
-only the inputs are bounded, and one solve is three C calls (set the data, set the primal start,
-solve) plus two for the status, on numpy arrays bound once.
+Why not ``casadi.conic("hpipm")``: every call of it allocates and creates HPIPM's dimensions,
+QP, solution, arguments and workspace anew, projects the sparse constraint matrix and Hessian
+into stage blocks, and boxes every state with bounds of +-1e8 (CasADi gives HPIPM all
+variables as boxed), so HPIPM's interior point carries ``2 (N + 1) n_x`` inequalities that
+never bind.  Here the structures are made once per solver, ``x_0`` is eliminated (stage 0 has
+no state: ``b_0 <- A_0 x_0 + b_0``, ``r_0 <- r_0 + S_0 x_0``), only the inputs are bounded,
+and one solve is three C calls (set the data, set the primal start, solve) plus two for the
+status, on numpy arrays bound once.
 
-The library is the ``libhpipm`` that ships with CasADi (the one ``casadi.conic`` loads), with the
-same options (mode, iteration limit, the four residual tolerances, primal warm start).  Like
-CasADi, the cost is handed to HPIPM halved (``1/2 H``, ``1/2 g``: the same minimiser), so the
-residual tolerances mean what they mean through ``casadi.conic``.  The two are the same optimum
-to the interior point's tolerance, not to the bit (other inequalities, so other iterates):
-``tests/test_hpipm_ocp.py`` compares them.
+The library is the ``libhpipm`` that ships with CasADi (the one ``casadi.conic`` loads), with
+the same options (mode, iteration limit, the four residual tolerances, primal warm start).
+Like CasADi, the cost is handed to HPIPM halved (``1/2 H``, ``1/2 g``: the same minimizer), so
+the residual tolerances mean what they mean through ``casadi.conic``.  The two are the same
+optimum to the interior point's tolerance, not to the bit (other inequalities, so other
+iterates).
 """
 
 from __future__ import annotations
@@ -30,14 +29,15 @@ import functools
 import glob
 import os
 
+import casadi
 import numpy as np
 
 #: HPIPM's ``enum hpipm_mode``
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 #: HPIPM's ``enum hpipm_status``
 STATUS = {0: "SUCCESS", 1: "MAX_ITER", 2: "MIN_STEP", 3: "NAN_SOL", 4: "INCONS_EQ"}
-# : the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their
-# HPIPM setters
+#: the ``hpipm`` options of :func:`~flexctrl.control.nmpc.screened_qp.hpipm_options` and their
+#: HPIPM setters
 _TOLERANCES = {
     "res_g_max": "tol_stat",
     "res_b_max": "tol_eq",
@@ -59,8 +59,6 @@ def library() -> ctypes.CDLL:
     HpipmUnavailable
         No loadable ``libhpipm`` in CasADi's package folder.
     """
-    import casadi
-
     folder = os.path.dirname(casadi.__file__)
     names = sorted(
         glob.glob(os.path.join(folder, "libhpipm.*")) + glob.glob(os.path.join(folder, "hpipm.dll"))
@@ -100,7 +98,10 @@ def library() -> ctypes.CDLL:
 
 
 def _pointers(array: np.ndarray, sizes: list[int]) -> ctypes.Array:
-    """A C array of pointers to consecutive blocks of ``sizes`` entries of the contiguous ``array``."""
+    """A C array of pointers to consecutive blocks of ``sizes`` entries of ``array``.
+
+    ``array`` is contiguous.
+    """
     base, step = array.ctypes.data, array.itemsize
     offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
     return (ctypes.c_void_p * len(sizes))(*[base + int(o) * step for o in offsets])
@@ -121,8 +122,9 @@ def _checked_mode(options: dict) -> str:
 
 
 class HpipmOCP:
-    """HPIPM on the problem of the module docstring; one per controller (not picklable, not
-    thread-safe).
+    """HPIPM on the problem of the module docstring; one per controller.
+
+    Not picklable and not thread-safe: its memory is HPIPM's.
 
     Parameters
     ----------

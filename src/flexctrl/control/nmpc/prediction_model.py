@@ -1,13 +1,11 @@
-"""The NMPC's prediction model: the design model, or its Galerkin truncation to fewer modes per
-link.
+"""The NMPC's prediction model: the design model, or its Galerkin truncation to fewer modes.
 
-The NMPC predicts with RK4, whose stable step is bounded by the fastest mode: on the
-three-link arm with two assumed modes per link (``amm:2``, 18 states) the second modes
-are at 1464-2045 rad/s (target (80, -10, -10) deg, 2 kg), so a 10 ms sample needs 9 RK4
-steps, and every step one Jacobian of ``f`` in the sensitivities.  Those modes are far
-beyond what a 100 Hz controller can act on (Nyquist 314 rad/s); the first modes
-(344-470 rad/s) need 2 RK4 steps.  ``prediction_modes = k`` predicts with the first
-``k`` modes of every link and leaves the others to the estimator and the plant.
+The NMPC predicts with RK4, whose stable step is bounded by the fastest mode: with two
+assumed modes per link the second modes of the three-link arm are far beyond what a 100 Hz
+controller can act on (its Nyquist frequency), yet they set the RK4 substeps, and every
+substep costs one Jacobian of ``f`` in the sensitivities.  ``prediction_modes = k`` predicts
+with the first ``k`` modes of every link and leaves the others to the estimator and the
+plant.
 
 Truncation.  With ``q = P q_r`` (``P`` selects the joints and the kept elastic
 coordinates; the others are held at zero), the reduced equations are the Galerkin
@@ -21,25 +19,23 @@ link's own eigenfunctions) this is the ``amm:k`` model of the same arm.
 Mapping the estimate.  The kept assumed-mode coordinates of the design model are not
 its slow modes: the mass matrix couples them to the dropped ones, so ``x[keep]``
 carries the fast (second) modes, and feeding them back through gains designed on the
-slow model is observation spillover.  With the tuned weights of ``controllers/nmpc.toml``
-that made the sampled loop unstable on ``move_joint1_30deg`` (spectral radius 1.025 about
-the target, with full state and with the Kalman filter alike).  :func:`modal_map` removes
-them first: with ``Phi`` the design model's modes at the target (``K_lin Phi = M Phi
-Omega^2``, M-orthonormal) and ``Phi_s`` the slowest ones, as many as the coordinates
-kept, the prediction sees ``q_r = P' Phi_s Phi_s' M q`` (``q = P q_r`` its basis: a selection, or
-:func:`coupled_basis`; the same
-map for ``qd``): the fast modes are in its null space, so in modal coordinates the
-linear loop is block triangular (fast modes open-loop, lightly damped and stable; slow
-modes under the reduced design's feedback; 0.978 on the same case).  The map alone is
-not enough: the first assumed mode per link puts the lowest elastic mode at 343 rad/s
-against the design model's 268, and that NMPC still oscillates; the coupled basis
-(:func:`coupled_basis`) keeps the slow frequencies and with the map the loop settles.  Joint
-displacements map to themselves where they are rigid-body modes.  The map is affine
-about the equilibria, ``x_r = x_op,r + T (x - x_op)``, and the torque is passed on as
-a deviation, ``u = u_op + (u_r - u_op,r)``, so the design model's equilibrium is the
-loop's.  ``prediction_map = "select"`` keeps ``x_r = x[keep]``
-(:attr:`Prediction.keep`).  The controller regulates about the prediction model's own
-equilibrium at the target joint angles.
+slow model is observation spillover, enough to make the sampled loop of the tuned NMPC
+(``controllers/nmpc.toml``) unstable about its target.  :func:`modal_map` removes them
+first: with ``Phi`` the design model's modes at the target (``K_lin Phi = M Phi Omega^2``,
+M-orthonormal) and ``Phi_s`` the slowest ones, as many as the coordinates kept, the
+prediction sees ``q_r = P' Phi_s Phi_s' M q`` (``q = P q_r`` its basis: a selection, or
+:func:`coupled_basis`; the same map for ``qd``): the fast modes are in its null space, so
+in modal coordinates the linear loop is block triangular (fast modes open-loop, lightly
+damped and stable; slow modes under the reduced design's feedback).  The map alone is not
+enough: the first assumed mode per link puts the lowest elastic mode well above the design
+model's, and that NMPC still oscillates; the coupled basis (:func:`coupled_basis`) keeps
+the slow frequencies, and with the map the loop settles.  Joint displacements map to
+themselves where they are rigid-body modes.  The map is affine about the equilibria,
+``x_r = x_op,r + T (x - x_op)``, and the torque is passed on as a deviation,
+``u = u_op + (u_r - u_op,r)``, so the design model's equilibrium is the loop's.
+``prediction_map = "select"`` keeps ``x_r = x[keep]`` (:attr:`Prediction.keep`).  The
+controller regulates about the prediction model's own equilibrium at the target joint
+angles.
 """
 
 from __future__ import annotations
@@ -48,7 +44,9 @@ from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
+import scipy.linalg as sl
 
+from flexctrl.dynamics.model import Model
 from flexctrl.errors import SpecError
 
 
@@ -64,12 +62,13 @@ class Prediction:
         Indices of the design model's state ``x = (q, qd)`` kept, in order.
     reduced : bool
         True when ``model`` is a truncation.
+    state_map : ndarray or None
+        ``T`` of ``x_r = x_op,r + T (x - x_op)`` (:func:`modal_map`); None: ``x_r = x[keep]``.
     """
 
     model: object
     keep: np.ndarray
     reduced: bool
-    #: ``T`` of ``x_r = x_op,r + T (x - x_op)`` (:func:`modal_map`); None: ``x_r = x[keep]``
     state_map: np.ndarray | None = None
 
 
@@ -135,10 +134,29 @@ def truncated_model(model, modes: int):
 
 
 def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: dict):
-    """The Galerkin projection of ``model`` onto ``q = basis q_r`` (``basis``: N x N_r, joints first)."""
-    from flexctrl.dynamics.model import Model
+    """The Galerkin projection of ``model`` onto ``q = basis q_r``.
 
-    N, Nr, n = model.n_q, basis.shape[1], model.n_u
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    basis : ndarray
+        ``P`` (N x N_r), the joints first.
+    names : sequence of str
+        The reduced coordinates' names.
+    name : str
+        The reduced model's name.
+    fidelity
+        Its fidelity.
+    info : dict
+        Its ``info``.
+
+    Returns
+    -------
+    flexctrl.dynamics.model.Model
+        With ``M, c, g, K, D, f, energies, tip, hubs, deflection`` on the reduced coordinates.
+    """
+    Nr, n = basis.shape[1], model.n_u
     P = ca.SX(ca.sparsify(ca.DM(basis)))
     fn = model.functions
     q, qd, u = ca.SX.sym("q", Nr), ca.SX.sym("qd", Nr), ca.SX.sym("u", n)
@@ -189,8 +207,7 @@ def projected_model(model, basis: np.ndarray, names, name: str, fidelity, info: 
 
 
 def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic: int) -> np.ndarray:
-    """``q = P q_r``: the joints, and the elastic parts of the design model's slowest modes at the
-    target.
+    """``q = P q_r``: the joints, and the elastic parts of the design model's slowest modes.
 
     ``P = blockdiag(I, E)`` with ``E`` (orthonormal columns, ``n_elastic`` of them) the
     dominant directions of the elastic components of the ``n_joints + n_elastic``
@@ -198,11 +215,24 @@ def coupled_basis(mass: np.ndarray, a_lin: np.ndarray, n_joints: int, n_elastic:
     :func:`modal_map`).  Where the rigid-body modes carry no elastic motion (no gravity
     stiffness, as in the horizontal plane) the span of ``P`` holds those modes exactly,
     so the Galerkin projection keeps their frequencies at the target (the first
-    assumed mode per link does not: 343 against 268 rad/s for the lowest on
-    ``move_joint1_30deg``).
-    """
-    import scipy.linalg as sl
+    assumed mode per link does not).
 
+    Parameters
+    ----------
+    mass : ndarray
+        The design model's mass matrix at the target (N x N).
+    a_lin : ndarray
+        Its continuous linearization ``A`` at the target (2N x 2N).
+    n_joints : int
+        Joints.
+    n_elastic : int
+        Elastic directions kept.
+
+    Returns
+    -------
+    ndarray
+        ``P`` (N x (n_joints + n_elastic)).
+    """
     N = mass.shape[0]
     M = 0.5 * (mass + mass.T)
     K = M @ -a_lin[N:, :N]
@@ -220,13 +250,26 @@ def prediction_model(
     mass: np.ndarray | None = None,
     a_lin: np.ndarray | None = None,
 ) -> Prediction:
-    """The NMPC's :class:`Prediction` for ``prediction_modes = modes`` (0: the design model itself).
+    """The NMPC's :class:`Prediction` for ``prediction_modes = modes``.
 
-    ``basis``: ``"assumed"`` (the first ``modes`` assumed modes per link,
-    :func:`truncated_model`) or ``"coupled"`` (:func:`coupled_basis`, as many
-    coordinates); ``mapping``: ``"select"`` or ``"modal"`` (:func:`modal_map`).  The
-    coupled basis and the modal map need the design model's mass matrix ``mass`` and
-    continuous linearisation ``a_lin`` at the target.
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    modes : int
+        Elastic modes per link predicted with; 0: the design model itself.
+    basis : {"assumed", "coupled"}
+        The first ``modes`` assumed modes per link (:func:`truncated_model`), or as many
+        coordinates of :func:`coupled_basis`.
+    mapping : {"select", "modal"}
+        How the design state maps onto the prediction's (:func:`modal_map` for ``"modal"``).
+    mass, a_lin : ndarray, optional
+        The design model's mass matrix and continuous linearization at the target, which the
+        coupled basis and the modal map need.
+
+    Returns
+    -------
+    Prediction
     """
     if modes <= 0 or model.n_q == model.n_u:
         return Prediction(model, np.arange(model.n_x), False)
@@ -238,22 +281,12 @@ def prediction_model(
         return Prediction(reduced, keep, True)
     if mass is None or a_lin is None:
         raise ValueError(
-            f"prediction basis {basis!r} with mapping {mapping!r} needs the mass matrix and the linearisation"
+            f"prediction basis {basis!r} with mapping {mapping!r} needs the mass matrix and "
+            "the linearization"
         )
     if basis == "coupled":
         P = coupled_basis(mass, a_lin, model.n_u, keep_q.size - model.n_u)
-        names = tuple(model.coordinate_names[: model.n_u]) + tuple(
-            f"eta{j + 1}" for j in range(P.shape[1] - model.n_u)
-        )
-        info = dict(model.info, truncated_from=str(model.fidelity), basis="coupled")
-        reduced = projected_model(
-            model,
-            P,
-            names,
-            f"{model.name} (slowest {P.shape[1] - model.n_u} coupled modes)",
-            reduced.fidelity,
-            info,
-        )
+        reduced = _coupled_model(model, P, reduced.fidelity)
     elif basis == "assumed":
         P = np.zeros((model.n_q, keep_q.size))
         P[keep_q, np.arange(keep_q.size)] = 1.0
@@ -270,6 +303,15 @@ def prediction_model(
             f"prediction mapping {mapping!r} is not allowed; allowed: 'modal', 'select'"
         )
     return Prediction(reduced, keep, True, T)
+
+
+def _coupled_model(model, P: np.ndarray, fidelity):
+    """The projection of ``model`` onto the coupled basis ``P`` (:func:`coupled_basis`)."""
+    n = model.n_u
+    names = tuple(model.coordinate_names[:n]) + tuple(f"eta{j + 1}" for j in range(P.shape[1] - n))
+    info = dict(model.info, truncated_from=str(model.fidelity), basis="coupled")
+    label = f"{model.name} (slowest {P.shape[1] - n} coupled modes)"
+    return projected_model(model, P, names, label, fidelity, info)
 
 
 def modal_map(mass: np.ndarray, a_lin: np.ndarray, basis: np.ndarray) -> np.ndarray:
@@ -298,8 +340,6 @@ def modal_map(mass: np.ndarray, a_lin: np.ndarray, basis: np.ndarray) -> np.ndar
     ValueError
         When the slow modes do not span the reduced coordinates (``P' Phi_s`` singular).
     """
-    import scipy.linalg as sl
-
     N = mass.shape[0]
     M = 0.5 * (mass + mass.T)
     K = M @ -a_lin[N:, :N]

@@ -1,28 +1,22 @@
 """The RTI's QP screened for its soft rows: solve without them first, keep that when they hold.
 
-The RTI's QP (:mod:`flexctrl.control.nmpc.controller`) carries soft output constraints, two rows and
-one slack per limited output and stage, penalised by ``l1 s + l2 s^2 / 2`` with
+The RTI's QP (:mod:`flexctrl.control.nmpc.controller`) carries soft output constraints, two
+rows and one slack per limited output and stage, penalized by ``l1 s + l2 s^2 / 2`` with
 ``l1 > 0``.  Drop the soft rows and the slacks and solve what is left (the shooting
-equalities, the torque bounds, the same costs).  If its solution ``w`` satisfies every
-soft row with no slack (``c_lo <= C z_{k+1} <= c_hi`` on all stages), then ``(w, s = 0)``
-solves the whole QP: it is feasible, and the KKT conditions of the smaller problem with
-zero multipliers on the soft rows and the multiplier ``l1 >= 0`` on every active bound
-``s >= 0`` are those of the whole problem (convex, so that is its optimum).  Otherwise the
-whole QP is solved as before.  Both answers are the same optimum to the interior point's
-tolerance, not to the bit (two solves take different iterates), so the closed-loop
-numbers move in their last digits (``docs/control.md``, "NMPC speed").
+equalities, the torque bounds, the same costs).  If its solution ``w`` satisfies every soft
+row with no slack (``c_lo <= C z_{k+1} <= c_hi`` on all stages), then ``(w, s = 0)`` solves
+the whole QP: it is feasible, and the KKT conditions of the smaller problem with zero
+multipliers on the soft rows and the multiplier ``l1 >= 0`` on every active bound ``s >= 0``
+are those of the whole problem (convex, so that is its optimum).  Otherwise the whole QP is
+solved.  Both answers are the same optimum to the interior point's tolerance, not to the bit
+(two solves take different iterates).
 
-The smaller QP has ``m`` instead of ``m + ns`` inputs and no general rows per stage: on the
-benchmark's problem (12 states, 3 torques, 3 deflection limits, horizon 20; ``flexctrl bench
-mpc``, in blocks) the QP step took 0.57 instead of 0.76 ms through ``casadi.conic``, 3
-iterations instead of 4.  Samples whose prediction reaches a deflection limit pay both solves.
-
-Since it has only the torque bounds, it is solved by HPIPM called directly
+Why: the smaller QP has ``m`` instead of ``m + ns`` inputs and no general rows per stage, so
+it takes fewer and cheaper iterations; only samples whose prediction reaches a limit pay
+both solves.  Since it has only the torque bounds, it is solved by HPIPM called directly
 (:class:`HpipmStages`, :mod:`flexctrl.control.nmpc.hpipm_ocp`: memory made once, ``z_0``
-eliminated, no state boxes), ``direct=False`` keeps ``casadi.conic``.  One bench run
-(``flexctrl bench mpc --json --pc-solves 0``, load 0.1-0.5): QP step 0.41 against 0.80 ms in
-blocks, 0.55 against 0.80 ms interleaved; the whole sample 1.12 against 1.96 ms in blocks and
-1.46 against 1.63 ms interleaved (``rti_frozen`` against ``rti_frozen_conic_qp``).
+eliminated, no state boxes).  When CasADi's ``libhpipm`` cannot be loaded, the smaller QP
+falls back to HPIPM through ``casadi.conic`` and :attr:`ScreenedQP.backend` says so.
 """
 
 from __future__ import annotations
@@ -35,7 +29,21 @@ from flexctrl.sim.bound import BoundFunction
 
 
 def hpipm_options(N: int, n: int, nu: int, ng: int, warm_start: bool) -> dict:
-    """``casadi.conic`` options of HPIPM for ``N`` stages of ``n`` states, ``nu`` inputs and ``ng`` rows each."""
+    """``casadi.conic`` options of HPIPM for ``N`` stages.
+
+    Parameters
+    ----------
+    N : int
+        Stages.
+    n, nu, ng : int
+        States, inputs and general rows per stage.
+    warm_start : bool
+        Start from the primal guess given.
+
+    Returns
+    -------
+    dict
+    """
     return {
         "N": N,
         "nx": [n] * (N + 1),
@@ -54,11 +62,11 @@ def hpipm_options(N: int, n: int, nu: int, ng: int, warm_start: bool) -> dict:
 
 
 class ScreenedQP:
-    """The RTI's QP without its soft rows and slacks (see the module docstring); one per controller.
+    """The RTI's QP without its soft rows and slacks (module docstring); one per controller.
 
     Parameters
     ----------
-    layout : nmpc._Layout
+    layout : flexctrl.control.nmpc.casadi_functions.Layout
         Index bookkeeping of the whole QP's ``w = [z_0, v_0, s_0, ..., z_N]``.
     H : ndarray
         The whole QP's Hessian (dense, ``nw x nw``).
@@ -66,13 +74,15 @@ class ScreenedQP:
         Sparsity of the whole QP's constraint matrix (per stage: ``n`` shooting rows, then
         ``2 ns`` soft rows).
     C, c_lo, c_hi : ndarray
-        The soft rows' outputs ``C z_{k+1}`` and their limits.
+        The soft rows' outputs ``C z_{k+1}`` and their limits (scaled).
     warm_start : bool
         HPIPM starts from the shifted previous solution.
-    direct : bool
-        Solve through :class:`HpipmStages` (HPIPM called directly, its memory made once; default)
-        or through ``casadi.conic`` (the slower path, kept to measure against; also the fall-back
-        when CasADi's ``libhpipm`` cannot be loaded, named in :attr:`backend`).
+
+    Attributes
+    ----------
+    backend : str
+        How the smaller QP is solved: ``"hpipm (direct)"``, or ``"casadi.conic hpipm (why)"``
+        when HPIPM's library cannot be called directly.
     """
 
     def __init__(
@@ -84,51 +94,44 @@ class ScreenedQP:
         c_lo: np.ndarray,
         c_hi: np.ndarray,
         warm_start: bool,
-        direct: bool = True,
     ):
-        n, m, ns, N = layout.n, layout.m, layout.ns, layout.N
+        n, ns, N = layout.n, layout.ns, layout.N
         self.layout = layout
         slack = np.zeros(layout.nw, dtype=bool)
         slack[layout.s.ravel()] = True
         #: the whole QP's variables and shooting rows the smaller one keeps
         self.keep = np.flatnonzero(~slack)
         self.rows = np.concatenate([k * (n + 2 * ns) + np.arange(n) for k in range(N)])
-        # nonzeros of the whole A that the kept rows and columns select, in the smaller A's order
+        # the whole A's sparsity holding its nonzeros' numbers (1-based), to select the kept ones
         numbered = ca.DM(a_sparsity, np.arange(1, a_sparsity.nnz() + 1, dtype=float))
-        self.C, self.c_lo, self.c_hi = (
-            np.asarray(C, dtype=float),
-            np.asarray(c_lo, dtype=float),
-            np.asarray(c_hi, dtype=float),
-        )
+        self.C, self.c_lo, self.c_hi = (np.asarray(v, dtype=float) for v in (C, c_lo, c_hi))
         #: the smaller QP's ``z_1 .. z_N`` in its own ``w``
         self._z_next = np.array([self.keep.searchsorted(layout.z[k + 1]) for k in range(N)])
-        options = hpipm_options(N, n, m, 0, warm_start)
-        # : how the smaller QP is solved: ``"hpipm (direct)"`` or ``"casadi.conic hpipm"`` (and why,
-        # if not direct)
-        self.backend = "casadi.conic hpipm"
+        options = hpipm_options(N, n, layout.m, 0, warm_start)
         self.direct: HpipmStages | None = None
-        if direct:
-            try:
-                self.direct = HpipmStages(layout, H, numbered, self.rows, options["hpipm"])
-                self.backend = "hpipm (direct)"
-            except HpipmUnavailable as exc:
-                self.backend = f"casadi.conic hpipm ({exc})"
-        if self.direct is None:
-            sub = numbered[self.rows.tolist(), self.keep.tolist()]
-            self.entries = np.array(sub.nonzeros(), dtype=int) - 1
-            Hk = H[np.ix_(self.keep, self.keep)]
-            H_sp = ca.DM(ca.sparsify(ca.DM(Hk)))
-            self.qp = ca.conic(
-                "nmpc_qp_screened",
-                "hpipm",
-                {"h": H_sp.sparsity(), "a": sub.sparsity()},
-                {"error_on_fail": False, **options},
-            )
-            self._bound = BoundFunction(
-                self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True
-            )
-            self._in = self._bound.arrays
-            self._x = self._bound.arrays["x"].reshape(-1)
+        try:
+            self.direct = HpipmStages(layout, H, numbered, self.rows, options["hpipm"])
+            self.backend = "hpipm (direct)"
+        except HpipmUnavailable as exc:
+            self.backend = f"casadi.conic hpipm ({exc})"
+            self._through_conic(H, numbered, options)
+
+    def _through_conic(self, H: np.ndarray, numbered: ca.DM, options: dict) -> None:
+        """The fall-back: the smaller QP through ``casadi.conic``'s HPIPM, on bound buffers."""
+        sub = numbered[self.rows.tolist(), self.keep.tolist()]
+        self.entries = np.array(sub.nonzeros(), dtype=int) - 1
+        H_sp = ca.DM(ca.sparsify(ca.DM(H[np.ix_(self.keep, self.keep)])))
+        self.qp = ca.conic(
+            "nmpc_qp_screened",
+            "hpipm",
+            {"h": H_sp.sparsity(), "a": sub.sparsity()},
+            {"error_on_fail": False, **options},
+        )
+        self._bound = BoundFunction(
+            self.qp, {"h": np.array(H_sp.nonzeros(), dtype=float)}, renew=True
+        )
+        self._in = self._bound.arrays
+        self._x = self._bound.arrays["x"].reshape(-1)
 
     def solve(
         self,
@@ -140,19 +143,35 @@ class ScreenedQP:
         ubx: np.ndarray,
         w0: np.ndarray,
     ) -> tuple[np.ndarray | None, dict]:
-        """The whole QP's solution with zero slacks if the smaller QP's satisfies the soft rows,
-        else None; its stats.
+        """The whole QP's solution with zero slacks, if the smaller QP's holds the soft rows.
 
-        Arguments are the whole QP's data (``a`` the nonzeros of its constraint matrix).
         Raises as the QP solver does (CasADi's checks).
+
+        Parameters
+        ----------
+        a : ndarray
+            The nonzeros of the whole QP's constraint matrix.
+        lba, uba : ndarray
+            The whole QP's row bounds.
+        g : ndarray
+            The whole QP's linear cost.
+        lbx, ubx : ndarray
+            The whole QP's variable bounds.
+        w0 : ndarray
+            The start (the whole QP's variables).
+
+        Returns
+        -------
+        tuple
+            ``(w or None, stats)``: None when the smaller QP failed or a soft row does not hold.
         """
-        keep, rows = self.keep, self.rows
         if self.direct is not None:
             w, stats = self.direct.solve(a, lba, g, lbx, ubx, w0)
             if not stats["success"] or not np.all(np.isfinite(w)):
                 return None, stats
             z_next = w[self.direct.z_index[1:]]
         else:
+            keep, rows = self.keep, self.rows
             self._in["a"][:] = a[self.entries]
             self._in["lba"][:] = lba[rows]
             self._in["uba"][:] = uba[rows]
@@ -175,16 +194,34 @@ class ScreenedQP:
 
 
 class HpipmStages:
-    """The smaller QP's data moved from the whole QP's arrays into
-    :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
+    """The smaller QP solved by :class:`~flexctrl.control.nmpc.hpipm_ocp.HpipmOCP`.
 
-    The whole QP's shooting rows read ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's
-    ``x_{k+1} = A_k x_k + B_k u_k + b_k`` has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds
-    (``lbx = ubx = z_0``) and eliminated.  The stage costs are the Hessian's diagonal blocks
-    ``Q_k = H[z_k, z_k]``, ``R_k = H[v_k, v_k]`` (the NMPC's has no cross terms; one with them is
-    refused), halved as ``casadi.conic`` hands them to HPIPM; the inputs' bounds are read from
-    ``lbx, ubx`` every solve.  Any other bound on a state (there is
-    none in the NMPC's QP) is refused when the data are read, not dropped.
+    Its data are moved from the whole QP's arrays.  The whole QP's shooting rows read
+    ``A_k z_k + B_k v_k - z_{k+1} = lba_k``, so HPIPM's ``x_{k+1} = A_k x_k + B_k u_k + b_k``
+    has ``b_k = -lba_k``; ``z_0`` is fixed by its bounds (``lbx = ubx = z_0``) and eliminated.
+    The stage costs are the Hessian's diagonal blocks ``Q_k = H[z_k, z_k]``,
+    ``R_k = H[v_k, v_k]`` (the NMPC's has no cross terms; one with them is refused), halved as
+    ``casadi.conic`` hands them to HPIPM; the inputs' bounds are read from ``lbx, ubx`` every
+    solve.  Any other bound on a state (there is none in the NMPC's QP) is refused when the
+    data are read, not dropped.
+
+    Parameters
+    ----------
+    layout : flexctrl.control.nmpc.casadi_functions.Layout
+        The whole QP's variables.
+    H : ndarray
+        The whole QP's Hessian (dense).
+    numbered : casadi.DM
+        The whole constraint matrix's sparsity holding its nonzeros' numbers (1-based).
+    rows : ndarray of int
+        The whole QP's shooting rows.
+    options : dict
+        HPIPM's options (:func:`hpipm_options`' ``"hpipm"`` entry).
+
+    Raises
+    ------
+    HpipmUnavailable
+        When CasADi's ``libhpipm`` cannot be loaded.
     """
 
     def __init__(self, layout, H: np.ndarray, numbered: ca.DM, rows: np.ndarray, options: dict):
@@ -196,12 +233,12 @@ class HpipmStages:
         # ``numbered``: the whole A's sparsity holding its nonzeros' numbers (1-based; 0 a
         # structural zero)
         nnz = numbered.nnz()
-        numbered = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
-        numbered[numbered < 0] = nnz  # the sentinel entry: 0
+        index = np.array(ca.densify(numbered), dtype=float).astype(np.int64) - 1
+        index[index < 0] = nnz  # the sentinel entry: 0
         shooting = rows.reshape(N, n)
         # HPIPM's column-major blocks as C-ordered (cols, rows) arrays: A_k[i, j] at [k, j, i]
-        self._ia = np.stack([numbered[np.ix_(shooting[k], self.z_index[k])].T for k in range(N)])
-        self._ib = np.stack([numbered[np.ix_(shooting[k], self.v_index[k])].T for k in range(N)])
+        self._ia = np.stack([index[np.ix_(shooting[k], self.z_index[k])].T for k in range(N)])
+        self._ib = np.stack([index[np.ix_(shooting[k], self.v_index[k])].T for k in range(N)])
         self._shooting = shooting
         self._a = np.zeros(nnz + 1)
         ocp = self.ocp
@@ -220,8 +257,7 @@ class HpipmStages:
         if np.any(H[np.ix_(kept, kept)][~blocks[np.ix_(kept, kept)]] != 0.0):
             raise ValueError(
                 "the direct HPIPM path takes a Hessian without cross terms between stages, "
-                "states and "
-                "inputs (the NMPC's); use ScreenedQP(..., direct=False)"
+                "states and inputs (the NMPC's has none)"
             )
         state_bounds = np.ones(layout.nw, dtype=bool)
         state_bounds[self.v_index.ravel()] = False
@@ -255,7 +291,7 @@ class HpipmStages:
         ):
             raise ValueError(
                 "the direct HPIPM path takes z_0 fixed and only the inputs bounded; "
-                "use ScreenedQP(..., direct=False) for other bounds"
+                "the NMPC's QP has no others"
             )
         self._a[:-1] = a
         ocp.A[:] = self._a[self._ia]

@@ -1,4 +1,7 @@
-"""The robust controller: designed at [30, 0, 0] deg and 2 kg, its linear loop is stable at every payload and pose."""
+"""The robust controller: designed at [30, 0, 0] deg and 2 kg, stable at every payload and pose.
+
+Its linear loop, checked over a grid of payloads and poses.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Reference trajectories (flexctrl.control.reference_trajectory) against finite differences and the model's own dynamics."""
+"""Reference trajectories against finite differences and the model's own dynamics."""
 
 from __future__ import annotations
 
@@ -73,7 +73,7 @@ def test_step_profile_and_its_validation():
 
 @pytest.mark.parametrize("model_name", ["horizontal", "vertical"])
 def test_reference_state_is_consistent_with_the_model(request, model_name):
-    """At (x_ref, u_ref) the model's forward dynamics accelerate the joints along the path with no elastic acceleration."""
+    """At (x_ref, u_ref) the model accelerates the joints along the path, the links not at all."""
     model = request.getfixturevalue(model_name)
     path = JointReference(START, TARGET, "quintic", move_time=1.5)
     ref = ReferenceTrajectory(model, path)
@@ -144,7 +144,7 @@ def _pd_residual(overrides):
 
 
 def test_pd_leaves_less_residual_with_the_quintic_than_with_the_step():
-    """Same PD, same window (from 4 s on), 2 kg: the smooth reference leaves less tip error behind."""
+    """Same PD, same window (from 4 s on), 2 kg: the smooth reference leaves less tip error."""
     quintic = _pd_residual(["metrics.settle_allowance=2.5", "duration=6.0"])
     step = _pd_residual(["metrics.settle_allowance=4.0", 'target.profile="step"', "duration=6.0"])
     assert quintic["tip_residual_rms"] < 0.5 * step["tip_residual_rms"]

@@ -1,32 +1,23 @@
-"""Linear MPC: unconstrained = LQR = closed-form QP; hard torque limits; soft limits never infeasible; fallbacks."""
+"""Linear MPC: unconstrained = LQR = closed-form QP; hard torque limits; soft limits; fallbacks.
+
+Soft limits never make the QP infeasible.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.lqr import weight_matrices
-from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import MPCSettings, OSQPSettings
 
 TARGET = np.radians([80.0, -10.0, -10.0])
 TIGHT = OSQPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=20000, polishing=True)
 
 
-@pytest.fixture(scope="module")
-def arm3():
-    return load_model("models/subedi3link.toml", fidelity="amm:2")
-
-
-@pytest.fixture(scope="module")
-def op3(arm3):
-    return L.equilibrium(arm3, TARGET)
-
-
 def closed_form_first_move(Ad, Bd, Q, R, P, N, dx0):
-    """Minimise sum x'Qx + u'Ru + x_N'P x_N s.t. x_{k+1} = A x_k + B u_k by one KKT solve (states kept)."""
+    """Minimise sum x'Qx + u'Ru + x_N'P x_N s.t. x_{k+1} = A x_k + B u_k: one KKT solve."""
     n, m = Bd.shape
     nz = N * (n + m)  # w = [u_0..u_{N-1}, x_1..x_N]
     H = np.zeros((nz, nz))
@@ -211,23 +202,6 @@ def test_a_reset_controller_repeats_its_run_to_the_last_digit(arm3, op3, formula
     np.testing.assert_array_equal(runs[1], runs[0])
 
 
-def test_benchmark_reports_every_variant():
-    from flexctrl.bench.mpc_step import default_variants, format_benchmark, mpc_benchmark
-
-    variants = {
-        k: v for k, v in default_variants().items() if k in ("osqp_sparse", "osqp_condensed")
-    }
-    result = mpc_benchmark(
-        steps=5, horizon=5, variants=variants, python_control_solves=0, nmpc=False
-    )
-    assert set(result["variants"]) == {"osqp_sparse", "osqp_condensed"}
-    for v in result["variants"].values():
-        assert v["solve_ms"]["median"] > 0 and v["status"] and v["fallbacks"] == 0
-        assert v["solve_ms"]["median"] <= v["solve_ms"]["p95"] <= v["solve_ms"]["max"]
-    assert result["problem"]["states"] == 18 and "mpc_benchmark" in result["command"]
-    assert "osqp_condensed" in format_benchmark(result)
-
-
 def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
     from flexctrl.spec.controller_settings import SensorSettings
 
@@ -254,7 +228,10 @@ def test_mpc_with_kalman_estimator_on_encoders_and_strain_gauges(arm3, op3):
 def test_with_a_moving_reference_the_unconstrained_first_move_is_lqr_tracking(
     arm3, op3, formulation
 ):
-    """Reference in the bounds only: MPC's first move = LQR's u_ref - K (x - x_ref), and the QP pattern is unchanged."""
+    """Reference in the bounds only: the first move is LQR's u_ref - K (x - x_ref).
+
+    The QP's pattern is unchanged.
+    """
     from flexctrl.control.lqr import LQRSettings
     from flexctrl.control.reference_trajectory import ReferenceTrajectory
     from flexctrl.spec.reference import JointReference

@@ -1,4 +1,4 @@
-"""Move blocking and thinned soft constraints in the condensed linear MPC, against an independent closed form."""
+"""Move blocking and thinned soft constraints of the condensed MPC, against a closed form."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def op(arm):
 
 
 def blocked_closed_form(Ad, Bd, Q, R, P, blocks, dx0):
-    """Minimise the horizon cost over held block moves by solving the normal equations in the block moves."""
+    """Minimise the horizon cost over held block moves: the normal equations in the block moves."""
     n, m = Bd.shape
     N = sum(blocks)
     owner = np.repeat(
@@ -163,7 +163,7 @@ def test_a_held_block_respects_the_tightest_bound_of_the_stages_it_covers(arm, o
 
 
 def test_the_blocked_mpcs_linear_law_is_its_own_unconstrained_first_move(arm, op):
-    """With move blocking the first move is not the LQR move; the linear verdict must use the MPC's own."""
+    """With move blocking the first move is not LQR's; the linear verdict must use the MPC's own."""
     ctrl = design(
         arm,
         op,

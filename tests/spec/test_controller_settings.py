@@ -1,4 +1,4 @@
-"""Controller settings: the shipped files load; bad values name the file, the key, the value and what is allowed."""
+"""Controller settings: shipped files load; bad values name file, key, value and what is allowed."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""HPIPM called directly on the input-bounded OCP QP, against an exact KKT solve and against casadi.conic."""
+"""HPIPM called directly on the input-bounded OCP QP, against a KKT solve and casadi.conic."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def _problem(seed: int = 3):
 
 
 def _stacked(A, B, b, Q, R, S, q, r, x0):
-    """The same QP over w = [x_0, u_0, x_1, u_1, ..., x_N] (H, g, equality rows, their right side)."""
+    """The same QP over w = [x_0, u_0, x_1, ..., x_N]: H, g, equality rows, their right side."""
     blk = NX + NU
     nw = N * blk + NX
     H, g = np.zeros((nw, nw)), np.zeros(nw)

@@ -1,4 +1,4 @@
-"""Nonlinear MPC: RTI iterates converge to the IPOPT optimum; closed loop; fallbacks; timing (slow)."""
+"""Nonlinear MPC: RTI iterates converge to the IPOPT optimum; closed loop; fallbacks."""
 
 from __future__ import annotations
 
@@ -258,29 +258,3 @@ def test_three_link_step_move_that_used_to_raise_nan_settles_like_lqr():
     assert report["fallbacks"] == sum(
         v for k, v in report["status"].items() if k.startswith("fallback_")
     )
-
-
-def test_the_bench_gives_the_same_runs_per_sample_and_in_blocks(onelink):
-    # `flexctrl bench mpc` times the NMPC variants twice, interleaved per sample and in blocks of
-    # consecutive
-    # samples: every variant has its own plant and is reset, so the order may change the times, not
-    # the runs
-    from flexctrl.bench.mpc_step import _run_nmpcs
-
-    model, op = onelink
-    dx0 = np.zeros(model.n_x)
-    dx0[0] = -0.3
-    variants = {
-        "warm": {"compile": False, "qp_warm_start": True, "deflection_limit": 0.02},
-        "exact": {"compile": False, "sensitivities": "exact", "deflection_limit": 0.02},
-    }
-    runs = _run_nmpcs(model, op, dx0, 7, 10, 0.02, variants, block_rounds=3)
-    for name in variants:
-        a, b = runs["sample"][name], runs["block"][name]
-        assert (
-            a["final_joint_error_deg"] == b["final_joint_error_deg"] and a["status"] == b["status"]
-        )
-        assert a["final_joint_error_deg"] < np.degrees(0.3)  # the runs moved towards the target
-        assert (
-            sum(a["status"].values()) == sum(b["status"].values()) == 7
-        )  # every sample once, stats reset between

@@ -1,4 +1,4 @@
-"""Minimum-time arrival of the linear MPC: the shortest arrival against the bang-bang closed form, and on the arm."""
+"""Minimum-time arrival of the linear MPC: against the bang-bang closed form, and on the arm."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from flexctrl.spec.controller_settings import MPCSettings
 def double_integrator(
     inertia: float, torque: float, Ts: float, horizon: int, band: float
 ) -> ScaledProblem:
-    """A rigid joint (kg m^2) under a torque limit (N m), ZOH at Ts, one arrival row on the angle (rad)."""
+    """A rigid joint (kg m^2) under a torque limit (N m), ZOH at Ts, an arrival row on its angle."""
     A = np.array([[1.0, Ts], [0.0, 1.0]])
     B = (
         torque / inertia * np.array([[0.5 * Ts**2], [Ts]])

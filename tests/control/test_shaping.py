@@ -1,4 +1,4 @@
-"""Input shaping: analytic impulse trains, zero residual vibration of an independently simulated oscillator."""
+"""Input shaping: analytic impulse trains; no residual vibration of a simulated oscillator."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from flexctrl import linear as L
 from flexctrl.control import design
 from flexctrl.control.nmpc.controller import interval_functions
 from flexctrl.control.shaping import Shaper, design_shaper, residual_vibration, zv, zvd
-from flexctrl.scenes.model_files import load_model
 from flexctrl.spec.controller_settings import ShapedSettings
 
 
@@ -87,15 +86,6 @@ def test_convolved_shapers_cancel_both_modes():
     assert design_shaper([], "zvd").times.tolist() == [0.0]
 
 
-@pytest.fixture(scope="module")
-def damped3():
-    return load_model(
-        "models/subedi3link.toml",
-        fidelity="amm:2",
-        overrides=[f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)],
-    )
-
-
 def test_shaped_controller_reference_steps_through_the_impulses(damped3):
     op = L.equilibrium(damped3, np.radians([80.0, -10.0, -10.0]))
     ctrl = design(damped3, op, ShapedSettings(shaper="zvd"))
@@ -119,7 +109,7 @@ def test_locked_frequency_source_uses_the_locked_structure(damped3):
 
 
 def test_shaped_move_deflects_the_links_less_than_the_unshaped_step(damped3):
-    """The classical comparison on the nonlinear arm: the same PD, a step reference vs a ZVD-shaped one."""
+    """The classical comparison on the nonlinear arm: the same PD, a step or a ZVD-shaped one."""
     op = L.equilibrium(damped3, np.radians([80.0, -10.0, -10.0]))
     F, _ = interval_functions(damped3, 0.001, 3, "frozen")
     start = L.equilibrium(damped3, np.radians([76.0, -8.0, -12.0]))
