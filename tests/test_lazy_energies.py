@@ -1,8 +1,9 @@
-"""A closed loop's energies are evaluated when first read, with the same values as the eager path.
+"""A closed loop's trajectory outputs: the tip and deflections, and energies evaluated when read.
 
-The tip and deflections come from a map without the energies (its own compiled code), so
-they agree with the full output map to round-off, not to the bit; the energies, when read,
-come from the full map itself, so they are the eager path's to the bit.
+The tip and deflections come from the plant's output map without the energies (its own
+compiled code), so they agree with the full output map to round-off, not to the bit; the
+energies, when read, come from the full map itself, so they are its values to the bit, and
+the model's own energies Function's to round-off.
 """
 
 import copy
@@ -12,14 +13,8 @@ import pickle
 import numpy as np
 import pytest
 
-from flexctrl.errors import SpecError
 from flexctrl.loop.plant_step import output_map
-from flexctrl.loop.sampled import (
-    integrate_closed_loop,
-    mapped,
-    tip_positions,
-    trajectory_from_states,
-)
+from flexctrl.loop.sampled import integrate_closed_loop, tip_positions, trajectory_from_states
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop
 from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
@@ -53,30 +48,31 @@ def run():
     return scene, cache, setup.plant, t, X, U, meta
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_lazy_energies_are_the_eager_ones(run, compiled):
+def mapped(model, name, count, *args):
+    """The model's own Function ``name`` over ``count`` columns, in CasADi's virtual machine."""
+    return [np.array(v, dtype=float) for v in model.functions[name].map(count)(*args)]
+
+
+def test_energies_are_evaluated_when_read_and_are_the_full_maps(run):
     _, _, plant, t, X, U, meta = run
-    eager = trajectory_from_states(plant, t, X, U, meta, compiled=compiled, energies="eager")
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=compiled)
-    assert isinstance(eager.energies, dict)
-    assert isinstance(lazy.energies, LazyEnergies) and not lazy.energies.evaluated
-    assert list(lazy.energies) == list(ENERGY_NAMES) and len(lazy.energies) == 4
-    assert lazy.energies.evaluated is False  # iterating over the names computes nothing
-    for name in ENERGY_NAMES:
-        np.testing.assert_array_equal(lazy.energies[name], eager.energies[name])
-    assert lazy.energies.evaluated
-    assert np.ptp(eager.energies["E_kin"]) > 0  # a moving arm: the comparison compares something
-    np.testing.assert_array_equal(
-        lazy.energies["E_total"],
-        eager.energies["E_kin"] + eager.energies["E_el"] + eager.energies["E_grav"],
-    )
-    scale = np.max(np.abs(eager.tip))
-    assert np.max(np.abs(lazy.tip - eager.tip)) <= 1e-14 * scale
-    assert np.max(np.abs(lazy.deflections - eager.deflections)) <= 1e-14 * max(
-        np.max(np.abs(eager.deflections)), 1e-3
-    )
+    trajectory = trajectory_from_states(plant, t, X, U, meta)
+    energies = trajectory.energies
+    assert isinstance(energies, LazyEnergies) and not energies.evaluated
+    assert list(energies) == list(ENERGY_NAMES) and len(energies) == 4
+    assert energies.evaluated is False  # iterating over the names computes nothing
+    full = evaluate(output_map(plant, t.size), X)[0]
+    for k, name in enumerate(("E_kin", "E_el", "E_grav")):
+        np.testing.assert_array_equal(energies[name], full[:, k])
+    assert energies.evaluated
+    assert np.ptp(energies["E_kin"]) > 0  # a moving arm: the comparison compares something
+    np.testing.assert_array_equal(energies["E_total"], full[:, 0] + full[:, 1] + full[:, 2])
+    q, qd = X[:, : plant.n_q].T, X[:, plant.n_q :].T
+    own = mapped(plant, "energies", t.size, q, qd)
+    for name, values in zip(("E_kin", "E_el", "E_grav"), own):
+        scale = max(np.max(np.abs(values)), 1e-12)
+        assert np.max(np.abs(energies[name] - values.ravel())) <= 1e-12 * scale
     with pytest.raises(KeyError):
-        lazy.energies["E_wrong"]
+        energies["E_wrong"]
 
 
 def test_tip_rows_come_from_the_map_without_energies(run):
@@ -87,9 +83,9 @@ def test_tip_rows_come_from_the_map_without_energies(run):
     np.testing.assert_allclose(
         kinematic, full[:, 3:], rtol=0, atol=1e-14 * np.max(np.abs(full[:, 3:5]))
     )
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=True)
-    np.testing.assert_array_equal(lazy.tip, kinematic[:, :2])
-    np.testing.assert_array_equal(lazy.deflections, kinematic[:, 2:])
+    trajectory = trajectory_from_states(plant, t, X, U, meta)
+    np.testing.assert_array_equal(trajectory.tip, kinematic[:, :2])
+    np.testing.assert_array_equal(trajectory.deflections, kinematic[:, 2:])
 
 
 def test_lazy_energies_mapping():
@@ -108,21 +104,17 @@ def test_lazy_energies_mapping():
 
 
 def test_tip_positions_are_the_trajectorys_tip(run):
-    """The fidelity chooser's tip paths: the compiled map's, within round-off of the VM's mapped calls."""
+    """The fidelity chooser's tip paths: the compiled map's, within round-off of the model's tip."""
     _, _, plant, t, X, U, meta = run
     tip = tip_positions(plant, X[::7])
-    np.testing.assert_array_equal(
-        tip, trajectory_from_states(plant, t, X, U, meta, compiled=True).tip[::7]
-    )
-    vm = np.array(
-        mapped(plant, "tip", tip.shape[0], X[::7, : plant.n_q].T, X[::7, plant.n_q :].T)[0]
-    ).T
+    np.testing.assert_array_equal(tip, trajectory_from_states(plant, t, X, U, meta).tip[::7])
+    vm = mapped(plant, "tip", tip.shape[0], X[::7, : plant.n_q].T, X[::7, plant.n_q :].T)[0].T
     assert np.max(np.abs(tip - vm)) <= 1e-14 * np.max(np.abs(vm))
 
 
 def test_copies_and_pickles_are_plain_dicts(run):
     _, _, plant, t, X, U, meta = run
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=True)
+    lazy = trajectory_from_states(plant, t, X, U, meta)
     for other in (copy.deepcopy(lazy.energies), pickle.loads(pickle.dumps(lazy.energies))):
         assert type(other) is dict and list(other) == list(ENERGY_NAMES)
         for name in ENERGY_NAMES:
@@ -131,21 +123,9 @@ def test_copies_and_pickles_are_plain_dicts(run):
 
 def test_the_scene_metrics_do_not_read_the_energies(run):
     scene, cache, *_ = run
-    lazy = run_closed_loop_scene(scene, cache=cache, on_divergence="record")
-    assert not lazy.trajectory.energies.evaluated
-    eager = run_closed_loop_scene(scene, cache=cache, on_divergence="record", energies="eager")
-    timing = ("controller_time_median", "controller_time_p95", "controller_time_max")
-    for key, value in eager.metrics.items():
-        if key not in timing:
-            np.testing.assert_allclose(lazy.metrics[key], value, rtol=1e-9, atol=1e-15)
-    names, matrix = lazy.trajectory.columns()  # the CSV reads them
-    assert lazy.trajectory.energies.evaluated
-    np.testing.assert_array_equal(
-        matrix[:, names.index("E_kin")], eager.trajectory.energies["E_kin"]
-    )
-
-
-def test_bad_energies_option_is_refused(run):
-    _, _, plant, t, X, U, meta = run
-    with pytest.raises(SpecError, match="'sometimes'.*allowed: 'lazy', 'eager'"):
-        trajectory_from_states(plant, t, X, U, meta, compiled=True, energies="sometimes")
+    result = run_closed_loop_scene(scene, cache=cache, on_divergence="record")
+    assert not result.trajectory.energies.evaluated
+    names, matrix = result.trajectory.columns()  # the CSV reads them
+    assert result.trajectory.energies.evaluated
+    full = evaluate(output_map(result.model, result.trajectory.time.size), result.trajectory.states)
+    np.testing.assert_array_equal(matrix[:, names.index("E_kin")], full[0][:, 0])

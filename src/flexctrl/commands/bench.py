@@ -24,7 +24,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "the NMPC real-time iteration, and python-control's create_mpc_iosystem on the same problem "
         "(--pc-solves solves; each takes seconds). "
         "'loop': one warm in-process closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default "
-        "the LQR) with the compiled loop and with the Python loop, beside the plant's compiled RK4 simulation alone "
+        "the LQR), with a fresh design and with a fresh configuration, beside the plant's compiled RK4 simulation alone "
         "(same step and duration), interleaved --repeats rounds; prints run_wall_s, plant_only_s and their ratio. 'studies': --study files (default "
         "studies/quickstart_finest.toml and studies/quickstart_auto.toml) alternated, each in a fresh process run twice "
         "(first pass, repeated pass), --repeats rounds, with the --set overrides applied to every study; prints the "

@@ -6,11 +6,12 @@ import math
 
 import numpy as np
 
+from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import SpecError
-from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.loop.verdict import linear_closed_loop_radius
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT, rk4_step
@@ -18,11 +19,10 @@ from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference, Move
 
 #: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
-#: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``:
-#: 0.99979 at y = 0.5, but 0.81 at 1.65 and 0.52 at 2.05 (sim/rk4.py), so a step chosen only
-#: for stability (y up to 2.5) damps the fastest modes numerically and moves the residual
-#: vibration by about 1 % on the 30-degree move (PD: 5.00 against 4.94 mm); at 0.5 it is 4.938 mm,
-#: within 0.1 % of the scenes' 0.5 ms step.
+#: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``
+#: (:mod:`flexctrl.sim.rk4`): 0.99979 at ``y = 0.5`` but 0.52 at 2.05, so a step chosen only for
+#: stability (``y`` up to 2.5) damps the fastest modes numerically and moves the residual
+#: vibration; at 0.5 the residual agrees with the scenes' 0.5 ms step.
 ACCURATE_OMEGA_DT = 0.5
 
 
@@ -39,14 +39,16 @@ def closed_loop(
     metrics: MetricSettings | None = None,
     on_divergence: str = "raise",
     compile: bool | None = None,
-    loop: str = "auto",
 ) -> ClosedLoopResult:
-    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` seconds.
+    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` s.
 
     The controller tracks the reference built on ``model`` (its design model: the joint
     path, the quasi-static deflection the path's accelerations need and the feed-forward
     torque); every ``controller.sample_time`` it reads the plant's sensors and its torque
-    is held while the plant advances by RK4 steps of ``dt``.
+    is held while the plant advances by RK4 steps of ``dt``.  A controller whose law is a
+    fixed map with memory (PD, LQR, LQG, shaped) runs its samples chained in CasADi; one
+    that optimises or schedules per sample (MPC, NMPC) is called once per sample
+    (:mod:`flexctrl.loop.sampled`).
 
     Parameters
     ----------
@@ -77,10 +79,6 @@ def closed_loop(
         records ``stable = 0`` with ``divergence_time`` (s).
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
-    loop : {"auto", "compiled", "python"}
-        Run the samples in one CasADi call when the controller's law allows it
-        (``"auto"``), or one Python iteration per sample (``"python"``, the slow path);
-        :func:`flexctrl.loop.sampled.simulate_closed_loop`.
 
     Returns
     -------
@@ -91,7 +89,9 @@ def closed_loop(
     Examples
     --------
     >>> import numpy as np, flexctrl as fc
-    >>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> model = fc.load_model(
+    ...     "models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0]
+    ... )
     >>> op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
     >>> pd = fc.design(model, op, fc.load_controller("controllers/pd.toml"))
     >>> move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
@@ -99,6 +99,42 @@ def closed_loop(
     >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3
     (True, True)
     """
+    _check_arguments(controller, on_divergence)
+    move = _as_move(reference)
+    path = move.joint_reference()
+    _check_path(model, path, duration)
+    plant = model if plant is None else plant
+    judge = MetricSettings() if metrics is None else metrics
+    controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
+    controller.reset()
+    sensors = (
+        controller.sensors
+        if plant is model
+        else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
+    )
+    trajectory, _ = simulate_closed_loop(
+        plant,
+        controller,
+        _initial_state(plant, path, x0),
+        float(duration),
+        _plant_step(plant, controller, dt),
+        sensors=sensors,
+        rng=_noise(noise),
+        compile=compile,
+        monitor=divergence_monitor(
+            plant,
+            plant.spec,
+            path.q_start,
+            path.q_target,
+            judge.divergence_deflection,
+            judge.divergence_angle,
+        ),
+        stop_on_divergence=on_divergence == "record",
+    )
+    return _result(trajectory, model, plant, controller, move, judge, float(duration), sensors)
+
+
+def _check_arguments(controller, on_divergence: str) -> None:
     if on_divergence not in ("raise", "record"):
         raise SpecError(
             f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
@@ -106,12 +142,14 @@ def closed_loop(
         )
     if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
         raise SpecError(
-            f"value of type {type(controller).__name__} is not a controller; allowed: a controller from "
-            "flexctrl.design(model, op, settings)",
+            f"value of type {type(controller).__name__} is not a controller; allowed: a "
+            "controller from flexctrl.design(model, op, settings)",
             key="controller",
         )
-    move = _as_move(reference)
-    path = move.joint_reference()
+
+
+def _check_path(model, path: JointReference, duration) -> None:
+    """The path has one angle per joint and the run outlasts it."""
     if len(path.q_target) != model.n_u:
         raise SpecError(
             f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
@@ -128,23 +166,18 @@ def closed_loop(
             f"({path.t_arrive:g} s)",
             key="duration",
         )
-    plant = model if plant is None else plant
-    judge = MetricSettings() if metrics is None else metrics
-    from flexctrl.control.reference_trajectory import ReferenceTrajectory
 
-    controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
-    controller.reset()
+
+def _plant_step(plant, controller, dt: float | None) -> float:
+    """``dt``, or the largest whole fraction of the sample time with ``omega_max * dt`` accurate."""
+    if dt is not None:
+        return float(dt)
     Ts = controller.sample_time
-    dt = (
-        rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
-        if dt is None
-        else float(dt)
-    )
-    sensors = (
-        controller.sensors
-        if plant is model
-        else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
-    )
+    return rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
+
+
+def _initial_state(plant, path: JointReference, x0) -> np.ndarray:
+    """``x0``, or the plant at rest at the path's start with undeformed links."""
     if x0 is None:
         x0 = np.zeros(plant.n_x)
         x0[: plant.n_u] = path.q_start
@@ -153,68 +186,47 @@ def closed_loop(
         raise SpecError(
             f"has shape {x0.shape}; expected ({plant.n_x},) finite values (q, qd)", key="x0"
         )
-    rng = (
-        noise
-        if isinstance(noise, np.random.Generator)
-        else (None if noise is None else np.random.default_rng(noise))
-    )
-    monitor = divergence_monitor(
-        plant,
-        plant.spec,
-        path.q_start,
-        path.q_target,
-        judge.divergence_deflection,
-        judge.divergence_angle,
-    )
-    trajectory, _ = simulate_closed_loop(
-        plant,
-        controller,
-        x0,
-        float(duration),
-        dt,
-        sensors=sensors,
-        rng=rng,
-        compile=compile,
-        monitor=monitor,
-        stop_on_divergence=on_divergence == "record",
-        loop=loop,
-    )
+    return x0
+
+
+def _noise(noise) -> np.random.Generator | None:
+    if isinstance(noise, np.random.Generator) or noise is None:
+        return noise
+    return np.random.default_rng(noise)
+
+
+def _result(
+    trajectory, model, plant, controller, move: Move, judge, duration: float, sensors
+) -> ClosedLoopResult:
+    """The run judged (metrics, linear verdict) and described (summary)."""
+    path = move.joint_reference()
     tip_target = tip_at_rest(plant, path.q_target)
-    report = controller.stats.summary()
-    limits = [getattr(j, "torque_limit", math.inf) for j in plant.spec.joints]
-    values = run_metrics(
+    values = judge_run(
         trajectory,
+        controller,
+        path,
+        judge,
         tip_target=tip_target,
-        reference_joints=path.joints(trajectory.time),
-        t_arrive=path.t_arrive,
-        settle_allowance=judge.settle_allowance,
-        band=judge.band,
-        stable_band=judge.stable_band,
-        duration=float(duration),
-        torque_limits=limits,
-        controller_stats=report,
-        step_times=controller.stats.step_times,
+        duration=duration,
+        torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
     )
-    summary = {
-        "controller": {"kind": controller.settings.kind, "sample_time": Ts, **report},
-        "plant": {
-            "fidelity": str(plant.fidelity),
-            "n_states": plant.n_x,
-            "payload_kg": plant.spec.payload.mass,
-        },
-        "design": {
+    summary = run_summary(
+        trajectory,
+        values,
+        controller,
+        plant=plant,
+        payload=plant.spec.payload.mass,
+        design={
             "fidelity": str(model.fidelity),
             "payload_kg": model.spec.payload.mass,
             "configuration_deg": np.degrees(controller.op.joints).tolist(),
         },
-        "reference": path.settings() | {"deflection": move.deflection},
-        "tip_target": tip_target.tolist(),
-        "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
-        "metrics": values,
-        "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time_s"],
-    }
+        path=path,
+        deflection=move.deflection,
+        tip_target=tip_target,
+        judge=judge,
+    )
     return ClosedLoopResult(
         trajectory=trajectory,
         metrics=values,
@@ -237,7 +249,7 @@ def _as_move(reference) -> Move:
             reference.t_start,
         )
     raise SpecError(
-        f"value of type {type(reference).__name__} is not a reference; allowed: flexctrl.Move(start=, "
-        "target=, time=) (rad, s) or a JointReference",
+        f"value of type {type(reference).__name__} is not a reference; allowed: "
+        "flexctrl.Move(start=, target=, time=) (rad, s) or a JointReference",
         key="reference",
     )

@@ -30,8 +30,12 @@ import numpy as np
 from scipy.linalg import expm
 
 from flexctrl.fidelity.ladder import RunRecord
+from flexctrl.linear import Linearizer, equilibrium
+from flexctrl.loop.run_state import LoopRun
+from flexctrl.loop.sampled import run_samples, tip_positions
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import build_loop
+from flexctrl.spec.fidelity import parse_fidelity
 
 #: How a linear rung is advanced over the grid step: RK4 at the rung's step, or exactly.
 LINEAR_STEPS = ("rk4", "exact")
@@ -113,10 +117,6 @@ def linear_closed_rung(
         (the grid step when exact); ``wall_time_s`` the whole estimate (linearising,
         discretising and the loop).
     """
-    from flexctrl.linear import Linearizer, equilibrium
-    from flexctrl.loop.compiled import run_compiled
-    from flexctrl.loop.sampled import LoopRun, tip_positions
-
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
     grid = float(scene.plant.dt)
@@ -124,9 +124,8 @@ def linear_closed_rung(
     plant, ctrl = setup.plant, setup.controller
     build = time.perf_counter() - start
     op = equilibrium(plant, scene.target_q)
-    A, B = Linearizer(plant, setup.sensors).matrices(op)[
-        :2
-    ]  # the loop's sensors: its verdict reuses them
+    # linearised with the loop's sensors: the loop's verdict reuses the linearisation
+    A, B = Linearizer(plant, setup.sensors).matrices(op)[:2]
     Phi, Gamma = grid_maps(A, B, grid, h)
     Ts = ctrl.sample_time
     substeps = int(round(Ts / grid))
@@ -137,26 +136,15 @@ def linear_closed_rung(
         plant,
         ctrl,
         setup.sensors,
-        None,
-        None,
-        grid,
-        substeps,
-        1,
-        int(math.ceil(scene.plant.duration / Ts - 1e-9)),
         advance,
         setup.x0,
+        dt=grid,
+        substeps=substeps,
+        stride=1,
+        n_samples=int(math.ceil(scene.plant.duration / Ts - 1e-9)),
     )
-    run.python_sample(0)
-    law = ctrl.sampled_law() if run.divergence is None else None
-    if law is not None:
-        run_compiled(run, law)
-    else:
-        for k in range(run.done, run.n_samples):
-            if run.divergence is not None or run.python_sample(k):
-                break
-    X, U = run.X[: run.end], run.U[: run.end]
-    U[-1] = run.u
-    t = np.arange(X.shape[0]) * grid
+    run_samples(run)
+    t, X, U = run.kept()
     tip = tip_positions(plant, X, scene.plant.solver.get("compile"))
     times, tip, torque = read_only(t, tip, U.copy())
     diverged = None if run.divergence is None else float(run.divergence["time"])
@@ -176,7 +164,5 @@ def linear_closed_rung(
 
 def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):
     """The scene's loop with the plant at ``fidelity`` on the scene's grid step (models and design from ``cache``)."""
-    from flexctrl.spec.fidelity import parse_fidelity
-
     plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity))
     return build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)

@@ -19,13 +19,17 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.control import design
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import FlexctrlError, SolverError, SpecError
+from flexctrl.linear import equilibrium
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
 from flexctrl.scenes.arm_setup import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
+from flexctrl.spec.controller_reader import load_controller
+from flexctrl.spec.fidelity import parse_fidelity
 
 #: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names no
 #: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
@@ -39,8 +43,6 @@ def pin_design(scene):
     designed on ``controller_fidelity``, or :data:`AUTO_DESIGN_FIDELITY` when the scene
     gives none.  Other scenes are returned unchanged.
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     if scene.plant.fidelity.kind != "auto" or scene.controller_fidelity is not None:
         return scene
     return dataclasses.replace(scene, controller_fidelity=parse_fidelity(AUTO_DESIGN_FIDELITY))
@@ -81,9 +83,6 @@ def design_scene_controller(scene, design_model, settings, path: str | Path, ref
     SolverError
         When the design fails numerically (named with the controller file and the configuration).
     """
-    from flexctrl.control import design
-    from flexctrl.linear import equilibrium
-
     design_q = tuple(scene.design_configuration)
     op = equilibrium(design_model, design_q)
     where = "the target" if scene.design_q is None else "the design configuration"
@@ -115,8 +114,6 @@ def build_loop(
     controller=None,
     overrides=(),
     cache: SceneCache | None = None,
-    *,
-    reference_compile: bool | None = None,
 ) -> LoopSetup:
     """Build plant and design models (kept in ``cache``), design the controller, set its reference.
 
@@ -132,16 +129,11 @@ def build_loop(
     only in the plant (payload, fidelity, step, noise) design once.  Its reference
     trajectory is kept in ``cache`` ("references") under the design model's description,
     the path and the deflection, so every controller designed on one model for one move
-    shares its tables.  ``reference_compile`` is the reference's ``compile``
-    (:class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`: ``False`` CasADi's virtual
-    machine, the slow path; ``True`` compiled); None (default) follows the plant's
-    ``solver.compile`` (compiled unless switched off).
+    shares its tables; the tables are compiled as the plant's ``solver.compile`` says
+    (compiled unless switched off).
     """
-    from flexctrl.spec.controller_reader import load_controller
-
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
-    design_key = None
     plant_scene = scene.plant
     designed = is_designed(controller)
     path = None if designed else (controller or scene.controller)
@@ -159,91 +151,111 @@ def build_loop(
             key="target.q",
         )
     plant = cache.model(arm, str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0)
-    if designed:
-        ctrl, settings = controller, controller.settings
-        design_model = _design_model_of(ctrl, scene, overrides)
-        design_arm, design_fidelity = design_model.spec, design_model.fidelity
-        design_q = tuple(float(a) for a in ctrl.op.joints)
-        same = design_model is plant
-        ctrl.set_reference(
-            ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection)
-        )
-        ctrl.reset()
-    else:
-        settings = load_controller(path, overrides)
-        if reference_compile is None:
-            reference_compile = plant_scene.solver.get("compile")
-        design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
-        design_fidelity = scene.controller_fidelity or plant_scene.fidelity
-        design_q = tuple(scene.design_configuration)
-        same = (
-            design_arm == arm
-            and str(design_fidelity) == str(plant_scene.fidelity)
-            and scene.design_q is None
-        )
-        design_model = (
-            plant
-            if same
-            else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
-        )
-        model_key = (
-            design_arm,
-            str(design_fidelity),
-            plant_scene.modes,
-            plant_scene.q0 if same else design_q,
-        )
-        design_key = (
-            *model_key,
-            design_q,
-            settings,
-            scene.joint_reference(),
-            scene.deflection,
-            reference_compile,
-        )
-        ctrl = cache.get(
-            "designs",
-            design_key,
-            lambda: design_scene_controller(
-                scene,
-                design_model,
-                settings,
-                path,
-                cache.reference(
-                    *model_key, scene.joint_reference(), scene.deflection, reference_compile
-                ),
-            ),
-        )
-        ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
-    path_ref = scene.joint_reference()
-    sensors = ctrl.sensors if same else plant_sensors(plant, ctrl.sensors, design_q)
-    x0 = initial_state(plant_scene, plant, arm)
-    monitor = divergence_monitor(
-        plant,
-        arm,
-        scene.start_q,
-        scene.target_q,
-        scene.divergence_deflection,
-        scene.divergence_angle,
+    design = (
+        _designed_in_python(scene, controller, overrides, plant)
+        if designed
+        else _designed_from_file(scene, path, overrides, cache, arm, plant)
     )
+    ctrl = design.controller
+    sensors = ctrl.sensors if design.same else plant_sensors(plant, ctrl.sensors, design.q)
     return LoopSetup(
         scene,
         plant_scene,
         arm,
         plant,
-        design_arm,
-        design_fidelity,
-        design_q,
-        design_model,
+        design.arm,
+        design.fidelity,
+        design.q,
+        design.model,
         ctrl,
-        settings,
+        design.settings,
         None if path is None else Path(path),
-        path_ref,
+        scene.joint_reference(),
         sensors,
-        x0,
-        monitor,
+        initial_state(plant_scene, plant, arm),
+        divergence_monitor(
+            plant,
+            arm,
+            scene.start_q,
+            scene.target_q,
+            scene.divergence_deflection,
+            scene.divergence_angle,
+        ),
         time.perf_counter() - start,
-        design_key,
+        design.key,
     )
+
+
+@dataclass(frozen=True)
+class _Design:
+    """A designed controller, reset and tracking the scene's path, and what it was designed on."""
+
+    controller: Any
+    settings: Any
+    model: Any
+    arm: Any
+    fidelity: Any
+    q: tuple[float, ...]
+    #: Whether the design model is the plant (then the controller's own sensors read it).
+    same: bool
+    key: Any = None
+
+
+def _designed_in_python(scene, ctrl, overrides, plant) -> _Design:
+    """A controller from :func:`flexctrl.design`, set to track the scene's path on its own model."""
+    design_model = _design_model_of(ctrl, scene, overrides)
+    ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
+    ctrl.reset()
+    return _Design(
+        controller=ctrl,
+        settings=ctrl.settings,
+        model=design_model,
+        arm=design_model.spec,
+        fidelity=design_model.fidelity,
+        q=tuple(float(a) for a in ctrl.op.joints),
+        same=design_model is plant,
+    )
+
+
+def _designed_from_file(scene, path, overrides, cache: SceneCache, arm, plant) -> _Design:
+    """The controller file's design on the scene's design model, kept in ``cache`` and reset."""
+    plant_scene = scene.plant
+    settings = load_controller(path, overrides)
+    compile = plant_scene.solver.get("compile")
+    design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
+    design_fidelity = scene.controller_fidelity or plant_scene.fidelity
+    design_q = tuple(scene.design_configuration)
+    same = (
+        design_arm == arm
+        and str(design_fidelity) == str(plant_scene.fidelity)
+        and scene.design_q is None
+    )
+    design_model = (
+        plant
+        if same
+        else cache.model(design_arm, str(design_fidelity), plant_scene.modes, design_q)
+    )
+    model_key = (
+        design_arm,
+        str(design_fidelity),
+        plant_scene.modes,
+        plant_scene.q0 if same else design_q,
+    )
+    path_ref = scene.joint_reference()
+    key = (*model_key, design_q, settings, path_ref, scene.deflection, compile)
+    ctrl = cache.get(
+        "designs",
+        key,
+        lambda: design_scene_controller(
+            scene,
+            design_model,
+            settings,
+            path,
+            cache.reference(*model_key, path_ref, scene.deflection, compile),
+        ),
+    )
+    ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
+    return _Design(ctrl, settings, design_model, design_arm, design_fidelity, design_q, same, key)
 
 
 def _design_model_of(ctrl, scene, overrides):
@@ -285,29 +297,25 @@ def closed_loop_tip_path(
     stride: int = 1,
     cache: SceneCache | None = None,
     keep: bool = False,
-    loop: str = "auto",
 ) -> dict[str, Any]:
-    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques only.
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques.
 
-    Used by :func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`.  A
+    Used by :func:`flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`.  A
     diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``
-    (the design model) is kept, so only the plant changes with ``fidelity``.  ``loop``: as in
-    :func:`~flexctrl.loop.sampled.integrate_closed_loop` (``"python"`` holds one sample's
-    substeps in memory, the compiled loop the whole run's).
+    (the design model) is kept, so only the plant changes with ``fidelity``.
 
     Returns
     -------
     dict
         ``time`` (s), ``tip`` (m, shape (T, 2)) and ``torque`` (N m, (T, n_u)) every
         ``stride`` plant steps; ``wall_time_s`` (the loop), ``build_time_s`` (models,
-        design, compiling or loading the plant's step),
-        ``omega_max`` (rad/s), ``diverged_at`` (s or None); with ``keep``, also ``run``: the
-        whole run at the plant rate (``t``, ``X``, ``U``, ``meta`` of
-        :func:`~flexctrl.loop.sampled.integrate_closed_loop` and the controller's ``stats``),
-        integrated with stride 1 and subsampled, which keeps every other value the same.
+        design, compiling or loading the plant's step), ``omega_max`` (rad/s),
+        ``diverged_at`` (s or None); with ``keep``, also ``run``: the whole run at the
+        plant rate (``t``, ``X``, ``U``, ``meta`` of
+        :func:`~flexctrl.loop.sampled.integrate_closed_loop` and the controller's
+        ``stats``), integrated with stride 1 and subsampled, which keeps every other value
+        the same.
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     fid = parse_fidelity(fidelity, key="fidelity")
     plant_scene = dataclasses.replace(scene.plant, fidelity=fid, dt=float(dt))
     setup = build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
@@ -324,7 +332,6 @@ def closed_loop_tip_path(
         monitor=setup.monitor,
         stop_on_divergence=True,
         stride=1 if keep else stride,
-        loop=loop,
     )
     whole = (
         {"t": t, "X": X, "U": U, "meta": meta, "stats": copy.deepcopy(setup.controller.stats)}

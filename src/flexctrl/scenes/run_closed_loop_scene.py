@@ -30,10 +30,11 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import check_tolerance
-from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
+from flexctrl.scenes.arm_setup import scene_arm
 from flexctrl.scenes.auto import (
     WHOLE_RUNS,
     check_closed_loop_auto,
@@ -41,13 +42,15 @@ from flexctrl.scenes.auto import (
     whole_run_key,
 )
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.loop_setup import build_loop, pin_design
+from flexctrl.scenes.loop_setup import LoopSetup, build_loop, pin_design
+from flexctrl.sim.rk4 import rk4_step
+from flexctrl.spec.fidelity import parse_fidelity
 
 
 def resolve_auto(
     scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any
 ):
-    """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step, and the choice.
+    """For a plant with ``fidelity = "auto"``: the scene at the chosen plant fidelity and step, and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
     :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` with the
@@ -67,11 +70,11 @@ def resolve_auto(
 
 
 def apply_choice(scene, choice, cache: SceneCache):
-    """The auto scene run at a choice made for another run (a study's shared choice): the chosen rung, with
-    the RK4 step the chooser's rule gives this scene's own model at that rung (:func:`~flexctrl.sim.rk4.rk4_step`)."""
-    from flexctrl.scenes.arm_setup import scene_arm
-    from flexctrl.sim.rk4 import rk4_step
+    """The auto scene run at a choice made for another run (a study's shared choice).
 
+    The chosen rung, with the RK4 step the chooser's rule gives this scene's own model at
+    that rung (:func:`~flexctrl.sim.rk4.rk4_step`).
+    """
     scene = pin_design(scene)
     model = cache.model(
         scene_arm(scene.plant), str(choice.choice), scene.plant.modes, scene.plant.q0
@@ -93,24 +96,24 @@ def run_closed_loop_scene(
     on_divergence: str = "raise",
     auto_options: dict[str, Any] | None = None,
     cache: SceneCache | None = None,
-    loop: str = "auto",
     choice=None,
-    reference_compile: bool | None = None,
-    energies: str = "lazy",
 ) -> ClosedLoopResult:
     """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
 
     Parameters
     ----------
     scene : ClosedLoopScene
-    out
+        From :func:`flexctrl.load_scene`.
+    out : str or Path, optional
         Folder for ``trajectory.csv``, ``summary.json`` (with a ``metrics`` object) and PNGs.
-    controller
+    controller : str or Path or Controller, optional
         Controller file (default: the scene's ``controller``), or a controller designed in
         Python (:func:`flexctrl.design`; see :func:`flexctrl.scenes.loop_setup.build_loop`).
-    fidelity
+    fidelity : str, optional
         Plant fidelity override (``--fidelity``); ``"auto"`` chooses it (below).
-    overrides
+    plots : bool, optional
+        Override the scene's ``outputs.plots``.
+    overrides : sequence of str
         ``KEY=VALUE`` overrides of the controller file.
     on_divergence : {"raise", "record"}
         What a diverging run does (see the module docstring): raise
@@ -121,28 +124,15 @@ def run_closed_loop_scene(
         runs report ``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip
         that never settles into the band reports ``settled = 0`` and ``settling_time`` =
         the duration (finite: :func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
-    auto_options
-        Keywords of :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity`
+    auto_options : dict, optional
+        Keywords of :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
         (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
     cache : SceneCache, optional
         Models, designs, verdicts, fidelity runs and choices to reuse (a fresh one when None).
-    loop : {"auto", "compiled", "python"}
-        How the samples run (:func:`flexctrl.loop.sampled.simulate_closed_loop`): in one
-        CasADi call for the controllers that allow it (``"auto"``), or one Python
-        iteration per sample (``"python"``, the slow path, for comparison).
     choice : FidelityChoice, optional
         For a plant with ``fidelity = "auto"``: a choice made for another run (a study's
         shared choice, :mod:`flexctrl.study.shared_choice`) used instead of choosing
         (:func:`apply_choice`); ``choice_time_s`` is then 0.
-    reference_compile : bool, optional
-        How the reference table's Newton iteration is evaluated
-        (:func:`~flexctrl.scenes.loop_setup.build_loop`): ``False`` in CasADi's virtual
-        machine (the slow path, for comparison), ``True`` compiled; None follows the
-        plant's ``solver.compile``.
-    energies : {"lazy", "eager"}
-        When the trajectory's energies are evaluated (no metric reads them): when first read
-        (default), or with the tip and deflections (the slow path, for comparison;
-        :func:`~flexctrl.loop.sampled.trajectory_from_states`).
 
     Returns
     -------
@@ -153,138 +143,132 @@ def run_closed_loop_scene(
     -----
     With ``fidelity = "auto"`` (scene or override) and the scene's ``tolerance`` (m),
     the controller is designed on ``controller_fidelity`` (default
-    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are chosen by
-    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` (kept in
-    ``cache`` by everything that changes the loop), and the run uses them.  The summary
-    then holds ``"fidelity_choice"`` (the choice and all its evidence) and the metrics
-    ``chosen_modes`` (modes per link of the chosen plant, 0 = rigid), ``chosen_dt``
+    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4
+    step are chosen by :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
+    (kept in ``cache`` by everything that changes the loop), and the run uses them.  The
+    summary then holds ``"fidelity_choice"`` (the choice and all its evidence) and the
+    metrics ``chosen_modes`` (modes per link of the chosen plant, 0 = rigid), ``chosen_dt``
     (s), ``estimated_error`` and ``reference_error`` (m), ``choice_cost_ratio`` (the
-    choice's loop wall time over the reference's) and ``choice_time_s`` (time this
-    call spent choosing, s: milliseconds when the choice was cached).
+    choice's loop wall time over the reference's) and ``choice_time_s`` (time this call
+    spent choosing, s: milliseconds when the choice was cached).
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     if on_divergence not in ("raise", "record"):
         raise SpecError(
             f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
             key="on_divergence",
         )
-    if fidelity is not None:
-        scene = dataclasses.replace(
-            scene,
-            plant=dataclasses.replace(
-                scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity")
-            ),
-        )
+    requested = _with_fidelity(scene, fidelity)
     cache = SceneCache() if cache is None else cache
-    requested = scene
     choosing = time.perf_counter()
-    if choice is not None and scene.plant.fidelity.kind == "auto":
-        scene = apply_choice(scene, choice, cache)
+    if choice is not None and requested.plant.fidelity.kind == "auto":
+        scene = apply_choice(requested, choice, cache)
     else:
-        scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
+        scene, choice = resolve_auto(
+            requested, controller, overrides, cache, **(auto_options or {})
+        )
     choosing = time.perf_counter() - choosing
-    setup = build_loop(scene, controller, overrides, cache, reference_compile=reference_compile)
-    plant_scene, plant, arm, ctrl = setup.plant_scene, setup.plant, setup.arm, setup.controller
-    whole = (
-        None
-        if choice is None or loop != "auto"
-        else cache.take(
-            WHOLE_RUNS,
-            whole_run_key(
-                pin_design(requested),
-                str(plant_scene.fidelity),
-                plant_scene.dt,
-                controller,
-                tuple(overrides),
-            ),
-        )
+    setup = build_loop(scene, controller, overrides, cache)
+    kept = None if choice is None else _choice_run(setup, requested, controller, overrides, cache)
+    trajectory = _run(setup, on_divergence) if kept is None else _from_choice_run(setup, kept)
+    result = _result(setup, trajectory, requested, cache)
+    if choice is not None:
+        _record_choice(result, choice, setup.plant_scene.dt, choosing)
+    if out is not None:
+        result.save(out, plots=setup.plant_scene.plots if plots is None else plots)
+    return result
+
+
+def _with_fidelity(scene, fidelity):
+    """The scene with its plant at ``fidelity`` (the ``--fidelity`` override), or unchanged."""
+    if fidelity is None:
+        return scene
+    plant = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity"))
+    return dataclasses.replace(scene, plant=plant)
+
+
+def _choice_run(setup: LoopSetup, requested, controller, overrides, cache: SceneCache):
+    """The fidelity choice's own run of this scene at the chosen rung and step, if it kept one."""
+    key = whole_run_key(
+        pin_design(requested),
+        str(setup.plant_scene.fidelity),
+        setup.plant_scene.dt,
+        controller,
+        tuple(overrides),
     )
-    if (
-        whole is not None
-    ):  # the choice's own run of this scene at this rung and step (auto's "whole runs")
-        ctrl.stats = copy.deepcopy(whole["stats"])
-        meta = {
-            **whole["meta"],
-            "reused": "the fidelity choice's run of this scene at the chosen rung and step",
-        }
-        trajectory = trajectory_from_states(
-            plant,
-            whole["t"],
-            whole["X"].copy(),
-            whole["U"].copy(),
-            meta,
-            compiled=loop != "python",
-            compile=plant_scene.solver.get("compile"),
-            energies=energies,
-        )
-    else:
-        rng = np.random.default_rng(scene.seed) if scene.noise else None
-        trajectory, _ = simulate_closed_loop(
-            plant,
-            ctrl,
-            setup.x0,
-            plant_scene.duration,
-            plant_scene.dt,
-            sensors=setup.sensors,
-            rng=rng,
-            compile=plant_scene.solver.get("compile"),
-            monitor=setup.monitor,
-            stop_on_divergence=on_divergence == "record",
-            loop=loop,
-            energies=energies,
-        )
+    return cache.take(WHOLE_RUNS, key)
+
+
+def _from_choice_run(setup: LoopSetup, whole: dict[str, Any]):
+    """The trajectory of the run the chooser made at the chosen rung (the same run, not repeated)."""
+    setup.controller.stats = copy.deepcopy(whole["stats"])
+    meta = {
+        **whole["meta"],
+        "reused": "the fidelity choice's run of this scene at the chosen rung and step",
+    }
+    return trajectory_from_states(
+        setup.plant,
+        whole["t"],
+        whole["X"].copy(),
+        whole["U"].copy(),
+        meta,
+        compile=setup.plant_scene.solver.get("compile"),
+    )
+
+
+def _run(setup: LoopSetup, on_divergence: str):
+    """The scene's closed loop (:func:`flexctrl.loop.sampled.simulate_closed_loop`)."""
+    scene, plant_scene = setup.scene, setup.plant_scene
+    trajectory, _ = simulate_closed_loop(
+        setup.plant,
+        setup.controller,
+        setup.x0,
+        plant_scene.duration,
+        plant_scene.dt,
+        sensors=setup.sensors,
+        rng=np.random.default_rng(scene.seed) if scene.noise else None,
+        compile=plant_scene.solver.get("compile"),
+        monitor=setup.monitor,
+        stop_on_divergence=on_divergence == "record",
+    )
+    return trajectory
+
+
+def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> ClosedLoopResult:
+    """The run judged (metrics, linear verdict) and described (``summary.json``)."""
+    scene, plant, ctrl = setup.scene, setup.plant, setup.controller
     tip_target = tip_at_rest(plant, scene.target_q)
-    report = ctrl.stats.summary()
-    metrics = run_metrics(
+    judge = scene.metric_settings
+    metrics = judge_run(
         trajectory,
+        ctrl,
+        setup.reference,
+        judge,
         tip_target=tip_target,
-        reference_joints=setup.reference.joints(trajectory.time),
-        t_arrive=scene.t_arrive,
-        settle_allowance=scene.settle_allowance,
-        band=scene.band,
-        stable_band=scene.stable_band,
-        duration=plant_scene.duration,
-        torque_limits=[j.torque_limit for j in arm.joints],
-        controller_stats=report,
-        step_times=ctrl.stats.step_times,
+        duration=setup.plant_scene.duration,
+        torque_limits=[j.torque_limit for j in setup.arm.joints],
         radius=loop_radius(setup, cache),
     )
-    if choice is not None:
-        metrics["chosen_modes"] = float(choice.choice.count or 0)
-        metrics["chosen_dt"] = float(plant_scene.dt)
-        metrics["estimated_error"] = float(choice.estimated_error)
-        metrics["reference_error"] = float(choice.reference_error)
-        metrics["choice_cost_ratio"] = float(choice.cost_ratio)
-        metrics["choice_time_s"] = float(choosing)
     summary = {
         "scene": requested.settings(),
-        "controller": {
-            "file": None if setup.path is None else str(setup.path),
-            "kind": setup.settings.kind,
-            "sample_time": ctrl.sample_time,
-            **report,
-        },
-        "plant": {
-            "fidelity": str(plant_scene.fidelity),
-            "n_states": plant.n_x,
-            "payload_kg": arm.payload.mass,
-        },
-        "design": {
-            "fidelity": str(setup.design_fidelity),
-            "payload_kg": setup.design_arm.payload.mass,
-            "configuration_deg": np.degrees(setup.design_q).tolist(),
-        },
-        "reference": setup.reference.settings() | {"deflection": scene.deflection},
-        "tip_target": tip_target.tolist(),
-        "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
-        "metrics": metrics,
-        "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time_s"],
+        **run_summary(
+            trajectory,
+            metrics,
+            ctrl,
+            plant=plant,
+            payload=setup.arm.payload.mass,
+            design={
+                "fidelity": str(setup.design_fidelity),
+                "payload_kg": setup.design_arm.payload.mass,
+                "configuration_deg": np.degrees(setup.design_q).tolist(),
+            },
+            path=setup.reference,
+            deflection=scene.deflection,
+            tip_target=tip_target,
+            judge=judge,
+            controller_file={"file": None if setup.path is None else str(setup.path)},
+        ),
     }
-    if choice is not None:
-        summary["fidelity_choice"] = choice.to_dict()
-    result = ClosedLoopResult(
+    return ClosedLoopResult(
         trajectory=trajectory,
         metrics=metrics,
         summary=summary,
@@ -293,13 +277,25 @@ def run_closed_loop_scene(
         reference=setup.reference,
         scene=scene,
     )
-    if out is not None:
-        result.save(out, plots=plant_scene.plots if plots is None else plots)
-    return result
+
+
+def _record_choice(result: ClosedLoopResult, choice, dt: float, choosing: float) -> None:
+    """The fidelity choice's figures among the metrics, and its evidence in the summary."""
+    metrics = result.metrics
+    metrics["chosen_modes"] = float(choice.choice.count or 0)
+    metrics["chosen_dt"] = float(dt)
+    metrics["estimated_error"] = float(choice.estimated_error)
+    metrics["reference_error"] = float(choice.reference_error)
+    metrics["choice_cost_ratio"] = float(choice.cost_ratio)
+    metrics["choice_time_s"] = float(choosing)
+    result.summary["fidelity_choice"] = choice.to_dict()
 
 
 def loop_radius(setup, cache: SceneCache) -> float | None:
-    """The linear verdict of a set-up loop; kept in ``cache`` ("verdicts") for a controller designed from a file."""
+    """The linear verdict of a set-up loop.
+
+    Kept in ``cache`` ("verdicts") for a controller designed from a file.
+    """
 
     def compute():
         return linear_closed_loop_radius(

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
@@ -129,6 +130,17 @@ class ClosedLoopScene:
     def t_arrive(self) -> float:
         """Time (s) the reference reaches the target (0 for the step, ``move_time`` for the quintic)."""
         return self.move_time if self.profile == "quintic" else 0.0
+
+    @property
+    def metric_settings(self) -> MetricSettings:
+        """How a run of the scene is judged (its ``[metrics]`` table)."""
+        return MetricSettings(
+            settle_allowance=self.settle_allowance,
+            band=self.band,
+            divergence_deflection=self.divergence_deflection,
+            divergence_angle=self.divergence_angle,
+            stable_band=self.stable_band,
+        )
 
     def settings(self) -> dict[str, Any]:
         """Plain JSON-ready data (angles in degrees)."""
