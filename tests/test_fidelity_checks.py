@@ -23,7 +23,7 @@ from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import pin_design
 from flexctrl.scenes.run_arm_scene import resolve_auto as resolve_arm_auto
 from flexctrl.scenes.run_closed_loop_scene import resolve_auto
-from flexctrl.spec.fidelity import FIDELITY_CHECKS
+from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS
 from flexctrl.spec.scene import load_scene
 
 TIME = np.linspace(0.0, 1.0, 101)
@@ -169,6 +169,17 @@ def test_a_bad_value_is_refused_naming_the_key_and_the_values_allowed():
         auto_fidelity.choose_closed_loop_fidelity(scene, 1e-2, checks="none")
     with pytest.raises(ValueError, match="checks"):
         _walk("none")
+
+
+def test_the_walks_are_estimate_and_ladder():
+    assert FIDELITY_WALKS == ("estimate", "ladder")
+    with pytest.raises(SpecError, match="fidelity_walk.*'linear'.*allowed: 'estimate', 'ladder'"):
+        load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity_walk='linear'"])
+    scene = pin_design(
+        load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity='auto'", "tolerance=1e-2"])
+    )
+    with pytest.raises(SpecError, match="fidelity_walk"):
+        auto_fidelity.choose_closed_loop_fidelity(scene, 1e-2, walk="linear")
 
 
 def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_runs_are_made():

@@ -275,19 +275,11 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
     assert choice.evidence["bandwidth_rule"]["torques_from"].startswith(
         f"the closed loop with the plant at amm:{top}"
     )
-    # the slow path, kept as fidelity_walk = "linear": linear estimates first, the same choice from the same runs
-    linear = auto_fidelity.choose_closed_loop_fidelity(
-        scene, tol, controller=mpc, cache=cache, walk="linear", **options
-    )
-    assert "linear_estimate" in linear.evidence and not linear.evidence["linear_estimate_skipped"]
-    assert linear.evidence["walk_taken"] == "linear_first"
+    assert "linear_estimate" not in choice.evidence and choice.evidence["linear_estimate_skipped"]
+    assert choice.evidence["walk_taken"] == "from_top"
     # a top rung that fails is a measured failure that says only the top was tried (the runs are in the cache)
     with pytest.raises(ToleranceUnreachable, match="the top rung amm:3 does not meet") as failed:
         auto_fidelity.choose_closed_loop_fidelity(
             scene, 1e-6, controller=mpc, cache=cache, **options
         )
     assert failed.value.evidence["best"]["rung"] == "amm:3"
-    assert (
-        str(linear.choice) == str(choice.choice)
-        and linear.estimated_error == choice.estimated_error
-    )

@@ -619,7 +619,7 @@ def walk_and_judge(
                 f"the top rung amm:{top} does not meet the tolerance {tol:.3g} m on scene '{name}': its estimate is "
                 f"{best_estimate:.3g} m ({safety:g} x its largest distance to the rungs above); the walk from the top "
                 "tries no rung below a top that fails; allowed: a tolerance >= "
-                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'linear' or 'ladder' (they try the "
+                f"{best_estimate:.3g} m, a higher top rung, or fidelity_walk = 'ladder' (it tries the "
                 "rungs below)",
                 evidence,
             )
@@ -708,7 +708,7 @@ def walk_and_judge(
             "role": (
                 "the reference model at omega_max * dt <= reference_omega_dt"
                 if linear is None
-                else "the reference model at its own RK4 step (fidelity_walk = 'estimate' or 'linear')"
+                else "the reference model at its own RK4 step (fidelity_walk = 'estimate')"
             ),
         },
         "candidates": rungs,

@@ -494,20 +494,21 @@ def choose_closed_loop_fidelity(
         As in :func:`choose_fidelity`.
     cache : SceneCache, optional
         Where models, runs and the choice are kept (a fresh one when None).
-    walk : {"estimate", "linear", "ladder"}
-        ``linear``: every rung's loop first on its linearised plant
-        (:mod:`flexctrl.scenes.auto_linear`, milliseconds to a second each); the lowest rung
-        whose linear estimate is within :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the
-        tolerance is certified by the nonlinear runs of the estimate's formula, walking up
-        while it fails; no rung within the factor is a predicted :class:`ToleranceUnreachable`
-        without nonlinear runs; the reference is the reference model at its own step (its step
-        error estimated linearly).  ``estimate`` (default): the same for a controller with a
-        sampled law (``has_sampled_law``: the linear loop is one compiled call); for one
-        stepped in Python (MPC, NMPC, a gain schedule), whose linear run costs what its
-        nonlinear run does, no linear estimate of the rungs: the nonlinear walk from ``top``
-        down while the rung below meets the tolerance (the reference and its linear step
-        check as before).  ``ladder``: the nonlinear walk from the bandwidth rule's start, the
-        reference at ``reference_omega_dt`` and half its step (issue 7's method).
+    walk : {"estimate", "ladder"}
+        ``estimate`` (default), for a controller with a sampled law (``has_sampled_law``:
+        the linear loop is one compiled call): every rung's loop first on its linearised
+        plant (:mod:`flexctrl.scenes.auto_linear`); the lowest rung whose linear estimate is
+        within :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the tolerance is
+        certified by the nonlinear runs of the estimate's formula, walking up while it
+        fails; no rung within the factor is a predicted :class:`ToleranceUnreachable`
+        without nonlinear runs.  For a controller stepped in Python (MPC, NMPC, a gain
+        schedule), whose linear run costs what its nonlinear run does, no linear estimate
+        of the rungs: the nonlinear walk from ``top`` down while the rung below meets the
+        tolerance.  Either way the reference is the reference model at its own step, its
+        step error estimated linearly.  ``ladder``: nonlinear runs only, from the bandwidth
+        rule's start, the reference at ``reference_omega_dt`` and half its step: no linear
+        assumption (for a loop the linearisation at the target does not describe), at
+        several times the cost.
     checks : {"full", "tolerance"}
         What is checked beyond the tolerance (:func:`~flexctrl.fidelity.ladder.walk_and_judge`):
         ``tolerance`` makes only the runs that certify it (no rung below a rung that meets
@@ -609,7 +610,7 @@ def _choose_closed(
     )
     first = min(max(low, design_rung), top)
     linear, from_top = None, False
-    if walk in ("estimate", "linear"):
+    if walk == "estimate":
         from flexctrl.scenes.auto_linear import linear_closed_rung, loop_at
 
         def linear_rung(m: int) -> RunRecord:
@@ -630,12 +631,9 @@ def _choose_closed(
         )
         # a controller stepped in Python costs as much on a linear plant as on the nonlinear one: no linear
         # estimate of the rungs, the nonlinear walk from the top down (the step check stays linear)
-        from_top = (
-            walk == "estimate"
-            and not loop_at(
-                scene, rung_name(first), controller, overrides, cache
-            ).controller.has_sampled_law()
-        )
+        from_top = not loop_at(
+            scene, rung_name(first), controller, overrides, cache
+        ).controller.has_sampled_law()
     if from_top:
         runs = {top: rung(top)}
         record = runs[top]

@@ -12,8 +12,8 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     payload = 2.0                     # kg (default: the model file's)
     fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
-    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate", "linear" or "ladder"
-                                      # (flexctrl.scenes.auto chooses the model)
+    fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate" or
+                                      # "ladder" (flexctrl.scenes.auto_closed_loop chooses the model)
     fidelity_checks = "full"          # or "tolerance": auto certifies the tolerance only (no rung below, no step check)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
@@ -130,7 +130,7 @@ class ArmScene:
     kind: str = "arm"
     tolerance: float | None = None
     #: How ``fidelity = "auto"`` walks the ladder for a closed loop: one of ``FIDELITY_WALKS``
-    #: (:mod:`flexctrl.spec.fidelity`): ``estimate``, ``linear`` or ``ladder``.
+    #: (:mod:`flexctrl.spec.fidelity`): ``estimate`` or ``ladder``.
     fidelity_walk: str = "estimate"
     #: What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full`` or ``tolerance``.
     fidelity_checks: str = "full"

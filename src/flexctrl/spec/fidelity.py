@@ -15,11 +15,13 @@ from typing import Literal
 from flexctrl.errors import SpecError
 
 KINDS = ("rigid", "amm", "fem", "auto")
-#: How ``fidelity = "auto"`` walks the ladder for a closed loop (``fidelity_walk``; flexctrl.scenes.auto):
-#: ``estimate`` (linear estimates first, or the nonlinear walk from the top rung down for a controller stepped in
-#: Python), ``linear`` (linear estimates first for every controller: the estimate walk before it had the
-#: walk from the top) and ``ladder`` (issue 7's nonlinear walk with a small-step reference).
-FIDELITY_WALKS = ("estimate", "linear", "ladder")
+#: How ``fidelity = "auto"`` walks the ladder for a closed loop (``fidelity_walk``;
+#: :mod:`flexctrl.scenes.auto_closed_loop`): ``estimate`` (the default: linear estimates of the
+#: rungs first, or the nonlinear walk from the top rung down for a controller stepped in
+#: Python; the reference model at its own step, its step error estimated linearly) or
+#: ``ladder`` (nonlinear runs only, from the bandwidth rule's start; the reference at a small
+#: step and half of it: no linear assumption, at several times the cost).
+FIDELITY_WALKS = ("estimate", "ladder")
 #: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``; flexctrl.fidelity.ladder.walk_and_judge):
 #: ``full`` (the rung below a rung that meets the tolerance is tried, so the choice is the lowest that meets it; the
 #: reference's step is checked) or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the rungs
