@@ -24,7 +24,7 @@ import pytest
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
 from flexctrl.loop.mismatch import state_projection
-from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes import auto_closed_loop as auto_fidelity
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import AUTO_DESIGN_FIDELITY, pin_design
 from flexctrl.scenes.run_closed_loop_scene import check_auto, run_closed_loop_scene

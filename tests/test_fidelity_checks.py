@@ -17,8 +17,15 @@ import pytest
 from flexctrl.cli import main
 from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
-from flexctrl.fidelity.ladder import RunRecord, ToleranceUnreachable, tip_distance, walk_and_judge
-from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.fidelity.ladder import (
+    Ladder,
+    RunRecord,
+    Runners,
+    ToleranceUnreachable,
+    tip_distance,
+    walk_and_judge,
+)
+from flexctrl.scenes import auto_closed_loop as auto_fidelity
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import pin_design
 from flexctrl.scenes.run_arm_scene import resolve_auto as resolve_arm_auto
@@ -45,6 +52,35 @@ def _record(m: int, *, dt: float = 1e-3, linear: str = "") -> RunRecord:
     )
 
 
+def judge(
+    *,
+    name,
+    tol,
+    low,
+    top,
+    reference,
+    safety,
+    rule,
+    run_rung,
+    run_reference,
+    reference_dt,
+    start=None,
+    linear=None,
+    from_top=False,
+    checks="full",
+):
+    """``walk_and_judge`` with the walk named by what it is given: the linear runs, from the top."""
+    walk = "from_top" if from_top else "ladder" if linear is None else "linear_first"
+    linear_rung, linear_exact = linear or (None, None)
+    return walk_and_judge(
+        Ladder(name, tol, low, top, reference, safety, checks),
+        Runners(run_rung, run_reference, reference_dt, linear_rung, linear_exact),
+        walk=walk,
+        start=start,
+        rule=rule,
+    )
+
+
 def _walk(checks: str, **kind):
     """``walk_and_judge`` on the synthetic ladder (top amm:3, reference amm:4, tolerance 0.3 mm), and what it ran."""
     made: list = []
@@ -57,7 +93,7 @@ def _walk(checks: str, **kind):
         made.append(("reference", dt))
         return _record(4, dt=dt)
 
-    choice = walk_and_judge(
+    choice = judge(
         name="synthetic",
         tol=3e-4,
         low=0,
@@ -124,9 +160,9 @@ def test_tolerance_keeps_a_higher_rung_where_full_finds_a_lower_one():
         run_rung=lambda m: (made.append(m), _record(m))[1],
         run_reference=lambda dt: _record(4, dt=dt),
     )
-    full = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True)
+    full = judge(**kw, start=3, linear=_linear([]), from_top=True)
     made.clear()
-    only = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True, checks="tolerance")
+    only = judge(**kw, start=3, linear=_linear([]), from_top=True, checks="tolerance")
     assert str(full.choice) == "amm:1" and str(only.choice) == "amm:3" and sorted(made) == [3, 4]
     assert only.estimated_error <= 1e-3 and only.reference_error <= only.estimated_error
 
@@ -243,13 +279,13 @@ def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it()
         run_rung=lambda m: (made.append(m), _record(m))[1],
         run_reference=lambda dt: _record(4, dt=dt),
     )
-    full = walk_and_judge(**kw)
+    full = judge(**kw)
     assert str(full.choice) == "amm:1" and 5 in made
     assert (
         full.evidence["reference"]["convergence"]["rung_below_m"] == 0.0
     )  # amm:5 follows the reference's path
     made.clear()
-    only = walk_and_judge(**kw, checks="tolerance")
+    only = judge(**kw, checks="tolerance")
     # neither the rung below the reference nor the finest model at its own step (the ladder walk's cost evidence)
     assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4]
     assert only.evidence["reference"]["convergence"]["rung_below_m"] is None
@@ -292,11 +328,11 @@ def test_in_tolerance_mode_a_convergence_warning_names_only_the_check_made():
         run_reference=lambda dt: _record(4, dt=dt),
     )
     with pytest.warns(UserWarning, match="moves by .* with half its step and differs by"):
-        walk_and_judge(**kw)
+        judge(**kw)
     with pytest.warns(
         UserWarning, match=r"\(rk4, dt = 0.0001 s\) differs by 0.000125 m from amm:3"
     ) as caught:
-        walk_and_judge(**kw, checks="tolerance")
+        judge(**kw, checks="tolerance")
     assert not any("moves by" in str(w.message) for w in caught)
 
 
@@ -305,7 +341,7 @@ def test_a_predicted_failure_records_the_checks_asked_for():
         return _record(m, linear="linear-rk4") if m < 4 else _record(4, linear="linear-rk4")
 
     with pytest.raises(ToleranceUnreachable) as failed:
-        walk_and_judge(
+        judge(
             name="synthetic",
             tol=1e-6,
             low=0,

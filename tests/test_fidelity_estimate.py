@@ -16,7 +16,7 @@ import pytest
 
 from flexctrl.errors import FlexctrlError
 from flexctrl.fidelity.ladder import LINEAR_FACTOR, ToleranceUnreachable, tip_distance
-from flexctrl.scenes import auto as auto_fidelity
+from flexctrl.scenes import auto_closed_loop as auto_fidelity
 from flexctrl.scenes.auto_linear import grid_maps, linear_closed_rung
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import pin_design

@@ -1,7 +1,7 @@
 """``flexctrl fidelity SCENE --tol METRES``: the cheapest model that keeps a scene's tip within a tolerance.
 
 Runs :func:`flexctrl.scenes.auto.choose_fidelity` on a ``kind = "arm"``
-scene, or :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` on a
+scene, or :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` on a
 ``kind = "closed_loop"`` scene (the plant's fidelity is chosen, the controller
 designed once on ``controller_fidelity``, else on the scene's own plant fidelity,
 ``amm:2`` when that is ``auto``; ``--controller``
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         tol = check_tolerance(args.tol, source=args.scene, key="--tol")
     try:
         if scene.kind == "closed_loop":
-            from flexctrl.scenes.auto import choose_closed_loop_fidelity
+            from flexctrl.scenes.auto_closed_loop import choose_closed_loop_fidelity
             from flexctrl.scenes.loop_setup import pin_design
             from flexctrl.scenes.run_closed_loop_scene import check_auto
 

@@ -35,7 +35,7 @@ from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
 from flexctrl.scenes.arm_setup import scene_arm
-from flexctrl.scenes.auto import (
+from flexctrl.scenes.auto_closed_loop import (
     WHOLE_RUNS,
     check_closed_loop_auto,
     choose_closed_loop_fidelity,
@@ -53,7 +53,7 @@ def resolve_auto(
     """For a plant with ``fidelity = "auto"``: the scene at the chosen plant fidelity and step, and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
-    :func:`~flexctrl.scenes.auto.choose_closed_loop_fidelity` with the
+    :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` with the
     scene's ``tolerance`` (kept in ``cache``).  Other scenes come back unchanged with None.
     """
     if scene.plant.fidelity.kind != "auto":

@@ -1,7 +1,7 @@
 """Fidelity choices shared across a study's runs (``[auto] share``): one choice per group, recorded.
 
 With ``fidelity = "auto"`` every run of a study chooses its plant model alone
-(:func:`flexctrl.scenes.auto.choose_closed_loop_fidelity`): a walk over the rungs and
+(:func:`flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`): a walk over the rungs and
 a reference run per run, which costs several times the run itself.  A study whose
 axes hold values the user knows do not change the choice declares them::
 
