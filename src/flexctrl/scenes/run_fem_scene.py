@@ -3,7 +3,7 @@
 The scenes are the validated descriptions of :mod:`flexctrl.spec.fem_scene`
 (:class:`~flexctrl.spec.fem_scene.SlidingBeamScene`, :class:`~flexctrl.spec.fem_scene.RPArmScene`,
 :class:`~flexctrl.spec.fem_scene.TelescopingScene`); :func:`run_scene` runs one (the runner of
-:data:`flexctrl.scenes.SCENE_RUNNERS`), :func:`run_fem_scene` reads a document and runs it.
+:data:`flexctrl.scenes.scene_runners.SCENE_RUNNERS`), :func:`run_fem_scene` reads a document and runs it.
 """
 
 from __future__ import annotations
@@ -312,7 +312,7 @@ def run_scene(
     fidelity: Fidelity | str | None = None,
     **unknown: Any,
 ) -> FemSceneResult:
-    """Run a finite-element scene; the runner of :data:`flexctrl.scenes.SCENE_RUNNERS`.
+    """Run a finite-element scene; the runner of :data:`flexctrl.scenes.scene_runners.SCENE_RUNNERS`.
 
     Parameters
     ----------

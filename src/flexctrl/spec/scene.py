@@ -3,15 +3,14 @@
 The top-level ``kind`` (default ``"arm"``) selects the reader from :data:`SCENE_READERS`,
 the one place where scene kinds are known to the descriptions:
 
-==================  ======================================================  ==============================
-kind                reader                                                  description
-==================  ======================================================  ==============================
-``arm``             :func:`flexctrl.spec.arm_scene.read_arm_scene`          :class:`~flexctrl.spec.arm_scene.ArmScene`
-``closed_loop``     :func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene`  :class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene`
-``sliding_beam``,   :func:`flexctrl.spec.fem_scene.read_fem_scene`          :class:`~flexctrl.spec.fem_scene.FemScene`
-``rp_arm``,
-``telescoping``
-==================  ======================================================  ==============================
+``arm``
+    :func:`flexctrl.spec.arm_scene.read_arm_scene` ->
+    :class:`~flexctrl.spec.arm_scene.ArmScene`
+``closed_loop``
+    :func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene` ->
+    :class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene`
+``sliding_beam``, ``rp_arm``, ``telescoping``
+    :func:`flexctrl.spec.fem_scene.read_fem_scene` -> :class:`~flexctrl.spec.fem_scene.FemScene`
 
 Running a scene is a higher layer's job (:func:`flexctrl.scenes.run_scene`).
 :func:`load_scene` applies ``--set KEY=VALUE`` overrides to the parsed document before
@@ -20,23 +19,26 @@ validation, so an override is checked exactly like the file.
 
 from __future__ import annotations
 
-import importlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
 from flexctrl.spec import shipped
-from flexctrl.spec.arm_scene import ArmScene, InputSpec, resolve_model_path  # noqa: F401  (the scene types' home)
+from flexctrl.spec.arm_scene import ArmScene, InputSpec, read_arm_scene
+from flexctrl.spec.closed_loop_scene import read_closed_loop_scene
+from flexctrl.spec.fem_scene import read_fem_scene
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
-#: Scene kinds: kind -> ``"module:reader"``; readers take ``(document, source, base_dir)`` and return a scene.
-SCENE_READERS: dict[str, str] = {
-    "arm": "flexctrl.spec.arm_scene:read_arm_scene",
-    "closed_loop": "flexctrl.spec.closed_loop_scene:read_closed_loop_scene",
-    "sliding_beam": "flexctrl.spec.fem_scene:read_fem_scene",
-    "rp_arm": "flexctrl.spec.fem_scene:read_fem_scene",
-    "telescoping": "flexctrl.spec.fem_scene:read_fem_scene",
+__all__ = ["SCENE_READERS", "ArmScene", "InputSpec", "load_scene", "scene_from_document"]
+
+#: Scene kinds: kind -> reader; a reader takes ``(document, source, base_dir)`` and returns a scene.
+SCENE_READERS: dict[str, Callable[..., Any]] = {
+    "arm": read_arm_scene,
+    "closed_loop": read_closed_loop_scene,
+    "sliding_beam": read_fem_scene,
+    "rp_arm": read_fem_scene,
+    "telescoping": read_fem_scene,
 }
 
 
@@ -71,5 +73,4 @@ def scene_from_document(document: dict[str, Any], source: str, base_dir: Path | 
     kind = document.get("kind", "arm")
     if kind not in SCENE_READERS:
         TableReader(document, source).string("kind", choices=tuple(SCENE_READERS))
-    module, _, name = SCENE_READERS[kind].partition(":")
-    return getattr(importlib.import_module(module), name)(document, source, base_dir or Path.cwd())
+    return SCENE_READERS[kind](document, source, base_dir or Path.cwd())
