@@ -42,36 +42,28 @@ def closed_loop(
 ) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` s.
 
-    The controller tracks the reference built on ``model`` (its design model: the joint
-    path, the quasi-static deflection the path's accelerations need and the feed-forward
-    torque); every ``controller.sample_time`` it reads the plant's sensors and its torque
-    is held while the plant advances by RK4 steps of ``dt``.  A controller whose law is a
-    fixed map with memory (PD, LQR, LQG, shaped) runs its samples chained in CasADi; one
-    that optimises or schedules per sample (MPC, NMPC) is called once per sample
-    (:mod:`flexctrl.loop.sampled`).
+    The controller tracks the reference built on ``model`` (its design model) at its sample
+    time; the plant advances by RK4 steps of ``dt`` between samples (:mod:`flexctrl.loop.sampled`).
 
     Parameters
     ----------
     model : flexctrl.dynamics.model.Model
         The model the controller was designed on.
     controller : flexctrl.control.controller.Controller
-        From :func:`flexctrl.design`.  It is reset and given the reference.
+        From :func:`flexctrl.design`; reset and given the reference.
     reference : Move or JointReference
         The joint path (rad, s).
     duration : float
         Simulated time, s.
     plant : Model, optional
-        The arm that is controlled, e.g. another payload (:func:`flexctrl.load_model`
-        with ``payload=``) or fidelity; default ``model``.
+        The arm controlled, e.g. another payload or fidelity; default ``model``.
     dt : float, optional
-        Plant step, s: a whole fraction of the sample time; default the largest one with
-        ``omega_max * dt <= ACCURATE_OMEGA_DT`` on the plant (see :data:`ACCURATE_OMEGA_DT`).
+        Plant step, s, a whole fraction of the sample time; default the largest with
+        ``omega_max * dt <=`` :data:`ACCURATE_OMEGA_DT` on the plant.
     noise : int or numpy.random.Generator, optional
-        Measurement noise at the levels of the controller's sensor settings, seeded;
-        None (default) measures exactly.
+        Seeded measurement noise at the controller's sensor levels; None measures exactly.
     x0 : array_like, optional
-        Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the move's start
-        with undeformed links.
+        Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the start.
     metrics : MetricSettings, optional
         How the run is judged (residual window, bands, divergence bounds).
     on_divergence : {"raise", "record"}
@@ -89,29 +81,18 @@ def closed_loop(
     Examples
     --------
     >>> import numpy as np, flexctrl as fc
-    >>> model = fc.load_model(
-    ...     "models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0]
-    ... )
-    >>> op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
-    >>> pd = fc.design(model, op, fc.load_controller("controllers/pd.toml"))
+    >>> model = fc.load_model("subedi3link", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> pd = fc.design(model, fc.equilibrium(model, np.radians([30, 0, 0])), fc.load_controller("pd"))
     >>> move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     >>> res = fc.closed_loop(model, pd, move, duration=4.0)
     >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3
     (True, True)
     """
-    _check_arguments(controller, on_divergence)
-    move = _as_move(reference)
-    path = move.joint_reference()
-    _check_path(model, path, duration)
-    plant = model if plant is None else plant
+    move = _checked_move(model, controller, reference, duration, on_divergence)
+    path, plant = move.joint_reference(), model if plant is None else plant
     judge = MetricSettings() if metrics is None else metrics
-    controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
-    controller.reset()
-    sensors = (
-        controller.sensors
-        if plant is model
-        else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
-    )
+    _track(controller, model, move)
+    sensors = _plant_sensors(model, plant, controller)
     trajectory, _ = simulate_closed_loop(
         plant,
         controller,
@@ -121,25 +102,55 @@ def closed_loop(
         sensors=sensors,
         rng=_noise(noise),
         compile=compile,
-        monitor=divergence_monitor(
-            plant,
-            plant.spec,
-            path.q_start,
-            path.q_target,
-            judge.divergence_deflection,
-            judge.divergence_angle,
-        ),
+        monitor=_monitor(plant, path, judge),
         stop_on_divergence=on_divergence == "record",
     )
     return _result(trajectory, model, plant, controller, move, judge, float(duration), sensors)
 
 
-def _check_arguments(controller, on_divergence: str) -> None:
+def _track(controller, model, move: Move) -> None:
+    """Reset ``controller`` and give it ``move``'s reference built on its design model."""
+    controller.set_reference(ReferenceTrajectory(model, move.joint_reference(), move.deflection))
+    controller.reset()
+
+
+def _plant_sensors(model, plant, controller):
+    """The controller's sensors as they read the plant (built on it when it is another model)."""
+    if plant is model:
+        return controller.sensors
+    return plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
+
+
+def _monitor(plant, path: JointReference, judge: MetricSettings):
+    return divergence_monitor(
+        plant,
+        plant.spec,
+        path.q_start,
+        path.q_target,
+        judge.divergence_deflection,
+        judge.divergence_angle,
+    )
+
+
+def _checked_move(model, controller, reference, duration, on_divergence: str) -> Move:
+    """The reference as a :class:`Move`, once the arguments are checked."""
+    _check_arguments(controller, on_divergence)
+    move = _as_move(reference)
+    _check_path(model, move.joint_reference(), duration)
+    return move
+
+
+def check_on_divergence(on_divergence: str) -> None:
+    """:class:`SpecError` unless ``on_divergence`` is ``"raise"`` or ``"record"``."""
     if on_divergence not in ("raise", "record"):
         raise SpecError(
             f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
             key="on_divergence",
         )
+
+
+def _check_arguments(controller, on_divergence: str) -> None:
+    check_on_divergence(on_divergence)
     if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
         raise SpecError(
             f"value of type {type(controller).__name__} is not a controller; allowed: a "

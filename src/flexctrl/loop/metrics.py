@@ -25,6 +25,24 @@ residual-vibration window
     Wall time of ``controller.step`` (s).
 ``fallbacks``, ``solver_failures``
     Counts reported by the controller.
+
+The verdicts of :func:`run_metrics`:
+
+``settled``
+    1 when the tip stays inside ``band`` to the end of a run that did not diverge;
+    otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
+    row of an unstable loop stays ok; ``inf`` would mark it failed).
+``final_tip_error``
+    Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
+``stable``
+    1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
+    in a saturated limit cycle does not diverge, but does not converge either).
+``divergence_time``
+    When the run diverged (s), else ``duration``.
+``closed_loop_radius``
+    The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
+``torque_limit_exceeded``
+    Whether any applied torque went beyond its joint's limit.
 """
 
 from __future__ import annotations
@@ -126,24 +144,8 @@ def run_metrics(
 ) -> dict:
     """Every metric of one closed-loop run: :func:`closed_loop_metrics` and the verdicts.
 
-    Added to :func:`closed_loop_metrics`' figures:
-
-    ``settled``
-        1 when the tip stays inside ``band`` to the end of a run that did not diverge;
-        otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
-        row of an unstable loop stays ok; ``inf`` would mark it failed).
-    ``final_tip_error``
-        Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
-    ``stable``
-        1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
-        in a saturated limit cycle does not diverge, but does not converge either).
-    ``divergence_time``
-        When the run diverged (s), else ``duration``.
-    ``closed_loop_radius``
-        The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
-    ``torque_limit_exceeded``
-        Whether any applied torque went beyond its joint's limit.
-
+    The verdicts (``settled``, ``final_tip_error``, ``stable``, ``divergence_time``,
+    ``closed_loop_radius``, ``torque_limit_exceeded``) are defined in the module docstring.
     For a run stopped by a divergence before the residual window opens, the window
     shrinks to the last sample.
 
@@ -160,6 +162,7 @@ def run_metrics(
         ``controller.stats.summary()`` (``fallbacks``, ``status`` counts).
     step_times : s per controller step
     radius : float, optional
+        The linear verdict.
     """
     divergence = trajectory.meta.get("divergence")
     tip_target = np.asarray(tip_target, dtype=float)
@@ -184,6 +187,21 @@ def run_metrics(
             v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))
         ),
     )
+    _add_verdicts(metrics, trajectory, tip_target, duration=duration, stable_band=stable_band)
+    if radius is not None:
+        metrics["closed_loop_radius"] = radius
+    limits = np.asarray(torque_limits, dtype=float)
+    metrics["torque_limit_exceeded"] = bool(
+        np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9))
+    )
+    return metrics
+
+
+def _add_verdicts(
+    metrics: dict, trajectory, tip_target: np.ndarray, *, duration: float, stable_band: float
+) -> None:
+    """``settled``, ``final_tip_error``, ``stable`` and ``divergence_time`` (:func:`run_metrics`)."""
+    divergence = trajectory.meta.get("divergence")
     metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
     if not metrics["settled"]:
         metrics["settling_time"] = float(duration)
@@ -192,13 +210,6 @@ def run_metrics(
     metrics["final_tip_error"] = float(np.max(error[final]))
     metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= stable_band)
     metrics["divergence_time"] = float(duration) if divergence is None else divergence["time"]
-    if radius is not None:
-        metrics["closed_loop_radius"] = radius
-    limits = np.asarray(torque_limits, dtype=float)
-    metrics["torque_limit_exceeded"] = bool(
-        np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9))
-    )
-    return metrics
 
 
 #: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists

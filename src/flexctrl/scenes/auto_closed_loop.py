@@ -1,10 +1,39 @@
 """Running closed loops for the automatic-fidelity ladder: the plant's rung chosen for a tolerance.
 
 :func:`choose_closed_loop_fidelity` chooses the plant's rung for a ``kind = "closed_loop"``
-scene: every candidate is a whole closed-loop run (:func:`simulate_closed_rung`) of the
-controller designed once on the pinned design model, with the plant at the rung; the
-linear estimates come from :mod:`flexctrl.scenes.auto_linear`, the walk and its judgement
-from :func:`~flexctrl.fidelity.ladder.walk_and_judge`.
+scene as :func:`~flexctrl.scenes.auto.choose_fidelity` does for an arm scene, with every
+candidate a whole closed-loop run (:func:`simulate_closed_rung`): the controller (the
+scene's, or a file with overrides) designed once on the scene's pinned
+``controller_fidelity`` (:func:`flexctrl.scenes.loop_setup.pin_design` gives ``amm:2`` when
+the scene names none), its payload and configuration the same for every rung; the plant at
+the rung, RK4 at the rung's step (the scene's ``dt`` divided by the smallest whole number
+that makes ``omega_max * dt <= 0.9 * 2.785``).  Differences from the arm method:
+
+* The excitation is the controller's torque, known only by running the loop, so the
+  bandwidth rule (method step 1) reads the torques of a first run with the plant at the
+  design model's rung (clipped to the ladder), with their mean removed.
+* Tip paths are compared on the scene's grid (``dt``), where every rung and the reference
+  have samples (their steps divide it), not at every plant step.
+* A candidate whose loop diverges has an infinite distance (it cannot be chosen); a
+  diverging reference raises :class:`~flexctrl.errors.SimulationError`.
+
+The walks (``fidelity_walk``):
+
+``estimate`` (the default)
+    For a controller with a sampled law (``has_sampled_law``: its loop is one compiled
+    call), every rung's loop first on its linearised plant (:mod:`flexctrl.scenes.auto_linear`);
+    the lowest rung whose linear estimate is within
+    :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the tolerance is certified by the
+    nonlinear runs of the estimate's formula, walking up while it fails; no rung within the
+    factor is a predicted :class:`~flexctrl.fidelity.records.ToleranceUnreachable` without
+    nonlinear runs.  For a controller stepped in Python (MPC, NMPC, a gain schedule), whose
+    linear run costs what its nonlinear run does, no linear estimate of the rungs: the
+    nonlinear walk from ``top`` down while the rung below meets the tolerance.  Either way
+    the reference is the reference model at its own step, its step error estimated linearly.
+``ladder``
+    Nonlinear runs only, from the bandwidth rule's start, the reference at
+    ``reference_omega_dt`` and half its step: no linear assumption (for a loop the
+    linearisation at the target does not describe), at several times the cost.
 
 Runs and choices are kept in the caller's :class:`~flexctrl.scenes.cache.SceneCache`,
 keyed by everything that changes the loop (:func:`closed_loop_key`); the run at the rung
@@ -13,6 +42,7 @@ finally chosen is kept whole (:data:`WHOLE_RUNS`) for the scene's run to reuse.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
@@ -181,22 +211,7 @@ def choose_closed_loop_fidelity(
 ) -> FidelityChoice:
     """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a loop's tip in ``tol``.
 
-    As :func:`~flexctrl.scenes.auto.choose_fidelity`, with every candidate a whole
-    closed-loop run: the controller (the scene's or ``controller`` with ``overrides``)
-    designed on the scene's ``controller_fidelity`` (pinned: the plant's fidelity is what
-    is chosen; :func:`flexctrl.scenes.loop_setup.pin_design` gives ``amm:2`` when the scene
-    names none), its payload and configuration, the same for every rung; the plant at the
-    rung, RK4 at the rung's step (the scene's ``dt`` divided by the smallest whole number
-    that makes ``omega_max * dt <= 0.9 * 2.785``).  Differences from the arm method:
-
-    * The excitation is the controller's torque, known only by running the loop, so
-      the bandwidth rule (method step 1) reads the torques of a first run with the
-      plant at the design model's rung (clipped to the ladder), with their mean
-      removed; the walk then starts where the rule says.
-    * Tip paths are compared on the scene's grid (``dt``), where every rung and the
-      reference have samples (their steps divide it), not at every plant step.
-    * A candidate whose loop diverges has an infinite distance (it cannot be chosen);
-      a diverging reference raises :class:`~flexctrl.errors.SimulationError`.
+    Every candidate is a whole closed-loop run with the plant at the rung (module docstring).
 
     Parameters
     ----------
@@ -214,24 +229,12 @@ def choose_closed_loop_fidelity(
     cache : SceneCache, optional
         Where models, runs and the choice are kept (a fresh one when None).
     walk : {"estimate", "ladder"}
-        ``estimate`` (default), for a controller with a sampled law (``has_sampled_law``:
-        the linear loop is one compiled call): every rung's loop first on its linearised
-        plant (:mod:`flexctrl.scenes.auto_linear`); the lowest rung whose linear estimate is
-        within :data:`~flexctrl.fidelity.ladder.LINEAR_FACTOR` of the tolerance is
-        certified by the nonlinear runs of the estimate's formula, walking up while it
-        fails; no rung within the factor is a predicted :class:`ToleranceUnreachable`
-        without nonlinear runs.  For a controller stepped in Python (MPC, NMPC, a gain
-        schedule), whose linear run costs what its nonlinear run does, no linear estimate
-        of the rungs: the nonlinear walk from ``top`` down while the rung below meets the
-        tolerance.  Either way the reference is the reference model at its own step, its
-        step error estimated linearly.  ``ladder``: nonlinear runs only, from the bandwidth
-        rule's start, the reference at ``reference_omega_dt`` and half its step: no linear
-        assumption (for a loop the linearisation at the target does not describe), at
-        several times the cost.
+        How the rungs are walked (module docstring): ``estimate`` (default) judges by linear
+        estimates first, or from the top rung down for a controller stepped in Python;
+        ``ladder`` makes nonlinear runs only, with no linear assumption, at several times
+        the cost.
     checks : {"full", "tolerance"}
-        What is checked beyond the tolerance (:class:`~flexctrl.fidelity.walk.Ladder`):
-        ``tolerance`` makes only the runs that certify it (no rung below a rung that meets
-        it is tried, no step check of the reference).
+        What is checked beyond the tolerance (:class:`~flexctrl.fidelity.walk.Ladder`).
 
     Returns
     -------
@@ -264,11 +267,8 @@ def choose_closed_loop_fidelity(
     cache = SceneCache() if cache is None else cache
     overrides = tuple(overrides)
     key = (closed_loop_key(scene, controller, overrides), options)
-    return cache.get(
-        "closed_choices",
-        key,
-        lambda: _ClosedChoice(scene, controller, overrides, cache, options).choose(),
-    )
+    choose = _ClosedChoice(scene, controller, overrides, cache, options).choose
+    return cache.get("closed_choices", key, choose)
 
 
 def _check_scene(scene, controller) -> None:
@@ -296,7 +296,11 @@ class _ClosedChoice:
     def __init__(self, scene, controller, overrides, cache: SceneCache, options: ChooserOptions):
         self.scene, self.controller, self.overrides = scene, controller, overrides
         self.cache, self.options = cache, options
-        self.key = closed_loop_key(scene, controller, overrides)
+
+    @functools.cached_property
+    def key(self) -> str:
+        """:func:`closed_loop_key` of the loop, for the linear runs kept in the cache."""
+        return closed_loop_key(self.scene, self.controller, self.overrides)
 
     def rung(self, m: int) -> RunRecord:
         """Rung ``m``'s nonlinear run at its own step."""

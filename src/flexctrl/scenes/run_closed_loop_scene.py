@@ -15,7 +15,11 @@ A run that leaves the divergence bounds (:mod:`flexctrl.loop.monitors`) stops th
 the time and the bound (``on_divergence="raise"``, ``flexctrl simulate``), or records it
 (``"record"``, the study executor): metrics ``stable = 0`` and ``divergence_time``
 (s), the other metrics over the run up to then, so a study row stays ``ok`` and a
-stability map is a map of the ``stable`` column.
+stability map is a map of the ``stable`` column.  When the divergence comes before the
+residual-vibration window opens, the window is the last plant sample.  Stable runs report
+``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip that never settles
+into the band reports ``settled = 0`` and ``settling_time`` = the duration (finite:
+:func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
 """
 
 from __future__ import annotations
@@ -28,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import check_tolerance
+from flexctrl.loop.closed_loop import check_on_divergence
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
 from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
@@ -118,12 +122,7 @@ def run_closed_loop_scene(
     on_divergence : {"raise", "record"}
         What a diverging run does (see the module docstring): raise
         :class:`~flexctrl.errors.SimulationError`, or stop and record ``stable = 0``
-        and ``divergence_time`` (s) among the metrics.  For such a run every other
-        metric covers the run up to the divergence; when that comes before the
-        residual-vibration window opens, the window is the last plant sample.  Stable
-        runs report ``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip
-        that never settles into the band reports ``settled = 0`` and ``settling_time`` =
-        the duration (finite: :func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
+        and ``divergence_time`` (s) among the metrics.
     auto_options : dict, optional
         Keywords of :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
         (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
@@ -152,20 +151,11 @@ def run_closed_loop_scene(
     choice's loop wall time over the reference's) and ``choice_time_s`` (time this call
     spent choosing, s: milliseconds when the choice was cached).
     """
-    if on_divergence not in ("raise", "record"):
-        raise SpecError(
-            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
-            key="on_divergence",
-        )
+    check_on_divergence(on_divergence)
     requested = _with_fidelity(scene, fidelity)
     cache = SceneCache() if cache is None else cache
     choosing = time.perf_counter()
-    if choice is not None and requested.plant.fidelity.kind == "auto":
-        scene = apply_choice(requested, choice, cache)
-    else:
-        scene, choice = resolve_auto(
-            requested, controller, overrides, cache, **(auto_options or {})
-        )
+    scene, choice = _plant_rung(requested, choice, controller, overrides, cache, auto_options)
     choosing = time.perf_counter() - choosing
     setup = build_loop(scene, controller, overrides, cache)
     kept = None if choice is None else _choice_run(setup, requested, controller, overrides, cache)
@@ -176,6 +166,16 @@ def run_closed_loop_scene(
     if out is not None:
         result.save(out, plots=setup.plant_scene.plots if plots is None else plots)
     return result
+
+
+def _plant_rung(requested, choice, controller, overrides, cache: SceneCache, auto_options):
+    """The scene at its plant's rung and the fidelity choice (None for a concrete fidelity).
+
+    An ``auto`` plant takes the shared ``choice`` when given, else chooses (kept in ``cache``).
+    """
+    if choice is not None and requested.plant.fidelity.kind == "auto":
+        return apply_choice(requested, choice, cache), choice
+    return resolve_auto(requested, controller, overrides, cache, **(auto_options or {}))
 
 
 def _with_fidelity(scene, fidelity):

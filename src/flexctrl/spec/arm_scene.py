@@ -203,6 +203,50 @@ def read_arm_scene(
     r.accept(*accept)
     model = resolve_model_path(r.string("model"), base_dir, r)
     fidelity = parse_fidelity(r.raw("fidelity", "amm:2"), source=source, key="fidelity")
+    tolerance = _read_tolerance(r, fidelity)
+    integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
+    gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
+    q0, qd0, qf0 = _read_initial(r.table_of("initial", {}))
+    zeta, friction, damping_form = _read_damping(r.table_of("damping", {}))
+    spec = _read_input(r.table_of("input", {}))
+    solver = _read_solver(r.table_of("solver", {}), integrator)
+    fft_span, fft_peaks, plots = _read_outputs(r.table_of("outputs", {}))
+    dt, duration = _read_times(r)
+    scene = ArmScene(
+        name=r.string("name", Path(source).stem),
+        description=r.string("description", ""),
+        model=model,
+        payload=r.nonnegative("payload", unit="kg") if r.has("payload") else None,
+        fidelity=fidelity,
+        modes=r.string("modes", "frozen", choices=MODES),  # type: ignore[arg-type]
+        gravity=(gravity[0], gravity[1]) if gravity else None,
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        q0=q0,
+        qd0=qd0,
+        qf0=qf0,
+        zeta=zeta,
+        friction=friction,
+        damping_form=damping_form,  # type: ignore[arg-type]
+        input=spec,
+        solver=solver,
+        fft_span=fft_span,
+        fft_peaks=fft_peaks,
+        plots=plots,
+        source=source,
+        tolerance=tolerance,
+        fidelity_walk=r.string("fidelity_walk", "estimate", choices=FIDELITY_WALKS),
+        fidelity_checks=r.string("fidelity_checks", "full", choices=FIDELITY_CHECKS),
+        axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
+        axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
+    )
+    r.finish()
+    return scene
+
+
+def _read_tolerance(r: TableReader, fidelity: Fidelity) -> float | None:
+    """``tolerance`` (m): required by ``fidelity = "auto"``."""
     tolerance = (
         r.number("tolerance", low=0.0, low_open=True, high=1.0, unit="m")
         if r.has("tolerance")
@@ -214,10 +258,11 @@ def read_arm_scene(
             "is missing; fidelity = 'auto' needs it; allowed: a number > 0 (m, tip-position "
             "tolerance), e.g. tolerance = 1e-3",
         )
-    integrator = r.string("integrator", "rk4", choices=INTEGRATOR_NAMES)
-    gravity = r.numbers("gravity", length=2, unit="m/s^2") if r.has("gravity") else None
+    return tolerance
 
-    ini = r.table_of("initial", {})
+
+def _read_initial(ini: TableReader):
+    """``[initial]``: joint angles (rad), rates (rad/s) and elastic coordinates (m)."""
     q0 = tuple(math.radians(a) for a in ini.degrees("q")) if ini.has("q") else None
     qd0 = (
         tuple(math.radians(a) for a in ini.numbers("qd", unit="degrees/s"))
@@ -235,8 +280,11 @@ def read_arm_scene(
             qf0[name] = qf.number(name, unit="m")
         qf.finish()
     ini.finish()
+    return q0, qd0, qf0
 
-    dmp = r.table_of("damping", {})
+
+def _read_damping(dmp: TableReader):
+    """``[damping]``: ``zeta``, ``friction`` (N m s/rad, one or one per joint), ``form``."""
     zeta = dmp.number("zeta", low=0.0, high=10.0) if dmp.has("zeta") else None
     friction = None
     if dmp.has("friction"):
@@ -248,8 +296,11 @@ def read_arm_scene(
         )
     damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
     dmp.finish()
+    return zeta, friction, damping_form
 
-    inp = r.table_of("input", {})
+
+def _read_input(inp: TableReader) -> InputSpec:
+    """``[input]``: none, or a bang-bang torque on one joint."""
     kind = inp.string("kind", "none", choices=INPUT_KINDS)
     if kind == "bangbang":
         t_accel = inp.positive("t_accel", unit="s")
@@ -264,15 +315,19 @@ def read_arm_scene(
     else:
         spec = InputSpec("none")
     inp.finish()
+    return spec
 
-    sol = r.table_of("solver", {})
-    solver: dict[str, Any] = {}
+
+def _read_solver(sol: TableReader, integrator: str) -> dict[str, Any]:
+    """``[solver]``: the options that apply to ``integrator`` (:data:`SOLVER_KEYS`)."""
     for key in list(sol.table):
         if key in SOLVER_KEYS and integrator not in SOLVER_KEYS[key]:
             raise sol.error(
                 key,
-                f"does not apply to integrator '{integrator}'; it applies to: {', '.join(SOLVER_KEYS[key])}",
+                f"does not apply to integrator '{integrator}'; it applies to: "
+                f"{', '.join(SOLVER_KEYS[key])}",
             )
+    solver: dict[str, Any] = {}
     if sol.has("rtol"):
         solver["rtol"] = sol.number("rtol", low=0.0, low_open=True, high=0.1)
     if sol.has("atol"):
@@ -288,13 +343,20 @@ def read_arm_scene(
     if sol.has("delta"):
         solver["delta"] = sol.number("delta", low=0.5, high=1.0)
     sol.finish()
+    return solver
 
-    out = r.table_of("outputs", {})
+
+def _read_outputs(out: TableReader) -> tuple[float, int, bool]:
+    """``[outputs]``: ``fft_span`` (s), ``fft_peaks``, ``plots``."""
     fft_span = out.positive("fft_span", 2.0, unit="s")
     fft_peaks = out.integer("fft_peaks", 2, low=1, high=20)
     plots = out.boolean("plots", True)
     out.finish()
+    return fft_span, fft_peaks, plots
 
+
+def _read_times(r: TableReader) -> tuple[float, float]:
+    """``dt`` and ``duration`` (s): a step no longer than the run, at most 5e7 steps."""
     dt = r.positive("dt", unit="s")
     duration = r.positive("duration", unit="s")
     if dt > duration:
@@ -305,36 +367,7 @@ def read_arm_scene(
     if duration / dt > 5e7:
         raise r.error(
             "duration",
-            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most 5e7 steps",
+            f"value {duration!r} needs {duration / dt:.3g} steps of {dt!r} s; allowed: at most "
+            "5e7 steps",
         )
-    scene = ArmScene(
-        name=r.string("name", Path(source).stem),
-        description=r.string("description", ""),
-        model=model,
-        payload=r.nonnegative("payload", unit="kg") if r.has("payload") else None,
-        fidelity=fidelity,
-        modes=r.string("modes", "frozen", choices=MODES),  # type: ignore[arg-type]
-        gravity=(gravity[0], gravity[1]) if gravity else None,
-        integrator=integrator,
-        dt=dt,
-        duration=duration,
-        q0=q0,
-        qd0=qd0,
-        qf0=qf0,
-        zeta=zeta,
-        friction=friction,
-        damping_form=damping_form,
-        input=spec,
-        solver=solver,
-        fft_span=fft_span,
-        fft_peaks=fft_peaks,
-        plots=plots,
-        source=source,
-        tolerance=tolerance,
-        fidelity_walk=r.string("fidelity_walk", "estimate", choices=FIDELITY_WALKS),
-        fidelity_checks=r.string("fidelity_checks", "full", choices=FIDELITY_CHECKS),
-        axial_shortening=r.boolean("axial_shortening") if r.has("axial_shortening") else None,
-        axial_stretch=r.boolean("axial_stretch") if r.has("axial_stretch") else None,
-    )
-    r.finish()
-    return scene
+    return dt, duration

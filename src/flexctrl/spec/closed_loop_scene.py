@@ -42,6 +42,7 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
+from flexctrl.spec.reference import DEFLECTIONS, PROFILES
 
 
 @dataclass(frozen=True)
@@ -173,20 +174,72 @@ def read_closed_loop_scene(
     """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
     plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
     r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
-    controller = None
-    if r.has("controller"):
-        name = r.string("controller")
-        try:
-            controller = shipped.find(name, "controller", base_dir)
-        except SpecError as exc:
-            raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
+    controller = _read_controller(r, base_dir)
     design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
     cf = (
         parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity")
         if r.has("controller_fidelity")
         else None
     )
-    target = r.table_of("target")
+    target = _read_target(r.table_of("target"), plant)
+    design_q = _read_design_configuration(r, len(target.q))
+    noise = r.table_of("noise", {})
+    enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
+    noise.finish()
+    judge = _read_metrics(r.table_of("metrics", {}))
+    r.finish()
+    t_arrive = target.move_time if target.profile == "quintic" else 0.0
+    move_time = target.move_time if target.profile == "quintic" else 0.0
+    if t_arrive + judge.settle_allowance >= plant.duration:
+        raise r.error(
+            "metrics.settle_allowance",
+            f"value {judge.settle_allowance!r} leaves no residual window after the move "
+            f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
+            f"({plant.duration - t_arrive:g} s)",
+        )
+    return ClosedLoopScene(
+        plant,
+        target.q,
+        controller,
+        design_payload,
+        cf,
+        enabled,
+        seed,
+        judge.settle_allowance,
+        judge.band,
+        target.profile,
+        move_time,
+        target.deflection,
+        design_q,
+        judge.divergence_deflection,
+        judge.divergence_angle,
+        judge.stable_band,
+    )
+
+
+def _read_controller(r: TableReader, base_dir: Path) -> Path | None:
+    """``controller``: a file relative to the scene's folder, or a shipped controller's name."""
+    if not r.has("controller"):
+        return None
+    name = r.string("controller")
+    try:
+        return shipped.find(name, "controller", base_dir)
+    except SpecError as exc:
+        raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
+
+
+@dataclass(frozen=True)
+class _Target:
+    """The ``[target]`` table read: joint angles (rad) and the reference to them."""
+
+    q: tuple[float, ...]
+    profile: str
+    move_time: float
+    deflection: str
+
+
+def _read_target(target: TableReader, plant: ArmScene) -> _Target:
+    """``[target]``: ``q`` (absolute) or ``move`` (relative), degrees; the reference's shape."""
     if target.has("q") == target.has("move"):
         given = "both are given" if target.has("q") else "missing required key"
         raise target.error(
@@ -202,11 +255,10 @@ def read_closed_loop_scene(
         if len(move) != len(start):
             raise target.error(
                 "move",
-                f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per joint",
+                f"has {len(move)} values for {len(start)} initial joint angles; allowed: one per "
+                "joint",
             )
         target_q = tuple(a + math.radians(b) for a, b in zip(start, move))
-    from flexctrl.spec.reference import DEFLECTIONS, PROFILES
-
     profile = target.string("profile", "step", choices=PROFILES)
     if profile == "quintic":
         if not target.has("move_time"):
@@ -215,24 +267,29 @@ def read_closed_loop_scene(
                 'is missing; allowed: a move time > 0 s, required with profile = "quintic"',
             )
         move_time = target.positive("move_time", unit="s")
-    else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch profiles
+    else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch
         move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
     deflection = target.string("deflection", "quasi_static", choices=DEFLECTIONS)
     target.finish()
-    design_q = None
-    if r.has("design_configuration"):
-        values = r.degrees("design_configuration")
-        if len(values) != len(target_q):
-            raise r.error(
-                "design_configuration",
-                f"has {len(values)} values for {len(target_q)} joints; "
-                "allowed: one angle per joint (degrees)",
-            )
-        design_q = tuple(math.radians(a) for a in values)
-    noise = r.table_of("noise", {})
-    enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
-    noise.finish()
-    metrics = r.table_of("metrics", {})
+    return _Target(target_q, profile, move_time, deflection)
+
+
+def _read_design_configuration(r: TableReader, n_joints: int) -> tuple[float, ...] | None:
+    """``design_configuration`` (degrees, one per joint), or None: the target."""
+    if not r.has("design_configuration"):
+        return None
+    values = r.degrees("design_configuration")
+    if len(values) != n_joints:
+        raise r.error(
+            "design_configuration",
+            f"has {len(values)} values for {n_joints} joints; "
+            "allowed: one angle per joint (degrees)",
+        )
+    return tuple(math.radians(a) for a in values)
+
+
+def _read_metrics(metrics: TableReader) -> MetricSettings:
+    """``[metrics]``: how a run is judged (the defaults are :class:`MetricSettings`')."""
     default = MetricSettings()
     settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
     band = metrics.positive("band", default.band, unit="m")
@@ -242,31 +299,4 @@ def read_closed_loop_scene(
     )
     stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
     metrics.finish()
-    r.finish()
-    t_arrive = move_time if profile == "quintic" else 0.0
-    move_time = move_time if profile == "quintic" else 0.0
-    if t_arrive + settle >= plant.duration:
-        raise r.error(
-            "metrics.settle_allowance",
-            f"value {settle!r} leaves no residual window after the move "
-            f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
-            f"({plant.duration - t_arrive:g} s)",
-        )
-    return ClosedLoopScene(
-        plant,
-        target_q,
-        controller,
-        design_payload,
-        cf,
-        enabled,
-        seed,
-        settle,
-        band,
-        profile,
-        move_time,
-        deflection,
-        design_q,
-        div_deflection,
-        div_angle,
-        stable_band,
-    )
+    return MetricSettings(settle, band, div_deflection, div_angle, stable_band)

@@ -213,28 +213,8 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
     base = path.resolve().parent
     r = TableReader(document, source)
     name = r.string("name", path.stem)
-    controller_name = r.string("controller")
-    controller = (base / controller_name).resolve()
-    if not controller.is_file():
-        raise r.error(
-            "controller", f"file {controller_name!r} not found (looked at '{controller}')"
-        )
-    controller_document = read_toml(controller)
-    raw = r.raw("parameters", None)
-    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
-        raise r.error(
-            "parameters",
-            f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
-            "with key, low, high",
-        )
-    parameters = []
-    for i, table in enumerate(raw):
-        p = TableReader(table, source, prefix=f"parameters[{i + 1}]")
-        parameters.append(_parameter(p, controller, controller_document))
-        p.finish()
-    keys = [p.key for p in parameters]
-    if len(set(keys)) != len(keys):
-        raise r.error("parameters", f"tunes a key twice ({keys}); allowed: each key once")
+    controller = _controller_file(r, base)
+    parameters = _parameters(r, controller)
     scenarios = r.raw("scenarios", None)
     if not isinstance(scenarios, dict) or not scenarios:
         raise r.error(
@@ -247,7 +227,56 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         o.string("metric", "tip_residual_rms"), o.string("statistic", "median", choices=STATISTICS)
     )
     o.finish()
-    c = r.table_of("constraints", {})
+    constraints = _constraints(r.table_of("constraints", {}))
+    optimizer = _optimizer(r.table_of("optimizer", {}))
+    r.finish()
+    return TuningSpec(
+        name,
+        source,
+        base,
+        controller,
+        parameters,
+        copy.deepcopy(scenarios),
+        objective,
+        constraints,
+        optimizer,
+    )
+
+
+def _controller_file(r: TableReader, base: Path) -> Path:
+    """``controller``: the controller file tuned, relative to the tuning file."""
+    controller_name = r.string("controller")
+    controller = (base / controller_name).resolve()
+    if not controller.is_file():
+        raise r.error(
+            "controller", f"file {controller_name!r} not found (looked at '{controller}')"
+        )
+    return controller
+
+
+def _parameters(r: TableReader, controller: Path) -> tuple[ParameterSpec, ...]:
+    """``[[parameters]]``: one or more, each key once, each a numeric key of the controller."""
+    controller_document = read_toml(controller)
+    raw = r.raw("parameters", None)
+    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
+        raise r.error(
+            "parameters",
+            f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
+            "with key, low, high",
+        )
+    parameters = []
+    for i, table in enumerate(raw):
+        p = TableReader(table, r.source, prefix=f"parameters[{i + 1}]")
+        parameters.append(_parameter(p, controller, controller_document))
+        p.finish()
+    keys = [p.key for p in parameters]
+    if len(set(keys)) != len(keys):
+        raise r.error("parameters", f"tunes a key twice ({keys}); allowed: each key once")
+    return tuple(parameters)
+
+
+def _constraints(c: TableReader) -> ConstraintSpec:
+    """``[constraints]``: what a candidate must satisfy."""
     constraints = ConstraintSpec(
         stable=c.boolean("stable", True),
         torque_limits=c.boolean("torque_limits", True),
@@ -257,7 +286,11 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         real_time=c.boolean("real_time", False),
     )
     c.finish()
-    m = r.table_of("optimizer", {})
+    return constraints
+
+
+def _optimizer(m: TableReader) -> OptimizerSpec:
+    """``[optimizer]``: the method, the evaluations, the population and the seed."""
     optimizer = OptimizerSpec(
         m.string("method", "differential_evolution", choices=METHODS),
         m.integer("evaluations", 60, low=1, high=100_000),
@@ -265,18 +298,7 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         m.integer("seed", 0, low=0),
     )
     m.finish()
-    r.finish()
-    return TuningSpec(
-        name,
-        source,
-        base,
-        controller,
-        tuple(parameters),
-        copy.deepcopy(scenarios),
-        objective,
-        constraints,
-        optimizer,
-    )
+    return optimizer
 
 
 def _parameter(p: TableReader, controller: Path, controller_document: dict) -> ParameterSpec:
