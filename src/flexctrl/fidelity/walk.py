@@ -328,7 +328,8 @@ class _Walk:
         """Rung ``n`` (which meets the tolerance) judged against the reference, with the evidence."""
         L, ref_n = self.ladder, self.ladder.ref_n
         # the reference model as a user would run it (its own step): the "always finest" cost; in
-        # the ladder walk only evidence (its cost ratio), so not run for it with checks = "tolerance"
+        # the ladder walk only evidence (its cost ratio), so not run for it with checks =
+        # "tolerance"
         finest = (
             self.run(ref_n) if self.full or self.walk != "ladder" or ref_n in self.runs else None
         )

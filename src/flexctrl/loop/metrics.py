@@ -100,8 +100,10 @@ def closed_loop_metrics(
     window = t >= t_arrive + settle_allowance
     if not np.any(window):
         raise ValueError(
-            f"the residual-vibration window is empty: the run ends at {t[-1]:g} s but the window starts at "
-            f"t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen the scene's duration"
+            f"the residual-vibration window is empty: the run ends at {t[-1]:g} s but the window "
+            "starts at "
+            f"t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen the scene's "
+            "duration"
         )
     torques = np.asarray(torques, dtype=float)
     times = np.asarray(controller_times, dtype=float)
@@ -123,7 +125,8 @@ def closed_loop_metrics(
     }
 
 
-#: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the ``stable_band``).
+#: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the
+#: ``stable_band``).
 FINAL_WINDOW = 1.0
 
 
@@ -213,7 +216,8 @@ def _add_verdicts(
 
 
 #: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists
-#: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``, ``peak_torque_2`` ...
+#: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``,
+#: ``peak_torque_2`` ...
 METRICS = (
     "tip_residual_rms",
     "tip_residual_peak",

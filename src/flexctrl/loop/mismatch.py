@@ -39,7 +39,8 @@ def state_projection(plant, design_names) -> np.ndarray:
         ):
             raise SpecError(
                 f"the full-state controller's coordinate '{name}' has no counterpart in the plant "
-                f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and design models "
+                f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and design "
+                "models "
                 "that are both assumed-modes ('rigid' or 'amm:N') of the same arm",
                 key="controller_fidelity",
             )
@@ -65,7 +66,8 @@ def plant_sensors(plant, design_sensors, q_joints):
     built = Sensors.build(plant, design_sensors.kinds, q_joints=q_joints)
     if built.names != design_sensors.names:
         raise SpecError(
-            f"the plant's sensors {list(built.names)} differ from the controller's {list(design_sensors.names)}; "
+            f"the plant's sensors {list(built.names)} differ from the controller's "
+            f"{list(design_sensors.names)}; "
             "strain gauges need links with modes in both models",
             key="controller_fidelity",
         )

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-#: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or m/s).
+#: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or
+#: m/s).
 MODAL_BOUND = 10.0
 
 
@@ -69,7 +70,8 @@ class LoopMonitor:
             i = int(out[0])
             return (
                 f"joint {i + 1} at {math.degrees(q[i]):.4g} deg, more than divergence_angle = "
-                f"{math.degrees(self.margin):g} deg outside its move [{math.degrees(self.start[i]):.4g}, "
+                f"{math.degrees(self.margin):g} deg outside its move "
+                f"[{math.degrees(self.start[i]):.4g}, "
                 f"{math.degrees(self.target[i]):.4g}] deg"
             )
         return None

@@ -13,7 +13,8 @@ from flexctrl.sim.compile import compile_for, compile_function
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
-#: (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the count).
+#: (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the
+#: count).
 UNROLL_LIMIT = 32
 
 
@@ -93,9 +94,9 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
         if constants.size == 0:
             return compile_function(fun, enabled=compile).function
-        # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a reduced
-        # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for amm:5) and
-        # evaluates 5x slower, for the same values bit for bit
+        # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a
+        # reduced input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s
+        # for amm:5) and evaluates 5x slower, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
         compiled = compile_for(
             fp, "itself", lambda: fp, enabled=compile
@@ -129,7 +130,8 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
         if constants.size == 0:  # f could not be rebuilt: one library per model
             compiled = compile_function(plant_step_function(model, substeps), enabled=compile)
             return compiled.function, compiled.compiled
-        # kept with the lifted f: a later configuration of the model shape neither builds nor loads it again
+        # kept with the lifted f: a later configuration of the model shape neither builds nor loads
+        # it again
         compiled = compile_for(
             fp,
             ("advance", substeps),
@@ -145,7 +147,8 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
             if constants.size
             else compile_function(build(), enabled=compile)
         )
-        # the constants enter once per step; as a constant of this (uncompiled) loop they are stored once
+        # the constants enter once per step; as a constant of this (uncompiled) loop they are stored
+        # once
         c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
         X = compiled.function.mapaccum(substeps)(
             x,

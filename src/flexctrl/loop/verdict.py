@@ -70,7 +70,8 @@ def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> floa
     sensors = controller.sensors if sensors is None else sensors
     if sensors.n_y != controller.sensors.n_y:
         raise SpecError(
-            f"the plant's sensors give {sensors.n_y} values, the controller reads {controller.sensors.n_y}",
+            f"the plant's sensors give {sensors.n_y} values, the controller reads "
+            f"{controller.sensors.n_y}",
             key="sensors",
         )
     q = np.asarray(target_q, dtype=float)

@@ -68,7 +68,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         friction = scene.friction * arm.n_links if len(scene.friction) == 1 else scene.friction
         if len(friction) != arm.n_links:
             raise SpecError(
-                f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or one per joint",
+                f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or one "
+                "per joint",
                 source=scene.source,
                 key="damping.friction",
             )

@@ -49,7 +49,8 @@ class SceneCache:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
                 raise ValueError(f"{name} {size!r} is not allowed; allowed: a whole number >= 1")
         self.maxsize = maxsize
-        #: entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the most memory)
+        #: entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the
+        #: most memory)
         self.limits = dict(limits or {})
         self._stores: dict[str, OrderedDict] = {}
         self._hits: dict[str, int] = {}

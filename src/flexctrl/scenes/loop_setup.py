@@ -31,8 +31,8 @@ from flexctrl.scenes.cache import SceneCache
 from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.fidelity import parse_fidelity
 
-#: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names no
-#: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
+#: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names
+#: no ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
 AUTO_DESIGN_FIDELITY = "amm:2"
 
 
@@ -68,7 +68,8 @@ class LoopSetup:
     x0: np.ndarray
     monitor: Any
     build_time_s: float
-    #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a designed controller).
+    #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a
+    #: designed controller).
     design_key: Any = None
 
 
@@ -268,13 +269,15 @@ def _design_model_of(ctrl, scene, overrides):
         if value is not None:
             raise SpecError(
                 "does not apply to a controller designed in Python (it keeps its own design model); "
+                ""
                 "allowed: no such key, or a controller file",
                 source=scene.source,
                 key=key,
             )
     if overrides:
         raise SpecError(
-            f"controller overrides {list(overrides)} do not apply to a designed controller; allowed: none",
+            f"controller overrides {list(overrides)} do not apply to a designed controller; "
+            "allowed: none",
             key="overrides",
         )
     model = getattr(ctrl, "design_model", None)

@@ -79,7 +79,8 @@ def load_model(
             document = apply_overrides(document, list(overrides), source=f"{source} (--set)")
     elif overrides is not None:
         raise SpecError(
-            f"value {overrides!r} is not allowed; allowed: a mapping {{'links[1].EI': 2.0}} or a list of "
+            f"value {overrides!r} is not allowed; allowed: a mapping {{'links[1].EI': 2.0}} or a "
+            "list of "
             "'KEY=VALUE' strings",
             source=source,
             key="overrides",

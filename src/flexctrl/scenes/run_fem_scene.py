@@ -51,7 +51,8 @@ def _simulate(scene: FemScene):
     if isinstance(scene, RPArmScene):
         return _simulate_rp_arm(scene)
     raise TypeError(
-        f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, RPArmScene, "
+        f"{type(scene).__name__} is not a finite-element scene; allowed: SlidingBeamScene, "
+        "RPArmScene, "
         "TelescopingScene (from read_fem_scene)"
     )
 

@@ -132,7 +132,8 @@ class ArmScene:
     #: How ``fidelity = "auto"`` walks the ladder for a closed loop: one of ``FIDELITY_WALKS``
     #: (:mod:`flexctrl.spec.fidelity`): ``estimate`` or ``ladder``.
     fidelity_walk: str = "estimate"
-    #: What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full`` or ``tolerance``.
+    #: What ``fidelity = "auto"`` checks beyond the tolerance: one of ``FIDELITY_CHECKS``: ``full``
+    #: or ``tolerance``.
     fidelity_checks: str = "full"
     axial_shortening: bool | None = None
     axial_stretch: bool | None = None

@@ -24,12 +24,14 @@ from flexctrl.spec.reader import TableReader, read_toml
 Array = NDArray[np.float64]
 #: The two links of a telescoping pair, in the order of the model file.
 SIDES = ("outer", "inner")
-#: The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or the
-#: link clamped at its inner end E in the carriage and held by one bearing at the housing mouth (Fig 4).
+#: The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or
+#: the link clamped at its inner end E in the carriage and held by one bearing at the housing mouth
+#: (Fig 4).
 JOINTS = ("supports", "clamped")
 
 
-# -- the revolute-prismatic arm ---------------------------------------------------------------------
+# -- the revolute-prismatic arm
+# ---------------------------------------------------------------------
 @dataclass(frozen=True)
 class RPArmSpec:
     """An R-P arm (``models/rp_arm.toml``): a flexible link sliding through a rotating rigid housing.
@@ -162,7 +164,8 @@ def load_rp_arm(path: str | Path, overrides: Iterable[str] = ()) -> RPArmSpec:
     return rp_arm_from_document(document, str(path))
 
 
-# -- the telescoping pair ---------------------------------------------------------------------------
+# -- the telescoping pair
+# ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Contact:
     """A bearing between the two links of a telescoping pair (Eqs 26-28).
@@ -243,9 +246,12 @@ class TelescopingSpec:
             for k, c in enumerate(self.contacts):
                 if not (0.0 < x1[k] <= L1 + 1e-12 and -1e-12 <= x2[k] <= L2 + 1e-12):
                     raise SpecError(
-                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact {k + 1} "
-                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; allowed: "
-                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on both links, "
+                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact "
+                        f"{k + 1} "
+                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; "
+                        "allowed: "
+                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on both "
+                        "links, "
                         "off the clamped root)",
                         source=self.source or None,
                         key=key,

@@ -22,10 +22,12 @@ KINDS = ("rigid", "amm", "fem", "auto")
 #: ``ladder`` (nonlinear runs only, from the bandwidth rule's start; the reference at a small
 #: step and half of it: no linear assumption, at several times the cost).
 FIDELITY_WALKS = ("estimate", "ladder")
-#: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``; flexctrl.fidelity.ladder.walk_and_judge):
-#: ``full`` (the rung below a rung that meets the tolerance is tried, so the choice is the lowest that meets it; the
-#: reference's step is checked) or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the rungs
-#: its estimate needs and the reference; the choice may be higher than needed, the reference's step is not checked).
+#: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``;
+#: flexctrl.fidelity.ladder.walk_and_judge): ``full`` (the rung below a rung that meets the
+#: tolerance is tried, so the choice is the lowest that meets it; the reference's step is checked)
+#: or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the rungs its
+#: estimate needs and the reference; the choice may be higher than needed, the reference's step is
+#: not checked).
 FIDELITY_CHECKS = ("full", "tolerance")
 _LIMITS = {"amm": (0, 6), "fem": (1, 64)}
 SPELLINGS = (

@@ -42,7 +42,8 @@ def _pieces(key: str, source: str) -> list[tuple[str, bool]]:
             current += char
     if inside:
         raise SpecError(
-            f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, e.g. grid.\"scene.dt\"",
+            f"override key '{key}' has an unclosed quote; allowed: a key part in double quotes, "
+            'e.g. grid."scene.dt"',
             source=source,
         )
     pieces.append((current, quoted))

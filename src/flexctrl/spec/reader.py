@@ -270,5 +270,6 @@ class TableReader:
             known = ", ".join(names)
             raise self.error(
                 name,
-                f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: {known}",
+                f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: "
+                f"{known}",
             )

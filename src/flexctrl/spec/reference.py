@@ -66,7 +66,8 @@ class JointReference:
             )
         if self.profile == "quintic" and not (math.isfinite(self.move_time) and self.move_time > 0):
             raise SpecError(
-                f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
+                f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the "
+                "quintic",
                 key="move_time",
             )
         if not (math.isfinite(self.t_start) and self.t_start >= 0):
@@ -159,7 +160,8 @@ class Move:
         object.__setattr__(self, "target", _angles(self.target, "target"))
         if self.deflection not in DEFLECTIONS:
             raise SpecError(
-                f"value {self.deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                f"value {self.deflection!r} is not allowed; allowed: "
+                f"{', '.join(map(repr, DEFLECTIONS))}",
                 key="deflection",
             )
         self.joint_reference()  # validates profile, lengths and times

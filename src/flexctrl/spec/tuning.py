@@ -317,7 +317,8 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
     if scale == "log" and low <= 0:
         raise p.error(
             "low",
-            f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = 'linear'",
+            f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = "
+            "'linear'",
         )
     initial = _file_value(controller_document, key)
     if initial is not None and (isinstance(initial, bool) or not isinstance(initial, (int, float))):

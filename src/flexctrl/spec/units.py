@@ -51,7 +51,8 @@ def warn_if_radians(degrees: Iterable[float], *, source: str | None, key: str) -
         shown = values[0] if len(values) == 1 else values
         in_degrees = [round(math.degrees(v), 3) for v in values]
         warn_spec(
-            f"value {shown!r} looks like radians; the unit expected is degrees (in degrees that would be "
+            f"value {shown!r} looks like radians; the unit expected is degrees (in degrees that "
+            "would be "
             f"{in_degrees[0] if len(values) == 1 else in_degrees!r})",
             source=source,
             key=key,
@@ -64,7 +65,8 @@ def warn_if_degrees(radians: Iterable[float], *, key: str, source: str | None = 
     values = [float(v) for v in radians]
     if looks_like_degrees(values):
         warn_spec(
-            f"value {values!r} looks like degrees (above 2 pi); the unit expected is radians (as radians "
+            f"value {values!r} looks like degrees (above 2 pi); the unit expected is radians (as "
+            "radians "
             f"{[round(math.radians(v), 4) for v in values]!r}, e.g. numpy.radians)",
             source=source,
             key=key,
