@@ -31,7 +31,7 @@ def linear_candidate(
     safety: float,
     factor: float = LINEAR_FACTOR,
 ) -> tuple[int | None, dict[str, Any]]:
-    """The lowest rung whose linear estimate is within ``factor`` of the tolerance, and the evidence.
+    """The lowest rung whose linear estimate is within ``factor`` of ``tol``, and the evidence.
 
     The linear estimate of rung ``m`` is the walk's formula (``safety`` times the largest
     tip distance to rungs ``m + 1`` and ``m + 2``, up to ``ref_n``) on the linear runs

@@ -1,4 +1,4 @@
-"""What the automatic-fidelity walk records: each run it made, its choice, an unreachable tolerance."""
+"""What the automatic-fidelity walk records: its runs, its choice, an unreachable tolerance."""
 
 from __future__ import annotations
 

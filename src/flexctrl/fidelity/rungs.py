@@ -1,4 +1,4 @@
-"""The pieces the automatic-fidelity walk is built from: rungs, bandwidths, distances, option checks.
+"""The automatic-fidelity walk's pieces: rungs, bandwidths, tip distances, option checks.
 
 The method they serve is described in :mod:`flexctrl.fidelity.ladder`.
 """
@@ -28,7 +28,7 @@ def rung_name(n: int) -> str:
 
 
 def required_modes(scene) -> int:
-    """Fewest modes per link that hold the scene's initial elastic coordinates (``qf<link><mode>``)."""
+    """Fewest modes per link that hold the scene's initial elastic coordinates (``qf<link><k>``)."""
     need = 0
     for name in scene.qf0:
         match = _QF.match(name)
@@ -38,7 +38,7 @@ def required_modes(scene) -> int:
 
 
 def tip_distance(a: RunRecord, b: RunRecord) -> TipError:
-    """Tip distance (m) of ``b`` from ``a`` on the finer run's samples; infinite if either diverged."""
+    """Tip distance (m) of ``b`` from ``a`` on the finer run's samples; infinite if one diverged."""
     if a.diverged_at is not None or b.diverged_at is not None:
         return TipError(rms=math.inf, max=math.inf)
     first, second = (a, b) if a.dt <= b.dt else (b, a)
@@ -104,7 +104,7 @@ def sampled_bandwidth(
 
 
 def _bandwidth(torque: np.ndarray, h: float, energy_fraction: float) -> float:
-    """The frequency (Hz) below which ``energy_fraction`` of the torques' one-sided spectrum lies."""
+    """The frequency (Hz) below which ``energy_fraction`` of the torques' spectrum lies."""
     n = torque.shape[0]
     n_fft = 1 << int(math.ceil(math.log2(4 * n)))
     spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)

@@ -1,4 +1,4 @@
-"""The walk over the ladder and its judgement: method steps 2 and 3 of :mod:`flexctrl.fidelity.ladder`.
+"""The walk over the ladder and its judgement: steps 2 and 3 of :mod:`flexctrl.fidelity.ladder`.
 
 :func:`walk_and_judge` is given what to answer (a :class:`Ladder`: the rungs, the
 tolerance, how strictly to check) and how to get runs (:class:`Runners`: callables that
@@ -325,7 +325,7 @@ class _Walk:
 
     # -- the reference and the choice -----------------------------------------------------------
     def judge(self, n: int) -> FidelityChoice:
-        """Rung ``n`` (which meets the tolerance) judged against the reference, with the evidence."""
+        """Rung ``n`` (which meets the tolerance) judged against the reference, with evidence."""
         L, ref_n = self.ladder, self.ladder.ref_n
         # the reference model as a user would run it (its own step): the "always finest" cost; in
         # the ladder walk only evidence (its cost ratio), so not run for it with checks =
@@ -454,7 +454,7 @@ def _ratio(a: float, b: float) -> float:
 
 
 def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict[str, float]:
-    """Rung ``m``'s distances to the rungs above and its estimate (empty when it was not estimated)."""
+    """Rung ``m``'s distances to the rungs above and its estimate (empty when not estimated)."""
     if m not in distances:
         return {}
     item = {"distance_to_next_m": distances[m][0]}
@@ -469,8 +469,8 @@ def _estimates(m: int, distances: dict[int, list[float]], safety: float) -> dict
 def _buildable_estimate(estimate: Callable[[int], float], m: int) -> float:
     """``estimate(m)``, or infinite when rung ``m`` cannot be built (a ``SpecError``).
 
-    E.g. strain gauges on ``rigid``.  Only a rung that cannot be built stops the walk this way; a solver or simulation
-    failure on it is raised, as the other walks raise it.
+    E.g. strain gauges on ``rigid``.  Only a rung that cannot be built stops the walk this
+    way; a solver or simulation failure on it is raised, as the other walks raise it.
     """
     try:
         return estimate(m)

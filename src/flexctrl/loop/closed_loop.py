@@ -75,14 +75,14 @@ def closed_loop(
     Returns
     -------
     ClosedLoopResult
-        ``metrics`` (``tip_residual_rms`` in m, ``settling_time`` in s, ``stable``, ...),
-        ``trajectory``, ``summary``, ``plot()``, ``save(dir)``, ``to_pandas()``.
+        ``metrics`` (SI units), ``trajectory``, ``summary``, ``plot()``, ``save(dir)`` ...
 
     Examples
     --------
     >>> import numpy as np, flexctrl as fc
     >>> model = fc.load_model("subedi3link", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
-    >>> pd = fc.design(model, fc.equilibrium(model, np.radians([30, 0, 0])), fc.load_controller("pd"))
+    >>> op = fc.equilibrium(model, np.radians([30, 0, 0]))
+    >>> pd = fc.design(model, op, fc.load_controller("pd"))
     >>> move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     >>> res = fc.closed_loop(model, pd, move, duration=4.0)
     >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3

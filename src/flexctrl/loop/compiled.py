@@ -1,4 +1,4 @@
-"""The closed loop chained in CasADi: every sample after the first, for controllers whose law is a map.
+"""The closed loop chained in CasADi: every sample after the first, for laws that are CasADi maps.
 
 Per sample the Python loop (:meth:`flexctrl.loop.run_state.LoopRun.python_sample`)
 measures, calls ``controller.step`` and the plant's compiled step, with Python and
@@ -48,7 +48,7 @@ CHUNK_STATES = 1 << 22
 
 
 def sample_function(run, law) -> ca.Function:
-    """``(x, xi, u_prev, r, z) -> (x_next, xi_next, u, X, v, y)`` of one sample (module docstring)."""
+    """``(x, xi, u_prev, r, z) -> (x_next, xi_next, u, X, v, y)``: one sample (module docstring)."""
     plant, sensors, controller = run.plant, run.sensors, run.controller
     x, u_prev = ca.MX.sym("x", plant.n_x), ca.MX.sym("u_prev", plant.n_u)
     xi = ca.MX.sym("xi", law.memory.size)
@@ -73,17 +73,17 @@ def sample_function(run, law) -> ca.Function:
 
 
 def chunk_size(run) -> int:
-    """Samples per call for ``run``: :data:`CHUNK`, fewer when its samples hold many plant states."""
+    """Samples per call for ``run``: :data:`CHUNK`, fewer when a sample holds many plant states."""
     per_sample = run.substeps * run.plant.n_x
     return max(1, min(CHUNK, CHUNK_STATES // per_sample))
 
 
 def run_compiled(run, law) -> None:
-    """Samples ``run.done`` to the end of ``run`` (a :class:`~flexctrl.loop.run_state.LoopRun`), chained.
+    """Samples ``run.done`` to the end of ``run``, chained in CasADi (module docstring).
 
     Parameters
     ----------
-    run : LoopRun
+    run : flexctrl.loop.run_state.LoopRun
         After its first sample (run in Python).
     law : SampledLaw
         The controller's :meth:`sampled_law`.
@@ -120,10 +120,10 @@ def run_compiled(run, law) -> None:
 
 
 def _keep(run, blocks: np.ndarray, us: np.ndarray, k0: int) -> int:
-    """Store the states ``blocks`` and torques ``us`` of samples ``k0, k0 + 1, ...`` up to a divergence.
+    """Keep the states ``blocks`` and torques ``us`` of samples ``k0, k0 + 1, ...`` in ``run``.
 
-    Returns how many samples were kept; a diverging sample is kept and recorded
-    (:meth:`~flexctrl.loop.run_state.LoopRun.check`), and ends the run.
+    Returns how many samples were kept: up to a divergence, whose sample is kept and
+    recorded (:meth:`~flexctrl.loop.run_state.LoopRun.check`) and ends the run.
     """
     per, stride, plant = run.per, run.stride, run.plant
     first = _first_divergence(run, blocks, k0)
@@ -139,7 +139,7 @@ def _keep(run, blocks: np.ndarray, us: np.ndarray, k0: int) -> int:
 
 
 def _first_divergence(run, blocks: np.ndarray, k0: int) -> int | None:
-    """Index (into ``blocks``) of the first sample the Python loop's check would stop at, or None."""
+    """Index into ``blocks`` of the first sample the Python loop's check would stop at, or None."""
     plant = run.plant
     with np.errstate(invalid="ignore", over="ignore"):
         bad = ~np.all(np.isfinite(blocks), axis=(1, 2))

@@ -101,9 +101,8 @@ def closed_loop_metrics(
     if not np.any(window):
         raise ValueError(
             f"the residual-vibration window is empty: the run ends at {t[-1]:g} s but the window "
-            "starts at "
-            f"t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen the scene's "
-            "duration"
+            f"starts at t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen "
+            "the scene's duration"
         )
     torques = np.asarray(torques, dtype=float)
     times = np.asarray(controller_times, dtype=float)
@@ -203,7 +202,7 @@ def run_metrics(
 def _add_verdicts(
     metrics: dict, trajectory, tip_target: np.ndarray, *, duration: float, stable_band: float
 ) -> None:
-    """``settled``, ``final_tip_error``, ``stable`` and ``divergence_time`` (:func:`run_metrics`)."""
+    """Add ``settled``, ``final_tip_error``, ``stable`` and ``divergence_time`` to ``metrics``."""
     divergence = trajectory.meta.get("divergence")
     metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
     if not metrics["settled"]:

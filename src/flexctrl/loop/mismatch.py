@@ -1,4 +1,4 @@
-"""Plant and design model apart: a controller's coordinates and sensors carried onto another plant."""
+"""Plant and design model apart: a controller's coordinates and sensors carried onto the plant."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from flexctrl.errors import SpecError
 
 
 def state_projection(plant, design_names) -> np.ndarray:
-    """Matrix ``P`` (n_design x plant.n_x) with ``x_design = P x_plant``: coordinates matched by name.
+    """Matrix ``P`` (n_design x plant.n_x), ``x_design = P x_plant``: coordinates matched by name.
 
     An assumed-modes rung keeps the first ``N`` clamped-mass modes of each link, the same
     functions at every ``N`` (a mode's shape and frequency do not depend on how many are

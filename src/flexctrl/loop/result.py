@@ -13,16 +13,19 @@ from flexctrl.sim.trajectory import Trajectory
 
 
 def tip_at_rest(model, q_joints) -> np.ndarray:
-    """The tip position (m) of ``model``'s static equilibrium at the joint angles ``q_joints`` (rad)."""
+    """The tip position (m) of ``model``'s static equilibrium at the joint angles ``q_joints``.
+
+    ``q_joints`` in rad.
+    """
     from flexctrl.linear import equilibrium
 
-    target = equilibrium(model, np.asarray(q_joints, dtype=float))
+    target = equilibrium(model, tuple(float(a) for a in q_joints))
     return np.array(model.functions["tip"](target.q, target.qd)[0], dtype=float).ravel()
 
 
 @dataclass
 class ClosedLoopResult:
-    """A closed-loop run (:func:`flexctrl.closed_loop`, :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`).
+    """A closed-loop run: what :func:`flexctrl.closed_loop` and a closed-loop scene return.
 
     Attributes
     ----------
@@ -69,11 +72,11 @@ class ClosedLoopResult:
         return float(window[0]), float(window[1])
 
     def to_pandas(self):
-        """The trajectory as a ``pandas.DataFrame`` (the CSV's columns, SI units, indexed by time in s)."""
+        """The trajectory as a ``pandas.DataFrame``: the CSV's columns, SI, indexed by time (s)."""
         return self.trajectory.to_pandas()
 
     def plot(self, label: str | None = None):
-        """One figure: tip error, every link's tip deflection, torques with their limits, joint angles.
+        """One figure: tip error, the links' tip deflections, torques and limits, joint angles.
 
         Returns
         -------
@@ -85,7 +88,7 @@ class ClosedLoopResult:
         return compare({label or self.summary.get("controller", {}).get("kind", "run"): self})
 
     def save(self, directory: str | Path, *, plots: bool = True) -> list[Path]:
-        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) the PNGs into ``directory``.
+        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) PNGs into ``directory``.
 
         Returns the paths written (also kept in :attr:`files`).
         """

@@ -124,7 +124,7 @@ class LoopRun:
         )
 
     def kept(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Times (s), states and held torques (N m) kept so far; the last torque is the last held."""
+        """Times (s), states and held torques (N m) kept so far (the last torque the last held)."""
         X, U = self.X[: self.end], self.U[: self.end]
         U[-1] = self.u
         return np.arange(X.shape[0]) * (self.dt * self.stride), X, U

@@ -249,7 +249,7 @@ def integrate_closed_loop(
 
 
 def run_samples(run: LoopRun) -> str:
-    """Run every sample of ``run``: the first in Python, the rest chained in CasADi when the law allows.
+    """Run every sample of ``run``: the first in Python, the rest chained in CasADi if possible.
 
     Returns how the samples after the first ran: ``"compiled"`` (the controller's
     :meth:`sampled_law`, :func:`flexctrl.loop.compiled.run_compiled`) or ``"python"``

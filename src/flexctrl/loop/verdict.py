@@ -41,7 +41,9 @@ def closed_loop_matrix(Ad, Bd, C, D, law) -> np.ndarray:
 
 
 def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> float | None:
-    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q`` (see the module docstring).
+    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q``.
+
+    The loop is the module docstring's map.
 
     Parameters
     ----------
@@ -75,7 +77,7 @@ def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> floa
             key="sensors",
         )
     q = np.asarray(target_q, dtype=float)
-    op = equilibrium(plant, q)
+    op = equilibrium(plant, tuple(q))
     A, B, C, D = Linearizer(plant, sensors).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), controller.sample_time)
     Ad, Bd = np.asarray(sysd.A, dtype=float), np.asarray(sysd.B, dtype=float)

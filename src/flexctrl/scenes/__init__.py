@@ -4,14 +4,22 @@
 :data:`flexctrl.scenes.scene_runners.SCENE_RUNNERS`, the one place runners are named (the
 descriptions' readers are :data:`flexctrl.spec.scene.SCENE_READERS`).  Modules:
 
-``arm_setup``, ``run_arm_scene``          an open-loop arm scene (building blocks; the runner)
-``loop_setup``, ``run_closed_loop_scene`` a closed-loop scene (models and controller; the runner)
-``run_fem_scene``                         the finite-element scenes
-``auto``, ``auto_closed_loop``            running scenes for the automatic-fidelity ladder
-``auto_linear``                           a closed loop's rungs estimated on linearised plants
-``cache``                                 :class:`~flexctrl.scenes.cache.SceneCache`, owned by the caller
-``model_files``                           a model file built (:func:`flexctrl.load_model`)
-``scene_runners``                         the runner of each scene kind
+``arm_setup``, ``run_arm_scene``
+    an open-loop arm scene (building blocks; the runner);
+``loop_setup``, ``run_closed_loop_scene``
+    a closed-loop scene (models and controller; the runner);
+``run_fem_scene``
+    the finite-element scenes;
+``auto``, ``auto_closed_loop``
+    running scenes for the automatic-fidelity ladder;
+``auto_linear``
+    a closed loop's rungs estimated on linearised plants;
+``cache``
+    :class:`~flexctrl.scenes.cache.SceneCache`, owned by the caller;
+``model_files``
+    a model file built (:func:`flexctrl.load_model`);
+``scene_runners``
+    the runner of each scene kind.
 """
 
 from __future__ import annotations

@@ -68,8 +68,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         friction = scene.friction * arm.n_links if len(scene.friction) == 1 else scene.friction
         if len(friction) != arm.n_links:
             raise SpecError(
-                f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or one "
-                "per joint",
+                f"lists {len(friction)} values for {arm.n_links} joints; allowed: one value, or "
+                "one per joint",
                 source=scene.source,
                 key="damping.friction",
             )
@@ -123,7 +123,8 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     model
         The built model, when the caller has it (e.g. from a cache); built here otherwise.
     integrator
-        A set-up :class:`~flexctrl.sim.integrator.Integrator` for ``model`` at ``scene.dt``, when the caller has one.
+        A set-up :class:`~flexctrl.sim.integrator.Integrator` for ``model`` at ``scene.dt``,
+        when the caller has one.
     **integrator_options
         Passed to the integrator class (e.g. ``compile=False``).
 

@@ -287,7 +287,7 @@ def _simulate_rung(
 
 
 def prepared(scene, cache: SceneCache) -> tuple[Any, Any]:
-    """The cached model and set-up integrator for a scene at a concrete fidelity, integrator and step.
+    """The cached model and set-up integrator of a scene at a concrete fidelity, integrator, step.
 
     Used to run a scene that ``fidelity = "auto"`` resolved: the chooser has built both already.
     """

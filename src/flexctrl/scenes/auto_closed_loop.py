@@ -105,7 +105,7 @@ def closed_loop_key(
 def whole_run_key(
     scene, fidelity: str, dt: float, controller=None, overrides: tuple[str, ...] = ()
 ) -> tuple:
-    """The key of :data:`WHOLE_RUNS`: the chooser's scene (design pinned), the rung and its step (s)."""
+    """The key of :data:`WHOLE_RUNS`: the chooser's scene (design pinned), rung and step (s)."""
     return (closed_loop_key(scene, controller, tuple(overrides)), str(fidelity), float(dt))
 
 
@@ -118,7 +118,7 @@ def simulate_closed_rung(
     overrides: tuple[str, ...] = (),
     cache: SceneCache | None = None,
 ) -> RunRecord:
-    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s; default method step 4).
+    """The closed loop with the plant at ``fidelity``, RK4 step ``dt`` (s; default method step 4).
 
     The tip is kept on the scene's grid (every ``scene.dt / dt``-th plant sample), so
     every rung is compared on the same times without interpolation.  A run at the rung's
@@ -209,7 +209,7 @@ def choose_closed_loop_fidelity(
     walk: str = "estimate",
     checks: str = "full",
 ) -> FidelityChoice:
-    """The lowest plant rung of ``rigid, amm:1 .. amm:top`` estimated to keep a loop's tip in ``tol``.
+    """The lowest plant rung of ``rigid .. amm:top`` estimated to keep a loop's tip in ``tol``.
 
     Every candidate is a whole closed-loop run with the plant at the rung (module docstring).
 

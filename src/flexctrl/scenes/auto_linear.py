@@ -1,4 +1,4 @@
-"""The linear estimate of a closed loop's plant rungs, for the estimate-first walk (issue 14).
+"""The linear estimate of a closed loop's plant rungs, for the estimate-first walk.
 
 :func:`linear_closed_rung` runs the scene's closed loop with the plant at a rung
 replaced by its linearisation: the rung's model linearised at its static equilibrium
@@ -15,8 +15,8 @@ The controller is the real one (designed as for the nonlinear runs, its saturati
 and constraints kept), called on the linear plant's measurements; controllers with a
 sampled law run in one CasADi call (:mod:`flexctrl.loop.compiled`), others sample by
 sample.  The tip is the model's nonlinear tip map of the linear states on the grid.
-A run costs milliseconds to a second against seconds for the nonlinear loop; it is an
-estimate to pick the rung to certify, never a certificate.
+A run costs a fraction of the nonlinear loop; it is an estimate to pick the rung to
+certify, never a certificate.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ LINEAR_STEPS = ("rk4", "exact")
 def grid_maps(
     A: np.ndarray, B: np.ndarray, grid: float, h: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step ``grid`` (s), ``du`` held.
+    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step (s), ``du`` held.
 
     ``h`` None: the exact zero-order hold.  Otherwise ``grid / h`` (a whole number) RK4
     steps of ``h`` on ``dx' = A dx + B du``: one step is ``dx + h T(hA) (A dx + B du)``
@@ -76,7 +76,7 @@ def grid_maps(
 def linear_advance(
     x_op: np.ndarray, u_op: np.ndarray, Phi: np.ndarray, Gamma: np.ndarray, substeps: int
 ) -> ca.Function:
-    """``advance(x, u, dt) -> X`` (n_x, substeps): the linear plant's grid states over one held sample."""
+    """``advance(x, u, dt) -> X`` (n_x, substeps): the linear plant's states over a held sample."""
     n = x_op.size
     P, G = [np.eye(n)], [np.zeros_like(Gamma)]
     for _ in range(substeps):
@@ -98,7 +98,9 @@ def linear_closed_rung(
     overrides=(),
     cache: SceneCache | None = None,
 ) -> RunRecord:
-    """The scene's closed loop on the linearised plant at ``fidelity`` (module docstring), on the scene's grid.
+    """The scene's closed loop on the linearised plant at ``fidelity``, on the scene's grid.
+
+    The method is the module docstring's.
 
     Parameters
     ----------
@@ -163,6 +165,9 @@ def linear_closed_rung(
 
 
 def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):
-    """The scene's loop with the plant at ``fidelity`` on the scene's grid step (models and design from ``cache``)."""
+    """The scene's loop with the plant at ``fidelity`` on the scene's grid step.
+
+    Models and design come from ``cache``.
+    """
     plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity))
     return build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)

@@ -1,4 +1,4 @@
-"""Building a closed loop from a scene: plant and design models, the designed controller, its reference.
+"""Building a closed loop from a scene: plant and design models, the controller, its reference.
 
 :func:`build_loop` is the one place a closed-loop scene becomes objects: the plant
 (the scene's arm at the plant's fidelity), the design model (another payload, fidelity
@@ -50,7 +50,7 @@ def pin_design(scene):
 
 @dataclass
 class LoopSetup:
-    """Everything a closed-loop run needs, built by :func:`build_loop` (see :func:`run_closed_loop_scene`)."""
+    """Everything a closed-loop run needs, built by :func:`build_loop`."""
 
     scene: Any
     plant_scene: Any
@@ -74,10 +74,12 @@ class LoopSetup:
 
 
 def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
-    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking the scene's path.
+    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset.
 
-    ``reference``: the :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the scene's path on
-    ``design_model`` when the caller keeps one (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
+    The controller tracks the scene's path: ``reference``, the
+    :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the path on
+    ``design_model`` when the caller keeps one
+    (:meth:`~flexctrl.scenes.cache.SceneCache.reference`), else one built here.
 
     Raises
     ------
@@ -106,7 +108,7 @@ def design_scene_controller(scene, design_model, settings, path: str | Path, ref
 
 
 def is_designed(controller) -> bool:
-    """True for a designed controller object (it has ``step`` and ``sensors``), False for a file path or None."""
+    """True for a designed controller (with ``step`` and ``sensors``), False for a path or None."""
     return hasattr(controller, "step") and hasattr(controller, "sensors")
 
 
@@ -268,9 +270,8 @@ def _design_model_of(ctrl, scene, overrides):
     ):
         if value is not None:
             raise SpecError(
-                "does not apply to a controller designed in Python (it keeps its own design model); "
-                ""
-                "allowed: no such key, or a controller file",
+                "does not apply to a controller designed in Python (it keeps its own design "
+                "model); allowed: no such key, or a controller file",
                 source=scene.source,
                 key=key,
             )

@@ -62,7 +62,9 @@ def load_model(
     Examples
     --------
     >>> import flexctrl as fc
-    >>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> model = fc.load_model(
+    ...     "models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0]
+    ... )
     >>> model.n_x, model.spec.payload.mass
     (6, 2.0)
     """

@@ -27,7 +27,7 @@ from flexctrl.spec.arm_scene import ArmScene
 def resolve_auto(
     scene: ArmScene, cache: SceneCache | None = None, **options: Any
 ) -> tuple[ArmScene, Any]:
-    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step, and the choice.
+    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step; the choice.
 
     Runs :func:`flexctrl.scenes.auto.choose_fidelity` with the scene's
     ``tolerance`` and ``options`` (keywords of ``choose_fidelity``, e.g. ``top``;

@@ -54,7 +54,7 @@ from flexctrl.spec.fidelity import parse_fidelity
 def resolve_auto(
     scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any
 ):
-    """For a plant with ``fidelity = "auto"``: the scene at the chosen plant fidelity and step, and the choice.
+    """For an ``auto`` plant: the scene at the chosen plant fidelity and step, and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
     :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` with the
@@ -102,7 +102,7 @@ def run_closed_loop_scene(
     cache: SceneCache | None = None,
     choice=None,
 ) -> ClosedLoopResult:
-    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its files.
+    """Build a closed-loop scene's plant and controller, run it and (with ``out``) write its files.
 
     Parameters
     ----------
@@ -199,7 +199,7 @@ def _choice_run(setup: LoopSetup, requested, controller, overrides, cache: Scene
 
 
 def _from_choice_run(setup: LoopSetup, whole: dict[str, Any]):
-    """The trajectory of the run the chooser made at the chosen rung (the same run, not repeated)."""
+    """The trajectory of the chooser's run at the chosen rung (the same run, not repeated)."""
     setup.controller.stats = copy.deepcopy(whole["stats"])
     meta = {
         **whole["meta"],

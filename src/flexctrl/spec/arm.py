@@ -15,8 +15,8 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
                                      # et al.'s Eq 68 as printed, d = 2 zeta omega, or "stiffness":
                                      # the finite elements' (2 zeta / omega_1) K (see DAMPING_FORMS)
-    axial_shortening = true          # a bent link's foreshortening; default: on for finite elements,
-                                     # off for assumed modes (docs/amm.md section 10)
+    axial_shortening = true          # a bent link's foreshortening; default: on for finite
+                                     # elements, off for assumed modes (docs/amm.md section 10)
     axial_stretch = true             # axially compliant assumed-modes links (EA; docs/amm.md
                                      # section 14); default off; finite elements always are
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
@@ -51,11 +51,15 @@ from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
 MAX_MODES = 6
-#: A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length * length**3 / 12``
-#: warns (a slip of a unit or of the axis: about the link's end it would be 4x).
+#: A link's ``inertia`` further than this factor from the uniform link's
+#: ``mass_per_length * length**3 / 12`` warns (a slip of a unit or of the axis: about the link's
+#: end it would be 4x).
 INERTIA_FACTOR = 2.0
-JOINT_TYPES = ("revolute", "prismatic")
-BOUNDARY_INERTIA = ("exact", "paper")
+JointType = Literal["revolute", "prismatic"]
+BoundaryInertia = Literal["exact", "paper"]
+DampingForm = Literal["ratio", "paper", "stiffness"]
+JOINT_TYPES: tuple[JointType, ...] = ("revolute", "prismatic")
+BOUNDARY_INERTIA: tuple[BoundaryInertia, ...] = ("exact", "paper")
 #: Modal damping forms (``damping_form`` in model files, ``[damping] form`` in scenes,
 #: ``damping=`` in :func:`flexctrl.dynamics.build.build_model`).  ``"ratio"``:
 #: ``d = 2 zeta omega m_l`` (kg/s), so ``zeta`` is the damping ratio of the isolated mode
@@ -66,7 +70,7 @@ BOUNDARY_INERTIA = ("exact", "paper")
 #: (``zeta_i`` the link's first ratio, ``omega_1i`` its first clamped-mass frequency), i.e. mode j
 #: of link i has the ratio ``zeta_i omega_j / omega_1i``: with it both families damp alike
 #: (``docs/amm.md`` section 14).
-DAMPING_FORMS = ("ratio", "paper", "stiffness")
+DAMPING_FORMS: tuple[DampingForm, ...] = ("ratio", "paper", "stiffness")
 
 
 @dataclass(frozen=True)
@@ -138,7 +142,8 @@ class LinkSpec:
             return self.damping_ratios[0]
         if mode >= len(self.damping_ratios):
             raise SpecError(
-                f"damping_ratio lists {len(self.damping_ratios)} values but mode {mode + 1} was asked for; "
+                f"damping_ratio lists {len(self.damping_ratios)} values but mode {mode + 1} was "
+                "asked for; "
                 "give one value per mode or a single value for all"
             )
         return self.damping_ratios[mode]
@@ -177,7 +182,7 @@ class JointSpec:
     source : str
     """
 
-    type: Literal["revolute", "prismatic"]
+    type: JointType
     hub_mass: float
     hub_inertia: float
     friction: float
@@ -243,8 +248,8 @@ class ArmSpec:
     payload: PayloadSpec
     gravity: tuple[float, float]
     configuration: tuple[float, ...]
-    boundary_inertia: Literal["exact", "paper"] = "exact"
-    damping_form: Literal["ratio", "paper", "stiffness"] = "ratio"
+    boundary_inertia: BoundaryInertia = "exact"
+    damping_form: DampingForm = "ratio"
     source: str = ""
     notes: str = ""
     axial_shortening: bool | None = None
@@ -304,7 +309,8 @@ def _read_link(r: TableReader) -> LinkSpec:
         if 2 * section.thickness >= min(section.width, section.height):
             raise r.error(
                 "section.thickness",
-                f"value {section.thickness!r} leaves no hollow; allowed: < half the width and height",
+                f"value {section.thickness!r} leaves no hollow; allowed: < half the width and "
+                "height",
             )
     damping = r.raw("damping_ratio", 0.0)
     if isinstance(damping, list):
@@ -327,7 +333,8 @@ def _read_link(r: TableReader) -> LinkSpec:
     if len(ratios) > 1 and len(ratios) < link.n_modes:
         raise r.error(
             "damping_ratio",
-            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per mode",
+            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per "
+            "mode",
         )
     r.finish()
     return link
@@ -342,9 +349,10 @@ def _link_inertia(r: TableReader) -> float:
     value = r.nonnegative("inertia", unit="kg m^2")
     if not uniform / INERTIA_FACTOR <= value <= uniform * INERTIA_FACTOR:
         warn_spec(
-            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / 12 = "
-            f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within a factor "
-            f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
+            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 "
+            f"/ 12 = {uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected "
+            f"within a factor {INERTIA_FACTOR:g} of it (leave the key out to use the uniform "
+            "value)",
             source=r.source,
             key=r.key("inertia"),
             stacklevel=4,
@@ -353,8 +361,11 @@ def _link_inertia(r: TableReader) -> float:
 
 
 def _torque_limit(r: TableReader) -> float:
-    """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an actuator without a limit."""
-    allowed = "a finite number > 0 (N m), or inf for an actuator without a limit (written out: no default)"
+    """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an unlimited actuator."""
+    allowed = (
+        "a finite number > 0 (N m), or inf for an actuator without a limit (written out: no "
+        "default)"
+    )
     value = r.raw("torque_limit", allowed=allowed)
     if isinstance(value, float) and value == math.inf:
         return math.inf
@@ -367,7 +378,7 @@ def _torque_limit(r: TableReader) -> float:
 
 def _read_joint(r: TableReader) -> JointSpec:
     joint = JointSpec(
-        type=r.string("type", "revolute", choices=JOINT_TYPES),  # type: ignore[arg-type]
+        type=r.choice("type", JOINT_TYPES, "revolute"),
         hub_mass=r.nonnegative("hub_mass", unit="kg"),
         hub_inertia=r.nonnegative("hub_inertia", unit="kg m^2"),
         friction=r.nonnegative("friction", 0.0, unit="N m s/rad"),
@@ -404,8 +415,8 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         payload=payload,
         gravity=(gravity[0], gravity[1]),
         configuration=tuple(math.radians(a) for a in config_deg),
-        boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
-        damping_form=r.string("damping_form", "ratio", choices=DAMPING_FORMS),  # type: ignore[arg-type]
+        boundary_inertia=r.choice("boundary_inertia", BOUNDARY_INERTIA, "exact"),
+        damping_form=r.choice("damping_form", DAMPING_FORMS, "ratio"),
         axial_shortening=r.boolean("axial_shortening", True) if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch", True) if r.has("axial_stretch") else None,
         source=source,

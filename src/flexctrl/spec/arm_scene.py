@@ -10,14 +10,17 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     description = "..."               # free text
     model = "models/subedi3link.toml" # relative to the scene file, the working dir or the repo
     payload = 2.0                     # kg (default: the model file's)
-    fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling) or 'auto'
+    fidelity = "amm:2"                # 'rigid', 'amm:N', 'fem:N' (the --fidelity spelling), 'auto'
     tolerance = 1e-3                  # m: tip-position tolerance; required by fidelity = "auto"
     fidelity_walk = "estimate"        # how auto walks the ladder for a closed loop: "estimate" or
-                                      # "ladder" (flexctrl.scenes.auto_closed_loop chooses the model)
-    fidelity_checks = "full"          # or "tolerance": auto certifies the tolerance only (no rung below, no step check)
+                                      # "ladder" (flexctrl.scenes.auto_closed_loop)
+    fidelity_checks = "full"          # or "tolerance": auto certifies the tolerance only (no rung
+                                      # below, no step check)
     modes = "frozen"                  # or "scheduled"
-    axial_shortening = true           # a bent link's foreshortening (default: the model file's; docs/amm.md)
-    axial_stretch = true              # axially compliant assumed-modes links (default: the model file's)
+    axial_shortening = true           # a bent link's foreshortening (default: the model file's;
+                                      # docs/amm.md)
+    axial_stretch = true              # axially compliant assumed-modes links (default: the model
+                                      # file's)
     gravity = [0.0, -9.81]            # m/s^2 (default: the model file's)
     integrator = "rk4"                # rk4 | cvodes | idas | scipy | euler | newmark
     dt = 1e-3                         # s: step, output interval and torque hold
@@ -26,8 +29,9 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
     [damping]   zeta (every mode, all links), friction (N m s/rad, one value or one per joint),
                 form = "ratio" (d = 2 zeta omega m_l, zeta the modal damping ratio) or "paper"
                 (Subedi et al. Eq 68 as printed, d = 2 zeta omega: 1/s where kg/s is needed,
-                an effective ratio zeta / m_l) or "stiffness" (the finite elements' (2 zeta / omega_1) K:
-                mode j has the ratio zeta omega_j / omega_1); default: the model file's damping_form
+                an effective ratio zeta / m_l) or "stiffness" (the finite elements'
+                (2 zeta / omega_1) K: mode j has the ratio zeta omega_j / omega_1); default: the
+                model file's damping_form
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
     [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
@@ -48,12 +52,14 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
-from flexctrl.spec.arm import DAMPING_FORMS
+from flexctrl.spec.arm import DAMPING_FORMS, DampingForm
 from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 
-MODES = ("frozen", "scheduled")
-INPUT_KINDS = ("none", "bangbang")
+Modes = Literal["frozen", "scheduled"]
+InputKind = Literal["none", "bangbang"]
+MODES: tuple[Modes, ...] = ("frozen", "scheduled")
+INPUT_KINDS: tuple[InputKind, ...] = ("none", "bangbang")
 INTEGRATOR_NAMES = ("rk4", "cvodes", "idas", "scipy", "euler", "newmark")
 SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 #: Solver keys and the integrators they apply to.
@@ -78,7 +84,7 @@ class InputSpec:
     seconds, then zero.
     """
 
-    kind: Literal["none", "bangbang"] = "none"
+    kind: InputKind = "none"
     joint: int = 1
     amplitude: float = 0.0
     t_accel: float = 0.0
@@ -111,7 +117,7 @@ class ArmScene:
     dt: float
     duration: float
     integrator: str = "rk4"
-    modes: Literal["frozen", "scheduled"] = "frozen"
+    modes: Modes = "frozen"
     payload: float | None = None
     gravity: tuple[float, float] | None = None
     q0: tuple[float, ...] | None = None
@@ -119,7 +125,7 @@ class ArmScene:
     qf0: dict[str, float] = field(default_factory=dict)
     zeta: float | None = None
     friction: tuple[float, ...] | None = None
-    damping_form: Literal["ratio", "paper", "stiffness"] | None = None
+    damping_form: DampingForm | None = None
     input: InputSpec = InputSpec()
     solver: dict[str, Any] = field(default_factory=dict)
     fft_span: float = 2.0
@@ -219,7 +225,7 @@ def read_arm_scene(
         model=model,
         payload=r.nonnegative("payload", unit="kg") if r.has("payload") else None,
         fidelity=fidelity,
-        modes=r.string("modes", "frozen", choices=MODES),  # type: ignore[arg-type]
+        modes=r.choice("modes", MODES, "frozen"),
         gravity=(gravity[0], gravity[1]) if gravity else None,
         integrator=integrator,
         dt=dt,
@@ -229,7 +235,7 @@ def read_arm_scene(
         qf0=qf0,
         zeta=zeta,
         friction=friction,
-        damping_form=damping_form,  # type: ignore[arg-type]
+        damping_form=damping_form,
         input=spec,
         solver=solver,
         fft_span=fft_span,
@@ -295,14 +301,14 @@ def _read_damping(dmp: TableReader):
             if isinstance(raw, list)
             else (dmp.nonnegative("friction", unit="N m s/rad"),)
         )
-    damping_form = dmp.string("form", choices=DAMPING_FORMS) if dmp.has("form") else None
+    damping_form = dmp.choice("form", DAMPING_FORMS) if dmp.has("form") else None
     dmp.finish()
     return zeta, friction, damping_form
 
 
 def _read_input(inp: TableReader) -> InputSpec:
     """``[input]``: none, or a bang-bang torque on one joint."""
-    kind = inp.string("kind", "none", choices=INPUT_KINDS)
+    kind = inp.choice("kind", INPUT_KINDS, "none")
     if kind == "bangbang":
         t_accel = inp.positive("t_accel", unit="s")
         spec = InputSpec(

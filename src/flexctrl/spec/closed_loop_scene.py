@@ -7,21 +7,23 @@ zero-order hold.  The extra keys::
 
     kind = "closed_loop"
     controller = "controllers/lqr.toml"  # default controller file (CLI --controller overrides)
-    design_payload = 2.0                 # kg the controller is designed for (mismatch; default: payload)
+    design_payload = 2.0                 # kg the controller is designed for (default: payload)
     controller_fidelity = "amm:2"        # model the controller is designed on (default: fidelity)
     design_configuration = [0, 90, 0]    # degrees: the joint angles the controller is designed
                                          # (linearised) at (default: the target)
     [target]   q = [30, 0, 0]            # degrees: the joint angles to move to
                # or move = [30, 0, 0]    # degrees relative to the initial joint angles (for sweeps)
-               profile = "quintic"       # "step" (default: the reference jumps at t = 0) or "quintic"
-               move_time = 1.5           # s, duration of the quintic (required with it; unused by a step)
-               deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static" or "static"
+               profile = "quintic"       # "step" (default: the reference jumps at t = 0), "quintic"
+               move_time = 1.5           # s, duration of the quintic (required with it)
+               deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static"
+                                             # or "static"
     [noise]    enabled = true, seed = 0  # measurement noise as set in the controller's sensors
     [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
-               divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the link's
-                                             # length means the closed loop diverged
-               divergence_angle = 90.0       # deg: so does a joint this far outside the range of its move
-               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last second below it
+               divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the
+                                             # link's length means the closed loop diverged
+               divergence_angle = 90.0       # deg: so does a joint this far outside its move
+               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last
+                                             # second below it
 
 Angles are in degrees in the file and radians in the dataclass.  The reference
 (:mod:`flexctrl.control.reference_trajectory`) goes from the initial joint angles to the target;
@@ -47,7 +49,7 @@ from flexctrl.spec.reference import DEFLECTIONS, PROFILES
 
 @dataclass(frozen=True)
 class MetricSettings:
-    """How a closed-loop run is judged (the ``[metrics]`` table of a scene; the defaults are the file's).
+    """How a closed-loop run is judged: a scene's ``[metrics]`` table (the defaults are the file's).
 
     Attributes
     ----------
@@ -122,14 +124,14 @@ class ClosedLoopScene:
         return self.design_q if self.design_q is not None else self.target_q
 
     def joint_reference(self):
-        """The :class:`~flexctrl.control.reference_trajectory.JointReference` from the initial angles to the target."""
+        """The :class:`~flexctrl.spec.reference.JointReference` from the start to the target."""
         from flexctrl.spec.reference import JointReference
 
         return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
 
     @property
     def t_arrive(self) -> float:
-        """Time (s) the reference reaches the target (0 for the step, ``move_time`` for the quintic)."""
+        """Time (s) the reference reaches the target: 0 for a step, ``move_time`` for a quintic."""
         return self.move_time if self.profile == "quintic" else 0.0
 
     @property

@@ -1,4 +1,4 @@
-"""Finite-element scenes with moving supports: ``kind = "sliding_beam"``, ``"rp_arm"``, ``"telescoping"``.
+"""Finite-element scenes with moving supports: ``sliding_beam``, ``rp_arm``, ``telescoping``.
 
 :func:`read_fem_scene` (the reader :func:`flexctrl.spec.scene.load_scene` uses for every
 ``kind`` in :data:`FEM_SCENE_KINDS`) validates a scene once, into a frozen description
@@ -41,9 +41,11 @@ or ``"static_load"`` with ``tip_deflection``), optional ``payload`` (kg) and
 ``gravity`` ([gx, gy] m/s^2) replacing the model file's, and an optional ``[drive]`` table::
 
     [drive]
-    kind = "motion"                 # "motion": theta(t), W(t) by Eq 57 (default) | "force": full coupling
-    coupling = "partial"            # motion only: "partial" (Eq 42, default) or "full" (Eq 43 with the
-                                    # joint coordinates constrained: reports the torque and force needed)
+    kind = "motion"                 # "motion": theta(t), W(t) by Eq 57 (default) | "force": full
+                                    # coupling
+    coupling = "partial"            # motion only: "partial" (Eq 42, default) or "full" (Eq 43
+                                    # with the joint coordinates constrained: reports the torque
+                                    # and force needed)
     torque_amplitude = 2.0          # force only: N m, tau = A sin(2 pi t / T) on [0, T], then 0
     force_amplitude = 1.0           # force only: N, the axial drive at E, same shape
 
@@ -157,9 +159,9 @@ def read_fem_scene(
 ) -> AnyFemScene:
     """Validate a finite-element scene document (see the module docstring) into its description.
 
-    The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of :data:`FEM_SCENE_KINDS`:
-    everything is checked here, once, including the model file and (``telescoping``) the
-    contacts over the stroke, so errors surface when the scene is loaded.
+    The reader of :data:`flexctrl.spec.scene.SCENE_READERS` for every kind of
+    :data:`FEM_SCENE_KINDS`: everything is checked here, once, including the model file and
+    (``telescoping``) the contacts over the stroke, so errors surface when the scene is loaded.
 
     Parameters
     ----------
@@ -216,6 +218,7 @@ def read_fem_scene(
     if kind == "rp_arm":
         s["initial"] = r.string("initial", "rest", choices=("rest", "static_load"))
         s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
+        assert drive is not None  # read above for rp_arm scenes
         s["drive"] = _read_drive(r, drive, drive_kind, s)
         spec = load_rp_arm(s["model"])
         if spec.joint == "clamped" and s["driven_end"] != "E":
@@ -226,14 +229,14 @@ def read_fem_scene(
             )
         r.finish()
         return RPArmScene(**s, model_spec=_with_overrides(spec, s), source=source)
-    spec = _check_telescoping_stroke(r, s)
+    telescoping = _check_telescoping_stroke(r, s)
     r.finish()
-    return TelescopingScene(**s, model_spec=_with_overrides(spec, s), source=source)
+    return TelescopingScene(**s, model_spec=_with_overrides(telescoping, s), source=source)
 
 
 def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]) -> RPDrive:
     if kind == "motion":
-        coupling = drive.string("coupling", "partial", choices=COUPLINGS)
+        coupling = drive.choice("coupling", COUPLINGS, "partial")
         if coupling == "full" and (s["driven_end"] != "E" or s["initial"] != "rest"):
             raise drive.error(
                 "coupling",

@@ -14,8 +14,8 @@ from flexctrl.spec.fem_models import RPArmSpec, TelescopingSpec
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 
 FEM_SCENE_KINDS = ("sliding_beam", "rp_arm", "telescoping")
-DRIVE_KINDS = ("motion", "force")
-COUPLINGS = ("partial", "full")
+DRIVE_KINDS: tuple[Literal["motion", "force"], ...] = ("motion", "force")
+COUPLINGS: tuple[Literal["partial", "full"], ...] = ("partial", "full")
 ENDS = ("H", "E")
 MAX_STEPS = 5_000_000
 #: Field metadata marking what :meth:`FemScene.settings` leaves out (the origin, the loaded model).
@@ -102,7 +102,7 @@ class FemScene:
     def with_fidelity(
         self, fidelity: Fidelity | str | None, *, source: str = "--fidelity"
     ) -> FemScene:
-        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes nothing.
+        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None: unchanged.
 
         Raises
         ------

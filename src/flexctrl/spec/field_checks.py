@@ -1,4 +1,7 @@
-"""Checks of settings fields: each raises :class:`~flexctrl.errors.SpecError` naming the key, the value and what is allowed."""
+"""Checks of settings fields, each raising a :class:`~flexctrl.errors.SpecError`.
+
+The error names the key, the value and what is allowed.
+"""
 
 from __future__ import annotations
 

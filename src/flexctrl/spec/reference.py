@@ -82,7 +82,10 @@ class JointReference:
         return self.t_start + (self.move_time if self.profile == "quintic" else 0.0)
 
     def derivatives(self, t, order: int = 2) -> tuple[np.ndarray, ...]:
-        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s): arrays (T, n) (rad, rad/s, ...), up to ``order`` (<= 3)."""
+        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s), up to ``order`` (<= 3).
+
+        Arrays (T, n) in rad, rad/s, rad/s^2, rad/s^3.
+        """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         q0, q1 = np.asarray(self.q_start), np.asarray(self.q_target)
         delta = q1 - q0
@@ -121,7 +124,9 @@ class JointReference:
 
 @dataclass(frozen=True)
 class Move:
-    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad), a quintic by default.
+    """A joint move for :func:`flexctrl.closed_loop` from ``start`` to ``target`` (rad).
+
+    A quintic by default.
 
     Parameters
     ----------

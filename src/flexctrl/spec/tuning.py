@@ -1,21 +1,22 @@
-"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, over which scenarios, for what.
+"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, on what, for what.
 
 Layout (paths relative to the tuning file; SI units, angles in degrees as in every file)::
 
     name = "tune_lqr"                        # default: the file's stem
-    controller = "../controllers/lqr.toml"   # the file to start from (its values are the initial point)
+    controller = "../controllers/lqr.toml"   # the file to start from (its values: the start)
 
     [[parameters]]                           # one table per tuned key
-    key = "weights.joint_deg"                # a key of the controller file (dotted, as --set writes it)
+    key = "weights.joint_deg"                # a key of the controller file (dotted, as --set)
     low = 0.02                               # bounds, in the key's own unit
     high = 1.0
     scale = "log"                            # "log" (default; low > 0) or "linear"
     integer = false                          # true: rounded to whole numbers (e.g. horizon)
-    step = 5e-4                              # optional: rounded to a multiple of step (a sample time the
-                                             # scene's plant step divides)
+    step = 5e-4                              # optional: rounded to a multiple of step (a
+                                             # sample time the scene's plant step divides)
 
-    [scenarios]                              # a study in the study file syntax (executor closed_loop):
-    scene = "scenes/move_joint1_30deg.toml"  # fixed settings and [scenarios.grid] axes, [scenarios.set] ...
+    [scenarios]                              # a study in the study file syntax (executor
+                                             # closed_loop): fixed settings, [scenarios.grid]
+    scene = "scenes/move_joint1_30deg.toml"  # axes, [scenarios.set] ...
     model = "../models/subedi3link.toml"
     payload = 2.0
     [scenarios.grid]
@@ -25,12 +26,14 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
     metric = "tip_residual_rms"              # a closed-loop metric (flexctrl.loop.metrics.METRICS)
     statistic = "median"                     # "median", "max" or "mean" over the scenarios
 
-    [constraints]                            # a candidate breaking one is infeasible (recorded, never a crash)
+    [constraints]                            # a candidate breaking one is infeasible
+                                             # (recorded, never a crash)
     stable = true                            # stable = 1 in every scenario
     torque_limits = true                     # no applied torque beyond its joint's limit
-    closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below this, wherever the
-                                             # controller has a full-state gain (omit to not check)
-    real_time = true                         # controller_time_p95 below the controller's sample time
+    closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below
+                                             # this, wherever the controller has a full-state
+                                             # gain (omit to not check)
+    real_time = true                         # controller_time_p95 below its sample time
 
     [optimizer]
     method = "differential_evolution"        # "differential_evolution" | "cma" | "nelder_mead"
@@ -96,8 +99,11 @@ class ParameterSpec:
         return math.log10(value) if self.scale == "log" else float(value)
 
     def from_unit(self, coordinate: float) -> float:
-        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 significant digits
-        (what a file shows; the runs use exactly the value written), whole for integers."""
+        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 digits.
+
+        Six significant digits (what a file shows; the runs use exactly the value written),
+        whole for integers.
+        """
         value = 10.0**coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)
         quantum = 1.0 if self.integer else self.step
@@ -312,7 +318,8 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
     if step is not None and (math.ceil(low / step - 1e-9) * step > high + 1e-12 * abs(high)):
         raise p.error(
             "step",
-            f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller step",
+            f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller "
+            "step",
         )
     if scale == "log" and low <= 0:
         raise p.error(
