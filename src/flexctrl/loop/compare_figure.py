@@ -125,6 +125,7 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
 
 def _panels(runs: Sequence[RunCurves]):
     """The figure and its panels by name (``tip``, ``w``, ``u``, ``q``), the window shaded."""
+    # matplotlib loads when a figure is drawn, not when a result is made
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -154,7 +155,7 @@ def _panels(runs: Sequence[RunCurves]):
 
 def _draw_run(axes, index: int, run: RunCurves, highlight: str | None):
     """One run's curves in every panel; returns its legend handle."""
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
     style: dict[str, Any] = {
         "color": f"C{index % 10}",
@@ -177,7 +178,7 @@ def _draw_run(axes, index: int, run: RunCurves, highlight: str | None):
 
 def _draw_limits(ax, limits: Sequence[float]) -> list:
     """The finite torque limits (N m) as lines at plus and minus; returns their legend handles."""
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
     handles = []
     for joint, limit in enumerate(limits):
@@ -193,7 +194,7 @@ def _draw_limits(ax, limits: Sequence[float]) -> list:
 
 def _draw_reference(ax, run: RunCurves) -> None:
     """The joint reference (deg) dotted, with its legend."""
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
     assert run.reference is not None
     for joint in range(run.reference.shape[1]):
@@ -207,7 +208,7 @@ def _draw_reference(ax, run: RunCurves) -> None:
 
 def _legends(axes, runs: Sequence[RunCurves], run_handles: list, limit_handles: list) -> None:
     """The runs' legend on the top panel, the line styles' and the limits' on theirs."""
-    from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
     n_styles = max(run.deflections.shape[1] for run in runs)
     styles = [

@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.linear import Sensors, state_names
 
 
 def state_projection(plant, design_names) -> np.ndarray:
@@ -26,8 +27,6 @@ def state_projection(plant, design_names) -> np.ndarray:
         When a design coordinate the plant lacks is not an elastic one (different arms or
         a finite-element plant: its coordinates are nodal, not modal).
     """
-    from flexctrl.linear import state_names
-
     plant_names = state_names(plant)
     index = {name: i for i, name in enumerate(plant_names)}
     P = np.zeros((len(design_names), plant.n_x))
@@ -53,8 +52,6 @@ def plant_sensors(plant, design_sensors, q_joints):
     A full-state controller on a plant of another fidelity measures the plant's state
     projected on the design model's coordinates (:func:`state_projection`).
     """
-    from flexctrl.linear import Sensors
-
     if "state" in design_sensors.kinds:
         if plant.n_x == design_sensors.function.size1_in(0):
             return design_sensors

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from flexctrl.sim.bound import BoundFunction
+
 #: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or
 #: m/s).
 MODAL_BOUND = 10.0
@@ -53,8 +55,6 @@ class LoopMonitor:
         The Python loop calls the monitor every sample; a bound call skips the DM conversions.
         One per run, so two runs in the threads of one Dask worker share no buffer.
         """
-        from flexctrl.sim.bound import BoundFunction
-
         deflection = BoundFunction(self.deflection)
         return lambda t, x: self.verdict(deflection(x[: self.N])[0].ravel(), x)
 

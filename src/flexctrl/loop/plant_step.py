@@ -10,6 +10,7 @@ import numpy as np
 from flexctrl.dynamics.model import derived
 from flexctrl.dynamics.parametric import parametric, try_expand
 from flexctrl.sim.compile import compile_for, compile_function
+from flexctrl.sim.integrator import output_function
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
@@ -92,8 +93,6 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
     """
 
     def build():
-        from flexctrl.sim.integrator import output_function
-
         fun = output_function(model, energies)
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
         if constants.size == 0:

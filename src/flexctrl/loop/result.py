@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.linear import equilibrium
+from flexctrl.loop.compare_figure import compare
 from flexctrl.sim.trajectory import Trajectory
 
 
@@ -17,8 +19,6 @@ def tip_at_rest(model, q_joints) -> np.ndarray:
 
     ``q_joints`` in rad.
     """
-    from flexctrl.linear import equilibrium
-
     target = equilibrium(model, tuple(float(a) for a in q_joints))
     return np.array(model.functions["tip"](target.q, target.qd)[0], dtype=float).ravel()
 
@@ -83,8 +83,6 @@ class ClosedLoopResult:
         matplotlib.figure.Figure
             Four panels sharing the time axis (s); the residual window is shaded.
         """
-        from flexctrl.loop.compare_figure import compare
-
         return compare({label or self.summary.get("controller", {}).get("kind", "run"): self})
 
     def save(self, directory: str | Path, *, plots: bool = True) -> list[Path]:

@@ -25,9 +25,11 @@ shares no code with the run.  Controllers without a linear law (NMPC) give None.
 
 from __future__ import annotations
 
+import control
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.linear import Linearizer, discretize, equilibrium
 
 
 def closed_loop_matrix(Ad, Bd, C, D, law) -> np.ndarray:
@@ -62,10 +64,6 @@ def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> floa
     -------
     float or None
     """
-    import control
-
-    from flexctrl.linear import Linearizer, discretize, equilibrium
-
     law = getattr(controller, "linear_law", None)
     if law is None:
         return None

@@ -115,6 +115,7 @@ class SceneCache:
         reference_q: tuple[float, ...] | None = None,
     ):
         """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, once."""
+        # the model code loads when a model is first asked for: a SceneCache itself is light
         from flexctrl.dynamics.build import build_model
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
@@ -143,6 +144,7 @@ class SceneCache:
         the controllers designed on one model for one move share its tables (one per sample
         time): a table is a pure function of those and the sample time.
         """
+        # the control layer loads when a reference is first asked for
         from flexctrl.control.reference_trajectory import ReferenceTrajectory
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
@@ -166,6 +168,7 @@ class SceneCache:
         solver: tuple[tuple[str, Any], ...] = (),
     ):
         """A set-up integrator on :meth:`model`'s model and its setup time (s)."""
+        # the integrators load when one is first asked for
         from flexctrl.sim import get_integrator
 
         def build():

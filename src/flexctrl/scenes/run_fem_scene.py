@@ -59,6 +59,7 @@ def _simulate(scene: FemScene):
 
 
 def _simulate_sliding_beam(scene: SlidingBeamScene):
+    # each finite-element family loads only when a scene of it runs
     from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, simulate_sliding_beam
 
     case = SlidingBeamCase(
@@ -82,6 +83,7 @@ def _simulate_sliding_beam(scene: SlidingBeamScene):
 
 def _rp_motion(scene: RPArmScene | TelescopingScene):
     """The prescribed motion of Eq 57: ``W(t)`` and the housing angle ``theta(t)``."""
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.moving_frame import RPMotion
 
     return RPMotion(
@@ -95,6 +97,7 @@ def _rp_motion(scene: RPArmScene | TelescopingScene):
 
 def _simulate_rp_arm_partial(scene: RPArmScene):
     """The R-P arm with its motion prescribed, partial coupling (Eq 42)."""
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.rp_arm import simulate_rp_arm
 
     res = simulate_rp_arm(
@@ -114,6 +117,7 @@ def _simulate_rp_arm_partial(scene: RPArmScene):
 
 def _simulate_rp_arm_full(scene: RPArmScene):
     """The R-P arm in full coupling (Eq 43): its motion, or its torque and force, prescribed."""
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
 
     drive = scene.drive
@@ -163,6 +167,7 @@ def _simulate_rp_arm(scene: RPArmScene):
 
 
 def _simulate_telescoping(scene: TelescopingScene):
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.telescoping import simulate_telescoping
 
     spec = scene.model_spec
@@ -195,6 +200,7 @@ def _simulate_telescoping(scene: TelescopingScene):
 
 
 def _plot(path: Path, res, scene: FemScene, extra: dict[str, np.ndarray]) -> None:
+    # matplotlib loads only when a figure is drawn
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.0, 5.5), layout="constrained")

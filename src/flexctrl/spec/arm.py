@@ -75,7 +75,17 @@ DAMPING_FORMS: tuple[DampingForm, ...] = ("ratio", "paper", "stiffness")
 
 @dataclass(frozen=True)
 class SectionSpec:
-    """Hollow rectangular cross-section (m); used to derive the axial stiffness EA."""
+    """Hollow rectangular cross-section; used to derive the axial stiffness EA.
+
+    Attributes
+    ----------
+    width : float
+        Outer width (m).
+    height : float
+        Outer height (m), in the bending direction.
+    thickness : float
+        Wall thickness (m), less than half the width and the height.
+    """
 
     width: float
     height: float
@@ -171,6 +181,7 @@ class JointSpec:
     Attributes
     ----------
     type : {"revolute", "prismatic"}
+        The joint's motion.
     hub_mass : float
         Hub mass (kg), located on the joint axis.
     hub_inertia : float
@@ -180,6 +191,7 @@ class JointSpec:
     torque_limit : float
         Actuator limit (N m), +inf when unlimited.
     source : str
+        Provenance note.
     """
 
     type: JointType
@@ -194,9 +206,17 @@ class JointSpec:
 class PayloadSpec:
     """Payload at the tip of the last link.
 
-    ``inertia`` (kg m^2, about its centre of mass) belongs to the payload: it is
-    carried only when ``mass > 0`` (Table 3 of Subedi et al. treats the no-payload
-    link 3 as a plain clamped-free beam).
+    ``inertia`` belongs to the payload: it is carried only when ``mass > 0`` (Table 3 of
+    Subedi et al. treats the no-payload link 3 as a plain clamped-free beam).
+
+    Attributes
+    ----------
+    mass : float
+        Payload mass (kg), >= 0.
+    inertia : float
+        Moment of inertia about its centre of mass (kg m^2).
+    source : str
+        Provenance note.
     """
 
     mass: float
@@ -216,12 +236,15 @@ class ArmSpec:
     Attributes
     ----------
     name : str
+        Model name (default: the file's stem).
     links : tuple of LinkSpec
+        The links, base to tip.
     joints : tuple of JointSpec
         ``joints[i]`` sits at the base of ``links[i]``.
     payload : PayloadSpec
-    gravity : numpy.ndarray
-        Gravity vector in the world frame (m/s^2), shape (2,).
+        At the tip of the last link.
+    gravity : tuple of float
+        Gravity vector in the world frame, ``(gx, gy)`` (m/s^2).
     configuration : tuple of float
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
@@ -240,6 +263,8 @@ class ArmSpec:
         ``False`` with a finite-element fidelity is refused when the model is built.
     source : str
         The file it was loaded from.
+    notes : str
+        Free text from the file.
     """
 
     name: str

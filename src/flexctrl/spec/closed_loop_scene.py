@@ -44,7 +44,7 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
-from flexctrl.spec.reference import DEFLECTIONS, PROFILES
+from flexctrl.spec.reference import DEFLECTIONS, PROFILES, JointReference
 
 
 @dataclass(frozen=True)
@@ -125,8 +125,6 @@ class ClosedLoopScene:
 
     def joint_reference(self):
         """The :class:`~flexctrl.spec.reference.JointReference` from the start to the target."""
-        from flexctrl.spec.reference import JointReference
-
         return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
 
     @property

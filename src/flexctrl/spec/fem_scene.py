@@ -73,6 +73,7 @@ from pathlib import Path
 from typing import Any
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.arm_scene import resolve_model_path
 from flexctrl.spec.fem_models import RPArmSpec, TelescopingSpec, load_rp_arm, load_telescoping
 from flexctrl.spec.fem_scene_types import (
     COUPLINGS,
@@ -207,8 +208,6 @@ def read_fem_scene(
             )
         r.finish()
         return SlidingBeamScene(**s, source=source)
-    from flexctrl.spec.arm_scene import resolve_model_path
-
     base = Path(source).resolve().parent
     s["model"] = str(resolve_model_path(r.string("model", f"models/{kind}.toml"), base, r))
     s["theta0_deg"] = r.degree("theta0", 0.0)

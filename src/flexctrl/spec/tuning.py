@@ -58,6 +58,7 @@ from typing import Any
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
+from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
@@ -334,8 +335,6 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
             f"value {key!r} names a {type(initial).__name__} in '{controller}' "
             f"({initial!r}); allowed: a numeric key",
         )
-    from flexctrl.spec.controller_reader import load_controller
-
     probe = low if scale == "linear" else math.sqrt(low * high)
     try:  # the key must exist for this controller kind and accept a value in the bounds
         load_controller(controller, [f"{key}={round(probe) if integer else probe!r}"])
