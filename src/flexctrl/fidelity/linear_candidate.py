@@ -17,7 +17,7 @@ from flexctrl.fidelity.rungs import rung_name, tip_distance
 
 #: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds
 #: ``LINEAR_FACTOR`` times the tolerance is not certified (docs/auto_fidelity.md gives the ratios
-#: measured on the quickstart's loops; tests/test_fidelity_estimate.py checks a small case).
+#: measured on the quickstart's loops; tests/scenes/test_auto_linear.py checks a small case).
 LINEAR_FACTOR = 3.0
 
 

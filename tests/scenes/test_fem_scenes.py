@@ -1,4 +1,7 @@
-"""Finite-element scenes (flexctrl.scenes.run_fem_scene) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
+"""Finite-element scenes (flexctrl.scenes.run_fem_scene) and the revolute-prismatic arm.
+
+The arm is :mod:`flexctrl.dynamics.fem.rp_arm`.
+"""
 
 from __future__ import annotations
 
@@ -30,7 +33,8 @@ def scene(name: str, *overrides: str) -> tuple[dict, str]:
     return apply_overrides(read_toml(path), overrides), str(path)
 
 
-# -- the scene runner ---------------------------------------------------------------------------------
+# -- the scene runner
+# ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", BK)
 def test_bk_scenes_write_trajectory_summary_and_plot(tmp_path, name):
     doc, src = scene(name, "duration=0.2")
@@ -117,7 +121,8 @@ def test_rp_scene_runs(tmp_path):
     assert summary["model"]["support_outer_m"] == 0.8
 
 
-# -- the R-P arm -------------------------------------------------------------------------------------------
+# -- the R-P arm
+# -------------------------------------------------------------------------------------------
 BK_RP = RPArmSpec(
     "bk", length=1.0, mass_per_length=1.0, EI=1.0, support_inner=0.55, support_outer=0.8
 )
@@ -126,7 +131,7 @@ BK_RP = RPArmSpec(
 @pytest.mark.parametrize("case", [FAST_PUSH, FAST_PULL], ids=lambda c: c.name)
 @pytest.mark.parametrize("driven_end", ["E", "H"])
 def test_rp_arm_without_rotation_is_the_sliding_beam(case, driven_end):
-    """Same supports (D = 0.25 m), same Eq 57 motion, housing held at a fixed angle: same response."""
+    """Same supports (D = 0.25 m), same Eq 57 motion, the housing held still: same response."""
     c = dataclasses.replace(case, driven_end=driven_end)
     ref = simulate_sliding_beam(c, 4, dt=1e-3, duration=0.5)
     motion = RPMotion(c.C1, c.C2, c.T, theta0=0.7, dtheta=0.0)
@@ -184,8 +189,11 @@ def test_rp_arm_follows_the_quasi_static_deflection(rp_run):
 
 
 def test_rp_arm_energy_balance(rp_run):
-    """d/dt (1/2 qd M qd + 1/2 q K q) = qd . (rigid-motion loads - (K_g - theta'^2 M) q - A^T lam):
-    the work of the frame's inertia and of the moving supports; after T the energy stays constant."""
+    """The energy changes by the work of the frame's inertia and of the moving supports.
+
+    d/dt (1/2 qd M qd + 1/2 q K q) = qd . (rigid-motion loads - (K_g - theta'^2 M) q - A^T lam);
+    after T the energy stays constant.
+    """
     spec, motion, _ = rp_run
     errors = {}
     for dt in (1e-3, 5e-4):

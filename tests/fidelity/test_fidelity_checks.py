@@ -1,9 +1,9 @@
-"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance (issue 14).
+"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance.
 
 The walk itself is checked on synthetic runs whose tip paths converge geometrically
 with the rung (every walk: from the top, the ladder's from a start, the estimate-first),
 counting which rungs and references each walk runs; one closed loop (the small case of
-:mod:`tests.test_fidelity_estimate`, MPC from the top) checks the scene key end to end
+tests/scenes/test_auto_linear.py, MPC from the top) checks the scene key end to end
 against the full checks and against distances recomputed from its runs.
 """
 
@@ -19,8 +19,8 @@ from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import (
     Ladder,
-    RunRecord,
     Runners,
+    RunRecord,
     ToleranceUnreachable,
     tip_distance,
     walk_and_judge,
@@ -37,7 +37,7 @@ TIME = np.linspace(0.0, 1.0, 101)
 
 
 def _record(m: int, *, dt: float = 1e-3, linear: str = "") -> RunRecord:
-    """Rung ``m`` (0 = rigid) of a ladder converging as ``2^-m`` mm onto the reference's path (``m = 4``)."""
+    """Rung ``m`` (0 = rigid) of a ladder converging as ``2^-m`` mm onto rung 4."""
     tip = np.column_stack([np.cos(TIME), np.sin(TIME)])
     tip[:, 0] += 1e-3 * 2.0**-m * np.sin(7 * TIME) * (m < 4)
     return RunRecord(
@@ -82,7 +82,10 @@ def judge(
 
 
 def _walk(checks: str, **kind):
-    """``walk_and_judge`` on the synthetic ladder (top amm:3, reference amm:4, tolerance 0.3 mm), and what it ran."""
+    """``walk_and_judge`` on the synthetic ladder, and what it ran.
+
+    Top ``amm:3``, reference ``amm:4``, tolerance 0.3 mm.
+    """
     made: list = []
 
     def run_rung(m):
@@ -146,7 +149,8 @@ def test_from_the_top_tolerance_stops_at_the_top_and_makes_no_step_check():
 
 
 def test_tolerance_keeps_a_higher_rung_where_full_finds_a_lower_one():
-    # with 1 mm every rung from amm:1 up meets: full walks down to it; tolerance keeps the top it started from
+    # with 1 mm every rung from amm:1 up meets: full walks down to it; tolerance keeps the top it
+    # started from
     made: list = []
     kw = dict(
         tol=1e-3,
@@ -188,7 +192,8 @@ def test_estimate_first_walk_keeps_its_candidate_and_drops_only_the_step_check()
     made.clear()
     only, _ = _walk("tolerance", linear=_linear(made))
     assert str(only.choice) == str(full.choice) and only.estimated_error == full.estimated_error
-    # the full walk's last two linear runs are its step check: the exact loop and the reference's at its step
+    # the full walk's last two linear runs are its step check: the exact loop and the reference's at
+    # its step
     assert full_linear[-2:] == [("linear", "exact"), ("linear", 4)] and made == full_linear[:-2]
 
 
@@ -264,7 +269,8 @@ def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_run
 
 
 def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it():
-    # reference amm:6: a choice of amm:2 is estimated from amm:3 and amm:4, so the rung below (amm:5) is no run of it
+    # reference amm:6: a choice of amm:2 is estimated from amm:3 and amm:4, so the rung below
+    # (amm:5) is no run of it
     made: list = []
     kw = dict(
         tol=1e-3,
@@ -286,7 +292,8 @@ def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it()
     )  # amm:5 follows the reference's path
     made.clear()
     only = judge(**kw, checks="tolerance")
-    # neither the rung below the reference nor the finest model at its own step (the ladder walk's cost evidence)
+    # neither the rung below the reference nor the finest model at its own step (the ladder walk's
+    # cost evidence)
     assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4]
     assert only.evidence["reference"]["convergence"]["rung_below_m"] is None
     assert (
@@ -313,7 +320,8 @@ def test_the_table_says_which_checks_were_not_made(kind):
 
 
 def test_in_tolerance_mode_a_convergence_warning_names_only_the_check_made():
-    # amm:3 is 0.125 mm from the reference amm:4, above half of a 0.2 mm tolerance: the reference may not be converged
+    # amm:3 is 0.125 mm from the reference amm:4, above half of a 0.2 mm tolerance: the reference
+    # may not be converged
     kw = dict(
         tol=2e-4,
         low=0,
@@ -360,7 +368,8 @@ def test_a_predicted_failure_records_the_checks_asked_for():
 
 
 def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
-    # the slow light move of tests/test_auto_fidelity.py: the ladder walk, rungs up to amm:2 against amm:3
+    # the slow light move of tests/scenes/test_auto_arm_fidelity.py: the ladder walk, rungs up to
+    # amm:2 against amm:3
     argv = [
         "fidelity",
         "studies/scenes/slow_move_light.toml",
@@ -387,7 +396,8 @@ def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
     )  # full walks down to the lowest rung that meets
     assert main([*argv, "--set", "fidelity_checks='tolerance'"]) == 0
     assert "step check not made" in capsys.readouterr().out
-    # the scene's own resolution (kind = "arm"), with the choices of the two modes kept apart in one cache
+    # the scene's own resolution (kind = "arm"), with the choices of the two modes kept apart in one
+    # cache
     cache = SceneCache()
     scenes = [
         load_scene(

@@ -32,7 +32,8 @@ def test_decaying_sinusoid_metrics_match_closed_forms():
     # RMS of a fast-decaying sinusoid: sqrt(mean(a^2 e^{-2 s t} cos^2)) ~ envelope / sqrt(2) average
     envelope = np.sqrt(np.mean((amp * np.exp(-sigma * t[window])) ** 2) / 2)
     assert m["tip_residual_rms"] == pytest.approx(envelope, rel=0.02)
-    # settling: envelope hits 1 mm at ln(10)/sigma; the last excursion above the band is just before that
+    # settling: envelope hits 1 mm at ln(10)/sigma; the last excursion above the band is just before
+    # that
     assert m["settling_time"] <= math.log(amp / 1e-3) / sigma + 1e-9
     assert m["settling_time"] > math.log(amp / 1e-3) / sigma - 1.0 / 3.0
     assert m["peak_torque"] == [2.0, 3.0] and m["rms_torque"] == [2.0, 3.0]

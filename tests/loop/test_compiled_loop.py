@@ -123,7 +123,7 @@ def test_scene_metrics_match(cache):
 
 
 def test_divergence_is_the_same(cache):
-    """An unfiltered, fast sampled PD is unstable on the light hubs (control/pd.py): both paths stop alike."""
+    """An unfiltered, fast sampled PD is unstable on the light hubs: both paths stop alike."""
     overrides = ("torque_filter=0", "bandwidth=8.0", "saturate=false")
     runs = both(short_scene(), "controllers/pd.toml", cache, overrides)
     (tp, sp, stp, _), (tc, sc, stc, _) = runs["python"], runs["compiled"]
@@ -193,9 +193,9 @@ def test_a_call_holds_at_most_chunk_states_plant_state_numbers():
 
 
 def test_the_deflection_monitor_stops_both_loops_alike(cache):
-    # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on link 1) trip it,
-    # so the Python loop's per-sample monitor call (bound to arrays for the run) and the compiled loop's
-    # batched flags must stop at the same sample for the same reason
+    # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on
+    # link 1) trip it, so the Python loop's per-sample monitor call (bound to arrays for the run)
+    # and the compiled loop's batched flags must stop at the same sample for the same reason
     scene = dataclasses.replace(short_scene(), divergence_deflection=0.002)
     runs = both(scene, "controllers/lqr.toml", cache)
     (tp, sp, _, _), (tc, sc, _, _) = runs["python"], runs["compiled"]

@@ -1,4 +1,4 @@
-"""fidelity = "auto": the cheapest model that meets a tip tolerance (issue 7).
+"""fidelity = "auto" for arm scenes: the cheapest model that meets a tip tolerance.
 
 The choices are checked against a reference that the chooser did not use to make
 them (the reference only judges).  What the chooser reports is recomputed here by
@@ -47,10 +47,11 @@ SLOW_OPTIONS = {"top": 2, "reference": "amm:3"}
 CACHE = SceneCache()
 HEAVY = "studies/scenes/bangbang_damped.toml"
 HEAVY_SET = ["duration=0.6", "payload=4.0", "fidelity='auto'", "tolerance=2e-4"]
-#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step 2).
+#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
+#: 2).
 SAFETY = 2.0
-#: Largest error (m) allowed to the CVODES reference at its default tolerances (rtol 1e-8, atol 1e-10): against
-#: runs at rtol 1e-12 it moved the tip by at most 2e-10 m on both scenes here.
+#: Largest error (m) allowed to the CVODES reference at its default tolerances (rtol 1e-8, atol
+#: 1e-10): against runs at rtol 1e-12 it moved the tip by at most 2e-10 m on both scenes here.
 CVODES_ERROR = 1e-9
 #: What the slow choice left in CACHE's run store, taken before any test here runs a rung itself.
 SLOW_CHOICE_RUNS: dict[str, int] = {}
@@ -65,7 +66,7 @@ def slow():
 
 
 def _distance(a, b) -> float:
-    """Largest tip distance between two runs, the coarser interpolated linearly onto the finer's samples.
+    """Largest tip distance between two runs, the coarser interpolated onto the finer's samples.
 
     Written out by index arithmetic on the runs' uniform grids (the ladder's definition,
     :func:`flexctrl.fidelity.ladder.tip_distance`, without its code).
@@ -86,7 +87,7 @@ def _rung(m: int) -> str:
 
 
 def _estimator(scene, choice: FidelityChoice):
-    """``estimate(m) -> (distances, estimate)`` of rung ``m``, recomputed from the chooser's runs (method step 2)."""
+    """``estimate(m) -> (distances, estimate)`` of rung ``m`` from the chooser's runs (step 2)."""
     ref_n = parse_fidelity(choice.evidence["reference"]["fidelity"]).count
     runs = {}
 
@@ -105,7 +106,10 @@ def _estimator(scene, choice: FidelityChoice):
 
 
 def _reference_by_cvodes(scene, choice: FidelityChoice):
-    """The reference model integrated by CVODES on the reference's samples; the chosen model re-run by ``simulate``."""
+    """The reference model by CVODES on the reference's samples; the chosen model re-run.
+
+    The chosen model is re-run by ``simulate``.
+    """
     # both scenes start at rest, undeformed, at q = 0: the initial state is zero
     assert all(a == 0.0 for a in scene.q0) and not scene.qf0 and not any(scene.qd0 or ())
     ref = choice.evidence["reference"]
@@ -173,7 +177,8 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
     scene, choice = slow
     assert choice.choice.modes_per_link is not None and choice.choice.modes_per_link <= 1
     _check_choice(scene, choice, scene.tolerance)
-    # the cost ratio is the choice's integration wall time over the reference's, and the choice is cheaper
+    # the cost ratio is the choice's integration wall time over the reference's, and the choice is
+    # cheaper
     ref = choice.evidence["reference"]
     chosen_run = simulate_rung(scene, str(choice.choice), cache=CACHE)
     reference_run = simulate_rung(scene, ref["fidelity"], "rk4", ref["dt_s"], cache=CACHE)
@@ -181,8 +186,9 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
         chosen_run.wall_time_s / reference_run.wall_time_s, rel=1e-12
     )
     assert choice.cost_ratio < 1
-    # every rung runs RK4 at the scene's step divided by the smallest whole number k that is stable with the
-    # documented margin (omega_max from the model itself), so outputs stay on the scene's grid
+    # every rung runs RK4 at the scene's step divided by the smallest whole number k that is stable
+    # with the documented margin (omega_max from the model itself), so outputs stay on the scene's
+    # grid
     for row in choice.evidence["candidates"]:
         omega = model_for(scene, row["fidelity"], CACHE).omega_max
         k = scene.dt / row["dt_s"]
@@ -213,7 +219,8 @@ def test_choices_are_kept_in_the_callers_cache(slow):
         load_scene(SLOW, SLOW_SET), scene.tolerance, **SLOW_OPTIONS, cache=CACHE
     )
     assert again is choice
-    # so are its runs, which the other checks here reuse: every rung at its step, the reference and its half step
+    # so are its runs, which the other checks here reuse: every rung at its step, the reference and
+    # its half step
     ref = choice.evidence["reference"]
     made = {(row["fidelity"], row["dt_s"]) for row in choice.evidence["candidates"]}
     made |= {
@@ -262,7 +269,8 @@ def test_cli_json_has_the_four_keys(slow, capsys):
         assert mine["reference_error_max_m"] == pytest.approx(
             api["reference_error_max_m"], rel=1e-9, abs=1e-15
         )
-    # the cost ratio is the chosen row's wall time over the reference's (timings differ from the API's run)
+    # the cost ratio is the chosen row's wall time over the reference's (timings differ from the
+    # API's run)
     row = next(c for c in data["candidates"] if c["fidelity"] == data["choice"])
     assert data["cost_ratio"] == pytest.approx(
         row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12
@@ -298,7 +306,8 @@ def test_unreachable_tolerance_exits_3_naming_the_best(slow, capsys):
     tiny = 0.1 * min(
         c["estimated_error_m"] for c in choice.evidence["candidates"] if "estimated_error_m" in c
     )
-    # no rung meets it, so no reference run is made (it only judges a choice): exit 3 with the best estimate
+    # no rung meets it, so no reference run is made (it only judges a choice): exit 3 with the best
+    # estimate
     status = main(
         [
             "fidelity",

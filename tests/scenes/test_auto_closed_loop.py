@@ -1,12 +1,12 @@
-"""Closed-loop scenes with ``fidelity = "auto"``: the plant model chosen from a tip tolerance (issue 7).
+"""Closed-loop scenes with ``fidelity = "auto"``: the plant model chosen from a tip tolerance.
 
-The choice is checked against runs the chooser did not make: the reference plant and
-the chosen plant are run directly here (full plant rate, through
-:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` with a concrete fidelity) and their
-tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`.  The error estimate is
-recomputed from the chooser's rung runs (kept in :data:`CACHE`) with the method's rule,
-``safety`` times the largest pointwise tip distance on the scene's grid to the next two
-rungs.  No choice or error is hard-coded: the tolerance is the only number the
+The choice is checked against runs the chooser did not make: the reference plant and the
+chosen plant are run directly here (full plant rate, through
+:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` with a concrete
+fidelity) and their tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`. The
+error estimate is recomputed from the chooser's rung runs (kept in :data:`CACHE`) with the
+method's rule, ``safety`` times the largest pointwise tip distance on the scene's grid to
+the next two rungs. No choice or error is hard-coded: the tolerance is the only number the
 assertions use.
 
 The scene is the quickstart's move (1.5 s quintic, 2 kg, q2, q3 = 90, -90 deg) cut to
@@ -33,16 +33,18 @@ from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"
-CONTROLLER = "tests/data/controllers/lqr_full_state.toml"  # fixed: re-tuning the shipped files must not move these tests
+# fixed: re-tuning the shipped files must not move these tests
+CONTROLLER = "tests/data/controllers/lqr_full_state.toml"
 SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
-#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step 2).
+#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
+#: 2).
 SAFETY = 2.0
 OPTIONS = {
     "top": 2,
     "reference": "amm:3",
     "walk": "ladder",
-}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
+}  # the ladder walk (the estimate walk: test_auto_linear.py)
 #: One cache for the module: the runs below share models and the choice, as a study worker does.
 CACHE = SceneCache()
 
@@ -61,9 +63,12 @@ def _rung(m: int) -> str:
 
 
 def _estimate(choice: dict, m: int) -> float:
-    """Safety times the largest tip distance of rung ``m`` to rungs ``m + 1`` and ``m + 2`` (up to the reference model).
+    """Safety times the largest tip distance of rung ``m`` to rungs ``m + 1`` and ``m + 2``.
 
-    From the chooser's runs (each rung at its own step, the tip on the scene's grid), by pointwise distance.
+    Up to the reference model.
+
+    From the chooser's runs (each rung at its own step, the tip on the scene's grid), by
+    pointwise distance.
     """
     scene = pin_design(_scene())
     ref_n = parse_fidelity(choice["reference"]["fidelity"]).count
@@ -94,7 +99,8 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
         0 if choice["choice"] == "rigid" else int(choice["choice"].split(":")[1])
     )
     assert metrics["chosen_dt"] == choice["dt_s"] == pytest.approx(auto_run.trajectory.meta["dt"])
-    # the estimate, recomputed from the chooser's runs: it meets the tolerance, the rung below's does not
+    # the estimate, recomputed from the chooser's runs: it meets the tolerance, the rung below's
+    # does not
     assert choice["safety"] == SAFETY
     chosen = parse_fidelity(choice["choice"]).modes_per_link
     mine = _estimate(choice, chosen)
@@ -115,7 +121,8 @@ def test_auto_resolves_records_and_meets_the_tolerance_against_a_direct_referenc
     conv = choice["reference"]["convergence"]
     assert max(conv["step_halving_m"], conv["rung_below_m"]) <= 0.5 * TOL
 
-    # independent: run the reference plant directly at its step, compare the tip paths at the full plant rate
+    # independent: run the reference plant directly at its step, compare the tip paths at the full
+    # plant rate
     ref = choice["reference"]
     direct_ref = run_closed_loop_scene(
         load_scene(
@@ -240,7 +247,8 @@ def test_fidelity_cli_json_for_a_closed_loop_scene(capsys, auto_run):
     for key in ("estimated_error", "reference_error", "reference_error_rms"):
         assert data[key] == pytest.approx(api[key], rel=1e-9, abs=1e-15)
     assert data["estimated_error"] <= TOL
-    # the cost ratio is the chosen loop's wall time over the reference loop's (timings differ from the API's run)
+    # the cost ratio is the chosen loop's wall time over the reference loop's (timings differ from
+    # the API's run)
     row = next(c for c in data["candidates"] if c["fidelity"] == data["choice"])
     assert data["cost_ratio"] == pytest.approx(
         row["wall_time_s"] / data["reference"]["wall_time_s"], rel=1e-12

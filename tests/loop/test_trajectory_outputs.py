@@ -88,7 +88,7 @@ def test_tip_rows_come_from_the_map_without_energies(run):
     np.testing.assert_array_equal(trajectory.deflections, kinematic[:, 2:])
 
 
-def test_lazy_energies_mapping():
+def test_lazy_energies_are_computed_once_when_first_read():
     calls = []
     kin, el, grav = np.array([1.0, 2.0]), np.array([0.5, 0.25]), np.array([-3.0, 4.0])
 
