@@ -157,13 +157,13 @@ def test_design_is_kept_and_reset(cache):
 @pytest.mark.parametrize("controller", ["controllers/lqg.toml", "controllers/pd.toml"])
 def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache, monkeypatch):
     # the loop is chained in calls of at most CHUNK samples, fewer when a call would hold more
-    # than CHUNK_STATES plant-state numbers; 7 leaves a remainder, so both the full and the
-    # last, shorter chunk run; CHUNK_STATES = 1 makes every call one sample
+    # than CHUNK_STEPS plant steps; 7 leaves a remainder, so both the full and the last, shorter
+    # chunk run; CHUNK_STEPS = 1 makes every call one sample
     scene = short_scene(noise=True)
     runs = {}
     for name, chunk, states in (("whole", 10**6, 10**12), ("7", 7, 10**12), ("1", 128, 1)):
         monkeypatch.setattr(compiled, "CHUNK", chunk)
-        monkeypatch.setattr(compiled, "CHUNK_STATES", states)
+        monkeypatch.setattr(compiled, "CHUNK_STEPS", states)
         runs[name] = run(scene, controller, cache)
     a, sa, stats_a, ua = runs["whole"]
     assert a.states.shape[0] > 7 * 15
@@ -180,16 +180,13 @@ def kept(stats):
     return {k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"}
 
 
-def test_a_call_holds_at_most_chunk_states_plant_state_numbers():
-    def size(substeps, n_x):
-        return compiled.chunk_size(
-            SimpleNamespace(substeps=substeps, plant=SimpleNamespace(n_x=n_x))
-        )
+def test_a_call_holds_at_most_chunk_steps_plant_steps():
+    def size(substeps):
+        return compiled.chunk_size(SimpleNamespace(substeps=substeps))
 
-    assert size(17, 18) == compiled.CHUNK  # the scenes' LQR on amm:2: 128 samples a call
-    fine = size(5000, 200)  # a finite-element plant, thousands of steps per sample
-    assert fine == compiled.CHUNK_STATES // (5000 * 200) and 1 <= fine < compiled.CHUNK
-    assert size(10**6, 200) == 1  # one sample alone is over the bound: one sample a call
+    assert size(17) == compiled.CHUNK  # the scenes' LQR on amm:2: 128 samples a call
+    assert size(260) == compiled.CHUNK_STEPS // 260  # amm:5 at its stable step under a 10 ms LQR
+    assert size(4029) == 1  # finite elements: thousands of steps per sample, one sample a call
 
 
 def test_the_deflection_monitor_stops_both_loops_alike(cache):

@@ -17,11 +17,12 @@ measurement, the shaped step from the first joint angles).
 
 The chain is evaluated in calls of at most :data:`CHUNK` samples: building a ``mapaccum``
 costs time in proportion to its length, so one loop of ``CHUNK`` samples is built once and
-called over the run (the remainder as a second loop).  A call returns every plant state
-of its samples, so fine plant steps (finite elements, thousands of steps per sample) get
-fewer samples per call, at most :data:`CHUNK_STATES` numbers: memory stays bounded
-whatever the run's length.  The chained state goes from one call to the next as a double,
-so any chunking gives the same numbers to the last digit.
+called over the run (the remainder as a second loop).  A call holds every plant step of
+its samples, so fine plant steps (finite elements, thousands of steps per sample) get
+fewer samples per call, at most :data:`CHUNK_STEPS` plant steps: building a chain of
+nested step loops costs memory and time faster than in proportion to its length, and a
+call's states stay bounded whatever the run's length.  The chained state goes from one
+call to the next as a double, so any chunking gives the same numbers to the last digit.
 
 Divergence is judged after each call on the same states with the same rules as the
 Python loop: the first offending sample ends the run as it would have there, and no
@@ -42,9 +43,9 @@ from flexctrl.sim.bound import evaluate
 
 #: Samples per call of the chained loop, at most.
 CHUNK = 128
-#: Plant-state numbers (``n_x`` per plant step) one call may return: fewer samples per call
-#: for fine plant steps, so a call holds about 32 MB at most.
-CHUNK_STATES = 1 << 22
+#: Plant steps per call of the chained loop, at most: fewer samples per call for fine plant
+#: steps (one sample per call beyond it).
+CHUNK_STEPS = 4096
 
 
 def sample_function(run, law) -> ca.Function:
@@ -73,9 +74,8 @@ def sample_function(run, law) -> ca.Function:
 
 
 def chunk_size(run) -> int:
-    """Samples per call for ``run``: :data:`CHUNK`, fewer when a sample holds many plant states."""
-    per_sample = run.substeps * run.plant.n_x
-    return max(1, min(CHUNK, CHUNK_STATES // per_sample))
+    """Samples per call for ``run``: :data:`CHUNK`, fewer when a sample holds many plant steps."""
+    return max(1, min(CHUNK, CHUNK_STEPS // run.substeps))
 
 
 def run_compiled(run, law) -> None:
