@@ -1,6 +1,7 @@
-"""The largest stable step of an integrator on a model, measured by bisection.
+"""Probe runs of an integrator about an equilibrium: is a step stable?
 
-Measured: :func:`largest_stable_step` (probes: :class:`StabilityProbe`)
+The probe (:class:`StabilityProbe`), which
+:func:`~flexctrl.analysis.stability.step_search.largest_stable_step` bisects with
     The model is linearised at an equilibrium ``(x0, u0)`` (joints held by the
     constant torques ``u0``, free to move; :func:`flexctrl.linear.equilibrium`
     makes one), ``A = df/dx``.  Its eigenvectors give *modal amplitudes*
@@ -54,18 +55,6 @@ Measured: :func:`largest_stable_step` (probes: :class:`StabilityProbe`)
     mode cannot grow faster than the tolerance under these methods, and its
     rounding noise would otherwise decide the verdict at small steps.
 
-    The search starts at ``omega_max h = 1``, grows the step fourfold while stable
-    (up to a cap, ``omega_max h = 1000 x 2.785``, :data:`flexctrl.sim.rk4.RK4_STABILITY_LIMIT`) or
-    shrinks it fourfold while unstable (down to a floor, ``omega_max h = 0.01``), then bisects
-    geometrically to ``rel_tol``.  The outcome is ``"bracketed"`` (``h_measured`` stable,
-    ``h_unstable`` unstable), ``"stable_at_cap"`` (``h_measured`` = the cap: stable at every tested
-    step, e.g. Newmark) or ``"unstable_at_floor"`` (``h_measured = 0``: unstable at every tested
-    step, e.g. explicit Euler on undamped modes; at the floor an undamped mode grows by ``(omega
-    h)^2/2 = 5e-5`` per step, five times the tolerance, so the floor is resolvable).  Bisection
-    assumes one boundary (stable below it, unstable above), which holds for these methods along
-    every ray ``lambda h``, ``h > 0``, met here; a failure that is not growth (Newton divergence)
-    also ends the stable range and is reported as such (:attr:`Probe.reason`).
-
 The theory it is compared with (``h_theory``, :attr:`StabilityResult.theory`) is
 :mod:`flexctrl.analysis.stability.theory`.
 
@@ -76,47 +65,30 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, cast
 
-import casadi as ca
 import numpy as np
-import scipy.linalg
 
+from flexctrl.analysis.stability.equilibrium import (
+    check_spectrum,
+    checked_state,
+    linearization_function,
+    linearize,
+    modal_basis,
+    refine_equilibrium,
+)
 from flexctrl.analysis.stability.theory import (
     EIGENVALUE_TOL,
     THEORY_METHODS,
     TheoryLimit,
-    classify_eigenvalues,
     theoretical_step_limit,
 )
-from flexctrl.dynamics.jacobians import jacobian_function
-from flexctrl.dynamics.parametric import try_expand
 from flexctrl.errors import SimulationError, SolverError, SpecError
-from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT
-
-Outcome = Literal["bracketed", "stable_at_cap", "unstable_at_floor"]
-
+from flexctrl.sim import get_integrator
 
 # -- linearisation --------------------------------------------------------------------
-
-
-def linearization_function(model) -> ca.Function:
-    """``(x, u) -> (f, A = df/dx)`` of the model's forward dynamics (free joints, torques held),
-    expanded to SX.
-
-    :func:`flexctrl.dynamics.jacobians.jacobian_function`, the one Jacobian builder.
-    """
-    return try_expand(jacobian_function(model, value=True))
-
-
-def linearize(
-    model, x0: np.ndarray, u0: np.ndarray, function: ca.Function | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(f(x0, u0), A = df/dx(x0, u0))``; pass ``function`` (:func:`linearisation_function`) to reuse it."""
-    f, A = (function or linearization_function(model))(x0, u0)
-    return np.asarray(f, dtype=float).ravel(), np.asarray(A, dtype=float)
 
 
 # -- measurement ----------------------------------------------------------------------
@@ -166,8 +138,8 @@ class StabilityCriterion:
             or not 0.0 < self.amplitude <= 0.1
         ):
             raise SpecError(
-                f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, 0.1] "
-                "(m or rad)",
+                f"amplitude = {self.amplitude!r} is not allowed; allowed: a number in (0, "
+                "0.1] (m or rad)",
                 key="amplitude",
             )
 
@@ -204,148 +176,10 @@ class Probe:
     kind: str = ""
 
 
-@dataclass(frozen=True)
-class StabilityResult:
-    """The outcome of :func:`largest_stable_step`.
-
-    Attributes
-    ----------
-    integrator : str
-    h_measured : float
-        Largest step found stable (s): the cap for ``"stable_at_cap"``, 0 for
-        ``"unstable_at_floor"``.
-    h_unstable : float
-        Smallest step found unstable (s); inf for ``"stable_at_cap"``.
-    outcome : {"bracketed", "stable_at_cap", "unstable_at_floor"}
-    omega_max : float
-        ``max |lambda|`` of ``A`` at the equilibrium (rad/s).
-    h_floor, h_cap : float
-        The search range (s).
-    theory : TheoryLimit or None
-        For rk4, euler and newmark.
-    probes : tuple of Probe
-        In the order run.
-    criterion : StabilityCriterion
-    n_modes : int
-        Modes excited and watched (one per conjugate pair).
-    equilibrium_residual : float
-        ``max |f(x0, u0)|`` after refinement.
-    settings : dict
-        The integrator's settings (from its last probe).
-    """
-
-    integrator: str
-    h_measured: float
-    h_unstable: float
-    outcome: Outcome
-    omega_max: float
-    h_floor: float
-    h_cap: float
-    theory: TheoryLimit | None
-    probes: tuple[Probe, ...]
-    criterion: StabilityCriterion
-    n_modes: int
-    equilibrium_residual: float
-    settings: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def first_failure(self) -> Probe | None:
-        """The unstable probe at the smallest step (None if every probe was stable)."""
-        unstable = [p for p in self.probes if not p.stable]
-        return min(unstable, key=lambda p: p.h) if unstable else None
-
-    @property
-    def h_theory(self) -> float:
-        """The theoretical limit (s), NaN without a theory."""
-        return self.theory.h if self.theory is not None else math.nan
-
-    @property
-    def ratio(self) -> float:
-        """``h_measured / h_theory``; NaN when undefined (no theory, 0/0, inf)."""
-        h, t = self.h_measured, self.h_theory
-        if not (math.isfinite(h) and math.isfinite(t)) or t <= 0:
-            return math.nan
-        return h / t
-
-    @property
-    def note(self) -> str:
-        """One sentence on what was found."""
-        w = self.omega_max
-        if self.outcome == "stable_at_cap":
-            return (
-                f"stable at every tested step, up to the cap h = {self.h_cap:.4g} s "
-                f"(omega_max h = {w * self.h_cap:.4g}); h_measured is that cap, a lower bound"
-            )
-        if self.outcome == "unstable_at_floor":
-            return (
-                f"unstable at every tested step, down to h = {self.h_floor:.4g} s "
-                f"(omega_max h = {w * self.h_floor:.4g}); h_measured = 0"
-            )
-        failure = self.first_failure
-        why = {
-            "growth": "a mode grows",
-            "diverged": "the run diverges",
-            "solver": "the method's solver fails",
-        }.get(failure.kind if failure else "", "")
-        return (
-            f"stable at h = {self.h_measured:.6g} s, unstable at {self.h_unstable:.6g} s "
-            f"(omega_max h = {w * self.h_measured:.5f}){': ' + why if why else ''}"
-        )
-
-
-def refine_equilibrium(
-    model,
-    x0: np.ndarray,
-    u0: np.ndarray,
-    *,
-    tolerance: float,
-    max_iterations: int = 8,
-    function: ca.Function | None = None,
-) -> tuple[np.ndarray, float]:
-    """Newton on ``f(x, u0) = 0`` from ``x0`` (least squares where ``A`` is singular); returns ``(x,
-    max|f|)``.
-
-    Parameters
-    ----------
-    tolerance
-        Largest acceptable remaining Newton step (m or rad): the offset of the
-        true equilibrium from the returned state, in the linear model.
-
-    Raises
-    ------
-    SpecError
-        If ``x0`` is not near an equilibrium: Newton moves it by more than 1 %
-        of ``1 + max|x0|`` or cannot bring the step below ``tolerance``.
-    """
-    function = function or linearization_function(model)
-    x = np.array(x0, dtype=float)
-    f, A = linearize(model, x, u0, function)
-    start = float(np.max(np.abs(f), initial=0.0))
-    step_size = math.inf
-    for _ in range(max_iterations):
-        step = np.linalg.lstsq(A, -f, rcond=None)[0]
-        step_size = float(np.max(np.abs(step), initial=0.0))
-        if step_size <= 1e-3 * tolerance:
-            break
-        x = x + step
-        f, A = linearize(model, x, u0, function)
-    residual = float(np.max(np.abs(f), initial=0.0))
-    moved = float(np.max(np.abs(x - x0)))
-    if moved > 1e-2 * (1.0 + float(np.max(np.abs(x0)))) or step_size > tolerance:
-        raise SpecError(
-            f"the state is not an equilibrium: max |f(x0, u0)| = {start:.3g}; Newton moved it by "
-            f"{moved:.3g} "
-            f"and its last step is {step_size:.3g} (allowed: {tolerance:.3g}); allowed: a static "
-            "equilibrium "
-            "with its holding torques, e.g. flexctrl.linear.equilibrium(model, q_joints)",
-            key="x0",
-        )
-    return x, residual
-
-
 @functools.lru_cache(maxsize=8)
 def _quiet_class(cls: type) -> type:
-    """``cls`` with a one-line divergence message (its advice computes a Jacobian: seconds for big models)."""
+    """``cls`` with a one-line divergence message (its advice computes a Jacobian: seconds for big
+    models)."""
 
     def stability_advice(self, states=()) -> str:
         return "(stability probe)"
@@ -355,22 +189,6 @@ def _quiet_class(cls: type) -> type:
         (cls,),
         {"stability_advice": stability_advice, "__module__": __name__},
     )
-
-
-def _modal_basis(A: np.ndarray, n_q: int, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Watched eigenvalues, their normalised right eigenvectors (columns) and modal projection rows."""
-    lam, left, right = scipy.linalg.eig(A, left=True, right=True)
-    kind, _snapped, _w = classify_eigenvalues(lam, tol)
-    keep = [i for i in range(lam.size) if kind[i] in ("undamped", "damped") and lam[i].imag >= 0]
-    vectors, rows = [], []
-    for i in keep:
-        v = right[:, i]
-        k = int(np.argmax(np.abs(v[:n_q])))
-        v = v / v[k]  # largest coordinate = 1 (real)
-        w = left[:, i]
-        rows.append(w.conj() / (w.conj() @ v))
-        vectors.append(v)
-    return lam[keep], np.array(vectors).T, np.array(rows)
 
 
 class StabilityProbe:
@@ -419,9 +237,8 @@ class StabilityProbe:
     Examples
     --------
     >>> import flexctrl as fc
-    >>> from flexctrl.linear import equilibrium
     >>> model = fc.load_model("subedi3link", fidelity="amm:1", gravity=[0.0, 0.0])
-    >>> op = equilibrium(model, [0.3, -0.2, 0.1])
+    >>> op = fc.equilibrium(model, [0.3, -0.2, 0.1])
     >>> probe = StabilityProbe(model, "rk4", op.x, op.u, integrator_options={"compile": False})
     >>> probe(2.7 / probe.omega_max).stable, probe(2.9 / probe.omega_max).stable
     (True, False)
@@ -437,7 +254,6 @@ class StabilityProbe:
         criterion: StabilityCriterion | None = None,
         integrator_options: Mapping[str, Any] | None = None,
     ):
-        from flexctrl.sim import get_integrator
 
         self.model = model
         self.criterion = criterion or StabilityCriterion()
@@ -446,49 +262,21 @@ class StabilityProbe:
         for key in ("chunk", "u_function"):
             if key in self.options:
                 raise SpecError(
-                    f"integrator option '{key}' is set by the probe; allowed: other options of {self.cls.name}",
+                    f"integrator option '{key}' is set by the probe; allowed: other options "
+                    f"of {self.cls.name}",
                     key=key,
                 )
-        x0 = np.asarray(x0, dtype=float).ravel()
-        u0 = np.zeros(model.n_u) if u0 is None else np.asarray(u0, dtype=float).ravel()
-        if (
-            x0.shape != (model.n_x,)
-            or u0.shape != (model.n_u,)
-            or not (np.all(np.isfinite(x0)) and np.all(np.isfinite(u0)))
-        ):
-            raise SpecError(
-                f"x0 has shape {x0.shape}, u0 {u0.shape}; expected {model.n_x} and {model.n_u} "
-                "finite values",
-                key="x0",
-            )
-        self.u0 = u0
+        x, u = checked_state(model, x0, u0)
+        self.u0 = u
         function = linearization_function(model)
         self.x_eq, self.residual = refine_equilibrium(
-            model, x0, u0, tolerance=1e-2 * self.criterion.amplitude, function=function
+            model, x, u, tolerance=1e-2 * self.criterion.amplitude, function=function
         )
-        _f, A = linearize(model, self.x_eq, u0, function)
+        _f, A = linearize(model, self.x_eq, u, function)
         self.eigenvalues = np.linalg.eigvals(A)
         self.omega_max = float(np.max(np.abs(self.eigenvalues), initial=0.0))
-        if not self.omega_max > 0:
-            raise SimulationError(
-                f"the linearisation of '{model.name}' at this state has no vibration mode "
-                "(omega_max = 0), "
-                "so there is no step scale to search; use a flexible fidelity or a configuration "
-                "under load"
-            )
-        kind, _snapped, _w = classify_eigenvalues(self.eigenvalues)
-        if np.any(kind == "growing"):
-            rates = np.sort(self.eigenvalues.real[kind == "growing"])[::-1]
-            raise SpecError(
-                f"the equilibrium is unstable: {rates.size} eigenvalues of df/dx grow physically "
-                "(rates up to "
-                f"{rates[0]:.4g} 1/s), and over a probe they would swamp the modes being "
-                "watched; allowed: a "
-                "stable equilibrium (e.g. hanging, or joints held where gravity does not tip the "
-                "arm over)",
-                key="x0",
-            )
-        lam, vectors, rows = _modal_basis(A, model.n_q, EIGENVALUE_TOL)
+        check_spectrum(model, self.eigenvalues, self.omega_max)
+        lam, vectors, rows = modal_basis(A, model.n_q, EIGENVALUE_TOL)
         if rows.size == 0:
             raise SimulationError(
                 f"the linearisation of '{model.name}' has no mode that is neither zero nor "
@@ -506,10 +294,9 @@ class StabilityProbe:
         if self.offset > 1e-3:
             raise SpecError(
                 "the equilibrium is not accurate enough for a probe of amplitude "
-                f"{self.criterion.amplitude:g}: "
-                f"its remaining offset is {self.offset:.3g} of a mode's initial amplitude (max "
-                "|f| = "
-                f"{self.residual:.3g}); allowed: at most 1e-3 (a larger amplitude, or a better equilibrium)",
+                f"{self.criterion.amplitude:g}: its remaining offset is {self.offset:.3g} of a "
+                f"mode's initial amplitude (max |f| = {self.residual:.3g}); allowed: at most "
+                "1e-3 (a larger amplitude, or a better equilibrium)",
                 key="x0",
             )
         self.settings: dict[str, Any] = {}
@@ -565,7 +352,8 @@ class StabilityProbe:
             )
         steps = self.criterion.steps
         try:
-            sim = _quiet_class(self.cls)(
+            # a class is hashable; mypy takes the instances' __eq__ for the class's own
+            sim = _quiet_class(cast(Hashable, self.cls))(
                 self.model, float(h), chunk=min(steps, 500), **self.options
             )
             self.settings = sim.settings()
@@ -587,124 +375,4 @@ class StabilityProbe:
             return Probe(float(h), False, math.inf, str(exc).splitlines()[0][:300], kind)
 
 
-def largest_stable_step(
-    model,
-    integrator: str | type,
-    x0: Sequence[float],
-    u0: Sequence[float] | None = None,
-    *,
-    criterion: StabilityCriterion | None = None,
-    rel_tol: float = 1e-4,
-    omega_h_start: float = 1.0,
-    omega_h_floor: float = 0.01,
-    omega_h_cap: float = 1000.0 * RK4_STABILITY_LIMIT,
-    expansion: float = 4.0,
-    integrator_options: Mapping[str, Any] | None = None,
-) -> StabilityResult:
-    """Largest stable step of ``integrator`` on ``model`` about the equilibrium ``(x0, u0)``, by
-    bisection.
-
-    Parameters
-    ----------
-    model, integrator, x0, u0, criterion, integrator_options
-        See :class:`StabilityProbe`.
-    rel_tol
-        Bisection stops when ``h_unstable / h_stable - 1 <= rel_tol``.
-    omega_h_start, omega_h_floor, omega_h_cap
-        First step, smallest and largest tested step, as ``omega_max h``.
-    expansion
-        Factor by which the step grows (or shrinks) until the boundary is bracketed.
-
-    Returns
-    -------
-    StabilityResult
-
-    Raises
-    ------
-    SpecError
-        For bad arguments, a state that is not an equilibrium, or an unstable equilibrium.
-    SimulationError
-        If the linearisation has no vibration mode (``omega_max = 0``), so there is no step scale.
-    """
-    if not (isinstance(expansion, (int, float)) and 1.0 < expansion <= 1e3):
-        raise SpecError(
-            f"expansion = {expansion!r} is not allowed; allowed: a number in (1, 1000]",
-            key="expansion",
-        )
-    if not (0 < rel_tol < 1):
-        raise SpecError(
-            f"rel_tol = {rel_tol!r} is not allowed; allowed: a number in (0, 1)", key="rel_tol"
-        )
-    if not (0 < omega_h_floor <= omega_h_start <= omega_h_cap and math.isfinite(omega_h_cap)):
-        raise SpecError(
-            f"omega_h_floor = {omega_h_floor!r}, omega_h_start = {omega_h_start!r}, omega_h_cap "
-            f"= {omega_h_cap!r} "
-            "are not allowed; allowed: 0 < floor <= start <= cap < inf",
-            key="omega_h_start",
-        )
-    probe = StabilityProbe(
-        model, integrator, x0, u0, criterion=criterion, integrator_options=integrator_options
-    )
-    omega_max = probe.omega_max
-    probes: list[Probe] = []
-
-    def run(y: float) -> bool:
-        p = probe(y / omega_max)
-        probes.append(p)
-        return p.stable
-
-    def result(y_measured: float, y_unstable: float, outcome: Outcome) -> StabilityResult:
-        return StabilityResult(
-            integrator=probe.name,
-            h_measured=y_measured / omega_max,
-            h_unstable=y_unstable / omega_max,
-            outcome=outcome,
-            omega_max=omega_max,
-            h_floor=omega_h_floor / omega_max,
-            h_cap=omega_h_cap / omega_max,
-            theory=probe.theory(),
-            probes=tuple(probes),
-            criterion=probe.criterion,
-            n_modes=probe.n_modes,
-            equilibrium_residual=probe.residual,
-            settings=dict(probe.settings),
-        )
-
-    y = omega_h_start
-    if run(y):
-        while y < omega_h_cap:
-            y_next = min(expansion * y, omega_h_cap)
-            if not run(y_next):
-                y_stable, y_unstable = y, y_next
-                break
-            y = y_next
-        else:
-            return result(omega_h_cap, math.inf, "stable_at_cap")
-    else:
-        while y > omega_h_floor:
-            y_next = max(y / expansion, omega_h_floor)
-            if run(y_next):
-                y_stable, y_unstable = y_next, y
-                break
-            y = y_next
-        else:
-            return result(0.0, omega_h_floor, "unstable_at_floor")
-    while y_unstable / y_stable - 1.0 > rel_tol:
-        mid = math.sqrt(y_stable * y_unstable)
-        if run(mid):
-            y_stable = mid
-        else:
-            y_unstable = mid
-    return result(y_stable, y_unstable, "bracketed")
-
-
-__all__ = [
-    "Probe",
-    "StabilityCriterion",
-    "StabilityProbe",
-    "StabilityResult",
-    "largest_stable_step",
-    "linearization_function",
-    "linearize",
-    "refine_equilibrium",
-]
+__all__ = ["Probe", "StabilityCriterion", "StabilityProbe"]

@@ -6,8 +6,8 @@ Theory: :func:`theoretical_step_limit`
 
     * ``rk4``: ``R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24``.  On the imaginary axis
       (undamped modes) the exit is at ``|z| = 2 sqrt 2 = 2.828``; on the negative
-      real axis at ``2.785`` (:data:`RK4_REAL_AXIS_LIMIT`).  The issue quotes
-      2.785 "on the imaginary axis": that is the real-axis value, 1.5 % below the
+      real axis at ``2.785`` (:data:`RK4_REAL_AXIS_LIMIT`).  2.785 is often quoted
+      "on the imaginary axis": it is the real-axis value, 1.5 % below the
       imaginary-axis one that governs an undamped arm, and the bound the
       integrators use (:data:`flexctrl.sim.rk4.RK4_STABILITY_LIMIT`: safe for
       every undamped mode).  We report the exact ray intersection as
@@ -48,17 +48,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.sim.newmark_model import newmark_critical_step
 
-# : Amplification polynomials ``R(z) = sum c_k z^k`` of the explicit methods (coefficients c_0, c_1,
-# ...).
+#: Amplification polynomials ``R(z) = sum c_k z^k`` of the explicit methods (coefficients c_0, c_1,
+#: ...).
 EXPLICIT_POLYNOMIALS: dict[str, tuple[float, ...]] = {
     "euler": (1.0, 1.0),
     "rk4": (1.0, 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0),
 }
 #: Methods with a stability theory here.
 THEORY_METHODS = ("rk4", "euler", "newmark")
-# : Eigenvalues within this fraction of the fastest oscillation of zero (or of the imaginary axis)
-# are treated as such.
+#: Eigenvalues within this fraction of the fastest oscillation of zero (or of the imaginary axis)
+#: are treated as such.
 EIGENVALUE_TOL = 1e-8
 
 
@@ -80,9 +81,8 @@ def amplification_factor(
     if method == "newmark" and alpha == 0.25 and delta == 0.5:
         return (1 + z / 2) / (1 - z / 2)
     raise SpecError(
-        f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification "
-        "factor here; "
-        "allowed: 'euler', 'rk4', 'newmark' with alpha = 0.25, delta = 0.5",
+        f"method {method!r} (alpha = {alpha}, delta = {delta}) has no scalar amplification factor "
+        "here; allowed: 'euler', 'rk4', 'newmark' with alpha = 0.25, delta = 0.5",
         key="method",
     )
 
@@ -238,11 +238,11 @@ def theoretical_step_limit(
     >>> theoretical_step_limit(lam, "euler").h, theoretical_step_limit(lam, "newmark").h
     (0.0, inf)
     """
-    from flexctrl.sim.newmark_model import newmark_critical_step
 
     if method not in THEORY_METHODS:
         raise SpecError(
-            f"method {method!r} has no stability theory here; allowed: {', '.join(map(repr, THEORY_METHODS))}",
+            f"method {method!r} has no stability theory here; allowed: "
+            f"{', '.join(map(repr, THEORY_METHODS))}",
             key="method",
         )
     kind, snapped, omega_max = classify_eigenvalues(eigenvalues, tol)

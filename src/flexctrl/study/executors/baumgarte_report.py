@@ -101,7 +101,8 @@ def _write_csv(path: Path, records: Sequence[dict]) -> None:
 
 
 def _summaries(groups: dict[tuple[str, float], list[dict]]) -> list[dict]:
-    """Per (feedback, dt): predicted and observed boundary, reduction factors, slope, model agreement."""
+    """Per (feedback, dt): predicted and observed boundary, reduction factors, slope, model
+    agreement."""
     out = []
     for (feedback, dt), recs in groups.items():
         ratio = recs[-1]["ratio"]
@@ -268,7 +269,8 @@ def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[st
     png = figures / "baumgarte_violation.png"
     _draw(png, groups, summaries)
     lines += [
-        f"Per-run numbers: `baumgarte.csv`. Figure: ![violation vs gamma]({png.relative_to(directory).as_posix()})",
+        "Per-run numbers: `baumgarte.csv`. Figure: ![violation vs "
+        f"gamma]({png.relative_to(directory).as_posix()})",
         "",
     ]
 

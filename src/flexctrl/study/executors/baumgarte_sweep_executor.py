@@ -95,7 +95,8 @@ def read_sweep_scene(
     s = read_fem_scene(document, source)
     if not isinstance(s, SlidingBeamScene):
         raise SpecError(
-            f"value {s.kind!r} is not allowed for the baumgarte_sweep executor; allowed: 'sliding_beam'",
+            f"value {s.kind!r} is not allowed for the baumgarte_sweep executor; allowed: "
+            "'sliding_beam'",
             source=source,
             key="kind",
         )
@@ -203,7 +204,8 @@ def _defects(
     axial_shortening: bool,
     dt: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Initial error state and step defects of the gamma = beta = 0 run at this dt (built once per worker)."""
+    """Initial error state and step defects of the gamma = beta = 0 run at this dt (built once per
+    worker)."""
     point = run_point(
         case,
         n_elements,
@@ -224,7 +226,8 @@ def _defects(
 
 
 def execute(settings: dict) -> RunOutput:
-    """The ``baumgarte_sweep`` executor: one (dt, gamma, beta, feedback) run with theory beside it."""
+    """The ``baumgarte_sweep`` executor: one (dt, gamma, beta, feedback) run with theory beside
+    it."""
     s = _scene_of(settings)
     point = run_point(
         s.case,

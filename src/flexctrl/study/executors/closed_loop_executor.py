@@ -31,7 +31,8 @@ def check_settings(settings: dict) -> None:
     scene = load_scene(settings["scene"], _scene_overrides(settings))
     if scene.kind != "closed_loop":
         raise SpecError(
-            f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = \"closed_loop\"",
+            f"scene kind '{scene.kind}' is not a closed-loop scene; allowed: kind = "
+            '"closed_loop"',
             source=str(settings["scene"]),
             key="kind",
         )
@@ -42,7 +43,8 @@ def check_settings(settings: dict) -> None:
 
 
 def unavailable_metrics(settings: dict) -> dict[str, str]:
-    """The metrics this run cannot produce, from its controller's kind: ``closed_loop_radius`` needs a linear law."""
+    """The metrics this run cannot produce, from its controller's kind: ``closed_loop_radius`` needs
+    a linear law."""
     from flexctrl.control import has_linear_law
 
     controller = settings.get("controller") or getattr(

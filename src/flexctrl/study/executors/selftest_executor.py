@@ -96,7 +96,8 @@ def _selftest_inputs(settings: Mapping[str, Any]):
 def _selftest_build(
     model: str, model_digest: str | None, model_overrides: tuple[str, ...]
 ) -> tuple[float, float]:
-    """First clamped-free frequency (Hz) and modal mass (kg) of the model's last link; built once per worker."""
+    """First clamped-free frequency (Hz) and modal mass (kg) of the model's last link; built once
+    per worker."""
     from flexctrl.spec.arm import load_arm
 
     link = load_arm(model, overrides=model_overrides).links[-1]

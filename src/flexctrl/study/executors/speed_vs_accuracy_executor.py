@@ -150,7 +150,8 @@ def plan_from_settings(settings: Mapping[str, Any]) -> RunPlan:
     )
     if reference.fidelity.split(":")[0] != "fem":
         raise SpecError(
-            f"value {reference.label!r} is not allowed; allowed: a finite-element reference 'fem:N/...'",
+            f"value {reference.label!r} is not allowed; allowed: a finite-element reference "
+            "'fem:N/...'",
             source=source,
             key="scene.reference",
         )
@@ -264,7 +265,8 @@ def _controller(
 ):
     """Controller designed once on the scene's own fidelity (or ``controller_fidelity``) and payload
     (or ``design_payload``) at its design configuration, tracking the scene's reference path, as
-    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the design configuration (rad)."""
+    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` does; returns it and the
+    design configuration (rad)."""
     from flexctrl.scenes.arm_setup import scene_arm
     from flexctrl.scenes.loop_setup import design_scene_controller
     from flexctrl.spec.controller_reader import load_controller
@@ -352,7 +354,8 @@ def _reference(plan_ref: RunPlan) -> tuple[Reference, str, bool]:
 
 
 def check_settings(settings: dict) -> None:
-    """Validate one run before the study starts: the executor's keys, the scene with its overrides, the controller."""
+    """Validate one run before the study starts: the executor's keys, the scene with its overrides,
+    the controller."""
     plan = plan_from_settings(settings)
     scene = _scene(_plan_scene(plan))
     if scene.kind == "closed_loop":

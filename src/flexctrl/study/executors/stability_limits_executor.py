@@ -11,7 +11,7 @@ every integrator and the study's table gets an ``scene.integrator`` column.
 The run builds the model, puts it in static equilibrium at the joint angles
 with the holding torques (:func:`flexctrl.linear.equilibrium`: elastic
 coordinates at their static deflection, joints free to move under constant
-torque) and calls :func:`flexctrl.analysis.stability.probe.largest_stable_step`.
+torque) and calls :func:`flexctrl.analysis.stability.step_search.largest_stable_step`.
 The scene's initial rates, elastic coordinates, torque input, ``dt`` and
 ``duration`` are not used: a stability probe needs a steady state to perturb
 (the free-vibration scene's arm falls away from its initial state within tens
@@ -47,37 +47,51 @@ outcome, note`` and any other grid columns; draws
 ``figures/stability_limits.png`` (h against omega_max on log axes with the
 RK4 lines ``2 sqrt 2 / omega`` and ``2.785 / omega``) and a Markdown table.
 It reads only the result folder (``results.csv`` rows and ``runs/<id>.json``
-records), so ``flexctrl report DIR`` redraws it.
+records), so ``flexctrl report DIR`` redraws it; the table, figure and text are
+:mod:`flexctrl.analysis.stability.limits_report`'s.
 """
 
 from __future__ import annotations
 
-import math
+import csv
+import dataclasses
+import io
+import json
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
+from flexctrl.analysis.stability.limits_report import (
+    CSV_COLUMNS,
+    EXTRA_COLUMNS,
+    KNOWN_METRICS,
+    draw_limits,
+    limits_row,
+    markdown_lines,
+    probe_histories,
+    result_metrics,
+)
+from flexctrl.analysis.stability.step_search import largest_stable_step
+from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
-from flexctrl.study.executors.stability_limits_report import OUTCOMES
-from flexctrl.study.executors.stability_limits_report import report_sections as report_sections
+from flexctrl.linear import equilibrium
+from flexctrl.scenes.arm_setup import scene_arm
+from flexctrl.spec.reader import read_toml
+from flexctrl.spec.scene import ArmScene, load_scene
 from flexctrl.study.outputs import RunOutput, overrides_for, per_worker_cache, scene_overrides
+from flexctrl.study.plan import SETTINGS
+from flexctrl.study.store import ResultStore, atomic_write
 
 #: Integrators this executor measures (fixed-step methods with a theory).
 METHODS = ("rk4", "euler", "newmark")
-# : Why the smallest unstable step failed, by ``failure_code`` (see
-# :class:`flexctrl.analysis.stability.probe.Probe`).
-FAILURES = ("growth", "diverged", "solver")
 
 
 def _scene(settings: dict):
-    from flexctrl.spec.scene import load_scene
-
     source = str(settings["scene"])
     if overrides_for(settings, "model"):
         raise SpecError(
             f"model overrides {overrides_for(settings, 'model')} are not supported by the "
-            "stability_limits "
-            "executor; allowed: scene.KEY overrides (payload, damping, gravity, fidelity, integrator)",
+            "stability_limits executor; allowed: scene.KEY overrides (payload, damping, "
+            "gravity, fidelity, integrator)",
             source=source,
             key="model",
         )
@@ -91,16 +105,15 @@ def _scene(settings: dict):
     if scene.fidelity.kind not in ("rigid", "amm", "fem"):
         raise SpecError(
             f"fidelity '{scene.fidelity}' is not allowed here; allowed: 'rigid', 'amm:N' or "
-            "'fem:N' (a model "
-            "of its own per run: the study compares fidelities)",
+            "'fem:N' (a model of its own per run: the study compares fidelities)",
             source=source,
             key="fidelity",
         )
     if scene.integrator not in METHODS:
         raise SpecError(
             f"integrator '{scene.integrator}' is not allowed here; allowed: "
-            f"{', '.join(map(repr, METHODS))} "
-            "(fixed-step methods: an adaptive one has no step to limit)",
+            f"{', '.join(map(repr, METHODS))} (fixed-step methods: an adaptive one has no step "
+            "to limit)",
             source=source,
             key="integrator",
         )
@@ -108,20 +121,14 @@ def _scene(settings: dict):
 
 
 def check_settings(settings: dict) -> None:
-    """Validate one run before the study starts (scene with overrides, integrator, model overrides)."""
+    """Validate one run before the study starts (scene with overrides, integrator, model
+    overrides)."""
     _scene(settings)
 
 
 @per_worker_cache(maxsize=8)
 def _build(model_key: tuple, scene_source: str):
     """The model and its equilibrium, once per worker per distinct arm (integrators share them)."""
-    import dataclasses
-
-    from flexctrl.dynamics.build import build_model
-    from flexctrl.linear import equilibrium
-    from flexctrl.scenes.arm_setup import scene_arm
-    from flexctrl.spec.arm_scene import ArmScene
-
     fields = dict(model_key)
     scene = ArmScene(
         name="stability",
@@ -159,47 +166,88 @@ def _model_key(scene, settings: dict) -> tuple:
 
 def execute(settings: dict) -> RunOutput:
     """Measure one integrator's largest stable step on one model (see the module docstring)."""
-    from flexctrl.analysis.stability.probe import largest_stable_step
-
     scene = _scene(settings)
     model, op, _ = _build(_model_key(scene, settings), str(settings["scene"]))
     options = {k: v for k, v in scene.solver.items() if k != "chunk"}
     result = largest_stable_step(model, scene.integrator, op.x, op.u, integrator_options=options)
-    w = result.omega_max
-    metrics: dict[str, float] = {
-        "omega_max": w,
-        "omega_max_model": float(model.omega_max),
-        "h_measured": result.h_measured,
-        "theory_unbounded": 1.0 if math.isinf(result.h_theory) else 0.0,
-        "omega_h_measured": w * result.h_measured,
-        "outcome_code": float(OUTCOMES.index(result.outcome)),
-        "h_cap": result.h_cap,
-        "h_floor": result.h_floor,
-        "n_modes": float(result.n_modes),
-        "n_probes": float(len(result.probes)),
-        "probe_steps": float(result.criterion.steps),
-        "growth_tolerance": result.criterion.growth,
-        "equilibrium_residual": result.equilibrium_residual,
-    }
-    if math.isfinite(result.h_unstable):
-        metrics["h_unstable"] = result.h_unstable
-    if math.isfinite(result.h_theory):
-        metrics["h_theory"] = result.h_theory
-        metrics["omega_h_theory"] = w * result.h_theory
-    if math.isfinite(result.ratio):
-        metrics["ratio"] = result.ratio
-    failure = result.first_failure
-    if failure is not None:
-        metrics["failure_code"] = float(FAILURES.index(failure.kind))
-    limiting = result.theory.limiting_eigenvalue if result.theory is not None else None
-    if limiting is not None:
-        metrics["limiting_omega"] = abs(limiting)
-        metrics["limiting_zeta"] = max(-limiting.real / abs(limiting), 0.0)
     return RunOutput(
-        metrics=metrics,
-        trajectories={
-            "probe_h": np.array([p.h for p in result.probes]),
-            "probe_stable": np.array([1.0 if p.stable else 0.0 for p in result.probes]),
-            "probe_growth": np.array([p.growth for p in result.probes]),
-        },
+        metrics=result_metrics(result, float(model.omega_max)),
+        trajectories=probe_histories(result),
     )
+
+
+# -- report ---------------------------------------------------------------------------
+
+
+def _run_facts(directory: Path, row: dict) -> tuple[str, str, str, dict]:
+    """Integrator, fidelity, scene label and every metric of a row, from its grid columns and its
+    record.
+
+    The record (``runs/<id>.json``) holds every metric even when the study's
+    ``metrics`` list keeps some out of ``results.csv``.
+    """
+    integrator = row.get("scene.integrator")
+    fidelity = row.get("fidelity")
+    scene_label = row.get("scene") or ""
+    record = ResultStore(directory).read_record(str(row.get("run_id"))) or {}
+    metrics = {k: v for k, v in (record.get("metrics") or {}).items() if v is not None}
+    metrics.update({k: v for k, v in row.items() if v is not None})
+    if integrator is None or fidelity is None or not scene_label:
+        settings = record.get("settings", {})
+        scene_path = settings.get("scene")
+        scene_label = scene_label or (Path(scene_path).stem if scene_path else "")
+        fidelity = fidelity or settings.get("fidelity")
+        for item in settings.get("overrides", []):
+            if item.startswith("scene.integrator="):
+                integrator = integrator or json.loads(item.split("=", 1)[1])
+        if (integrator is None or fidelity is None) and scene_path:
+            try:
+                doc = read_toml(scene_path)
+                integrator = integrator or doc.get("integrator", "rk4")
+                fidelity = fidelity or doc.get("fidelity", "amm:2")
+            except (SpecError, OSError):
+                pass
+    return str(integrator or "?"), str(fidelity or "?"), str(scene_label), metrics
+
+
+def _other_columns(rows: list[dict]) -> list[str]:
+    """The study's own grid columns that the table carries beside its own."""
+    skip = set(CSV_COLUMNS) | set(EXTRA_COLUMNS) | set(KNOWN_METRICS)
+    skip |= {"scene.integrator", "seed", "error", "wall_time_s", "peak_memory_mb"}
+    skip |= {"bytes_written", "worker", "run_id", "status"}
+    return [
+        c
+        for c in (rows[0] if rows else {})
+        if c not in skip and (c in SETTINGS or "." in c or c.startswith("q") or c == "replicate")
+    ]
+
+
+def stability_rows(directory: Path, rows: list[dict]) -> tuple[list[str], list[dict[str, Any]]]:
+    """The ``stability_limits.csv`` table (columns, rows) from the study table's rows."""
+    other = _other_columns(rows)
+    out = []
+    for original in rows:
+        integrator, fidelity, scene_label, row = _run_facts(directory, original)
+        entry = limits_row(integrator, fidelity, scene_label, row)
+        for column in other:
+            value = row.get(column)
+            entry[column] = "" if value is None else value
+        out.append(entry)
+    return list(CSV_COLUMNS) + list(EXTRA_COLUMNS) + other, out
+
+
+def report_sections(directory: Path, rows: list[dict], figures: Path) -> list[str]:
+    """Write ``stability_limits.csv`` and ``figures/stability_limits.png``; the Markdown lines."""
+    directory = Path(directory)
+    columns, table = stability_rows(directory, rows)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(table)
+    atomic_write(directory / "stability_limits.csv", text.getvalue().encode())
+    lines = ["## Largest stable step (stability_limits)", "", *markdown_lines(table)]
+    if any(e["omega_max"] for e in table):
+        name = "stability_limits.png"
+        draw_limits(figures / name, table)
+        lines += ["", f"![largest stable step]({figures.name}/{name})"]
+    return lines

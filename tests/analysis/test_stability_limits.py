@@ -1,11 +1,11 @@
-"""Issue 7, "stability where methods fail": largest stable steps of rk4, euler and newmark.
+"""Stability where methods fail: the largest stable steps of rk4, euler and newmark.
 
 Every expected value is computed here by a second route: the stability
 boundaries from the amplification factors by hand or by scanning, the
 frequencies from the mass and stiffness matrices (not from the Jacobian the
 library uses), the Newmark boundary from the spectral radius of its
-single-mode step matrix.  The issue's number 2.785 is used where the issue
-demands it (RK4 within 5 % of 2.785/omega_max).
+single-mode step matrix.  The often quoted 2.785 is used where a bound of RK4
+is asked for (within 5 % of 2.785/omega_max).
 """
 
 from __future__ import annotations
@@ -19,12 +19,10 @@ import numpy as np
 import pytest
 import scipy.linalg
 from support import DATA
+from support_models import spring_pendulum
 
-from flexctrl.analysis.stability.probe import (
-    StabilityCriterion,
-    StabilityProbe,
-    largest_stable_step,
-)
+from flexctrl.analysis.stability.probe import StabilityCriterion, StabilityProbe
+from flexctrl.analysis.stability.step_search import largest_stable_step
 from flexctrl.analysis.stability.theory import (
     EXPLICIT_POLYNOMIALS,
     RK4_IMAGINARY_AXIS_LIMIT,
@@ -38,7 +36,6 @@ from flexctrl.linear import equilibrium, stiffness_matrix
 from flexctrl.sim import INTEGRATORS, simulate
 from flexctrl.sim.newmark_model import newmark_critical_step
 from flexctrl.sim.rk4 import RK4, RK4_STABILITY_LIMIT
-from support_models import spring_pendulum
 
 STUDY = DATA / "studies" / "stability_limits.toml"
 
@@ -61,7 +58,8 @@ def _frequencies(model, q: np.ndarray) -> np.ndarray:
 
 
 def _newmark_step_matrix(alpha: float, delta: float, omega_h: float, zeta: float) -> np.ndarray:
-    """One Newmark step on q'' + 2 zeta q' + q = 0 with step omega_h, as a matrix on (q, q') (built column by column)."""
+    """One Newmark step on q'' + 2 zeta q' + q = 0 with step omega_h, as a matrix on (q, q') (built
+    column by column)."""
     h = omega_h
     step = np.empty((2, 2))
     for j, (q, v) in enumerate(((1.0, 0.0), (0.0, 1.0))):
@@ -121,7 +119,7 @@ def test_rk4_limits_on_both_axes_by_hand():
         1.0, abs=1e-9
     )  # R = +1 there (x^3 - 4x^2 + 12x - 24 = 0)
     assert np.polynomial.polynomial.polyval(lo, [-24, 12, -4, 1]) == pytest.approx(0.0, abs=1e-9)
-    # the real-axis limit (the issue's 2.785) is 1.5 % below the imaginary-axis one
+    # the real-axis limit (the often quoted 2.785) is 1.5 % below the imaginary-axis one
     assert 0.015 < 1 - RK4_REAL_AXIS_LIMIT / RK4_IMAGINARY_AXIS_LIMIT < 0.016
 
 
@@ -177,7 +175,7 @@ def test_newmark_average_acceleration_is_unconditionally_stable():
 # -- the new integrators ----------------------------------------------------------------
 
 
-def test_new_integrators_are_registered():
+def test_euler_and_newmark_are_registered_integrators():
     assert {"euler", "newmark"} <= set(INTEGRATORS)
 
 
@@ -207,7 +205,7 @@ def test_newmark_integrator_matches_simulate_model_newmark(toy):
         INTEGRATORS["newmark"](model, dt, alpha=0.7)
 
 
-def test_scene_accepts_the_new_integrators_and_newmark_parameters():
+def test_scene_accepts_the_newmark_integrator_and_its_parameters():
     from flexctrl.spec.scene import load_scene
 
     scene = load_scene(
@@ -270,15 +268,15 @@ def test_euler_bisection_finds_two_zeta_over_omega_on_a_damped_oscillator():
 # -- measurement on the arm (amm:1) -----------------------------------------------------
 
 
-def test_rk4_on_amm1_within_5_percent_of_issue_and_tightly_of_theory(arm_amm1):
+def test_rk4_on_amm1_within_5_percent_of_2785_and_tightly_of_theory(arm_amm1):
     model, op = arm_amm1
     result = largest_stable_step(model, "rk4", op.x, op.u)
     omega = _frequencies(model, op.q).max()
     assert result.omega_max == pytest.approx(omega, rel=1e-7)
     assert (
         abs(result.h_measured / (RK4_STABILITY_LIMIT / result.omega_max) - 1) < 0.05
-    )  # the issue's demand
-    assert abs(result.h_measured / result.h_theory - 1) < 0.01  # the brief's demand ...
+    )  # within 5 % of the real-axis bound
+    assert abs(result.h_measured / result.h_theory - 1) < 0.01  # and within 1 % of the exact theory
     assert result.h_theory == pytest.approx(
         RK4_IMAGINARY_AXIS_LIMIT / omega, rel=1e-7
     )  # undamped: 2 sqrt 2 / omega
