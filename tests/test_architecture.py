@@ -39,7 +39,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("analysis", "bench"),
     ("study",),
     ("tuning", "reproduce"),
-    ("commands", "cli"),
+    ("commands",),
+    ("cli",),
 )
 RANK = {name: rank for rank, names in enumerate(LAYERS) for name in names}
 #: The public namespace re-exports from every layer and nothing imports it.
@@ -66,7 +67,8 @@ def _resolve(name: str, mods: dict[str, Path]) -> str | None:
 
 
 def import_graph() -> dict[str, set[str]]:
-    """``{module: {modules it imports}}`` for every module of flexctrl (see the module docstring)."""
+    """``{module: {modules it imports}}`` for every module of flexctrl (see the module
+    docstring)."""
     mods = _modules()
     edges: dict[str, set[str]] = {m: set() for m in mods}
     for module, path in mods.items():

@@ -11,27 +11,44 @@ as one line each on stderr, without the source line Python would show.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from types import ModuleType
 
+from flexctrl.commands import (
+    bench,
+    check,
+    examples,
+    fidelity,
+    identify_hubs,
+    linearize,
+    modal_report,
+    modes,
+    report,
+    reproduce,
+    simulate,
+    study,
+    tune,
+)
 from flexctrl.errors import FlexctrlError, SpecError, SpecWarning
 
-# Sub-command modules, in the order ``flexctrl --help`` lists them.
-COMMANDS = (
-    "check",
-    "modes",
-    "modal_report",
-    "identify_hubs",
-    "linearize",
-    "simulate",
-    "fidelity",
-    "bench",
-    "study",
-    "tune",
-    "report",
-    "reproduce",
+#: Sub-command modules, in the order ``flexctrl --help`` lists them.  Each imports only light
+#: modules at its top (the heavy ones inside ``run``), so building the parser stays quick.
+COMMANDS: tuple[ModuleType, ...] = (
+    examples,
+    check,
+    modes,
+    modal_report,
+    identify_hubs,
+    linearize,
+    simulate,
+    fidelity,
+    bench,
+    study,
+    tune,
+    report,
+    reproduce,
 )
 
 
@@ -43,8 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Units are SI; angles on the command line are in degrees.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
-        module = importlib.import_module(f"flexctrl.commands.{name}")
+    for module in COMMANDS:
         sub = module.add_parser(subparsers)
         sub.set_defaults(_run=module.run)
     return parser
@@ -54,20 +70,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    previous = warnings.formatwarning  # (catch_warnings does not restore it)
-    warnings.formatwarning = _one_line_warning(
-        args.command
-    )  # recording, e.g. by pytest.warns, still works
+    # catch_warnings does not restore formatwarning; recording (pytest.warns) still works
+    previous = warnings.formatwarning
+    warnings.formatwarning = _one_line_warning(args.command)
     try:
         return _run(args)
     finally:
         warnings.formatwarning = previous
 
 
-def _one_line_warning(command: str):
-    """A ``warnings.formatwarning`` giving ``flexctrl COMMAND: warning: MESSAGE`` on one line (no source dump)."""
+def _one_line_warning(command: str) -> Callable[..., str]:
+    """A ``warnings.formatwarning`` giving ``flexctrl COMMAND: warning: MESSAGE`` on one line,
+    without the source line."""
 
-    def format_warning(message, category, filename, lineno, line=None) -> str:
+    def format_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        line: str | None = None,
+    ) -> str:
         text = str(message).replace("\n", " ")
         kind = "" if issubclass(category, SpecWarning) else f"{category.__name__}: "
         return f"flexctrl {command}: warning: {kind}{text}\n"

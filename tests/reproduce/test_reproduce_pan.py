@@ -1,4 +1,5 @@
-"""The Pan, Scott and Ulsoy (1990) reproduction in its reduced form (same code paths as the full run)."""
+"""The Pan, Scott and Ulsoy (1990) reproduction in its reduced form (same code paths as the full
+run)."""
 
 from __future__ import annotations
 

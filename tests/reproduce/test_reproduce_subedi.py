@@ -1,9 +1,11 @@
-"""``flexctrl reproduce subedi --reduced``: every numbered table and figure, and the Fig 14 peaks."""
+"""``flexctrl reproduce subedi --reduced``: every numbered table and figure, and the Fig 14
+peaks."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import re
 
 import numpy as np
@@ -20,8 +22,16 @@ from flexctrl.sim.fft_peaks import dominant_frequencies
 
 @pytest.fixture(scope="module")
 def reduced(tmp_path_factory):
-    out = tmp_path_factory.mktemp("subedi")
-    assert main(["reproduce", "subedi", "--out", str(out), "--reduced"]) == 0
+    """The reduced reproduction, run from a folder outside the repository, into ``report/``."""
+    elsewhere = tmp_path_factory.mktemp("elsewhere")
+    previous = os.getcwd()
+    os.chdir(elsewhere)
+    try:
+        assert main(["reproduce", "subedi", "--out", "report", "--reduced"]) == 0
+    finally:
+        os.chdir(previous)
+    out = elsewhere / "report"
+    assert list(elsewhere.iterdir()) == [out]  # nothing else written in the working folder
     return out, json.loads((out / "reproduction.json").read_text())
 
 
@@ -60,7 +70,8 @@ def test_fig14_peaks_agree_with_the_paper_within_the_fft_resolution(reduced):
 
 
 def test_the_paper_fft_grid_is_found_from_a_known_signal():
-    """A 2000-sample record padded to 2048 puts a 1.465 Hz sine on bin 3 (1.4648 Hz), not on 1.5 Hz."""
+    """A 2000-sample record padded to 2048 puts a 1.465 Hz sine on bin 3 (1.4648 Hz), not on 1.5
+    Hz."""
     t = np.arange(2000) * 1e-3
     signal = np.sin(2 * np.pi * 1.465 * t)
     assert dominant_frequencies(signal, 1e-3, 1, n_fft=2048) == [pytest.approx(3 * RESOLUTION_HZ)]
