@@ -1,4 +1,4 @@
-"""pytest set-up shared by the test suite and the doctests of the package (run from the repository root)."""
+"""pytest set-up shared by the test suite and the package's doctests (run from the root)."""
 
 import matplotlib
 

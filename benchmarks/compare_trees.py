@@ -43,13 +43,17 @@ try:
 except ImportError:
     from flexctrl.study.spec import load_study
 spec = load_study(sys.argv[1])
-options = {"metrics": list(spec.metrics) if spec.metrics else None, "keep_trajectories": spec.keep_trajectories,
-           "decimation": spec.decimation}
-print(json.dumps([[run.run_id, {k: str(v) for k, v in run.coords}] for run in spec.runs]), flush=True)
+options = {
+    "metrics": list(spec.metrics) if spec.metrics else None,
+    "keep_trajectories": spec.keep_trajectories,
+    "decimation": spec.decimation,
+}
+runs = [[run.run_id, {k: str(v) for k, v in run.coords}] for run in spec.runs]
+print(json.dumps(runs), flush=True)
 for line in sys.stdin:
     result = execute_run(spec.executor, spec.runs[int(line)].settings, options)
-    print(json.dumps({"wall": result["wall_time_s"], "status": result["status"], "metrics": result["metrics"]}),
-          flush=True)
+    record = {k: result[k] for k in ("status", "metrics")}
+    print(json.dumps(dict(record, wall=result["wall_time_s"])), flush=True)
 """
 
 
@@ -65,7 +69,8 @@ def import_root(tree: Path) -> Path:
 
 
 def _start(tree: Path, study: Path) -> tuple[subprocess.Popen, list]:
-    """A worker on ``tree`` and the study's runs as it reads them (``[run_id, {column: value}]``)."""
+    """A worker on ``tree`` and the study's runs as it reads them (``[run_id, {column:
+    value}]``)."""
     env = dict(os.environ, PYTHONPATH=str(import_root(tree)))
     proc = subprocess.Popen(
         [sys.executable, "-c", _WORKER, str(study)],
@@ -159,7 +164,8 @@ def format_runs(result: dict[str, Any]) -> str:
     trees = result["trees"]
     lines = [
         f"compare_trees: {Path(result['study']).name}, {result['runs']} runs alternated between "
-        f"{len(trees)} trees (load average {result['load_average_1min']}); summed run wall (s) by {result['by']}"
+        f"{len(trees)} trees (load average {result['load_average_1min']}); summed run wall (s) "
+        f"by {result['by']}"
     ]
     for group in result["summed_run_wall_s"][0]:
         values = " -> ".join(f"{w[group]:.2f}" for w in result["summed_run_wall_s"])
@@ -169,7 +175,8 @@ def format_runs(result: dict[str, Any]) -> str:
         f"({result['ratio_to_first'][-1]['total']:.2f}x)"
     )
     lines.append(
-        f"  largest relative metric difference first/last tree: {result['max_metric_relative_difference']:.2g}"
+        "  largest relative metric difference first/last tree: "
+        f"{result['max_metric_relative_difference']:.2g}"
         + (
             f" ({result['where']['metric']} of run {result['where']['run_id']})"
             if result["where"]

@@ -1,17 +1,16 @@
 """Studies side by side: each study's first pass and a repeated pass, alternated round by round.
 
 ``python benchmarks/studies_side_by_side.py --study A --study B [--repeats N] [--set K=V]``
-(default: ``studies/quickstart_finest.toml`` then ``studies/quickstart_auto.toml``) runs, for every round and every study in turn, a
-fresh Python process that runs the study twice into new folders: the *first pass*
-(nothing in the process: models built, designs made, fidelity choices made; the
-compiled-library cache on disk as it is) and a *repeated pass* in the same process (its
-worker cache holds the models, designs and choices of the first).  Alternating the
-studies round by round lets the machine's load move them together; the figures are
-each study's wall time per pass, the summed per-run wall time (``results.csv``'s
-``wall_time_s``), and the ratios of every study to the first one (of the medians, and
-round by round for the first pass).  ``--set KEY=VALUE`` overrides apply to every study.  Each pass's table is
-compared with the first pass's, every column but the timing and memory ones
-(``tables_identical``).
+(default: ``studies/quickstart_finest.toml`` then ``studies/quickstart_auto.toml``) runs, for every
+round and every study in turn, a fresh Python process that runs the study twice into new folders:
+the *first pass* (nothing in the process: models built, designs made, fidelity choices made; the
+compiled-library cache on disk as it is) and a *repeated pass* in the same process (its worker cache
+holds the models, designs and choices of the first).  Alternating the studies round by round lets
+the machine's load move them together; the figures are each study's wall time per pass, the summed
+per-run wall time (``results.csv``'s ``wall_time_s``), and the ratios of every study to the first
+one (of the medians, and round by round for the first pass).  ``--set KEY=VALUE`` overrides apply to
+every study.  Each pass's table is compared with the first pass's, every column but the timing and
+memory ones (``tables_identical``).
 """
 
 from __future__ import annotations
@@ -51,7 +50,8 @@ _PASSES = """
 import json, sys, time
 from flexctrl.study.runner import run_study
 from flexctrl.study.study_file import load_study
-study, overrides, outs, workers = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3:-1], int(sys.argv[-1])
+study, overrides = sys.argv[1], json.loads(sys.argv[2])
+outs, workers = sys.argv[3:-1], int(sys.argv[-1])
 spec, walls = load_study(study, overrides=overrides), []
 for out in outs:
     start = time.perf_counter()
@@ -75,7 +75,8 @@ def stable_columns(rows: list[dict[str, str]]) -> list[tuple]:
 def run_passes(
     study: Path, passes: int, workers: int, folder: Path, overrides: Sequence[str] = ()
 ) -> dict[str, Any]:
-    """One fresh process running ``study`` (with ``overrides``, as ``flexctrl study --set``) ``passes`` times.
+    """One fresh process running ``study`` (with ``overrides``, as ``flexctrl study --set``)
+    ``passes`` times.
 
     Returns wall times, summed run times and status counts.
     """
@@ -184,7 +185,8 @@ def bench_studies(
 def format_studies(result: dict[str, Any]) -> str:
     """Human-readable lines of :func:`bench_studies`."""
     lines = [
-        f"studies_side_by_side: {result['rounds']} round(s), {result['passes']} passes per process, "
+        f"studies_side_by_side: {result['rounds']} round(s), {result['passes']} passes per "
+        "process, "
         f"workers {result['workers']} (load average {result['load_average_1min']})"
         + (
             f"; every study with --set {' --set '.join(result['overrides'])}"

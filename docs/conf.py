@@ -44,8 +44,18 @@ exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
 exclude_patterns += [
     f"{name}.md"
     for name in (
-        "amm", "architecture", "auto_fidelity", "baumgarte", "control", "fem", "inputs",
-        "modal", "speed_accuracy", "stability", "studies", "tuning",
+        "amm",
+        "architecture",
+        "auto_fidelity",
+        "baumgarte",
+        "control",
+        "fem",
+        "inputs",
+        "modal",
+        "speed_accuracy",
+        "stability",
+        "studies",
+        "tuning",
     )
 ]
 templates_path = ["_templates"]

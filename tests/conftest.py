@@ -1,4 +1,5 @@
-"""Fixtures shared by the tests: paths and small plants (the Agg backend is set in the repository's conftest.py)."""
+"""Fixtures shared by the tests: paths and small plants (the Agg backend is set in the repository's
+conftest.py)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ def root() -> Path:
 
 @pytest.fixture
 def selftest_study(tmp_path) -> Path:
-    """``tests/data/study_selftest.toml`` and its files copied to ``tmp_path`` (isolated from edits of models/)."""
+    """``tests/data/study_selftest.toml`` and its files copied to ``tmp_path`` (isolated from edits
+    of models/)."""
     import shutil
 
     shutil.copytree(ROOT / "tests" / "data", tmp_path / "tests" / "data")
@@ -32,7 +34,8 @@ def selftest_study(tmp_path) -> Path:
 
 @pytest.fixture(scope="module")
 def onelink():
-    """A one-link arm with one assumed mode (4 states) and its equilibrium at 0.5 rad: the NMPC tests' small plant."""
+    """A one-link arm with one assumed mode (4 states) and its equilibrium at 0.5 rad: the NMPC
+    tests' small plant."""
     from flexctrl import linear as L
     from flexctrl.dynamics.amm import build_amm
     from flexctrl.spec.arm import arm_from_document

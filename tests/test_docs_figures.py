@@ -1,4 +1,5 @@
-"""The figures of README.md and docs/: each one shown somewhere, each one there, small, and made by `make figures`."""
+"""The figures of README.md and docs/: each one shown somewhere, each one there, small, and made by
+`make figures`."""
 
 from __future__ import annotations
 

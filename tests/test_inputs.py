@@ -29,7 +29,8 @@ SHIPPED = sorted(
 
 
 def _cli(*argv: str) -> tuple[int, str]:
-    """Exit status and stderr of ``flexctrl ARGV`` run in its own process from the repository root."""
+    """Exit status and stderr of ``flexctrl ARGV`` run in its own process from the repository
+    root."""
     import subprocess
     import sys
 
@@ -610,7 +611,8 @@ def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monke
     spec = load_study(
         "studies/controller_stability.toml",
         [
-            'grid.controller=["../controllers/pd.toml", "../controllers/lqg.toml", "../controllers/nmpc.toml"]',
+            'grid.controller=["../controllers/pd.toml", "../controllers/lqg.toml", '
+            '"../controllers/nmpc.toml"]',
             "grid.payload=[2.0]",
             "grid.q2=[0]",
             "grid.q3=[0]",

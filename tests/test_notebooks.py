@@ -30,14 +30,15 @@ pytest.importorskip("ipykernel", reason="notebook tests need the 'notebooks' ext
 
 from jupyter_client.kernelspec import KernelSpec, KernelSpecManager  # noqa: E402  (nbclient depends on it)
 from jupyter_client.manager import AsyncKernelManager  # noqa: E402
-from support import DATA, ROOT
+from support import DATA, ROOT  # noqa: E402
 
 NOTEBOOKS = sorted((DATA / "studies" / "notebooks").glob("*.ipynb"))
 TIMEOUT_S = 600  # per cell
 
 
 class ThisInterpreterKernelSpecs(KernelSpecManager):
-    """Resolve every kernel name to ipykernel on ``sys.executable`` (no installed kernel spec needed)."""
+    """Resolve every kernel name to ipykernel on ``sys.executable`` (no installed kernel spec
+    needed)."""
 
     def get_kernel_spec(self, kernel_name: str) -> KernelSpec:
         return KernelSpec(
@@ -49,7 +50,8 @@ class ThisInterpreterKernelSpecs(KernelSpecManager):
 
 
 def execute_notebook(path: Path) -> tuple[object, float]:
-    """Run all cells of ``path`` in a fresh kernel; return the executed notebook and the wall time (s)."""
+    """Run all cells of ``path`` in a fresh kernel; return the executed notebook and the wall time
+    (s)."""
     nb = nbformat.read(path, as_version=4)
     km = AsyncKernelManager(kernel_name="python3", kernel_spec_manager=ThisInterpreterKernelSpecs())
     client = nbclient.NotebookClient(

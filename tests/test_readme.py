@@ -1,4 +1,5 @@
-"""The README's Python example runs as written (from the repository root) and says what it claims."""
+"""The README's Python example runs as written (from the repository root) and says what it
+claims."""
 
 from __future__ import annotations
 

@@ -157,7 +157,8 @@ def bangbang_runs(
     sample: float = 1e-3,
     amm_substeps: int = 10,
 ) -> dict:
-    """Tip trajectories of AMM-2 and FEM-N in the bang-bang scene, their differences and run times."""
+    """Tip trajectories of AMM-2 and FEM-N in the bang-bang scene, their differences and run
+    times."""
     from flexctrl.dynamics.build import build_model
 
     a = bangbang_arm(arm)
@@ -244,7 +245,8 @@ def timings(
             "dt": 1e-3,
             "n_elements": 4,
             "wall_per_simulated_s": _median_time(
-                lambda: simulate_sliding_beam(case, 4, dt=1e-3).wall_time / dur, repeats
+                lambda case=case, dur=dur: simulate_sliding_beam(case, 4, dt=1e-3).wall_time / dur,
+                repeats,
             ),
         }
     a = bangbang_arm(arm)
@@ -256,12 +258,12 @@ def timings(
         n = int(round(rk4_span / sample))
         U = bangbang_torque(n, sample)
 
-        def rk4_once() -> float:
+        def rk4_once(run=run, m=m, U=U) -> float:
             start = time.perf_counter()
             run(np.zeros(m.n_x), U)
             return (time.perf_counter() - start) / rk4_span
 
-        def newmark_once() -> float:
+        def newmark_once(m=m) -> float:
             res = simulate_model_newmark(
                 m,
                 np.zeros(m.n_x),

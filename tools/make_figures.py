@@ -94,7 +94,8 @@ def stability_map(args) -> Path:
         "controller_stability",
         "studies/controller_stability.toml",
         [
-            'grid.controller=["../controllers/pd.toml", "../controllers/lqr.toml", "../controllers/robust.toml"]'
+            'grid.controller=["../controllers/pd.toml", "../controllers/lqr.toml", '
+            '"../controllers/robust.toml"]'
         ],
         args,
     )
@@ -144,7 +145,8 @@ def pareto_shortening(args) -> Path:
         compare(read_pareto(off), read_pareto(on)),
         FIGURES / "pareto_shortening.png",
         ("axial shortening off", "on"),
-        title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and on (filled)\n"
+        title="bang-bang at 2 kg, straight arm: assumed-modes axial shortening off (hollow) and "
+        "on (filled)\n"
         "(the finite elements have it in both; arrows: where a method moved)",
         dpi=DPI,
     )
@@ -250,7 +252,8 @@ def main(argv: list[str] | None = None) -> int:
         made = FIGURE_MAKERS[name](args)
         for path in made if isinstance(made, list) else [made]:
             print(
-                f"{path.relative_to(ROOT)} ({path.stat().st_size / 1024:.0f} KiB, {time.perf_counter() - start:.0f} s)"
+                f"{path.relative_to(ROOT)} ({path.stat().st_size / 1024:.0f} KiB, "
+                f"{time.perf_counter() - start:.0f} s)"
             )
     return 0
 

@@ -8,7 +8,7 @@ nor python-control until a name that needs them is used.
 
 >>> import numpy as np
 >>> import flexctrl as fc
->>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0])
+>>> model = fc.load_model("subedi3link", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0])
 >>> op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
 >>> sys = fc.linearize(model, op)
 >>> sys.nstates, sys.ninputs, sys.input_labels

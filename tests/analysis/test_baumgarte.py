@@ -1,4 +1,5 @@
-"""Baumgarte stabilisation under Newmark: discrete theory against the beam-over-supports runs (issue 7)."""
+"""Baumgarte stabilisation under Newmark: discrete theory against the beam-over-supports runs (issue
+7)."""
 
 from __future__ import annotations
 
@@ -42,7 +43,8 @@ def unstabilised():
 
 @pytest.mark.parametrize("g, b", [(0.3, 0.3), (1.0, 2.0), (2.5, 0.7)])
 def test_characteristic_polynomials(g, b):
-    """np.poly of G equals the hand-derived polynomials (explicit: one step of lag; implicit: trapezoidal)."""
+    """np.poly of G equals the hand-derived polynomials (explicit: one step of lag; implicit:
+    trapezoidal)."""
     pm = np.polynomial.polynomial
     lag, damping, stiffness = (
         pm.polypow([-1, 1], 2),
@@ -58,7 +60,8 @@ def test_characteristic_polynomials(g, b):
 
 
 def test_implicit_feedback_is_the_trapezoidal_rule_on_the_error_ode():
-    """Eigenvalues = (1 + s h/2) / (1 - s h/2) for the roots s of s^2 + 2 gamma s + beta^2 (A-stable)."""
+    """Eigenvalues = (1 + s h/2) / (1 - s h/2) for the roots s of s^2 + 2 gamma s + beta^2
+    (A-stable)."""
     gamma, beta, h = 30.0, 20.0, 0.01
     s = np.roots([1.0, 2 * gamma, beta**2])
     expected = sorted((1 + s * h / 2) / (1 - s * h / 2), key=lambda z: (z.real, z.imag))
@@ -73,7 +76,8 @@ def test_implicit_feedback_is_the_trapezoidal_rule_on_the_error_ode():
 
 
 def test_explicit_limit_is_three_minus_sqrt5_and_decay_saturates_before_it():
-    """Bisection on the spectral radius finds Jury's closed form; the fastest decay lies below the limit."""
+    """Bisection on the spectral radius finds Jury's closed form; the fastest decay lies below the
+    limit."""
     assert stability_limit(1.0, "explicit") == pytest.approx(3.0 - math.sqrt(5.0), rel=1e-9)
     assert EXPLICIT_LIMIT == pytest.approx(3.0 - math.sqrt(5.0), rel=1e-15)
     g_opt, rho_min = fastest_decay(1.0, "explicit")
@@ -86,7 +90,8 @@ def test_explicit_limit_is_three_minus_sqrt5_and_decay_saturates_before_it():
 
 @pytest.mark.parametrize("feedback", ["explicit", "implicit"])
 def test_steady_drift_response_by_iteration(feedback):
-    """A constant position defect d per step settles at e = 2 gamma d / (beta^2 h), h e' = -d (either feedback)."""
+    """A constant position defect d per step settles at e = 2 gamma d / (beta^2 h), h e' = -d
+    (either feedback)."""
     g = b = 0.2
     G, M = error_amplification(g, b, feedback), defect_gain(g, b, feedback)
     x, d = np.zeros(3), np.array([1.0, 0.0, 0.0])
@@ -122,7 +127,8 @@ def test_unstabilised_drift_grows_linearly_once_the_motion_stops(unstabilised):
 def test_moderate_gamma_cuts_the_violation_as_the_linear_error_model_predicts(unstabilised):
     """gamma h = 0.5 (below the limit) lowers max|Phi| by more than 10x; the linear model driven by
     the
-    step defects of the gamma = 0 run predicts the stabilised run's max|Phi| and max|Phidot| to 1 %."""
+    step defects of the gamma = 0 run predicts the stabilised run's max|Phi| and max|Phidot| to 1
+    %."""
     gamma = 0.5 / DT
     p = run_point(FAST_PUSH, 4, DT, gamma, gamma, duration=1.0)
     assert p.bounded

@@ -1,4 +1,5 @@
-"""Speed against accuracy (issue 7): tip error, reference convergence, RK4 order, Pareto front, the study."""
+"""Speed against accuracy (issue 7): tip error, reference convergence, RK4 order, Pareto front, the
+study."""
 
 from __future__ import annotations
 
@@ -238,7 +239,8 @@ def test_reduced_study_writes_pareto_csv_and_the_figure(tmp_path, monkeypatch):
         'set={"scene.horizon" = 0.1, "scene.reference" = "fem:3/rk4@stable", '
         '"scene.reference_meshes" = ["fem:2"], '
         '"scene.repeats" = 2, "controller.sensors.outputs" = ["joints", "deflection"]}',
-        'metrics=["tip_error_rms", "tip_error_max", "wall_per_sim_s", "ref_step2_max", "ref_fem2_max"]',
+        'metrics=["tip_error_rms", "tip_error_max", "wall_per_sim_s", "ref_step2_max", '
+        '"ref_fem2_max"]',
     ]
     spec = load_study(STUDY, overrides)
     assert len(spec.runs) == 3

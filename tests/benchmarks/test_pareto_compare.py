@@ -1,4 +1,5 @@
-"""Two speed-vs-accuracy results side by side (issue 17), and the axial-shortening copy of the study."""
+"""Two speed-vs-accuracy results side by side (issue 17), and the axial-shortening copy of the
+study."""
 
 from __future__ import annotations
 

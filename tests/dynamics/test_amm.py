@@ -307,7 +307,7 @@ def test_energy_decreases_with_damping(model_path):
 
 
 def test_output_functions_consistent(model_path):
-    # Subedi's kinematics as printed (Eqs 1-9); the axial shortening: tests/test_amm_shortening.py
+    # Subedi's kinematics as printed (Eqs 1-9); the axial shortening: test_amm_shortening.py
     arm = dataclasses.replace(_general_arm(model_path), axial_shortening=False)
     model = build_amm(arm, 2)
     rng = np.random.default_rng(8)
@@ -388,7 +388,7 @@ def _energies_by_quadrature(arm, modes, q, qd, points=24):
 
 
 def test_energies_match_quadrature_of_the_continuum(model_path):
-    # the continuum of Eqs 1-9 (no axial shortening; that one: tests/test_amm_shortening.py)
+    # the continuum of Eqs 1-9 (no axial shortening; that one: test_amm_shortening.py)
     arm = dataclasses.replace(_general_arm(model_path, slender=True), axial_shortening=False)
     model = build_amm(arm, 3)
     modes = [link_modes(arm, np.asarray(arm.configuration), i, 3) for i in range(3)]

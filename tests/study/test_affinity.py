@@ -1,4 +1,5 @@
-"""Worker affinity of the local pool: the runs that share a model go to one worker, with the same table."""
+"""Worker affinity of the local pool: the runs that share a model go to one worker, with the same
+table."""
 
 from __future__ import annotations
 
@@ -75,9 +76,10 @@ def test_grouped_runs_share_a_worker_and_the_table_is_the_in_process_ones(selfte
     grouped = run_study(spec, tmp_path / "grouped", workers=2, progress="none", report=False)
     plain = run_study(spec, tmp_path / "plain", workers=0, progress="none", report=False)
     assert "runs grouped by model per worker" in grouped.backend and "grouped" not in plain.backend
-    strip = lambda table: [
-        {k: v for k, v in row.items() if k not in VOLATILE} for row in table.rows
-    ]  # noqa: E731
+
+    def strip(table):
+        return [{k: v for k, v in row.items() if k not in VOLATILE} for row in table.rows]
+
     assert strip(grouped.table()) == strip(plain.table())
     workers = defaultdict(set)
     for row in grouped.table().rows:
@@ -94,7 +96,8 @@ import concurrent.futures as cf, sys
 from flexctrl.study.backends import pool_context
 context = pool_context({preload!r})
 with cf.ProcessPoolExecutor(1, mp_context=context) as pool:
-    print(pool.submit(eval, "sorted(m for m in __import__('sys').modules if m.startswith('flexctrl.study'))").result())
+    loaded = "sorted(m for m in __import__('sys').modules if m.startswith('flexctrl.study'))"
+    print(pool.submit(eval, loaded).result())
 """
 
 
@@ -102,10 +105,12 @@ with cf.ProcessPoolExecutor(1, mp_context=context) as pool:
     "forkserver" not in multiprocessing.get_all_start_methods(), reason="no forkserver here"
 )
 def test_the_fork_server_imports_the_executors_module_for_its_workers():
-    """A worker forked by a preloading server has the executor's module before its first run; without it, not.
+    """A worker forked by a preloading server has the executor's module before its first run;
+    without it, not.
 
-    The module is the one the registry records for ``_selftest``.  Each probe is a fresh interpreter: a process
-    starts its fork server once, so an earlier pool in the test process would decide what the server holds.
+    The module is the one the registry records for ``_selftest``.  Each probe is a fresh
+    interpreter: a process starts its fork server once, so an earlier pool in the test process would
+    decide what the server holds.
     """
     import ast
     import subprocess

@@ -1,4 +1,5 @@
-"""The local pool's workers hold their BLAS libraries to usable CPUs // workers threads (flexctrl.study.blas_threads)."""
+"""The local pool's workers hold their BLAS libraries to usable CPUs // workers threads
+(flexctrl.study.blas_threads)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from flexctrl.study.blas_threads import (
 # every thread count.
 PROBE = (
     "(__import__('scipy.linalg'), "
-    "__import__('flexctrl.study.blas_threads', fromlist=['blas_threads_now']).blas_threads_now())[1]"
+    "__import__('flexctrl.study.blas_threads', "
+    "fromlist=['blas_threads_now']).blas_threads_now())[1]"
 )
 
 
@@ -52,7 +54,8 @@ def test_the_budget_refuses_what_is_not_a_count(bad):
 
 @pytest.mark.skipif(usable_cpus() < 2, reason="one CPU: OpenBLAS may not start a second thread")
 def test_a_pool_worker_holds_every_blas_library_to_its_budget():
-    """Asked for 1 and for 2, the worker reports exactly that for every loaded library, whatever it inherited."""
+    """Asked for 1 and for 2, the worker reports exactly that for every loaded library, whatever it
+    inherited."""
     for threads in (1, 2, 1):
         counts = worker_threads(threads)
         assert len(counts) >= 2, counts  # NumPy's and SciPy's OpenBLAS at least
@@ -70,9 +73,10 @@ def test_the_budget_is_named_in_the_backend_and_the_table_does_not_move(selftest
     assert "2 workers" in limited.backend and "1 BLAS thread per worker" in limited.backend
     assert "2 BLAS threads per worker" in library.backend  # set, whatever the environment says
     volatile = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
-    strip = lambda table: [
-        {k: v for k, v in row.items() if k not in volatile} for row in table.rows
-    ]  # noqa: E731
+
+    def strip(table):
+        return [{k: v for k, v in row.items() if k not in volatile} for row in table.rows]
+
     assert strip(limited.table()) == strip(library.table())
 
 

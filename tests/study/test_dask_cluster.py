@@ -1,4 +1,5 @@
-"""A study on a real multi-process Dask cluster: `dask scheduler` and `dask worker` processes on localhost."""
+"""A study on a real multi-process Dask cluster: `dask scheduler` and `dask worker` processes on
+localhost."""
 
 from __future__ import annotations
 
@@ -14,12 +15,13 @@ from flexctrl.study import load_study, run_study
 
 distributed = pytest.importorskip("distributed")
 
-from support import DATA as SHIPPED
+from support import DATA as SHIPPED  # noqa: E402
+from support import ROOT  # noqa: E402
 
 from flexctrl.study.blas_threads import THREAD_VARIABLES, blas_thread_budget  # noqa: E402
 from flexctrl.study.dask_cluster import LocalhostCluster  # noqa: E402
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = ROOT / "tests" / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
 
 
@@ -82,7 +84,8 @@ def test_a_localhost_cluster_gives_the_pool_table_and_survives_a_killed_worker(
 
 
 def worker_blas_threads(cluster: LocalhostCluster) -> dict[int, list[int]]:
-    """Each worker's pid and the thread counts of NumPy's and SciPy's BLAS, once both are loaded there."""
+    """Each worker's pid and the thread counts of NumPy's and SciPy's BLAS, once both are loaded
+    there."""
     from distributed import Client
 
     def in_worker() -> tuple[int, list[int]]:  # nested, so cloudpickle sends it by value

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 from support import DATA as SHIPPED
+from support import ROOT
 
 import flexctrl as fc
 from flexctrl import cli
@@ -24,7 +25,7 @@ from flexctrl.study import load_study, run_study
 from flexctrl.study.column_units import display
 from flexctrl.study.report import write_report
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = ROOT / "tests" / "data"
 
 
 @pytest.fixture

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support import DATA as SHIPPED
+from support import ROOT
 
 from flexctrl import cli
 from flexctrl.errors import SpecError
@@ -28,17 +29,8 @@ from flexctrl.study.progress import Progress
 from flexctrl.study.run_execution import execute_run
 from flexctrl.study.store import Table
 
-TEST_DATA = Path(__file__).resolve().parent / "data"
+TEST_DATA = ROOT / "tests" / "data"
 VOLATILE = ("wall_time_s", "peak_memory_mb", "bytes_written", "worker")
-
-
-@pytest.fixture
-def study(tmp_path, root) -> Path:
-    """The example study and its files copied to tmp_path (isolated from edits of models/)."""
-    shutil.copytree(TEST_DATA, tmp_path / "tests" / "data")
-    (tmp_path / "models").mkdir()
-    shutil.copy(SHIPPED / "models" / "subedi3link.toml", tmp_path / "models")
-    return tmp_path / "tests" / "data" / "study_selftest.toml"
 
 
 def variant(
@@ -432,7 +424,8 @@ def test_quoted_dotted_axis_is_replaced_by_a_nested_override(study):
 
 
 def test_quoted_override_key_reaches_a_quoted_axis_beside_a_file_axis(root):
-    """grid.scene (files) and grid."scene.method" cannot both nest; --set must still reach the latter."""
+    """grid.scene (files) and grid."scene.method" cannot both nest; --set must still reach the
+    latter."""
     path = SHIPPED / "studies" / "speed_vs_accuracy.toml"
     methods = ["amm:2/rk4@0.25ms", "amm:2+sched/rk4@1ms"]
     spec = load_study(

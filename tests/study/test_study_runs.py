@@ -1,4 +1,5 @@
-"""Running studies in worker processes: kill and resume, Dask against the local pool, dead workers."""
+"""Running studies in worker processes: kill and resume, Dask against the local pool, dead
+workers."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 fidelity_choices.json.
 
 Grid expansion and the choices file are checked here without simulating (the
-``_selftest`` study); the closed-loop choice itself is :mod:`tests.test_closedloop_auto`'s.
+``_selftest`` study); the closed-loop choice itself is the closed-loop scene tests'.
 """
 
 from __future__ import annotations
@@ -11,7 +11,6 @@ import json
 from pathlib import Path
 
 import pytest
-from test_study import study  # noqa: F401 - the example study copied to tmp_path
 
 from flexctrl.errors import SpecError
 from flexctrl.study import load_study
@@ -26,7 +25,7 @@ def with_share(study: Path, share: str) -> Path:
     return path
 
 
-def test_each_run_carries_its_group_representative_the_first_run_with_the_shared_axes_at_their_first_value(
+def test_each_run_carries_its_group_representative_the_first_in_grid_order(
     study,
 ):
     plain, spec = load_study(study), load_study(with_share(study, '["q2", "q3"]'))

@@ -1,4 +1,5 @@
-"""The tuner: it finds an optimum known from a dense sweep, its files reproduce, bad files are refused, it resumes."""
+"""The tuner: it finds an optimum known from a dense sweep, its files reproduce, bad files are
+refused, it resumes."""
 
 from __future__ import annotations
 

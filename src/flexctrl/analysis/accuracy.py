@@ -115,7 +115,8 @@ def cache_root() -> Path:
 
 
 def reference_key(description: dict[str, Any]) -> str:
-    """24 hex digits of sha256 of the canonical JSON of ``description`` plus :data:`REFERENCE_VERSION`."""
+    """24 hex digits of sha256 of the canonical JSON of ``description`` plus
+    :data:`REFERENCE_VERSION`."""
     text = json.dumps(
         {**description, "version": REFERENCE_VERSION},
         sort_keys=True,

@@ -124,7 +124,8 @@ def _design(scene):
 
 
 def _bent_start(scene, model, arm) -> np.ndarray:
-    """The free-vibration start as a shape of link 3 (module docstring), in ``model``'s coordinates."""
+    """The free-vibration start as a shape of link 3 (module docstring), in ``model``'s
+    coordinates."""
     from flexctrl.modal.arm_modes import link_modes
     from flexctrl.scenes.arm_setup import initial_state
 
@@ -263,7 +264,8 @@ def reference(
     directory: Path | str = "out/amm_convergence",
     hub_inertia: float | None = None,
 ) -> Reference:
-    """The cached reference tip path of ``case`` (finite elements with axial shortening, RK4 at the stable step)."""
+    """The cached reference tip path of ``case`` (finite elements with axial shortening, RK4 at the
+    stable step)."""
     name, duration = CASES[case]
     digest = {
         k: (_SCENES / f).read_text()
@@ -292,7 +294,8 @@ def reference(
 def window_errors(
     ref: Reference, run: dict[str, Any], windows: Sequence[float]
 ) -> dict[str, float]:
-    """RMS tip distance (m) from the reference over ``[0, T]`` for each ``T`` of ``windows``, and the max over all."""
+    """RMS tip distance (m) from the reference over ``[0, T]`` for each ``T`` of ``windows``, and
+    the max over all."""
     tip = np.column_stack([np.interp(ref.time, run["time"], run["tip"][:, k]) for k in range(2)])
     d = np.linalg.norm(tip - ref.tip, axis=1)
     out = {f"rms_{T:g}s": float(np.sqrt(np.mean(d[ref.time <= T + 1e-9] ** 2))) for T in windows}
@@ -418,7 +421,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--hub-inertia",
         type=float,
         default=None,
-        help="raise every hub's rotor inertia to at least this (kg m^2; open-loop cases; a diagnosis)",
+        help="raise every hub's rotor inertia to at least this (kg m^2; open-loop cases; a "
+        "diagnosis)",
     )
     parser.add_argument(
         "--static-correction",

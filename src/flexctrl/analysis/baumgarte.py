@@ -238,7 +238,8 @@ def predicted_regime(
     alpha: float = 0.25,
     delta: float = 0.5,
 ) -> str:
-    """``"none"`` (gamma = 0), ``"helps"`` (below :func:`fastest_decay`), ``"saturated"`` or ``"unstable"``."""
+    """``"none"`` (gamma = 0), ``"helps"`` (below :func:`fastest_decay`), ``"saturated"`` or
+    ``"unstable"``."""
     if gamma_dt <= 0.0:
         return "none"
     if gamma_dt > stability_limit(beta_over_gamma, feedback, alpha, delta):
@@ -288,7 +289,8 @@ def step_defects(states: Array, alpha: float = 0.25, delta: float = 0.5) -> Arra
 
 @dataclass(frozen=True)
 class ErrorPrediction:
-    """Violation predicted by the linear error model (m, m/s; ``steps_bounded`` steps stayed within the bound)."""
+    """Violation predicted by the linear error model (m, m/s; ``steps_bounded`` steps stayed within
+    the bound)."""
 
     max_phi: float
     final_phi: float
@@ -309,7 +311,8 @@ def propagate_errors(
     delta: float = 0.5,
     bound: float = math.inf,
 ) -> ErrorPrediction:
-    """Run ``x_{k+1} = G x_k + M d_k`` from ``x0`` (shape (3, m)) until the defects end or ``|e|`` exceeds ``bound`` (m)."""
+    """Run ``x_{k+1} = G x_k + M d_k`` from ``x0`` (shape (3, m)) until the defects end or ``|e|``
+    exceeds ``bound`` (m)."""
     G = error_amplification(gamma_dt, beta_dt, feedback, alpha, delta)
     gain = defect_gain(gamma_dt, beta_dt, feedback, alpha, delta)
     x = np.array(x0, dtype=float)

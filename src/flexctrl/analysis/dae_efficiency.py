@@ -50,7 +50,8 @@ LABELS = {
 
 @dataclass(frozen=True)
 class Case:
-    """One constrained problem: the model, its initial nodal values (at rest) and the simulated time (s)."""
+    """One constrained problem: the model, its initial nodal values (at rest) and the simulated time
+    (s)."""
 
     name: str
     model: RPArmModel
@@ -59,7 +60,8 @@ class Case:
 
 
 def beam_case() -> Case:
-    """Buffinton & Kane's fast push (Pan Fig 8) as an R-P arm with the housing fixed, driven at H."""
+    """Buffinton & Kane's fast push (Pan Fig 8) as an R-P arm with the housing fixed, driven at
+    H."""
     spec = RPArmSpec(
         "beam over supports",
         length=1.0,
@@ -78,21 +80,24 @@ def beam_case() -> Case:
 
 
 def arm_case() -> Case:
-    """``models/rp_arm.toml``: W 0.3 -> 0.7 m while theta 0 -> 60 deg in 1 s, from rest, 8 elements."""
+    """``models/rp_arm.toml``: W 0.3 -> 0.7 m while theta 0 -> 60 deg in 1 s, from rest, 8
+    elements."""
     spec = load_rp_arm(ROOT / "models" / "rp_arm.toml")
     model = RPArmModel(spec, RPMotion(C1=0.3, C2=-0.4, T=1.0, dtheta=math.radians(60.0)), 8)
     return Case("R-P arm, extend and rotate (8 elements)", model, np.zeros(model.ndof), 1.5)
 
 
 def _on_grid(t: Array, y: Array, duration: float) -> tuple[Array, Array]:
-    """The samples of ``y(t)`` at the multiples of :data:`GRID` ms (indices into the reference grid)."""
+    """The samples of ``y(t)`` at the multiples of :data:`GRID` ms (indices into the reference
+    grid)."""
     k = np.round(t / GRID)
     keep = np.abs(t - k * GRID) < 1e-9
     return k[keep].astype(int), y[keep]
 
 
 def newmark_point(case: Case, dt: float, repeats: int = 1, gamma: float = 5.0) -> dict:
-    """One Newmark + Baumgarte run (gamma = beta, Eq 49): tip on the grid, violations, wall time (best of)."""
+    """One Newmark + Baumgarte run (gamma = beta, Eq 49): tip on the grid, violations, wall time
+    (best of)."""
     prob = case.model.problem()
     walls = []
     for _ in range(repeats):
@@ -156,7 +161,8 @@ def interpolate_wall(points: list[dict], target: float) -> float:
 
 
 def targets_in_overlap(errors_a: list[float], errors_b: list[float], count: int = 3) -> list[float]:
-    """``count`` log-spaced errors (m) inside the range both sweeps cover (empty if they do not overlap)."""
+    """``count`` log-spaced errors (m) inside the range both sweeps cover (empty if they do not
+    overlap)."""
     lo, hi = max(min(errors_a), min(errors_b)), min(max(errors_a), max(errors_b))
     if not lo < hi:
         return []
@@ -174,7 +180,8 @@ def compare(
 ) -> dict:
     """The three sweeps against the IDAS reference (``reference_rtol``, BDF order <= 2), and wall
     times at
-    equal accuracy: for each IDAS variant, at three errors inside the range it shares with the Newmark sweep."""
+    equal accuracy: for each IDAS variant, at three errors inside the range it shares with the
+    Newmark sweep."""
     ref = idas_point(case, reference_rtol, max_order=2)
     points = (
         [newmark_point(case, dt, repeats) for dt in dts]
@@ -221,7 +228,8 @@ def compare(
 
 
 def plot(results: list[dict], path: Path) -> None:
-    """Work-precision (wall time against tip error) and constraint drift against tip error, per case."""
+    """Work-precision (wall time against tip error) and constraint drift against tip error, per
+    case."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10.0, 7.5), layout="constrained")

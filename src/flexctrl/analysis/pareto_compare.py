@@ -133,7 +133,8 @@ def _flag(row: dict[str, Any] | None) -> str:
 
 
 def markdown(rows: Sequence[dict[str, Any]], labels: tuple[str, str] = ("old", "new")) -> str:
-    """Per scene, a table with both sides' cost, errors, failures and Pareto flag (sorted by the old cost)."""
+    """Per scene, a table with both sides' cost, errors, failures and Pareto flag (sorted by the old
+    cost)."""
     a, b = labels
     lines: list[str] = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
@@ -215,7 +216,8 @@ def case_table(
 
 
 def error_cost_axes(ax, title: str) -> None:
-    """Log axes of tip error RMS (mm) against integration wall time per simulated second (s/s): every Pareto chart's."""
+    """Log axes of tip error RMS (mm) against integration wall time per simulated second (s/s):
+    every Pareto chart's."""
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time per simulated second (s/s), median")
@@ -231,7 +233,8 @@ def plot(
     title: str = "",
     dpi: int = 90,
 ) -> Path:
-    """Per scene, median tip error RMS (mm) against median cost (s/s), old hollow, new filled, an arrow where it moved."""
+    """Per scene, median tip error RMS (mm) against median cost (s/s), old hollow, new filled, an
+    arrow where it moved."""
     from matplotlib.figure import Figure
 
     scenes = list(dict.fromkeys(r["scene"] for r in rows))

@@ -23,7 +23,8 @@ OUTPUT_DT = 1e-3
 DIVERGED = 1e6
 
 _METHOD = re.compile(
-    r"^(?P<fid>[a-z]+(?::\d+)?)(?P<sched>\+sched)?/(?P<integ>[a-z0-9]+)(?::(?P<variant>[A-Za-z0-9]+))?(?:@(?P<value>[^@]+))?$"
+    r"^(?P<fid>[a-z]+(?::\d+)?)(?P<sched>\+sched)?/(?P<integ>[a-z0-9]+)"
+    r"(?::(?P<variant>[A-Za-z0-9]+))?(?:@(?P<value>[^@]+))?$"
 )
 _STEP = re.compile(r"^(?P<num>[0-9.]+(?:e-?\d+)?)(?P<unit>s|ms|us)?$")
 
@@ -165,7 +166,8 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
         hint = difflib.get_close_matches(integ, INTEGRATORS, n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
         raise SpecError(
-            f"method {text!r}: integrator '{integ}' is not known{extra}; allowed: {', '.join(INTEGRATORS)}",
+            f"method {text!r}: integrator '{integ}' is not known{extra}; allowed: "
+            f"{', '.join(INTEGRATORS)}",
             source=source,
             key=key,
         )
@@ -177,7 +179,8 @@ def parse_method(text: Any, *, source: str | None = None, key: str | None = None
         variant = variant or "RK45"
         if variant not in SCIPY_METHODS:
             raise SpecError(
-                f"method {text!r}: scipy method '{variant}' is not allowed; allowed: {', '.join(SCIPY_METHODS)}",
+                f"method {text!r}: scipy method '{variant}' is not allowed; allowed: "
+                f"{', '.join(SCIPY_METHODS)}",
                 source=source,
                 key=key,
             )

@@ -40,7 +40,8 @@ class Stepper:
         self.counters: dict[str, float] = {}
 
     def advance(self, x: np.ndarray, u: np.ndarray, t0: float, n: int) -> np.ndarray:
-        """States after each of ``n`` output samples from ``x`` at ``t0`` with torque ``u`` held, shape (n, n_x)."""
+        """States after each of ``n`` output samples from ``x`` at ``t0`` with torque ``u`` held,
+        shape (n, n_x)."""
         raise NotImplementedError
 
     def reset(self) -> None:
@@ -244,7 +245,8 @@ def tip_path(model, states: np.ndarray) -> np.ndarray:
 
 
 def run_open_loop(stepper: Stepper, x0: np.ndarray, torque: np.ndarray) -> MethodRun:
-    """Drive ``stepper`` with held torques ``torque`` (one row per output sample), one call per constant piece."""
+    """Drive ``stepper`` with held torques ``torque`` (one row per output sample), one call per
+    constant piece."""
     stepper.reset()
     n = torque.shape[0]
     X = np.empty((n + 1, x0.size))

@@ -91,6 +91,28 @@ def _measure(model, dt, duration, repeats, scipy_span, scipy_options, use_cache)
     }
 
 
+def _accuracy(m: dict[str, Any], q: slice) -> dict[str, float]:
+    """Joint-angle errors (rad) at the end of the scipy span against RK4 at a tenth of the step."""
+    fine = m["fine"].states[-1, q]
+    return {
+        "max_q_error_rk4_dt_vs_rk4_dt_over_10": float(
+            np.max(np.abs(m["coarse"].states[-1, q] - fine))
+        ),
+        "max_q_error_scipy_vs_rk4_dt_over_10": float(
+            np.max(np.abs(m["scipy_run"].states[-1, q] - fine))
+        ),
+    }
+
+
+def _host() -> dict[str, Any]:
+    """The machine the figures are measured on."""
+    return {
+        "machine": platform.machine(),
+        "processor": platform.processor() or None,
+        "python": platform.python_version(),
+    }
+
+
 def bench_sim(
     model_path: str | Path = DEFAULT_MODEL,
     *,
@@ -115,17 +137,10 @@ def bench_sim(
     m = _measure(model, dt, duration, repeats, scipy_span, scipy_options, use_cache)
     walls_c, walls_vm, walls_sp = m["walls"]
     cpus_c, cpus_vm, cpus_sp = m["cpus"]
-    settings, coarse, fine, traj_sp, nfev = (
-        m["settings"],
-        m["coarse"],
-        m["fine"],
-        m["scipy_run"],
-        m["nfev"],
-    )
+    settings, nfev = m["settings"], m["nfev"]
     rf_c = duration / statistics.median(walls_c)
     rf_vm = duration / statistics.median(walls_vm)
     rf_sp = scipy_span / statistics.median(walls_sp)
-    q = slice(0, model.n_q)
     return {
         "model": str(model_path),
         "fidelity": fidelity,
@@ -143,7 +158,8 @@ def bench_sim(
             "realtime_factor_compiled": duration / statistics.median(cpus_c),
             "realtime_factor_vm": duration / statistics.median(cpus_vm),
             "realtime_factor_scipy": scipy_span / statistics.median(cpus_sp),
-            "note": "process CPU time instead of wall time: less sensitive to other load on the machine",
+            "note": "process CPU time instead of wall time: less sensitive to other load on the "
+            "machine",
         },
         "load_average_1min": _load_average(),
         "compile_time_s": settings["compile_time_s"],
@@ -162,24 +178,13 @@ def bench_sim(
             "scaled": scipy_span != duration,
             "rhs_evaluations": nfev,
         },
-        "accuracy_at_scipy_span": {
-            "max_q_error_rk4_dt_vs_rk4_dt_over_10": float(
-                np.max(np.abs(coarse.states[-1, q] - fine.states[-1, q]))
-            ),
-            "max_q_error_scipy_vs_rk4_dt_over_10": float(
-                np.max(np.abs(traj_sp.states[-1, q] - fine.states[-1, q]))
-            ),
-        },
+        "accuracy_at_scipy_span": _accuracy(m, slice(0, model.n_q)),
         "targets": {
             "realtime_factor_compiled": TARGET_REALTIME,
             "ratio_vs_scipy": TARGET_RATIO,
             "met": bool(rf_c >= TARGET_REALTIME and rf_c / rf_sp >= TARGET_RATIO),
         },
-        "host": {
-            "machine": platform.machine(),
-            "processor": platform.processor() or None,
-            "python": platform.python_version(),
-        },
+        "host": _host(),
         "omega_max_rad_s": float(model.omega_max),
         "omega_max_dt": float(model.omega_max) * dt if math.isfinite(model.omega_max) else None,
     }

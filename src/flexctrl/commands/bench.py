@@ -100,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(
         f"  compiled RK4   {result['realtime_factor_compiled']:9.1f}x real time "
-        f"({result['duration_s']:g} s runs; compile {result['compile_time_s']:.2f} s, flags {' '.join(result['flags'])})"
+        f"({result['duration_s']:g} s runs; compile {result['compile_time_s']:.2f} s, flags "
+        f"{' '.join(result['flags'])})"
     )
     print(f"  VM RK4         {result['realtime_factor_vm']:9.1f}x real time")
     sp = result["scipy"]
@@ -112,12 +113,14 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"  from CPU time: compiled {cpu['realtime_factor_compiled']:.1f}x, VM "
         f"{cpu['realtime_factor_vm']:.1f}x, "
-        f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average {result['load_average_1min']})"
+        f"scipy {cpu['realtime_factor_scipy']:.4f}x (1-min load average "
+        f"{result['load_average_1min']})"
     )
     print(
         f"  compiled / scipy = {result['ratio_vs_scipy']:.0f}; targets >= "
         f"{result['targets']['realtime_factor_compiled']:g}x "
-        f"and >= {result['targets']['ratio_vs_scipy']:g}x: {'met' if result['targets']['met'] else 'NOT met'}"
+        f"and >= {result['targets']['ratio_vs_scipy']:g}x: "
+        f"{'met' if result['targets']['met'] else 'NOT met'}"
     )
     return 0
 

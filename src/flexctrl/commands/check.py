@@ -8,13 +8,13 @@ holds (:func:`file_kind`; ``--kind`` names it instead):
   :func:`flexctrl.spec.controller_reader.load_controller`;
 * ``tuning``: ``[[parameters]]`` or ``[scenarios]``: :func:`flexctrl.spec.tuning.load_tuning` and
   its scenario study (:func:`flexctrl.tuning.scenarios.scenario_study`);
-* ``model``: ``[[links]]`` or ``[[joints]]`` (:func:`flexctrl.spec.arm.load_arm`); ``kind = "rp_arm"``
-  with ``[link]``/``[housing]``, ``kind = "telescoping"`` with ``[outer]``/``[inner]``
-  (:mod:`flexctrl.spec.fem_models`);
+* ``model``: ``[[links]]`` or ``[[joints]]`` (:func:`flexctrl.spec.arm.load_arm`);
+  ``kind = "rp_arm"`` with ``[link]``/``[housing]``, ``kind = "telescoping"`` with
+  ``[outer]``/``[inner]`` (:mod:`flexctrl.spec.fem_models`);
 * ``scene``: any other scene ``kind``, or ``model`` with ``dt``/``duration``
   (:func:`flexctrl.spec.scene.load_scene`, and a closed-loop scene's controller file);
-* ``study``: ``scene``, ``[grid]``, ``[set]`` or ``executor`` (:func:`flexctrl.study.study_file.load_study`,
-  every run's settings checked by its executor).
+* ``study``: ``scene``, ``[grid]``, ``[set]`` or ``executor``
+  (:func:`flexctrl.study.study_file.load_study`, every run's settings checked by its executor).
 
 Every file is checked (one failing file does not hide the next); each prints one line,
 ``FILE: ok (KIND ...)`` on stdout or the error on stderr, and the exit status is 0 when all
@@ -109,7 +109,8 @@ def check_file(path: str | Path, kind: str | None = None) -> str:
             "scene "
             "(kind, model, dt, duration), a controller (kind = 'pd', 'lqr', 'mpc', 'nmpc' or "
             "'shaped'), "
-            "a study (scene, [grid]) or a tuning ([[parameters]], [scenarios]); or name it with --kind",
+            "a study (scene, [grid]) or a tuning ([[parameters]], [scenarios]); or name it with "
+            "--kind",
             source=source,
         )
     return _CHECKS[kind](path, document)

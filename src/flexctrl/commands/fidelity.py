@@ -178,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _step_check(conv: dict) -> str:
-    """The reference's step check, as made (or "not made", with ``fidelity_checks = "tolerance"``)."""
+    """The reference's step check, as made (or "not made", with ``fidelity_checks =
+    "tolerance"``)."""
     if "step_halving_m" in conv:
         return f"halving its step moves the tip {conv['step_halving_m']:.2e} m; "
     if "step_error_linear_m" in conv:
@@ -187,7 +188,8 @@ def _step_check(conv: dict) -> str:
 
 
 def _rung_below(conv: dict) -> str:
-    """The reference's distance from the rung below it (not run with ``fidelity_checks = "tolerance"``)."""
+    """The reference's distance from the rung below it (not run with ``fidelity_checks =
+    "tolerance"``)."""
     if conv["rung_below_m"] is None:
         return f"{conv['rung_below']} not run; "
     return f"{conv['rung_below']} differs by {conv['rung_below_m']:.2e} m; "
@@ -204,10 +206,12 @@ def format_table(data: dict) -> str:
         (
             f"bandwidth rule: {rule['energy_fraction']:.3g} of the torque energy below {bw:.3g} "
             "Hz; modes below "
-            f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at {rule['start']}"
+            f"{rule['cutoff_hz']:.3g} Hz kept per link {rule['modes_kept_per_link']} -> start at "
+            f"{rule['start']}"
         )
         if bw is not None
-        else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest rung)",
+        else f"bandwidth rule: no torque; start at {rule['start']} (the initial state's lowest "
+        "rung)",
         (
             f"reference {ref['fidelity']} ({ref['integrator']}, dt {ref['dt_s']:.3g} s, "
             f"omega_max*dt {ref['omega_max_dt']:.2f}): "
@@ -224,7 +228,8 @@ def format_table(data: dict) -> str:
         lines.append(
             f"{c['fidelity']:>7} {c['dt_s']:9.3g} {c['wall_time_s']:9.3g} "
             f"{_f(c.get('distance_to_next_m'))} "
-            f"{_f(c.get('estimated_error_m'))} {c['reference_error_max_m']:11.2e} {c['cost_ratio']:8.3g}{mark}"
+            f"{_f(c.get('estimated_error_m'))} {c['reference_error_max_m']:11.2e} "
+            f"{c['cost_ratio']:8.3g}{mark}"
         )
     lines += [
         "",

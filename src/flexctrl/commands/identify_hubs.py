@@ -63,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"m_h{joint} = {mass:.4f} kg")
     print(f"fit over links 1-2: rms {fit.rms_hz:.4f} Hz, max |residual| {fit.max_abs_hz:.4f} Hz")
     print(
-        f"{'payload kg':>10} {'link':>4} {'mode':>4} {'Table 3 Hz':>10} {'model Hz':>10} {'residual Hz':>11}"
+        f"{'payload kg':>10} {'link':>4} {'mode':>4} {'Table 3 Hz':>10} {'model Hz':>10} "
+        f"{'residual Hz':>11}"
     )
     for payload, link, mode, ref, model, res in fit.residuals_hz:
         print(f"{payload:10.1f} {link:4d} {mode:4d} {ref:10.2f} {model:10.4f} {res:11.4f}")

@@ -1,4 +1,5 @@
-"""``flexctrl linearize MODEL``: the linearisation at a static equilibrium, its modes and locked frequencies."""
+"""``flexctrl linearize MODEL``: the linearisation at a static equilibrium, its modes and locked
+frequencies."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ UNSTABLE_TOL = 1e-9
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "linearize",
-        help="linearise at the static equilibrium of a configuration: modal frequencies and damping",
+        help="linearise at the static equilibrium of a configuration: modal frequencies and "
+        "damping",
         description="Builds the model (default amm:2), solves the static equilibrium with the "
         "joints held at "
         "--q (degrees) against gravity, linearises it (python-control StateSpace, states q then "
@@ -104,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pole_table(eigenvalues) -> str:
-    """One line per pole of the linearisation (of each complex pair the one with Im s > 0), UNSTABLE marked."""
+    """One line per pole of the linearisation (of each complex pair the one with Im s > 0), UNSTABLE
+    marked."""
     lines = [
         "  poles of the linearisation (torques held at the equilibrium's; f = |s| / 2 pi, "
         "zeta = -Re s / |s|; Re s > 0 grows):",

@@ -28,7 +28,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--n-modes",
         type=int,
         metavar="N",
-        help=f"modes per link, 0..{MAX_MODES} (default: the model file's, or N of --fidelity amm:N)",
+        help=f"modes per link, 0..{MAX_MODES} (default: the model file's, or N of --fidelity "
+        "amm:N)",
     )
     parser.add_argument(
         "--json",
@@ -43,7 +44,8 @@ def _n_modes(args: argparse.Namespace) -> int | None:
     if args.n_modes is not None:
         if not 0 <= args.n_modes <= MAX_MODES:
             raise SpecError(
-                f"value {args.n_modes!r} is out of range; allowed: an integer from 0 to {MAX_MODES}",
+                f"value {args.n_modes!r} is out of range; allowed: an integer from 0 to "
+                f"{MAX_MODES}",
                 key="--n-modes",
             )
         return args.n_modes

@@ -8,7 +8,8 @@ import argparse
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "report",
-        help="redraw report.md and figures of a study folder from results.csv, study.json and runs/",
+        help="redraw report.md and figures of a study folder from results.csv, study.json and "
+        "runs/",
         description="Draws the report of a study's result folder without running anything: maps "
         "of a metric "
         "over two grid columns, controller ranking per payload, worst cases with their "

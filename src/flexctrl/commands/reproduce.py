@@ -1,4 +1,5 @@
-"""``flexctrl reproduce {subedi,pan} --out DIR [--reduced]``: a seed paper's tables and figures beside flexctrl's."""
+"""``flexctrl reproduce {subedi,pan} --out DIR [--reduced]``: a seed paper's tables and figures
+beside flexctrl's."""
 
 from __future__ import annotations
 

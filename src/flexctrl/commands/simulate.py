@@ -22,7 +22,8 @@ CONTROLLER_PREFIX = "controller."
 def add_parser(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "simulate",
-        help="simulate a scene file (studies/scenes/*.toml) and write trajectory, summary and plots",
+        help="simulate a scene file (studies/scenes/*.toml) and write trajectory, summary and "
+        "plots",
         description="Loads a scene (model, payload, fidelity, initial state, damping, input, "
         "integrator, "
         "step and duration), simulates it and writes trajectory.csv, summary.json and PNG plots "
@@ -44,12 +45,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default=[],
         metavar="KEY=VALUE",
         help="override any scene key, e.g. duration=0.5 or initial.qf.qf31=0.05, or with "
-        "controller.KEY a key of the controller file, e.g. controller.sample_time=0.005 (repeatable)",
+        "controller.KEY a key of the controller file, e.g. controller.sample_time=0.005 "
+        "(repeatable)",
     )
     parser.add_argument(
         "--controller",
         metavar="FILE",
-        help='controller settings (controllers/*.toml) for a closed-loop scene (kind = "closed_loop")',
+        help="controller settings (controllers/*.toml) for a closed-loop scene (kind = "
+        '"closed_loop")',
     )
     parser.add_argument("--no-plots", action="store_true", help="write no PNG files")
     parser.add_argument(
@@ -95,7 +98,8 @@ def _run_options(args: argparse.Namespace, scene, controller_overrides: list[str
             else f"--set {CONTROLLER_PREFIX}{controller_overrides[0]}"
         )
         raise SpecError(
-            f"scene kind '{scene.kind}' runs no controller; allowed: a kind = \"closed_loop\" scene",
+            f"scene kind '{scene.kind}' runs no controller; allowed: a kind = \"closed_loop\" "
+            "scene",
             source=args.scene,
             key=key,
         )

@@ -25,7 +25,8 @@ IDENTICAL = 1e-5
 
 
 def runs(reduced: bool) -> dict:
-    """Every case at 4 elements and at the converged mesh (32; 16 reduced), shortening on and off."""
+    """Every case at 4 elements and at the converged mesh (32; 16 reduced), shortening on and
+    off."""
     fine = 16 if reduced else 32
     out = {"fine": fine}
     for key, case in CASES.items():
@@ -225,8 +226,8 @@ def _convergence_items(r, fine) -> list:
     """Per case of Figs 7-9: four elements against the converged mesh, and the shortening."""
     note4 = (
         f"max |4 elements - {fine} elements| over the run, shortening on; the converged answer "
-        f"({fine} elements) moves by < 0.1 mm from 16 to 32 elements (tests/test_sliding_beam.py "
-        "checks "
+        f"({fine} elements) moves by < 0.1 mm from 16 to 32 elements "
+        "(tests/dynamics/fem/test_sliding_beam.py checks "
         "monotone convergence). Buffinton and Kane's curve is not in the text, so the paper's "
         "agreement "
         "can only be read at plot resolution: an offset of this size is visible on a 10 mm scale"
@@ -239,7 +240,8 @@ def _convergence_items(r, fine) -> list:
                 "excellent agreement with Buffinton and Kane"
                 if key == "slow_push"
                 else "very good agreement with Buffinton and Kane",
-                f"4 elements are {_mm(_offset(r, fine, key))} off the {fine}-element answer (10 mm initial deflection)",
+                f"4 elements are {_mm(_offset(r, fine, key))} off the {fine}-element answer (10 "
+                "mm initial deflection)",
                 False,
                 note4,
             ),
@@ -313,7 +315,8 @@ def _fig9_items(r, fine) -> list[Item]:
         Item(
             "Fig 9, pull against push",
             "the response is quite different from the push cases",
-            f"max |pull tip E - fast push tip H| = {_mm(differ)} (peak {_mm(_peak(r, fine, 'fast_push'))})",
+            f"max |pull tip E - fast push tip H| = {_mm(differ)} (peak "
+            f"{_mm(_peak(r, fine, 'fast_push'))})",
             differ > SMALL * _peak(r, fine, "fast_push"),
             f"'quite different' taken as more than {100 * SMALL:.0f} % of the peak",
         ),

@@ -90,7 +90,8 @@ def fig1(out_dir: Path, reduced: bool) -> Section:
             _gap(full.tip_y, part.tip_y) < 1e-3 * peak,
             "the Lagrangian of the full model keeps the shortening in T; with the motion imposed "
             "its nodal rows "
-            "are Eq 42 with Pan's K_g (bound 0.1 % of the peak; the gap is the O(dt^2) joint tracking)",
+            "are Eq 42 with Pan's K_g (bound 0.1 % of the peak; the gap is the O(dt^2) joint "
+            "tracking)",
         ),
     ]
     _draw_arm(part, spec, out_dir / "fig1_rp_arm.png")
@@ -238,7 +239,8 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
             Item(
                 f"Fig 4, static tip deflection, W = {W:g} m",
                 "link clamped at E (Eqs 22-23), held at "
-                "the mouth D' (Eq 24): a cantilever of the free length W beyond D' on a propped span",
+                "the mouth D' (Eq 24): a cantilever of the free length W beyond D' on a propped "
+                "span",
                 f"{1e3 * q[model.tip]:.4f} mm; overhang on the tangent at D' "
                 f"{1e3 * (q[model.tip] - slope * c):.4f} mm",
                 abs(q[model.tip] / closed - 1) < 1e-9
@@ -269,9 +271,11 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
         Item(
             "Fig 4, prescribed torque/force (Eq 43) against prescribed motion",
             "full coupling retains both directions of the rigid-elastic coupling",
-            f"fed the same motion: tip {_gap(full.tip_y, clamped.tip_y):.1e} m from the partial model",
+            f"fed the same motion: tip {_gap(full.tip_y, clamped.tip_y):.1e} m from the partial "
+            "model",
             _gap(full.tip_y, clamped.tip_y) < 1e-3 * peak,
-            "bound 0.1 % of the peak; rigid limit against solve_ivp: tests/test_prismatic_clamped.py",
+            "bound 0.1 % of the peak; rigid limit against solve_ivp: "
+            "tests/dynamics/fem/test_prismatic_clamped.py",
         ),
     ]
     _time_plot(
@@ -328,7 +332,8 @@ def fig5(out_dir: Path, reduced: bool) -> Section:
             f"{_gap(full.outer_tip_y, part.outer_tip_y):.1e} m "
             f"from the motion-driven model (peak {1e3 * peak:.2f} mm)",
             _gap(full.tip_y, part.tip_y) < 1e-3 * peak,
-            "bound 0.1 % of the peak; the gap is O(dt^2) (tests/test_telescoping_full.py)",
+            "bound 0.1 % of the peak; the gap is O(dt^2) "
+            "(tests/dynamics/fem/test_telescoping_full.py)",
         ),
         Item(
             "Fig 5, the needed torque and force fed back",

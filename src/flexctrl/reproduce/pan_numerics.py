@@ -74,7 +74,8 @@ def baumgarte_section() -> Section:
             stab.phi_violation.max() < free.phi_violation.max() and err["stab"] <= err["free"],
             "satisfactory read as: less drift and a tip no worse than without the terms; gamma h "
             "= 0.005 is "
-            "far inside the explicit-feedback stability limit gamma h < 3 - sqrt(5) (docs/baumgarte.md)",
+            "far inside the explicit-feedback stability limit gamma h < 3 - sqrt(5) "
+            "(docs/baumgarte.md)",
         )
     ]
     eq49, printed = _violation(SLOW_PUSH, "eq49"), _violation(SLOW_PUSH, "eq54_printed")
@@ -248,8 +249,8 @@ def _efficiency_text(results: list, cfg, cases, lines: list[str]) -> str:
         "s whatever "
         "the tolerance, while the trapezoidal Newmark rule is A-stable and its step follows "
         "accuracy only. "
-        "This is a likely mechanism behind the paper's claim. Limiting IDAS to order 2 removes it.\n\n"
-        + "\n".join(lines)
+        "This is a likely mechanism behind the paper's claim. Limiting IDAS to order 2 removes "
+        "it.\n\n" + "\n".join(lines)
     )
 
 

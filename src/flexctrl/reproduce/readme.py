@@ -4,7 +4,8 @@
 block between the two markers below with one row per numbered table or figure of each
 paper (in the papers' order): how many of its items agree, and every item that differs.
 The JSON files are the full runs of ``flexctrl reproduce PAPER --out DIR`` copied to
-``docs/reproduction/``; ``tests/test_reproduce_readme.py`` checks the README is their table.
+``docs/reproduction/``; ``tests/reproduce/test_reproduce_readme.py`` checks the README is their
+table.
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ def rewrite(readme: Path, sources: list[Path]) -> str:
     text = readme.read_text()
     if BEGIN not in text or END not in text:
         raise ValueError(
-            f"{readme}: the markers of the reproduction table are missing; add the lines\n{BEGIN}\n{END}"
+            f"{readme}: the markers of the reproduction table are missing; add the "
+            f"lines\n{BEGIN}\n{END}"
         )
     documents = [json.loads(Path(s).read_text()) for s in sources]
     head, rest = text.split(BEGIN, 1)

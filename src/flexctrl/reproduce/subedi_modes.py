@@ -34,7 +34,8 @@ CHANGE = 1e-6
 
 
 def _shapes(arm: ArmSpec, q_deg, link: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """x (m), the two shapes (2, len(x)) and the frequencies (Hz) of ``link`` (0-based) at ``q_deg``."""
+    """x (m), the two shapes (2, len(x)) and the frequencies (Hz) of ``link`` (0-based) at
+    ``q_deg``."""
     x = np.arange(0.0, arm.links[link].length + X_STEP / 2, X_STEP)
     modes = link_modes(arm, np.radians(q_deg), link, 2)
     return x, modes.shape(x), modes.frequency_hz
@@ -47,7 +48,8 @@ def _aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
 
 
 def shape_change(arm: ArmSpec, link: int, poses) -> float:
-    """Largest change of ``link``'s shapes over ``poses`` (degrees), relative to the first pose's peak."""
+    """Largest change of ``link``'s shapes over ``poses`` (degrees), relative to the first pose's
+    peak."""
     _x, ref, _f = _shapes(arm, poses[0], link)
     worst = 0.0
     for pose in poses[1:]:
@@ -92,7 +94,10 @@ def fig3(arm: ArmSpec, out_dir: Path) -> Section:
     items = []
     for conv in ("exact", "paper"):
         b1, b2 = boundary_values(arm, q, 0, conv), boundary_values(arm, q, 1, conv)
-        spread = lambda v, axis: float(np.max(np.ptp(v, axis=axis)))  # noqa: E731  range over one joint
+
+        def spread(v, axis):  # the range over one joint
+            return float(np.max(np.ptp(v, axis=axis)))
+
         checks = (
             (
                 "J_D1",
@@ -232,7 +237,8 @@ def _draw_arm(ax, arm: ArmSpec, q_deg, scale: float) -> None:
 
 
 def fig5(arm: ArmSpec, out_dir: Path) -> Section:
-    """Fig 5: the arm drawn with its shapes at q3 (a) or q2 (b) = 0, 90, 180 deg, one pose per panel."""
+    """Fig 5: the arm drawn with its shapes at q3 (a) or q2 (b) = 0, 90, 180 deg, one pose per
+    panel."""
     fig, axes = figure(2, 3, 4.2, 3.3)
     items = []
     for row, (panel, joint) in enumerate((("a", 2), ("b", 1))):
@@ -374,7 +380,8 @@ def _slice_item(freqs, panel: str, vary: int, hold: int, fixed: float) -> Item:
 
 
 def fig7(arm: ArmSpec, out_dir: Path, step: float) -> Section:
-    """Fig 7: maps of f11, f12 over (q2, q3) and f21, f22 over q3; symmetric under (q2, q3) -> (-q2, -q3)."""
+    """Fig 7: maps of f11, f12 over (q2, q3) and f21, f22 over q3; symmetric under (q2, q3) -> (-q2,
+    -q3)."""
     path = Path(out_dir) / "figures" / "fig07_frequency_maps.png"
     _path, diff = plot_frequency_maps(arm, path, step)
     maps = frequency_maps(arm, step)
@@ -386,7 +393,8 @@ def fig7(arm: ArmSpec, out_dir: Path, step: float) -> Section:
             "vary over the whole (q2, q3) plane",
             f"f11 {f1[..., 0].min():.3f} to {f1[..., 0].max():.3f} Hz, f12 "
             f"{f1[..., 1].min():.2f} to "
-            f"{f1[..., 1].max():.2f} Hz; mirror symmetry f(q2, q3) = f(-q2, -q3) to {mirror:.1e} Hz",
+            f"{f1[..., 1].max():.2f} Hz; mirror symmetry f(q2, q3) = f(-q2, -q3) to {mirror:.1e} "
+            "Hz",
             bool(np.ptp(f1[..., 0]) > CHANGE and mirror < 1e-6),
             "symmetry: Eqs 69-70 hold only cosines",
         ),

@@ -31,7 +31,8 @@ FINE_DT = 1e-4  # s, a tenth of the paper's 1 ms
 
 @dataclass
 class Runs:
-    """Trajectories by ``(scene key, variant)``; variants: ``frozen``, ``scheduled``, ``eq68``, ``fine``."""
+    """Trajectories by ``(scene key, variant)``; variants: ``frozen``, ``scheduled``, ``eq68``,
+    ``fine``."""
 
     reduced: bool
     runs: dict[tuple[str, str], Trajectory] = field(default_factory=dict)
@@ -92,7 +93,8 @@ def max_tip_difference(a: Trajectory, b: Trajectory) -> float:
 
 
 def energy_loss(traj: Trajectory, t: float, start: float = 0.0) -> float:
-    """``E_total(start) + work - E_total(t)`` (J): energy not accounted for between ``start`` and ``t``."""
+    """``E_total(start) + work - E_total(t)`` (J): energy not accounted for between ``start`` and
+    ``t``."""
     i0, i1 = (
         int(np.searchsorted(traj.time, start - 1e-12)),
         int(np.searchsorted(traj.time, t - 1e-12)),

@@ -44,7 +44,8 @@ def table1(arm: ArmSpec) -> Section:
         items.append(
             Item(
                 f"Table 1, link {i + 1}",
-                f"{length} m, {width * 1e3:g} x {height * 1e3:g} mm, wall {wall * 1e3:g} mm, aluminium",
+                f"{length} m, {width * 1e3:g} x {height * 1e3:g} mm, wall {wall * 1e3:g} mm, "
+                "aluminium",
                 f"A = {sec.area * 1e6:.1f} mm^2, I = {sec.second_moment * 1e9:.1f} mm^4: Table "
                 f"2's rho / A = {density:.1f} kg/m^3, "
                 f"EI / I = {modulus / 1e9:.2f} GPa; model file: length {arm.links[i].length} m",
@@ -140,7 +141,8 @@ def table2(arm: ArmSpec, fit) -> Section:
 
 
 def table3(arm: ArmSpec) -> Section:
-    """Table 3: 12 frequencies, with the identified hub masses and with none (Table 2 read literally)."""
+    """Table 3: 12 frequencies, with the identified hub masses and with none (Table 2 read
+    literally)."""
     no_hubs = dataclasses.replace(
         arm, joints=tuple(dataclasses.replace(j, hub_mass=0.0) for j in arm.joints)
     )
@@ -172,7 +174,8 @@ def table3(arm: ArmSpec) -> Section:
 
 def _frames(arm: ArmSpec, q: np.ndarray, tip_w: np.ndarray, tip_slope: np.ndarray):
     """Joint positions and frames by Eqs 4-7, literally: ``W_i = W_{i-1} E_{i-1} A_i``,
-    ``r_{i+1} = r_i + W_i (l_i, w_ie)``, ``E = [[1, -w'], [w', 1]]`` (linearised, not a rotation)."""
+    ``r_{i+1} = r_i + W_i (l_i, w_ie)``, ``E = [[1, -w'], [w', 1]]`` (linearised, not a
+    rotation)."""
     origin, W, E, bases, frames = np.zeros(2), np.eye(2), np.eye(2), [], []
     for i, link in enumerate(arm.links):
         c, s = math.cos(q[i]), math.sin(q[i])

@@ -36,7 +36,8 @@ STYLES = {
 def _response_figure(
     runs: Runs, key: str, variants: tuple[str, ...], title: str, out_dir: Path, name: str
 ) -> str:
-    """Panels (a) joints, (b-d) tip deflections, (e) tip path, (f) energies; one line style per variant."""
+    """Panels (a) joints, (b-d) tip deflections, (e) tip path, (f) energies; one line style per
+    variant."""
     fig, axes = figure(2, 3, 4.6, 3.1)
     for variant in variants:
         traj, (style, label) = runs.get(key, variant), STYLES[variant]
@@ -80,7 +81,8 @@ def _response_figure(
 
 
 def _frozen_vs_scheduled(runs: Runs, key: str, fig: str) -> Item:
-    """Do the two models draw the same figure?  The deflections (panels b-d) within SAME_FIGURE of their range."""
+    """Do the two models draw the same figure?  The deflections (panels b-d) within SAME_FIGURE of
+    their range."""
     frozen, scheduled = runs.get(key, "frozen"), runs.get(key, "scheduled")
     diff = max_tip_difference(frozen, scheduled)
     n = min(frozen.time.size, scheduled.time.size)
@@ -104,7 +106,8 @@ def _frozen_vs_scheduled(runs: Runs, key: str, fig: str) -> Item:
 
 
 def fig8_9(runs: Runs, out_dir: Path) -> list[Section]:
-    """Figs 8 and 9: free vibration under gravity from the horizontal with link 3 bent, without and with damping."""
+    """Figs 8 and 9: free vibration under gravity from the horizontal with link 3 bent, without and
+    with damping."""
     end = runs.get("free").time[-1]
     undamped = vibration_rms(runs.get("free"), 2, end - 1.0, end)
     first = vibration_rms(runs.get("free"), 2, 0.0, 1.0)

@@ -43,8 +43,10 @@ def affinity_key(settings: dict[str, Any]) -> str:
     Examples
     --------
     >>> a = {"model": "m.toml", "payload": 2.0, "controller": "lqr.toml", "seed": 1,
-    ...      "overrides": ["controller.horizon=10", "scene.duration=3"], "digests": {"model": "x", "controller": "y"}}
-    >>> b = dict(a, controller="pd.toml", seed=2, overrides=["scene.duration=3"], digests={"model": "x", "controller": "z"})
+    ...      "overrides": ["controller.horizon=10", "scene.duration=3"],
+    ...      "digests": {"model": "x", "controller": "y"}}
+    >>> b = dict(a, controller="pd.toml", seed=2, overrides=["scene.duration=3"],
+    ...          digests={"model": "x", "controller": "z"})
     >>> affinity_key(a) == affinity_key(b), affinity_key(a) == affinity_key(dict(a, payload=0.0))
     (True, False)
     """
@@ -57,7 +59,8 @@ def affinity_key(settings: dict[str, Any]) -> str:
 
 
 class AffinityQueue:
-    """The runs still to start, grouped by :func:`affinity_key` in plan order, and which worker holds which group."""
+    """The runs still to start, grouped by :func:`affinity_key` in plan order, and which worker
+    holds which group."""
 
     def __init__(self, runs: Iterable[Any], key: Callable[[Any], str]):
         self.groups: OrderedDict[str, deque] = OrderedDict()
@@ -69,7 +72,8 @@ class AffinityQueue:
         return bool(self.groups)
 
     def next_for(self, worker: int) -> Any | None:
-        """The next run for ``worker``: its group's next, a new group's first, or the end of the fullest group."""
+        """The next run for ``worker``: its group's next, a new group's first, or the end of the
+        fullest group."""
         group = self.held.get(worker)
         if group in self.groups:
             return self._take(group, from_end=False)

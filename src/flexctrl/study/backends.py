@@ -93,7 +93,8 @@ class LocalPoolBackend:
         )
 
     def pool(self, size: int, context) -> cf.ProcessPoolExecutor:
-        """A process pool of ``size`` workers, each holding its BLAS libraries to :attr:`threads`."""
+        """A process pool of ``size`` workers, each holding its BLAS libraries to
+        :attr:`threads`."""
         return cf.ProcessPoolExecutor(
             size, mp_context=context, initializer=limit_blas_threads, initargs=(self.threads,)
         )

@@ -31,7 +31,8 @@ THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"
 
 
 def usable_cpus() -> int:
-    """The CPUs this process may run on (its affinity mask; ``os.cpu_count()`` where there is none)."""
+    """The CPUs this process may run on (its affinity mask; ``os.cpu_count()`` where there is
+    none)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
@@ -57,7 +58,9 @@ def blas_thread_budget(setting: int | str, workers: int, cpus: int | None = None
 
     Examples
     --------
-    >>> blas_thread_budget("auto", 2, cpus=2), blas_thread_budget("auto", 1, cpus=2), blas_thread_budget("auto", 3, cpus=8)
+    >>> import functools
+    >>> budget = functools.partial(blas_thread_budget, "auto")
+    >>> budget(2, cpus=2), budget(1, cpus=2), budget(3, cpus=8)
     (1, 2, 2)
     >>> blas_thread_budget(3, 2, cpus=2)
     3
@@ -98,7 +101,8 @@ def parse_blas_threads(text: str) -> int | str:
 
 
 def thread_environment(threads: int) -> dict[str, str]:
-    """The environment variables that hold libraries loaded later to ``threads`` threads (none for 0)."""
+    """The environment variables that hold libraries loaded later to ``threads`` threads (none for
+    0)."""
     return {name: str(threads) for name in THREAD_VARIABLES} if threads > 0 else {}
 
 
@@ -119,7 +123,8 @@ def limit_blas_threads(threads: int) -> None:
 
 
 def blas_threads_now() -> list[int]:
-    """The thread count of every BLAS and OpenMP library loaded in this process (for tests and reports)."""
+    """The thread count of every BLAS and OpenMP library loaded in this process (for tests and
+    reports)."""
     from threadpoolctl import threadpool_info
 
     return [int(info["num_threads"]) for info in threadpool_info()]

@@ -76,7 +76,8 @@ _UNIT_WORDS = ("s", "hz", "mb", "kg")
 
 @dataclass(frozen=True)
 class Shown:
-    """How a column is shown: its ``label`` with the unit, and ``scale`` from table value to shown value."""
+    """How a column is shown: its ``label`` with the unit, and ``scale`` from table value to shown
+    value."""
 
     name: str
     unit: str
@@ -84,7 +85,8 @@ class Shown:
 
     @property
     def label(self) -> str:
-        """``"tip residual RMS (mm)"``; no parentheses for a count, a 0/1 verdict or an unknown unit."""
+        """``"tip residual RMS (mm)"``; no parentheses for a count, a 0/1 verdict or an unknown
+        unit."""
         if self.name in _NAMES:
             return _NAMES[self.name]
         parts = self.name.split("_")
@@ -127,7 +129,8 @@ def display(column: str, *, trajectory: bool = False) -> Shown:
     'controller time 95th percentile (ms)'
     >>> display("q2").label, display("payload").label, display("stable").label
     ('q2 (deg)', 'payload (kg)', 'stable (1 = yes, 0 = no)')
-    >>> display("q2", trajectory=True).scale == display("final_tip_error").scale / 1e3 * 180 / 3.141592653589793
+    >>> metres_to_mm = display("final_tip_error").scale
+    >>> display("q2", trajectory=True).scale == metres_to_mm / 1e3 * 180 / 3.141592653589793
     True
     """
     unit = si_unit(column, trajectory=trajectory)
@@ -140,7 +143,8 @@ def display(column: str, *, trajectory: bool = False) -> Shown:
 
 
 def with_unit(column: str, value) -> str:
-    """``"payload = 2 kg"``, ``"q2 = 45 deg"``, ``"controller = lqr"``: a coordinate as a reader reads it."""
+    """``"payload = 2 kg"``, ``"q2 = 45 deg"``, ``"controller = lqr"``: a coordinate as a reader
+    reads it."""
     shown = display(column)
     number = shown.value(value)
     text = f"{number:g}" if isinstance(number, float) else str(number)

@@ -35,7 +35,8 @@ class DaskBackend:
             import distributed  # noqa: F401
         except ImportError:
             raise FlexctrlError(
-                "a Dask scheduler needs dask.distributed, an optional dependency: pip install 'flexctrl[dask]'"
+                "a Dask scheduler needs dask.distributed, an optional dependency: pip install "
+                "'flexctrl[dask]'"
             ) from None
         self.address = address
         self.client = client

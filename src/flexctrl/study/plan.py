@@ -1,4 +1,5 @@
-"""The plan of a study as plain frozen data: its runs, axes and report settings (read by :mod:`flexctrl.study.study_file`)."""
+"""The plan of a study as plain frozen data: its runs, axes and report settings (read by
+:mod:`flexctrl.study.study_file`)."""
 
 from __future__ import annotations
 

@@ -105,7 +105,8 @@ class Executor:
     module: str | None = None
 
     def unavailable_metrics(self, settings: dict) -> dict[str, str]:
-        """``{metric: reason}`` of the metrics this run cannot produce, known from its settings alone."""
+        """``{metric: reason}`` of the metrics this run cannot produce, known from its settings
+        alone."""
         return {} if self.unavailable is None else dict(self.unavailable(settings))
 
 
@@ -151,7 +152,8 @@ def register_executor(
     existing = _REGISTRY.get(name)
     if existing is not None and existing.run is not fn:
         raise ValueError(
-            f"executor '{name}' is registered already (to {existing.run.__module__}.{existing.run.__qualname__})"
+            f"executor '{name}' is registered already (to "
+            f"{existing.run.__module__}.{existing.run.__qualname__})"
         )
     _REGISTRY[name] = Executor(name, fn, check, summary, report, module=fn.__module__)
 
@@ -175,7 +177,8 @@ def get_executor(name: str, *, source: str | None = None, key: str = "executor")
         hint = difflib.get_close_matches(name, list(_REGISTRY), n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
         raise SpecError(
-            f"value {name!r} is not a registered executor; allowed: {', '.join(map(repr, _REGISTRY))}{extra}",
+            f"value {name!r} is not a registered executor; allowed: "
+            f"{', '.join(map(repr, _REGISTRY))}{extra}",
             source=source,
             key=key,
         )

@@ -100,7 +100,8 @@ def write_report(
     if metric is not None:
         if metric not in metrics:
             raise SpecError(
-                f"'{metric}' is not a metric of this study; allowed: {', '.join(metrics) or '(none recorded)'}",
+                f"'{metric}' is not a metric of this study; allowed: "
+                f"{', '.join(metrics) or '(none recorded)'}",
                 key="--metric",
             )
         spec = dataclasses.replace(spec, metric=metric)
@@ -175,7 +176,8 @@ def _header(ctx: ReportContext) -> list[str]:
         else "- no metric recorded yet",
         f"- started {ctx.study.get('start', '?')}, ended "
         f"{ctx.study.get('end') or 'not yet (interrupted or running)'}; "
-        f"{len(ctx.study.get('sessions', []))} session(s), last on {ctx.study.get('sessions', [{}])[-1].get('backend', '?')}",
+        f"{len(ctx.study.get('sessions', []))} session(s), last on "
+        f"{ctx.study.get('sessions', [{}])[-1].get('backend', '?')}",
         f"- machine: {machine.get('platform', '?')}, {machine.get('cpu_count', '?')} CPUs",
         "- versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()),
         "",
@@ -267,7 +269,8 @@ def _worst(ctx: ReportContext) -> list[str]:
         f"The {len(rows)} ok runs with the "
         f"{'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
         + (
-            f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one thicker)."
+            f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one "
+            "thicker)."
             if rank_by
             else "."
         ),
@@ -306,7 +309,8 @@ def _worst(ctx: ReportContext) -> list[str]:
 
 
 def _draw_cell(ctx: ReportContext, path: Path, stored, label, title: str, highlight: str) -> None:
-    """The closed loop's four panels (:func:`flexctrl.loop.compare_figure.draw_runs`) or any executor's signals."""
+    """The closed loop's four panels (:func:`flexctrl.loop.compare_figure.draw_runs`) or any
+    executor's signals."""
     time_name = ctx.spec.time
     if all(k in stored[0][1] for k in (time_name, "u1", "w1")) and not ctx.spec.signals:
         from flexctrl.loop.compare_figure import draw_runs
@@ -326,7 +330,8 @@ def _draw_cell(ctx: ReportContext, path: Path, stored, label, title: str, highli
 
 
 def _run_curves(ctx: ReportContext, row: dict, arrays: dict[str, np.ndarray], label: str):
-    """A closed-loop run's stored trajectories (``t``, ``e``, ``q<k>``, ``u<k>``, ``w<k>``) as curves."""
+    """A closed-loop run's stored trajectories (``t``, ``e``, ``q<k>``, ``u<k>``, ``w<k>``) as
+    curves."""
     from flexctrl.loop.compare_figure import RunCurves
 
     def stack(prefix: str) -> np.ndarray:

@@ -79,7 +79,8 @@ def columns(table: Table) -> tuple[list[str], list[str]]:
 def cell_medians(
     ctx: ReportContext, members: Sequence[dict], xs, ys, x_axis: str, y_axis: str
 ) -> np.ndarray:
-    """Median metric (table units) per (y, x) cell of ``members``; NaN where no ok run has a value."""
+    """Median metric (table units) per (y, x) cell of ``members``; NaN where no ok run has a
+    value."""
     grid = np.full((len(ys), len(xs)), np.nan)
     cells: dict[tuple, list] = {}
     for r in members:

@@ -232,7 +232,8 @@ def draw_ranking(
     group_by: str,
     metric: Shown,
 ) -> None:
-    """Bars of the median per candidate and group, with every ok run as a dot (the spread over poses)."""
+    """Bars of the median per candidate and group, with every ok run as a dot (the spread over
+    poses)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -291,7 +292,8 @@ def draw_ranking(
         )
     ax.set_ylabel(metric.label + (", log scale" if log else ""))
     ax.set_title(
-        "bars: median over the ok runs\ndots: every ok run (the spread over the other grid columns)",
+        "bars: median over the ok runs\ndots: every ok run (the spread over the other grid "
+        "columns)",
         fontsize=8,
     )
     if len(groups) > 1:
@@ -317,7 +319,8 @@ def draw_signals(
     title: str,
     highlight: str | None = None,
 ) -> None:
-    """Any executor's stored signals, one panel per signal, every run of the cell on the same axes."""
+    """Any executor's stored signals, one panel per signal, every run of the cell on the same
+    axes."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

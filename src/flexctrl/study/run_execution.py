@@ -84,7 +84,8 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         clash = sorted(set(metrics) & set(RESERVED_COLUMNS))
         if clash:
             raise ValueError(
-                f"executor '{executor}' returned metrics named like table columns: {', '.join(clash)}"
+                f"executor '{executor}' returned metrics named like table columns: "
+                f"{', '.join(clash)}"
             )
         if options.get("keep_trajectories", True):
             step = int(options.get("decimation", 1))
@@ -101,7 +102,8 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         if missing:
             status, error = (
                 "failed",
-                f"the executor returned no metric {', '.join(map(repr, missing))}; it returned: {', '.join(metrics) or 'none'}",
+                f"the executor returned no metric {', '.join(map(repr, missing))}; it returned: "
+                f"{', '.join(metrics) or 'none'}",
             )
         elif bad:
             status = "failed"

@@ -126,7 +126,8 @@ def make_backend(
     if scheduler is not None or client is not None:
         if workers is not None:
             raise SpecError(
-                "--workers sizes the local pool; with --scheduler the cluster's workers run the study",
+                "--workers sizes the local pool; with --scheduler the cluster's workers run the "
+                "study",
                 key="--workers",
             )
         return DaskBackend(scheduler, client)
@@ -305,7 +306,8 @@ def _run(
     counts.update({"ran": session["ok"] + session["failed"], "skipped": len(skip)})
     notes = (
         [
-            f"{counts['extra']} record(s) in runs/ belong to no run of this study (left out of results.csv)"
+            f"{counts['extra']} record(s) in runs/ belong to no run of this study (left out of "
+            "results.csv)"
         ]
         if counts.get("extra")
         else []

@@ -27,9 +27,10 @@ File format (paths relative to the study file; angles in degrees; SI units)::
     [set]                                # fixed KEY=VALUE overrides of the files
     "scene.duration" = 3.0               # scene.KEY, controller.KEY or model.KEY
 
-    [per_controller.mpc]                 # overrides of ONE controller of the study (its file's stem,
-    horizon = 30                         # as in the table's controller column): only the runs with
-    "weights.torque" = 0.2               # controllers/mpc.toml get them (over any [set] value)
+    [per_controller.mpc]                 # overrides of ONE controller of the study (its
+    horizon = 30                         # file's stem, as in the table's controller column):
+    "weights.torque" = 0.2               # only the runs with controllers/mpc.toml get them
+                                         # (over any [set] value)
 
     [grid]                               # axes: every key takes a list of values
     payload = [0.0, 2.0]
@@ -366,7 +367,8 @@ def _checked_by_executor(spec: StudySpec, source: str) -> StudySpec:
 
 
 def _per_controller(ctx: ReadContext, table: TableReader) -> dict[str, dict[str, Any]]:
-    """``[per_controller.STEM]`` tables: ``{stem: {controller key: value}}``, values checked as plain data."""
+    """``[per_controller.STEM]`` tables: ``{stem: {controller key: value}}``, values checked as
+    plain data."""
     out: dict[str, dict[str, Any]] = {}
     for stem in list(table.table):
         sub_table = table.table_of(stem)
@@ -407,7 +409,8 @@ def _read_report(
         if value not in columns:
             raise r.error(
                 name,
-                f"'{value}' is not a grid column; allowed: {', '.join(columns) or '(the study has no axes)'}",
+                f"'{value}' is not a grid column; allowed: "
+                f"{', '.join(columns) or '(the study has no axes)'}",
             )
         return value
 

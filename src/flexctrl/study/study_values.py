@@ -130,7 +130,8 @@ def setting_value(ctx: ReadContext, key: str, name: str, value: Any) -> Any:
     except ValueError:
         raise ctx.error(
             key,
-            f"value {value!r} is not plain data; allowed: numbers, strings, booleans, lists, tables",
+            f"value {value!r} is not plain data; allowed: numbers, strings, booleans, lists, "
+            "tables",
         ) from None
     return value
 
@@ -148,7 +149,8 @@ def check_override_key(ctx: ReadContext, key: str, name: str) -> None:
         extra = f" (did you mean '{hint[0]}.{rest}'?)" if hint else ""
         raise ctx.error(
             key,
-            f"'{target}' is not a file to override{extra}; allowed: {', '.join(t + '.KEY' for t in TARGETS)}",
+            f"'{target}' is not a file to override{extra}; allowed: "
+            f"{', '.join(t + '.KEY' for t in TARGETS)}",
         )
     if not rest or any(not part for part in rest.split(".")):
         raise ctx.error(

@@ -139,7 +139,8 @@ class Evaluator:
         self._sample_times: dict[tuple[str, ...], float] = {}
 
     def evaluate(self, batch: Sequence[dict[str, float]], first_number: int) -> list[Evaluation]:
-        """Judge every candidate of ``batch`` (tuned key -> value; ``{}`` is the file as shipped)."""
+        """Judge every candidate of ``batch`` (tuned key -> value; ``{}`` is the file as
+        shipped)."""
         overrides = [
             candidate_overrides(self.spec.parameters, values) if values else [] for values in batch
         ]

@@ -74,7 +74,8 @@ def scenario_study(spec: TuningSpec) -> StudySpec:
 def candidate_overrides(
     parameters: tuple[ParameterSpec, ...], values: dict[str, float]
 ) -> list[str]:
-    """The ``controller.KEY=VALUE`` overrides that make a candidate (integers written as integers)."""
+    """The ``controller.KEY=VALUE`` overrides that make a candidate (integers written as
+    integers)."""
     out = []
     for p in parameters:
         value = values[p.key]

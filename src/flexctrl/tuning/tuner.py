@@ -2,12 +2,16 @@
 
 Output folder::
 
-    DIR/runs/<id>.json      every closed-loop run (the study store: kept, so a killed tuning resumes)
+    DIR/runs/<id>.json      every closed-loop run (the study store: kept, so a killed
+                            tuning resumes)
     DIR/evaluations.jsonl   every candidate judged (rewritten whole after each batch)
-    DIR/tuning.json         the outcome: initial_objective, best_objective, evaluations, best_parameters,
-                            per_scenario (before and after), the settings, timings
-    DIR/controller.toml     the controller file with the best values, a comment naming the tuning
-    DIR/report.md           convergence plot (DIR/figures/convergence.png) and the before/after table
+    DIR/tuning.json         the outcome: initial_objective, best_objective, evaluations,
+                            best_parameters, per_scenario (before and after), the settings,
+                            timings
+    DIR/controller.toml     the controller file with the best values, a comment naming the
+                            tuning
+    DIR/report.md           convergence plot (DIR/figures/convergence.png) and the
+                            before/after table
 
 Number 0 is the controller file as shipped (the "before"); the optimiser starts from the
 file's values clipped to the bounds.
@@ -173,7 +177,8 @@ def tune(
     if best is None:
         raise FlexctrlError(
             f"no feasible candidate in {len(evaluations) - 1} evaluations of '{spec.name}' "
-            f"(see {out / 'report.md'}): widen the bounds, relax the constraints or raise the budget"
+            f"(see {out / 'report.md'}): widen the bounds, relax the constraints or raise the "
+            "budget"
         )
     return result
 
@@ -285,7 +290,8 @@ def _write(result: TuningResult) -> None:
             f"{len(result.initial.scenarios)} scenarios "
             f"{_fmt(factor * result.initial.objective)} -> "
             f"{_fmt(factor * result.best.objective)} {unit} "
-            f"(candidate {result.best.number} of {len(result.evaluations) - 1}, {spec.optimizer.method})."
+            f"(candidate {result.best.number} of {len(result.evaluations) - 1}, "
+            f"{spec.optimizer.method})."
         )
         integers = {p.key for p in spec.parameters if p.integer}
         values = {k: int(v) if k in integers else v for k, v in result.best.values.items()}

@@ -12,7 +12,8 @@ _LENGTHS = ("tip_residual_rms", "tip_residual_peak", "peak_deflection", "final_t
 
 
 def metric_unit(metric: str) -> tuple[str, float]:
-    """The unit a person reads ``metric`` in, and the factor from SI (m -> mm, s -> ms for solver times)."""
+    """The unit a person reads ``metric`` in, and the factor from SI (m -> mm, s -> ms for solver
+    times)."""
     if metric in _LENGTHS:
         return "mm", 1e3
     if metric.startswith(("settling_time", "divergence_time")):
@@ -37,7 +38,8 @@ def _coordinate_header(name: str) -> str:
 
 
 def convergence_figure(result, path: Path) -> Path:
-    """Every candidate's objective (feasible: dots; infeasible: crosses at the top), the best so far, the start."""
+    """Every candidate's objective (feasible: dots; infeasible: crosses at the top), the best so
+    far, the start."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -113,7 +115,8 @@ def write_report(result) -> list[Path]:
     lines = [
         f"# Tuning `{spec.name}`",
         "",
-        f"`flexctrl tune {spec.source} --out {out}`: {spec.objective.statistic} of `{spec.objective.metric}`"
+        f"`flexctrl tune {spec.source} --out {out}`: {spec.objective.statistic} of "
+        f"`{spec.objective.metric}`"
         f"{f' ({unit})' if unit else ''} over {len(result.initial.scenarios)} scenarios, "
         "starting from "
         f"`{spec.controller}`, {spec.optimizer.method} with {spec.optimizer.evaluations} "
