@@ -40,6 +40,8 @@ nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 
 exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
+# generated fragments, included by the pages that show them
+exclude_patterns += ["reproduction/table.md"]
 # the earlier notes, kept in the tree until every section has its place in the site
 exclude_patterns += [
     f"{name}.md"

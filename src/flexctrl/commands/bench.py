@@ -1,8 +1,10 @@
-"""``flexctrl bench sim|mpc|loop``: the speed figures a user asks for.
+"""``flexctrl bench sim|mpc|loop|all``: the speed figures a user asks for.
 
 Simulation speed (:mod:`flexctrl.bench.simulation_speed`), MPC solve times
-(:mod:`flexctrl.bench.mpc_step`) and a closed-loop run against the plant alone
-(:mod:`flexctrl.bench.loop_overhead`). Comparisons of the toolkit against an earlier
+(:mod:`flexctrl.bench.mpc_step`), a closed-loop run against the plant alone
+(:mod:`flexctrl.bench.loop_overhead`), and all the headline figures side by side in one run
+with the study throughput (:mod:`flexctrl.bench.headline`; ``--markdown FILE`` writes the table
+the documentation includes). Comparisons of the toolkit against an earlier
 commit live beside the package, in ``benchmarks/``.
 """
 
@@ -13,13 +15,14 @@ import json
 
 from flexctrl.errors import SpecError
 
-BENCHMARKS = ("sim", "mpc", "loop")
+BENCHMARKS = ("sim", "mpc", "loop", "all")
 
 
 HELP = (
     "benchmarks: 'sim' measures RK4 (compiled and virtual machine) against scipy solve_ivp; "
     "'mpc' times linear MPC (OSQP and casadi QP backends), NMPC and python-control's MPC; "
-    "'loop' times one whole closed-loop run against the plant's compiled simulation alone"
+    "'loop' times one whole closed-loop run against the plant's compiled simulation alone; "
+    "'all' measures the headline figures side by side and the quickstart study's throughput"
 )
 DESCRIPTION = (
     "'sim': simulated seconds per wall-clock second of a --duration RK4 run at 1 ms of the "
@@ -32,7 +35,10 @@ DESCRIPTION = (
     "closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default the LQR), "
     "beside the plant's compiled RK4 "
     "simulation alone (same step and duration), interleaved --repeats rounds; prints "
-    "run_wall_s, plant_only_s and their ratio."
+    "run_wall_s, plant_only_s and their ratio. 'all': accuracy (Table 3, RK4), simulation "
+    "speed, MPC and NMPC steps, the loop ratio and the quickstart study's runs per minute "
+    "(--workers), with the machine and date; --markdown FILE writes them as a table "
+    "(docs/reference/benchmarks.md), --quick with fewer repeats."
 )
 #: ``(flag, type, default, metavar, help)`` of the numeric and file options.
 OPTIONS = (
@@ -60,6 +66,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     for flag, kind, default, metavar, text in OPTIONS:
         parser.add_argument(flag, type=kind, default=default, metavar=metavar, help=text)
     parser.add_argument("--no-nmpc", action="store_true", help="mpc: skip the NMPC timing")
+    parser.add_argument("--quick", action="store_true", help="all: fewer repeats and samples")
+    parser.add_argument(
+        "--workers", type=int, default=2, metavar="N", help="all: study processes (default 2)"
+    )
+    parser.add_argument(
+        "--markdown",
+        metavar="FILE",
+        default=None,
+        help="all: also write the figures as a Markdown table to FILE",
+    )
     parser.add_argument(
         "--use-cache",
         action="store_true",
@@ -69,6 +85,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the chosen benchmark and print its figures (or JSON)."""
+    if args.what == "all":
+        return _run_all(args)
     if args.what == "mpc":
         return _run_mpc(args)
     if args.what == "loop":
@@ -163,4 +182,49 @@ def _run_loop(args: argparse.Namespace) -> int:
         )
     result = bench_loop(controller=args.controller or DEFAULT_CONTROLLER, repeats=args.repeats)
     print(json.dumps(result, indent=2) if args.json else format_loop(result))
+    return 0
+
+
+def _study_throughput(workers: int) -> dict:
+    """The quickstart study into a temporary folder: wall time and runs per minute."""
+    import tempfile
+    import time
+    from pathlib import Path
+
+    from flexctrl.study.runner import run_study
+    from flexctrl.study.study_file import load_study
+
+    spec = load_study("quickstart")
+    with tempfile.TemporaryDirectory() as out:
+        start = time.perf_counter()
+        outcome = run_study(spec, Path(out), workers=workers, progress="none", report=False)
+        wall = time.perf_counter() - start
+        failed = sum(row.get("status") != "ok" for row in outcome.table().rows)
+    runs = len(spec.runs)
+    return {
+        "runs": runs,
+        "failed": failed,
+        "workers": workers,
+        "wall_s": wall,
+        "runs_per_min": 60.0 * runs / wall,
+    }
+
+
+def _run_all(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from flexctrl.bench.headline import headline, markdown
+
+    if args.workers < 0:
+        raise SpecError(
+            f"value {args.workers!r} is out of range; allowed: an integer >= 0", key="--workers"
+        )
+    result = headline(quick=args.quick)
+    result["study"] = _study_throughput(args.workers)
+    table = markdown(result)
+    if args.markdown:
+        Path(args.markdown).write_text(
+            "# Benchmarks\n\nThe headline figures, measured side by side in one run.\n\n" + table
+        )
+    print(json.dumps(result, indent=2, default=str) if args.json else table)
     return 0
