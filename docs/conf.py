@@ -42,6 +42,8 @@ nb_execution_show_tb = True
 exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
 # generated fragments, included by the pages that show them
 exclude_patterns += ["reproduction/table.md"]
+# figures taken out of docstrings, kept until each has its place in an explanation page
+exclude_patterns += ["from_code/*"]
 # the earlier notes, kept in the tree until every section has its place in the site
 exclude_patterns += [
     f"{name}.md"
@@ -73,3 +75,12 @@ html_theme_options = {
 }
 html_sidebars = {"**": ["sidebar-nav-bs"]}
 suppress_warnings = ["mystnb.unknown_mime_type"]
+
+# The reference documents the public namespace (flexctrl.NAME). Docstrings also point into the
+# toolkit's own modules (flexctrl.LAYER.MODULE...) and, unqualified, to names of the module they
+# sit in; those are for readers of the source and have no page here, so they are not checked.
+nitpick_ignore_regex = [
+    (r"py:.*", r"flexctrl\.[a-z_]+\..+"),
+    (r"py:.*", r"[A-Za-z_][A-Za-z0-9_]*"),
+    (r"py:.*", r"abc\.ABC"),
+]
