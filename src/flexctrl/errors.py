@@ -3,7 +3,8 @@
 Every error a user can cause by their input is a :class:`SpecError` (a
 ``ValueError``) whose message names the file, the key, the value and what is
 allowed, on one line; a valid but doubtful value is a :class:`SpecWarning`
-located the same way.  Numerical failures are :class:`SimulationError`
+located the same way; a controller designed on a fragile sampled model is a
+:class:`DesignWarning`.  Numerical failures are :class:`SimulationError`
 (a ``RuntimeError``) or :class:`SolverError`.
 """
 
@@ -58,6 +59,16 @@ def warn_spec(
 ) -> None:
     """Issue a :class:`SpecWarning` located like a :class:`SpecError` (file, then key)."""
     warnings.warn(_located(message, source, key), SpecWarning, stacklevel=stacklevel)
+
+
+class DesignWarning(UserWarning):
+    """A controller was designed on a model whose sampled form is fragile.
+
+    Issued by :func:`flexctrl.control.design` when the design model has undamped elastic
+    modes or a mode within a few percent of a multiple of half the sample rate
+    (:mod:`flexctrl.control.sampling_check`); the message is one line naming the modes and
+    the sample time.
+    """
 
 
 class SimulationError(FlexctrlError, RuntimeError):

@@ -174,3 +174,26 @@ def test_scene_refuses_design_keys_with_a_designed_controller(model, op):
     scene = fc.load_scene(SCENE, ["design_payload=0.0", "duration=3.0"])
     with pytest.raises(SpecError, match="key 'design_payload'.*designed in Python"):
         fc.run_scene(scene, controller=lqr)
+
+
+def test_divergence_message_names_the_design_diagnosis():
+    """The undamped arm at 8.5 ms: the LQR diverges and the message says why, not the RK4 step."""
+    import warnings
+
+    model = fc.load_model(
+        "models/subedi3link.toml", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0]
+    )
+    op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fc.DesignWarning)
+        ctrl = fc.design(model, op, fc.load_controller("controllers/lqr.toml"))
+    move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
+    with pytest.raises(fc.SimulationError) as caught:
+        fc.closed_loop(model, ctrl, move, duration=4.0)
+    text = str(caught.value)
+    assert "likely because the design model has undamped elastic modes" in text
+    assert "235.0 Hz mode" in text and "RK4" not in text
+    ctrl.design_diagnosis = None  # the same run without a diagnosis: no cause named
+    with pytest.raises(fc.SimulationError) as again:
+        fc.closed_loop(model, ctrl, move, duration=4.0)
+    assert "likely because" not in str(again.value)

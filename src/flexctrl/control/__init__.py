@@ -24,6 +24,7 @@ Closed loop (sampled, zero-order hold)::
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 from flexctrl.control.controller import Controller, ControllerStats
@@ -31,8 +32,9 @@ from flexctrl.control.lqr import LQRController, design_lqr
 from flexctrl.control.mpc import MPCController, design_mpc
 from flexctrl.control.nmpc import NMPCController, design_nmpc
 from flexctrl.control.pd import PDController, design_pd
+from flexctrl.control.sampling_check import sampling_diagnosis
 from flexctrl.control.shaping import ShapedController, design_shaped
-from flexctrl.errors import SpecError
+from flexctrl.errors import DesignWarning, SpecError
 from flexctrl.linear import holding_torque_excess
 from flexctrl.spec.controller_settings import (
     SETTINGS,
@@ -125,6 +127,14 @@ def design(model, op, settings) -> Controller:
     ------
     SpecError
         For settings of another type, or a target the torque limits cannot hold.
+
+    Warns
+    -----
+    DesignWarning
+        When the design model has undamped elastic modes or a mode within 3 % (of ``fs/2``)
+        of a multiple of half the sample rate (:mod:`flexctrl.control.sampling_check`); the
+        controller keeps the diagnosis as ``design_diagnosis`` and a diverging closed loop
+        names it.
     """
     designer = DESIGNERS.get(type(settings))
     if designer is None:
@@ -134,7 +144,14 @@ def design(model, op, settings) -> Controller:
             key="settings",
         )
     _check_holding_torque(model, op)
-    return designer(model, op, settings)
+    controller = designer(model, op, settings)
+    diagnosis = sampling_diagnosis(model, op, settings.sample_time)
+    if diagnosis.flagged:
+        controller.design_diagnosis = diagnosis
+        warnings.warn(
+            f"'{settings.kind}' controller: {diagnosis.message()}", DesignWarning, stacklevel=2
+        )
+    return controller
 
 
 __all__ = [

@@ -146,6 +146,9 @@ class Controller(ABC):
     """
 
     kind: ClassVar[str] = ""
+    #: What :func:`flexctrl.control.design` found fragile in the design model's sampled
+    #: form (a :class:`~flexctrl.control.sampling_check.SamplingDiagnosis`), or None.
+    design_diagnosis: Any = None
 
     def __init__(
         self,

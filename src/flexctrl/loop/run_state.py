@@ -114,13 +114,27 @@ class LoopRun:
         return True
 
     def _divergence_message(self, t_end: float, reason: str) -> str:
+        """What diverged, when, and the causes that apply.
+
+        The RK4 step is named only when it is within a factor 2 of RK4's stability bound for
+        the locked-joint modes; the design's diagnosis
+        (:attr:`~flexctrl.control.controller.Controller.design_diagnosis`) when it flagged
+        undamped or near-aliased modes.
+        """
         plant, Ts, dt = self.plant, self.controller.sample_time, self.dt
         stable_step = RK4_STABILITY_LIMIT / max(plant.omega_max, 1e-12)
+        cause = "the controller does not stabilise this plant"
+        diagnosis = getattr(self.controller, "design_diagnosis", None)
+        if diagnosis is not None and diagnosis.flagged:
+            cause += f", likely because {diagnosis.message()}"
+        if dt > 0.5 * stable_step:
+            cause += (
+                " (or the plant step is too large for RK4: stable below "
+                f"~{stable_step:.3g} s for the locked-joint modes)"
+            )
         return (
             f"closed loop diverged at t = {t_end:.4g} s ({reason}; plant step {dt:g} s, "
-            f"controller sample {Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): the "
-            "controller does not stabilise this plant (or the plant step is too large for RK4: "
-            f"stable below ~{stable_step:.3g} s for the locked-joint modes)"
+            f"controller sample {Ts:g} s, plant omega_max {plant.omega_max:.4g} rad/s): {cause}"
         )
 
     def kept(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
