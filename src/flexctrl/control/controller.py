@@ -291,6 +291,43 @@ class Controller(ABC):
         """
         return False
 
+    def export_c(self, out, *, replay=None, qp_eps: float | None = None):
+        """Write the designed controller as a self-contained C library into the folder ``out``.
+
+        The library (``flexctrl_controller.h``, its sources, a ``Makefile`` for the system
+        C compiler) steps the same law as :meth:`step`: ``flexctrl_step(c, k, y, u)`` every
+        :attr:`sample_time`, measurements in the order and units of
+        :attr:`measurement_names`, torques in N m.  With ``replay``, ``make check`` replays
+        it and compares the C torques with Python's (:mod:`flexctrl.control.cexport`).
+        LQR/LQG (fixed gain) and the linear MPC export; other kinds raise.
+
+        Parameters
+        ----------
+        out : str or path-like
+            The folder to write (created; files of an earlier export are overwritten).
+        replay : flexctrl.control.cexport.step_replay.Replay, optional
+            Steps recorded from this controller (:class:`~flexctrl.control.cexport.StepRecorder`)
+            for the harness; without it ``make check`` has nothing to compare.
+        qp_eps : float, optional
+            The linear MPC's QP tolerance in C (absolute and relative); default 1/100 of the
+            controller's OSQP ``eps_abs``.  Unused by other kinds.
+
+        Returns
+        -------
+        flexctrl.control.cexport.c_library.Export
+            What was written (folder, files, sizes, the harness's check).
+
+        Raises
+        ------
+        SpecError
+            For a controller kind (or option) that has no C export.
+        """
+        raise SpecError(
+            f"a {type(self).__name__} has no C export; allowed: an LQR/LQG without a gain "
+            "schedule, or a linear MPC",
+            key="kind",
+        )
+
     def __repr__(self) -> str:
         names = list(self.sensors.names)
         return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={names})"
