@@ -26,6 +26,7 @@ COMMANDS = (
     "identify_hubs",
     "linearize",
     "simulate",
+    "export",
     "fidelity",
     "bench",
     "study",

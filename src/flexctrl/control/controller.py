@@ -294,39 +294,38 @@ class Controller(ABC):
     def export_c(self, out, *, replay=None, qp_eps: float | None = None):
         """Write the designed controller as a self-contained C library into the folder ``out``.
 
-        The library (``flexctrl_controller.h``, its sources, a ``Makefile`` for the system
-        C compiler) steps the same law as :meth:`step`: ``flexctrl_step(c, k, y, u)`` every
-        :attr:`sample_time`, measurements in the order and units of
-        :attr:`measurement_names`, torques in N m.  With ``replay``, ``make check`` replays
-        it and compares the C torques with Python's (:mod:`flexctrl.control.cexport`).
-        LQR/LQG (fixed gain) and the linear MPC export; other kinds raise.
+        The library steps the same law as :meth:`step` (``flexctrl_step(c, k, y, u)`` every
+        :attr:`sample_time`; measurements in the order and units of
+        :attr:`measurement_names`, torques in N m), with a header, a ``Makefile`` for the
+        system C compiler and a harness: ``make -C out check`` replays ``replay`` and
+        compares the C torques with Python's (:mod:`flexctrl.control.cexport`).
 
         Parameters
         ----------
         out : str or path-like
-            The folder to write (created; files of an earlier export are overwritten).
-        replay : flexctrl.control.cexport.step_replay.Replay, optional
-            Steps recorded from this controller (:class:`~flexctrl.control.cexport.StepRecorder`)
-            for the harness; without it ``make check`` has nothing to compare.
+            The folder to write (created; the files of an earlier export are overwritten).
+        replay : flexctrl.control.cexport.Replay, optional
+            Steps of this controller recorded in a closed loop
+            (:class:`~flexctrl.control.cexport.StepRecorder`); without it ``make check`` has
+            nothing to compare.
         qp_eps : float, optional
             The linear MPC's QP tolerance in C (absolute and relative); default 1/100 of the
-            controller's OSQP ``eps_abs``.  Unused by other kinds.
+            controller's OSQP ``eps_abs``.
 
         Returns
         -------
-        flexctrl.control.cexport.c_library.Export
-            What was written (folder, files, sizes, the harness's check).
+        flexctrl.control.cexport.Export
+            The folder, the files written and the bound ``make check`` holds.
 
         Raises
         ------
         SpecError
-            For a controller kind (or option) that has no C export.
+            For a kind with no C export (allowed: an LQR/LQG without a gain schedule, a
+            linear MPC).
         """
-        raise SpecError(
-            f"a {type(self).__name__} has no C export; allowed: an LQR/LQG without a gain "
-            "schedule, or a linear MPC",
-            key="kind",
-        )
+        from flexctrl.control.cexport import export_c
+
+        return export_c(self, out, replay=replay, qp_eps=qp_eps)
 
     def __repr__(self) -> str:
         names = list(self.sensors.names)

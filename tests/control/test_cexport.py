@@ -1,0 +1,103 @@
+"""C export of designed controllers: the library builds with the system compiler and its
+torques replay Python's (``flexctrl export`` then ``make -C DIR check``)."""
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import flexctrl as fc
+from flexctrl.cli import main
+from flexctrl.control.cexport import StepRecorder
+from flexctrl.errors import SpecError
+
+SCENE = "studies/scenes/move_joint1_30deg.toml"
+needs_cc = pytest.mark.skipif(
+    shutil.which("cc") is None or shutil.which("make") is None,
+    reason="no C compiler (cc) or make",
+)
+
+
+def export(controller: str, out, *extra: str) -> None:
+    """``flexctrl export CONTROLLER --scene SCENE --out OUT`` in this process."""
+    assert main(["export", controller, "--scene", SCENE, "--out", str(out), *extra]) == 0
+
+
+def make_check(folder) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["make", "-s", "-C", str(folder), "check", "REPEATS=1"], capture_output=True, text=True
+    )
+
+
+def worst_relative(stdout: str, what: str = "pass A (") -> list[float]:
+    """The harness's largest difference per joint relative to the joint's largest torque."""
+    lines = stdout.split(what, 1)[1].split("pass", 1)[0].splitlines()
+    return [
+        float(line.split(" of max |u_py|")[0].rsplit(", ", 1)[1]) for line in lines if "tau" in line
+    ]
+
+
+@pytest.fixture(scope="module")
+def lqr_export(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lqr")
+    export("controllers/lqr.toml", out, "--repeats", "1")
+    return out
+
+
+@needs_cc
+def test_lqr_export_replays_python_to_1e9(lqr_export):
+    done = make_check(lqr_export)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "CHECK PASSED" in done.stdout
+    assert "rejected, torques equal to pass A's" in done.stdout  # the NaN contract in C
+    worst = worst_relative(done.stdout)
+    assert len(worst) == 3 and max(worst) <= 1e-9
+    replayed = np.loadtxt(lqr_export / "replay.csv", delimiter=",", skiprows=1)
+    assert replayed.shape[0] == 942  # 8 s at 8.5 ms, every sample of the scene's loop
+
+
+@needs_cc
+def test_a_broken_c_law_fails_the_harness(lqr_export, tmp_path):
+    broken = tmp_path / "broken"
+    shutil.copytree(lqr_export, broken)
+    law = broken / "law.c"
+    text = law.read_text()
+    assert "    u[i] = ui;\n" in text
+    law.write_text(text.replace("    u[i] = ui;\n", "    u[i] = ui + 1e-6;\n"))
+    done = make_check(broken)
+    assert done.returncode != 0  # make reports the harness's failure
+    assert "CHECK FAILED" in done.stdout and "FAIL" in done.stdout.split("pass A (", 1)[1]
+
+
+@needs_cc
+def test_full_state_lqr_from_python(tmp_path):
+    damped = [f"links[{i}].damping_ratio=0.005" for i in (1, 2, 3)]
+    model = fc.load_model(
+        "subedi3link", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0], overrides=damped
+    )
+    op = fc.equilibrium(model, np.radians([20.0, 0.0, 0.0]))
+    ctrl = fc.design(model, op, fc.load_controller("lqr_ideal"))
+    rec = StepRecorder(ctrl)
+    move = fc.Move(start=np.radians([0.0, 0, 0]), target=np.radians([20.0, 0, 0]), time=1.5)
+    fc.closed_loop(model, rec, move, 4.0, dt=ctrl.sample_time / 17)
+    result = ctrl.export_c(tmp_path / "ideal", replay=rec.replay())
+    assert result.samples == int(np.ceil(4.0 / ctrl.sample_time - 1e-9))
+    header = (tmp_path / "ideal" / "flexctrl_controller.h").read_text()
+    assert "y[0] q1         rad" in header and "u[2] tau3" in header
+    done = make_check(tmp_path / "ideal")
+    assert done.returncode == 0, done.stdout
+    assert max(worst_relative(done.stdout)) <= 1e-9
+
+
+def test_kinds_without_export_raise(tmp_path):
+    model = fc.load_model("subedi3link", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    pd = fc.design(model, op, fc.load_controller("pd"))
+    with pytest.raises(SpecError, match="no C export.*allowed: an LQR/LQG"):
+        pd.export_c(tmp_path / "pd")
+    lqr = fc.design(model, op, fc.load_controller("lqr_ideal"))
+    with pytest.raises(SpecError, match="qp_eps"):
+        lqr.export_c(tmp_path / "lqr", qp_eps=1e-6)
+    with pytest.raises(SpecError, match="no steps were recorded"):
+        StepRecorder(lqr).replay()
