@@ -101,3 +101,55 @@ def test_kinds_without_export_raise(tmp_path):
         lqr.export_c(tmp_path / "lqr", qp_eps=1e-6)
     with pytest.raises(SpecError, match="no steps were recorded"):
         StepRecorder(lqr).replay()
+
+
+@pytest.fixture(scope="module")
+def mpc_export(tmp_path_factory):
+    out = tmp_path_factory.mktemp("mpc")
+    export("controllers/mpc.toml", out, "--repeats", "1", "--set", "duration=4.0")
+    return out
+
+
+@needs_cc
+def test_mpc_export_replays_python_at_the_qps_tolerance(mpc_export):
+    done = make_check(mpc_export)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "rejected, torques equal to pass A's" in done.stdout
+    # u*: the same QPs solved tightly in Python; the C torques are closer to it than Python's
+    exact = np.loadtxt(mpc_export / "exact.csv", delimiter=",", skiprows=1)[:, 1:]
+    c = np.loadtxt(mpc_export / "c_torques.csv", delimiter=",", skiprows=1)[:, 2:]
+    replay = np.loadtxt(mpc_export / "replay.csv", delimiter=",", skiprows=1)[:, -3:]
+    python_gap = np.abs(replay - exact).max(axis=0)
+    assert np.all(np.abs(c - exact).max(axis=0) <= 1.1 * python_gap)
+    assert np.all(np.abs(c - replay).max(axis=0) <= 2.0 * python_gap)
+    # and Python's OSQP is within a few of its own tolerances of u* (eps_abs 1e-3 on v = du/S_u)
+    assert np.all(python_gap < 1.0)
+
+
+@needs_cc
+def test_a_loose_c_solver_fails_the_harness(mpc_export, tmp_path):
+    broken = tmp_path / "loose"
+    shutil.copytree(mpc_export, broken)
+    header = broken / "flexctrl_controller.h"
+    text = header.read_text()
+    eps = [line for line in text.splitlines() if line.startswith("#define FLEXCTRL_EPS_")]
+    assert len(eps) == 2
+    for line in eps:
+        text = text.replace(line, line.rsplit(" ", 1)[0] + " 0.1")
+    header.write_text(text)
+    subprocess.run(["make", "-s", "-C", str(broken), "clean"], check=True)
+    done = make_check(broken)
+    assert done.returncode != 0 and "CHECK FAILED" in done.stdout
+
+
+def test_mpc_options_without_export_raise(tmp_path):
+    import dataclasses
+
+    model = fc.load_model("subedi3link", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0])
+    op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    settings = fc.load_controller("mpc")
+    blocked = dataclasses.replace(settings, formulation="condensed", blocks=(5, 5, 10))
+    with pytest.raises(SpecError, match="move blocking"):
+        fc.design(model, op, blocked).export_c(tmp_path / "blocked")
+    with pytest.raises(SpecError, match="qp_eps"):
+        fc.design(model, op, settings).export_c(tmp_path / "eps", qp_eps=-1.0)

@@ -79,19 +79,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Design, record, export; print what was written (and the check with --check)."""
-    from flexctrl.control.cexport import StepRecorder, export_c
+    from flexctrl.control.cexport import StepRecorder
 
     setup = _setup(args)
     ctrl = setup.controller
     replay, python = None, {}
     if not args.no_record:
-        recorder = StepRecorder(ctrl)
+        recorder = StepRecorder(ctrl, _source(setup, args.scene))
         _record(setup, recorder)
         replay = recorder.replay()
         python = _python_step_times(ctrl, replay, args.repeats)
-    info = {"controller": f"{ctrl.kind} ({args.controller})"}
-    info["scene"] = str(args.scene)
-    export = export_c(ctrl, args.out, replay=replay, qp_eps=args.qp_eps, info=info | _design(setup))
+    export = ctrl.export_c(args.out, replay=replay, qp_eps=args.qp_eps)
     (Path(args.out) / "python_side.json").write_text(json.dumps(python, indent=2) + "\n")
     print(
         f"wrote {len(export.files)} files to {args.out} (route {export.route}, "
@@ -152,12 +150,13 @@ def _record(setup, recorder) -> None:
     )
 
 
-def _design(setup) -> dict:
-    model, q = setup.design_model, np.degrees(setup.design_q).round(4).tolist()
-    return {
-        "design": f"{model.name} ({model.fidelity}), payload {model.spec.payload.mass:g} kg, "
-        f"at {q} deg; scene {setup.scene.name}",
-    }
+def _source(setup, path: str) -> str:
+    """The recorded loop in words, for the exported header."""
+    plant, scene = setup.plant, setup.plant_scene
+    return (
+        f"scene {setup.scene.name} ({path}): plant {plant.name} ({plant.fidelity}), payload "
+        f"{plant.spec.payload.mass:g} kg, step {scene.dt:g} s, {scene.duration:g} s"
+    )
 
 
 def _python_step_times(ctrl, replay, repeats: int) -> dict:

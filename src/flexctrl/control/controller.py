@@ -310,7 +310,7 @@ class Controller(ABC):
             nothing to compare.
         qp_eps : float, optional
             The linear MPC's QP tolerance in C (absolute and relative); default 1/100 of the
-            controller's OSQP ``eps_abs``.
+            controller's OSQP ``eps_abs`` (1/1000 without warm starts).
 
         Returns
         -------
@@ -321,11 +321,13 @@ class Controller(ABC):
         ------
         SpecError
             For a kind with no C export (allowed: an LQR/LQG without a gain schedule, a
-            linear MPC).
+            linear MPC), which this base method is.
         """
-        from flexctrl.control.cexport import export_c
-
-        return export_c(self, out, replay=replay, qp_eps=qp_eps)
+        raise SpecError(
+            f"value {self.kind or type(self).__name__!r} has no C export; allowed: an LQR/LQG "
+            "without a gain schedule, or a linear MPC ('lqr', 'mpc')",
+            key="kind",
+        )
 
     def __repr__(self) -> str:
         names = list(self.sensors.names)

@@ -374,6 +374,12 @@ class LQRController(Controller):
         name, first = ("lqr_law_start", "xi") if start else ("lqr_law", "xi_next")
         return ca.Function(name, inputs, [xi_next, u], names, [first, "u"])
 
+    def export_c(self, out, *, replay=None, qp_eps: float | None = None):
+        """The law in C (:meth:`Controller.export_c`; :mod:`flexctrl.control.cexport.law`)."""
+        from flexctrl.control.cexport.law import export_law
+
+        return export_law(self, out, replay, qp_eps)
+
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)
         x_ref, u_ref, _ = self.reference.at(t, self.sample_time)

@@ -15,7 +15,30 @@ from __future__ import annotations
 from pathlib import Path
 
 from flexctrl.control.cexport.c_code import generate, template
-from flexctrl.control.cexport.library import Plan
+from flexctrl.control.cexport.library import Export, Plan, export_folder, no_option, write_library
+
+
+def export_law(ctrl, out, replay=None, qp_eps=None) -> Export:
+    """Write the LQR/LQG ``ctrl`` as a C library into ``out`` (:meth:`Controller.export_c`).
+
+    Parameters
+    ----------
+    ctrl : LQRController
+        Without a gain schedule.
+    out : str or path-like
+        The folder.
+    replay : Replay, optional
+        Its recorded steps, for ``make check``.
+    qp_eps : None
+        Only the linear MPC takes a QP tolerance.
+
+    Returns
+    -------
+    Export
+    """
+    no_option(ctrl, qp_eps)
+    folder = export_folder(out)
+    return write_library(folder, ctrl, plan_law(ctrl, folder), replay)
 
 
 def plan_law(ctrl, out: Path) -> Plan:
@@ -61,4 +84,4 @@ def _renamed(function, name: str):
     return ca.Function(name, args, function(*args), function.name_in(), function.name_out())
 
 
-__all__ = ["plan_law"]
+__all__ = ["export_law", "plan_law"]

@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from flexctrl.control.cexport.c_code import c_array, c_double, template, unit_of
+from flexctrl.control.cexport.replay import write_replay
+from flexctrl.errors import SpecError
 
 
 @dataclass
@@ -134,6 +136,7 @@ def header_text(ctrl, plan: Plan, info: dict) -> str:
         controller=info["controller"],
         route=plan.route,
         design=info["design"],
+        recorded=info["recorded"],
         measurements=meas,
         torques=torques,
         states=info["states"],
@@ -176,10 +179,63 @@ def check_text(plan: Plan, n_u: int) -> str:
     )
 
 
-def write_library(out: Path, ctrl, plan: Plan, info: dict, samples: int) -> Export:
-    """Write the generic files around ``plan`` (whose sources are already in ``out``)."""
+def export_folder(out) -> Path:
+    """The folder ``out``, created."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def no_option(ctrl, qp_eps) -> None:
+    """:class:`SpecError` for a QP tolerance given to a controller without a QP."""
+    if qp_eps is not None:
+        raise SpecError(
+            f"value {qp_eps!r} is not allowed for a '{ctrl.kind}' controller; allowed: only "
+            "for the linear MPC",
+            key="qp_eps",
+        )
+
+
+def design_info(ctrl, replay) -> dict:
+    """What the header says the controller was designed on and the replay recorded from."""
+    model = ctrl.design_model
+    where = (
+        "a model"
+        if model is None
+        else (f"{model.name} ({model.fidelity}), payload {model.spec.payload.mass:g} kg")
+    )
+    names = tuple(getattr(model, "coordinate_names", ()))
+    return {
+        "controller": ctrl.kind,
+        "design": f"{where}, at {np.degrees(ctrl.op.joints).round(4).tolist()} deg",
+        "states": " ".join(names) + " and their rates" if names else "(the design model's)",
+        "recorded": "nothing (no replay.csv)" if replay is None else replay.source or "Python",
+    }
+
+
+def write_library(out: Path, ctrl, plan: Plan, replay=None) -> Export:
+    """Write the generic files around ``plan`` (whose sources are already in ``out``).
+
+    Parameters
+    ----------
+    out : Path
+        The folder.
+    ctrl : Controller
+        The exported controller.
+    plan : Plan
+        Its kind's part.
+    replay : Replay, optional
+        Written as ``replay.csv`` for the harness.
+
+    Returns
+    -------
+    Export
+    """
+    if replay is not None:
+        write_replay(replay, out / "replay.csv", ctrl.sensors.names)
+    samples = 0 if replay is None else replay.samples
     table_x, table_u = reference_table(ctrl)
-    info = {**info, "ref_rows": int(table_x.shape[0])}
+    info = {**design_info(ctrl, replay), "ref_rows": int(table_x.shape[0])}
     texts = {
         "flexctrl_controller.h": header_text(ctrl, plan, info),
         "flexctrl_data.c": data_text(ctrl, table_x, table_u, plan),
@@ -206,4 +262,12 @@ def write_library(out: Path, ctrl, plan: Plan, info: dict, samples: int) -> Expo
     return Export(out, tuple(files), plan.route, samples, plan.check_doc)
 
 
-__all__ = ["Plan", "Export", "reference_table", "write_library"]
+__all__ = [
+    "Plan",
+    "Export",
+    "reference_table",
+    "export_folder",
+    "no_option",
+    "design_info",
+    "write_library",
+]

@@ -36,6 +36,8 @@ class Replay:
         (K, n_u) the torque the controller returned, N m.
     step_times : ndarray
         (K,) wall time of each ``step``, s.
+    source : str
+        Where the loop was recorded (a scene, a plant), for the exported header.
     """
 
     t: np.ndarray
@@ -45,6 +47,7 @@ class Replay:
     u_ref: np.ndarray
     u: np.ndarray
     step_times: np.ndarray
+    source: str = ""
 
     @property
     def samples(self) -> int:
@@ -59,6 +62,8 @@ class StepRecorder:
     ----------
     controller : flexctrl.control.controller.Controller
         The controller; every attribute but :meth:`step` and :meth:`sampled_law` is its own.
+    source : str
+        Where the loop runs (a scene, a plant), said in the exported header.
 
     Examples
     --------
@@ -67,8 +72,9 @@ class StepRecorder:
     >>> ctrl.export_c("out/lqr", replay=rec.replay())             # doctest: +SKIP
     """
 
-    def __init__(self, controller):
+    def __init__(self, controller, source: str = ""):
         self.controller = controller
+        self.source = source
         self._rows: list[tuple] = []
 
     def __getattr__(self, name: str):
@@ -130,7 +136,7 @@ class StepRecorder:
                 key="replay",
             )
         times = np.asarray(self.controller.stats.step_times[-t.size :], dtype=float)
-        return Replay(t, y, u_prev, X, U, u, times)
+        return Replay(t, y, u_prev, X, U, u, times, self.source)
 
 
 def write_replay(replay: Replay, path, names: tuple[str, ...]) -> None:

@@ -2,6 +2,7 @@
  *
  * Controller: {controller}  (computed in C by route "{route}")
  * Designed on: {design}
+ * Replay recorded from: {recorded}
  *
  * Call flexctrl_step() every FLEXCTRL_SAMPLE_TIME seconds, right after sampling the sensors,
  * and hold the returned torques until the next call (zero-order hold).
