@@ -153,3 +153,56 @@ def test_mpc_options_without_export_raise(tmp_path):
         fc.design(model, op, blocked).export_c(tmp_path / "blocked")
     with pytest.raises(SpecError, match="qp_eps"):
         fc.design(model, op, settings).export_c(tmp_path / "eps", qp_eps=-1.0)
+
+
+def test_exported_law_functions_are_the_python_step():
+    """Without a compiler: the two generated functions reproduce ``ctrl.step`` sample by sample."""
+    model = fc.load_model("subedi3link", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0])
+    op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    ctrl = fc.design(model, op, fc.load_controller("lqr"))
+    start, later = ctrl.law_function(start=True), ctrl.law_function(start=False)
+    rng = np.random.default_rng(1)
+    y0 = ctrl.sensors.evaluate(op.x, op.u)
+    r = np.r_[op.x, op.u]
+    ctrl.reset()
+    xi = None
+    for k in range(4):
+        y = y0 + 1e-3 * rng.standard_normal(y0.size)
+        u_prev = ctrl.u_previous.copy()
+        u = ctrl.step(k * ctrl.sample_time, y)
+        if xi is None:
+            xi, v = start(y, u_prev, r)
+        else:
+            xi, v = later(xi, y, u_prev, r)
+        v = np.clip(np.asarray(v).ravel(), -ctrl.limits, ctrl.limits)
+        assert np.allclose(v, u, rtol=1e-12, atol=1e-12 * np.abs(u).max())
+        assert np.allclose(np.asarray(xi).ravel(), ctrl.observer.memory, rtol=1e-12, atol=1e-15)
+
+
+def test_mpc_parameters_are_the_controllers_shifts():
+    """The generated QP parameters ``p = [z, dv, dc]`` equal the controller's own, and the
+    condensed QP's solution at ``p`` is the controller's first move."""
+    from flexctrl.control.cexport.mpc_dense import condensed_data, pre_functions
+    from flexctrl.control.reference_trajectory import ReferenceTrajectory
+
+    model = fc.load_model("subedi3link", payload=2.0, fidelity="amm:1", gravity=[0.0, 0.0])
+    op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
+    ctrl = fc.design(model, op, fc.load_controller("mpc"))
+    move = fc.Move(start=np.radians([0.0, 0, 0]), target=np.radians([30.0, 0, 0]), time=1.5)
+    ctrl.set_reference(ReferenceTrajectory(model, move.joint_reference(), move.deflection))
+    ctrl.reset()
+    start, _ = pre_functions(ctrl)
+    pb, t, N = ctrl.problem, 0.3, ctrl.problem.horizon
+    X, U, _ = ctrl.reference.window(t, ctrl.sample_time, N + 1)
+    y = ctrl.sensors.evaluate(X[0], U[0])
+    _xi, p, u_lqr = start(y, ctrl.u_previous, X.T, U.T)
+    x = ctrl.observer.estimate(y, ctrl.u_previous)
+    r, u_ref, dv, dc = ctrl.reference_shifts(t)
+    z = (x - op.x) / pb.Sx - r[0]
+    assert np.allclose(np.asarray(p).ravel(), np.r_[z, dv.ravel(), dc.ravel()], atol=1e-12)
+    assert np.allclose(np.asarray(u_lqr).ravel(), u_ref[0] - pb.Su * (pb.K @ z), atol=1e-9)
+    # the condensed QP's data: with the DARE terminal cost and no constraint active, its first
+    # move is the LQR move -K z (an analytic limit, independent of the QP's assembly)
+    d = condensed_data(ctrl)
+    v = np.linalg.solve(d["H"], -d["F"] @ z)
+    assert np.allclose(v[: pb.m], -pb.K @ z, rtol=1e-8, atol=1e-10 * np.abs(z).max())
