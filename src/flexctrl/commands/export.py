@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     ctrl = setup.controller
     replay, python = None, {}
     if not args.no_record:
-        recorder = StepRecorder(ctrl, _source(setup, args.scene))
+        recorder = StepRecorder(ctrl, _source(setup, args))
         _record(setup, recorder)
         replay = recorder.replay()
         python = _python_step_times(ctrl, replay, args.repeats)
@@ -150,12 +150,13 @@ def _record(setup, recorder) -> None:
     )
 
 
-def _source(setup, path: str) -> str:
+def _source(setup, args: argparse.Namespace) -> str:
     """The recorded loop in words, for the exported header."""
     plant, scene = setup.plant, setup.plant_scene
     return (
-        f"scene {setup.scene.name} ({path}): plant {plant.name} ({plant.fidelity}), payload "
-        f"{plant.spec.payload.mass:g} kg, step {scene.dt:g} s, {scene.duration:g} s"
+        f"{args.controller} on scene {setup.scene.name} ({args.scene}): plant {plant.name} "
+        f"({plant.fidelity}), payload {plant.spec.payload.mass:g} kg, step {scene.dt:g} s, "
+        f"{scene.duration:g} s"
     )
 
 
