@@ -86,6 +86,9 @@ def test_the_wheel_carries_every_kind_of_shipped_file(wheel):
     for kind, folder in KINDS.items():
         assert any(n.startswith(folder) and n != folder for n in names), kind
     assert "flexctrl/py.typed" in names
+    c_sources = ROOT / "src" / "flexctrl" / "control" / "cexport" / "c"
+    templates = {f"flexctrl/control/cexport/c/{p.name}" for p in c_sources.iterdir()}
+    assert templates and templates <= names  # the C export's sources
 
 
 def test_the_installed_package_loads_a_shipped_model_by_name(fresh_venv, tmp_path):

@@ -294,6 +294,44 @@ class Controller(ABC):
         """
         return False
 
+    def export_c(self, out, *, replay=None, qp_eps: float | None = None):
+        """Write the designed controller as a self-contained C library into the folder ``out``.
+
+        The library steps the same law as :meth:`step` (``flexctrl_step(c, k, y, u)`` every
+        :attr:`sample_time`; measurements in the order and units of
+        :attr:`measurement_names`, torques in N m), with a header, a ``Makefile`` for the
+        system C compiler and a harness: ``make -C out check`` replays ``replay`` and
+        compares the C torques with Python's (:mod:`flexctrl.control.cexport`).
+
+        Parameters
+        ----------
+        out : str or path-like
+            The folder to write (created; the files of an earlier export are overwritten).
+        replay : flexctrl.control.cexport.Replay, optional
+            Steps of this controller recorded in a closed loop
+            (:class:`~flexctrl.control.cexport.StepRecorder`); without it ``make check`` has
+            nothing to compare.
+        qp_eps : float, optional
+            The linear MPC's QP tolerance in C (absolute and relative); default 1/100 of the
+            controller's OSQP ``eps_abs`` (1/1000 without warm starts).
+
+        Returns
+        -------
+        flexctrl.control.cexport.Export
+            The folder, the files written and the bound ``make check`` holds.
+
+        Raises
+        ------
+        SpecError
+            For a kind with no C export (allowed: an LQR/LQG without a gain schedule, a
+            linear MPC), which this base method is.
+        """
+        raise SpecError(
+            f"value {self.kind or type(self).__name__!r} has no C export; allowed: an LQR/LQG "
+            "without a gain schedule, or a linear MPC ('lqr', 'mpc')",
+            key="kind",
+        )
+
     def __repr__(self) -> str:
         names = list(self.sensors.names)
         return f"{type(self).__name__}(sample_time={self.sample_time:g} s, measures={names})"

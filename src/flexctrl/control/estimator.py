@@ -53,6 +53,10 @@ class FullState:
         """``(memory_next, x)``: :meth:`estimate` on CasADi symbols."""
         return memory, y
 
+    def symbolic_start(self, y, u_previous):
+        """``(memory, x)``: the first :meth:`estimate` after :meth:`reset` on CasADi symbols."""
+        return ca.MX(0, 1), y
+
 
 def zoh_input_matrix(A: np.ndarray, G: np.ndarray, dt: float) -> np.ndarray:
     """``int_0^dt exp(A s) ds G``: the exact discrete input matrix of a held input.
@@ -212,6 +216,17 @@ class KalmanEstimator:
         dy = y - ca.DM(self.y_op) - ca.mtimes(D, du)
         pred = ca.mtimes(A, memory) + ca.mtimes(B, du)
         dx = pred + ca.mtimes(M, dy - ca.mtimes(C, pred))
+        return dx, ca.DM(self.op.x) + dx
+
+    def symbolic_start(self, y, u_previous):
+        """``(dx, x)``: the first :meth:`estimate` after :meth:`reset` on CasADi symbols.
+
+        The least-squares fit ``dx = C^+ (dy - D du)``, the same operations as
+        :meth:`estimate` with no estimate yet.
+        """
+        du = u_previous - ca.DM(self.op.u)
+        dy = y - ca.DM(self.y_op) - ca.mtimes(ca.DM(self.D), du)
+        dx = ca.mtimes(ca.DM(self._pinv), dy)
         return dx, ca.DM(self.op.x) + dx
 
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -325,25 +325,60 @@ class LQRController(Controller):
         """
         if self.schedule is not None:
             return None
-        memory = self.observer.memory
-        xi, y = ca.MX.sym("xi", memory.size), ca.MX.sym("y", self.sensors.n_y)
-        u_prev, r = ca.MX.sym("u_prev", self.n_u), ca.MX.sym("r", self.op.x.size + self.n_u)
-        xi_next, x = self.observer.symbolic(xi, y, u_prev)
-        x_ref, u_ref = r[: self.op.x.size], r[self.op.x.size :]
-        u = u_ref - ca.mtimes(ca.DM(self.K), x - x_ref)
-        function = ca.Function(
-            "lqr_law",
-            [xi, y, u_prev, r],
-            [xi_next, u],
-            ["xi", "y", "u_prev", "r"],
-            ["xi_next", "u"],
-        )
 
         def references(times: np.ndarray) -> np.ndarray:
             X, U, _ = self.reference.window(float(times[0]), self.sample_time, len(times))
             return np.hstack([X, U])
 
-        return SampledLaw(function, memory, references, self.observer.restore)
+        return SampledLaw(
+            self.law_function(), self.observer.memory, references, self.observer.restore
+        )
+
+    def law_function(self, *, start: bool = False) -> ca.Function:
+        """The law with its estimator as one CasADi Function (the function of :meth:`sampled_law`).
+
+        Parameters
+        ----------
+        start : bool
+            The first sample after :meth:`reset`, where the estimator starts from the
+            measurement: ``(y, u_prev, r) -> (xi, u)``.  False: a later sample,
+            ``(xi, y, u_prev, r) -> (xi_next, u)``.
+
+        Returns
+        -------
+        casadi.Function
+            ``xi`` the estimator's memory, ``r = (x_ref, u_ref)`` the reference row; ``u``
+            (N m) before clipping.
+
+        Raises
+        ------
+        SpecError
+            For a gain-scheduled LQR (its gain is interpolated per sample).
+        """
+        if self.schedule is not None:
+            raise SpecError(
+                "a gain-scheduled LQR has no fixed law; allowed: an LQR without a schedule",
+                key="schedule",
+            )
+        n_x = self.op.x.size
+        y, u_prev = ca.MX.sym("y", self.sensors.n_y), ca.MX.sym("u_prev", self.n_u)
+        r = ca.MX.sym("r", n_x + self.n_u)
+        xi_start, x_start = self.observer.symbolic_start(y, u_prev)
+        if start:
+            xi_next, x, inputs, names = xi_start, x_start, [y, u_prev, r], ["y", "u_prev", "r"]
+        else:
+            xi = ca.MX.sym("xi", xi_start.shape[0])
+            xi_next, x = self.observer.symbolic(xi, y, u_prev)
+            inputs, names = [xi, y, u_prev, r], ["xi", "y", "u_prev", "r"]
+        u = r[n_x:] - ca.mtimes(ca.DM(self.K), x - r[:n_x])
+        name, first = ("lqr_law_start", "xi") if start else ("lqr_law", "xi_next")
+        return ca.Function(name, inputs, [xi_next, u], names, [first, "u"])
+
+    def export_c(self, out, *, replay=None, qp_eps: float | None = None):
+        """The law in C (:meth:`Controller.export_c`; :mod:`flexctrl.control.cexport.law`)."""
+        from flexctrl.control.cexport.law import export_law
+
+        return export_law(self, out, replay, qp_eps)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)

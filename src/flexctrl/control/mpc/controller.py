@@ -254,6 +254,12 @@ class MPCController(Controller):
         warm = self._w if self.settings.warm_start != "none" else None
         return self.backend.solve(z, warm, dv, dc, self.arrival_release(t, z, dv, dc))
 
+    def export_c(self, out, *, replay=None, qp_eps: float | None = None):
+        """The MPC in C (:meth:`Controller.export_c`; :mod:`flexctrl.control.cexport.mpc_dense`)."""
+        from flexctrl.control.cexport.mpc_dense import export_mpc
+
+        return export_mpc(self, out, replay, qp_eps)
+
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         x = self.observer.estimate(y, self.u_previous)
         r, u_ref, dv, dc = self.reference_shifts(t)
