@@ -30,6 +30,7 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import (
     SETTINGS,
+    BadMeasurement,
     ControllerSettings,
     EstimatorSettings,
     LQRSettings,
@@ -78,6 +79,10 @@ def _refuse_renamed(reader: TableReader, renamed: dict[str, str]) -> None:
                 f"was renamed '{new}' (value {reader.table[old]!r}): angles in the files are "
                 f"degrees and their keys say so; allowed: {new}",
             )
+
+
+def _on_bad_measurement(reader: TableReader, default: str) -> str:
+    return _literal(reader, "on_bad_measurement", default, BadMeasurement)
 
 
 def _free_text(reader: TableReader) -> None:
@@ -243,6 +248,7 @@ def _pd_values(r: TableReader, d: PDSettings) -> dict[str, Any]:
         ),
         "strain_rate_filter": r.nonnegative("strain_rate_filter", d.strain_rate_filter, unit="Hz"),
         "sensors": _sensors(r, d.sensors),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
 
 
@@ -260,6 +266,7 @@ def _read_lqr(r: TableReader) -> LQRSettings:
         "estimator": _estimator(r),
         "schedule": _schedule(r),
         "saturate": r.boolean("saturate", d.saturate),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
     return _build(r, LQRSettings, values)
 
@@ -308,6 +315,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "osqp": _osqp(r),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
     return _build(r, MPCSettings, values)
 
@@ -346,6 +354,7 @@ def _read_nmpc(r: TableReader) -> NMPCSettings:
         "qp_warm_start": r.boolean("qp_warm_start", d.qp_warm_start),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
     return _build(r, NMPCSettings, values)
 

@@ -12,6 +12,7 @@ from typing import Literal
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
+    BadMeasurement,
     ControllerKind,
     EstimatorSettings,
     Fallback,
@@ -156,8 +157,8 @@ class MPCSettings:
         Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc.arrival_search`).
     osqp : OSQPSettings
         OSQP's settings (backend ``"osqp"``).
-    sensors, estimator
-        As for LQR.
+    sensors, estimator, on_bad_measurement
+        As for LQR (a held sample solves the QP on the estimator's prediction).
     """
 
     kind: Literal["mpc"] = "mpc"
@@ -182,9 +183,11 @@ class MPCSettings:
     osqp: OSQPSettings = field(default_factory=OSQPSettings)
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    on_bad_measurement: BadMeasurement = "raise"
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["mpc"])
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         integer_field("horizon", self.horizon, low=1, high=1000)
         choice_field("terminal", self.terminal, Literal["dare", "stage"])
@@ -310,8 +313,8 @@ class NMPCSettings:
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``, fewer iterations) instead of its default start.  The
         other QP solvers are always given it.
-    sensors, estimator
-        As for LQR.
+    sensors, estimator, on_bad_measurement
+        As for LQR (a held sample solves on the estimator's prediction).
     """
 
     kind: Literal["nmpc"] = "nmpc"
@@ -339,9 +342,11 @@ class NMPCSettings:
     qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    on_bad_measurement: BadMeasurement = "raise"
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["nmpc"])
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         integer_field("horizon", self.horizon, low=1, high=1000)
         integer_field("substeps", self.substeps, low=0, high=200)
