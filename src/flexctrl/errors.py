@@ -9,6 +9,8 @@ located the same way.  Numerical failures are :class:`SimulationError`
 
 from __future__ import annotations
 
+import warnings
+
 
 class FlexctrlError(Exception):
     """Base class of every error raised on purpose by flexctrl."""
@@ -28,11 +30,11 @@ class SpecError(FlexctrlError, ValueError):
 
     Parameters
     ----------
-    message
+    message : str
         What is wrong, naming the key, the value and what is allowed.
-    source
+    source : str, optional
         The file (or other origin) the value came from.
-    key
+    key : str, optional
         The dotted key of the offending value, e.g. ``links[2].EI``.
     """
 
@@ -76,7 +78,7 @@ class MeasurementError(SpecError):
 
 
 class SpecWarning(UserWarning):
-    """A description is valid but probably not what its author meant (a unit slip, an odd value).
+    """A description is valid but probably not what its author meant (a unit slip, odd value).
 
     The message names the file, the key, the value and what was expected, on one line,
     as :class:`SpecError`'s does; the command line prints it as one line on stderr.
@@ -87,8 +89,6 @@ def warn_spec(
     message: str, *, source: str | None = None, key: str | None = None, stacklevel: int = 3
 ) -> None:
     """Issue a :class:`SpecWarning` located like a :class:`SpecError` (file, then key)."""
-    import warnings
-
     warnings.warn(_located(message, source, key), SpecWarning, stacklevel=stacklevel)
 
 

@@ -171,9 +171,6 @@ def _simulate_closed_loop(case: str, scene, method, fidelity: str) -> dict[str, 
     else:
         h = method.step
     stride = max(1, int(round(sample / h)))
-    # the Python loop for the finite elements: the compiled one holds every RK4 substep of the
-    # run
-    # (tens of thousands per sample at their damped stable step) in memory at once
     controller = _design(scene)
     out = closed_loop_tip_path(
         dataclasses.replace(scene, controller_fidelity=None),
@@ -181,7 +178,6 @@ def _simulate_closed_loop(case: str, scene, method, fidelity: str) -> dict[str, 
         h,
         controller=controller,
         stride=stride,
-        loop="python" if fidelity.startswith("fem:") else "auto",
     )
     if out["diverged_at"] is not None:
         raise RuntimeError(f"{case} {fidelity} diverged at {out['diverged_at']} s")

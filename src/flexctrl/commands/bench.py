@@ -29,8 +29,8 @@ DESCRIPTION = (
     "(median, p95, max) of the warm-started linear MPC variants over --steps closed-loop "
     "samples, the NMPC real-time iteration, and python-control's create_mpc_iosystem on the "
     "same problem (--pc-solves solves; each takes seconds). 'loop': one warm in-process "
-    "closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default the LQR) "
-    "with the compiled loop and with the Python loop, beside the plant's compiled RK4 "
+    "closed-loop run of studies/scenes/move_joint1_30deg.toml (--controller, default the LQR), "
+    "beside the plant's compiled RK4 "
     "simulation alone (same step and duration), interleaved --repeats rounds; prints "
     "run_wall_s, plant_only_s and their ratio."
 )

@@ -1,4 +1,4 @@
-"""The cheapest model that meets a scene's tip-accuracy tolerance (issue 7, ``fidelity = "auto"``).
+"""The cheapest model that meets a scene's tip-accuracy tolerance (``fidelity = "auto"``).
 
 :func:`choose_fidelity` picks, for one ``kind = "arm"`` scene and a tolerance on
 the tip position (m), the lowest rung of the ladder ``rigid -> amm:1 -> amm:2 ->
@@ -23,8 +23,8 @@ claim against a converged reference.  The method:
    (error <= d / (1 - r) <= 2 d for r <= 1/2); the measured ratio of successive
    differences is recorded so a reader can check that assumption.  Two rungs, not
    one, because convergence in modes per link is not monotone: on a slow move the
-   first mode per link changes the tip less than the second does, and ``rigid``
-   against ``amm:1`` alone underestimated the error by a factor of 2.4.  From the
+   first mode per link can change the tip less than the second does, so ``rigid``
+   against ``amm:1`` alone can underestimate the error.  From the
    starting rung the walk goes *up* while the estimate exceeds the tolerance, or
    *down* while the rung below also meets it; the choice is the lowest rung
    reached whose estimate meets the tolerance.
@@ -37,8 +37,8 @@ claim against a converged reference.  The method:
    chosen rung's tip distance from the reference is ``reference_error``.
 4. **Integrator and step.**  A scene with an implicit integrator (``cvodes``,
    ``idas``, ``scipy``) keeps it and its step.  With ``rk4``, a rung keeps the
-   scene's step when ``omega_max * dt <= RK4_MARGIN * RK4_STABILITY_LIMIT`` (RK4's stability limit
-   with a 10 % margin); otherwise the step is the scene's divided by the
+   scene's step when ``omega_max * dt <= RK4_MARGIN * RK4_STABILITY_LIMIT`` (RK4's
+   stability limit with a 10 % margin); otherwise the step is the scene's divided by the
    smallest whole number that satisfies it, so outputs and torque switching
    still fall on the scene's grid.
 
@@ -46,11 +46,19 @@ Every simulation's wall time (``time.perf_counter``, integration only; model
 build and compilation recorded apart) is kept; ``cost_ratio`` is the choice's
 integration wall time over the reference's.
 
-This module is the method alone: it runs candidates through the callables it is
-given (``run_rung``, ``run_reference`` of :func:`walk_and_judge`) and knows no scene
-file, model builder or integrator.  Running scenes for it is
-:mod:`flexctrl.scenes.auto`'s job (models, runs and choices kept in a
-:class:`~flexctrl.scenes.cache.SceneCache` the caller owns).
+For a closed loop the default walk (``fidelity_walk = "estimate"``) first estimates the
+rungs on linearised plants (:mod:`flexctrl.fidelity.linear_candidate`) and certifies the
+lowest one they cannot exclude, or, for a controller stepped in Python, walks down from
+the top rung; both judge against the reference model at its own step and estimate its
+step error linearly (:mod:`flexctrl.fidelity.walk`).
+
+The package is the method alone: it runs candidates through the callables it is given
+(:class:`~flexctrl.fidelity.walk.Runners`) and knows no scene file, model builder or
+integrator.  Running scenes for it is the job of :mod:`flexctrl.scenes.auto` (arm scenes)
+and :mod:`flexctrl.scenes.auto_closed_loop` (closed loops), with models, runs and choices
+kept in a :class:`~flexctrl.scenes.cache.SceneCache` the caller owns.  This module gathers
+the names the rest of the toolkit uses: the records (:mod:`flexctrl.fidelity.records`),
+the pieces (:mod:`flexctrl.fidelity.rungs`) and the walk.
 
 Examples
 --------
@@ -64,161 +72,44 @@ Examples
 
 from __future__ import annotations
 
-import math
-import re
-from typing import Any
-
-import numpy as np
-
-from flexctrl.errors import SpecError
-from flexctrl.fidelity.records import (
-    FidelityChoice,
-    RunRecord,
-    ToleranceUnreachable,
+from flexctrl.fidelity.linear_candidate import LINEAR_FACTOR, linear_candidate
+from flexctrl.fidelity.records import FidelityChoice, RunRecord, ToleranceUnreachable
+from flexctrl.fidelity.rungs import (
+    IMPLICIT,
+    check_ladder,
+    check_tolerance,
+    excitation_bandwidth,
+    required_modes,
     rung_name,
+    sampled_bandwidth,
     tip_distance,
 )
-from flexctrl.fidelity.walk import LINEAR_FACTOR, WALKS, linear_candidate, walk_and_judge
-from flexctrl.spec.fidelity import parse_fidelity
+from flexctrl.fidelity.walk import (
+    METHOD,
+    METHOD_ESTIMATE,
+    METHOD_FROM_TOP,
+    WALK_KINDS,
+    Ladder,
+    Runners,
+    walk_and_judge,
+)
+from flexctrl.spec.fidelity import FIDELITY_WALKS
 
-IMPLICIT = ("cvodes", "idas", "scipy")
-
-
-_QF = re.compile(r"^qf(\d+?)(\d)$")
-
-
-# -- the pieces of the method -----------------------------------------------------------------
-def excitation_bandwidth(scene, n_joints: int, *, energy_fraction: float = 0.99) -> float | None:
-    """Frequency (Hz) below which ``energy_fraction`` of the scene's torque energy lies.
-
-    The torques of ``scene.input`` are sampled at the scene's step (refined to at
-    most 0.1 ms) over the scene's duration, zero-padded to four times that length,
-    and their energy spectrum summed over joints.
-
-    Parameters
-    ----------
-    scene : ArmScene
-    n_joints : int
-    energy_fraction : float
-        In (0, 1).
-
-    Returns
-    -------
-    float or None
-        The bandwidth (Hz), or None when the scene applies no torque.
-    """
-    k = max(1, math.ceil(scene.dt / 1e-4 - 1e-9))
-    h = scene.dt / k
-    n = max(2, int(math.ceil(scene.duration / h - 1e-9)))
-    torque = scene.input.torque((np.arange(n) + 0.5) * h, n_joints)
-    if not np.any(torque):
-        return None
-    n_fft = 1 << int(math.ceil(math.log2(4 * n)))
-    spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)
-    spectrum[1:] *= 2.0  # one-sided
-    cumulative = np.cumsum(spectrum) / spectrum.sum()
-    freqs = np.fft.rfftfreq(n_fft, h)
-    return float(freqs[min(int(np.searchsorted(cumulative, energy_fraction)), freqs.size - 1)])
-
-
-# -- closed-loop scenes -------------------------------------------------------------------------
-def sampled_bandwidth(
-    torque: np.ndarray, h: float, *, energy_fraction: float = 0.99
-) -> float | None:
-    """Frequency (Hz) below which ``energy_fraction`` of sampled torques' energy lies.
-
-    Parameters
-    ----------
-    torque : numpy.ndarray
-        Torques (N m), shape (T, n_joints), sampled every ``h`` s; their mean is removed
-        first (a held final torque is no excitation), then they are zero-padded to four
-        times their length.
-    h : float
-        Sample period (s).
-
-    Returns
-    -------
-    float or None
-        None when the torques are constant.
-    """
-    torque = np.asarray(torque, dtype=float)
-    torque = torque - torque.mean(axis=0)
-    if not np.any(torque):
-        return None
-    n = torque.shape[0]
-    n_fft = 1 << int(math.ceil(math.log2(4 * n)))
-    spectrum = np.sum(np.abs(np.fft.rfft(torque, n=n_fft, axis=0)) ** 2, axis=1)
-    spectrum[1:] *= 2.0
-    cumulative = np.cumsum(spectrum) / spectrum.sum()
-    freqs = np.fft.rfftfreq(n_fft, h)
-    return float(freqs[min(int(np.searchsorted(cumulative, energy_fraction)), freqs.size - 1)])
-
-
-def required_modes(scene) -> int:
-    """Fewest modes per link that hold the scene's initial elastic coordinates (``qf<link><mode>``)."""
-    need = 0
-    for name in scene.qf0:
-        match = _QF.match(name)
-        if match:
-            need = max(need, int(match.group(2)))
-    return need
-
-
-def check_ladder(top, reference, safety, energy_fraction, bandwidth_factor, reference_omega_dt):
-    """Validate the chooser's options (shared by the arm and closed-loop choosers); returns the reference fidelity."""
-    if isinstance(top, bool) or not isinstance(top, int) or not 1 <= top <= 5:
-        raise SpecError(
-            f"value {top!r} is not allowed; allowed: an integer 1..5 (amm:top is the highest candidate)",
-            key="top",
-        )
-    ref = parse_fidelity(reference if reference is not None else f"amm:{top + 1}", key="reference")
-    if ref.kind != "amm" or not top < (ref.count or 0) <= 6:
-        raise SpecError(
-            f"value '{ref}' is not allowed; allowed: 'amm:R' with {top} < R <= 6 (above the top "
-            f"candidate amm:{top})",
-            key="reference",
-        )
-    for name, value, low, high in (
-        ("safety", safety, 1.0, 100.0),
-        ("energy_fraction", energy_fraction, 0.0, 1.0),
-        ("bandwidth_factor", bandwidth_factor, 0.0, 1e3),
-        ("reference_omega_dt", reference_omega_dt, 0.0, 2.5),
-    ):
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, (int, float))
-            or not low <= value <= high
-            or value == 0
-        ):
-            raise SpecError(
-                f"value {value!r} is not allowed; allowed: a number in ({low:g}, {high:g}]",
-                key=name,
-            )
-    return ref
-
-
-def check_tolerance(tol: Any, *, source: str | None = None, key: str = "tolerance") -> float:
-    """``tol`` as a float if it is a finite number > 0 (m), else :class:`SpecError`."""
-    if (
-        isinstance(tol, bool)
-        or not isinstance(tol, (int, float))
-        or not math.isfinite(tol)
-        or tol <= 0
-    ):
-        raise SpecError(
-            f"value {tol!r} is not allowed; allowed: a finite number > 0 (m, tip-position tolerance)",
-            source=source,
-            key=key,
-        )
-    return float(tol)
-
+#: The walks of the closed-loop chooser (:data:`flexctrl.spec.fidelity.FIDELITY_WALKS`).
+WALKS = FIDELITY_WALKS
 
 __all__ = [
     "IMPLICIT",
     "LINEAR_FACTOR",
+    "METHOD",
+    "METHOD_ESTIMATE",
+    "METHOD_FROM_TOP",
     "WALKS",
+    "WALK_KINDS",
     "FidelityChoice",
+    "Ladder",
     "RunRecord",
+    "Runners",
     "ToleranceUnreachable",
     "check_ladder",
     "check_tolerance",

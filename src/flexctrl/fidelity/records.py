@@ -1,16 +1,13 @@
-"""The records of a fidelity choice: the runs made, the choice and its evidence, and the
-failure to meet a tolerance (:mod:`flexctrl.fidelity.ladder` describes the method)."""
+"""What the automatic-fidelity walk records: its runs, its choice, an unreachable tolerance."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from flexctrl.errors import FlexctrlError
-from flexctrl.sim.tip_error import TipError, tip_error
 from flexctrl.spec.fidelity import Fidelity
 
 
@@ -29,7 +26,10 @@ class RunRecord:
     Attributes
     ----------
     fidelity : str
+        The rung (``rigid``, ``amm:N``) or reference model run.
     integrator : str
+        The integrator (``rk4``, ``cvodes`` ...; ``linear-rk4`` and ``linear-exact`` for the
+        linear estimates).
     dt : float
         Step (s).
     omega_max : float
@@ -38,8 +38,10 @@ class RunRecord:
         Integration wall time (s).
     build_time_s : float
         Model build plus integrator setup (compilation or cache load) in this process (s).
-    time, tip : numpy.ndarray
-        Sample times (s) and tip positions (m).
+    time : numpy.ndarray
+        Sample times (s).
+    tip : numpy.ndarray
+        Tip positions (m), shape (T, 2).
     diverged_at : float or None
         Time (s) a closed loop diverged (its tip path stops there), None when it did not.
     torque : numpy.ndarray or None
@@ -84,8 +86,8 @@ class FidelityChoice:
     tolerance : float
         Tolerance on the tip position (m).
     estimated_error : float
-        ``safety`` times the largest tip distance to the next rung (m): the estimate that justified
-        the choice.
+        ``safety`` times the largest tip distance to the next rungs (m): the estimate that
+        justified the choice.
     reference_error : float
         Largest tip distance of the choice from the reference (m).
     reference_error_rms : float
@@ -93,8 +95,9 @@ class FidelityChoice:
     cost_ratio : float
         Integration wall time of the choice over that of the reference.
     integrator : str
+        The integrator the choice is run with.
     dt : float
-        Integrator and step (s) the choice is run with.
+        Its step (s).
     evidence : dict
         Everything measured: the bandwidth rule, every rung's run and estimate, the
         reference and its convergence checks (see :meth:`to_dict`).
@@ -123,15 +126,3 @@ class FidelityChoice:
             "dt_s": self.dt,
             **self.evidence,
         }
-
-
-def rung_name(n: int) -> str:
-    return "rigid" if n == 0 else f"amm:{n}"
-
-
-def tip_distance(a: RunRecord, b: RunRecord):
-    """Tip distance of ``b`` from ``a`` on ``a``'s samples (the finer run goes first); infinite if either diverged."""
-    if a.diverged_at is not None or b.diverged_at is not None:
-        return TipError(rms=math.inf, max=math.inf)
-    first, second = (a, b) if a.dt <= b.dt else (b, a)
-    return tip_error(first.time, first.tip, second.time, second.tip)

@@ -8,10 +8,10 @@ import numpy as np
 
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import SpecError
-from flexctrl.loop.metrics import run_metrics
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.loop.verdict import linear_closed_loop_radius
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT, rk4_step
@@ -19,10 +19,10 @@ from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference, Move
 
 #: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
-#: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``:
-#: 0.99979 at y = 0.5, but 0.81 at 1.65 and 0.52 at 2.05, so a step chosen only for stability
-#: (y up to 2.5) damps the fastest modes numerically and moves the residual vibration; at 0.5
-#: the residual is that of the scenes' finer step to 0.1 %.
+#: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``
+#: (:mod:`flexctrl.sim.rk4`): 0.99979 at ``y = 0.5`` but 0.52 at 2.05, so a step chosen only for
+#: stability (``y`` up to 2.5) damps the fastest modes numerically and moves the residual
+#: vibration; at 0.5 the residual agrees with the scenes' 0.5 ms step.
 ACCURATE_OMEGA_DT = 0.5
 
 
@@ -39,37 +39,31 @@ def closed_loop(
     metrics: MetricSettings | None = None,
     on_divergence: str = "raise",
     compile: bool | None = None,
-    loop: str = "auto",
 ) -> ClosedLoopResult:
-    """Run ``controller`` on ``plant`` (default ``model``) along ``reference``.
+    """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` s.
 
-    The controller tracks the reference built on ``model`` (its design model: the joint
-    path, the quasi-static deflection the path's accelerations need and the feed-forward
-    torque); every ``controller.sample_time`` it reads the plant's sensors and its torque
-    is held while the plant advances by RK4 steps of ``dt``.
+    The controller tracks the reference built on ``model`` (its design model) at its sample
+    time; the plant advances by RK4 steps of ``dt`` between samples (:mod:`flexctrl.loop.sampled`).
 
     Parameters
     ----------
     model : flexctrl.dynamics.model.Model
         The model the controller was designed on.
     controller : flexctrl.control.controller.Controller
-        From :func:`flexctrl.design`.  It is reset and given the reference.
+        From :func:`flexctrl.design`; reset and given the reference.
     reference : Move or JointReference
         The joint path (rad, s).
     duration : float
         Simulated time, s.
     plant : Model, optional
-        The arm that is controlled, e.g. another payload (:func:`flexctrl.load_model`
-        with ``payload=``) or fidelity; default ``model``.
+        The arm controlled, e.g. another payload or fidelity; default ``model``.
     dt : float, optional
-        Plant step, s: a whole fraction of the sample time; default the largest one with
-        ``omega_max * dt <= ACCURATE_OMEGA_DT`` on the plant (see :data:`ACCURATE_OMEGA_DT`).
+        Plant step, s, a whole fraction of the sample time; default the largest with
+        ``omega_max * dt <=`` :data:`ACCURATE_OMEGA_DT` on the plant.
     noise : int or numpy.random.Generator, optional
-        Measurement noise at the levels of the controller's sensor settings, seeded;
-        None (default) measures exactly.
+        Seeded measurement noise at the controller's sensor levels; None measures exactly.
     x0 : array_like, optional
-        Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the move's start
-        with undeformed links.
+        Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the start.
     metrics : MetricSettings, optional
         How the run is judged (residual window, bands, divergence bounds).
     on_divergence : {"raise", "record"}
@@ -77,50 +71,58 @@ def closed_loop(
         records ``stable = 0`` with ``divergence_time`` (s).
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
-    loop : {"auto", "compiled", "python"}
-        Run the samples in one CasADi call when the controller's law allows it
-        (``"auto"``), or one Python iteration per sample (``"python"``: one sample's plant
-        steps in memory at a time); :func:`flexctrl.loop.sampled.simulate_closed_loop`.
 
     Returns
     -------
     ClosedLoopResult
-        ``metrics`` (``tip_residual_rms`` in m, ``settling_time`` in s, ``stable``, ...),
-        ``trajectory``, ``summary``, ``plot()``, ``save(dir)``, ``to_pandas()``.
+        ``metrics`` (SI units), ``trajectory``, ``summary``, ``plot()``, ``save(dir)`` ...
 
     Examples
     --------
     >>> import numpy as np, flexctrl as fc
-    >>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
-    >>> op = fc.equilibrium(model, np.radians([30.0, 0.0, 0.0]))
-    >>> pd = fc.design(model, op, fc.load_controller("controllers/pd.toml"))
+    >>> model = fc.load_model("subedi3link", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> op = fc.equilibrium(model, np.radians([30, 0, 0]))
+    >>> pd = fc.design(model, op, fc.load_controller("pd"))
     >>> move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     >>> res = fc.closed_loop(model, pd, move, duration=4.0)
     >>> bool(res.metrics["stable"]), res.metrics["tip_residual_rms"] < 1e-3
     (True, True)
     """
-    move, path = _checked(model, controller, reference, duration, on_divergence)
-    plant = model if plant is None else plant
+    move = _checked_move(model, controller, reference, duration, on_divergence)
+    path, plant = move.joint_reference(), model if plant is None else plant
     judge = MetricSettings() if metrics is None else metrics
-    controller.set_reference(ReferenceTrajectory(model, path, move.deflection))
+    _track(controller, model, move)
+    sensors = _plant_sensors(model, plant, controller)
+    trajectory, _ = simulate_closed_loop(
+        plant,
+        controller,
+        _initial_state(plant, path, x0),
+        float(duration),
+        _plant_step(plant, controller, dt),
+        sensors=sensors,
+        rng=_noise(noise),
+        compile=compile,
+        monitor=_monitor(plant, path, judge),
+        stop_on_divergence=on_divergence == "record",
+    )
+    return _result(trajectory, model, plant, controller, move, judge, float(duration), sensors)
+
+
+def _track(controller, model, move: Move) -> None:
+    """Reset ``controller`` and give it ``move``'s reference built on its design model."""
+    controller.set_reference(ReferenceTrajectory(model, move.joint_reference(), move.deflection))
     controller.reset()
-    dt = (
-        rk4_step(plant.omega_max, controller.sample_time, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
-        if dt is None
-        else float(dt)
-    )
-    sensors = (
-        controller.sensors
-        if plant is model
-        else plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
-    )
-    x0 = _initial_state(plant, path, x0)
-    rng = (
-        noise
-        if isinstance(noise, np.random.Generator)
-        else (None if noise is None else np.random.default_rng(noise))
-    )
-    monitor = divergence_monitor(
+
+
+def _plant_sensors(model, plant, controller):
+    """The controller's sensors as they read the plant (built on it when it is another model)."""
+    if plant is model:
+        return controller.sensors
+    return plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
+
+
+def _monitor(plant, path: JointReference, judge: MetricSettings):
+    return divergence_monitor(
         plant,
         plant.spec,
         path.q_start,
@@ -128,58 +130,37 @@ def closed_loop(
         judge.divergence_deflection,
         judge.divergence_angle,
     )
-    trajectory, _ = simulate_closed_loop(
-        plant,
-        controller,
-        x0,
-        float(duration),
-        dt,
-        sensors=sensors,
-        rng=rng,
-        compile=compile,
-        monitor=monitor,
-        stop_on_divergence=on_divergence == "record",
-        loop=loop,
-    )
-    values = run_metrics(
-        trajectory,
-        tip_target=tip_at_rest(plant, path.q_target),
-        reference_joints=path.joints(trajectory.time),
-        t_arrive=path.t_arrive,
-        settle_allowance=judge.settle_allowance,
-        band=judge.band,
-        stable_band=judge.stable_band,
-        duration=float(duration),
-        torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
-        controller_stats=controller.stats.summary(),
-        step_times=controller.stats.step_times,
-        radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
-    )
-    return ClosedLoopResult(
-        trajectory=trajectory,
-        metrics=values,
-        summary=_summary(model, plant, controller, move, path, judge, trajectory, values),
-        model=plant,
-        controller=controller,
-        reference=path,
-    )
 
 
-def _checked(model, controller, reference, duration, on_divergence):
-    """The move and its joint path, after the arguments are checked."""
+def _checked_move(model, controller, reference, duration, on_divergence: str) -> Move:
+    """The reference as a :class:`Move`, once the arguments are checked."""
+    _check_arguments(controller, on_divergence)
+    move = _as_move(reference)
+    _check_path(model, move.joint_reference(), duration)
+    return move
+
+
+def check_on_divergence(on_divergence: str) -> None:
+    """:class:`SpecError` unless ``on_divergence`` is ``"raise"`` or ``"record"``."""
     if on_divergence not in ("raise", "record"):
         raise SpecError(
             f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
             key="on_divergence",
         )
+
+
+def _check_arguments(controller, on_divergence: str) -> None:
+    check_on_divergence(on_divergence)
     if not (hasattr(controller, "step") and hasattr(controller, "sensors")):
         raise SpecError(
             f"value of type {type(controller).__name__} is not a controller; allowed: a "
             "controller from flexctrl.design(model, op, settings)",
             key="controller",
         )
-    move = _as_move(reference)
-    path = move.joint_reference()
+
+
+def _check_path(model, path: JointReference, duration) -> None:
+    """The path has one angle per joint and the run outlasts it."""
     if len(path.q_target) != model.n_u:
         raise SpecError(
             f"the move has {len(path.q_target)} joint angles; expected {model.n_u} (one per joint)",
@@ -196,11 +177,18 @@ def _checked(model, controller, reference, duration, on_divergence):
             f"({path.t_arrive:g} s)",
             key="duration",
         )
-    return move, path
 
 
-def _initial_state(plant, path, x0) -> np.ndarray:
-    """``x0`` checked, or the plant at rest at the move's start with undeformed links."""
+def _plant_step(plant, controller, dt: float | None) -> float:
+    """``dt``, or the largest whole fraction of the sample time with ``omega_max * dt`` accurate."""
+    if dt is not None:
+        return float(dt)
+    Ts = controller.sample_time
+    return rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
+
+
+def _initial_state(plant, path: JointReference, x0) -> np.ndarray:
+    """``x0``, or the plant at rest at the path's start with undeformed links."""
     if x0 is None:
         x0 = np.zeros(plant.n_x)
         x0[: plant.n_u] = path.q_start
@@ -212,31 +200,52 @@ def _initial_state(plant, path, x0) -> np.ndarray:
     return x0
 
 
-def _summary(model, plant, controller, move, path, judge, trajectory, values) -> dict:
-    """The run's summary (``summary.json`` when saved)."""
-    return {
-        "controller": {
-            "kind": controller.settings.kind,
-            "sample_time": controller.sample_time,
-            **controller.stats.summary(),
-        },
-        "plant": {
-            "fidelity": str(plant.fidelity),
-            "n_states": plant.n_x,
-            "payload_kg": plant.spec.payload.mass,
-        },
-        "design": {
+def _noise(noise) -> np.random.Generator | None:
+    if isinstance(noise, np.random.Generator) or noise is None:
+        return noise
+    return np.random.default_rng(noise)
+
+
+def _result(
+    trajectory, model, plant, controller, move: Move, judge, duration: float, sensors
+) -> ClosedLoopResult:
+    """The run judged (metrics, linear verdict) and described (summary)."""
+    path = move.joint_reference()
+    tip_target = tip_at_rest(plant, path.q_target)
+    values = judge_run(
+        trajectory,
+        controller,
+        path,
+        judge,
+        tip_target=tip_target,
+        duration=duration,
+        torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
+        radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
+    )
+    summary = run_summary(
+        trajectory,
+        values,
+        controller,
+        plant=plant,
+        payload=plant.spec.payload.mass,
+        design={
             "fidelity": str(model.fidelity),
             "payload_kg": model.spec.payload.mass,
             "configuration_deg": np.degrees(controller.op.joints).tolist(),
         },
-        "reference": path.settings() | {"deflection": move.deflection},
-        "tip_target": tip_at_rest(plant, path.q_target).tolist(),
-        "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
-        "metrics": values,
-        "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time_s"],
-    }
+        path=path,
+        deflection=move.deflection,
+        tip_target=tip_target,
+        judge=judge,
+    )
+    return ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=values,
+        summary=summary,
+        model=plant,
+        controller=controller,
+        reference=path,
+    )
 
 
 def _as_move(reference) -> Move:
@@ -252,7 +261,6 @@ def _as_move(reference) -> Move:
         )
     raise SpecError(
         f"value of type {type(reference).__name__} is not a reference; allowed: "
-        "flexctrl.Move(start=, "
-        "target=, time=) (rad, s) or a JointReference",
+        "flexctrl.Move(start=, target=, time=) (rad, s) or a JointReference",
         key="reference",
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -102,11 +103,32 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     The first run's window is shaded and the first run's torque limits are drawn; a panel
     whose data no run has (tip error, joint angles) is left out.
     """
+    if not runs:
+        raise ValueError("nothing to draw: give at least one run")
+    fig, axes = _panels(runs)
+    first = runs[0]
+    run_handles = [_draw_run(axes, index, run, highlight) for index, run in enumerate(runs)]
+    limit_handles = _draw_limits(axes["u"], first.torque_limits)
+    if "q" in axes and first.reference is not None:
+        _draw_reference(axes["q"], first)
+    if "tip" in axes:
+        _tip_scale(axes["tip"], [r.tip_error for r in runs if r.tip_error is not None])
+    _legends(axes, runs, run_handles, limit_handles)
+    shaded = (
+        f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s"
+        if first.window
+        else ""
+    )
+    list(axes.values())[0].set_title("\n".join(t for t in (title, shaded) if t), fontsize=9)
+    return fig
+
+
+def _panels(runs: Sequence[RunCurves]):
+    """The figure and its panels by name (``tip``, ``w``, ``u``, ``q``), the window shaded."""
+    # matplotlib loads when a figure is drawn, not when a result is made
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    if not runs:
-        raise ValueError("nothing to draw: give at least one run")
     panels = (
         ["tip"] * any(r.tip_error is not None for r in runs)
         + ["w", "u"]
@@ -115,42 +137,31 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     fig = Figure(figsize=(8.0, 2.25 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = dict(zip(panels, np.atleast_1d(fig.subplots(len(panels), 1, sharex=True))))
-    first = runs[0]
-    for ax in axes.values():
-        if first.window is not None:
-            ax.axvspan(*first.window, color="0.9", zorder=0)
+    labels = {
+        "tip": "tip error (mm)",
+        "w": "link tip deflection (mm)",
+        "u": "torque (N m)",
+        "q": "joint angle (deg)",
+    }
+    window = runs[0].window
+    for key, ax in axes.items():
+        if window is not None:
+            ax.axvspan(*window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
-    run_handles = [_draw_run(axes, index, run, highlight) for index, run in enumerate(runs)]
-    limit_handles = _draw_limits(axes, first)
-    if "q" in axes and first.reference is not None:
-        _draw_reference(axes["q"], first)
-    _label(axes, runs, run_handles, limit_handles, first, title)
-    return fig
+        ax.set_ylabel(labels[key])
+    list(axes.values())[-1].set_xlabel("time (s)")
+    return fig, axes
 
 
-def _tip_scale(ax, errors: list[np.ndarray]) -> None:
-    """A log axis when the tip errors span more than two decades (down to 1e-7 of the peak).
+def _draw_run(axes, index: int, run: RunCurves, highlight: str | None):
+    """One run's curves in every panel; returns its legend handle."""
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
-    The move's metre-scale start and the residual window's micrometre ringing both stay
-    in view; only the dips of the zero crossings are cut.
-    """
-    positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
-    if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
-        ax.set_yscale("log")
-        ax.set_ylim(
-            bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max()))
-        )
-
-
-def _draw_run(axes: dict, index: int, run: RunCurves, highlight: str | None):
-    """One run's curves on every panel; its legend handle."""
-    from matplotlib.lines import Line2D
-
-    style = {
+    style: dict[str, Any] = {
         "color": f"C{index % 10}",
         "lw": 1.8 if run.label == highlight else 0.9,
-        "zorder": 1.5 if run.label == highlight else 2.0,
-    }  # the others stay visible over the worst
+        "zorder": 1.5 if run.label == highlight else 2.0,  # the others stay visible over it
+    }
     rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
     if "tip" in axes and run.tip_error is not None:
         axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
@@ -165,36 +176,29 @@ def _draw_run(axes: dict, index: int, run: RunCurves, highlight: str | None):
     return Line2D([], [], label=f"{run.label}{rms}", **style)
 
 
-def _draw_limits(axes: dict, first: RunCurves) -> list:
-    """The first run's torque limits; their legend handles."""
-    from matplotlib.lines import Line2D
+def _draw_limits(ax, limits: Sequence[float]) -> list:
+    """The finite torque limits (N m) as lines at plus and minus; returns their legend handles."""
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
-    limit_handles = []
-    for joint, limit in enumerate(first.torque_limits):
-        if math.isfinite(limit):
-            for sign in (1, -1):
-                axes["u"].axhline(
-                    sign * limit, color="k", ls=_LINK_STYLES[joint % 4], lw=0.6, alpha=0.7
-                )
-            limit_handles.append(
-                Line2D(
-                    [],
-                    [],
-                    color="k",
-                    ls=_LINK_STYLES[joint % 4],
-                    lw=0.6,
-                    label=f"limit joint {joint + 1}: ±{limit:g} N m",
-                )
-            )
-    return limit_handles
+    handles = []
+    for joint, limit in enumerate(limits):
+        if not math.isfinite(limit):
+            continue
+        ls = _LINK_STYLES[joint % 4]
+        for sign in (1, -1):
+            ax.axhline(sign * limit, color="k", ls=ls, lw=0.6, alpha=0.7)
+        label = f"limit joint {joint + 1}: ±{limit:g} N m"
+        handles.append(Line2D([], [], color="k", ls=ls, lw=0.6, label=label))
+    return handles
 
 
-def _draw_reference(ax, first: RunCurves) -> None:
-    """The first run's joint reference (deg)."""
-    from matplotlib.lines import Line2D
+def _draw_reference(ax, run: RunCurves) -> None:
+    """The joint reference (deg) dotted, with its legend."""
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
-    for joint in range(first.reference.shape[1]):
-        ax.plot(first.time, np.degrees(first.reference[:, joint]), color="k", ls=":", lw=0.8)
+    assert run.reference is not None
+    for joint in range(run.reference.shape[1]):
+        ax.plot(run.time, np.degrees(run.reference[:, joint]), color="k", ls=":", lw=0.8)
     ax.legend(
         handles=[Line2D([], [], color="k", ls=":", lw=0.8, label="reference")],
         fontsize=7,
@@ -202,34 +206,30 @@ def _draw_reference(ax, first: RunCurves) -> None:
     )
 
 
-def _label(axes: dict, runs, run_handles, limit_handles, first: RunCurves, title) -> None:
-    """Axis labels, legends and the title with the residual-vibration window."""
-    from matplotlib.lines import Line2D
+def _legends(axes, runs: Sequence[RunCurves], run_handles: list, limit_handles: list) -> None:
+    """The runs' legend on the top panel, the line styles' and the limits' on theirs."""
+    from matplotlib.lines import Line2D  # loaded when a figure is drawn
 
-    if "tip" in axes:
-        _tip_scale(axes["tip"], [r.tip_error for r in runs if r.tip_error is not None])
-    labels = {
-        "tip": "tip error (mm)",
-        "w": "link tip deflection (mm)",
-        "u": "torque (N m)",
-        "q": "joint angle (deg)",
-    }
-    for key, ax in axes.items():
-        ax.set_ylabel(labels[key])
     n_styles = max(run.deflections.shape[1] for run in runs)
     styles = [
         Line2D([], [], color="0.3", lw=0.9, ls=_LINK_STYLES[k % 4], label=f"link / joint {k + 1}")
         for k in range(n_styles)
     ]
-    top = list(axes.values())[0]
-    top.legend(handles=run_handles, fontsize=7, loc="best")
+    list(axes.values())[0].legend(handles=run_handles, fontsize=7, loc="best")
     axes["w"].legend(handles=styles, fontsize=6.5, loc="best", ncol=len(styles))
     if limit_handles:
         axes["u"].legend(handles=limit_handles, fontsize=6.5, loc="best", ncol=len(limit_handles))
-    list(axes.values())[-1].set_xlabel("time (s)")
-    shaded = (
-        f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s"
-        if first.window
-        else ""
-    )
-    list(axes.values())[0].set_title("\n".join(t for t in (title, shaded) if t), fontsize=9)
+
+
+def _tip_scale(ax, errors: list[np.ndarray]) -> None:
+    """A log axis when the tip errors span more than two decades (down to 1e-7 of the peak).
+
+    The move's metre-scale start and the residual window's micrometre ringing both stay
+    in view; only the dips of the zero crossings are cut.
+    """
+    positive = np.concatenate([e[e > 0] for e in errors]) if errors else np.array([])
+    if positive.size and positive.max() / max(np.percentile(positive, 5), 1e-12) > 100:
+        ax.set_yscale("log")
+        ax.set_ylim(
+            bottom=1e3 * max(float(np.percentile(positive, 1)), 1e-7 * float(positive.max()))
+        )

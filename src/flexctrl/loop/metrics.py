@@ -25,6 +25,24 @@ residual-vibration window
     Wall time of ``controller.step`` (s).
 ``fallbacks``, ``solver_failures``
     Counts reported by the controller.
+
+The verdicts of :func:`run_metrics`:
+
+``settled``
+    1 when the tip stays inside ``band`` to the end of a run that did not diverge;
+    otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
+    row of an unstable loop stays ok; ``inf`` would mark it failed).
+``final_tip_error``
+    Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
+``stable``
+    1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
+    in a saturated limit cycle does not diverge, but does not converge either).
+``divergence_time``
+    When the run diverged (s), else ``duration``.
+``closed_loop_radius``
+    The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
+``torque_limit_exceeded``
+    Whether any applied torque went beyond its joint's limit.
 """
 
 from __future__ import annotations
@@ -83,9 +101,8 @@ def closed_loop_metrics(
     if not np.any(window):
         raise ValueError(
             f"the residual-vibration window is empty: the run ends at {t[-1]:g} s but the window "
-            "starts at "
-            f"t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen the "
-            "scene's duration"
+            f"starts at t_arrive + settle_allowance = {t_arrive + settle_allowance:g} s; lengthen "
+            "the scene's duration"
         )
     torques = np.asarray(torques, dtype=float)
     times = np.asarray(controller_times, dtype=float)
@@ -107,8 +124,8 @@ def closed_loop_metrics(
     }
 
 
-# : Length (s) of the end of a run whose largest tip error decides ``stable`` (with the
-# ``stable_band``).
+#: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the
+#: ``stable_band``).
 FINAL_WINDOW = 1.0
 
 
@@ -129,24 +146,8 @@ def run_metrics(
 ) -> dict:
     """Every metric of one closed-loop run: :func:`closed_loop_metrics` and the verdicts.
 
-    Added to :func:`closed_loop_metrics`' figures:
-
-    ``settled``
-        1 when the tip stays inside ``band`` to the end of a run that did not diverge;
-        otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
-        row of an unstable loop stays ok; ``inf`` would mark it failed).
-    ``final_tip_error``
-        Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
-    ``stable``
-        1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
-        in a saturated limit cycle does not diverge, but does not converge either).
-    ``divergence_time``
-        When the run diverged (s), else ``duration``.
-    ``closed_loop_radius``
-        The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
-    ``torque_limit_exceeded``
-        Whether any applied torque went beyond its joint's limit.
-
+    The verdicts (``settled``, ``final_tip_error``, ``stable``, ``divergence_time``,
+    ``closed_loop_radius``, ``torque_limit_exceeded``) are defined in the module docstring.
     For a run stopped by a divergence before the residual window opens, the window
     shrinks to the last sample.
 
@@ -163,6 +164,7 @@ def run_metrics(
         ``controller.stats.summary()`` (``fallbacks``, ``status`` counts).
     step_times : s per controller step
     radius : float, optional
+        The linear verdict.
     """
     divergence = trajectory.meta.get("divergence")
     tip_target = np.asarray(tip_target, dtype=float)
@@ -187,14 +189,7 @@ def run_metrics(
             v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))
         ),
     )
-    metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
-    if not metrics["settled"]:
-        metrics["settling_time"] = float(duration)
-    error = np.linalg.norm(trajectory.tip - tip_target[None, :], axis=1)
-    final = trajectory.time >= trajectory.time[-1] - FINAL_WINDOW
-    metrics["final_tip_error"] = float(np.max(error[final]))
-    metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= stable_band)
-    metrics["divergence_time"] = float(duration) if divergence is None else divergence["time"]
+    _add_verdicts(metrics, trajectory, tip_target, duration=duration, stable_band=stable_band)
     if radius is not None:
         metrics["closed_loop_radius"] = radius
     limits = np.asarray(torque_limits, dtype=float)
@@ -204,9 +199,24 @@ def run_metrics(
     return metrics
 
 
+def _add_verdicts(
+    metrics: dict, trajectory, tip_target: np.ndarray, *, duration: float, stable_band: float
+) -> None:
+    """Add ``settled``, ``final_tip_error``, ``stable`` and ``divergence_time`` to ``metrics``."""
+    divergence = trajectory.meta.get("divergence")
+    metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
+    if not metrics["settled"]:
+        metrics["settling_time"] = float(duration)
+    error = np.linalg.norm(trajectory.tip - tip_target[None, :], axis=1)
+    final = trajectory.time >= trajectory.time[-1] - FINAL_WINDOW
+    metrics["final_tip_error"] = float(np.max(error[final]))
+    metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= stable_band)
+    metrics["divergence_time"] = float(duration) if divergence is None else divergence["time"]
+
+
 #: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists
-# : ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``,
-# ``peak_torque_2`` ...
+#: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``,
+#: ``peak_torque_2`` ...
 METRICS = (
     "tip_residual_rms",
     "tip_residual_peak",

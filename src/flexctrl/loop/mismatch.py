@@ -1,4 +1,4 @@
-"""Plant and design model apart: a controller's coordinates and sensors carried onto another plant."""
+"""Plant and design model apart: a controller's coordinates and sensors carried onto the plant."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import casadi as ca
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.linear import Sensors, state_names
 
 
 def state_projection(plant, design_names) -> np.ndarray:
-    """Matrix ``P`` (n_design x plant.n_x) with ``x_design = P x_plant``: coordinates matched by
-    name.
+    """Matrix ``P`` (n_design x plant.n_x), ``x_design = P x_plant``: coordinates matched by name.
 
     An assumed-modes rung keeps the first ``N`` clamped-mass modes of each link, the same
     functions at every ``N`` (a mode's shape and frequency do not depend on how many are
@@ -27,8 +27,6 @@ def state_projection(plant, design_names) -> np.ndarray:
         When a design coordinate the plant lacks is not an elastic one (different arms or
         a finite-element plant: its coordinates are nodal, not modal).
     """
-    from flexctrl.linear import state_names
-
     plant_names = state_names(plant)
     index = {name: i for i, name in enumerate(plant_names)}
     P = np.zeros((len(design_names), plant.n_x))
@@ -40,8 +38,8 @@ def state_projection(plant, design_names) -> np.ndarray:
         ):
             raise SpecError(
                 f"the full-state controller's coordinate '{name}' has no counterpart in the plant "
-                f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and "
-                "design models "
+                f"'{plant.name}' ({', '.join(plant.coordinate_names)}); allowed: plant and design "
+                "models "
                 "that are both assumed-modes ('rigid' or 'amm:N') of the same arm",
                 key="controller_fidelity",
             )
@@ -54,8 +52,6 @@ def plant_sensors(plant, design_sensors, q_joints):
     A full-state controller on a plant of another fidelity measures the plant's state
     projected on the design model's coordinates (:func:`state_projection`).
     """
-    from flexctrl.linear import Sensors
-
     if "state" in design_sensors.kinds:
         if plant.n_x == design_sensors.function.size1_in(0):
             return design_sensors

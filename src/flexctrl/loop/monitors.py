@@ -6,8 +6,10 @@ import math
 
 import numpy as np
 
-# : Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or
-# m/s).
+from flexctrl.sim.bound import BoundFunction
+
+#: Bounds beyond which the plant is declared diverged: |modal coordinate| (m), |rate| (rad/s or
+#: m/s).
 MODAL_BOUND = 10.0
 
 
@@ -15,7 +17,10 @@ RATE_BOUND = 1e4
 
 
 class LoopMonitor:
-    """``monitor(t, x) -> str | None`` of :func:`divergence_monitor`, and :meth:`flags` for many states at once."""
+    """``monitor(t, x) -> str | None`` of :func:`divergence_monitor`, and :meth:`flags`.
+
+    :meth:`flags` judges many states at once.
+    """
 
     def __init__(self, plant, arm, start_q, target_q, fraction: float, margin: float):
         self.n, self.N = plant.n_u, plant.n_q
@@ -31,7 +36,7 @@ class LoopMonitor:
         self.deflection = plant.functions["deflection"]
 
     def flags(self, X: np.ndarray) -> np.ndarray:
-        """For states ``X`` (rows): whether :meth:`__call__` objects to each (one mapped evaluation)."""
+        """For states ``X`` (rows): whether :meth:`__call__` objects to each (one mapped call)."""
         X = np.asarray(X, dtype=float)
         if not X.shape[0]:
             return np.zeros(0, dtype=bool)
@@ -45,14 +50,11 @@ class LoopMonitor:
         return self.verdict(np.array(self.deflection(x[: self.N])[0], dtype=float).ravel(), x)
 
     def for_run(self):
-        """This monitor as ``monitor(t, x)`` with its deflections through a buffer bound for one run
-        alone.
+        """This monitor as ``monitor(t, x)``, its deflections through a buffer bound for one run.
 
         The Python loop calls the monitor every sample; a bound call skips the DM conversions.
         One per run, so two runs in the threads of one Dask worker share no buffer.
         """
-        from flexctrl.sim.bound import BoundFunction
-
         deflection = BoundFunction(self.deflection)
         return lambda t, x: self.verdict(deflection(x[: self.N])[0].ravel(), x)
 
@@ -81,8 +83,7 @@ class LoopMonitor:
 def divergence_monitor(
     plant, arm, start_q, target_q, fraction: float, margin: float
 ) -> LoopMonitor:
-    """``monitor(t, x)`` for :func:`simulate_closed_loop`: link tip deflections and joint
-    excursions.
+    """``monitor(t, x)`` for the closed loop: link tip deflections and joint excursions.
 
     A link diverges when its tip deflection exceeds ``fraction`` of its length (m); a
     joint when it leaves the range of its move widened by ``margin`` (rad) on each side.

@@ -10,19 +10,21 @@ import numpy as np
 from flexctrl.dynamics.model import derived
 from flexctrl.dynamics.parametric import parametric, try_expand
 from flexctrl.sim.compile import compile_for, compile_function
+from flexctrl.sim.integrator import output_function
 from flexctrl.sim.rk4 import rk4_next, rk4_step_function
 
 #: Above this many plant steps per controller sample the step function is a CasADi ``mapaccum`` loop
-# : (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the
-# count).
+#: (compiles in constant time) instead of an unrolled chain (faster, but its C code grows with the
+#: count).
 UNROLL_LIMIT = 32
 
 
 def plant_step_function(
     model, substeps: int, f: ca.Function | None = None, n_constants: int = 0
 ) -> ca.Function:
-    """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of size ``h`` (s) with ``u`` held; X
-    is (n_x, substeps).
+    """``advance(x, u, h[, c]) -> (X)``: ``substeps`` RK4 steps of ``h`` (s) with ``u`` held.
+
+    ``X`` is (n_x, substeps).
 
     The steps are unrolled into one expression (compiled whole by :func:`advance_function`
     up to :data:`UNROLL_LIMIT` steps).  With ``f = fp(x, u, c)`` (the model's ``f`` with
@@ -64,18 +66,16 @@ def _name(text: str) -> str:
 def output_map(
     model, count: int, compile: bool | None = None, *, energies: bool = True
 ) -> ca.Function:
-    """``Y = outputs(X)`` over ``count`` states (columns) of
-    :func:`flexctrl.sim.integrator.output_function`, compiled.
+    """``Y = outputs(X)`` over ``count`` states (columns), compiled.
 
-    The rows of ``Y`` are the energies, tip and deflections (``energies=False``: the tip and
-    deflections alone, a tenth of the cost or less).  Compiled with the model's
-    constants as an input, one per use of a constant (one library per model shape, whatever
-    the configuration: :func:`flexctrl.dynamics.parametric.constants_as_parameters`), and mapped
-    with the model's constants; the compiled point Function is kept per model and rows, the map
-    per count too.  Its values can differ from the virtual
-    machine's in the last digits (fused multiply-adds), and the two row sets' tip and deflections
-    from each other's (about 1e-15 m here);
-    ``sampled.trajectory_from_states(..., compiled=False)`` keeps the VM.
+    The outputs are :func:`flexctrl.sim.integrator.output_function`'s: the rows of ``Y`` are
+    the energies, tip and deflections (``energies=False``: the tip and deflections alone, a
+    fraction of the cost).  Compiled with the model's constants as an input, one per use of
+    a constant (one library per model shape, whatever the configuration:
+    :func:`flexctrl.dynamics.parametric.constants_as_parameters`), and mapped with the
+    model's constants; the compiled point Function is kept per model and rows, the map per
+    count too.  Its values can differ from the virtual machine's in the last digits (fused
+    multiply-adds), and the two row sets' tip and deflections from each other's likewise.
     """
 
     def build():
@@ -87,20 +87,19 @@ def output_map(
 
 
 def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
-    """The compiled outputs ``y(x)`` of one state, the model's constants embedded; kept per model and rows."""
+    """The compiled outputs ``y(x)`` of one state, the model's constants embedded.
+
+    Kept per model and rows.
+    """
 
     def build():
-        from flexctrl.sim.integrator import output_function
-
         fun = output_function(model, energies)
         fp, constants = parametric(model, fun.name(), lambda: fun, per_use=True)
         if constants.size == 0:
             return compile_function(fun, enabled=compile).function
         # the constants embedded in a thin wrapper, then a plain map: a map with the constants as a
-        # reduced
-        # input (``map(..., [1], [])``) costs seconds to build for 48k columns (about 60 s for
-        # amm:5) and
-        # evaluates 5x slower, for the same values bit for bit
+        # reduced input (``map(..., [1], [])``) is far slower to build for many columns and slower
+        # to evaluate, for the same values bit for bit
         x = ca.MX.sym("x", model.n_x)
         compiled = compile_for(
             fp, "itself", lambda: fp, enabled=compile
@@ -111,18 +110,17 @@ def _output_point(model, compile: bool | None, energies: bool) -> ca.Function:
 
 
 def advance_function(model, substeps: int, compile: bool | None = None) -> tuple[ca.Function, bool]:
-    """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, compiled; and whether it
-    is.
+    """The plant's ``advance(x, u, h) -> (X)`` over one controller sample, and whether compiled.
 
     Up to :data:`UNROLL_LIMIT` steps: :func:`plant_step_function` compiled whole (the
     fastest per call).  Above (a fine plant step under a slow controller, e.g. ``amm:5``
-    at 38 us under a 10 ms LQR: 260 steps): ONE compiled RK4 step, chained by a CasADi
-    ``mapaccum`` loop in the virtual machine, so one library per model serves every
-    step count and step size (compiling ``amm:5``'s step takes about 13 s here, the
-    same as six unrolled steps).  Built once per model and step count
-    (:func:`flexctrl.dynamics.model.derived`); the compiled Function is kept with the lifted ``f``
-    (:func:`flexctrl.sim.compile.compile_for`), so a later configuration of the model shape wraps it
-    with its own constants without building it again.
+    at 38 us under a 10 ms LQR: 260 steps): one compiled RK4 step, chained by a CasADi
+    ``mapaccum`` loop in the virtual machine, so one library per model serves every step
+    count and step size (a large model's single step compiles as slowly as a few unrolled
+    ones).  Built once per model and step count (:func:`flexctrl.dynamics.model.derived`);
+    the compiled Function is kept with the lifted ``f``
+    (:func:`flexctrl.sim.compile.compile_for`), so a later configuration of the model shape
+    wraps it with its own constants without building it again.
     """
     return derived(
         model, ("advance", substeps, compile), lambda: _advance_function(model, substeps, compile)
@@ -155,7 +153,9 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
         )
         # the constants enter once per step; as a constant of this (uncompiled) loop they are stored
         # once
-        c = ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
+        c: ca.DM | list = (
+            ca.DM(np.tile(constants.reshape(-1, 1), (1, substeps))) if constants.size else []
+        )
         X = compiled.function.mapaccum(substeps)(
             x,
             ca.repmat(u, 1, substeps),
@@ -168,8 +168,7 @@ def _advance_function(model, substeps: int, compile: bool | None) -> tuple[ca.Fu
 
 
 def _single_step(model, fp: ca.Function, n_constants: int) -> ca.Function:
-    """``rk4(x, u, h[, c]) -> x_next``: one RK4 step; with ``c`` (``n_constants > 0``) named by the
-    sizes alone.
+    """``rk4(x, u, h[, c]) -> x_next``: one RK4 step; with ``c`` named by the sizes alone.
 
     With the constants as the input ``c`` the generated code is the same for every
     configuration of one model shape, so one library serves them all.

@@ -9,23 +9,23 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.linear import equilibrium
+from flexctrl.loop.compare_figure import compare
 from flexctrl.sim.trajectory import Trajectory
 
 
 def tip_at_rest(model, q_joints) -> np.ndarray:
-    """The tip position (m) of ``model``'s static equilibrium at the joint angles ``q_joints`` (rad)."""
-    from flexctrl.linear import equilibrium
+    """The tip position (m) of ``model``'s static equilibrium at the joint angles ``q_joints``.
 
-    target = equilibrium(model, np.asarray(q_joints, dtype=float))
+    ``q_joints`` in rad.
+    """
+    target = equilibrium(model, tuple(float(a) for a in q_joints))
     return np.array(model.functions["tip"](target.q, target.qd)[0], dtype=float).ravel()
 
 
 @dataclass
 class ClosedLoopResult:
-    """A closed-loop run: its trajectory, metrics, summary, figures and files.
-
-    Returned by :func:`flexctrl.closed_loop` and
-    :func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`.
+    """A closed-loop run: what :func:`flexctrl.closed_loop` and a closed-loop scene return.
 
     Attributes
     ----------
@@ -72,25 +72,21 @@ class ClosedLoopResult:
         return float(window[0]), float(window[1])
 
     def to_pandas(self):
-        """The trajectory as a ``pandas.DataFrame`` (the CSV's columns, SI units, indexed by time in s)."""
+        """The trajectory as a ``pandas.DataFrame``: the CSV's columns, SI, indexed by time (s)."""
         return self.trajectory.to_pandas()
 
     def plot(self, label: str | None = None):
-        """One figure: tip error, every link's tip deflection, torques with their limits, joint
-        angles.
+        """One figure: tip error, the links' tip deflections, torques and limits, joint angles.
 
         Returns
         -------
         matplotlib.figure.Figure
             Four panels sharing the time axis (s); the residual window is shaded.
         """
-        from flexctrl.loop.compare_figure import compare
-
         return compare({label or self.summary.get("controller", {}).get("kind", "run"): self})
 
     def save(self, directory: str | Path, *, plots: bool = True) -> list[Path]:
-        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) the PNGs into
-        ``directory``.
+        """Write ``trajectory.csv``, ``summary.json`` and (with ``plots``) PNGs into ``directory``.
 
         Returns the paths written (also kept in :attr:`files`).
         """

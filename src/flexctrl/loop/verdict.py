@@ -25,9 +25,11 @@ shares no code with the run.  Controllers without a linear law (NMPC) give None.
 
 from __future__ import annotations
 
+import control
 import numpy as np
 
 from flexctrl.errors import SpecError
+from flexctrl.linear import Linearizer, discretize, equilibrium
 
 
 def closed_loop_matrix(Ad, Bd, C, D, law) -> np.ndarray:
@@ -41,8 +43,9 @@ def closed_loop_matrix(Ad, Bd, C, D, law) -> np.ndarray:
 
 
 def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> float | None:
-    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q`` (see
-    the module docstring).
+    """Spectral radius of the sampled loop of ``controller`` on ``plant`` about ``target_q``.
+
+    The loop is the module docstring's map.
 
     Parameters
     ----------
@@ -61,21 +64,18 @@ def linear_closed_loop_radius(plant, controller, target_q, sensors=None) -> floa
     -------
     float or None
     """
-    import control
-
-    from flexctrl.linear import Linearizer, discretize, equilibrium
-
     law = getattr(controller, "linear_law", None)
     if law is None:
         return None
     sensors = controller.sensors if sensors is None else sensors
     if sensors.n_y != controller.sensors.n_y:
         raise SpecError(
-            f"the plant's sensors give {sensors.n_y} values, the controller reads {controller.sensors.n_y}",
+            f"the plant's sensors give {sensors.n_y} values, the controller reads "
+            f"{controller.sensors.n_y}",
             key="sensors",
         )
     q = np.asarray(target_q, dtype=float)
-    op = equilibrium(plant, q)
+    op = equilibrium(plant, tuple(q))
     A, B, C, D = Linearizer(plant, sensors).matrices(op)
     sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), controller.sample_time)
     Ad, Bd = np.asarray(sysd.A, dtype=float), np.asarray(sysd.B, dtype=float)

@@ -9,6 +9,7 @@ Running a whole scene with its files is :func:`flexctrl.scenes.run_arm_scene.run
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
+from flexctrl.sim import get_integrator
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.arm import ArmSpec, load_arm
 from flexctrl.spec.arm_scene import ArmScene
@@ -99,8 +102,6 @@ def initial_state(scene: ArmScene, model, arm: ArmSpec) -> np.ndarray:
     names = list(model.coordinate_names)
     for name, value in scene.qf0.items():
         if name not in names:
-            import difflib
-
             hint = difflib.get_close_matches(name, names[n:], n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
             raise SpecError(
@@ -123,8 +124,8 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     model
         The built model, when the caller has it (e.g. from a cache); built here otherwise.
     integrator
-        A set-up :class:`~flexctrl.sim.integrator.Integrator` for ``model`` at ``scene.dt``, when
-        the caller has one.
+        A set-up :class:`~flexctrl.sim.integrator.Integrator` for ``model`` at ``scene.dt``,
+        when the caller has one.
     **integrator_options
         Passed to the integrator class (e.g. ``compile=False``).
 
@@ -132,9 +133,6 @@ def simulate_arm_scene(scene: ArmScene, *, model=None, integrator=None, **integr
     -------
     (Trajectory, Model, ArmSpec)
     """
-    from flexctrl.dynamics.build import build_model
-    from flexctrl.sim import get_integrator
-
     arm = scene_arm(scene)
     reference_q = scene.q0 if scene.q0 is not None else None
     if reference_q is not None and len(reference_q) != arm.n_links:

@@ -1,4 +1,4 @@
-"""The linear estimate of a closed loop's plant rungs, for the estimate-first walk (issue 14).
+"""The linear estimate of a closed loop's plant rungs, for the estimate-first walk.
 
 :func:`linear_closed_rung` runs the scene's closed loop with the plant at a rung
 replaced by its linearisation: the rung's model linearised at its static equilibrium
@@ -15,8 +15,8 @@ The controller is the real one (designed as for the nonlinear runs, its saturati
 and constraints kept), called on the linear plant's measurements; controllers with a
 sampled law run in one CasADi call (:mod:`flexctrl.loop.compiled`), others sample by
 sample.  The tip is the model's nonlinear tip map of the linear states on the grid.
-A run costs milliseconds to a second against seconds for the nonlinear loop; it is an
-estimate to pick the rung to certify, never a certificate.
+A run costs a fraction of the nonlinear loop; it is an estimate to pick the rung to
+certify, never a certificate.
 """
 
 from __future__ import annotations
@@ -30,8 +30,12 @@ import numpy as np
 from scipy.linalg import expm
 
 from flexctrl.fidelity.ladder import RunRecord
+from flexctrl.linear import Linearizer, equilibrium
+from flexctrl.loop.run_state import LoopRun
+from flexctrl.loop.sampled import run_samples, tip_positions
 from flexctrl.scenes.cache import SceneCache, read_only
 from flexctrl.scenes.loop_setup import build_loop
+from flexctrl.spec.fidelity import parse_fidelity
 
 #: How a linear rung is advanced over the grid step: RK4 at the rung's step, or exactly.
 LINEAR_STEPS = ("rk4", "exact")
@@ -40,8 +44,7 @@ LINEAR_STEPS = ("rk4", "exact")
 def grid_maps(
     A: np.ndarray, B: np.ndarray, grid: float, h: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step ``grid`` (s),
-    ``du`` held.
+    """``(Phi, Gamma)`` of ``dx_{j+1} = Phi dx_j + Gamma du`` over one grid step (s), ``du`` held.
 
     ``h`` None: the exact zero-order hold.  Otherwise ``grid / h`` (a whole number) RK4
     steps of ``h`` on ``dx' = A dx + B du``: one step is ``dx + h T(hA) (A dx + B du)``
@@ -73,7 +76,7 @@ def grid_maps(
 def linear_advance(
     x_op: np.ndarray, u_op: np.ndarray, Phi: np.ndarray, Gamma: np.ndarray, substeps: int
 ) -> ca.Function:
-    """``advance(x, u, dt) -> X`` (n_x, substeps): the linear plant's grid states over one held sample."""
+    """``advance(x, u, dt) -> X`` (n_x, substeps): the linear plant's states over a held sample."""
     n = x_op.size
     P, G = [np.eye(n)], [np.zeros_like(Gamma)]
     for _ in range(substeps):
@@ -95,8 +98,9 @@ def linear_closed_rung(
     overrides=(),
     cache: SceneCache | None = None,
 ) -> RunRecord:
-    """The scene's closed loop on the linearised plant at ``fidelity`` (module docstring), on the
-    scene's grid.
+    """The scene's closed loop on the linearised plant at ``fidelity``, on the scene's grid.
+
+    The method is the module docstring's.
 
     Parameters
     ----------
@@ -115,10 +119,6 @@ def linear_closed_rung(
         (the grid step when exact); ``wall_time_s`` the whole estimate (linearising,
         discretising and the loop).
     """
-    from flexctrl.linear import Linearizer, equilibrium
-    from flexctrl.loop.compiled import run_compiled
-    from flexctrl.loop.sampled import LoopRun, tip_positions
-
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
     grid = float(scene.plant.dt)
@@ -126,9 +126,8 @@ def linear_closed_rung(
     plant, ctrl = setup.plant, setup.controller
     build = time.perf_counter() - start
     op = equilibrium(plant, scene.target_q)
-    A, B = Linearizer(plant, setup.sensors).matrices(op)[
-        :2
-    ]  # the loop's sensors: its verdict reuses them
+    # linearised with the loop's sensors: the loop's verdict reuses the linearisation
+    A, B = Linearizer(plant, setup.sensors).matrices(op)[:2]
     Phi, Gamma = grid_maps(A, B, grid, h)
     Ts = ctrl.sample_time
     substeps = int(round(Ts / grid))
@@ -139,26 +138,15 @@ def linear_closed_rung(
         plant,
         ctrl,
         setup.sensors,
-        None,
-        None,
-        grid,
-        substeps,
-        1,
-        int(math.ceil(scene.plant.duration / Ts - 1e-9)),
         advance,
         setup.x0,
+        dt=grid,
+        substeps=substeps,
+        stride=1,
+        n_samples=int(math.ceil(scene.plant.duration / Ts - 1e-9)),
     )
-    run.python_sample(0)
-    law = ctrl.sampled_law() if run.divergence is None else None
-    if law is not None:
-        run_compiled(run, law)
-    else:
-        for k in range(run.done, run.n_samples):
-            if run.divergence is not None or run.python_sample(k):
-                break
-    X, U = run.X[: run.end], run.U[: run.end]
-    U[-1] = run.u
-    t = np.arange(X.shape[0]) * grid
+    run_samples(run)
+    t, X, U = run.kept()
     tip = tip_positions(plant, X, scene.plant.solver.get("compile"))
     times, tip, torque = read_only(t, tip, U.copy())
     diverged = None if run.divergence is None else float(run.divergence["time"])
@@ -177,8 +165,9 @@ def linear_closed_rung(
 
 
 def loop_at(scene, fidelity: str, controller, overrides, cache: SceneCache):
-    """The scene's loop with the plant at ``fidelity`` on the scene's grid step (models and design from ``cache``)."""
-    from flexctrl.spec.fidelity import parse_fidelity
+    """The scene's loop with the plant at ``fidelity`` on the scene's grid step.
 
+    Models and design come from ``cache``.
+    """
     plant_scene = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity))
     return build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)

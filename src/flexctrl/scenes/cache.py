@@ -1,5 +1,4 @@
-"""An explicit cache for scene runs: models, reference tables, set-up integrators, runs and fidelity
-choices.
+"""An explicit cache for scene runs: models, references, integrators, runs and fidelity choices.
 
 Building a model (symbolic derivation, modes, compilation) costs far more than most
 runs, and a study worker or a fidelity chooser runs many scenes on the same arm.  What
@@ -19,6 +18,8 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Any
+
+from flexctrl.spec.arm_scene import Modes
 
 
 class SceneCache:
@@ -50,15 +51,18 @@ class SceneCache:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
                 raise ValueError(f"{name} {size!r} is not allowed; allowed: a whole number >= 1")
         self.maxsize = maxsize
-        # : entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the
-        # most memory)
+        #: entries kept per kind where it differs from ``maxsize`` (kinds that hold models hold the
+        #: most memory)
         self.limits = dict(limits or {})
-        self._stores: dict[str, OrderedDict] = {}
+        self._stores: dict[str, OrderedDict[Hashable, Any]] = {}
         self._hits: dict[str, int] = {}
         self._misses: dict[str, int] = {}
 
     def get(self, kind: str, key: Hashable, build: Callable[[], Any]) -> Any:
-        """The entry ``key`` of ``kind``, built by ``build()`` the first time (an exception is not kept)."""
+        """The entry ``key`` of ``kind``, built by ``build()`` the first time.
+
+        An exception raised by ``build()`` is not kept.
+        """
         store = self._stores.setdefault(kind, OrderedDict())
         if key in store:
             store.move_to_end(key)
@@ -72,8 +76,9 @@ class SceneCache:
         return value
 
     def keep(self, kind: str, key: Hashable, value: Any, limit: int = 1) -> None:
-        """Keep ``value`` under ``key`` for one :meth:`take`, at most ``limit`` entries of ``kind``
-        (oldest dropped).
+        """Keep ``value`` under ``key`` for one :meth:`take`; ``limit`` entries of ``kind`` at most.
+
+        The oldest is dropped beyond ``limit``.
 
         For large things worth reusing once, such as a whole run the next call will ask for.
 
@@ -90,14 +95,15 @@ class SceneCache:
 
     def take(self, kind: str, key: Hashable) -> Any:
         """The value :meth:`keep` left under ``key`` (removed), or None."""
-        value = self._stores.get(kind, {}).pop(key, None)
+        store = self._stores.get(kind)
+        value = None if store is None else store.pop(key, None)
         counts = self._hits if value is not None else self._misses
         counts[kind] = counts.get(kind, 0) + 1
         return value
 
     def drop(self, kind: str, keep: Hashable | None = None) -> None:
         """Forget every entry of ``kind`` but ``keep``."""
-        store = self._stores.get(kind, {})
+        store = self._stores.get(kind, OrderedDict())
         for key in [k for k in store if k != keep]:
             del store[key]
 
@@ -105,10 +111,11 @@ class SceneCache:
         self,
         arm,
         fidelity: str,
-        modes: str = "frozen",
+        modes: Modes = "frozen",
         reference_q: tuple[float, ...] | None = None,
     ):
-        """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, built once here."""
+        """:func:`flexctrl.dynamics.build.build_model` of a (hashable) arm description, once."""
+        # the model code loads when a model is first asked for: a SceneCache itself is light
         from flexctrl.dynamics.build import build_model
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
@@ -123,19 +130,21 @@ class SceneCache:
         self,
         arm,
         fidelity: str,
-        modes: str,
+        modes: Modes,
         reference_q,
         path,
         deflection: str,
         compile: bool | None = False,
     ):
-        """A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of ``path`` on
-        :meth:`model`'s model, built once.
+        """The reference trajectory of ``path`` on :meth:`model`'s model, built once.
+
+        A :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`.
 
         Keyed on the model's description, the joint path and the deflection (plain data), so
         the controllers designed on one model for one move share its tables (one per sample
         time): a table is a pure function of those and the sample time.
         """
+        # the control layer loads when a reference is first asked for
         from flexctrl.control.reference_trajectory import ReferenceTrajectory
 
         reference_q = None if reference_q is None else tuple(float(a) for a in reference_q)
@@ -152,13 +161,14 @@ class SceneCache:
         self,
         arm,
         fidelity: str,
-        modes: str,
+        modes: Modes,
         reference_q,
         integrator: str,
         dt: float,
         solver: tuple[tuple[str, Any], ...] = (),
     ):
         """A set-up integrator on :meth:`model`'s model and its setup time (s)."""
+        # the integrators load when one is first asked for
         from flexctrl.sim import get_integrator
 
         def build():

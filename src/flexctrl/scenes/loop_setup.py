@@ -1,5 +1,4 @@
-"""Building a closed loop from a scene: plant and design models, the designed controller, its
-reference.
+"""Building a closed loop from a scene: plant and design models, the controller, its reference.
 
 :func:`build_loop` is the one place a closed-loop scene becomes objects: the plant
 (the scene's arm at the plant's fidelity), the design model (another payload, fidelity
@@ -20,17 +19,20 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.control import design
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import FlexctrlError, SolverError, SpecError
+from flexctrl.linear import equilibrium
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.sampled import integrate_closed_loop, tip_positions
 from flexctrl.scenes.arm_setup import initial_state, scene_arm
 from flexctrl.scenes.cache import SceneCache
+from flexctrl.spec.controller_reader import load_controller
+from flexctrl.spec.fidelity import parse_fidelity
 
-# : The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene
-# names no
-#: ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
+#: The model a controller is designed on when the plant is ``fidelity = "auto"`` and the scene names
+#: no ``controller_fidelity``: the quickstart's plant and design model (two modes per link).
 AUTO_DESIGN_FIDELITY = "amm:2"
 
 
@@ -41,8 +43,6 @@ def pin_design(scene):
     designed on ``controller_fidelity``, or :data:`AUTO_DESIGN_FIDELITY` when the scene
     gives none.  Other scenes are returned unchanged.
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     if scene.plant.fidelity.kind != "auto" or scene.controller_fidelity is not None:
         return scene
     return dataclasses.replace(scene, controller_fidelity=parse_fidelity(AUTO_DESIGN_FIDELITY))
@@ -50,7 +50,7 @@ def pin_design(scene):
 
 @dataclass
 class LoopSetup:
-    """Everything a closed-loop run needs, built by :func:`build_loop` (see :func:`run_closed_loop_scene`)."""
+    """Everything a closed-loop run needs, built by :func:`build_loop`."""
 
     scene: Any
     plant_scene: Any
@@ -68,27 +68,24 @@ class LoopSetup:
     x0: np.ndarray
     monitor: Any
     build_time_s: float
-    # : What the designed controller depends on (the key of ``cache``'s "designs"; None for a
-    # designed controller).
+    #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a
+    #: designed controller).
     design_key: Any = None
 
 
 def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
-    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset, tracking
-    the scene's path.
+    """Design ``settings`` on ``design_model`` at the scene's design configuration, reset.
 
-    ``reference``: the :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the
-    scene's path on ``design_model`` when the caller keeps one
-    (:meth:`~flexctrl.scenes.cache.SceneCache.reference`); else built here.
+    The controller tracks the scene's path: ``reference``, the
+    :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` of the path on
+    ``design_model`` when the caller keeps one
+    (:meth:`~flexctrl.scenes.cache.SceneCache.reference`), else one built here.
 
     Raises
     ------
     SolverError
         When the design fails numerically (named with the controller file and the configuration).
     """
-    from flexctrl.control import design
-    from flexctrl.linear import equilibrium
-
     design_q = tuple(scene.design_configuration)
     op = equilibrium(design_model, design_q)
     where = "the target" if scene.design_q is None else "the design configuration"
@@ -111,11 +108,16 @@ def design_scene_controller(scene, design_model, settings, path: str | Path, ref
 
 
 def is_designed(controller) -> bool:
-    """True for a designed controller object (it has ``step`` and ``sensors``), False for a file path or None."""
+    """True for a designed controller (with ``step`` and ``sensors``), False for a path or None."""
     return hasattr(controller, "step") and hasattr(controller, "sensors")
 
 
-def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = None) -> LoopSetup:
+def build_loop(
+    scene,
+    controller=None,
+    overrides=(),
+    cache: SceneCache | None = None,
+) -> LoopSetup:
     """Build plant and design models (kept in ``cache``), design the controller, set its reference.
 
     ``scene`` must have a concrete plant fidelity (resolve ``auto`` first).  ``controller``
@@ -130,8 +132,8 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
     only in the plant (payload, fidelity, step, noise) design once.  Its reference
     trajectory is kept in ``cache`` ("references") under the design model's description,
     the path and the deflection, so every controller designed on one model for one move
-    shares its tables.  The reference's Newton iteration is compiled as the plant's
-    ``solver.compile`` says (compiled unless switched off).
+    shares its tables; the tables are compiled as the plant's ``solver.compile`` says
+    (compiled unless switched off).
     """
     cache = SceneCache() if cache is None else cache
     start = time.perf_counter()
@@ -152,20 +154,13 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
             key="target.q",
         )
     plant = cache.model(arm, str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0)
-    if designed:
-        design = _designed_in_python(scene, controller, overrides, plant)
-    else:
-        design = _designed_from_file(scene, path, overrides, arm, plant, cache)
+    design = (
+        _designed_in_python(scene, controller, overrides, plant)
+        if designed
+        else _designed_from_file(scene, path, overrides, cache, arm, plant)
+    )
     ctrl = design.controller
     sensors = ctrl.sensors if design.same else plant_sensors(plant, ctrl.sensors, design.q)
-    monitor = divergence_monitor(
-        plant,
-        arm,
-        scene.start_q,
-        scene.target_q,
-        scene.divergence_deflection,
-        scene.divergence_angle,
-    )
     return LoopSetup(
         scene,
         plant_scene,
@@ -181,15 +176,22 @@ def build_loop(scene, controller=None, overrides=(), cache: SceneCache | None = 
         scene.joint_reference(),
         sensors,
         initial_state(plant_scene, plant, arm),
-        monitor,
+        divergence_monitor(
+            plant,
+            arm,
+            scene.start_q,
+            scene.target_q,
+            scene.divergence_deflection,
+            scene.divergence_angle,
+        ),
         time.perf_counter() - start,
         design.key,
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Design:
-    """The controller of a loop and what it was designed on (:func:`build_loop`)."""
+    """A designed controller, reset and tracking the scene's path, and what it was designed on."""
 
     controller: Any
     settings: Any
@@ -197,33 +199,32 @@ class _Design:
     arm: Any
     fidelity: Any
     q: tuple[float, ...]
-    same: bool  # designed on the plant itself (its sensors are the plant's)
+    #: Whether the design model is the plant (then the controller's own sensors read it).
+    same: bool
     key: Any = None
 
 
 def _designed_in_python(scene, ctrl, overrides, plant) -> _Design:
-    """A controller from :func:`flexctrl.design`, set to track the scene's path."""
+    """A controller from :func:`flexctrl.design`, set to track the scene's path on its own model."""
     design_model = _design_model_of(ctrl, scene, overrides)
     ctrl.set_reference(ReferenceTrajectory(design_model, scene.joint_reference(), scene.deflection))
     ctrl.reset()
     return _Design(
-        ctrl,
-        ctrl.settings,
-        design_model,
-        design_model.spec,
-        design_model.fidelity,
-        tuple(float(a) for a in ctrl.op.joints),
-        design_model is plant,
+        controller=ctrl,
+        settings=ctrl.settings,
+        model=design_model,
+        arm=design_model.spec,
+        fidelity=design_model.fidelity,
+        q=tuple(float(a) for a in ctrl.op.joints),
+        same=design_model is plant,
     )
 
 
-def _designed_from_file(scene, path, overrides, arm, plant, cache: SceneCache) -> _Design:
-    """The controller file's design at the scene's design point, kept in ``cache``."""
-    from flexctrl.spec.controller_reader import load_controller
-
+def _designed_from_file(scene, path, overrides, cache: SceneCache, arm, plant) -> _Design:
+    """The controller file's design on the scene's design model, kept in ``cache`` and reset."""
     plant_scene = scene.plant
     settings = load_controller(path, overrides)
-    compile_reference = plant_scene.solver.get("compile")
+    compile = plant_scene.solver.get("compile")
     design_arm = arm if scene.design_payload is None else arm.with_payload(scene.design_payload)
     design_fidelity = scene.controller_fidelity or plant_scene.fidelity
     design_q = tuple(scene.design_configuration)
@@ -243,18 +244,21 @@ def _designed_from_file(scene, path, overrides, arm, plant, cache: SceneCache) -
         plant_scene.modes,
         plant_scene.q0 if same else design_q,
     )
-    path_key = (scene.joint_reference(), scene.deflection, compile_reference)
-    design_key = (*model_key, design_q, settings, *path_key)
-
-    def design():
-        reference = cache.reference(*model_key, *path_key)
-        return design_scene_controller(scene, design_model, settings, path, reference)
-
-    ctrl = cache.get("designs", design_key, design)
-    ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
-    return _Design(
-        ctrl, settings, design_model, design_arm, design_fidelity, design_q, same, design_key
+    path_ref = scene.joint_reference()
+    key = (*model_key, design_q, settings, path_ref, scene.deflection, compile)
+    ctrl = cache.get(
+        "designs",
+        key,
+        lambda: design_scene_controller(
+            scene,
+            design_model,
+            settings,
+            path,
+            cache.reference(*model_key, path_ref, scene.deflection, compile),
+        ),
     )
+    ctrl.reset()  # a design kept from an earlier run starts afresh (its reference table is kept)
+    return _Design(ctrl, settings, design_model, design_arm, design_fidelity, design_q, same, key)
 
 
 def _design_model_of(ctrl, scene, overrides):
@@ -267,8 +271,7 @@ def _design_model_of(ctrl, scene, overrides):
         if value is not None:
             raise SpecError(
                 "does not apply to a controller designed in Python (it keeps its own design "
-                "model); "
-                "allowed: no such key, or a controller file",
+                "model); allowed: no such key, or a controller file",
                 source=scene.source,
                 key=key,
             )
@@ -298,30 +301,25 @@ def closed_loop_tip_path(
     stride: int = 1,
     cache: SceneCache | None = None,
     keep: bool = False,
-    loop: str = "auto",
 ) -> dict[str, Any]:
-    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques
-    only.
+    """The closed loop with the plant at ``fidelity`` and RK4 step ``dt`` (s): tip path and torques.
 
     Used by :func:`flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`.  A
     diverging run stops there (``diverged_at``, s).  The scene's ``controller_fidelity``
-    (the design model) is kept, so only the plant changes with ``fidelity``.  ``loop``: as in
-    :func:`~flexctrl.loop.sampled.integrate_closed_loop` (``"python"`` holds one sample's
-    substeps in memory, the compiled loop the whole run's).
+    (the design model) is kept, so only the plant changes with ``fidelity``.
 
     Returns
     -------
     dict
         ``time`` (s), ``tip`` (m, shape (T, 2)) and ``torque`` (N m, (T, n_u)) every
         ``stride`` plant steps; ``wall_time_s`` (the loop), ``build_time_s`` (models,
-        design, compiling or loading the plant's step),
-        ``omega_max`` (rad/s), ``diverged_at`` (s or None); with ``keep``, also ``run``: the
-        whole run at the plant rate (``t``, ``X``, ``U``, ``meta`` of
-        :func:`~flexctrl.loop.sampled.integrate_closed_loop` and the controller's ``stats``),
-        integrated with stride 1 and subsampled, which keeps every other value the same.
+        design, compiling or loading the plant's step), ``omega_max`` (rad/s),
+        ``diverged_at`` (s or None); with ``keep``, also ``run``: the whole run at the
+        plant rate (``t``, ``X``, ``U``, ``meta`` of
+        :func:`~flexctrl.loop.sampled.integrate_closed_loop` and the controller's
+        ``stats``), integrated with stride 1 and subsampled, which keeps every other value
+        the same.
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     fid = parse_fidelity(fidelity, key="fidelity")
     plant_scene = dataclasses.replace(scene.plant, fidelity=fid, dt=float(dt))
     setup = build_loop(dataclasses.replace(scene, plant=plant_scene), controller, overrides, cache)
@@ -338,7 +336,6 @@ def closed_loop_tip_path(
         monitor=setup.monitor,
         stop_on_divergence=True,
         stride=1 if keep else stride,
-        loop=loop,
     )
     whole = (
         {"t": t, "X": X, "U": U, "meta": meta, "stats": copy.deepcopy(setup.controller.stats)}

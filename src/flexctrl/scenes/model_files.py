@@ -6,6 +6,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
+from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
 from flexctrl.spec.arm import arm_from_document
@@ -62,7 +63,9 @@ def load_model(
     Examples
     --------
     >>> import flexctrl as fc
-    >>> model = fc.load_model("models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0])
+    >>> model = fc.load_model(
+    ...     "models/subedi3link.toml", payload=2.0, fidelity="rigid", gravity=[0.0, 0.0]
+    ... )
     >>> model.n_x, model.spec.payload.mass
     (6, 2.0)
     """
@@ -87,6 +90,4 @@ def load_model(
         )
     document = apply_values(document, values, source=f"{source} (arguments)")
     arm = arm_from_document(document, f"{source} (arguments)" if values else source)
-    from flexctrl.dynamics.build import build_model
-
     return build_model(arm, fidelity, modes=modes, reference_q=reference_q, damping=damping)

@@ -22,13 +22,13 @@ from flexctrl.scenes.auto import choose_fidelity, prepared
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.sim.trajectory import jsonable
 from flexctrl.spec.arm_scene import ArmScene
+from flexctrl.spec.fidelity import parse_fidelity
 
 
 def resolve_auto(
     scene: ArmScene, cache: SceneCache | None = None, **options: Any
 ) -> tuple[ArmScene, Any]:
-    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step, and the
-    choice.
+    """For ``fidelity = "auto"``: the scene at the chosen fidelity, integrator and step; the choice.
 
     Runs :func:`flexctrl.scenes.auto.choose_fidelity` with the scene's
     ``tolerance`` and ``options`` (keywords of ``choose_fidelity``, e.g. ``top``;
@@ -83,8 +83,6 @@ def run_arm_scene(
     **integrator_options
         Passed to the integrator (e.g. ``compile=False``, ``cache_dir``).
     """
-    from flexctrl.spec.fidelity import parse_fidelity
-
     if fidelity is not None:
         scene = dataclasses.replace(scene, fidelity=parse_fidelity(fidelity, source="--fidelity"))
     requested = scene

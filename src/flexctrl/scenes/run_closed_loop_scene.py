@@ -15,7 +15,11 @@ A run that leaves the divergence bounds (:mod:`flexctrl.loop.monitors`) stops th
 the time and the bound (``on_divergence="raise"``, ``flexctrl simulate``), or records it
 (``"record"``, the study executor): metrics ``stable = 0`` and ``divergence_time``
 (s), the other metrics over the run up to then, so a study row stays ``ok`` and a
-stability map is a map of the ``stable`` column.
+stability map is a map of the ``stable`` column.  When the divergence comes before the
+residual-vibration window opens, the window is the last plant sample.  Stable runs report
+``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip that never settles
+into the band reports ``settled = 0`` and ``settling_time`` = the duration (finite:
+:func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
 """
 
 from __future__ import annotations
@@ -28,12 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import SpecError
 from flexctrl.fidelity.ladder import check_tolerance
-from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.closed_loop import check_on_divergence
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
+from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop, trajectory_from_states
 from flexctrl.loop.verdict import linear_closed_loop_radius
+from flexctrl.scenes.arm_setup import scene_arm
 from flexctrl.scenes.auto_closed_loop import (
     WHOLE_RUNS,
     check_closed_loop_auto,
@@ -41,14 +46,15 @@ from flexctrl.scenes.auto_closed_loop import (
     whole_run_key,
 )
 from flexctrl.scenes.cache import SceneCache
-from flexctrl.scenes.loop_setup import build_loop, pin_design
+from flexctrl.scenes.loop_setup import LoopSetup, build_loop, pin_design
+from flexctrl.sim.rk4 import rk4_step
+from flexctrl.spec.fidelity import parse_fidelity
 
 
 def resolve_auto(
     scene, controller=None, overrides=(), cache: SceneCache | None = None, **options: Any
 ):
-    """For a plant with ``fidelity = "auto"``: the scene with the chosen plant fidelity and step,
-    and the choice.
+    """For an ``auto`` plant: the scene at the chosen plant fidelity and step, and the choice.
 
     The design model is pinned first (:func:`pin_design`); the choice is
     :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` with the
@@ -68,12 +74,11 @@ def resolve_auto(
 
 
 def apply_choice(scene, choice, cache: SceneCache):
-    """The auto scene run at a choice made for another run (a study's shared choice): the chosen
-    rung, with
-    the RK4 step the chooser's rule gives this scene's own model at that rung (:func:`~flexctrl.sim.rk4.rk4_step`)."""
-    from flexctrl.scenes.arm_setup import scene_arm
-    from flexctrl.sim.rk4 import rk4_step
+    """The auto scene run at a choice made for another run (a study's shared choice).
 
+    The chosen rung, with the RK4 step the chooser's rule gives this scene's own model at
+    that rung (:func:`~flexctrl.sim.rk4.rk4_step`).
+    """
     scene = pin_design(scene)
     model = cache.model(
         scene_arm(scene.plant), str(choice.choice), scene.plant.modes, scene.plant.q0
@@ -95,45 +100,34 @@ def run_closed_loop_scene(
     on_divergence: str = "raise",
     auto_options: dict[str, Any] | None = None,
     cache: SceneCache | None = None,
-    loop: str = "auto",
     choice=None,
 ) -> ClosedLoopResult:
-    """Build plant and controller for a closed-loop scene, run it and (with ``out``) write its
-    files.
+    """Build a closed-loop scene's plant and controller, run it and (with ``out``) write its files.
 
     Parameters
     ----------
     scene : ClosedLoopScene
-    out
+        From :func:`flexctrl.load_scene`.
+    out : str or Path, optional
         Folder for ``trajectory.csv``, ``summary.json`` (with a ``metrics`` object) and PNGs.
-    controller
+    controller : str or Path or Controller, optional
         Controller file (default: the scene's ``controller``), or a controller designed in
         Python (:func:`flexctrl.design`; see :func:`flexctrl.scenes.loop_setup.build_loop`).
-    fidelity
+    fidelity : str, optional
         Plant fidelity override (``--fidelity``); ``"auto"`` chooses it (below).
     plots : bool, optional
-        Write the PNGs with ``out`` (default: the scene's ``plots``).
-    overrides
+        Override the scene's ``outputs.plots``.
+    overrides : sequence of str
         ``KEY=VALUE`` overrides of the controller file.
     on_divergence : {"raise", "record"}
         What a diverging run does (see the module docstring): raise
         :class:`~flexctrl.errors.SimulationError`, or stop and record ``stable = 0``
-        and ``divergence_time`` (s) among the metrics.  For such a run every other
-        metric covers the run up to the divergence; when that comes before the
-        residual-vibration window opens, the window is the last plant sample.  Stable
-        runs report ``stable = 1`` and ``divergence_time`` = the scene's duration.  A tip
-        that never settles into the band reports ``settled = 0`` and ``settling_time`` =
-        the duration (finite: :func:`flexctrl.loop.metrics.settling_time` gives ``inf``).
-    auto_options
+        and ``divergence_time`` (s) among the metrics.
+    auto_options : dict, optional
         Keywords of :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
         (``top``, ``reference``, ``safety``, ...) for a plant with ``fidelity = "auto"``.
     cache : SceneCache, optional
         Models, designs, verdicts, fidelity runs and choices to reuse (a fresh one when None).
-    loop : {"auto", "compiled", "python"}
-        How the samples run (:func:`flexctrl.loop.sampled.simulate_closed_loop`): in one
-        CasADi call for the controllers that allow it (``"auto"``), or one Python
-        iteration per sample (``"python"``: only one sample's plant steps in memory at a
-        time, for plants whose fine step makes a whole run's states too many to hold).
     choice : FidelityChoice, optional
         For a plant with ``fidelity = "auto"``: a choice made for another run (a study's
         shared choice, :mod:`flexctrl.study.shared_choice`) used instead of choosing
@@ -148,73 +142,64 @@ def run_closed_loop_scene(
     -----
     With ``fidelity = "auto"`` (scene or override) and the scene's ``tolerance`` (m),
     the controller is designed on ``controller_fidelity`` (default
-    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4 step are
-    chosen by :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity` (kept in ``cache`` by
-    everything that changes the loop), and the run uses them.  The summary then holds
-    ``"fidelity_choice"`` (the choice and all its evidence) and the metrics ``chosen_modes`` (modes
-    per link of the chosen plant, 0 = rigid), ``chosen_dt`` (s), ``estimated_error`` and
-    ``reference_error`` (m), ``choice_cost_ratio`` (the choice's loop wall time over the
-    reference's) and ``choice_time_s`` (time this call spent choosing, s: milliseconds when the
-    choice was cached).
+    :data:`flexctrl.scenes.loop_setup.AUTO_DESIGN_FIDELITY`), the plant fidelity and RK4
+    step are chosen by :func:`~flexctrl.scenes.auto_closed_loop.choose_closed_loop_fidelity`
+    (kept in ``cache`` by everything that changes the loop), and the run uses them.  The
+    summary then holds ``"fidelity_choice"`` (the choice and all its evidence) and the
+    metrics ``chosen_modes`` (modes per link of the chosen plant, 0 = rigid), ``chosen_dt``
+    (s), ``estimated_error`` and ``reference_error`` (m), ``choice_cost_ratio`` (the
+    choice's loop wall time over the reference's) and ``choice_time_s`` (time this call
+    spent choosing, s: milliseconds when the choice was cached).
     """
-    if on_divergence not in ("raise", "record"):
-        raise SpecError(
-            f"value {on_divergence!r} is not allowed; allowed: 'raise', 'record'",
-            key="on_divergence",
-        )
-    scene = _with_fidelity(scene, fidelity)
+    check_on_divergence(on_divergence)
+    requested = _with_fidelity(scene, fidelity)
     cache = SceneCache() if cache is None else cache
-    requested = scene
     choosing = time.perf_counter()
-    if choice is not None and scene.plant.fidelity.kind == "auto":
-        scene = apply_choice(scene, choice, cache)
-    else:
-        scene, choice = resolve_auto(scene, controller, overrides, cache, **(auto_options or {}))
+    scene, choice = _plant_rung(requested, choice, controller, overrides, cache, auto_options)
     choosing = time.perf_counter() - choosing
     setup = build_loop(scene, controller, overrides, cache)
-    reused = None
-    if choice is not None and loop == "auto":
-        key = whole_run_key(
-            pin_design(requested),
-            str(setup.plant_scene.fidelity),
-            setup.plant_scene.dt,
-            controller,
-            tuple(overrides),
-        )
-        reused = cache.take(WHOLE_RUNS, key)
-    if reused is not None:
-        trajectory = _reused_trajectory(setup, reused, loop)
-    else:
-        trajectory = _simulate(scene, setup, on_divergence, loop)
-    metrics = _metrics(scene, setup, trajectory, cache)
+    kept = None if choice is None else _choice_run(setup, requested, controller, overrides, cache)
+    trajectory = _run(setup, on_divergence) if kept is None else _from_choice_run(setup, kept)
+    result = _result(setup, trajectory, requested, cache)
     if choice is not None:
-        metrics.update(_choice_metrics(choice, setup.plant_scene.dt, choosing))
-    result = ClosedLoopResult(
-        trajectory=trajectory,
-        metrics=metrics,
-        summary=_summary(requested, scene, setup, trajectory, metrics, choice),
-        model=setup.plant,
-        controller=setup.controller,
-        reference=setup.reference,
-        scene=scene,
-    )
+        _record_choice(result, choice, setup.plant_scene.dt, choosing)
     if out is not None:
         result.save(out, plots=setup.plant_scene.plots if plots is None else plots)
     return result
 
 
-def _with_fidelity(scene, fidelity):
-    """``scene`` with its plant at ``fidelity`` (unchanged for None)."""
-    from flexctrl.spec.fidelity import parse_fidelity
+def _plant_rung(requested, choice, controller, overrides, cache: SceneCache, auto_options):
+    """The scene at its plant's rung and the fidelity choice (None for a concrete fidelity).
 
+    An ``auto`` plant takes the shared ``choice`` when given, else chooses (kept in ``cache``).
+    """
+    if choice is not None and requested.plant.fidelity.kind == "auto":
+        return apply_choice(requested, choice, cache), choice
+    return resolve_auto(requested, controller, overrides, cache, **(auto_options or {}))
+
+
+def _with_fidelity(scene, fidelity):
+    """The scene with its plant at ``fidelity`` (the ``--fidelity`` override), or unchanged."""
     if fidelity is None:
         return scene
     plant = dataclasses.replace(scene.plant, fidelity=parse_fidelity(fidelity, source="--fidelity"))
     return dataclasses.replace(scene, plant=plant)
 
 
-def _reused_trajectory(setup, whole: dict[str, Any], loop: str):
-    """The trajectory of the fidelity choice's own run of this scene at the chosen rung and step."""
+def _choice_run(setup: LoopSetup, requested, controller, overrides, cache: SceneCache):
+    """The fidelity choice's own run of this scene at the chosen rung and step, if it kept one."""
+    key = whole_run_key(
+        pin_design(requested),
+        str(setup.plant_scene.fidelity),
+        setup.plant_scene.dt,
+        controller,
+        tuple(overrides),
+    )
+    return cache.take(WHOLE_RUNS, key)
+
+
+def _from_choice_run(setup: LoopSetup, whole: dict[str, Any]):
+    """The trajectory of the chooser's run at the chosen rung (the same run, not repeated)."""
     setup.controller.stats = copy.deepcopy(whole["stats"])
     meta = {
         **whole["meta"],
@@ -226,15 +211,13 @@ def _reused_trajectory(setup, whole: dict[str, Any], loop: str):
         whole["X"].copy(),
         whole["U"].copy(),
         meta,
-        compiled=loop != "python",
         compile=setup.plant_scene.solver.get("compile"),
     )
 
 
-def _simulate(scene, setup, on_divergence: str, loop: str):
-    """The closed loop of ``setup`` run for the scene's duration."""
-    plant_scene = setup.plant_scene
-    rng = np.random.default_rng(scene.seed) if scene.noise else None
+def _run(setup: LoopSetup, on_divergence: str):
+    """The scene's closed loop (:func:`flexctrl.loop.sampled.simulate_closed_loop`)."""
+    scene, plant_scene = setup.scene, setup.plant_scene
     trajectory, _ = simulate_closed_loop(
         setup.plant,
         setup.controller,
@@ -242,81 +225,77 @@ def _simulate(scene, setup, on_divergence: str, loop: str):
         plant_scene.duration,
         plant_scene.dt,
         sensors=setup.sensors,
-        rng=rng,
+        rng=np.random.default_rng(scene.seed) if scene.noise else None,
         compile=plant_scene.solver.get("compile"),
         monitor=setup.monitor,
         stop_on_divergence=on_divergence == "record",
-        loop=loop,
     )
     return trajectory
 
 
-def _metrics(scene, setup, trajectory, cache: SceneCache) -> dict[str, Any]:
-    """The run's metrics (:func:`flexctrl.loop.metrics.run_metrics`) with its linear verdict."""
-    ctrl = setup.controller
-    return run_metrics(
+def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> ClosedLoopResult:
+    """The run judged (metrics, linear verdict) and described (``summary.json``)."""
+    scene, plant, ctrl = setup.scene, setup.plant, setup.controller
+    tip_target = tip_at_rest(plant, scene.target_q)
+    judge = scene.metric_settings
+    metrics = judge_run(
         trajectory,
-        tip_target=tip_at_rest(setup.plant, scene.target_q),
-        reference_joints=setup.reference.joints(trajectory.time),
-        t_arrive=scene.t_arrive,
-        settle_allowance=scene.settle_allowance,
-        band=scene.band,
-        stable_band=scene.stable_band,
+        ctrl,
+        setup.reference,
+        judge,
+        tip_target=tip_target,
         duration=setup.plant_scene.duration,
         torque_limits=[j.torque_limit for j in setup.arm.joints],
-        controller_stats=ctrl.stats.summary(),
-        step_times=ctrl.stats.step_times,
         radius=loop_radius(setup, cache),
+    )
+    summary = {
+        "scene": requested.settings(),
+        **run_summary(
+            trajectory,
+            metrics,
+            ctrl,
+            plant=plant,
+            payload=setup.arm.payload.mass,
+            design={
+                "fidelity": str(setup.design_fidelity),
+                "payload_kg": setup.design_arm.payload.mass,
+                "configuration_deg": np.degrees(setup.design_q).tolist(),
+            },
+            path=setup.reference,
+            deflection=scene.deflection,
+            tip_target=tip_target,
+            judge=judge,
+            controller_file={"file": None if setup.path is None else str(setup.path)},
+        ),
+    }
+    return ClosedLoopResult(
+        trajectory=trajectory,
+        metrics=metrics,
+        summary=summary,
+        model=plant,
+        controller=ctrl,
+        reference=setup.reference,
+        scene=scene,
     )
 
 
-def _choice_metrics(choice, dt: float, choosing: float) -> dict[str, float]:
-    """The metrics that record an automatic fidelity choice."""
-    return {
-        "chosen_modes": float(choice.choice.count or 0),
-        "chosen_dt": float(dt),
-        "estimated_error": float(choice.estimated_error),
-        "reference_error": float(choice.reference_error),
-        "choice_cost_ratio": float(choice.cost_ratio),
-        "choice_time_s": float(choosing),
-    }
-
-
-def _summary(requested, scene, setup, trajectory, metrics, choice) -> dict[str, Any]:
-    """``summary.json``'s content."""
-    ctrl, plant_scene = setup.controller, setup.plant_scene
-    summary = {
-        "scene": requested.settings(),
-        "controller": {
-            "file": None if setup.path is None else str(setup.path),
-            "kind": setup.settings.kind,
-            "sample_time": ctrl.sample_time,
-            **ctrl.stats.summary(),
-        },
-        "plant": {
-            "fidelity": str(plant_scene.fidelity),
-            "n_states": setup.plant.n_x,
-            "payload_kg": setup.arm.payload.mass,
-        },
-        "design": {
-            "fidelity": str(setup.design_fidelity),
-            "payload_kg": setup.design_arm.payload.mass,
-            "configuration_deg": np.degrees(setup.design_q).tolist(),
-        },
-        "reference": setup.reference.settings() | {"deflection": scene.deflection},
-        "tip_target": tip_at_rest(setup.plant, scene.target_q).tolist(),
-        "window_s": [scene.t_arrive + scene.settle_allowance, float(trajectory.time[-1])],
-        "metrics": metrics,
-        "divergence": trajectory.meta.get("divergence"),
-        "wall_time_s": trajectory.meta["wall_time_s"],
-    }
-    if choice is not None:
-        summary["fidelity_choice"] = choice.to_dict()
-    return summary
+def _record_choice(result: ClosedLoopResult, choice, dt: float, choosing: float) -> None:
+    """The fidelity choice's figures among the metrics, and its evidence in the summary."""
+    metrics = result.metrics
+    metrics["chosen_modes"] = float(choice.choice.count or 0)
+    metrics["chosen_dt"] = float(dt)
+    metrics["estimated_error"] = float(choice.estimated_error)
+    metrics["reference_error"] = float(choice.reference_error)
+    metrics["choice_cost_ratio"] = float(choice.cost_ratio)
+    metrics["choice_time_s"] = float(choosing)
+    result.summary["fidelity_choice"] = choice.to_dict()
 
 
 def loop_radius(setup, cache: SceneCache) -> float | None:
-    """The linear verdict of a set-up loop; kept in ``cache`` ("verdicts") for a controller designed from a file."""
+    """The linear verdict of a set-up loop.
+
+    Kept in ``cache`` ("verdicts") for a controller designed from a file.
+    """
 
     def compute():
         return linear_closed_loop_radius(

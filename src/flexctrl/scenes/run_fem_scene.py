@@ -1,9 +1,10 @@
 """Running the finite-element scenes (``kind = "sliding_beam"``, ``"rp_arm"``, ``"telescoping"``).
 
 The scenes are the validated descriptions of :mod:`flexctrl.spec.fem_scene`
-(:class:`~flexctrl.spec.fem_scene.SlidingBeamScene`, :class:`~flexctrl.spec.fem_scene.RPArmScene`,
-:class:`~flexctrl.spec.fem_scene.TelescopingScene`); :func:`run_scene` runs one (the runner of
-:func:`flexctrl.scenes.scene_runners`), :func:`run_fem_scene` reads a document and runs it.
+(:class:`~flexctrl.spec.fem_scene.SlidingBeamScene`,
+:class:`~flexctrl.spec.fem_scene.RPArmScene`, :class:`~flexctrl.spec.fem_scene.TelescopingScene`);
+:func:`run_scene` runs one (the runner of :data:`flexctrl.scenes.scene_runners.SCENE_RUNNERS`),
+:func:`run_fem_scene` reads a document and runs it.
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ def _simulate(scene: FemScene):
 
 
 def _simulate_sliding_beam(scene: SlidingBeamScene):
+    # each finite-element family loads only when a scene of it runs
     from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, simulate_sliding_beam
 
     case = SlidingBeamCase(
@@ -79,53 +81,76 @@ def _simulate_sliding_beam(scene: SlidingBeamScene):
     return res, {}, {"ndof": int(res.q.shape[1])}
 
 
-def _simulate_rp_arm(scene: RPArmScene):
+def _rp_motion(scene: RPArmScene | TelescopingScene):
+    """The prescribed motion of Eq 57: ``W(t)`` and the housing angle ``theta(t)``."""
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.moving_frame import RPMotion
-    from flexctrl.dynamics.fem.rp_arm import simulate_rp_arm
-    from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
 
-    spec, drive, common = scene.model_spec, scene.drive, _integration(scene)
-    motion = RPMotion(
+    return RPMotion(
         C1=scene.C1,
         C2=scene.C2,
         T=scene.T,
         theta0=math.radians(scene.theta0_deg),
         dtheta=math.radians(scene.rotation_deg),
     )
-    if drive.coupling == "partial":
-        res = simulate_rp_arm(
-            spec,
-            motion,
-            scene.n_elements,
-            dt=scene.dt,
-            duration=scene.duration,
-            driven_end=scene.driven_end,
-            tracked_end=scene.tracked_end,
-            initial=scene.initial,
-            tip_deflection=scene.tip_deflection,
-            **common,
+
+
+def _simulate_rp_arm_partial(scene: RPArmScene):
+    """The R-P arm with its motion prescribed, partial coupling (Eq 42)."""
+    # loaded only when a scene of this family runs
+    from flexctrl.dynamics.fem.rp_arm import simulate_rp_arm
+
+    res = simulate_rp_arm(
+        scene.model_spec,
+        _rp_motion(scene),
+        scene.n_elements,
+        dt=scene.dt,
+        duration=scene.duration,
+        driven_end=scene.driven_end,
+        tracked_end=scene.tracked_end,
+        initial=scene.initial,
+        tip_deflection=scene.tip_deflection,
+        **_integration(scene),
+    )
+    return res, {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1]}
+
+
+def _simulate_rp_arm_full(scene: RPArmScene):
+    """The R-P arm in full coupling (Eq 43): its motion, or its torque and force, prescribed."""
+    # loaded only when a scene of this family runs
+    from flexctrl.dynamics.fem.rp_arm_full import RPForces, simulate_rp_arm_full
+
+    drive = scene.drive
+    drives = (
+        RPForces.sine(
+            drive.torque_amplitude,
+            drive.force_amplitude,
+            scene.T,
+            theta0=math.radians(scene.theta0_deg),
+            W0=scene.C1,
         )
-    else:
-        if drive.kind == "force":
-            motion = RPForces.sine(
-                drive.torque_amplitude,
-                drive.force_amplitude,
-                scene.T,
-                theta0=math.radians(scene.theta0_deg),
-                W0=scene.C1,
-            )
-        res = simulate_rp_arm_full(
-            spec,
-            motion,
-            scene.n_elements,
-            dt=scene.dt,
-            duration=scene.duration,
-            tracked_end=scene.tracked_end,
-            **common,
-        )
+        if drive.kind == "force"
+        else _rp_motion(scene)
+    )
+    res = simulate_rp_arm_full(
+        scene.model_spec,
+        drives,
+        scene.n_elements,
+        dt=scene.dt,
+        duration=scene.duration,
+        tracked_end=scene.tracked_end,
+        **_integration(scene),
+    )
     extra = {"theta": res.theta, "tip_X": res.tip_world[:, 0], "tip_Y": res.tip_world[:, 1]}
-    if drive.coupling == "full":
-        extra.update(torque=res.torque, force=res.force)
+    return res, extra | {"torque": res.torque, "force": res.force}
+
+
+def _simulate_rp_arm(scene: RPArmScene):
+    spec = scene.model_spec
+    if scene.drive.coupling == "partial":
+        res, extra = _simulate_rp_arm_partial(scene)
+    else:
+        res, extra = _simulate_rp_arm_full(scene)
     facts = {
         "ndof": int(res.q.shape[1]),
         "support_inner_m": spec.support_inner,
@@ -142,20 +167,13 @@ def _simulate_rp_arm(scene: RPArmScene):
 
 
 def _simulate_telescoping(scene: TelescopingScene):
-    from flexctrl.dynamics.fem.moving_frame import RPMotion
+    # loaded only when a scene of this family runs
     from flexctrl.dynamics.fem.telescoping import simulate_telescoping
 
     spec = scene.model_spec
-    motion = RPMotion(
-        C1=scene.C1,
-        C2=scene.C2,
-        T=scene.T,
-        theta0=math.radians(scene.theta0_deg),
-        dtheta=math.radians(scene.rotation_deg),
-    )
     res = simulate_telescoping(
         spec,
-        motion,
+        _rp_motion(scene),
         scene.n_elements,
         scene.n_elements,
         dt=scene.dt,
@@ -182,6 +200,7 @@ def _simulate_telescoping(scene: TelescopingScene):
 
 
 def _plot(path: Path, res, scene: FemScene, extra: dict[str, np.ndarray]) -> None:
+    # matplotlib loads only when a figure is drawn
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.0, 5.5), layout="constrained")
@@ -313,13 +332,13 @@ def run_scene(
     fidelity: Fidelity | str | None = None,
     **unknown: Any,
 ) -> FemSceneResult:
-    """Run a finite-element scene; the runner of :func:`flexctrl.scenes.scene_runners`.
+    """Run a finite-element scene (the runner of its kinds in ``SCENE_RUNNERS``).
 
     Parameters
     ----------
     scene
-        From :func:`flexctrl.spec.fem_scene.read_fem_scene` (or
-        :func:`flexctrl.spec.scene.load_scene`).
+        From :func:`flexctrl.spec.fem_scene.read_fem_scene` or
+        :func:`flexctrl.spec.scene.load_scene`.
     out
         Folder for ``trajectory.csv``, ``summary.json`` and ``tip.png``; None writes nothing.
     plots

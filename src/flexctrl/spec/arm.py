@@ -15,8 +15,8 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
                                      # et al.'s Eq 68 as printed, d = 2 zeta omega, or "stiffness":
                                      # the finite elements' (2 zeta / omega_1) K (see DAMPING_FORMS)
-    axial_shortening = true          # a bent link's foreshortening; default: on for finite elements,
-                                     # off for assumed modes (docs/amm.md section 10)
+    axial_shortening = true          # a bent link's foreshortening; default: on for finite
+                                     # elements, off for assumed modes (docs/amm.md section 10)
     axial_stretch = true             # axially compliant assumed-modes links (EA; docs/amm.md
                                      # section 14); default off; finite elements always are
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
@@ -51,12 +51,15 @@ from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
 MAX_MODES = 6
-# : A link's ``inertia`` further than this factor from the uniform link's ``mass_per_length *
-# length**3 / 12``
-#: warns (a slip of a unit or of the axis: about the link's end it would be 4x).
+#: A link's ``inertia`` further than this factor from the uniform link's
+#: ``mass_per_length * length**3 / 12`` warns (a slip of a unit or of the axis: about the link's
+#: end it would be 4x).
 INERTIA_FACTOR = 2.0
-JOINT_TYPES = ("revolute", "prismatic")
-BOUNDARY_INERTIA = ("exact", "paper")
+JointType = Literal["revolute", "prismatic"]
+BoundaryInertia = Literal["exact", "paper"]
+DampingForm = Literal["ratio", "paper", "stiffness"]
+JOINT_TYPES: tuple[JointType, ...] = ("revolute", "prismatic")
+BOUNDARY_INERTIA: tuple[BoundaryInertia, ...] = ("exact", "paper")
 #: Modal damping forms (``damping_form`` in model files, ``[damping] form`` in scenes,
 #: ``damping=`` in :func:`flexctrl.dynamics.build.build_model`).  ``"ratio"``:
 #: ``d = 2 zeta omega m_l`` (kg/s), so ``zeta`` is the damping ratio of the isolated mode
@@ -67,7 +70,7 @@ BOUNDARY_INERTIA = ("exact", "paper")
 #: (``zeta_i`` the link's first ratio, ``omega_1i`` its first clamped-mass frequency), i.e. mode j
 #: of link i has the ratio ``zeta_i omega_j / omega_1i``: with it both families damp alike
 #: (``docs/amm.md`` section 14).
-DAMPING_FORMS = ("ratio", "paper", "stiffness")
+DAMPING_FORMS: tuple[DampingForm, ...] = ("ratio", "paper", "stiffness")
 
 
 @dataclass(frozen=True)
@@ -76,10 +79,12 @@ class SectionSpec:
 
     Attributes
     ----------
-    width, height : float
-        Outer dimensions, m (bending in the height direction).
+    width : float
+        Outer width (m).
+    height : float
+        Outer height (m), in the bending direction.
     thickness : float
-        Wall thickness, m.
+        Wall thickness (m), less than half the width and the height.
     """
 
     width: float
@@ -176,6 +181,7 @@ class JointSpec:
     Attributes
     ----------
     type : {"revolute", "prismatic"}
+        The joint's motion.
     hub_mass : float
         Hub mass (kg), located on the joint axis.
     hub_inertia : float
@@ -185,9 +191,10 @@ class JointSpec:
     torque_limit : float
         Actuator limit (N m), +inf when unlimited.
     source : str
+        Provenance note.
     """
 
-    type: Literal["revolute", "prismatic"]
+    type: JointType
     hub_mass: float
     hub_inertia: float
     friction: float
@@ -199,18 +206,17 @@ class JointSpec:
 class PayloadSpec:
     """Payload at the tip of the last link.
 
-    ``inertia`` (kg m^2, about its centre of mass) belongs to the payload: it is
-    carried only when ``mass > 0`` (Table 3 of Subedi et al. treats the no-payload
-    link 3 as a plain clamped-free beam).
+    ``inertia`` belongs to the payload: it is carried only when ``mass > 0`` (Table 3 of
+    Subedi et al. treats the no-payload link 3 as a plain clamped-free beam).
 
     Attributes
     ----------
     mass : float
-        kg.
+        Payload mass (kg), >= 0.
     inertia : float
-        kg m^2, about the payload's centre of mass.
+        Moment of inertia about its centre of mass (kg m^2).
     source : str
-        Where the values come from (free text).
+        Provenance note.
     """
 
     mass: float
@@ -230,12 +236,15 @@ class ArmSpec:
     Attributes
     ----------
     name : str
+        Model name (default: the file's stem).
     links : tuple of LinkSpec
+        The links, base to tip.
     joints : tuple of JointSpec
         ``joints[i]`` sits at the base of ``links[i]``.
     payload : PayloadSpec
-    gravity : numpy.ndarray
-        Gravity vector in the world frame (m/s^2), shape (2,).
+        At the tip of the last link.
+    gravity : tuple of float
+        Gravity vector in the world frame, ``(gx, gy)`` (m/s^2).
     configuration : tuple of float
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
@@ -255,7 +264,7 @@ class ArmSpec:
     source : str
         The file it was loaded from.
     notes : str
-        Free text of the file's ``notes`` key (where its numbers come from).
+        Free text from the file.
     """
 
     name: str
@@ -264,8 +273,8 @@ class ArmSpec:
     payload: PayloadSpec
     gravity: tuple[float, float]
     configuration: tuple[float, ...]
-    boundary_inertia: Literal["exact", "paper"] = "exact"
-    damping_form: Literal["ratio", "paper", "stiffness"] = "ratio"
+    boundary_inertia: BoundaryInertia = "exact"
+    damping_form: DampingForm = "ratio"
     source: str = ""
     notes: str = ""
     axial_shortening: bool | None = None
@@ -325,7 +334,8 @@ def _read_link(r: TableReader) -> LinkSpec:
         if 2 * section.thickness >= min(section.width, section.height):
             raise r.error(
                 "section.thickness",
-                f"value {section.thickness!r} leaves no hollow; allowed: < half the width and height",
+                f"value {section.thickness!r} leaves no hollow; allowed: < half the width and "
+                "height",
             )
     damping = r.raw("damping_ratio", 0.0)
     if isinstance(damping, list):
@@ -348,8 +358,8 @@ def _read_link(r: TableReader) -> LinkSpec:
     if len(ratios) > 1 and len(ratios) < link.n_modes:
         raise r.error(
             "damping_ratio",
-            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one "
-            "per mode",
+            f"lists {len(ratios)} values for {link.n_modes} modes; allowed: one value, or one per "
+            "mode",
         )
     r.finish()
     return link
@@ -364,11 +374,10 @@ def _link_inertia(r: TableReader) -> float:
     value = r.nonnegative("inertia", unit="kg m^2")
     if not uniform / INERTIA_FACTOR <= value <= uniform * INERTIA_FACTOR:
         warn_spec(
-            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 / "
-            "12 = "
-            f"{uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected within "
-            "a factor "
-            f"{INERTIA_FACTOR:g} of it (leave the key out to use the uniform value)",
+            f"value {value!r} kg m^2 is {value / uniform:.3g} times mass_per_length * length^3 "
+            f"/ 12 = {uniform:.4g} kg m^2 (the uniform link about its centre of mass); expected "
+            f"within a factor {INERTIA_FACTOR:g} of it (leave the key out to use the uniform "
+            "value)",
             source=r.source,
             key=r.key("inertia"),
             stacklevel=4,
@@ -377,10 +386,10 @@ def _link_inertia(r: TableReader) -> float:
 
 
 def _torque_limit(r: TableReader) -> float:
-    """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an actuator without a limit."""
+    """``torque_limit``: required, > 0 (N m), or ``inf`` written out for an unlimited actuator."""
     allowed = (
-        "a finite number > 0 (N m), or inf for an actuator without a limit (written out: "
-        "no default)"
+        "a finite number > 0 (N m), or inf for an actuator without a limit (written out: no "
+        "default)"
     )
     value = r.raw("torque_limit", allowed=allowed)
     if isinstance(value, float) and value == math.inf:
@@ -394,7 +403,7 @@ def _torque_limit(r: TableReader) -> float:
 
 def _read_joint(r: TableReader) -> JointSpec:
     joint = JointSpec(
-        type=r.string("type", "revolute", choices=JOINT_TYPES),  # type: ignore[arg-type]
+        type=r.choice("type", JOINT_TYPES, "revolute"),
         hub_mass=r.nonnegative("hub_mass", unit="kg"),
         hub_inertia=r.nonnegative("hub_inertia", unit="kg m^2"),
         friction=r.nonnegative("friction", 0.0, unit="N m s/rad"),
@@ -431,8 +440,8 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         payload=payload,
         gravity=(gravity[0], gravity[1]),
         configuration=tuple(math.radians(a) for a in config_deg),
-        boundary_inertia=r.string("boundary_inertia", "exact", choices=BOUNDARY_INERTIA),  # type: ignore[arg-type]
-        damping_form=r.string("damping_form", "ratio", choices=DAMPING_FORMS),  # type: ignore[arg-type]
+        boundary_inertia=r.choice("boundary_inertia", BOUNDARY_INERTIA, "exact"),
+        damping_form=r.choice("damping_form", DAMPING_FORMS, "ratio"),
         axial_shortening=r.boolean("axial_shortening", True) if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch", True) if r.has("axial_stretch") else None,
         source=source,

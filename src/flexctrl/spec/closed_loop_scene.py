@@ -7,24 +7,23 @@ zero-order hold.  The extra keys::
 
     kind = "closed_loop"
     controller = "controllers/lqr.toml"  # default controller file (CLI --controller overrides)
-    design_payload = 2.0                 # kg the controller is designed for (mismatch; default: payload)
+    design_payload = 2.0                 # kg the controller is designed for (default: payload)
     controller_fidelity = "amm:2"        # model the controller is designed on (default: fidelity)
     design_configuration = [0, 90, 0]    # degrees: the joint angles the controller is designed
                                          # (linearised) at (default: the target)
     [target]   q = [30, 0, 0]            # degrees: the joint angles to move to
                # or move = [30, 0, 0]    # degrees relative to the initial joint angles (for sweeps)
-               profile = "quintic"       # "step" (default: the reference jumps at t = 0) or
-               "quintic" move_time = 1.5           # s, duration of the quintic (required with it;
-               unused by a step) deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC:
-               "quasi_static" or "static"
+               profile = "quintic"       # "step" (default: the reference jumps at t = 0), "quintic"
+               move_time = 1.5           # s, duration of the quintic (required with it)
+               deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static"
+                                             # or "static"
     [noise]    enabled = true, seed = 0  # measurement noise as set in the controller's sensors
     [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
                divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the
-               link's
-                                             # length means the closed loop diverged
-               divergence_angle = 90.0       # deg: so does a joint this far outside the range of
-               its move stable_band = 0.01            # m: stable = 1 needs the tip error of the
-               run's last second below it
+                                             # link's length means the closed loop diverged
+               divergence_angle = 90.0       # deg: so does a joint this far outside its move
+               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last
+                                             # second below it
 
 Angles are in degrees in the file and radians in the dataclass.  The reference
 (:mod:`flexctrl.control.reference_trajectory`) goes from the initial joint angles to the target;
@@ -45,14 +44,12 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
-from flexctrl.spec.reference import DEFLECTIONS, PROFILES
+from flexctrl.spec.reference import DEFLECTIONS, PROFILES, JointReference
 
 
 @dataclass(frozen=True)
 class MetricSettings:
-    """How a closed-loop run is judged: the ``[metrics]`` table of a scene.
-
-    The defaults are those of a scene file.
+    """How a closed-loop run is judged: a scene's ``[metrics]`` table (the defaults are the file's).
 
     Attributes
     ----------
@@ -127,15 +124,24 @@ class ClosedLoopScene:
         return self.design_q if self.design_q is not None else self.target_q
 
     def joint_reference(self):
-        """The :class:`~flexctrl.control.reference_trajectory.JointReference` from the initial angles to the target."""
-        from flexctrl.spec.reference import JointReference
-
+        """The :class:`~flexctrl.spec.reference.JointReference` from the start to the target."""
         return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
 
     @property
     def t_arrive(self) -> float:
-        """Time (s) the reference reaches the target (0 for the step, ``move_time`` for the quintic)."""
+        """Time (s) the reference reaches the target: 0 for a step, ``move_time`` for a quintic."""
         return self.move_time if self.profile == "quintic" else 0.0
+
+    @property
+    def metric_settings(self) -> MetricSettings:
+        """How a run of the scene is judged (its ``[metrics]`` table)."""
+        return MetricSettings(
+            settle_allowance=self.settle_allowance,
+            band=self.band,
+            divergence_deflection=self.divergence_deflection,
+            divergence_angle=self.divergence_angle,
+            stable_band=self.stable_band,
+        )
 
     def settings(self) -> dict[str, Any]:
         """Plain JSON-ready data (angles in degrees)."""
@@ -168,66 +174,72 @@ def read_closed_loop_scene(
     """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
     plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
     r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
-    controller = None
-    if r.has("controller"):
-        name = r.string("controller")
-        try:
-            controller = shipped.find(name, "controller", base_dir)
-        except SpecError as exc:
-            raise r.error("controller", exc.message.replace("file", f"file {name!r}", 1)) from None
+    controller = _read_controller(r, base_dir)
     design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
     cf = (
         parse_fidelity(r.raw("controller_fidelity"), source=source, key="controller_fidelity")
         if r.has("controller_fidelity")
         else None
     )
-    target_q, profile, move_time, deflection = _read_target(r.table_of("target"), plant)
-    design_q = None
-    if r.has("design_configuration"):
-        values = r.degrees("design_configuration")
-        if len(values) != len(target_q):
-            raise r.error(
-                "design_configuration",
-                f"has {len(values)} values for {len(target_q)} joints; "
-                "allowed: one angle per joint (degrees)",
-            )
-        design_q = tuple(math.radians(a) for a in values)
+    target = _read_target(r.table_of("target"), plant)
+    design_q = _read_design_configuration(r, len(target.q))
     noise = r.table_of("noise", {})
     enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
     noise.finish()
-    settle, band, div_deflection, div_angle, stable_band = _read_metrics(r.table_of("metrics", {}))
+    judge = _read_metrics(r.table_of("metrics", {}))
     r.finish()
-    t_arrive = move_time if profile == "quintic" else 0.0
-    move_time = move_time if profile == "quintic" else 0.0
-    if t_arrive + settle >= plant.duration:
+    t_arrive = target.move_time if target.profile == "quintic" else 0.0
+    move_time = target.move_time if target.profile == "quintic" else 0.0
+    if t_arrive + judge.settle_allowance >= plant.duration:
         raise r.error(
             "metrics.settle_allowance",
-            f"value {settle!r} leaves no residual window after the move "
+            f"value {judge.settle_allowance!r} leaves no residual window after the move "
             f"(arrives at {t_arrive:g} s); allowed: < duration - arrival "
             f"({plant.duration - t_arrive:g} s)",
         )
     return ClosedLoopScene(
         plant,
-        target_q,
+        target.q,
         controller,
         design_payload,
         cf,
         enabled,
         seed,
-        settle,
-        band,
-        profile,
+        judge.settle_allowance,
+        judge.band,
+        target.profile,
         move_time,
-        deflection,
+        target.deflection,
         design_q,
-        div_deflection,
-        div_angle,
-        stable_band,
+        judge.divergence_deflection,
+        judge.divergence_angle,
+        judge.stable_band,
     )
 
 
-def _read_target(target: TableReader, plant):
-    """The ``[target]`` table: target joint angles (rad), profile, move time (s), deflection."""
+def _read_controller(r: TableReader, base_dir: Path) -> Path | None:
+    """``controller``: a file relative to the scene's folder, or a shipped controller's name."""
+    if not r.has("controller"):
+        return None
+    name = r.string("controller")
+    try:
+        return shipped.find(name, "controller", base_dir)
+    except SpecError as exc:
+        raise r.error("controller", f"file {name!r} not found ({exc.message})") from None
+
+
+@dataclass(frozen=True)
+class _Target:
+    """The ``[target]`` table read: joint angles (rad) and the reference to them."""
+
+    q: tuple[float, ...]
+    profile: str
+    move_time: float
+    deflection: str
+
+
+def _read_target(target: TableReader, plant: ArmScene) -> _Target:
+    """``[target]``: ``q`` (absolute) or ``move`` (relative), degrees; the reference's shape."""
     if target.has("q") == target.has("move"):
         given = "both are given" if target.has("q") else "missing required key"
         raise target.error(
@@ -255,15 +267,29 @@ def _read_target(target: TableReader, plant):
                 'is missing; allowed: a move time > 0 s, required with profile = "quintic"',
             )
         move_time = target.positive("move_time", unit="s")
-    else:  # a step has no duration; a move_time is accepted (unused): a study may switch profiles
+    else:  # a step has no duration; a move_time is accepted (and unused) so a study can switch
         move_time = target.positive("move_time", unit="s") if target.has("move_time") else 0.0
     deflection = target.string("deflection", "quasi_static", choices=DEFLECTIONS)
     target.finish()
-    return target_q, profile, move_time, deflection
+    return _Target(target_q, profile, move_time, deflection)
 
 
-def _read_metrics(metrics: TableReader):
-    """The ``[metrics]`` table (:class:`MetricSettings`' defaults for what it leaves out)."""
+def _read_design_configuration(r: TableReader, n_joints: int) -> tuple[float, ...] | None:
+    """``design_configuration`` (degrees, one per joint), or None: the target."""
+    if not r.has("design_configuration"):
+        return None
+    values = r.degrees("design_configuration")
+    if len(values) != n_joints:
+        raise r.error(
+            "design_configuration",
+            f"has {len(values)} values for {n_joints} joints; "
+            "allowed: one angle per joint (degrees)",
+        )
+    return tuple(math.radians(a) for a in values)
+
+
+def _read_metrics(metrics: TableReader) -> MetricSettings:
+    """``[metrics]``: how a run is judged (the defaults are :class:`MetricSettings`')."""
     default = MetricSettings()
     settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
     band = metrics.positive("band", default.band, unit="m")
@@ -273,4 +299,4 @@ def _read_metrics(metrics: TableReader):
     )
     stable_band = metrics.positive("stable_band", default.stable_band, unit="m")
     metrics.finish()
-    return settle, band, div_deflection, div_angle, stable_band
+    return MetricSettings(settle, band, div_deflection, div_angle, stable_band)

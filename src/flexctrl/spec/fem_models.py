@@ -1,5 +1,6 @@
-"""Model files of the finite-element arms with moving supports: ``models/rp_arm.toml`` and
-``models/telescoping.toml``.
+"""Model files of the finite-element arms with moving supports: ``rp_arm``, ``telescoping``.
+
+The files are ``models/rp_arm.toml`` and ``models/telescoping.toml``.
 
 Plain descriptions, read and validated here and simulated by
 :mod:`flexctrl.dynamics.fem.rp_arm`, :mod:`flexctrl.dynamics.fem.rp_arm_full` and
@@ -24,20 +25,18 @@ from flexctrl.spec.reader import TableReader, read_toml
 
 Array = NDArray[np.float64]
 #: The two links of a telescoping pair, in the order of the model file.
-SIDES = ("outer", "inner")
-# : The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or
-# the
-# : link clamped at its inner end E in the carriage and held by one bearing at the housing mouth
-# (Fig 4).
-JOINTS = ("supports", "clamped")
+SIDES: tuple[Literal["outer", "inner"], ...] = ("outer", "inner")
+#: The prismatic joints of an R-P arm (Pan et al. 1990): two bilateral supports in the housing, or
+#: the link clamped at its inner end E in the carriage and held by one bearing at the housing mouth
+#: (Fig 4).
+JOINTS: tuple[Literal["supports", "clamped"], ...] = ("supports", "clamped")
 
 
 # -- the revolute-prismatic arm
 # ---------------------------------------------------------------------
 @dataclass(frozen=True)
 class RPArmSpec:
-    """An R-P arm (``models/rp_arm.toml``): a flexible link sliding through a rotating rigid
-    housing.
+    """An R-P arm (``models/rp_arm.toml``): a flexible link sliding through a rotating housing.
 
     Attributes
     ----------
@@ -50,9 +49,10 @@ class RPArmSpec:
     EI : float
         Bending stiffness of the link, N m^2.
     support_inner, support_outer : float
-        Radii of the two bilateral supports from the base axis, m (``support_inner <
-        support_outer``). With ``joint = "clamped"`` ``support_outer`` is the mouth bearing D' and
-        ``support_inner`` the outboard end of the carriage's travel (E stays inboard of it).
+        Radii of the two bilateral supports from the base axis, m
+        (``support_inner < support_outer``).
+        With ``joint = "clamped"`` ``support_outer`` is the mouth bearing D' and ``support_inner``
+        the outboard end of the carriage's travel (E stays inboard of it).
     joint : {"supports", "clamped"}
         ``"supports"``: the link slides through two bilateral supports (Eqs 24-25 twice), driven at
         an end.  ``"clamped"``: Pan's Fig 4, the link clamped at its inner end E in the carriage
@@ -112,7 +112,7 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
     r1 = housing.nonnegative("support_inner", unit="m")
     r2 = housing.positive("support_outer", unit="m")
     housing.string("source", "")
-    joint = housing.string("joint", "supports", choices=JOINTS)
+    joint = housing.choice("joint", JOINTS, "supports")
     if not r2 > r1:
         raise housing.error(
             "support_outer", f"value {r2!r} is not beyond support_inner = {r1!r}; allowed: > {r1} m"
@@ -146,7 +146,7 @@ def rp_arm_from_document(document: dict, source: str) -> RPArmSpec:
 
 
 def _drive_masses(r: TableReader) -> tuple[float, float, float]:
-    """The optional ``[base] hub_inertia`` (kg m^2), ``[carriage] mass`` and ``[payload] mass`` (kg)."""
+    """The optional ``[base] hub_inertia`` (kg m^2), ``[carriage] mass``, ``[payload] mass``."""
     values = []
     for table, key, unit in (
         ("base", "hub_inertia", "kg m^2"),
@@ -199,8 +199,7 @@ class LinkProps:
 
 @dataclass(frozen=True)
 class TelescopingSpec:
-    """A telescoping pair (``models/telescoping.toml``): an inner flexible link sliding in an outer
-    one.
+    """A telescoping pair (``models/telescoping.toml``): an inner flexible link in an outer one.
 
     Attributes
     ----------
@@ -237,7 +236,10 @@ class TelescopingSpec:
     notes: str = ""
 
     def contact_points(self, s: float) -> tuple[Array, Array]:
-        """Material coordinates ``(x1_k, x2_k)`` (m) of the contacts when E is at tube coordinate ``s`` (m)."""
+        """Material coordinates ``(x1_k, x2_k)`` (m) of the contacts, E at tube coordinate ``s``.
+
+        ``s`` in m.
+        """
         x1 = np.array([c.at if c.on == "outer" else c.at + s for c in self.contacts])
         x2 = np.array([c.at - s if c.on == "outer" else c.at for c in self.contacts])
         return x1, x2
@@ -250,13 +252,11 @@ class TelescopingSpec:
             for k, c in enumerate(self.contacts):
                 if not (0.0 < x1[k] <= L1 + 1e-12 and -1e-12 <= x2[k] <= L2 + 1e-12):
                     raise SpecError(
-                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) "
-                        f"contact {k + 1} "
-                        f"(on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, x2 = {x2[k]:g} m; "
-                        "allowed: "
-                        f"0 < x1 <= L1 = {L1:g} m and 0 <= x2 <= L2 = {L2:g} m (the contact on "
-                        "both links, "
-                        "off the clamped root)",
+                        f"with E at s = {s:g} m in the outer link (W = {s - L1 + L2:g} m) contact "
+                        f"{k + 1} (on {c.on} at {c.at:g} m) sits at x1 = {x1[k]:g} m, "
+                        f"x2 = {x2[k]:g} m; allowed: 0 < x1 <= L1 = {L1:g} m and "
+                        f"0 <= x2 <= L2 = {L2:g} m (the contact on both links, off the clamped "
+                        "root)",
                         source=self.source or None,
                         key=key,
                     )
@@ -284,7 +284,7 @@ def telescoping_from_document(document: dict, source: str) -> TelescopingSpec:
         t.finish()
     contacts = []
     for t in r.tables("contacts", min_count=1):
-        on = t.string("on", choices=SIDES)
+        on = t.choice("on", SIDES)
         limit = links[on].length
         contacts.append(
             Contact(

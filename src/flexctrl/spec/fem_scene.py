@@ -1,13 +1,13 @@
-"""Descriptions of the finite-element scenes with moving supports: ``kind = "sliding_beam"``,
-``"rp_arm"``, ``"telescoping"``.
+"""Finite-element scenes with moving supports: ``sliding_beam``, ``rp_arm``, ``telescoping``.
 
 :func:`read_fem_scene` (the reader :func:`flexctrl.spec.scene.load_scene` uses for every
-``kind`` in :data:`FEM_SCENE_KINDS`) validates a scene once, into a frozen description:
-:class:`SlidingBeamScene`, :class:`RPArmScene` or :class:`TelescopingScene`, all
-:class:`FemScene`; :meth:`FemScene.settings` gives them back as the plain data
-``summary.json`` records under ``"scene"``.  ``--set`` overrides are applied to the raw
-document first, so ``--set axial_shortening=false`` is validated like the file.  Running
-is :func:`flexctrl.scenes.run_fem_scene.run_scene`.
+``kind`` in :data:`FEM_SCENE_KINDS`) validates a scene once, into a frozen description
+(:mod:`flexctrl.spec.fem_scene_types`, re-exported here): :class:`SlidingBeamScene`,
+:class:`RPArmScene` or :class:`TelescopingScene`, all :class:`FemScene`;
+:meth:`FemScene.settings` gives them back as the plain data ``summary.json`` records under
+``"scene"``.  ``--set`` overrides are applied to the raw document first, so ``--set
+axial_shortening=false`` is validated like the file.  Running is
+:func:`flexctrl.scenes.run_fem_scene.run_scene`.
 
 Keys (SI units; angles in degrees)::
 
@@ -41,9 +41,11 @@ or ``"static_load"`` with ``tip_deflection``), optional ``payload`` (kg) and
 ``gravity`` ([gx, gy] m/s^2) replacing the model file's, and an optional ``[drive]`` table::
 
     [drive]
-    kind = "motion"                 # "motion": theta(t), W(t) by Eq 57 (default) | "force": full coupling
-    coupling = "partial"            # motion only: "partial" (Eq 42, default) or "full" (Eq 43 with the
-                                    # joint coordinates constrained: reports the torque and force needed)
+    kind = "motion"                 # "motion": theta(t), W(t) by Eq 57 (default) | "force": full
+                                    # coupling
+    coupling = "partial"            # motion only: "partial" (Eq 42, default) or "full" (Eq 43
+                                    # with the joint coordinates constrained: reports the torque
+                                    # and force needed)
     torque_amplitude = 2.0          # force only: N m, tau = A sin(2 pi t / T) on [0, T], then 0
     force_amplitude = 1.0           # force only: N, the axial drive at E, same shape
 
@@ -68,261 +70,43 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any
 
 from flexctrl.errors import SpecError
+from flexctrl.spec.arm_scene import resolve_model_path
 from flexctrl.spec.fem_models import RPArmSpec, TelescopingSpec, load_rp_arm, load_telescoping
-from flexctrl.spec.fidelity import Fidelity, parse_fidelity
+from flexctrl.spec.fem_scene_types import (
+    COUPLINGS,
+    DRIVE_KINDS,
+    ENDS,
+    FEM_SCENE_KINDS,
+    MAX_STEPS,
+    SCENE_CLASSES,
+    AnyFemScene,
+    FemScene,
+    RPArmScene,
+    RPDrive,
+    SlidingBeamScene,
+    TelescopingScene,
+    fem_elements,
+)
 from flexctrl.spec.reader import TableReader
 
-FEM_SCENE_KINDS = ("sliding_beam", "rp_arm", "telescoping")
-DRIVE_KINDS = ("motion", "force")
-COUPLINGS = ("partial", "full")
-ENDS = ("H", "E")
-MAX_STEPS = 5_000_000
-#: Field metadata marking what :meth:`FemScene.settings` leaves out (the origin, the loaded model).
-_NOT_A_SETTING = {"setting": False}
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class FemScene:
-    """What every finite-element scene holds, validated (keys in the module docstring; SI units).
-
-    Use the kind's class: :class:`SlidingBeamScene`, :class:`RPArmScene`, :class:`TelescopingScene`.
-
-    Attributes
-    ----------
-    name, description : str
-        Scene name (default: the file's stem) and free text.
-    C1 : float
-        Initial overhang ``W(0)`` beyond the outer support, m (Eq 57).
-    C2 : float
-        Travel, m: ``W(T) = C1 - C2`` (negative: the link extends).
-    T : float
-        Duration of the prescribed motion (or of the force pulses), s.
-    tracked_end : {"H", "E"}
-        End whose transverse displacement is reported as ``tip_y``.
-    driven_end : {"H", "E"}
-        Where the axial drive acts.
-    n_elements : int
-        Equal Hermite elements (per link for ``telescoping``), 1 to 256.
-    dt, duration : float
-        Newmark step and simulated time, s (``dt <= duration``, at most :data:`MAX_STEPS` steps).
-    gamma, beta : float
-        Baumgarte parameters, 1/s (Eq 49).
-    alpha, delta : float
-        Newmark parameters (Eqs 50-51).
-    axial_shortening : bool
-        Geometric stiffness of the rigid-body axial force (Eqs 16-18).
-    max_violation : float
-        Bound on the constraint violation ``|Phi|``, m (exceeding it stops the run).
-    plots : bool
-        Write ``tip.png``.
-    source : str
-        The file (or other origin) the scene was read from.
-    """
-
-    KIND: ClassVar[str] = ""
-
-    name: str
-    description: str = ""
-    C1: float
-    C2: float
-    T: float
-    tracked_end: Literal["H", "E"] = "H"
-    driven_end: Literal["H", "E"]
-    n_elements: int = 4
-    dt: float = 1e-3
-    duration: float
-    gamma: float = 5.0
-    beta: float = 5.0
-    alpha: float = 0.25
-    delta: float = 0.5
-    axial_shortening: bool = True
-    max_violation: float = 1e-3
-    plots: bool = True
-    source: str = dataclasses.field(default="", metadata=_NOT_A_SETTING)
-
-    @property
-    def kind(self) -> str:
-        """The scene's ``kind`` (``"sliding_beam"``, ``"rp_arm"`` or ``"telescoping"``)."""
-        return self.KIND
-
-    def settings(self) -> dict[str, Any]:
-        """The scene as plain, JSON-ready data: ``summary.json``'s ``"scene"`` (``kind`` first, then
-        the keys in the order of the module docstring; angles in degrees, as in the file)."""
-        out: dict[str, Any] = {"kind": self.kind}
-        for f in dataclasses.fields(self):
-            if f.metadata.get("setting", True):
-                out[f.name] = _plain(getattr(self, f.name))
-        return out
-
-    def with_fidelity(
-        self, fidelity: Fidelity | str | None, *, source: str = "--fidelity"
-    ) -> FemScene:
-        """This scene with ``fidelity = "fem:N"`` applied (``n_elements = N``); None changes
-        nothing.
-
-        Raises
-        ------
-        SpecError
-            For any other fidelity, naming ``source`` and the key ``fidelity``.
-        """
-        if fidelity is None:
-            return self
-        return dataclasses.replace(self, n_elements=_fem_elements(fidelity, self.kind, source))
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class SlidingBeamScene(FemScene):
-    """A beam sliding over two bilateral supports (``kind = "sliding_beam"``; Buffinton & Kane).
-
-    Attributes
-    ----------
-    L : float
-        Beam length, m.
-    rho : float
-        Mass per unit length, kg/m.
-    EI : float
-        Bending stiffness, N m^2.
-    D : float
-        Support spacing, m.
-    tip_deflection : float
-        Initial static deflection of the tracked end, m.
-    """
-
-    KIND: ClassVar[str] = "sliding_beam"
-
-    driven_end: Literal["H", "E"] = "H"
-    L: float = 1.0
-    rho: float = 1.0
-    EI: float = 1.0
-    D: float = 0.25
-    tip_deflection: float = 0.01
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class _ModelFileScene(FemScene):
-    """The keys of the scenes that name a model file (``rp_arm``, ``telescoping``).
-
-    Attributes
-    ----------
-    model : str
-        The model file, resolved to an absolute path.
-    theta0_deg, rotation_deg : float
-        Housing angle at ``t = 0`` and its change over ``T``, degrees.
-    payload : float or None
-        Tip mass replacing the model file's, kg (None: the file's).
-    gravity : tuple of float or None
-        ``(gx, gy)`` replacing the model file's, m/s^2 (None: the file's).
-    """
-
-    driven_end: Literal["H", "E"] = "E"
-    model: str
-    theta0_deg: float = 0.0
-    rotation_deg: float = 0.0
-    payload: float | None = None
-    gravity: tuple[float, float] | None = None
-
-
-@dataclasses.dataclass(frozen=True)
-class RPDrive:
-    """The ``[drive]`` table of an ``rp_arm`` scene.
-
-    Attributes
-    ----------
-    kind : {"motion", "force"}
-        ``"motion"``: ``theta(t)``, ``W(t)`` prescribed by Eq 57; ``"force"``: joint torque and
-        axial force prescribed (full coupling).
-    coupling : {"partial", "full"}
-        Eq 42 or Eq 43; a force drive is always ``"full"``.
-    torque_amplitude : float
-        Force drive only: amplitude of ``tau = A sin(2 pi t / T)`` on ``[0, T]``, N m.
-    force_amplitude : float
-        Force drive only: amplitude of the axial force at E, same shape, N.
-    """
-
-    kind: Literal["motion", "force"] = "motion"
-    coupling: Literal["partial", "full"] = "partial"
-    torque_amplitude: float = 0.0
-    force_amplitude: float = 0.0
-
-    def settings(self) -> dict[str, Any]:
-        """Plain data as in ``summary.json`` (the amplitudes only for a force drive)."""
-        out: dict[str, Any] = {"kind": self.kind, "coupling": self.coupling}
-        if self.kind == "force":
-            out.update(torque_amplitude=self.torque_amplitude, force_amplitude=self.force_amplitude)
-        return out
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class RPArmScene(_ModelFileScene):
-    """The revolute-prismatic arm (``kind = "rp_arm"``; Pan et al. Figs 1, 4).
-
-    Attributes
-    ----------
-    initial : {"rest", "static_load"}
-        Start undeformed, or from the static deflection under a uniform load scaled to
-        ``tip_deflection``.
-    tip_deflection : float
-        Initial deflection of the tracked end with ``initial = "static_load"``, m.
-    drive : RPDrive
-        Prescribed motion (partial or full coupling) or prescribed torque and force.
-    model_spec : RPArmSpec
-        The model file, read at load time, with ``payload`` and ``gravity`` applied.
-    """
-
-    KIND: ClassVar[str] = "rp_arm"
-
-    initial: Literal["rest", "static_load"] = "rest"
-    tip_deflection: float = 0.01
-    drive: RPDrive = RPDrive()
-    model_spec: RPArmSpec = dataclasses.field(metadata=_NOT_A_SETTING)
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class TelescopingScene(_ModelFileScene):
-    """Two flexible links sliding on each other (``kind = "telescoping"``; Pan et al. Fig 5).
-
-    ``W`` is the overhang of the inner tip beyond the outer link's mouth, ``n_elements`` applies to
-    each link and ``driven_end`` is ``"E"``.
-
-    Attributes
-    ----------
-    model_spec : TelescopingSpec
-        The model file, read at load time (the contacts checked over the stroke), with
-        ``payload`` and ``gravity`` applied.
-    """
-
-    KIND: ClassVar[str] = "telescoping"
-
-    model_spec: TelescopingSpec = dataclasses.field(metadata=_NOT_A_SETTING)
-
-
-#: Any finite-element scene.
-AnyFemScene = SlidingBeamScene | RPArmScene | TelescopingScene
-SCENE_CLASSES: dict[str, type[FemScene]] = {
-    c.KIND: c for c in (SlidingBeamScene, RPArmScene, TelescopingScene)
-}
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, RPDrive):
-        return value.settings()
-    if isinstance(value, tuple):
-        return list(value)
-    return value
-
-
-def _fem_elements(value: Any, kind: str, origin: str) -> int:
-    fid = parse_fidelity(value, source=origin, key="fidelity")
-    if fid.kind != "fem":
-        raise SpecError(
-            f"value '{fid}' does not apply to '{kind}' scenes; allowed: 'fem:N' (N elements)",
-            source=origin,
-            key="fidelity",
-        )
-    return int(fid.count)
+__all__ = [
+    "COUPLINGS",
+    "DRIVE_KINDS",
+    "ENDS",
+    "FEM_SCENE_KINDS",
+    "MAX_STEPS",
+    "SCENE_CLASSES",
+    "AnyFemScene",
+    "FemScene",
+    "RPArmScene",
+    "RPDrive",
+    "SlidingBeamScene",
+    "TelescopingScene",
+    "read_fem_scene",
+]
 
 
 def _common(r: TableReader, kind: str, force_drive: bool = False) -> dict[str, Any]:
@@ -346,7 +130,7 @@ def _common(r: TableReader, kind: str, force_drive: bool = False) -> dict[str, A
         "fidelity", None
     )  # as `flexctrl simulate --fidelity` writes it into the document
     if fidelity is not None:
-        s["n_elements"] = _fem_elements(fidelity, kind, r.source)
+        s["n_elements"] = fem_elements(fidelity, kind, r.source)
     s["dt"] = r.positive("dt", 1e-3, unit="s")
     s["duration"] = r.positive("duration", max(s["T"], 1.0), unit="s")
     if s["dt"] > s["duration"]:
@@ -424,8 +208,6 @@ def read_fem_scene(
             )
         r.finish()
         return SlidingBeamScene(**s, source=source)
-    from flexctrl.spec.arm_scene import resolve_model_path
-
     base = Path(source).resolve().parent
     s["model"] = str(resolve_model_path(r.string("model", f"models/{kind}.toml"), base, r))
     s["theta0_deg"] = r.degree("theta0", 0.0)
@@ -435,6 +217,7 @@ def read_fem_scene(
     if kind == "rp_arm":
         s["initial"] = r.string("initial", "rest", choices=("rest", "static_load"))
         s["tip_deflection"] = r.number("tip_deflection", 0.01, unit="m")
+        assert drive is not None  # read above for rp_arm scenes
         s["drive"] = _read_drive(r, drive, drive_kind, s)
         spec = load_rp_arm(s["model"])
         if spec.joint == "clamped" and s["driven_end"] != "E":
@@ -445,14 +228,14 @@ def read_fem_scene(
             )
         r.finish()
         return RPArmScene(**s, model_spec=_with_overrides(spec, s), source=source)
-    spec = _check_telescoping_stroke(r, s)
+    telescoping = _check_telescoping_stroke(r, s)
     r.finish()
-    return TelescopingScene(**s, model_spec=_with_overrides(spec, s), source=source)
+    return TelescopingScene(**s, model_spec=_with_overrides(telescoping, s), source=source)
 
 
 def _read_drive(r: TableReader, drive: TableReader, kind: str, s: dict[str, Any]) -> RPDrive:
     if kind == "motion":
-        coupling = drive.string("coupling", "partial", choices=COUPLINGS)
+        coupling = drive.choice("coupling", COUPLINGS, "partial")
         if coupling == "full" and (s["driven_end"] != "E" or s["initial"] != "rest"):
             raise drive.error(
                 "coupling",

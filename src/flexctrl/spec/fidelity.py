@@ -15,19 +15,19 @@ from typing import Literal
 from flexctrl.errors import SpecError
 
 KINDS = ("rigid", "amm", "fem", "auto")
-#: How ``fidelity = "auto"`` walks the ladder for a closed loop (``fidelity_walk``,
-#: :mod:`flexctrl.scenes.auto`): ``estimate`` (linear estimates of the rungs first; for a
-#: controller stepped in Python, whose linear runs cost what its nonlinear runs do, the
-#: nonlinear walk from the top rung down) or ``ladder`` (the nonlinear walk up from the
-#: bandwidth rule's start, with a small-step reference: slower, and it reaches tolerances the
-#: linear estimates cannot certify).
+#: How ``fidelity = "auto"`` walks the ladder for a closed loop (``fidelity_walk``;
+#: :mod:`flexctrl.scenes.auto_closed_loop`): ``estimate`` (the default: linear estimates of the
+#: rungs first, or the nonlinear walk from the top rung down for a controller stepped in
+#: Python; the reference model at its own step, its step error estimated linearly) or
+#: ``ladder`` (nonlinear runs only, from the bandwidth rule's start; the reference at a small
+#: step and half of it: no linear assumption, at several times the cost).
 FIDELITY_WALKS = ("estimate", "ladder")
-#: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``,
-#: :func:`flexctrl.fidelity.ladder.walk_and_judge`): ``full`` (the rung below a rung that meets
-#: the tolerance is tried, so the choice is the lowest that meets it; the reference's step is
-#: checked) or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the
-#: rungs its estimate needs and the reference; the choice may be higher than needed, the
-#: reference's step is not checked).
+#: What ``fidelity = "auto"`` checks beyond the tolerance (``fidelity_checks``;
+#: flexctrl.fidelity.ladder.walk_and_judge): ``full`` (the rung below a rung that meets the
+#: tolerance is tried, so the choice is the lowest that meets it; the reference's step is checked)
+#: or ``tolerance`` (only the runs that certify the tolerance: the chosen rung, the rungs its
+#: estimate needs and the reference; the choice may be higher than needed, the reference's step is
+#: not checked).
 FIDELITY_CHECKS = ("full", "tolerance")
 _LIMITS = {"amm": (0, 6), "fem": (1, 64)}
 SPELLINGS = (

@@ -1,7 +1,11 @@
-"""Checks of settings fields: each raises :class:`~flexctrl.errors.SpecError` naming the key, the value and what is allowed."""
+"""Checks of settings fields, each raising a :class:`~flexctrl.errors.SpecError`.
+
+The error names the key, the value and what is allowed.
+"""
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import get_args
 
@@ -11,8 +15,6 @@ from flexctrl.errors import SpecError
 def choice_field(key: str, value, literal) -> None:
     allowed = get_args(literal)
     if value not in allowed:
-        import difflib
-
         hint = difflib.get_close_matches(str(value), [str(a) for a in allowed], n=1)
         extra = f" (did you mean '{hint[0]}'?)" if hint else ""
         raise SpecError(

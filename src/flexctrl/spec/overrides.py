@@ -99,8 +99,7 @@ def apply_overrides(
 def apply_values(
     document: dict[str, Any], values: Mapping[str, Any], source: str = "overrides"
 ) -> dict[str, Any]:
-    """Return a copy of ``document`` with ``{KEY: value}`` set, keys spelled as for
-    :func:`apply_overrides`.
+    """A copy of ``document`` with ``{KEY: value}`` set, the keys spelled as for ``--set``.
 
     The values are used as given (Python numbers, lists, strings), not parsed, so the
     document's validation sees exactly what the caller passed: ``{"payload.mass": "0.5"}``

@@ -14,13 +14,15 @@ import math
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
 from flexctrl.spec.units import warn_if_radians
 
 _MISSING = object()
+#: A string type, typically a ``Literal`` of the allowed values (:meth:`TableReader.choice`).
+Choice = TypeVar("Choice", bound=str)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -82,16 +84,19 @@ class TableReader:
         return SpecError(message, source=self.source, key=self.key(name))
 
     def has(self, name: str) -> bool:
-        """Whether the table holds ``name`` (which becomes a known key of the table's suggestions)."""
+        """Whether the table holds ``name`` (which becomes a known key of the suggestions)."""
         self._known.add(name)
         return name in self.table
 
     def accept(self, *names: str) -> None:
-        """Mark ``names`` as keys of this table that another reader handles (known, never unknown)."""
+        """Mark ``names`` as keys of this table that another reader handles (never unknown)."""
         self._seen.update(names)
 
     def raw(self, name: str, default: Any = _MISSING, *, allowed: str = "") -> Any:
-        """The unvalidated value of ``name`` (marks it as read); ``allowed`` describes it when it is missing."""
+        """The unvalidated value of ``name`` (marks it as read).
+
+        ``allowed`` describes it in the error when it is missing.
+        """
         self._seen.add(name)
         if name not in self.table:
             if default is _MISSING:
@@ -197,6 +202,11 @@ class TableReader:
             )
         return value
 
+    def choice(self, name: str, choices: Sequence[Choice], default: Any = _MISSING) -> Choice:
+        """One of ``choices`` (typed as they are: a ``Literal`` stays a ``Literal``)."""
+        value = self.string(name, default, choices=choices)
+        return next(c for c in choices if c == value)
+
     def numbers(
         self,
         name: str,
@@ -230,7 +240,10 @@ class TableReader:
     def degrees(
         self, name: str, default: Any = _MISSING, *, length: int | None = None
     ) -> tuple[float, ...]:
-        """Joint angles in degrees (a list); warns when they look like radians (:mod:`flexctrl.spec.units`)."""
+        """Joint angles in degrees (a list); warns when they look like radians.
+
+        The check is :mod:`flexctrl.spec.units`'.
+        """
         values = self.numbers(name, default, length=length, unit="degrees")
         if self.has(name):
             warn_if_radians(values, source=self.source, key=self.key(name))
@@ -270,5 +283,6 @@ class TableReader:
             known = ", ".join(names)
             raise self.error(
                 name,
-                f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: {known}",
+                f"unknown key (value {self.table[name]!r}){extra} Allowed: the known keys here: "
+                f"{known}",
             )

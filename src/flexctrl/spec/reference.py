@@ -66,7 +66,8 @@ class JointReference:
             )
         if self.profile == "quintic" and not (math.isfinite(self.move_time) and self.move_time > 0):
             raise SpecError(
-                f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the quintic",
+                f"value {self.move_time!r} is not allowed; allowed: a move time > 0 s for the "
+                "quintic",
                 key="move_time",
             )
         if not (math.isfinite(self.t_start) and self.t_start >= 0):
@@ -81,7 +82,10 @@ class JointReference:
         return self.t_start + (self.move_time if self.profile == "quintic" else 0.0)
 
     def derivatives(self, t, order: int = 2) -> tuple[np.ndarray, ...]:
-        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s): arrays (T, n) (rad, rad/s, ...), up to ``order`` (<= 3)."""
+        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s), up to ``order`` (<= 3).
+
+        Arrays (T, n) in rad, rad/s, rad/s^2, rad/s^3.
+        """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         q0, q1 = np.asarray(self.q_start), np.asarray(self.q_target)
         delta = q1 - q0
@@ -120,9 +124,9 @@ class JointReference:
 
 @dataclass(frozen=True)
 class Move:
-    """A joint move for :func:`flexctrl.closed_loop`: from ``start`` to ``target`` (rad).
+    """A joint move for :func:`flexctrl.closed_loop` from ``start`` to ``target`` (rad).
 
-    A quintic (minimum-jerk) path by default.
+    A quintic by default.
 
     Parameters
     ----------
@@ -161,7 +165,8 @@ class Move:
         object.__setattr__(self, "target", _angles(self.target, "target"))
         if self.deflection not in DEFLECTIONS:
             raise SpecError(
-                f"value {self.deflection!r} is not allowed; allowed: {', '.join(map(repr, DEFLECTIONS))}",
+                f"value {self.deflection!r} is not allowed; allowed: "
+                f"{', '.join(map(repr, DEFLECTIONS))}",
                 key="deflection",
             )
         self.joint_reference()  # validates profile, lengths and times

@@ -3,16 +3,14 @@
 The top-level ``kind`` (default ``"arm"``) selects the reader from :data:`SCENE_READERS`,
 the one place where scene kinds are known to the descriptions:
 
-==================================  ===================================================
-kind                                reader (scene type)
-==================================  ===================================================
-``arm``                             :func:`~flexctrl.spec.arm_scene.read_arm_scene`
-                                    (:class:`~flexctrl.spec.arm_scene.ArmScene`)
-``closed_loop``                     :func:`~flexctrl.spec.closed_loop_scene.read_closed_loop_scene`
-                                    (:class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene`)
-``sliding_beam``, ``rp_arm``,       :func:`~flexctrl.spec.fem_scene.read_fem_scene`
-``telescoping``                     (:class:`~flexctrl.spec.fem_scene.FemScene`)
-==================================  ===================================================
+``arm``
+    :func:`flexctrl.spec.arm_scene.read_arm_scene` ->
+    :class:`~flexctrl.spec.arm_scene.ArmScene`
+``closed_loop``
+    :func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene` ->
+    :class:`~flexctrl.spec.closed_loop_scene.ClosedLoopScene`
+``sliding_beam``, ``rp_arm``, ``telescoping``
+    :func:`flexctrl.spec.fem_scene.read_fem_scene` -> :class:`~flexctrl.spec.fem_scene.FemScene`
 
 Running a scene is a higher layer's job (:func:`flexctrl.scenes.run_scene`).
 :func:`load_scene` applies ``--set KEY=VALUE`` overrides to the parsed document before
@@ -26,14 +24,15 @@ from pathlib import Path
 from typing import Any
 
 from flexctrl.spec import shipped
-from flexctrl.spec.arm_scene import read_arm_scene
+from flexctrl.spec.arm_scene import ArmScene, InputSpec, read_arm_scene
 from flexctrl.spec.closed_loop_scene import read_closed_loop_scene
 from flexctrl.spec.fem_scene import read_fem_scene
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
-#: Scene kinds: kind -> reader; a reader takes ``(document, source, base_dir)`` and returns a
-#: scene.
+__all__ = ["SCENE_READERS", "ArmScene", "InputSpec", "load_scene", "scene_from_document"]
+
+#: Scene kinds: kind -> reader; a reader takes ``(document, source, base_dir)`` and returns a scene.
 SCENE_READERS: dict[str, Callable[..., Any]] = {
     "arm": read_arm_scene,
     "closed_loop": read_closed_loop_scene,

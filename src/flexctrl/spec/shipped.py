@@ -39,11 +39,14 @@ def data_root() -> Path:
 
 
 def names(kind: str | None = None) -> list[str]:
-    """The names of the shipped files of ``kind`` (``"model"``, ``"controller"``, ...; None: all), sorted."""
+    """The names of the shipped files of ``kind`` (``"model"``, ``"controller"``, ...), sorted.
+
+    None: of every kind.
+    """
     if kind is None:
         return sorted({name for k in FOLDERS for name in names(k)})
     suffix = _SUFFIX.get(kind, ".toml")
-    found = set()
+    found: set[str] = set()
     for folder in FOLDERS[kind]:
         found.update(p.stem for p in (data_root() / folder).glob(f"*{suffix}"))
     return sorted(found)

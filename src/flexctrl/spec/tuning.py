@@ -1,22 +1,22 @@
-"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, over which scenarios, for
-what.
+"""Tuning files (``studies/tune_*.toml``): which controller keys to tune, on what, for what.
 
 Layout (paths relative to the tuning file; SI units, angles in degrees as in every file)::
 
     name = "tune_lqr"                        # default: the file's stem
-    controller = "../controllers/lqr.toml"   # the file to start from (its values are the initial point)
+    controller = "../controllers/lqr.toml"   # the file to start from (its values: the start)
 
     [[parameters]]                           # one table per tuned key
-    key = "weights.joint_deg"                # a key of the controller file (dotted, as --set writes it)
+    key = "weights.joint_deg"                # a key of the controller file (dotted, as --set)
     low = 0.02                               # bounds, in the key's own unit
     high = 1.0
     scale = "log"                            # "log" (default; low > 0) or "linear"
     integer = false                          # true: rounded to whole numbers (e.g. horizon)
-    step = 5e-4                              # optional: rounded to a multiple of step (a sample time the
-                                             # scene's plant step divides)
+    step = 5e-4                              # optional: rounded to a multiple of step (a
+                                             # sample time the scene's plant step divides)
 
-    [scenarios]                              # a study in the study file syntax (executor closed_loop):
-    scene = "scenes/move_joint1_30deg.toml"  # fixed settings and [scenarios.grid] axes, [scenarios.set] ...
+    [scenarios]                              # a study in the study file syntax (executor
+                                             # closed_loop): fixed settings, [scenarios.grid]
+    scene = "scenes/move_joint1_30deg.toml"  # axes, [scenarios.set] ...
     model = "../models/subedi3link.toml"
     payload = 2.0
     [scenarios.grid]
@@ -26,12 +26,14 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
     metric = "tip_residual_rms"              # a closed-loop metric (flexctrl.loop.metrics.METRICS)
     statistic = "median"                     # "median", "max" or "mean" over the scenarios
 
-    [constraints]                            # a candidate breaking one is infeasible (recorded, never a crash)
+    [constraints]                            # a candidate breaking one is infeasible
+                                             # (recorded, never a crash)
     stable = true                            # stable = 1 in every scenario
     torque_limits = true                     # no applied torque beyond its joint's limit
-    closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below this, wherever the
-                                             # controller has a full-state gain (omit to not check)
-    real_time = true                         # controller_time_p95 below the controller's sample time
+    closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below
+                                             # this, wherever the controller has a full-state
+                                             # gain (omit to not check)
+    real_time = true                         # controller_time_p95 below its sample time
 
     [optimizer]
     method = "differential_evolution"        # "differential_evolution" | "cma" | "nelder_mead"
@@ -56,6 +58,7 @@ from typing import Any
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
+from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
@@ -97,9 +100,11 @@ class ParameterSpec:
         return math.log10(value) if self.scale == "log" else float(value)
 
     def from_unit(self, coordinate: float) -> float:
-        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 significant
-        digits
-        (what a file shows; the runs use exactly the value written), whole for integers."""
+        """The key's value for an optimiser coordinate: clipped to the bounds, to 6 digits.
+
+        Six significant digits (what a file shows; the runs use exactly the value written),
+        whole for integers.
+        """
         value = 10.0**coordinate if self.scale == "log" else float(coordinate)
         value = min(max(float(f"{value:.6g}"), self.low), self.high)
         quantum = 1.0 if self.integer else self.step
@@ -215,28 +220,8 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
     base = path.resolve().parent
     r = TableReader(document, source)
     name = r.string("name", path.stem)
-    controller_name = r.string("controller")
-    controller = (base / controller_name).resolve()
-    if not controller.is_file():
-        raise r.error(
-            "controller", f"file {controller_name!r} not found (looked at '{controller}')"
-        )
-    controller_document = read_toml(controller)
-    raw = r.raw("parameters", None)
-    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
-        raise r.error(
-            "parameters",
-            f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
-            "with key, low, high",
-        )
-    parameters = []
-    for i, table in enumerate(raw):
-        p = TableReader(table, source, prefix=f"parameters[{i + 1}]")
-        parameters.append(_parameter(p, controller, controller_document))
-        p.finish()
-    keys = [p.key for p in parameters]
-    if len(set(keys)) != len(keys):
-        raise r.error("parameters", f"tunes a key twice ({keys}); allowed: each key once")
+    controller = _controller_file(r, base)
+    parameters = _parameters(r, controller)
     scenarios = r.raw("scenarios", None)
     if not isinstance(scenarios, dict) or not scenarios:
         raise r.error(
@@ -249,7 +234,56 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         o.string("metric", "tip_residual_rms"), o.string("statistic", "median", choices=STATISTICS)
     )
     o.finish()
-    c = r.table_of("constraints", {})
+    constraints = _constraints(r.table_of("constraints", {}))
+    optimizer = _optimizer(r.table_of("optimizer", {}))
+    r.finish()
+    return TuningSpec(
+        name,
+        source,
+        base,
+        controller,
+        parameters,
+        copy.deepcopy(scenarios),
+        objective,
+        constraints,
+        optimizer,
+    )
+
+
+def _controller_file(r: TableReader, base: Path) -> Path:
+    """``controller``: the controller file tuned, relative to the tuning file."""
+    controller_name = r.string("controller")
+    controller = (base / controller_name).resolve()
+    if not controller.is_file():
+        raise r.error(
+            "controller", f"file {controller_name!r} not found (looked at '{controller}')"
+        )
+    return controller
+
+
+def _parameters(r: TableReader, controller: Path) -> tuple[ParameterSpec, ...]:
+    """``[[parameters]]``: one or more, each key once, each a numeric key of the controller."""
+    controller_document = read_toml(controller)
+    raw = r.raw("parameters", None)
+    if not isinstance(raw, list) or not raw or not all(isinstance(t, dict) for t in raw):
+        raise r.error(
+            "parameters",
+            f"value {raw!r} is not allowed; allowed: one or more [[parameters]] tables "
+            "with key, low, high",
+        )
+    parameters = []
+    for i, table in enumerate(raw):
+        p = TableReader(table, r.source, prefix=f"parameters[{i + 1}]")
+        parameters.append(_parameter(p, controller, controller_document))
+        p.finish()
+    keys = [p.key for p in parameters]
+    if len(set(keys)) != len(keys):
+        raise r.error("parameters", f"tunes a key twice ({keys}); allowed: each key once")
+    return tuple(parameters)
+
+
+def _constraints(c: TableReader) -> ConstraintSpec:
+    """``[constraints]``: what a candidate must satisfy."""
     constraints = ConstraintSpec(
         stable=c.boolean("stable", True),
         torque_limits=c.boolean("torque_limits", True),
@@ -259,7 +293,11 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         real_time=c.boolean("real_time", False),
     )
     c.finish()
-    m = r.table_of("optimizer", {})
+    return constraints
+
+
+def _optimizer(m: TableReader) -> OptimizerSpec:
+    """``[optimizer]``: the method, the evaluations, the population and the seed."""
     optimizer = OptimizerSpec(
         m.string("method", "differential_evolution", choices=METHODS),
         m.integer("evaluations", 60, low=1, high=100_000),
@@ -267,18 +305,7 @@ def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
         m.integer("seed", 0, low=0),
     )
     m.finish()
-    r.finish()
-    return TuningSpec(
-        name,
-        source,
-        base,
-        controller,
-        tuple(parameters),
-        copy.deepcopy(scenarios),
-        objective,
-        constraints,
-        optimizer,
-    )
+    return optimizer
 
 
 def _parameter(p: TableReader, controller: Path, controller_document: dict) -> ParameterSpec:
@@ -292,12 +319,14 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
     if step is not None and (math.ceil(low / step - 1e-9) * step > high + 1e-12 * abs(high)):
         raise p.error(
             "step",
-            f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller step",
+            f"value {step!r} leaves no multiple within [{low!r}, {high!r}]; allowed: a smaller "
+            "step",
         )
     if scale == "log" and low <= 0:
         raise p.error(
             "low",
-            f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = 'linear'",
+            f"value {low!r} is not allowed with scale = 'log'; allowed: low > 0, or scale = "
+            "'linear'",
         )
     initial = _file_value(controller_document, key)
     if initial is not None and (isinstance(initial, bool) or not isinstance(initial, (int, float))):
@@ -306,8 +335,6 @@ def _parameter(p: TableReader, controller: Path, controller_document: dict) -> P
             f"value {key!r} names a {type(initial).__name__} in '{controller}' "
             f"({initial!r}); allowed: a numeric key",
         )
-    from flexctrl.spec.controller_reader import load_controller
-
     probe = low if scale == "linear" else math.sqrt(low * high)
     try:  # the key must exist for this controller kind and accept a value in the bounds
         load_controller(controller, [f"{key}={round(probe) if integer else probe!r}"])

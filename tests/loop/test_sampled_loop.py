@@ -61,7 +61,7 @@ def test_zero_order_hold_equals_open_loop_rk4_with_the_same_held_torques(arm_mod
     assert traj.states[-1] == pytest.approx(reference.states[-1], rel=1e-9, abs=1e-12)
     assert times == pytest.approx(np.arange(samples) * Ts)
     # the controller saw the plant's joint angles at each sample instant
-    for k, (t, y) in enumerate(ctrl.seen[1:], start=1):
+    for k, (_t, y) in enumerate(ctrl.seen[1:], start=1):
         assert y == pytest.approx(traj.states[k * 10, : model.n_u], abs=1e-12)
 
 
@@ -109,9 +109,10 @@ def test_divergence_can_stop_the_run_and_be_recorded(arm_model):
     gentle = _Schedule(
         np.full((100, model.n_u), 5.0), 0.01, sensors, np.full(model.n_u, np.inf), op
     )
-    monitor = lambda t, x: (
-        "joint beyond 0.01 rad" if np.max(np.abs(x[: model.n_u])) > 0.01 else None
-    )  # noqa: E731
+
+    def monitor(t, x):
+        return "joint beyond 0.01 rad" if np.max(np.abs(x[: model.n_u])) > 0.01 else None
+
     traj, _ = simulate_closed_loop(
         model,
         gentle,

@@ -6,6 +6,7 @@ import math
 import re
 
 import pytest
+from support import MODEL
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import load_arm
@@ -30,7 +31,7 @@ def test_youngs_modulus_implied_by_table2_is_aluminium(model_path):
     arm = load_arm(model_path)
     for link in arm.links:
         youngs = link.EI / link.section.second_moment
-        assert 66e9 < youngs < 72e9  # aluminium, ~69 GPa (issue 4)
+        assert 66e9 < youngs < 72e9  # aluminium, ~69 GPa
         # rho from Table 2 equals the section area times aluminium density ~2700 kg/m^3
         assert link.mass_per_length / link.section.area == pytest.approx(2700, rel=0.01)
 
@@ -40,8 +41,6 @@ def _write(tmp_path, text):
     path.write_text(text)
     return path
 
-
-from support import MODEL
 
 BASE = MODEL.read_text()
 

@@ -1,4 +1,7 @@
-"""Finite-element scenes (flexctrl.scenes.run_fem_scene) and the revolute-prismatic arm (flexctrl.dynamics.fem.rp_arm)."""
+"""Finite-element scenes (flexctrl.scenes.run_fem_scene) and the revolute-prismatic arm.
+
+The arm is :mod:`flexctrl.dynamics.fem.rp_arm`.
+"""
 
 from __future__ import annotations
 
@@ -128,7 +131,7 @@ BK_RP = RPArmSpec(
 @pytest.mark.parametrize("case", [FAST_PUSH, FAST_PULL], ids=lambda c: c.name)
 @pytest.mark.parametrize("driven_end", ["E", "H"])
 def test_rp_arm_without_rotation_is_the_sliding_beam(case, driven_end):
-    """Same supports (D = 0.25 m), same Eq 57 motion, housing held at a fixed angle: same response."""
+    """Same supports (D = 0.25 m), same Eq 57 motion, the housing held still: same response."""
     c = dataclasses.replace(case, driven_end=driven_end)
     ref = simulate_sliding_beam(c, 4, dt=1e-3, duration=0.5)
     motion = RPMotion(c.C1, c.C2, c.T, theta0=0.7, dtheta=0.0)
@@ -186,8 +189,11 @@ def test_rp_arm_follows_the_quasi_static_deflection(rp_run):
 
 
 def test_rp_arm_energy_balance(rp_run):
-    """d/dt (1/2 qd M qd + 1/2 q K q) = qd . (rigid-motion loads - (K_g - theta'^2 M) q - A^T lam):
-    the work of the frame's inertia and of the moving supports; after T the energy stays constant."""
+    """The energy changes by the work of the frame's inertia and of the moving supports.
+
+    d/dt (1/2 qd M qd + 1/2 q K q) = qd . (rigid-motion loads - (K_g - theta'^2 M) q - A^T lam);
+    after T the energy stays constant.
+    """
     spec, motion, _ = rp_run
     errors = {}
     for dt in (1e-3, 5e-4):

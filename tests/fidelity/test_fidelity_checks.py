@@ -1,10 +1,9 @@
-"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance
-(issue 14).
+"""``fidelity_checks = "tolerance"``: a choice that makes only the runs certifying its tolerance.
 
 The walk itself is checked on synthetic runs whose tip paths converge geometrically
 with the rung (every walk: from the top, the ladder's from a start, the estimate-first),
 counting which rungs and references each walk runs; one closed loop (the small case of
-:mod:`tests.test_fidelity_estimate`, MPC from the top) checks the scene key end to end
+tests/scenes/test_auto_linear.py, MPC from the top) checks the scene key end to end
 against the full checks and against distances recomputed from its runs.
 """
 
@@ -18,20 +17,27 @@ import pytest
 from flexctrl.cli import main
 from flexctrl.commands.fidelity import format_table
 from flexctrl.errors import SpecError
-from flexctrl.fidelity.ladder import RunRecord, ToleranceUnreachable, tip_distance, walk_and_judge
+from flexctrl.fidelity.ladder import (
+    Ladder,
+    Runners,
+    RunRecord,
+    ToleranceUnreachable,
+    tip_distance,
+    walk_and_judge,
+)
 from flexctrl.scenes import auto_closed_loop as auto_fidelity
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import pin_design
 from flexctrl.scenes.run_arm_scene import resolve_auto as resolve_arm_auto
 from flexctrl.scenes.run_closed_loop_scene import resolve_auto
-from flexctrl.spec.fidelity import FIDELITY_CHECKS
+from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS
 from flexctrl.spec.scene import load_scene
 
 TIME = np.linspace(0.0, 1.0, 101)
 
 
 def _record(m: int, *, dt: float = 1e-3, linear: str = "") -> RunRecord:
-    """Rung ``m`` (0 = rigid) of a ladder converging as ``2^-m`` mm onto the reference's path (``m = 4``)."""
+    """Rung ``m`` (0 = rigid) of a ladder converging as ``2^-m`` mm onto rung 4."""
     tip = np.column_stack([np.cos(TIME), np.sin(TIME)])
     tip[:, 0] += 1e-3 * 2.0**-m * np.sin(7 * TIME) * (m < 4)
     return RunRecord(
@@ -46,8 +52,40 @@ def _record(m: int, *, dt: float = 1e-3, linear: str = "") -> RunRecord:
     )
 
 
+def judge(
+    *,
+    name,
+    tol,
+    low,
+    top,
+    reference,
+    safety,
+    rule,
+    run_rung,
+    run_reference,
+    reference_dt,
+    start=None,
+    linear=None,
+    from_top=False,
+    checks="full",
+):
+    """``walk_and_judge`` with the walk named by what it is given: the linear runs, from the top."""
+    walk = "from_top" if from_top else "ladder" if linear is None else "linear_first"
+    linear_rung, linear_exact = linear or (None, None)
+    return walk_and_judge(
+        Ladder(name, tol, low, top, reference, safety, checks),
+        Runners(run_rung, run_reference, reference_dt, linear_rung, linear_exact),
+        walk=walk,
+        start=start,
+        rule=rule,
+    )
+
+
 def _walk(checks: str, **kind):
-    """``walk_and_judge`` on the synthetic ladder (top amm:3, reference amm:4, tolerance 0.3 mm), and what it ran."""
+    """``walk_and_judge`` on the synthetic ladder, and what it ran.
+
+    Top ``amm:3``, reference ``amm:4``, tolerance 0.3 mm.
+    """
     made: list = []
 
     def run_rung(m):
@@ -58,7 +96,7 @@ def _walk(checks: str, **kind):
         made.append(("reference", dt))
         return _record(4, dt=dt)
 
-    choice = walk_and_judge(
+    choice = judge(
         name="synthetic",
         tol=3e-4,
         low=0,
@@ -126,9 +164,9 @@ def test_tolerance_keeps_a_higher_rung_where_full_finds_a_lower_one():
         run_rung=lambda m: (made.append(m), _record(m))[1],
         run_reference=lambda dt: _record(4, dt=dt),
     )
-    full = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True)
+    full = judge(**kw, start=3, linear=_linear([]), from_top=True)
     made.clear()
-    only = walk_and_judge(**kw, start=3, linear=_linear([]), from_top=True, checks="tolerance")
+    only = judge(**kw, start=3, linear=_linear([]), from_top=True, checks="tolerance")
     assert str(full.choice) == "amm:1" and str(only.choice) == "amm:3" and sorted(made) == [3, 4]
     assert only.estimated_error <= 1e-3 and only.reference_error <= only.estimated_error
 
@@ -172,6 +210,17 @@ def test_a_bad_value_is_refused_naming_the_key_and_the_values_allowed():
         auto_fidelity.choose_closed_loop_fidelity(scene, 1e-2, checks="none")
     with pytest.raises(ValueError, match="checks"):
         _walk("none")
+
+
+def test_the_walks_are_estimate_and_ladder():
+    assert FIDELITY_WALKS == ("estimate", "ladder")
+    with pytest.raises(SpecError, match="fidelity_walk.*'linear'.*allowed: 'estimate', 'ladder'"):
+        load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity_walk='linear'"])
+    scene = pin_design(
+        load_scene("studies/scenes/move_joint1_30deg.toml", ["fidelity='auto'", "tolerance=1e-2"])
+    )
+    with pytest.raises(SpecError, match="fidelity_walk"):
+        auto_fidelity.choose_closed_loop_fidelity(scene, 1e-2, walk="linear")
 
 
 def test_the_scene_key_reaches_a_closed_loops_choice_and_only_the_certifying_runs_are_made():
@@ -236,13 +285,13 @@ def test_tolerance_runs_the_rung_below_the_reference_only_when_the_walk_ran_it()
         run_rung=lambda m: (made.append(m), _record(m))[1],
         run_reference=lambda dt: _record(4, dt=dt),
     )
-    full = walk_and_judge(**kw)
+    full = judge(**kw)
     assert str(full.choice) == "amm:1" and 5 in made
     assert (
         full.evidence["reference"]["convergence"]["rung_below_m"] == 0.0
     )  # amm:5 follows the reference's path
     made.clear()
-    only = walk_and_judge(**kw, checks="tolerance")
+    only = judge(**kw, checks="tolerance")
     # neither the rung below the reference nor the finest model at its own step (the ladder walk's
     # cost evidence)
     assert str(only.choice) == "amm:2" and sorted(made) == [2, 3, 4]
@@ -287,11 +336,11 @@ def test_in_tolerance_mode_a_convergence_warning_names_only_the_check_made():
         run_reference=lambda dt: _record(4, dt=dt),
     )
     with pytest.warns(UserWarning, match="moves by .* with half its step and differs by"):
-        walk_and_judge(**kw)
+        judge(**kw)
     with pytest.warns(
         UserWarning, match=r"\(rk4, dt = 0.0001 s\) differs by 0.000125 m from amm:3"
     ) as caught:
-        walk_and_judge(**kw, checks="tolerance")
+        judge(**kw, checks="tolerance")
     assert not any("moves by" in str(w.message) for w in caught)
 
 
@@ -300,7 +349,7 @@ def test_a_predicted_failure_records_the_checks_asked_for():
         return _record(m, linear="linear-rk4") if m < 4 else _record(4, linear="linear-rk4")
 
     with pytest.raises(ToleranceUnreachable) as failed:
-        walk_and_judge(
+        judge(
             name="synthetic",
             tol=1e-6,
             low=0,
@@ -319,8 +368,8 @@ def test_a_predicted_failure_records_the_checks_asked_for():
 
 
 def test_an_arm_scene_reads_the_key_through_the_command_and_the_scene(capsys):
-    # the slow light move of tests/test_auto_fidelity.py: the ladder walk, rungs up to amm:2 against
-    # amm:3
+    # the slow light move of tests/scenes/test_auto_arm_fidelity.py: the ladder walk, rungs up to
+    # amm:2 against amm:3
     argv = [
         "fidelity",
         "studies/scenes/slow_move_light.toml",

@@ -1,18 +1,21 @@
-"""The compiled closed loop (one CasADi call for all samples after the first) against the Python
-loop.
+"""The closed loop chained in CasADi against the same controller stepped once per sample.
 
-Same plant step, same controller arithmetic, the same noise draws: the trajectories
-agree to round-off (the controllers' matrix products and the compiled output map sum
-in another order), the divergence verdicts exactly.
+A controller with a sampled law runs its samples after the first chained in CasADi; the
+same controller with its law hidden is stepped from Python, the path every controller
+without a law takes.  Same plant step, same controller arithmetic, the same noise draws:
+the trajectories agree to round-off (the controllers' matrix products sum in another
+order), the divergence verdicts exactly.
 """
 
+import contextlib
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from flexctrl.bench.loop_overhead import metric_differences
-from flexctrl.errors import SpecError
+from flexctrl.loop import compiled
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop
@@ -35,26 +38,40 @@ def short_scene(duration=3.6, noise=False):
     )
 
 
-def both(scene, controller, cache, overrides=(), loops=("python", "compiled")):
-    out = {}
-    for loop in loops:
-        setup = build_loop(scene, controller, overrides, cache)
-        rng = np.random.default_rng(scene.seed) if scene.noise else None
-        traj, samples = simulate_closed_loop(
-            setup.plant,
-            setup.controller,
-            setup.x0,
-            scene.plant.duration,
-            scene.plant.dt,
-            sensors=setup.sensors,
-            rng=rng,
-            monitor=setup.monitor,
-            stop_on_divergence=True,
-            loop=loop,
-        )
-        ctrl = setup.controller
-        out[loop] = (traj, samples, ctrl.stats.summary(), np.array(ctrl.u_previous))
-    return out
+@contextlib.contextmanager
+def stepped_in_python(controller):
+    """The controller without its sampled law: the loop steps it once per sample from Python."""
+    controller.sampled_law = lambda: None
+    try:
+        yield controller
+    finally:
+        del controller.sampled_law
+
+
+def run(scene, controller, cache, overrides=()):
+    setup = build_loop(scene, controller, overrides, cache)
+    rng = np.random.default_rng(scene.seed) if scene.noise else None
+    traj, samples = simulate_closed_loop(
+        setup.plant,
+        setup.controller,
+        setup.x0,
+        scene.plant.duration,
+        scene.plant.dt,
+        sensors=setup.sensors,
+        rng=rng,
+        monitor=setup.monitor,
+        stop_on_divergence=True,
+    )
+    ctrl = setup.controller
+    return traj, samples, ctrl.stats.summary(), np.array(ctrl.u_previous)
+
+
+def both(scene, controller, cache, overrides=()):
+    """The run stepped in Python and chained in CasADi, on one cached design."""
+    design = build_loop(scene, controller, overrides, cache).controller
+    with stepped_in_python(design):
+        python = run(scene, controller, cache, overrides)
+    return {"python": python, "compiled": run(scene, controller, cache, overrides)}
 
 
 def assert_close(a, b, tol=TOL):
@@ -95,17 +112,18 @@ def test_compiled_loop_matches_python(controller, noise, overrides, cache):
 
 def test_scene_metrics_match(cache):
     scene = dataclasses.replace(short_scene(noise=True), controller="controllers/lqg.toml")
-    a, b = (
-        run_closed_loop_scene(scene, cache=cache, on_divergence="record", loop=loop).metrics
-        for loop in ("python", "compiled")
-    )
+    with stepped_in_python(build_loop(scene, scene.controller, (), cache).controller):
+        a = run_closed_loop_scene(scene, cache=cache, on_divergence="record")
+    b = run_closed_loop_scene(scene, cache=cache, on_divergence="record")
+    assert a.trajectory.meta["loop"] == "python" and b.trajectory.meta["loop"] == "compiled"
+    a, b = a.metrics, b.metrics
     differences = metric_differences(a, b)
     assert max(differences.values()) <= TOL, differences
     assert a["settled"] == b["settled"] and a["stable"] == b["stable"]
 
 
 def test_divergence_is_the_same(cache):
-    """An unfiltered, fast sampled PD is unstable on the light hubs (control/pd.py): both paths stop alike."""
+    """An unfiltered, fast sampled PD is unstable on the light hubs: both paths stop alike."""
     overrides = ("torque_filter=0", "bandwidth=8.0", "saturate=false")
     runs = both(short_scene(), "controllers/pd.toml", cache, overrides)
     (tp, sp, stp, _), (tc, sc, stc, _) = runs["python"], runs["compiled"]
@@ -116,23 +134,15 @@ def test_divergence_is_the_same(cache):
     assert_close(tp.states[finite], tc.states[finite], 1e-6)
 
 
-def test_loop_option_is_checked(cache):
-    scene = short_scene()
+def test_a_controller_without_a_sampled_law_is_stepped_in_python(cache):
+    scene = short_scene(duration=0.5)
     setup = build_loop(scene, "controllers/mpc.toml", (), cache)
-    with pytest.raises(SpecError, match="no sampled law"):
-        simulate_closed_loop(
-            setup.plant,
-            setup.controller,
-            setup.x0,
-            0.5,
-            scene.plant.dt,
-            sensors=setup.sensors,
-            loop="compiled",
-        )
-    with pytest.raises(SpecError, match="'auto', 'compiled', 'python'"):
-        simulate_closed_loop(
-            setup.plant, setup.controller, setup.x0, 0.5, scene.plant.dt, loop="fast"
-        )
+    assert setup.controller.sampled_law() is None
+    traj, samples = simulate_closed_loop(
+        setup.plant, setup.controller, setup.x0, 0.5, scene.plant.dt, sensors=setup.sensors
+    )
+    assert traj.meta["loop"] == "python"
+    assert setup.controller.stats.summary()["steps"] == samples.size > 1
 
 
 def test_design_is_kept_and_reset(cache):
@@ -146,35 +156,43 @@ def test_design_is_kept_and_reset(cache):
 
 @pytest.mark.parametrize("controller", ["controllers/lqg.toml", "controllers/pd.toml"])
 def test_chained_in_chunks_equals_one_chain_to_the_last_digit(controller, cache, monkeypatch):
-    # the loop is chained in calls of CHUNK samples (building one mapaccum over the whole run costs
-    # time
-    # in proportion to its length); 7 leaves a remainder, so both the full and the last, shorter
-    # chunk run
-    import flexctrl.loop.compiled as compiled
-
+    # the loop is chained in calls of at most CHUNK samples, fewer when a call would hold more
+    # than CHUNK_STEPS plant steps; 7 leaves a remainder, so both the full and the last, shorter
+    # chunk run; CHUNK_STEPS = 1 makes every call one sample
     scene = short_scene(noise=True)
     runs = {}
-    for chunk in (None, 7):
-        monkeypatch.setattr(compiled.run_compiled, "__defaults__", (chunk,))
-        runs[chunk] = both(scene, controller, cache, loops=("compiled",))["compiled"]
-    (a, sa, stats_a, ua), (b, sb, stats_b, ub) = runs[None], runs[7]
-    np.testing.assert_array_equal(sa, sb)
+    for name, chunk, states in (("whole", 10**6, 10**12), ("7", 7, 10**12), ("1", 128, 1)):
+        monkeypatch.setattr(compiled, "CHUNK", chunk)
+        monkeypatch.setattr(compiled, "CHUNK_STEPS", states)
+        runs[name] = run(scene, controller, cache)
+    a, sa, stats_a, ua = runs["whole"]
     assert a.states.shape[0] > 7 * 15
-    np.testing.assert_array_equal(a.states, b.states)
-    np.testing.assert_array_equal(a.inputs, b.inputs)
-    np.testing.assert_array_equal(ua, ub)
-    kept = lambda stats: {
-        k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"
-    }  # noqa: E731
-    assert kept(stats_a) == kept(stats_b) and kept(stats_a)["steps"] == len(sa)
+    for b, sb, stats_b, ub in (runs["7"], runs["1"]):
+        np.testing.assert_array_equal(sa, sb)
+        np.testing.assert_array_equal(a.states, b.states)
+        np.testing.assert_array_equal(a.inputs, b.inputs)
+        np.testing.assert_array_equal(ua, ub)
+        assert kept(stats_a) == kept(stats_b) and kept(stats_a)["steps"] == len(sa)
+
+
+def kept(stats):
+    """The statistics that are not wall times."""
+    return {k: v for k, v in stats.items() if not k.endswith("_ms") and k != "median_iterations"}
+
+
+def test_a_call_holds_at_most_chunk_steps_plant_steps():
+    def size(substeps):
+        return compiled.chunk_size(SimpleNamespace(substeps=substeps))
+
+    assert size(17) == compiled.CHUNK  # the scenes' LQR on amm:2: 128 samples a call
+    assert size(260) == compiled.CHUNK_STEPS // 260  # amm:5 at its stable step under a 10 ms LQR
+    assert size(4029) == 1  # finite elements: thousands of steps per sample, one sample a call
 
 
 def test_the_deflection_monitor_stops_both_loops_alike(cache):
     # a limit of 0.2 % of each link's length (2-3 mm): the move's own deflections (about 11 mm on
-    # link 1) trip it,
-    # so the Python loop's per-sample monitor call (bound to arrays for the run) and the compiled
-    # loop's
-    # batched flags must stop at the same sample for the same reason
+    # link 1) trip it, so the Python loop's per-sample monitor call (bound to arrays for the run)
+    # and the compiled loop's batched flags must stop at the same sample for the same reason
     scene = dataclasses.replace(short_scene(), divergence_deflection=0.002)
     runs = both(scene, "controllers/lqr.toml", cache)
     (tp, sp, _, _), (tc, sc, _, _) = runs["python"], runs["compiled"]

@@ -1,4 +1,4 @@
-"""The public Python API (``import flexctrl as fc``): names, docstrings, inputs, and agreement with the scene files."""
+"""The public Python API (``import flexctrl as fc``): names, inputs, agreement with scene files."""
 
 from __future__ import annotations
 
@@ -52,8 +52,8 @@ def test_unknown_public_name_is_an_attribute_error():
 
 def test_import_is_lazy():
     code = (
-        "import flexctrl, sys; print(sorted(m for m in ('casadi', 'control', 'matplotlib') if "
-        "m in sys.modules))"
+        "import flexctrl, sys; "
+        "print(sorted(m for m in ('casadi', 'control', 'matplotlib') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
@@ -107,7 +107,7 @@ def test_linearize_names_states_inputs_and_outputs(model, op):
 
 
 def test_closed_loop_equals_the_scene_file_at_the_same_step(model, op):
-    """The Python API and the scene runner build the loop separately (reference, x0, window, sensors)."""
+    """The Python API and the scene runner build the loop apart (reference, x0, window, sensors)."""
     lqr = fc.design(model, op, fc.load_controller(DATA / "controllers" / "lqr.toml"))
     move = fc.Move(start=np.radians([0, 0, 0]), target=np.radians([30, 0, 0]), time=1.5)
     res = fc.closed_loop(

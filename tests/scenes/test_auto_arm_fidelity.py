@@ -1,4 +1,4 @@
-"""fidelity = "auto": the cheapest model that meets a tip tolerance (issue 7).
+"""fidelity = "auto" for arm scenes: the cheapest model that meets a tip tolerance.
 
 The choices are checked against a reference that the chooser did not use to make
 them (the reference only judges).  What the chooser reports is recomputed here by
@@ -47,12 +47,11 @@ SLOW_OPTIONS = {"top": 2, "reference": "amm:3"}
 CACHE = SceneCache()
 HEAVY = "studies/scenes/bangbang_damped.toml"
 HEAVY_SET = ["duration=0.6", "payload=4.0", "fidelity='auto'", "tolerance=2e-4"]
-# : The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
-# 2).
+#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
+#: 2).
 SAFETY = 2.0
-# : Largest error (m) allowed to the CVODES reference at its default tolerances (rtol 1e-8, atol
-# 1e-10): against
-#: runs at rtol 1e-12 it moved the tip by at most 2e-10 m on both scenes here.
+#: Largest error (m) allowed to the CVODES reference at its default tolerances (rtol 1e-8, atol
+#: 1e-10): against runs at rtol 1e-12 it moved the tip by at most 2e-10 m on both scenes here.
 CVODES_ERROR = 1e-9
 #: What the slow choice left in CACHE's run store, taken before any test here runs a rung itself.
 SLOW_CHOICE_RUNS: dict[str, int] = {}
@@ -67,8 +66,7 @@ def slow():
 
 
 def _distance(a, b) -> float:
-    """Largest tip distance between two runs, the coarser interpolated linearly onto the finer's
-    samples.
+    """Largest tip distance between two runs, the coarser interpolated onto the finer's samples.
 
     Written out by index arithmetic on the runs' uniform grids (the ladder's definition,
     :func:`flexctrl.fidelity.ladder.tip_distance`, without its code).
@@ -89,7 +87,7 @@ def _rung(m: int) -> str:
 
 
 def _estimator(scene, choice: FidelityChoice):
-    """``estimate(m) -> (distances, estimate)`` of rung ``m``, recomputed from the chooser's runs (method step 2)."""
+    """``estimate(m) -> (distances, estimate)`` of rung ``m`` from the chooser's runs (step 2)."""
     ref_n = parse_fidelity(choice.evidence["reference"]["fidelity"]).count
     runs = {}
 
@@ -108,7 +106,10 @@ def _estimator(scene, choice: FidelityChoice):
 
 
 def _reference_by_cvodes(scene, choice: FidelityChoice):
-    """The reference model integrated by CVODES on the reference's samples; the chosen model re-run by ``simulate``."""
+    """The reference model by CVODES on the reference's samples; the chosen model re-run.
+
+    The chosen model is re-run by ``simulate``.
+    """
     # both scenes start at rest, undeformed, at q = 0: the initial state is zero
     assert all(a == 0.0 for a in scene.q0) and not scene.qf0 and not any(scene.qd0 or ())
     ref = choice.evidence["reference"]
@@ -186,8 +187,8 @@ def test_slow_light_move_picks_a_low_fidelity(slow):
     )
     assert choice.cost_ratio < 1
     # every rung runs RK4 at the scene's step divided by the smallest whole number k that is stable
-    # with the
-    # documented margin (omega_max from the model itself), so outputs stay on the scene's grid
+    # with the documented margin (omega_max from the model itself), so outputs stay on the scene's
+    # grid
     for row in choice.evidence["candidates"]:
         omega = model_for(scene, row["fidelity"], CACHE).omega_max
         k = scene.dt / row["dt_s"]

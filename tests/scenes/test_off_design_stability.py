@@ -1,4 +1,4 @@
-"""Issue 7 (controllers): a controller designed at one configuration and payload, run elsewhere.
+"""A controller designed at one configuration and payload, run elsewhere.
 
 The verdict of the run (``stable``) is checked against an independent linear one: the
 spectral radius of the plant's own linearisation at the target closed with the
@@ -52,7 +52,7 @@ def test_near_the_design_point_the_same_lqr_is_stable():
 
 
 def test_a_diverging_run_is_recorded_as_a_finite_ok_row_or_raised_by_simulate(tmp_path):
-    """Leaving the bounds stops the run: recorded (stable = 0, divergence_time) or a SimulationError."""
+    """Leaving the bounds stops the run: recorded (stable = 0, divergence_time) or raised."""
     # a tight deflection bound makes the unstable loop leave it within the run
     overrides = DESIGN + [
         "payload=0.0",

@@ -180,7 +180,8 @@ def test_misspelt_key_gets_a_suggestion(tmp_path):
         ("dt=-1e-3", r"key 'dt'.*-0.001.*allowed: a finite number > 0"),
         (
             "integrator='rk5'",
-            r"key 'integrator'.*'rk5'.*allowed: 'rk4', 'cvodes', 'idas', 'scipy'.*did you mean 'rk4'",
+            r"key 'integrator'.*'rk5'.*allowed: 'rk4', 'cvodes', 'idas', 'scipy'.*did you mean "
+            r"'rk4'",
         ),
         ("modes='moving'", r"key 'modes'.*allowed: 'frozen', 'scheduled'"),
         ("fidelity='amm:9'", r"key 'fidelity'.*'amm:9'"),

@@ -1,13 +1,13 @@
-"""Closed-loop scenes with ``fidelity = "auto"``: the plant model chosen from a tip tolerance (issue
-7).
+"""Closed-loop scenes with ``fidelity = "auto"``: the plant model chosen from a tip tolerance.
 
-The choice is checked against runs the chooser did not make: the reference plant and
-the chosen plant are run directly here (full plant rate, through
-:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` with a concrete fidelity) and
-their tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`.  The error estimate is
-recomputed from the chooser's rung runs (kept in :data:`CACHE`) with the method's rule, ``safety``
-times the largest pointwise tip distance on the scene's grid to the next two rungs.  No choice or
-error is hard-coded: the tolerance is the only number the assertions use.
+The choice is checked against runs the chooser did not make: the reference plant and the
+chosen plant are run directly here (full plant rate, through
+:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene` with a concrete
+fidelity) and their tip paths compared with :func:`flexctrl.sim.tip_error.tip_error`. The
+error estimate is recomputed from the chooser's rung runs (kept in :data:`CACHE`) with the
+method's rule, ``safety`` times the largest pointwise tip distance on the scene's grid to
+the next two rungs. No choice or error is hard-coded: the tolerance is the only number the
+assertions use.
 
 The scene is the quickstart's move (1.5 s quintic, 2 kg, q2, q3 = 90, -90 deg) cut to
 2.8 s, with the ladder cut at ``amm:2`` (reference ``amm:3``) and the LQR (10 ms
@@ -33,17 +33,18 @@ from flexctrl.spec.fidelity import parse_fidelity
 from flexctrl.spec.scene import load_scene
 
 SCENE = "studies/scenes/move_joint1_30deg.toml"
-CONTROLLER = "tests/data/controllers/lqr_full_state.toml"  # fixed: re-tuning the shipped files must not move these tests
+# fixed: re-tuning the shipped files must not move these tests
+CONTROLLER = "tests/data/controllers/lqr_full_state.toml"
 SHORT = ["duration=2.8", "initial.q=[0.0, 90.0, -90.0]"]
 TOL = 3e-3  # m
-# : The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
-# 2).
+#: The documented default safety factor (module docstring of flexctrl.fidelity.ladder, method step
+#: 2).
 SAFETY = 2.0
 OPTIONS = {
     "top": 2,
     "reference": "amm:3",
     "walk": "ladder",
-}  # the ladder walk (the estimate walk: test_fidelity_estimate.py)
+}  # the ladder walk (the estimate walk: test_auto_linear.py)
 #: One cache for the module: the runs below share models and the choice, as a study worker does.
 CACHE = SceneCache()
 
@@ -62,11 +63,12 @@ def _rung(m: int) -> str:
 
 
 def _estimate(choice: dict, m: int) -> float:
-    """Safety times the largest tip distance of rung ``m`` to rungs ``m + 1`` and ``m + 2`` (up to
-    the reference model).
+    """Safety times the largest tip distance of rung ``m`` to rungs ``m + 1`` and ``m + 2``.
 
-    From the chooser's runs (each rung at its own step, the tip on the scene's grid), by pointwise
-    distance.
+    Up to the reference model.
+
+    From the chooser's runs (each rung at its own step, the tip on the scene's grid), by
+    pointwise distance.
     """
     scene = pin_design(_scene())
     ref_n = parse_fidelity(choice["reference"]["fidelity"]).count

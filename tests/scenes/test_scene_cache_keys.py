@@ -1,5 +1,6 @@
-"""What a study worker reuses between runs (models, designs, reference tables) is keyed on
-everything it depends on.
+"""What a study worker reuses between runs is keyed on everything it depends on.
+
+Reused: models, designs, reference tables.
 
 A worker's :class:`~flexctrl.scenes.cache.SceneCache` keeps models, designed controllers
 and reference trajectories under plain-data keys.  Each run below goes through ONE
@@ -69,9 +70,8 @@ def test_runs_through_one_cache_equal_runs_on_fresh_caches(controller, overrides
         assert metrics(reused) == metrics(fresh), name
         seen[name] = fresh.metrics["tip_residual_rms"]
     # the variants are different runs (a test comparing a run with itself would pass whatever the
-    # keys), except
-    # the deflection for PD: it reads the reference's rigid part only (elastic=False), the same for
-    # both
+    # keys), except the deflection for PD: it reads the reference's rigid part only (elastic=False),
+    # the same for both
     same = {"deflection"} if "pd" in controller else set()
     assert all(
         seen[name] != seen["nominal"] for name in VARIANTS if name != "nominal" and name not in same
@@ -83,7 +83,7 @@ def test_runs_through_one_cache_equal_runs_on_fresh_caches(controller, overrides
 
 
 def test_controller_settings_and_sample_time_are_part_of_the_keys():
-    """Two controllers on one model share its reference (one table per sample time), each with its own design."""
+    """Two controllers on one model share its reference (a table per sample time), not a design."""
     shared = SceneCache()
     run = scene([], "controllers/lqr.toml")
     variants = [(), ("sample_time=0.0075",), ("weights.modal=0.03",)]
@@ -148,8 +148,7 @@ def relative(a, b):
 
 @pytest.mark.parametrize("q0", [(0.0, 0.0, 0.0), (0.0, 1.5707963267948966, -1.5707963267948966)])
 def test_compiled_reference_tables_match_the_virtual_machine(q0):
-    """Tables of the compiled Newton within 1e-9 relative of the VM's, at two configurations of one
-    shape.
+    """The compiled Newton's tables within 1e-9 of the VM's, at two configurations of one shape.
 
     The second configuration loads the first's library (one per model shape): its
     constants, bound in the wrapper, must be its own (the tables differ between the

@@ -1,4 +1,4 @@
-"""Issue 5's acceptance scene: a 30 degree move of joint 1, horizontal plane, 2 kg, zeta = 0.005.
+"""The move scene: a 30 degree move of joint 1, horizontal plane, 2 kg, zeta = 0.005.
 
 The reference is a 1.5 s quintic (the fastest within joint 1's 200 N m at 2 kg); every
 controller tracks it, and what is compared is what each leaves behind after it arrives.
@@ -60,7 +60,7 @@ def test_pd_leaves_the_largest_residual_peak(runs):
 
 @pytest.mark.parametrize("name", ["lqr", "mpc"])
 def test_lqr_and_mpc_beat_pd_on_residual_vibration_with_the_smooth_reference(runs, name):
-    """Issue 5: with the quintic, the model-based controllers leave less tip residual than PD (2 kg)."""
+    """With the quintic, the model-based controllers leave less tip residual than PD (2 kg)."""
     pd, other = runs["pd"]["metrics"], runs[name]["metrics"]
     assert runs[name]["reference"]["profile"] == "quintic"
     assert other["tip_residual_rms"] < pd["tip_residual_rms"]

@@ -1,10 +1,10 @@
-"""The estimate-first walk of ``fidelity = "auto"`` for closed loops (issue 14).
+"""The estimate-first walk of ``fidelity = "auto"`` for closed loops (scenes/auto_linear.py).
 
 Checked against the ladder walk and against nonlinear runs it did not make for its
 estimate: the linear estimate of each rung (:mod:`flexctrl.scenes.auto_linear`) is
 compared with the same formula on the nonlinear runs; the two walks' choices are
 compared; the recorded ``estimated_error`` and ``reference_error`` are recomputed from
-the nonlinear runs in the cache.  The small case is :mod:`tests.test_closedloop_auto`'s
+the nonlinear runs in the cache.  The small case is tests/scenes/test_auto_closed_loop.py's
 (the quickstart's move cut to 2.8 s at (q2, q3) = (90, -90) deg, ladder to ``amm:2``,
 reference ``amm:3``, the fixed full-state LQR).
 """
@@ -138,7 +138,8 @@ def test_estimate_walk_chooses_as_the_ladder_and_records_what_its_nonlinear_runs
     assert estimate.evidence["linear_estimate"]["candidate"] is not None
 
 
-@pytest.mark.slow  # the quickstart's PD at full length: the ladder's walk alone is ~5 nonlinear runs
+# the quickstart's PD at full length: the ladder's walk alone is ~5 nonlinear runs
+@pytest.mark.slow
 def test_unreachability_is_predicted_where_the_ladder_walk_finds_it():
     scene = pin_design(
         load_scene(
@@ -168,7 +169,8 @@ def test_unreachability_is_predicted_where_the_ladder_walk_finds_it():
     assert ladder.value.evidence["best"]["estimated_error_m"] > 1e-3
 
 
-@pytest.mark.slow  # the small case with the MPC: its choice (linear and nonlinear runs) and two runs
+# the small case with the MPC: its choice (linear and nonlinear runs) and two runs
+@pytest.mark.slow
 def test_the_run_at_the_choice_reuses_the_choices_own_run_and_equals_a_fresh_run():
     from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
 
@@ -247,8 +249,7 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
         and "from the top rung down" in choice.evidence["method"]
     )
     # the rule, recomputed from the nonlinear runs: every rung from the choice to the top meets the
-    # tolerance,
-    # the rung below the choice does not
+    # tolerance, the rung below the choice does not
     ref_n, top = parse_fidelity(options["reference"]).count, options["top"]
     low = 1  # the MPC measures strain: rigid cannot be built
     with pytest.raises(FlexctrlError, match="strain gauges"):
@@ -267,8 +268,7 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
     assert low < n < top, est  # the case tests the stop between rungs
     assert choice.estimated_error == pytest.approx(est[n], rel=1e-12)
     # the reference's step check is the estimate walk's: its linear loop at its own step against the
-    # exact hold,
-    # the only linear runs made
+    # exact hold, the only linear runs made
     assert cache.stats()["linear_runs"]["misses"] == 1
     exact = linear_closed_rung(scene, options["reference"], None, controller=mpc, cache=cache)
     at_h = linear_closed_rung(
@@ -281,6 +281,8 @@ def test_a_controller_stepped_in_python_walks_down_from_the_top_without_linear_r
     assert choice.evidence["bandwidth_rule"]["torques_from"].startswith(
         f"the closed loop with the plant at amm:{top}"
     )
+    assert "linear_estimate" not in choice.evidence and choice.evidence["linear_estimate_skipped"]
+    assert choice.evidence["walk_taken"] == "from_top"
     # a top rung that fails is a measured failure that says only the top was tried (the runs are in
     # the cache)
     with pytest.raises(ToleranceUnreachable, match="the top rung amm:3 does not meet") as failed:

@@ -1,8 +1,9 @@
-"""A closed loop's energies are evaluated when first read, and are the model's energies.
+"""A closed loop's trajectory outputs: the tip and deflections, and energies evaluated when read.
 
-The tip and deflections come from a map without the energies (its own compiled code), so
-they agree with the full output map to round-off, not to the bit; the energies, when read,
-agree with the model's own ``energies`` Function evaluated state by state.
+The tip and deflections come from the plant's output map without the energies (its own
+compiled code), so they agree with the full output map to round-off, not to the bit; the
+energies, when read, come from the full map itself, so they are its values to the bit, and
+the model's own energies Function's to round-off.
 """
 
 import copy
@@ -13,12 +14,7 @@ import numpy as np
 import pytest
 
 from flexctrl.loop.plant_step import output_map
-from flexctrl.loop.sampled import (
-    integrate_closed_loop,
-    mapped,
-    tip_positions,
-    trajectory_from_states,
-)
+from flexctrl.loop.sampled import integrate_closed_loop, tip_positions, trajectory_from_states
 from flexctrl.scenes.cache import SceneCache
 from flexctrl.scenes.loop_setup import build_loop
 from flexctrl.scenes.run_closed_loop_scene import run_closed_loop_scene
@@ -52,32 +48,31 @@ def run():
     return scene, cache, setup.plant, t, X, U, meta
 
 
-def _model_energies(plant, X):
-    """The model's ``energies`` Function at every state, in CasADi's virtual machine."""
-    q, qd = X[:, : plant.n_q].T, X[:, plant.n_q :].T
-    values = mapped(plant, "energies", X.shape[0], q, qd)
-    return {name: np.array(v, dtype=float).ravel() for name, v in zip(ENERGY_NAMES, values)}
+def mapped(model, name, count, *args):
+    """The model's own Function ``name`` over ``count`` columns, in CasADi's virtual machine."""
+    return [np.array(v, dtype=float) for v in model.functions[name].map(count)(*args)]
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_energies_read_later_are_the_models_energies(run, compiled):
+def test_energies_are_evaluated_when_read_and_are_the_full_maps(run):
     _, _, plant, t, X, U, meta = run
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=compiled)
-    assert isinstance(lazy.energies, LazyEnergies) and not lazy.energies.evaluated
-    assert list(lazy.energies) == list(ENERGY_NAMES) and len(lazy.energies) == 4
-    assert lazy.energies.evaluated is False  # iterating over the names computes nothing
-    expected = _model_energies(plant, X)
-    assert np.ptp(expected["E_kin"]) > 0  # a moving arm: the comparison compares something
-    for name in ("E_kin", "E_el", "E_grav"):
-        scale = max(np.max(np.abs(expected[name])), 1e-12)
-        np.testing.assert_allclose(lazy.energies[name], expected[name], rtol=0, atol=1e-12 * scale)
-    assert lazy.energies.evaluated
-    np.testing.assert_array_equal(
-        lazy.energies["E_total"],
-        lazy.energies["E_kin"] + lazy.energies["E_el"] + lazy.energies["E_grav"],
-    )
+    trajectory = trajectory_from_states(plant, t, X, U, meta)
+    energies = trajectory.energies
+    assert isinstance(energies, LazyEnergies) and not energies.evaluated
+    assert list(energies) == list(ENERGY_NAMES) and len(energies) == 4
+    assert energies.evaluated is False  # iterating over the names computes nothing
+    full = evaluate(output_map(plant, t.size), X)[0]
+    for k, name in enumerate(("E_kin", "E_el", "E_grav")):
+        np.testing.assert_array_equal(energies[name], full[:, k])
+    assert energies.evaluated
+    assert np.ptp(energies["E_kin"]) > 0  # a moving arm: the comparison compares something
+    np.testing.assert_array_equal(energies["E_total"], full[:, 0] + full[:, 1] + full[:, 2])
+    q, qd = X[:, : plant.n_q].T, X[:, plant.n_q :].T
+    own = mapped(plant, "energies", t.size, q, qd)
+    for name, values in zip(("E_kin", "E_el", "E_grav"), own):
+        scale = max(np.max(np.abs(values)), 1e-12)
+        assert np.max(np.abs(energies[name] - values.ravel())) <= 1e-12 * scale
     with pytest.raises(KeyError):
-        lazy.energies["E_wrong"]
+        energies["E_wrong"]
 
 
 def test_tip_rows_come_from_the_map_without_energies(run):
@@ -88,12 +83,12 @@ def test_tip_rows_come_from_the_map_without_energies(run):
     np.testing.assert_allclose(
         kinematic, full[:, 3:], rtol=0, atol=1e-14 * np.max(np.abs(full[:, 3:5]))
     )
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=True)
-    np.testing.assert_array_equal(lazy.tip, kinematic[:, :2])
-    np.testing.assert_array_equal(lazy.deflections, kinematic[:, 2:])
+    trajectory = trajectory_from_states(plant, t, X, U, meta)
+    np.testing.assert_array_equal(trajectory.tip, kinematic[:, :2])
+    np.testing.assert_array_equal(trajectory.deflections, kinematic[:, 2:])
 
 
-def test_lazy_energies_mapping():
+def test_lazy_energies_are_computed_once_when_first_read():
     calls = []
     kin, el, grav = np.array([1.0, 2.0]), np.array([0.5, 0.25]), np.array([-3.0, 4.0])
 
@@ -109,21 +104,17 @@ def test_lazy_energies_mapping():
 
 
 def test_tip_positions_are_the_trajectorys_tip(run):
-    """The fidelity chooser's tip paths: the compiled map's, within round-off of the VM's mapped calls."""
+    """The fidelity chooser's tip paths: the compiled map's, within round-off of the model's tip."""
     _, _, plant, t, X, U, meta = run
     tip = tip_positions(plant, X[::7])
-    np.testing.assert_array_equal(
-        tip, trajectory_from_states(plant, t, X, U, meta, compiled=True).tip[::7]
-    )
-    vm = np.array(
-        mapped(plant, "tip", tip.shape[0], X[::7, : plant.n_q].T, X[::7, plant.n_q :].T)[0]
-    ).T
+    np.testing.assert_array_equal(tip, trajectory_from_states(plant, t, X, U, meta).tip[::7])
+    vm = mapped(plant, "tip", tip.shape[0], X[::7, : plant.n_q].T, X[::7, plant.n_q :].T)[0].T
     assert np.max(np.abs(tip - vm)) <= 1e-14 * np.max(np.abs(vm))
 
 
 def test_copies_and_pickles_are_plain_dicts(run):
     _, _, plant, t, X, U, meta = run
-    lazy = trajectory_from_states(plant, t, X, U, meta, compiled=True)
+    lazy = trajectory_from_states(plant, t, X, U, meta)
     for other in (copy.deepcopy(lazy.energies), pickle.loads(pickle.dumps(lazy.energies))):
         assert type(other) is dict and list(other) == list(ENERGY_NAMES)
         for name in ENERGY_NAMES:
@@ -131,12 +122,10 @@ def test_copies_and_pickles_are_plain_dicts(run):
 
 
 def test_the_scene_metrics_do_not_read_the_energies(run):
-    scene, cache, plant, *_ = run
+    scene, cache, *_ = run
     result = run_closed_loop_scene(scene, cache=cache, on_divergence="record")
     assert not result.trajectory.energies.evaluated
     names, matrix = result.trajectory.columns()  # the CSV reads them
     assert result.trajectory.energies.evaluated
-    expected = _model_energies(plant, result.trajectory.states)["E_kin"]
-    np.testing.assert_allclose(
-        matrix[:, names.index("E_kin")], expected, rtol=0, atol=1e-12 * np.max(np.abs(expected))
-    )
+    full = evaluate(output_map(result.model, result.trajectory.time.size), result.trajectory.states)
+    np.testing.assert_array_equal(matrix[:, names.index("E_kin")], full[0][:, 0])

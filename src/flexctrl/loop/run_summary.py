@@ -1,0 +1,129 @@
+"""A finished closed-loop run judged and described: its metrics and ``summary.json``'s content.
+
+Shared by the Python entry point (:func:`flexctrl.loop.closed_loop.closed_loop`) and the
+scene runner (:func:`flexctrl.scenes.run_closed_loop_scene.run_closed_loop_scene`), so
+both judge and describe a run alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from flexctrl.loop.metrics import run_metrics
+from flexctrl.sim.trajectory import Trajectory
+from flexctrl.spec.closed_loop_scene import MetricSettings
+from flexctrl.spec.reference import JointReference
+
+
+def judge_run(
+    trajectory: Trajectory,
+    controller,
+    path: JointReference,
+    judge: MetricSettings,
+    *,
+    tip_target: np.ndarray,
+    duration: float,
+    torque_limits: Sequence[float],
+    radius: float | None,
+) -> dict[str, Any]:
+    """Every metric of the run (:func:`flexctrl.loop.metrics.run_metrics`).
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The plant's run.
+    controller : Controller
+        The controller that ran (its statistics and step times).
+    path : JointReference
+        The joint path it tracked (rad, s).
+    judge : MetricSettings
+        The residual window, bands and divergence bounds.
+    tip_target : numpy.ndarray
+        The tip at rest at the target (m).
+    duration : float
+        The run's requested length (s).
+    torque_limits : sequence of float
+        Per joint (N m).
+    radius : float or None
+        The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`).
+    """
+    return run_metrics(
+        trajectory,
+        tip_target=tip_target,
+        reference_joints=path.joints(trajectory.time),
+        t_arrive=path.t_arrive,
+        settle_allowance=judge.settle_allowance,
+        band=judge.band,
+        stable_band=judge.stable_band,
+        duration=duration,
+        torque_limits=torque_limits,
+        controller_stats=controller.stats.summary(),
+        step_times=controller.stats.step_times,
+        radius=radius,
+    )
+
+
+def run_summary(
+    trajectory: Trajectory,
+    metrics: dict[str, Any],
+    controller,
+    *,
+    plant,
+    payload: float,
+    design: dict[str, Any],
+    path: JointReference,
+    deflection: str,
+    tip_target: np.ndarray,
+    judge: MetricSettings,
+    controller_file: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """``summary.json``'s description of a run besides the scene.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The plant's run.
+    metrics : dict
+        :func:`judge_run`'s.
+    controller : Controller
+        The controller that ran.
+    plant : Model
+        The plant.
+    payload : float
+        The plant's payload (kg).
+    design : dict
+        The design model: ``fidelity``, ``payload_kg``, ``configuration_deg``.
+    path : JointReference
+        The joint path tracked (rad, s).
+    deflection : str
+        The elastic reference (``"quasi_static"`` or ``"static"``).
+    tip_target : numpy.ndarray
+        The tip at rest at the target (m).
+    judge : MetricSettings
+        Its ``settle_allowance`` opens the residual window.
+    controller_file : dict, optional
+        ``{"file": path or None}`` for a controller from a file, listed first.
+    """
+    return {
+        "controller": {
+            **(controller_file or {}),
+            "kind": controller.settings.kind,
+            "sample_time": controller.sample_time,
+            **controller.stats.summary(),
+        },
+        "plant": {
+            "fidelity": str(plant.fidelity),
+            "n_states": plant.n_x,
+            "payload_kg": payload,
+        },
+        "design": design,
+        "reference": path.settings() | {"deflection": deflection},
+        "tip_target": tip_target.tolist(),
+        "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
+        "metrics": metrics,
+        "divergence": trajectory.meta.get("divergence"),
+        "wall_time_s": trajectory.meta["wall_time_s"],
+    }
