@@ -76,6 +76,7 @@ _EXPORTS: dict[str, str] = {
     # errors
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",
+    "MeasurementError": "flexctrl.errors",
     "SimulationError": "flexctrl.errors",
     "SolverError": "flexctrl.errors",
 }

@@ -346,7 +346,14 @@ class LQRController(Controller):
         return SampledLaw(function, memory, references, self.observer.restore)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
-        x = self.observer.estimate(y, self.u_previous)
+        return self._law(t, self.observer.estimate(y, self.u_previous))
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        x = self.observer.predict(self.u_previous)
+        return None if x is None else self._law(t, x)
+
+    def _law(self, t: float, x: np.ndarray) -> np.ndarray:
+        """``u_ref - K (x - x_ref)`` at ``t`` (s) on the state (estimate) ``x``."""
         x_ref, u_ref, _ = self.reference.at(t, self.sample_time)
         self.record("ok")
         return u_ref - self.gain(x) @ (x - x_ref)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from flexctrl.control.reference_trajectory import ReferenceTrajectory
+from flexctrl.control.reference_trajectory import reference_from_move
 from flexctrl.errors import SpecError
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
@@ -110,7 +110,7 @@ def closed_loop(
 
 def _track(controller, model, move: Move) -> None:
     """Reset ``controller`` and give it ``move``'s reference built on its design model."""
-    controller.set_reference(ReferenceTrajectory(model, move.joint_reference(), move.deflection))
+    controller.set_reference(reference_from_move(model, move))
     controller.reset()
 
 

@@ -255,7 +255,14 @@ class MPCController(Controller):
         return self.backend.solve(z, warm, dv, dc, self.arrival_release(t, z, dv, dc))
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
-        x = self.observer.estimate(y, self.u_previous)
+        return self._act(t, self.observer.estimate(y, self.u_previous))
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        x = self.observer.predict(self.u_previous)
+        return None if x is None else self._act(t, x)
+
+    def _act(self, t: float, x: np.ndarray) -> np.ndarray:
+        """Solve the QP at ``t`` (s) from the state estimate ``x``: its first move or a fallback."""
         r, u_ref, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
         release = self.arrival_release(t, z, dv, dc)
