@@ -60,6 +60,7 @@ _EXPORTS: dict[str, str] = {
     "Move": "flexctrl.spec.reference",
     "MetricSettings": "flexctrl.spec.closed_loop_scene",
     "closed_loop": "flexctrl.loop.closed_loop",
+    "Plant": "flexctrl.loop.plant",
     "ClosedLoopResult": "flexctrl.loop.result",
     "compare": "flexctrl.loop.compare_figure",
     # scenes and studies
