@@ -2,7 +2,8 @@
 
 Design (:func:`design_lqr`): linearise the model at the design equilibrium ``op``
 with the controller's sensors as outputs, discretise by zero-order hold at the
-sample time, weight by Bryson's rule (:func:`weight_matrices`) and solve the DARE
+sample time, weight by Bryson's rule (:func:`weight_matrices`) or the raw ``Q``, ``R`` of the
+settings (:func:`design_weights`) and solve the DARE
 (by doubling, :mod:`flexctrl.control.riccati`).  Control law, in deviations from the
 reference (:mod:`flexctrl.control.reference_trajectory`)::
 
@@ -37,6 +38,7 @@ from flexctrl.linear import (
     Sensors,
     discretize,
     equilibrium,
+    state_names,
     torque_limits,
 )
 from flexctrl.spec.controller_settings import (
@@ -45,6 +47,7 @@ from flexctrl.spec.controller_settings import (
     SensorSettings,
     Weights,
 )
+from flexctrl.spec.raw_weights import checked_size
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +173,46 @@ def weight_matrices(
     return np.diag(1.0 / xmax**2), np.diag(1.0 / (weights.torque * scale) ** 2)
 
 
+def design_weights(
+    model, settings, limits: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``Q`` (2N x 2N) and ``R`` (n x n) a controller designs with.
+
+    The raw matrices of the settings (``settings.Q``, ``settings.R``) where given, on the
+    design model's state in the order of :func:`flexctrl.linear.state_names` (what
+    ``fc.linearize(model, op).state_labels`` and a controller's ``state_names`` list), else
+    Bryson's rule from ``settings.weights`` (:func:`weight_matrices`).
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    settings : LQRSettings or MPCSettings or NMPCSettings
+        Its ``weights`` and, where the settings have them, ``Q`` and ``R``.
+    limits : ndarray, optional
+        Torque limits per joint, N m (default: the model's).
+
+    Returns
+    -------
+    tuple of ndarray
+        ``Q`` and ``R``.
+
+    Raises
+    ------
+    SpecError
+        When a raw matrix does not fit the model, naming ``Q`` or ``R``, its shape and
+        the expected one.
+    """
+    Q, R = weight_matrices(model, settings.weights, limits)
+    raw_Q, raw_R = getattr(settings, "Q", None), getattr(settings, "R", None)
+    if raw_Q is not None:
+        names = ", ".join(state_names(model))
+        Q = checked_size("Q", raw_Q, model.n_x, f"states ({names})")
+    if raw_R is not None:
+        R = checked_size("R", raw_R, model.n_u, f"joint torques (one row per joint, {model.n_u})")
+    return Q, R
+
+
 def lqr_gain(
     Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -287,6 +330,8 @@ class LQRController(Controller):
         self.S = S
         self.observer = observer
         self.schedule = schedule
+        #: The state the gain acts on, in order (``Q``'s rows): joints, elastic coordinates, rates.
+        self.state_names = tuple(plant.sys.state_labels)
 
     def gain(self, x: np.ndarray) -> np.ndarray:
         """The gain at state ``x`` (scheduled or fixed)."""
@@ -405,7 +450,7 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
     sensors = build_sensors(model, settings.sensors, op)
     lin = Linearizer(model, sensors)
     plant = linear_plant(model, op, sensors, settings.sample_time, lin)
-    Q, R = weight_matrices(model, settings.weights, limits)
+    Q, R = design_weights(model, settings, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     schedule = (
@@ -423,6 +468,7 @@ __all__ = [
     "design_lqr",
     "linear_plant",
     "weight_matrices",
+    "design_weights",
     "lqr_gain",
     "build_sensors",
 ]

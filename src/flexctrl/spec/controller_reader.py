@@ -11,7 +11,9 @@ under the plain names (``Weights.joint``), so no name means two units.  The old
 spellings (``joint``, ``joint_rate``, ``joints``, ``joint_rates``, ``q2``) are refused
 with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the
 file, the dotted key, the value and what is allowed; unknown keys are rejected with a "did you
-mean".
+mean".  LQR and MPC files may give raw weight matrices ``Q`` and ``R`` in ``[weights]`` (SI
+units, the design model's state order; a list is a diagonal) instead of the Bryson magnitudes
+they replace (:mod:`flexctrl.spec.raw_weights`).
 
 >>> from flexctrl.spec.controller_reader import load_controller
 >>> load_controller("controllers/lqr.toml").kind
@@ -44,6 +46,7 @@ from flexctrl.spec.controller_settings import (
     Weights,
 )
 from flexctrl.spec.overrides import apply_overrides
+from flexctrl.spec.raw_weights import read_raw_weights
 from flexctrl.spec.reader import TableReader, read_toml
 from flexctrl.spec.sensors import SENSOR_KINDS
 
@@ -135,8 +138,11 @@ def _sensors(reader: TableReader, default: SensorSettings) -> SensorSettings:
     return _build(r, SensorSettings, values)
 
 
-def _weights(reader: TableReader) -> Weights:
+def _weights(reader: TableReader, raw: dict[str, Any] | None = None) -> Weights:
+    """``[weights]``: the Bryson magnitudes; with ``raw`` (a dict filled here) also ``Q``, ``R``."""
     r = reader.table_of("weights", {})
+    if raw is not None:
+        raw.update(read_raw_weights(r))
     _refuse_renamed(r, {"joint": "joint_deg", "joint_rate": "joint_rate_deg_s"})
     d = Weights()
     values = {
@@ -258,17 +264,18 @@ def _read_pd(r: TableReader) -> PDSettings:
 
 def _read_lqr(r: TableReader) -> LQRSettings:
     d = LQRSettings()
+    raw: dict[str, Any] = {}
     values = {
         "kind": "lqr",
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
-        "weights": _weights(r),
+        "weights": _weights(r, raw),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
         "schedule": _schedule(r),
         "saturate": r.boolean("saturate", d.saturate),
         "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
-    return _build(r, LQRSettings, values)
+    return _build(r, LQRSettings, {**values, **raw})
 
 
 def _soft_values(r: TableReader, cls: type, d) -> dict[str, Any]:
@@ -292,11 +299,12 @@ def _whole_numbers(r: TableReader, name: str, default: tuple[int, ...]) -> tuple
 
 def _read_mpc(r: TableReader) -> MPCSettings:
     d = MPCSettings()
+    raw: dict[str, Any] = {}
     values = {
         "kind": "mpc",
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
         "horizon": r.integer("horizon", d.horizon, low=1, high=1000),
-        "weights": _weights(r),
+        "weights": _weights(r, raw),
         "terminal": _literal(r, "terminal", d.terminal, _field_type(MPCSettings, "terminal")),
         **_soft_values(r, MPCSettings, d),
         "formulation": _literal(
@@ -317,7 +325,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "estimator": _estimator(r),
         "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
-    return _build(r, MPCSettings, values)
+    return _build(r, MPCSettings, {**values, **raw})
 
 
 def _read_nmpc(r: TableReader) -> NMPCSettings:

@@ -47,6 +47,7 @@ from flexctrl.spec.field_checks import (
     numbers_field,
 )
 from flexctrl.spec.mpc_settings import MPCSettings, NMPCSettings, OSQPSettings
+from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,16 @@ class LQRSettings:
     sample_time : float
         s.
     weights : Weights
+        Bryson's-rule magnitudes the weights come from, unless ``Q`` / ``R`` are given.
+    Q : array_like, optional
+        Raw state weight on the design model's state ``(q, qd)`` in SI units (rad, m,
+        rad/s, m/s), in the order of ``fc.linearize(model, op).state_labels`` or a designed
+        controller's ``state_names``: a square matrix or a list (its diagonal), symmetric
+        and positive semidefinite (:mod:`flexctrl.spec.raw_weights`).  Replaces the state
+        magnitudes of ``weights``.  Stored as a tuple of rows.
+    R : array_like, optional
+        Raw torque weight (per (N m)^2), one row per joint, symmetric positive definite;
+        replaces ``weights.torque``.
     sensors : SensorSettings
         ``("state",)`` for full-state LQR; e.g. ``("joints", "strain")`` for LQG.
     estimator : EstimatorSettings
@@ -228,8 +239,12 @@ class LQRSettings:
     schedule: ScheduleSettings | None = None
     saturate: bool = True
     on_bad_measurement: BadMeasurement = "raise"
+    Q: Matrix | None = None
+    R: Matrix | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
+        object.__setattr__(self, "R", weight_matrix("R", self.R))
         choice_field("kind", self.kind, Literal["lqr"])
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         boolean_field("saturate", self.saturate)

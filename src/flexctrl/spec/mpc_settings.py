@@ -39,6 +39,7 @@ from flexctrl.spec.field_checks import (
     integer_field,
     number_field,
 )
+from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,15 @@ class MPCSettings:
         Prediction steps N.
     weights : Weights
         Stage weights; the terminal weight is the DARE solution (``terminal = "dare"``).
+    Q : array_like, optional
+        Raw state weight on the design model's state ``(q, qd)`` in SI units (rad, m,
+        rad/s, m/s), in the order of ``fc.linearize(model, op).state_labels`` or a designed
+        controller's ``state_names``: a square matrix or a list (its diagonal), symmetric
+        and positive semidefinite (:mod:`flexctrl.spec.raw_weights`).  Replaces the state
+        magnitudes of ``weights`` (which still set the scaling).  Stored as a tuple of rows.
+    R : array_like, optional
+        Raw torque weight (per (N m)^2), one row per joint, symmetric positive definite;
+        replaces ``weights.torque``.
     terminal : {"dare", "stage"}
         Terminal weight: the DARE solution at the target, or the stage weight.
     soft : {"none", "deflection", "tip"}
@@ -184,8 +194,12 @@ class MPCSettings:
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
     on_bad_measurement: BadMeasurement = "raise"
+    Q: Matrix | None = None
+    R: Matrix | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
+        object.__setattr__(self, "R", weight_matrix("R", self.R))
         choice_field("kind", self.kind, Literal["mpc"])
         choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")

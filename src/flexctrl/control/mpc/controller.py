@@ -119,6 +119,9 @@ class MPCController(Controller):
         self.qp = qp
         self.backend = backend
         self.observer = observer
+        #: The state the weights act on, in order (``Q``'s rows): joints, elastic coordinates,
+        #: rates.
+        self.state_names = tuple(plant.sys.state_labels)
         self._w: np.ndarray | None = None  # last solution
         self._plan: np.ndarray | None = None  # (N, m) scaled moves of the last solution
         self._plan_u: np.ndarray | None = None  # (N, m) planned torques, N m

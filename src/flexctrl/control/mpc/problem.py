@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.lqr import LinearPlant, lqr_gain, weight_matrices
+from flexctrl.control.lqr import LinearPlant, design_weights, lqr_gain, weight_matrices
 from flexctrl.linear import OperatingPoint
 
 
@@ -216,7 +216,8 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     plant : LinearPlant
         Its discrete linearization at the target.
     settings : MPCSettings or NMPCSettings
-        Weights, terminal cost, scaling, soft constraint, slack penalties, horizon, arrival.
+        Weights (Bryson magnitudes, or raw ``Q``, ``R`` where given: :func:`design_weights`),
+        terminal cost, scaling, soft constraint, slack penalties, horizon, arrival.
     limits : ndarray
         Torque limits per joint, N m.
 
@@ -224,11 +225,12 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     -------
     ScaledProblem
     """
-    Q, R = weight_matrices(model, settings.weights, limits)
+    Q, R = design_weights(model, settings, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     scale_u = np.where(np.isfinite(limits), limits, 1.0) * settings.weights.torque
+    bryson, _ = weight_matrices(model, settings.weights, limits)  # the scales' magnitudes
     Sx = state_scales(
-        plant, K, Q, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
+        plant, K, bryson, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
     )
     Sxi = 1.0 / Sx
     A = Sxi[:, None] * plant.Ad * Sx[None, :]
