@@ -56,6 +56,7 @@ _EXPORTS: dict[str, str] = {
     "SensorSettings": "flexctrl.spec.controller_settings",
     "EstimatorSettings": "flexctrl.spec.controller_settings",
     "Weights": "flexctrl.spec.controller_settings",
+    "Bound": "flexctrl.spec.mpc_constraints",
     # closed loop
     "Move": "flexctrl.spec.reference",
     "MetricSettings": "flexctrl.spec.closed_loop_scene",

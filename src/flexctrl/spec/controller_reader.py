@@ -3,7 +3,8 @@
 
 Every file has ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"``, optional free-text
 ``name``, ``notes`` and ``source``, the controller's scalar keys and sub-tables
-(``[weights]``, ``[sensors]``, ``[estimator]``, ``[schedule]``, ``[osqp]``, ``[pd]``).
+(``[weights]``, ``[sensors]``, ``[estimator]``, ``[schedule]``, ``[osqp]``, ``[pd]``,
+``[constraints]``: :mod:`flexctrl.spec.mpc_constraints`).
 Angles and angular rates are in **degrees** (deg, deg/s) as everywhere in the files,
 and every key that holds one says so in its name (``joint_deg``, ``joint_rate_deg_s``,
 ``joints_deg``, ``q2_deg``): the settings classes hold the same quantities in radians
@@ -45,6 +46,7 @@ from flexctrl.spec.controller_settings import (
     ShapedSettings,
     Weights,
 )
+from flexctrl.spec.mpc_constraints import read_constraints
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.raw_weights import read_raw_weights
 from flexctrl.spec.reader import TableReader, read_toml
@@ -305,6 +307,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
         "horizon": r.integer("horizon", d.horizon, low=1, high=1000),
         "weights": _weights(r, raw),
+        "constraints": read_constraints(r),
         "terminal": _literal(r, "terminal", d.terminal, _field_type(MPCSettings, "terminal")),
         **_soft_values(r, MPCSettings, d),
         "formulation": _literal(

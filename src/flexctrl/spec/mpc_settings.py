@@ -39,6 +39,7 @@ from flexctrl.spec.field_checks import (
     integer_field,
     number_field,
 )
+from flexctrl.spec.mpc_constraints import Bound, checked_bounds
 from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
@@ -135,6 +136,11 @@ class MPCSettings:
         replaces ``weights.torque``.
     terminal : {"dare", "stage"}
         Terminal weight: the DARE solution at the target, or the stage weight.
+    constraints : tuple of Bound
+        Bounds on joint angles, joint rates, link deflections, the tip position and torque
+        rates over the horizon, each hard or soft, named by signal
+        (:mod:`flexctrl.spec.mpc_constraints`; ``[constraints]`` in files).  Torque-rate
+        bounds need a backend other than HPIPM.
     soft : {"none", "deflection", "tip"}
         Soft constraint: every link's tip deflection ``|w_i| <= deflection_limit``, or the
         tip position error ``|p - p_target| <= tip_limit`` per component; with slack.
@@ -196,10 +202,12 @@ class MPCSettings:
     on_bad_measurement: BadMeasurement = "raise"
     Q: Matrix | None = None
     R: Matrix | None = None
+    constraints: tuple[Bound, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
         object.__setattr__(self, "R", weight_matrix("R", self.R))
+        object.__setattr__(self, "constraints", checked_bounds(self.constraints))
         choice_field("kind", self.kind, Literal["mpc"])
         choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
@@ -221,6 +229,12 @@ class MPCSettings:
                 f"value {self.formulation!r} is not allowed with backend 'hpipm'; "
                 "allowed: 'sparse'",
                 key="formulation",
+            )
+        if self.backend == "hpipm" and any(b.kind == "du" for b in self.constraints):
+            raise SpecError(
+                "torque-rate bounds couple two stages, which HPIPM's stage-wise QP cannot "
+                "hold; allowed: backend 'osqp', 'daqp' or 'qpoases' with them",
+                key="constraints",
             )
         if not isinstance(self.blocks, tuple) or not all(
             isinstance(b, int) and not isinstance(b, bool) and b >= 1 for b in self.blocks
