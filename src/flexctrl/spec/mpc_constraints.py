@@ -21,6 +21,15 @@ penalties, weighed per the bound's own scale.  Torque-rate bounds are always har
 the last torque meets them, so they can never make the QP infeasible; the first one acts
 on the change from the torque applied in the sample that just ended.
 
+What holds on the arm: the bounds hold on the QP's linear prediction at the sample instants,
+so the arm keeps them to the prediction's one-sample error.  On a rigid arm that error is
+small (a 25 deg/s joint-rate bound on the 30 degree quintic move peaks 0.04 % above it).  A
+flexible arm's joint rate also carries the hub's vibration against the links, which the
+sampled model sees only at the samples (between them it can far exceed a rate bound), and a
+moving reference that is not a trajectory of the sampled linear model (the quasi-static
+deflection and the held feed-forward of a fast move) shifts every prediction by its own
+one-sample mismatch; bound such signals with that margin in mind.
+
 In a controller file the ``[constraints]`` table holds one key per signal with
 ``[lower, upper]`` (``-inf``/``inf`` for none), angles in degrees under keys that say so,
 and ``soft``, the list of soft signals (the rest are hard)::
