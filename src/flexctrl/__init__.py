@@ -57,10 +57,12 @@ _EXPORTS: dict[str, str] = {
     "EstimatorSettings": "flexctrl.spec.controller_settings",
     "Weights": "flexctrl.spec.controller_settings",
     "StepRecorder": "flexctrl.control.cexport",
+    "Bound": "flexctrl.spec.mpc_constraints",
     # closed loop
     "Move": "flexctrl.spec.reference",
     "MetricSettings": "flexctrl.spec.closed_loop_scene",
     "closed_loop": "flexctrl.loop.closed_loop",
+    "Plant": "flexctrl.loop.plant",
     "ClosedLoopResult": "flexctrl.loop.result",
     "compare": "flexctrl.loop.compare_figure",
     # scenes and studies
@@ -78,6 +80,7 @@ _EXPORTS: dict[str, str] = {
     "FlexctrlError": "flexctrl.errors",
     "SpecError": "flexctrl.errors",
     "DesignWarning": "flexctrl.errors",
+    "MeasurementError": "flexctrl.errors",
     "SimulationError": "flexctrl.errors",
     "SolverError": "flexctrl.errors",
 }

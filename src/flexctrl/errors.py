@@ -46,6 +46,38 @@ class SpecError(FlexctrlError, ValueError):
         super().__init__(_located(message, source, key))
 
 
+class MeasurementError(SpecError):
+    """A measurement given to a controller's ``step`` is not finite or has the wrong length.
+
+    Raised before the controller changes any of its state, so the next valid measurement
+    gives the torque it would have given had the bad one never been seen.
+
+    Parameters
+    ----------
+    message
+        What is wrong: the channel (``measurement_names[i]``), its value, the sample time.
+    channel
+        The name of the first offending channel, or None for a wrong length.
+    value
+        Its value (or the measurement's length for a wrong length).
+    t
+        The sample time the measurement was given for, s.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        channel: str | None = None,
+        value: float | None = None,
+        t: float | None = None,
+    ):
+        self.channel = channel
+        self.value = value
+        self.t = t
+        super().__init__(message, key="measurement")
+
+
 class SpecWarning(UserWarning):
     """A description is valid but probably not what its author meant (a unit slip, odd value).
 

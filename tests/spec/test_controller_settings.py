@@ -178,3 +178,15 @@ def test_settings_are_frozen():
     s = MPCSettings()
     with pytest.raises(AttributeError):
         s.horizon = 3  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("kind", ["pd", "lqr", "mpc", "nmpc", "shaped"])
+def test_on_bad_measurement_reads_from_files(tmp_path, kind):
+    table = "[pd]\n" if kind == "shaped" else ""
+    path = _write(tmp_path, f'kind = "{kind}"\n{table}on_bad_measurement = "hold"\n')
+    assert load_controller(path).on_bad_measurement == "hold"
+    path = _write(tmp_path, f'kind = "{kind}"\n{table}on_bad_measurement = "skip"\n')
+    with pytest.raises(SpecError) as info:
+        load_controller(path)
+    assert "'skip'" in str(info.value) and "'hold'" in str(info.value)
+    assert info.value.key.endswith("on_bad_measurement")

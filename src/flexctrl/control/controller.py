@@ -19,6 +19,16 @@ feed-forward torque), which every controller reads at its sample times.
 checks the measurement, times the call, clips to the torque limits and records;
 subclasses implement ``_step``.  ``u`` passed to ``sensors.measure`` is the torque
 held during the sample that just ended (tip accelerometers feel it).
+
+The bad-measurement contract lives in :meth:`Controller.step` alone: a measurement of the
+wrong length, or with a non-finite entry, raises
+:class:`~flexctrl.errors.MeasurementError` (naming the channel, its value and the sample
+time) before the controller changes any of its state, so the next valid measurement gives
+the torque it would have given had the bad one never come.  With ``on_bad_measurement =
+"hold"`` in the settings a non-finite measurement instead skips the correction: the base
+class calls the subclass's ``_hold(t)`` (the estimator predicts with the torque applied and
+the law acts on the prediction; PD holds its torque) and counts the sample in
+``stats.status["held"]``.
 """
 
 from __future__ import annotations
@@ -32,9 +42,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from flexctrl.control.reference_trajectory import HoldReference
-from flexctrl.errors import SpecError
+from flexctrl.control.reference_trajectory import HoldReference, reference_from_move
+from flexctrl.errors import MeasurementError, SpecError
 from flexctrl.linear import OperatingPoint, Sensors
+from flexctrl.spec.reference import Move
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,15 +184,38 @@ class Controller(ABC):
         self.reference = HoldReference(op)
 
     def set_reference(self, reference) -> None:
-        """Track ``reference`` (a
-        :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory`) from now on.
+        """Track ``reference`` from now on.
 
         Parameters
         ----------
-        reference
-            Built on the controller's design model; ``None`` restores regulation to the
-            operating point.  The reference survives :meth:`reset`.
+        reference : Move, ReferenceTrajectory or None
+            A :class:`~flexctrl.spec.reference.Move` (joint angles in rad, times in s) is
+            built into the reference :func:`flexctrl.closed_loop` gives the controller: its
+            joint path, the quasi-static deflection along it and the feed-forward torque on
+            the controller's :attr:`design_model`.  A
+            :class:`~flexctrl.control.reference_trajectory.ReferenceTrajectory` must be built
+            on the design model.  ``None`` restores regulation to the operating point.  The
+            reference survives :meth:`reset`; call :meth:`reset` before a new run.
+
+        Raises
+        ------
+        SpecError
+            When the reference has another number of joints, or a move is given to a
+            controller without a design model.
         """
+        if isinstance(reference, Move):
+            if self.design_model is None:
+                raise SpecError(
+                    "a Move needs the controller's design model to build its reference; "
+                    "allowed: a controller from flexctrl.design, or a ReferenceTrajectory",
+                    key="reference",
+                )
+            if len(reference.target) != self.n_u:
+                raise SpecError(
+                    f"the move has {len(reference.target)} joint angles; expected {self.n_u}",
+                    key="reference",
+                )
+            reference = reference_from_move(self.design_model, reference)
         if reference is not None and len(reference.path.q_target) != self.n_u:
             raise SpecError(
                 f"the reference has {len(reference.path.q_target)} joint angles; "
@@ -213,8 +247,11 @@ class Controller(ABC):
     def step(self, t: float, measurement) -> np.ndarray:
         """Joint torques for the measurement taken at time ``t``.
 
-        Checks the measurement, times the call, clips to the torque limits (when the
-        controller saturates) and records; the subclass's ``_step`` computes the law.
+        The controller regulates the arm to its :attr:`reference` at ``t``: the operating
+        point it was designed for, or the path given by :meth:`set_reference` (joint angles,
+        the quasi-static deflection along them, the feed-forward torque).  Checks the
+        measurement, times the call, clips to the torque limits (when the controller
+        saturates) and records; the subclass's ``_step`` computes the law.
 
         Parameters
         ----------
@@ -231,18 +268,25 @@ class Controller(ABC):
 
         Raises
         ------
-        SpecError
-            When the measurement has the wrong number of entries.
+        MeasurementError
+            When the measurement has the wrong number of entries, or a non-finite entry and
+            the settings' ``on_bad_measurement`` is ``"raise"`` (the default), or is
+            ``"hold"`` before any valid measurement.  The controller is left as it was.
         """
         start = time.perf_counter()
-        y = np.asarray(measurement, dtype=float).ravel()
-        if y.size != self.sensors.n_y:
-            raise SpecError(
-                f"measurement has {y.size} entries; expected {self.sensors.n_y} "
-                f"({', '.join(self.sensors.names)})",
-                key="measurement",
-            )
-        u = np.asarray(self._step(float(t), y), dtype=float).ravel()
+        y = self._checked_measurement(t, measurement)
+        if y is None:
+            held = self._hold(float(t))
+            if held is None:
+                raise MeasurementError(
+                    f"cannot hold at t = {float(t):g} s: no valid measurement yet to predict "
+                    "from; allowed: a first measurement with finite values",
+                    t=float(t),
+                )
+            self.stats.status["held"] += 1
+            u = np.asarray(held, dtype=float).ravel()
+        else:
+            u = np.asarray(self._step(float(t), y), dtype=float).ravel()
         if self.saturate:
             clipped = np.clip(u, -self.limits, self.limits)
             if np.any(clipped != u):
@@ -254,6 +298,37 @@ class Controller(ABC):
         self.u_previous = u
         self.stats.step_times.append(time.perf_counter() - start)
         return u.copy()
+
+    @property
+    def on_bad_measurement(self) -> str:
+        """``"raise"`` or ``"hold"``: what :meth:`step` does with a non-finite measurement."""
+        return str(getattr(self.settings, "on_bad_measurement", "raise"))
+
+    def _checked_measurement(self, t: float, measurement) -> np.ndarray | None:
+        """The measurement as a float vector, None to hold, or :class:`MeasurementError`."""
+        y = np.asarray(measurement, dtype=float).ravel()
+        names = self.sensors.names
+        if y.size != self.sensors.n_y:
+            raise MeasurementError(
+                f"measurement at t = {float(t):g} s has {y.size} entries; expected "
+                f"{self.sensors.n_y} ({', '.join(names)})",
+                value=float(y.size),
+                t=float(t),
+            )
+        finite = np.isfinite(y)
+        if np.all(finite):
+            return y
+        i = int(np.argmin(finite))
+        if self.on_bad_measurement == "hold":
+            return None
+        raise MeasurementError(
+            f"measurement channel {names[i]!r} (entry {i}) is {y[i]!r} at t = {float(t):g} s; "
+            "allowed: finite values (or on_bad_measurement = 'hold' in the settings to "
+            "predict through such samples)",
+            channel=names[i],
+            value=float(y[i]),
+            t=float(t),
+        )
 
     def record(self, status: str) -> None:
         """Count ``status`` for this step."""
@@ -270,6 +345,18 @@ class Controller(ABC):
 
     def _reset(self) -> None:  # noqa: B027 (an optional hook, empty by design)
         """Subclass part of :meth:`reset`."""
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        """Torques for a sample whose measurement is skipped (``on_bad_measurement = "hold"``).
+
+        Prediction only: the estimator advances its model with the torque applied
+        (:attr:`u_previous`) without a correction, and the law acts on the prediction.
+        None when there is nothing to predict from (no valid measurement since
+        :meth:`reset`); :meth:`step` then raises.
+        """
+        raise NotImplementedError(
+            f"{type(self).__name__} does not implement _hold; it cannot skip a measurement"
+        )
 
     def sampled_law(self) -> SampledLaw | None:
         """The law as one CasADi map from the current state (:class:`SampledLaw`), or None.

@@ -28,14 +28,44 @@ from flexctrl.linear import OperatingPoint, Sensors
 
 
 class FullState:
-    """The measurement *is* the state."""
+    """The measurement *is* the state.
+
+    Parameters
+    ----------
+    Ad, Bd : ndarray, optional
+        The discrete linearisation the state is predicted with through a skipped sample
+        (:meth:`predict`); without them nothing can be predicted.
+    op : OperatingPoint, optional
+        Where ``Ad``, ``Bd`` were taken (deviations are about it).
+    """
+
+    def __init__(self, Ad=None, Bd=None, op: OperatingPoint | None = None):
+        self.A = None if Ad is None else np.asarray(Ad, dtype=float)
+        self.B = None if Bd is None else np.asarray(Bd, dtype=float)
+        self.op = op
+        self.dx: np.ndarray | None = None
 
     def reset(self) -> None:
-        """Nothing to forget."""
+        """Forget the last state (nothing to predict from until the next measurement)."""
+        self.dx = None
 
     def estimate(self, y: np.ndarray, u_previous: np.ndarray) -> np.ndarray:
         """The state ``y``."""
+        if self.op is not None:
+            self.dx = y - self.op.x
         return y
+
+    def predict(self, u_previous: np.ndarray) -> np.ndarray | None:
+        """The state one sample after the last, ``A dx + B du`` about ``op``, or None.
+
+        None without a last state or without the linearisation.  The prediction becomes the
+        last state, so skipped samples in a row chain their predictions.
+        """
+        if self.dx is None or self.A is None or self.B is None or self.op is None:
+            return None
+        du = np.asarray(u_previous, dtype=float) - self.op.u
+        self.dx = self.A @ self.dx + self.B @ du
+        return self.op.x + self.dx
 
     def linear_form(self, n_y: int, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(E, F, G)`` of ``x_k = E x_{k-1} + F dy_k + G du_{k-1}``: the measurement itself."""
@@ -47,7 +77,8 @@ class FullState:
         return np.zeros(0)
 
     def restore(self, memory: np.ndarray) -> None:
-        """Nothing to restore."""
+        """Forget the last state: the chained samples that ran elsewhere kept none."""
+        self.dx = None
 
     def symbolic(self, memory, y, u_previous):
         """``(memory_next, x)``: :meth:`estimate` on CasADi symbols."""
@@ -195,6 +226,18 @@ class KalmanEstimator:
             self.dx = pred + self.M @ (dy - self.C @ pred)
         return self.op.x + self.dx
 
+    def predict(self, u_previous: np.ndarray) -> np.ndarray | None:
+        """The estimate at the next sample without a measurement: ``A dx + B du``, or None.
+
+        The prediction step of :meth:`estimate` alone (a skipped sample); None before the
+        first measurement.
+        """
+        if self.dx is None:
+            return None
+        du = np.asarray(u_previous, dtype=float) - self.op.u
+        self.dx = self.A @ self.dx + self.B @ du
+        return self.op.x + self.dx
+
     @property
     def memory(self) -> np.ndarray:
         """The deviation estimate ``dx`` (after a first measurement)."""
@@ -267,9 +310,10 @@ def make_observer(
     Returns
     -------
     FullState or KalmanEstimator
+        Both predict through a skipped sample with ``sysd``.
     """
     if sensors.full_state:
-        return FullState()
+        return FullState(sysd.A, sysd.B, op)
     W = process_noise(
         model,
         op,

@@ -2,7 +2,8 @@
 
 Design (:func:`design_lqr`): linearise the model at the design equilibrium ``op``
 with the controller's sensors as outputs, discretise by zero-order hold at the
-sample time, weight by Bryson's rule (:func:`weight_matrices`) and solve the DARE
+sample time, weight by Bryson's rule (:func:`weight_matrices`) or the raw ``Q``, ``R`` of the
+settings (:func:`design_weights`) and solve the DARE
 (by doubling, :mod:`flexctrl.control.riccati`).  Control law, in deviations from the
 reference (:mod:`flexctrl.control.reference_trajectory`)::
 
@@ -19,32 +20,31 @@ estimator stays that of the design point and the feed-forward is the reference's
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import casadi as ca
 import control
 import numpy as np
-from scipy.interpolate import RegularGridInterpolator
 
 from flexctrl.control.controller import Controller, SampledLaw
 from flexctrl.control.estimator import make_observer
-from flexctrl.control.riccati import solve_dare
+from flexctrl.control.gain_schedule import GainSchedule, gain_schedule
+from flexctrl.control.riccati import lqr_gain
 from flexctrl.errors import SpecError
 from flexctrl.linear import (
     Linearizer,
     OperatingPoint,
     Sensors,
     discretize,
-    equilibrium,
+    state_names,
     torque_limits,
 )
 from flexctrl.spec.controller_settings import (
     LQRSettings,
-    ScheduleSettings,
     SensorSettings,
     Weights,
 )
+from flexctrl.spec.raw_weights import checked_size
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,68 +170,44 @@ def weight_matrices(
     return np.diag(1.0 / xmax**2), np.diag(1.0 / (weights.torque * scale) ** 2)
 
 
-def lqr_gain(
-    Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray
+def design_weights(
+    model, settings, limits: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S``.
+    """The ``Q`` (2N x 2N) and ``R`` (n x n) a controller designs with.
 
-    The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`), which
-    needs no eigenvalue reordering and so does not fail on the ill-conditioned pencils of
-    flexible arms.
+    The raw matrices of the settings (``settings.Q``, ``settings.R``) where given, on the
+    design model's state in the order of :func:`flexctrl.linear.state_names` (what
+    ``fc.linearize(model, op).state_labels`` and a controller's ``state_names`` list), else
+    Bryson's rule from ``settings.weights`` (:func:`weight_matrices`).
 
     Parameters
     ----------
-    Ad, Bd : ndarray
-        The discrete system.
-    Q, R : ndarray
-        State and input weights.
+    model : flexctrl.dynamics.model.Model
+        The design model.
+    settings : LQRSettings or MPCSettings or NMPCSettings
+        Its ``weights`` and, where the settings have them, ``Q`` and ``R``.
+    limits : ndarray, optional
+        Torque limits per joint, N m (default: the model's).
 
     Returns
     -------
     tuple of ndarray
-        ``(K, S)``.
+        ``Q`` and ``R``.
 
     Raises
     ------
-    SolverError
-        When no stabilizing solution is found.
+    SpecError
+        When a raw matrix does not fit the model, naming ``Q`` or ``R``, its shape and
+        the expected one.
     """
-    S = solve_dare(Ad, Bd, Q, R, what="LQR")
-    K = np.linalg.solve(R + Bd.T @ S @ Bd, Bd.T @ S @ Ad)
-    return K, S
-
-
-class GainSchedule:
-    """Gains on a grid of scheduling joint angles, interpolated multilinearly.
-
-    Outside the grid the gains of the nearest edge are used.
-
-    Parameters
-    ----------
-    joints : tuple of int
-        The scheduling joints, 1-based.
-    grid : tuple of tuple of float
-        The grid's joint angles per scheduling joint, rad, increasing.
-    gains : ndarray
-        The gains at the grid's nodes, shape ``grid shape + (n_u, n_x)``.
-    """
-
-    def __init__(
-        self, joints: tuple[int, ...], grid: tuple[tuple[float, ...], ...], gains: np.ndarray
-    ):
-        self.joints = np.asarray(joints, dtype=int) - 1  # 0-based indices into the state
-        self.grid = tuple(np.asarray(g, dtype=float) for g in grid)
-        self.gains = gains  # grid shape + (n_u, n_x)
-        self._shape = gains.shape[-2:]
-        self._interp = RegularGridInterpolator(
-            self.grid, gains.reshape(gains.shape[:-2] + (-1,)), method="linear"
-        )
-        self._low = np.array([g[0] for g in self.grid])
-        self._high = np.array([g[-1] for g in self.grid])
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        s = np.clip(x[self.joints], self._low, self._high)
-        return self._interp(s[None, :])[0].reshape(self._shape)
+    Q, R = weight_matrices(model, settings.weights, limits)
+    raw_Q, raw_R = getattr(settings, "Q", None), getattr(settings, "R", None)
+    if raw_Q is not None:
+        names = ", ".join(state_names(model))
+        Q = checked_size("Q", raw_Q, model.n_x, f"states ({names})")
+    if raw_R is not None:
+        R = checked_size("R", raw_R, model.n_u, f"joint torques (one row per joint, {model.n_u})")
+    return Q, R
 
 
 class LQRController(Controller):
@@ -287,6 +263,8 @@ class LQRController(Controller):
         self.S = S
         self.observer = observer
         self.schedule = schedule
+        #: The state the gain acts on, in order (``Q``'s rows): joints, elastic coordinates, rates.
+        self.state_names = tuple(plant.sys.state_labels)
 
     def gain(self, x: np.ndarray) -> np.ndarray:
         """The gain at state ``x`` (scheduled or fixed)."""
@@ -381,35 +359,17 @@ class LQRController(Controller):
         return export_law(self, out, replay, qp_eps)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
-        x = self.observer.estimate(y, self.u_previous)
+        return self._law(t, self.observer.estimate(y, self.u_previous))
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        x = self.observer.predict(self.u_previous)
+        return None if x is None else self._law(t, x)
+
+    def _law(self, t: float, x: np.ndarray) -> np.ndarray:
+        """``u_ref - K (x - x_ref)`` at ``t`` (s) on the state (estimate) ``x``."""
         x_ref, u_ref, _ = self.reference.at(t, self.sample_time)
         self.record("ok")
         return u_ref - self.gain(x) @ (x - x_ref)
-
-
-def _gain_schedule(
-    model, op: OperatingPoint, sched: ScheduleSettings, sample_time: float, Q, R, shape
-) -> GainSchedule:
-    """The LQR gains (each of ``shape``) at the equilibria of the schedule's grid.
-
-    The joints not scheduled stay at ``op``.
-    """
-    if max(sched.joints) > model.n_u:
-        raise SpecError(
-            f"value q{max(sched.joints)} is not a joint of this {model.n_u}-joint arm; "
-            f"allowed: q1..q{model.n_u}",
-            key="schedule",
-        )
-    state_lin = Linearizer(model, ("joints",))
-    gains = np.empty(tuple(len(g) for g in sched.grid) + tuple(shape))
-    for index in itertools.product(*(range(len(g)) for g in sched.grid)):
-        q = np.array(op.joints, dtype=float)
-        for joint, values, i in zip(sched.joints, sched.grid, index):
-            q[joint - 1] = values[i]
-        A, B, _C, _D = state_lin.matrices(equilibrium(model, q))
-        sysd = discretize(control.ss(A, B, np.eye(A.shape[0]), 0), sample_time)
-        gains[index] = lqr_gain(np.asarray(sysd.A), np.asarray(sysd.B), Q, R)[0]
-    return GainSchedule(sched.joints, sched.grid, gains)
 
 
 def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRController:
@@ -433,13 +393,13 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
     sensors = build_sensors(model, settings.sensors, op)
     lin = Linearizer(model, sensors)
     plant = linear_plant(model, op, sensors, settings.sample_time, lin)
-    Q, R = weight_matrices(model, settings.weights, limits)
+    Q, R = design_weights(model, settings, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     observer = make_observer(model, op, sensors, plant.sys.A, plant.sysd, settings.estimator)
     schedule = (
         None
         if settings.schedule is None
-        else _gain_schedule(model, op, settings.schedule, settings.sample_time, Q, R, K.shape)
+        else gain_schedule(model, op, settings.schedule, settings.sample_time, Q, R, K.shape)
     )
     return LQRController(settings, plant, limits, K, S, observer, schedule, design_model=model)
 
@@ -447,10 +407,10 @@ def design_lqr(model, op: OperatingPoint, settings: LQRSettings) -> LQRControlle
 __all__ = [
     "LQRController",
     "LinearPlant",
-    "GainSchedule",
     "design_lqr",
     "linear_plant",
     "weight_matrices",
+    "design_weights",
     "lqr_gain",
     "build_sensors",
 ]

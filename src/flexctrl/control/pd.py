@@ -307,6 +307,13 @@ class PDController(Controller):
 
         return SampledLaw(function, memory, self.reference_table, restore)
 
+    def _hold(self, t: float) -> np.ndarray | None:
+        """The previous torque: PD has no model to predict with; its filters keep their state.
+
+        None before the first sample since :meth:`reset` (no torque of its own to hold).
+        """
+        return self.u_previous.copy() if self.stats.step_times else None
+
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[self._iq], y[self._iqd]
         q_ref, qd_ref, u_ref, u_static = self.reference_terms(t, q)

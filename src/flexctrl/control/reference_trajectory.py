@@ -52,7 +52,7 @@ from flexctrl.dynamics.parametric import parametric
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
 from flexctrl.sim.compile import QUICK_FLAGS, compile_for
-from flexctrl.spec.reference import DEFLECTIONS, JointReference
+from flexctrl.spec.reference import DEFLECTIONS, JointReference, Move
 
 
 def _damping_matrix(model, q):
@@ -382,4 +382,25 @@ class HoldReference:
         return self.op.x, self.op.u, self.op.u
 
 
-__all__ = ["ReferenceTrajectory", "HoldReference"]
+def reference_from_move(model, move: Move) -> ReferenceTrajectory:
+    """The reference a controller designed on ``model`` tracks along ``move``.
+
+    The joint path of ``move`` with its elastic part (``move.deflection``) on ``model``: what
+    :func:`flexctrl.closed_loop` and :meth:`Controller.set_reference
+    <flexctrl.control.controller.Controller.set_reference>` give the controller.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The controller's design model.
+    move : Move
+        The joint move (rad, s).
+
+    Returns
+    -------
+    ReferenceTrajectory
+    """
+    return ReferenceTrajectory(model, move.joint_reference(), move.deflection)
+
+
+__all__ = ["ReferenceTrajectory", "HoldReference", "reference_from_move"]

@@ -140,4 +140,35 @@ def solve_dare(
     return X
 
 
-__all__ = ["solve_dare", "RESIDUAL_TOL"]
+def lqr_gain(
+    Ad: np.ndarray, Bd: np.ndarray, Q: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Discrete LQR gain ``K`` (``u = -K x``) and DARE solution ``S``.
+
+    The DARE is solved by doubling (:func:`flexctrl.control.riccati.solve_dare`), which
+    needs no eigenvalue reordering and so does not fail on the ill-conditioned pencils of
+    flexible arms.
+
+    Parameters
+    ----------
+    Ad, Bd : ndarray
+        The discrete system.
+    Q, R : ndarray
+        State and input weights.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(K, S)``.
+
+    Raises
+    ------
+    SolverError
+        When no stabilizing solution is found.
+    """
+    S = solve_dare(Ad, Bd, Q, R, what="LQR")
+    K = np.linalg.solve(R + Bd.T @ S @ Bd, Bd.T @ S @ Ad)
+    return K, S
+
+
+__all__ = ["solve_dare", "lqr_gain", "RESIDUAL_TOL"]

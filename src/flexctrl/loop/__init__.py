@@ -2,6 +2,7 @@
 
 ``plant_step``     the plant's compiled RK4 substeps over one controller sample;
 ``sampled``        the loop itself (measure, step, hold, advance), its trajectory;
+``plant``          :class:`~flexctrl.loop.plant.Plant`, the arm stepped a sample at a time;
 ``run_state``      one run's states, torques, samples done and divergence;
 ``compiled``       the samples chained in CasADi, for laws that are CasADi maps;
 ``mismatch``       a controller's coordinates and sensors carried onto another plant;

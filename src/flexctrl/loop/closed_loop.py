@@ -6,24 +6,17 @@ import math
 
 import numpy as np
 
-from flexctrl.control.reference_trajectory import ReferenceTrajectory
+from flexctrl.control.reference_trajectory import reference_from_move
 from flexctrl.errors import SpecError
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
+from flexctrl.loop.plant import accurate_plant_step
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
 from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.loop.verdict import linear_closed_loop_radius
-from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT, rk4_step
 from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference, Move
-
-#: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
-#: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``
-#: (:mod:`flexctrl.sim.rk4`): 0.99979 at ``y = 0.5`` but 0.52 at 2.05, so a step chosen only for
-#: stability (``y`` up to 2.5) damps the fastest modes numerically and moves the residual
-#: vibration; at 0.5 the residual agrees with the scenes' 0.5 ms step.
-ACCURATE_OMEGA_DT = 0.5
 
 
 def closed_loop(
@@ -110,7 +103,7 @@ def closed_loop(
 
 def _track(controller, model, move: Move) -> None:
     """Reset ``controller`` and give it ``move``'s reference built on its design model."""
-    controller.set_reference(ReferenceTrajectory(model, move.joint_reference(), move.deflection))
+    controller.set_reference(reference_from_move(model, move))
     controller.reset()
 
 
@@ -183,8 +176,7 @@ def _plant_step(plant, controller, dt: float | None) -> float:
     """``dt``, or the largest whole fraction of the sample time with ``omega_max * dt`` accurate."""
     if dt is not None:
         return float(dt)
-    Ts = controller.sample_time
-    return rk4_step(plant.omega_max, Ts, ACCURATE_OMEGA_DT / RK4_STABILITY_LIMIT)
+    return accurate_plant_step(plant, controller.sample_time)
 
 
 def _initial_state(plant, path: JointReference, x0) -> np.ndarray:

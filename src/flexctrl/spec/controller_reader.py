@@ -3,7 +3,8 @@
 
 Every file has ``kind = "pd" | "lqr" | "mpc" | "nmpc" | "shaped"``, optional free-text
 ``name``, ``notes`` and ``source``, the controller's scalar keys and sub-tables
-(``[weights]``, ``[sensors]``, ``[estimator]``, ``[schedule]``, ``[osqp]``, ``[pd]``).
+(``[weights]``, ``[sensors]``, ``[estimator]``, ``[schedule]``, ``[osqp]``, ``[pd]``,
+``[constraints]``: :mod:`flexctrl.spec.mpc_constraints`).
 Angles and angular rates are in **degrees** (deg, deg/s) as everywhere in the files,
 and every key that holds one says so in its name (``joint_deg``, ``joint_rate_deg_s``,
 ``joints_deg``, ``q2_deg``): the settings classes hold the same quantities in radians
@@ -11,7 +12,9 @@ under the plain names (``Weights.joint``), so no name means two units.  The old
 spellings (``joint``, ``joint_rate``, ``joints``, ``joint_rates``, ``q2``) are refused
 with a message naming the new key.  Gains are per radian (N m/rad, N m s/rad).  Errors name the
 file, the dotted key, the value and what is allowed; unknown keys are rejected with a "did you
-mean".
+mean".  LQR and MPC files may give raw weight matrices ``Q`` and ``R`` in ``[weights]`` (SI
+units, the design model's state order; a list is a diagonal) instead of the Bryson magnitudes
+they replace (:mod:`flexctrl.spec.raw_weights`).
 
 >>> from flexctrl.spec.controller_reader import load_controller
 >>> load_controller("controllers/lqr.toml").kind
@@ -30,6 +33,7 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import (
     SETTINGS,
+    BadMeasurement,
     ControllerSettings,
     EstimatorSettings,
     LQRSettings,
@@ -42,7 +46,9 @@ from flexctrl.spec.controller_settings import (
     ShapedSettings,
     Weights,
 )
+from flexctrl.spec.mpc_constraints import read_constraints
 from flexctrl.spec.overrides import apply_overrides
+from flexctrl.spec.raw_weights import read_raw_weights
 from flexctrl.spec.reader import TableReader, read_toml
 from flexctrl.spec.sensors import SENSOR_KINDS
 
@@ -78,6 +84,10 @@ def _refuse_renamed(reader: TableReader, renamed: dict[str, str]) -> None:
                 f"was renamed '{new}' (value {reader.table[old]!r}): angles in the files are "
                 f"degrees and their keys say so; allowed: {new}",
             )
+
+
+def _on_bad_measurement(reader: TableReader, default: str) -> str:
+    return _literal(reader, "on_bad_measurement", default, BadMeasurement)
 
 
 def _free_text(reader: TableReader) -> None:
@@ -130,8 +140,11 @@ def _sensors(reader: TableReader, default: SensorSettings) -> SensorSettings:
     return _build(r, SensorSettings, values)
 
 
-def _weights(reader: TableReader) -> Weights:
+def _weights(reader: TableReader, raw: dict[str, Any] | None = None) -> Weights:
+    """``[weights]``: the Bryson magnitudes; with ``raw`` (a dict filled here) also ``Q``, ``R``."""
     r = reader.table_of("weights", {})
+    if raw is not None:
+        raw.update(read_raw_weights(r))
     _refuse_renamed(r, {"joint": "joint_deg", "joint_rate": "joint_rate_deg_s"})
     d = Weights()
     values = {
@@ -243,6 +256,7 @@ def _pd_values(r: TableReader, d: PDSettings) -> dict[str, Any]:
         ),
         "strain_rate_filter": r.nonnegative("strain_rate_filter", d.strain_rate_filter, unit="Hz"),
         "sensors": _sensors(r, d.sensors),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
 
 
@@ -252,16 +266,18 @@ def _read_pd(r: TableReader) -> PDSettings:
 
 def _read_lqr(r: TableReader) -> LQRSettings:
     d = LQRSettings()
+    raw: dict[str, Any] = {}
     values = {
         "kind": "lqr",
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
-        "weights": _weights(r),
+        "weights": _weights(r, raw),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
         "schedule": _schedule(r),
         "saturate": r.boolean("saturate", d.saturate),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
-    return _build(r, LQRSettings, values)
+    return _build(r, LQRSettings, {**values, **raw})
 
 
 def _soft_values(r: TableReader, cls: type, d) -> dict[str, Any]:
@@ -285,11 +301,13 @@ def _whole_numbers(r: TableReader, name: str, default: tuple[int, ...]) -> tuple
 
 def _read_mpc(r: TableReader) -> MPCSettings:
     d = MPCSettings()
+    raw: dict[str, Any] = {}
     values = {
         "kind": "mpc",
         "sample_time": r.positive("sample_time", d.sample_time, unit="s"),
         "horizon": r.integer("horizon", d.horizon, low=1, high=1000),
-        "weights": _weights(r),
+        "weights": _weights(r, raw),
+        "constraints": read_constraints(r),
         "terminal": _literal(r, "terminal", d.terminal, _field_type(MPCSettings, "terminal")),
         **_soft_values(r, MPCSettings, d),
         "formulation": _literal(
@@ -308,8 +326,9 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "osqp": _osqp(r),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
-    return _build(r, MPCSettings, values)
+    return _build(r, MPCSettings, {**values, **raw})
 
 
 def _read_nmpc(r: TableReader) -> NMPCSettings:
@@ -346,6 +365,7 @@ def _read_nmpc(r: TableReader) -> NMPCSettings:
         "qp_warm_start": r.boolean("qp_warm_start", d.qp_warm_start),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
+        "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
     }
     return _build(r, NMPCSettings, values)
 

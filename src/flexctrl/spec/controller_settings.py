@@ -18,6 +18,7 @@ from typing import Literal
 
 from flexctrl.errors import SpecError
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
+    BadMeasurement,
     ControllerKind,
     EstimatorSettings,
     Fallback,
@@ -46,6 +47,7 @@ from flexctrl.spec.field_checks import (
     numbers_field,
 )
 from flexctrl.spec.mpc_settings import MPCSettings, NMPCSettings, OSQPSettings
+from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
 @dataclass(frozen=True)
@@ -129,6 +131,12 @@ class PDSettings:
         Corner frequency (Hz) of the first-order low-pass on the differentiated strain; 0: none.
     sensors : SensorSettings
         Default: joint encoders and joint rates.
+    on_bad_measurement : {"raise", "hold"}
+        A measurement with a non-finite entry raises
+        :class:`~flexctrl.errors.MeasurementError` and leaves the controller as it was
+        (``"raise"``), or the sample is skipped (``"hold"``): PD has no model to predict
+        with, so the previous torque is held, the filters keep their state, and the sample
+        is counted in ``stats.status["held"]``.  A wrong length always raises.
     """
 
     kind: Literal["pd"] = "pd"
@@ -146,9 +154,11 @@ class PDSettings:
     sensors: SensorSettings = field(
         default_factory=lambda: SensorSettings(outputs=("joints", "joint_rates"))
     )
+    on_bad_measurement: BadMeasurement = "raise"
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["pd"])
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         numbers_field("kp", self.kp, low=0.0)
         numbers_field("kd", self.kd, low=0.0)
@@ -195,6 +205,16 @@ class LQRSettings:
     sample_time : float
         s.
     weights : Weights
+        Bryson's-rule magnitudes the weights come from, unless ``Q`` / ``R`` are given.
+    Q : array_like, optional
+        Raw state weight on the design model's state ``(q, qd)`` in SI units (rad, m,
+        rad/s, m/s), in the order of ``fc.linearize(model, op).state_labels`` or a designed
+        controller's ``state_names``: a square matrix or a list (its diagonal), symmetric
+        and positive semidefinite (:mod:`flexctrl.spec.raw_weights`).  Replaces the state
+        magnitudes of ``weights``.  Stored as a tuple of rows.
+    R : array_like, optional
+        Raw torque weight (per (N m)^2), one row per joint, symmetric positive definite;
+        replaces ``weights.torque``.
     sensors : SensorSettings
         ``("state",)`` for full-state LQR; e.g. ``("joints", "strain")`` for LQG.
     estimator : EstimatorSettings
@@ -203,6 +223,12 @@ class LQRSettings:
         Gain scheduling over configuration.
     saturate : bool
         Clip torques at the joint limits.
+    on_bad_measurement : {"raise", "hold"}
+        A measurement with a non-finite entry raises
+        :class:`~flexctrl.errors.MeasurementError` and leaves the controller as it was
+        (``"raise"``), or the sample is skipped (``"hold"``): the estimator predicts with the
+        torque applied, without a correction, the gain acts on the prediction, and the
+        sample is counted in ``stats.status["held"]``.  A wrong length always raises.
     """
 
     kind: Literal["lqr"] = "lqr"
@@ -212,11 +238,17 @@ class LQRSettings:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
     schedule: ScheduleSettings | None = None
     saturate: bool = True
+    on_bad_measurement: BadMeasurement = "raise"
+    Q: Matrix | None = None
+    R: Matrix | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
+        object.__setattr__(self, "R", weight_matrix("R", self.R))
         choice_field("kind", self.kind, Literal["lqr"])
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         boolean_field("saturate", self.saturate)
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
 
 
 @dataclass(frozen=True)
@@ -265,6 +297,11 @@ class ShapedSettings:
     def sensors(self) -> SensorSettings:
         """The PD's sensors."""
         return self.pd.sensors
+
+    @property
+    def on_bad_measurement(self) -> str:
+        """The PD's ``on_bad_measurement`` (``[pd]`` in a file)."""
+        return self.pd.on_bad_measurement
 
 
 ControllerSettings = PDSettings | LQRSettings | MPCSettings | NMPCSettings | ShapedSettings

@@ -29,6 +29,9 @@ RTIQPSolver = Literal["hpipm", "osqp", "qpoases"]
 Sensitivities = Literal["frozen", "midpoint", "exact"]
 Shaper = Literal["zv", "zvd", "none"]
 FrequencySource = Literal["closed_loop", "locked"]
+#: What a controller does with a measurement that is not finite: raise
+#: :class:`~flexctrl.errors.MeasurementError`, or skip the sample (prediction only).
+BadMeasurement = Literal["raise", "hold"]
 
 
 # --------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ from typing import Literal
 from flexctrl.errors import SpecError
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
+    BadMeasurement,
     ControllerKind,
     EstimatorSettings,
     Fallback,
@@ -38,6 +39,8 @@ from flexctrl.spec.field_checks import (
     integer_field,
     number_field,
 )
+from flexctrl.spec.mpc_constraints import Bound, checked_bounds
+from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
 @dataclass(frozen=True)
@@ -122,8 +125,22 @@ class MPCSettings:
         Prediction steps N.
     weights : Weights
         Stage weights; the terminal weight is the DARE solution (``terminal = "dare"``).
+    Q : array_like, optional
+        Raw state weight on the design model's state ``(q, qd)`` in SI units (rad, m,
+        rad/s, m/s), in the order of ``fc.linearize(model, op).state_labels`` or a designed
+        controller's ``state_names``: a square matrix or a list (its diagonal), symmetric
+        and positive semidefinite (:mod:`flexctrl.spec.raw_weights`).  Replaces the state
+        magnitudes of ``weights`` (which still set the scaling).  Stored as a tuple of rows.
+    R : array_like, optional
+        Raw torque weight (per (N m)^2), one row per joint, symmetric positive definite;
+        replaces ``weights.torque``.
     terminal : {"dare", "stage"}
         Terminal weight: the DARE solution at the target, or the stage weight.
+    constraints : tuple of Bound
+        Bounds on joint angles, joint rates, link deflections, the tip position and torque
+        rates over the horizon, each hard or soft, named by signal
+        (:mod:`flexctrl.spec.mpc_constraints`; ``[constraints]`` in files).  Torque-rate
+        bounds need a backend other than HPIPM.
     soft : {"none", "deflection", "tip"}
         Soft constraint: every link's tip deflection ``|w_i| <= deflection_limit``, or the
         tip position error ``|p - p_target| <= tip_limit`` per component; with slack.
@@ -156,8 +173,8 @@ class MPCSettings:
         Minimum-time arrival (condensed only; :mod:`flexctrl.control.mpc.arrival_search`).
     osqp : OSQPSettings
         OSQP's settings (backend ``"osqp"``).
-    sensors, estimator
-        As for LQR.
+    sensors, estimator, on_bad_measurement
+        As for LQR (a held sample solves the QP on the estimator's prediction).
     """
 
     kind: Literal["mpc"] = "mpc"
@@ -182,9 +199,17 @@ class MPCSettings:
     osqp: OSQPSettings = field(default_factory=OSQPSettings)
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    on_bad_measurement: BadMeasurement = "raise"
+    Q: Matrix | None = None
+    R: Matrix | None = None
+    constraints: tuple[Bound, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
+        object.__setattr__(self, "R", weight_matrix("R", self.R))
+        object.__setattr__(self, "constraints", checked_bounds(self.constraints))
         choice_field("kind", self.kind, Literal["mpc"])
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         integer_field("horizon", self.horizon, low=1, high=1000)
         choice_field("terminal", self.terminal, Literal["dare", "stage"])
@@ -204,6 +229,12 @@ class MPCSettings:
                 f"value {self.formulation!r} is not allowed with backend 'hpipm'; "
                 "allowed: 'sparse'",
                 key="formulation",
+            )
+        if self.backend == "hpipm" and any(b.kind == "du" for b in self.constraints):
+            raise SpecError(
+                "torque-rate bounds couple two stages, which HPIPM's stage-wise QP cannot "
+                "hold; allowed: backend 'osqp', 'daqp' or 'qpoases' with them",
+                key="constraints",
             )
         if not isinstance(self.blocks, tuple) or not all(
             isinstance(b, int) and not isinstance(b, bool) and b >= 1 for b in self.blocks
@@ -310,8 +341,8 @@ class NMPCSettings:
         HPIPM only: start its interior point from the shifted previous solution
         (HPIPM's ``warm_start = 1``, fewer iterations) instead of its default start.  The
         other QP solvers are always given it.
-    sensors, estimator
-        As for LQR.
+    sensors, estimator, on_bad_measurement
+        As for LQR (a held sample solves on the estimator's prediction).
     """
 
     kind: Literal["nmpc"] = "nmpc"
@@ -339,9 +370,11 @@ class NMPCSettings:
     qp_warm_start: bool = False
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    on_bad_measurement: BadMeasurement = "raise"
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["nmpc"])
+        choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
         number_field("sample_time", self.sample_time, low=0.0, low_open=True, unit="s")
         integer_field("horizon", self.horizon, low=1, high=1000)
         integer_field("substeps", self.substeps, low=0, high=200)

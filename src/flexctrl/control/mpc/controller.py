@@ -6,7 +6,13 @@ Problem (deviations from the reference over the horizon, scaled, see below)::
     s.t. z_0 = z(t),   z_{k+1} = A z_k + B v_k,
          u_min - u_ref,k <= v_k <= u_max - u_ref,k                      (hard: torque limits)
          lo - c_op - C r_k+1 - s_k <= C z_{k+1} <= hi - c_op - C r_k+1 + s_k,  s_k >= 0
-                                                                 (soft: deflection or tip error)
+                                 (soft: deflection or tip error; the bounds of ``constraints``)
+         Ts du_lo <= u_k - u_k-1 <= Ts du_hi         (hard: torque rates, u_-1 the last torque)
+
+The bounds of ``settings.constraints`` (:mod:`flexctrl.spec.mpc_constraints`: joint angles and
+rates, link deflections, the tip position) are rows of ``C`` with their values ``c_op`` at the
+target, each scaled by its own magnitude (the Bryson joint and joint-rate magnitudes, the soft
+limit's scale for lengths); a hard one has its slack held at zero.
 
 with ``z_k = x_k - x_ref(t + k Ts)``, ``v_k = u_k - u_ref(t + k Ts)`` and ``r_k = x_ref(t + k Ts) -
 x_op`` (:mod:`flexctrl.control.reference_trajectory`: the joint path, its quasi-static deflection
@@ -119,6 +125,9 @@ class MPCController(Controller):
         self.qp = qp
         self.backend = backend
         self.observer = observer
+        #: The state the weights act on, in order (``Q``'s rows): joints, elastic coordinates,
+        #: rates.
+        self.state_names = tuple(plant.sys.state_labels)
         self._w: np.ndarray | None = None  # last solution
         self._plan: np.ndarray | None = None  # (N, m) scaled moves of the last solution
         self._plan_u: np.ndarray | None = None  # (N, m) planned torques, N m
@@ -249,10 +258,23 @@ class MPCController(Controller):
         Solution
             In scaled variables.
         """
-        r, _u, dv, dc = self.reference_shifts(t)
+        r, u_ref, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
         warm = self._w if self.settings.warm_start != "none" else None
-        return self.backend.solve(z, warm, dv, dc, self.arrival_release(t, z, dv, dc))
+        release = self.arrival_release(t, z, dv, dc)
+        return self.backend.solve(z, warm, dv, dc, release, self.rate_shifts(u_ref))
+
+    def rate_shifts(self, u_ref: np.ndarray) -> np.ndarray | None:
+        """The torque-rate rows' bound shifts for the reference torques ``u_ref`` (N, m), N m.
+
+        Row ``k`` is the reference's change into stage ``k`` (from the last torque applied,
+        :attr:`u_previous`, for ``k = 0``), scaled; None without torque-rate bounds.
+        """
+        pb = self.problem
+        if not pb.rate_joints.size:
+            return None
+        before = np.vstack([self.u_previous[None, :], u_ref[:-1]])
+        return ((u_ref - before) / pb.Su)[:, pb.rate_joints]
 
     def export_c(self, out, *, replay=None, qp_eps: float | None = None):
         """The MPC in C (:meth:`Controller.export_c`; :mod:`flexctrl.control.cexport.mpc_dense`)."""
@@ -261,12 +283,24 @@ class MPCController(Controller):
         return export_mpc(self, out, replay, qp_eps)
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
-        x = self.observer.estimate(y, self.u_previous)
+        return self._act(t, self.observer.estimate(y, self.u_previous))
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        x = self.observer.predict(self.u_previous)
+        return None if x is None else self._act(t, x)
+
+    def _act(self, t: float, x: np.ndarray) -> np.ndarray:
+        """Solve the QP at ``t`` (s) from the state estimate ``x``: its first move or a fallback."""
         r, u_ref, dv, dc = self.reference_shifts(t)
         z = (x - self.op.x) / self.problem.Sx - r[0]
         release = self.arrival_release(t, z, dv, dc)
         sol = self.backend.solve(
-            z, self._w if self.settings.warm_start != "none" else None, dv, dc, release
+            z,
+            self._w if self.settings.warm_start != "none" else None,
+            dv,
+            dc,
+            release,
+            self.rate_shifts(u_ref),
         )
         self.last = sol
         self.stats.iterations.append(sol.iterations)
@@ -278,7 +312,7 @@ class MPCController(Controller):
             self._age = 0
             if self.qp.slack.size:
                 self.stats.slack_max = max(
-                    self.stats.slack_max, float(np.max(sol.w[self.qp.slack])) * self.problem.h
+                    self.stats.slack_max, self.problem.slack_violation(sol.w[self.qp.slack])
                 )
             return self._plan_u[0].copy()
         self._age += 1

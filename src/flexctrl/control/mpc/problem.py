@@ -6,12 +6,14 @@ describes the problem and the scaling.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from flexctrl.control.lqr import LinearPlant, lqr_gain, weight_matrices
+from flexctrl.control.lqr import LinearPlant, design_weights, weight_matrices
+from flexctrl.control.riccati import lqr_gain
+from flexctrl.errors import SpecError
 from flexctrl.linear import OperatingPoint
 
 
@@ -39,6 +41,15 @@ class ScaledProblem:
         Prediction steps N.
     n_arrival : int
         The last ``n_arrival`` soft rows are the arrival rows (:func:`arrival_rows`).
+    row_scale : ndarray or None
+        Per soft row, the physical violation of one unit of its slack (m, rad, rad/s);
+        None: ``h`` for every row.
+    hard : ndarray of bool or None
+        Per soft row, whether its slack is held at zero (a hard bound); None: none is.
+    rate_joints : ndarray of int
+        The joints (0-based) with torque-rate bounds.
+    rate_lo, rate_hi : ndarray
+        Their bounds on ``v_k - v_(k-1)`` (scaled: ``Ts * bound / S_u``).
     """
 
     A: np.ndarray
@@ -59,6 +70,18 @@ class ScaledProblem:
     l2: float
     horizon: int
     n_arrival: int = 0
+    row_scale: np.ndarray | None = None
+    hard: np.ndarray | None = None
+    rate_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    rate_lo: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rate_hi: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def slack_violation(self, slack: np.ndarray) -> float:
+        """The largest physical violation (the row's unit) of the slacks ``slack`` (stage-major)."""
+        if not slack.size:
+            return 0.0
+        scale = self.h if self.row_scale is None else self.row_scale
+        return float(np.max(slack.reshape(-1, self.ns) * scale))
 
     @property
     def n(self) -> int:
@@ -206,6 +229,101 @@ def arrival_rows(model, op: OperatingPoint) -> np.ndarray:
     return np.vstack([np.hstack([jac, np.zeros_like(jac)]), joints])
 
 
+def _joint(model, bound, what: str) -> int:
+    if bound.index >= model.n_u:
+        raise SpecError(
+            f"value {bound.signal!r} names {what} {bound.index + 1} of a {model.n_u}-joint arm; "
+            f"allowed: 1..{model.n_u}",
+            key=f"constraints.{bound.signal}",
+        )
+    return bound.index
+
+
+def bound_rows(model, op: OperatingPoint, bounds, weights, h: float):
+    """The state bounds of ``bounds`` as rows on the state, linearised at ``op``.
+
+    Parameters
+    ----------
+    model : flexctrl.dynamics.model.Model
+        The model predicted with.
+    op : OperatingPoint
+        The target (where the deflections and the tip are linearised).
+    bounds : sequence of Bound
+        The MPC's bounds (:mod:`flexctrl.spec.mpc_constraints`); torque rates are skipped.
+    weights : Weights
+        Their magnitudes scale the joint rows (rad, rad/s).
+    h : float
+        The scale of the deflection and tip rows, m (the soft rows').
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(rows, value, lower, upper, scale, hard)``: rows by the state (physical units per
+        state unit), the signals' values at ``op``, the bounds, each row's scale and
+        whether it is hard.
+
+    Raises
+    ------
+    SpecError
+        For a joint or link the model does not have, or a link without modes.
+    """
+    N = model.n_q
+    q = ca.SX.sym("q", N)
+    maps = ca.Function(
+        "bounded",
+        [q],
+        [
+            model.functions["deflection"](q)[0],
+            ca.jacobian(model.functions["deflection"](q)[0], q),
+            model.functions["tip"](q, ca.SX.zeros(N))[0],
+            ca.jacobian(model.functions["tip"](q, ca.SX.zeros(N))[0], q),
+        ],
+    )
+    w, dw, tip, dtip = (np.array(v, dtype=float) for v in maps(op.q))
+    out: list[tuple] = []
+    for b in bounds:
+        row = np.zeros(2 * N)
+        if b.kind == "q":
+            row[_joint(model, b, "joint")] = 1.0
+            value, scale = op.x[b.index], weights.joint
+        elif b.kind == "dq":
+            row[N + _joint(model, b, "joint")] = 1.0
+            value, scale = op.x[N + b.index], weights.joint_rate
+        elif b.kind == "w":
+            if b.index >= dw.shape[0] or not np.any(dw[b.index] != 0):
+                raise SpecError(
+                    f"value {b.signal!r} names a link without modes (or none) of this model; "
+                    "allowed: links with elastic coordinates",
+                    key=f"constraints.{b.signal}",
+                )
+            row[:N] = dw[b.index]
+            value, scale = w[b.index, 0], h
+        elif b.kind == "tip":
+            row[:N] = dtip[b.index]
+            value, scale = tip[b.index, 0], h
+        else:
+            continue
+        out.append((row, value, b.lower, b.upper, scale, not b.soft))
+    if not out:
+        empty = np.zeros(0)
+        return np.zeros((0, 2 * N)), empty, empty, empty, empty, np.zeros(0, bool)
+    rows, value, lo, hi, scale, hard = zip(*out)
+    return (
+        np.array(rows),
+        *(np.array(v, dtype=float) for v in (value, lo, hi, scale)),
+        np.array(hard, bool),
+    )
+
+
+def _rate_bounds(model, bounds, sample_time: float, scale_u: np.ndarray):
+    """``(joints, lo, hi)`` of the torque-rate bounds, scaled to ``v_k - v_(k-1)``."""
+    rates = [b for b in bounds if b.kind == "du"]
+    joints = np.array([_joint(model, b, "joint") for b in rates], dtype=int)
+    lo = np.array([b.lower * sample_time for b in rates]) / scale_u[joints]
+    hi = np.array([b.upper * sample_time for b in rates]) / scale_u[joints]
+    return joints, lo, hi
+
+
 def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> ScaledProblem:
     """Weights, terminal cost, scaling and constraints of the MPC at ``plant.op``.
 
@@ -216,7 +334,8 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     plant : LinearPlant
         Its discrete linearization at the target.
     settings : MPCSettings or NMPCSettings
-        Weights, terminal cost, scaling, soft constraint, slack penalties, horizon, arrival.
+        Weights (Bryson magnitudes, or raw ``Q``, ``R`` where given: :func:`design_weights`),
+        terminal cost, scaling, soft constraint, slack penalties, horizon, arrival.
     limits : ndarray
         Torque limits per joint, N m.
 
@@ -224,11 +343,12 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     -------
     ScaledProblem
     """
-    Q, R = weight_matrices(model, settings.weights, limits)
+    Q, R = design_weights(model, settings, limits)
     K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
     scale_u = np.where(np.isfinite(limits), limits, 1.0) * settings.weights.torque
+    bryson, _ = weight_matrices(model, settings.weights, limits)  # the scales' magnitudes
     Sx = state_scales(
-        plant, K, Q, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
+        plant, K, bryson, model.n_u, getattr(settings, "scaling", "auto"), settings.weights.joint
     )
     Sxi = 1.0 / Sx
     A = Sxi[:, None] * plant.Ad * Sx[None, :]
@@ -242,18 +362,22 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
     v_lo = (-limits - u_op) / scale_u
     v_hi = (limits - u_op) / scale_u
     rows, value, limit, h = soft_rows(model, plant.op, settings)
+    bounds = getattr(settings, "constraints", ())
+    b_rows, b_value, b_lo, b_hi, b_scale, b_hard = bound_rows(
+        model, plant.op, bounds, settings.weights, h
+    )
     arrival = getattr(settings, "arrival", None)
-    n_arrival = 0
+    extra, band = np.zeros((0, rows.shape[1])), 0.0
     if arrival is not None and arrival.enabled:
-        # the arrival rows after the soft rows, the error from the target
-        extra = arrival_rows(model, plant.op)
-        n_arrival = extra.shape[0]
-        rows, value, limit = (
-            np.vstack([rows, extra]),
-            np.r_[value, np.zeros(n_arrival)],
-            np.r_[limit, np.full(n_arrival, arrival.band)],
-        )
-    C = rows * Sx[None, :] / h
+        # the arrival rows after the soft rows and bounds, the error from the target
+        extra, band = arrival_rows(model, plant.op), arrival.band
+    n_arrival = extra.shape[0]
+    scale = np.r_[np.full(rows.shape[0], h), b_scale, np.full(n_arrival, h)]
+    lower = np.r_[-limit - value, b_lo - b_value, np.full(n_arrival, -band)]
+    upper = np.r_[limit - value, b_hi - b_value, np.full(n_arrival, band)]
+    C = np.vstack([rows, b_rows, extra]) * Sx[None, :] / scale[:, None]
+    hard = np.r_[np.zeros(rows.shape[0], bool), b_hard, np.zeros(n_arrival, bool)]
+    rate_joints, rate_lo, rate_hi = _rate_bounds(model, bounds, plant.dt, scale_u)
     return ScaledProblem(
         A=A,
         B=B,
@@ -266,14 +390,26 @@ def scaled_problem(model, plant: LinearPlant, settings, limits: np.ndarray) -> S
         v_lo=v_lo,
         v_hi=v_hi,
         C=C,
-        c_lo=(-limit - value) / h,
-        c_hi=(limit - value) / h,
+        c_lo=lower / scale,
+        c_hi=upper / scale,
         h=h,
         l1=settings.slack_l1 * h,
         l2=settings.slack_l2 * h * h,
         horizon=settings.horizon,
         n_arrival=n_arrival,
+        row_scale=scale if b_rows.shape[0] else None,
+        hard=hard if np.any(hard) else None,
+        rate_joints=rate_joints,
+        rate_lo=rate_lo,
+        rate_hi=rate_hi,
     )
 
 
-__all__ = ["ScaledProblem", "arrival_rows", "scaled_problem", "soft_rows", "state_scales"]
+__all__ = [
+    "ScaledProblem",
+    "arrival_rows",
+    "bound_rows",
+    "scaled_problem",
+    "soft_rows",
+    "state_scales",
+]

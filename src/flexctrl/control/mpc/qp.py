@@ -5,7 +5,7 @@ See :mod:`flexctrl.control.mpc.controller` for the problem, the formulations and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -50,6 +50,10 @@ class QP:
         Move blocking: the first stage of every block; None: no blocking.
     n_arrival : int
         The last ``n_arrival`` soft rows of every constrained stage are arrival rows.
+    rate_rows : ndarray of int
+        (N, r): the rows ``v_k - v_(k-1)`` (``v_0`` for ``k = 0``) of the joints with
+        torque-rate bounds, after every other row; their bounds move with the reference and
+        the last torque (``du`` of :meth:`vectors`).
     """
 
     H: sp.csc_matrix
@@ -73,6 +77,7 @@ class QP:
     soft_steps: np.ndarray | None = None
     block_starts: np.ndarray | None = None
     n_arrival: int = 0
+    rate_rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), int))
 
     @property
     def n_moves(self) -> int:
@@ -85,6 +90,7 @@ class QP:
         dv: np.ndarray | None = None,
         dc: np.ndarray | None = None,
         release: np.ndarray | None = None,
+        du: np.ndarray | None = None,
     ):
         """``(g, lba, uba, lbx, ubx)`` for the current scaled state ``z``.
 
@@ -97,6 +103,9 @@ class QP:
             down (the scaled reference input and soft-row value, see the module docstring).
         release : ndarray of bool, optional
             One per constrained stage: lift the bounds of that stage's arrival rows.
+        du : ndarray, optional
+            (N, r): shift the torque-rate rows' bounds down (the scaled change of the
+            reference torque, from the last torque applied for the first stage).
 
         Returns
         -------
@@ -137,6 +146,10 @@ class QP:
             free = self.soft_rows[np.asarray(release, bool)]
             uba[free[:, ns - na : ns]] = np.inf  # the upper rows of the arrival constraints
             lba[free[:, 2 * ns - na :]] = -np.inf  # and the lower ones
+        if du is not None and self.rate_rows.size:
+            lba, uba = lba.copy(), uba.copy()
+            lba[self.rate_rows] -= du
+            uba[self.rate_rows] -= du
         return g, lba, uba, lbx, ubx
 
 
@@ -148,6 +161,26 @@ def _shift_blocks(first: int, block: int, count: int, tail: np.ndarray) -> np.nd
         idx.append(first + src * block + np.arange(block))
     idx.append(tail)
     return np.concatenate(idx).astype(int)
+
+
+def rate_rows(pb: ScaledProblem, moves: np.ndarray, nw: int, first_row: int, shifted: bool):
+    """The torque-rate rows (after ``first_row`` others) on the moves ``moves`` (N, m) of ``w``.
+
+    Returns ``(A, lba, uba, rows, shift_a)``: row ``(k, j)`` is ``v_k - v_(k-1)`` of the
+    ``j``-th rate-bounded joint (``v_0`` for ``k = 0``; zero when both are one held block),
+    its bounds, the row indices (N, r) and their warm-start dual shift.
+    """
+    joints, N = pb.rate_joints, moves.shape[0]
+    r = joints.size
+    A = sp.lil_matrix((N * r, nw))
+    for k in range(N):
+        for i, j in enumerate(joints):
+            A[k * r + i, moves[k, j]] += 1.0
+            if k:
+                A[k * r + i, moves[k - 1, j]] -= 1.0
+    rows = first_row + np.arange(N * r).reshape(N, r)
+    shift = _shift_blocks(0, r, N, np.zeros(0, int)) if shifted else np.arange(N * r)
+    return A.tocsc(), np.tile(pb.rate_lo, N), np.tile(pb.rate_hi, N), rows, first_row + shift
 
 
 class _StageIndex:
@@ -237,28 +270,33 @@ def sparse_qp(pb: ScaledProblem, soft_on_next: bool = False) -> QP:
         lbx[ix.v(k)], ubx[ix.v(k)] = pb.v_lo, pb.v_hi
         if ns:
             lbx[ix.s(k)] = 0.0
+            if pb.hard is not None:
+                ubx[ix.s(k)] = np.where(pb.hard, 0.0, np.inf)
+    moves = np.array([ix.v(k) for k in range(N)])
+    Ar, lr, ur, rows, shift_r = rate_rows(pb, moves, ix.nw, A.shape[0], True)
     rblk = n + 2 * ns
     stages = {"N": N, "nx": [n] * (N + 1), "nu": [m + ns] * N + [0], "ng": [2 * ns] * N + [0]}
     soft = np.array([k * rblk + n + np.arange(2 * ns) for k in range(N)], dtype=int)
     return QP(
         H=sp.csc_matrix(H),
         g0=g0,
-        A=sp.csc_matrix(A),
-        lba0=lba,
-        uba0=uba,
+        A=sp.vstack([sp.csc_matrix(A), Ar], format="csc"),
+        lba0=np.r_[lba, lr],
+        uba0=np.r_[uba, ur],
         lbx=lbx,
         ubx=ubx,
         Gz=None,
         Lz=None,
         ix0=ix.z(0),
         first_move=ix.v(0),
-        moves=np.array([ix.v(k) for k in range(N)]),
+        moves=moves,
         slack=np.concatenate([ix.s(k) for k in range(N)]) if ns else np.zeros(0, int),
         shift_w=_shift_blocks(0, ix.blk, N, ix.zN),
-        shift_a=_shift_blocks(0, rblk, N, np.zeros(0, int)),
+        shift_a=np.r_[_shift_blocks(0, rblk, N, np.zeros(0, int)), shift_r].astype(int),
         stages=stages,
         n_state=n,
         soft_rows=soft.reshape(N, 2 * ns),
+        rate_rows=rows,
     )
 
 
@@ -411,18 +449,27 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
     H[nv:, nv:] = pb.l2 * np.eye(nsl)
     A, lba0, uba0, Lz = _condensed_soft_rows(pb, Gam, Phi, steps, nw)
     moves = (block_of[:, None] * m + np.arange(m)[None, :]).astype(int)
-    shift_w, shift_a = _condensed_shifts(pb, nv, nsl, A.shape[0], not blocks and stride == 1)
+    shifted = not blocks and stride == 1
+    shift_w, shift_a = _condensed_shifts(pb, nv, nsl, A.shape[0], shifted)
+    Ar, lr, ur, rows, shift_r = rate_rows(pb, moves, nw, A.shape[0], shifted)
+    if Lz is not None:
+        Lz = np.vstack([Lz, np.zeros((Ar.shape[0], n))])
     soft = np.array(
         [np.r_[k * ns + np.arange(ns), nsl + k * ns + np.arange(ns)] for k in range(S)], dtype=int
     ).reshape(S, 2 * ns)
     return QP(
         H=sp.csc_matrix(H),
         g0=np.r_[np.zeros(nv), np.full(nsl, pb.l1)],
-        A=sp.csc_matrix(A),
-        lba0=lba0,
-        uba0=uba0,
+        A=sp.vstack([sp.csc_matrix(A), Ar], format="csc"),
+        lba0=np.r_[lba0, lr],
+        uba0=np.r_[uba0, ur],
         lbx=np.r_[np.tile(pb.v_lo, nv // m), np.zeros(nsl)],
-        ubx=np.r_[np.tile(pb.v_hi, nv // m), np.full(nsl, np.inf)],
+        ubx=np.r_[
+            np.tile(pb.v_hi, nv // m),
+            np.tile(np.where(pb.hard, 0.0, np.inf), S)
+            if pb.hard is not None
+            else np.full(nsl, np.inf),
+        ],
         Gz=np.vstack([Fv, np.zeros((nsl, n))]),
         Lz=Lz,
         ix0=np.zeros(0, int),
@@ -430,13 +477,14 @@ def condensed_qp(pb: ScaledProblem, blocks: tuple[int, ...] = (), stride: int = 
         moves=moves,
         slack=nv + np.arange(nsl),
         shift_w=shift_w,
-        shift_a=shift_a,
+        shift_a=np.r_[shift_a, shift_r].astype(int),
         stages={},
         n_state=n,
         soft_rows=soft,
         soft_steps=None if stride == 1 else steps,
         block_starts=starts,
         n_arrival=pb.n_arrival,
+        rate_rows=rows,
     )
 
 

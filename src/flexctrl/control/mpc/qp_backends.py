@@ -113,8 +113,9 @@ class OSQPBackend:
         dv: np.ndarray | None = None,
         dc: np.ndarray | None = None,
         release: np.ndarray | None = None,
+        du: np.ndarray | None = None,
     ) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release, du)
         self.solver.update(q=g, l=np.r_[lba, lbx[self.bounded]], u=np.r_[uba, ubx[self.bounded]])
         if self.warm == "shift" and w_prev is not None and self.y is not None:
             self.solver.warm_start(x=w_prev[self.qp.shift_w], y=self.y[self.shift_y])
@@ -179,8 +180,9 @@ class ConicBackend:
         dv: np.ndarray | None = None,
         dc: np.ndarray | None = None,
         release: np.ndarray | None = None,
+        du: np.ndarray | None = None,
     ) -> Solution:
-        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release)
+        g, lba, uba, lbx, ubx = self.qp.vectors(z, dv, dc, release, du)
         args = {"h": self.H, "g": g, "a": self.Am, "lba": lba, "uba": uba, "lbx": lbx, "ubx": ubx}
         if w_prev is not None:
             args["x0"] = w_prev[self.qp.shift_w]

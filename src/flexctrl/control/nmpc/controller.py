@@ -326,7 +326,15 @@ class NMPCController(Controller):
 
     def _step(self, t: float, y: np.ndarray) -> np.ndarray:
         start = time.perf_counter()
-        x = self.observer.estimate(y, self.u_previous)
+        return self._act(t, self.observer.estimate(y, self.u_previous), start)
+
+    def _hold(self, t: float) -> np.ndarray | None:
+        start = time.perf_counter()
+        x = self.observer.predict(self.u_previous)
+        return None if x is None else self._act(t, x, start)
+
+    def _act(self, t: float, x: np.ndarray, start: float) -> np.ndarray:
+        """One solve at ``t`` (s) from the state (estimate) ``x``; its first move or a fallback."""
         z0 = (self.to_prediction(x) - self.pred_op.x) / self.problem.Sx
         sol = self.solve(x, t)
         self.last = sol
