@@ -322,7 +322,7 @@ class Controller(ABC):
         if self.on_bad_measurement == "hold":
             return None
         raise MeasurementError(
-            f"measurement channel {names[i]!r} (entry {i}) is {y[i]!r} at t = {float(t):g} s; "
+            f"measurement channel {names[i]!r} (entry {i}) is {float(y[i])} at t = {float(t):g} s; "
             "allowed: finite values (or on_bad_measurement = 'hold' in the settings to "
             "predict through such samples)",
             channel=names[i],
