@@ -56,10 +56,10 @@ class RunOutput:
                 raise TypeError(f"metric '{name}' = {value!r} is not a real scalar")
             metrics[name] = float(value)
         arrays = {}
-        for name, value in dict(self.trajectories).items():
+        for name, series in dict(self.trajectories).items():
             if not isinstance(name, str) or not IDENTIFIER.match(name):
                 raise TypeError(f"trajectory name {name!r} is not an identifier")
-            array = np.asarray(value)
+            array = np.asarray(series)
             if array.ndim != 1 or array.dtype.kind not in "biuf":
                 raise TypeError(
                     f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; "

@@ -130,7 +130,7 @@ def load_study(
     SpecError
         Naming the file, the key, the value and what is allowed.
     """
-    path = shipped.find(path, "study")
+    path = shipped.find(os.fspath(path), "study")
     source = str(path)
     document = nest_dotted_keys(read_toml(path), source)
     document = apply_overrides(

@@ -19,7 +19,7 @@ infeasible candidate ranks below every feasible one and fewer violations rank be
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +33,11 @@ from flexctrl.tuning.scenarios import candidate_overrides, candidate_runs
 
 #: Score of an infeasible candidate per violation (far above any metric in SI units).
 PENALTY = 1.0e6
-_STATISTICS = {"median": np.median, "max": np.max, "mean": np.mean}
+_STATISTICS: dict[str, Callable[[Sequence[float]], Any]] = {
+    "median": np.median,
+    "max": np.max,
+    "mean": np.mean,
+}
 
 
 @dataclass(frozen=True)
