@@ -116,6 +116,9 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     _legends(axes, runs, run_handles, limit_handles)
     shaded = (
         f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s"
+        if first.window and first.window[0] < first.window[1]
+        else f"no residual-vibration window: the run ended at {first.time[-1]:.3g} s, before "
+        f"it opened at {first.window[0]:.3g} s"
         if first.window
         else ""
     )
@@ -145,7 +148,7 @@ def _panels(runs: Sequence[RunCurves]):
     }
     window = runs[0].window
     for key, ax in axes.items():
-        if window is not None:
+        if window is not None and window[0] < window[1]:
             ax.axvspan(*window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
         ax.set_ylabel(labels[key])

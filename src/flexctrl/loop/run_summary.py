@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.metrics import metric_notes, run_metrics
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference
@@ -25,7 +25,6 @@ def judge_run(
     judge: MetricSettings,
     *,
     tip_target: np.ndarray,
-    duration: float,
     torque_limits: Sequence[float],
     radius: float | None,
 ) -> dict[str, Any]:
@@ -43,8 +42,6 @@ def judge_run(
         The residual window, bands and divergence bounds.
     tip_target : numpy.ndarray
         The tip at rest at the target (m).
-    duration : float
-        The run's requested length (s).
     torque_limits : sequence of float
         Per joint (N m).
     radius : float or None
@@ -58,7 +55,6 @@ def judge_run(
         settle_allowance=judge.settle_allowance,
         band=judge.band,
         stable_band=judge.stable_band,
-        duration=duration,
         torque_limits=torque_limits,
         controller_stats=controller.stats.summary(),
         step_times=controller.stats.step_times,
@@ -124,6 +120,12 @@ def run_summary(
         "tip_target": tip_target.tolist(),
         "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
         "metrics": metrics,
+        "metric_notes": metric_notes(
+            metrics,
+            trajectory.meta.get("divergence"),
+            window_start=path.t_arrive + judge.settle_allowance,
+            band=judge.band,
+        ),
         "divergence": trajectory.meta.get("divergence"),
         "wall_time_s": trajectory.meta["wall_time_s"],
     }

@@ -28,7 +28,7 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
 
     [constraints]                            # a candidate breaking one is infeasible
                                              # (recorded, never a crash)
-    stable = true                            # stable = 1 in every scenario
+    stable = true                            # stable = 1, settled_within_band = 1 everywhere
     torque_limits = true                     # no applied torque beyond its joint's limit
     closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below
                                              # this, wherever the controller has a full-state

@@ -64,7 +64,7 @@ class ReportSpec:
     """What the report shows (see the module docstring, ``[report]``)."""
 
     metric: str | None = None
-    lower_is_better: bool = True
+    lower_is_better: bool | None = None
     map_axes: tuple[str, str] | None = None
     facet: tuple[str, ...] | None = None
     rank_by: str | None = None

@@ -46,7 +46,7 @@ File format (paths relative to the study file; angles in degrees; SI units)::
 
     [report]
     metric = "tip_residual_rms"          # default: the first metric
-    lower_is_better = true               # the worst cases are the largest values
+    lower_is_better = true               # default: the metric's own direction
     map_axes = ["q2", "q3"]              # heat-map axes (default q2, q3 if they vary)
     facet = ["payload", "controller"]    # one map per combination (default: other axes)
     rank_by = "controller"               # ranking of ... (default controller)
@@ -429,7 +429,7 @@ def _read_report(
             )
     spec = ReportSpec(
         metric=metric,
-        lower_is_better=r.boolean("lower_is_better", True),
+        lower_is_better=r.boolean("lower_is_better") if r.has("lower_is_better") else None,
         map_axes=map_axes,  # type: ignore[arg-type]
         facet=string_list(r, "facet", columns) if r.has("facet") else None,
         rank_by=column("rank_by", "controller"),
