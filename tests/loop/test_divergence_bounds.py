@@ -43,6 +43,10 @@ def test_a_light_arms_one_second_move_runs_where_a_tenth_of_its_length_stopped_i
     )
     assert old.metrics["stable"] == 0 and old.metrics["divergence_time"] < 1.0
     assert "divergence_deflection = 0.1 of its 1 m length" in old.summary["divergence"]["message"]
+    # its figure says the window never opened, and shades nothing
+    tip = old.plot().axes[0]
+    assert tip.get_title().startswith("no residual-vibration window: the run ended at 0.32")
+    assert not tip.patches and "no residual" in tip.get_legend().get_texts()[0].get_text()
     run = fc.closed_loop(model, pd, move, duration=4.0)  # the default bounds: raises if crossed
     assert run.metrics["stable"] == 1 and run.metrics["settled_within_band"] == 1
     # it bends past the old bound on the way (measured on the trajectory, not by the monitor)

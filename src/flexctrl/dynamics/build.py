@@ -17,7 +17,7 @@ import numpy as np
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.fem.fem_arm import build_fem_model
 from flexctrl.dynamics.model import Model
-from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.errors import FlexctrlError, SpecError, keyword_checked
 from flexctrl.spec.arm import ArmSpec
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 
@@ -26,6 +26,7 @@ class ModelFamilyUnavailable(FlexctrlError, NotImplementedError):
     """The requested model family cannot be built here (yet)."""
 
 
+@keyword_checked
 def build_model(
     arm: ArmSpec,
     fidelity: str | Fidelity | None = "amm:2",

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.result import ClosedLoopResult, tip_at_rest
@@ -26,6 +26,7 @@ from flexctrl.spec.reference import JointReference, Move
 ACCURATE_OMEGA_DT = 0.5
 
 
+@keyword_checked
 def closed_loop(
     model,
     controller,

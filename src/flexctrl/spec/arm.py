@@ -45,7 +45,7 @@ from typing import Literal
 
 import numpy as np
 
-from flexctrl.errors import SpecError, warn_spec
+from flexctrl.errors import SpecError, keyword_checked, warn_spec
 from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
@@ -451,6 +451,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
     return arm
 
 
+@keyword_checked
 def load_arm(path: str | Path, overrides: Iterable[str] = ()) -> ArmSpec:
     """Load and validate a model file.
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.overrides import apply_overrides
@@ -193,6 +193,7 @@ class TuningSpec:
         }
 
 
+@keyword_checked
 def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
     """Read and validate a tuning file (see the module docstring).
 

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.study.column_units import display, lower_is_better, metric_info, with_unit
 from flexctrl.study.plan import ReportSpec
 from flexctrl.study.report_context import (
@@ -57,6 +57,7 @@ from flexctrl.study.report_timing import timing_section
 from flexctrl.study.store import ResultStore, atomic_write
 
 
+@keyword_checked
 def write_report(
     directory: str | Path,
     *,

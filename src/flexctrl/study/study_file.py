@@ -73,7 +73,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
@@ -105,6 +105,7 @@ from flexctrl.study.study_values import (
 # -- loading ---------------------------------------------------------------------------
 
 
+@keyword_checked
 def load_study(
     path: str | os.PathLike, overrides: Sequence[str] = (), *, check_executor: bool = True
 ) -> StudySpec:
