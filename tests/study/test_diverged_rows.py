@@ -79,3 +79,6 @@ def test_a_diverged_run_is_marked_listed_apart_and_ranked_by_direction(tmp_path,
     report = (out / "report.md").read_text()
     assert "(higher is better)" in report and "best first (highest)" in report
     assert [(c[1], c[2]) for c in _ranking(report)] == [("2", "1"), ("0", "0")]
+    # both runs are worst-case candidates, but they share a cell (the figure draws every
+    # payload of it): one figure, not the same one twice
+    assert report.count("](figures/worst_") == 1

@@ -107,6 +107,13 @@ def _build_fem(
             f"modes '{modes}' applies to assumed modes only; a finite-element model has no "
             "mode option"
         )
+    if (arm.damping_form if damping is None else damping) == "modal":
+        raise ModelFamilyUnavailable(
+            "damping form 'modal' (damping_zeta on the coupled modes) applies to assumed modes "
+            "only; a finite-element model takes its damping from damping_ratio "
+            "stiffness-proportionally (use an 'amm:N' fidelity, or damping form 'ratio' or "
+            "'stiffness')"
+        )
     if (arm.damping_form if damping is None else damping) == "paper":
         raise ModelFamilyUnavailable(
             "damping form 'paper' (Eq 68 of Subedi et al. as printed) applies to assumed "

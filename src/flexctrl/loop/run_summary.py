@@ -62,6 +62,14 @@ def judge_run(
     )
 
 
+def _damping(plant) -> dict[str, Any] | None:
+    """The plant's damping as built (:meth:`flexctrl.spec.arm.ArmSpec.damping_summary`)."""
+    spec = getattr(plant, "spec", None)
+    if spec is None or not hasattr(spec, "damping_summary"):
+        return None
+    return spec.damping_summary(getattr(plant, "info", {}).get("damping"))
+
+
 def run_summary(
     trajectory: Trajectory,
     metrics: dict[str, Any],
@@ -114,6 +122,7 @@ def run_summary(
             "fidelity": str(plant.fidelity),
             "n_states": plant.n_x,
             "payload_kg": payload,
+            "damping": _damping(plant),
         },
         "design": design,
         "reference": path.settings() | {"deflection": deflection},
