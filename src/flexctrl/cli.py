@@ -4,13 +4,17 @@ Each sub-command lives in its own module under :mod:`flexctrl.commands` with two
 functions, ``add_parser(subparsers)`` and ``run(args) -> int``; this module only
 dispatches.  Errors a user can cause (:class:`~flexctrl.errors.SpecError`) are
 printed on one line to stderr with exit status 2; numerical failures with
-status 3.  Warnings (:class:`~flexctrl.errors.SpecWarning` and any other) are printed
+status 3.  Ctrl-C ends a command with one line (with the module's
+``interrupt_hint(args)``, if it has one, saying how to pick up) and status 130; a closed
+output pipe (``flexctrl modes ... | head``) ends it quietly with status 141, as SIGPIPE
+would.  Warnings (:class:`~flexctrl.errors.SpecWarning` and any other) are printed
 as one line each on stderr, without the source line Python would show.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -64,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in COMMANDS:
         sub = module.add_parser(subparsers)
-        sub.set_defaults(_run=module.run)
+        sub.set_defaults(_run=module.run, _hint=getattr(module, "interrupt_hint", None))
     return parser
 
 
@@ -101,13 +105,25 @@ def _one_line_warning(command: str) -> Callable[..., str]:
 
 def _run(args: argparse.Namespace) -> int:
     try:
-        return int(args._run(args) or 0)
+        status = int(args._run(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+        return status
     except SpecError as exc:
         print(f"flexctrl {args.command}: error: {exc}".replace("\n", " "), file=sys.stderr)
         return 2
     except FlexctrlError as exc:
         print(f"flexctrl {args.command}: failed: {exc}".replace("\n", " "), file=sys.stderr)
         return 3
+    except KeyboardInterrupt:
+        hint = args._hint(args) if args._hint is not None else ""
+        print(f"flexctrl {args.command}: interrupted{'; ' + hint if hint else ''}", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # the reader left (``| head``): send what is still buffered nowhere, so the flush at
+        # exit does not raise again
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

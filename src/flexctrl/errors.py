@@ -10,7 +10,15 @@ located the same way; a controller designed on a fragile sampled model is a
 
 from __future__ import annotations
 
+import difflib
+import functools
+import inspect
 import warnings
+from collections.abc import Callable
+from typing import ParamSpec, TypeVar
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 
 class FlexctrlError(Exception):
@@ -109,3 +117,44 @@ class SimulationError(FlexctrlError, RuntimeError):
 
 class SolverError(FlexctrlError, RuntimeError):
     """A numerical solver (root finder, QP, NLP, Newton iteration) failed."""
+
+
+def keyword_checked(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """``fn`` with a misspelt keyword argument answered by a :class:`TypeError` listing the
+    allowed names (and the closest one), as an unknown key in a file is.
+
+    Python's own message names only the unknown keyword.  A function taking ``**kwargs`` is
+    returned unchanged.
+
+    >>> @keyword_checked
+    ... def move(q, *, duration=1.0, profile="quintic"):
+    ...     return q
+    >>> try:
+    ...     move(0.0, durtion=2.0)
+    ... except TypeError as exc:
+    ...     print(*str(exc).split("; "), sep="\\n")
+    move() got an unexpected keyword argument 'durtion' (did you mean 'duration'?)
+    allowed: q, duration, profile
+    """
+    parameters = inspect.signature(fn).parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        return fn
+    allowed = [
+        p.name
+        for p in parameters
+        if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    ]
+
+    @functools.wraps(fn)
+    def checked(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        for name in kwargs:
+            if name not in allowed:
+                close = difflib.get_close_matches(name, allowed, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise TypeError(
+                    f"{fn.__name__}() got an unexpected keyword argument {name!r}{hint}; "
+                    f"allowed: {', '.join(allowed)}"
+                )
+        return fn(*args, **kwargs)
+
+    return checked

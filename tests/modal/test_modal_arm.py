@@ -250,3 +250,19 @@ def test_modes_cli_bad_input_exits_nonzero_with_one_line_naming_the_key(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert key in err
+
+
+def test_a_link_index_outside_the_arm_names_both_counts():
+    import flexctrl as fc
+    from flexctrl.errors import SpecError
+
+    arm = fc.load_arm("subedi3link")
+    assert fc.link_modes(arm, None, 2).frequency_hz.size == arm.links[2].n_modes
+    with pytest.raises(
+        SpecError, match=r"value 3 is not a link of this 3-link arm; allowed: 0\.\.2"
+    ):
+        fc.link_modes(arm, None, 3)  # the third link as the files count it
+    with pytest.raises(SpecError, match=r"links\[1\]\.\.links\[3\]"):
+        fc.link_modes(arm, None, -1)
+    with pytest.raises(SpecError, match="not a link index"):
+        fc.link_modes(arm, None, 1.0)

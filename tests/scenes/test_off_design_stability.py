@@ -7,6 +7,8 @@ controller's gain (``closed_loop_radius``).
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from flexctrl.errors import SimulationError
@@ -47,7 +49,8 @@ def test_near_the_design_point_the_same_lqr_is_stable():
     )
     m = result.summary["metrics"]
     assert m["stable"] == 1 and m["closed_loop_radius"] < 1.0
-    assert m["divergence_time"] == pytest.approx(result.scene.plant.duration)
+    assert math.isnan(m["divergence_time"])  # it did not diverge
+    assert result.summary["metric_notes"] == {"divergence_time": "the run did not diverge"}
     assert m["final_tip_error"] < result.scene.stable_band
 
 
@@ -82,6 +85,13 @@ def test_a_diverging_run_is_recorded_as_a_finite_ok_row_or_raised_by_simulate(tm
     assert row["status"] == "ok", row["error"]
     assert row["metrics"]["stable"] == 0
     assert 0 < row["metrics"]["divergence_time"] < 5.0
+    # the residual window (from 2.5 s) never opened: no residual, the reason in the row
+    assert math.isnan(row["metrics"]["tip_residual_rms"])
+    assert (
+        "no tip_residual_rms, tip_residual_peak, settling_time: the run diverged at"
+        in (row["error"])
+    )
+    assert "before its residual window opened at 2.5 s" in row["error"]
     assert row["trajectories"]["t"][-1] == pytest.approx(
         row["metrics"]["divergence_time"], abs=0.011
     )

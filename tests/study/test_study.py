@@ -412,6 +412,10 @@ def test_progress_lines_count_runs_and_estimate_the_time_left():
     quiet = io.StringIO()
     Progress(3, mode="none", stream=quiet).update(True)
     assert quiet.getvalue() == ""
+    # a resume with nothing left says so once
+    done = io.StringIO()
+    Progress(0, skipped=5, label="s", mode="lines", stream=done).close()
+    assert done.getvalue() == "s: nothing to run (5 already recorded)\n"
 
 
 def test_quoted_dotted_axis_is_replaced_by_a_nested_override(study):

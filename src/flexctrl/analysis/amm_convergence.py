@@ -319,7 +319,7 @@ def convergence(
     """
     ref = reference(case, reference_fidelity, directory, hub_inertia)
     steps = steps or {}
-    rows = []
+    rows: list[dict[str, Any]] = []
     for label, shortening, stretch in VARIANTS:
         for N in modes:
             step = steps.get(N, "0.05ms" if N >= 4 else "0.1ms")

@@ -51,7 +51,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from flexctrl.dynamics.fem.newmark_dae import DAEResult, simulate
+from flexctrl.dynamics.fem.newmark_dae import DAEProblem, DAEResult, simulate
 from flexctrl.dynamics.fem.sliding_beam import SlidingBeamCase, SlidingBeamModel
 from flexctrl.errors import SimulationError, SolverError
 
@@ -107,7 +107,7 @@ def defect_gain(
     if feedback == "explicit":
         return np.eye(3)
     _, into = newmark_error_matrices(alpha, delta)
-    return np.linalg.inv(np.eye(3) - np.outer(into, _law(gamma_dt, beta_dt)))
+    return np.asarray(np.linalg.inv(np.eye(3) - np.outer(into, _law(gamma_dt, beta_dt))), float)
 
 
 def error_amplification(
@@ -443,17 +443,25 @@ def run_point(
     t_end = max(case.T, 1.0) if duration is None else float(duration)
     q0 = model.initial_shape()
     qd0 = np.zeros_like(q0)
-    common = dict(
-        gamma=gamma,
-        beta=beta,
-        alpha=alpha,
-        delta=delta,
-        feedback=feedback,
-        max_violation=max_violation,
-    )
+
+    def run(problem: DAEProblem, until: float, step: float) -> DAEResult:
+        return simulate(
+            problem,
+            q0,
+            qd0,
+            until,
+            step,
+            gamma=gamma,
+            beta=beta,
+            alpha=alpha,
+            delta=delta,
+            feedback=feedback,
+            max_violation=max_violation,
+        )
+
     problem, seen = _last_time_probe(model.problem())
     try:
-        res = simulate(problem, q0, qd0, t_end, dt, **common)
+        res = run(problem, t_end, dt)
         return SweepPoint(res.dt, gamma, beta, feedback, True, None, res, res.q[:, model.tip_dof])
     except (SimulationError, SolverError) as exc:
         message = str(exc)
@@ -466,7 +474,7 @@ def run_point(
             h, gamma, beta, feedback, False, blowup, None, np.array([q0[model.tip_dof]]), message
         )
     # same step sequence, stopped before the failing step (the first k - 1 steps are identical)
-    res = simulate(model.problem(), q0, qd0, (k - 1) * h, h, **common)
+    res = run(model.problem(), (k - 1) * h, h)
     return SweepPoint(
         res.dt, gamma, beta, feedback, False, blowup, res, res.q[:, model.tip_dof], message
     )

@@ -95,6 +95,8 @@ class Method:
             return dataclasses.replace(self, step=self.step / 2)
         if self.integrator == "rk4":
             return dataclasses.replace(self, divide=2 * self.divide)
+        if self.rtol is None:
+            raise ValueError(f"method {self.label!r} has neither a step nor a tolerance to refine")
         return dataclasses.replace(self, rtol=self.rtol / 10)
 
 

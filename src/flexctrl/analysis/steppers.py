@@ -161,8 +161,15 @@ class NewmarkStepper(Stepper):
         start = time.perf_counter()
         self._u = np.zeros(model.n_u)
         self._problem = model_dae_problem(model, lambda t: self._u, tangent="potential")
-        self.ratio = max(1, int(round(dt / method.step)))
-        if abs(self.ratio * method.step - dt) > 1e-9 * dt:
+        step = method.step
+        if step is None:
+            raise SpecError(
+                f"method '{method.label}': newmark needs a step; allowed: 'newmark@STEP', "
+                "e.g. 'fem:4/newmark@1ms'",
+                key="method",
+            )
+        self.ratio = max(1, int(round(dt / step)))
+        if abs(self.ratio * step - dt) > 1e-9 * dt:
             raise SpecError(
                 f"method '{method.label}': step {method.step:g} s does not divide the output "
                 f"sample {dt:g} s",
@@ -296,8 +303,8 @@ def run_closed_loop(
         wall += time.perf_counter() - start
         X[k * per + 1 : (k + 1) * per + 1] = block
         x = block[-1]
-    t = np.arange(X.shape[0]) * stepper.dt
-    return MethodRun(t, X, tip_path(stepper.model, X), wall, dict(stepper.counters))
+    times = np.arange(X.shape[0]) * stepper.dt
+    return MethodRun(times, X, tip_path(stepper.model, X), wall, dict(stepper.counters))
 
 
 __all__ = [

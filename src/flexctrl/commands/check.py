@@ -126,7 +126,7 @@ def _model(path, document) -> str:
     from flexctrl.spec.arm import load_arm
 
     arm = load_arm(path)
-    return f"model '{arm.name}', {arm.n_links} links"
+    return f"model '{arm.name}', {arm.n_links} link{'s' if arm.n_links != 1 else ''}"
 
 
 def _scene(path, document) -> str:

@@ -12,6 +12,7 @@ import numpy as np
 
 from flexctrl.spec.arm import ArmSpec, load_arm
 from flexctrl.spec.fidelity import SPELLINGS, Fidelity, parse_fidelity
+from flexctrl.spec.units import warn_if_radians
 
 
 def add_model_arguments(
@@ -44,7 +45,13 @@ def add_model_arguments(
 
 
 def load_arm_from_args(args: argparse.Namespace) -> tuple[ArmSpec, np.ndarray]:
-    """The validated arm (payload applied) and the configuration in radians."""
+    """The validated arm (payload applied) and the configuration in radians.
+
+    ``--q`` values that look like radians warn as the same slip in a file does
+    (:func:`flexctrl.spec.units.warn_if_radians`).
+    """
+    if args.q is not None:
+        warn_if_radians(args.q, source=None, key="--q")
     arm = load_arm(args.model, overrides=args.set)
     if args.payload is not None:
         arm = arm.with_payload(args.payload)

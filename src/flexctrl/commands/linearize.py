@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         result["unstable"] = [
             bool(s.real > UNSTABLE_TOL * max(1.0, abs(s))) for s in summary.eigenvalues
         ]
+        result["damping"] = arm.damping_summary(model.info.get("damping"))
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -102,7 +103,27 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
     print(_pole_table(summary.eigenvalues))
+    print(_damping_note(result["damping"], result["q_deg"]))
     return 0
+
+
+def _damping_note(damping: dict, q_deg: list[float]) -> str:
+    """What the model's damping is, beside the poles' zeta it gives."""
+    if damping["form"] == "modal":
+        return (
+            f"  damping: damping_form = 'modal', damping_zeta = {damping['zeta_coupled_modes']:g} "
+            "on every coupled elastic mode at the model's configuration (joints free, no "
+            "gravity); at other poses, with gravity or joint friction the poles' zeta moves "
+            "from it"
+        )
+    ratios = damping["damping_ratio_per_clamped_mass_mode"]
+    return (
+        f"  damping: damping_form = '{damping['form']}', each link's damping_ratio {ratios} "
+        "acts per clamped-mass mode of that link (Eq 68's form), not on the arm's coupled "
+        "modes: the zeta column above is what it gives them. For a damping ratio on the "
+        "coupled modes set damping_form = 'modal' and damping_zeta (e.g. --set "
+        "damping_form=modal --set damping_zeta=0.01)"
+    )
 
 
 def _pole_table(eigenvalues) -> str:
@@ -114,13 +135,15 @@ def _pole_table(eigenvalues) -> str:
         f"    {'f (Hz)':>10}  {'zeta':>8}  {'Re s (1/s)':>11}  kind",
     ]
     unstable = 0
+    largest = max((abs(s) for s in eigenvalues), default=0.0)
     for s in eigenvalues:
         magnitude = abs(s)
-        kind = "oscillatory pair" if s.imag > 0 else ("real" if magnitude > 0 else "rigid (s = 0)")
-        zeta = f"{-s.real / magnitude + 0.0:8.4f}" if magnitude > 0 else f"{'-':>8}"
+        rigid = magnitude <= UNSTABLE_TOL * largest  # zero to round-off
+        kind = "oscillatory pair" if s.imag > 0 else ("rigid (s = 0)" if rigid else "real")
+        zeta = f"{-s.real / magnitude + 0.0:8.4f}" if not rigid else f"{'-':>8}"
         zeta = zeta.replace("-0.0000", " 0.0000")
         mark = ""
-        if s.real > UNSTABLE_TOL * max(1.0, magnitude):
+        if s.real > UNSTABLE_TOL * max(1.0, magnitude) and not rigid:
             unstable += 1
             mark = (
                 f"  UNSTABLE (grows as exp({s.real:.4g} t), doubling in "

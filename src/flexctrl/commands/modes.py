@@ -62,14 +62,15 @@ def run(args: argparse.Namespace) -> int:
     if fidelity is not None and fidelity.kind == "fem":
         from flexctrl.modal.fem_modes import link_frequencies_fem
 
+        elements = fidelity.count
+        if elements is None:  # parse_fidelity gives every 'fem' fidelity its element count
+            raise SpecError(f"fidelity {fidelity} has no element count; allowed: 'fem:N'")
         for i in range(arm.n_links):
             count = n_modes if n_modes is not None else arm.links[i].n_modes
             links.append(
                 {
                     "link": i + 1,
-                    "frequencies_hz": link_frequencies_fem(
-                        arm, q, i, count, fidelity.count
-                    ).tolist(),
+                    "frequencies_hz": link_frequencies_fem(arm, q, i, count, elements).tolist(),
                 }
             )
     else:
@@ -102,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(
         f"{arm.name}: payload {arm.payload.mass:g} kg, q = "
-        f"{np.round(result['q_deg'], 3).tolist()} deg, boundary_inertia = {arm.boundary_inertia}"
+        f"{np.round([math.degrees(a) for a in q], 3).tolist()} deg, "
+        f"boundary_inertia = {arm.boundary_inertia}"
     )
     for entry in links:
         freqs = ", ".join(f"{f:.4f}" for f in entry["frequencies_hz"])

@@ -28,6 +28,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return parser
 
 
+def interrupt_hint(args: argparse.Namespace) -> str:
+    """What to do after Ctrl-C: the report is written whole or not at all."""
+    return f"report.md is unchanged; 'flexctrl report {args.dir}' draws it again"
+
+
 def run(args: argparse.Namespace) -> int:
     from flexctrl.study.report import write_report
 

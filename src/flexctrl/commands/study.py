@@ -64,6 +64,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return parser
 
 
+def interrupt_hint(args: argparse.Namespace) -> str:
+    """What to do after Ctrl-C outside the runs (the runner answers one inside them): the
+    finished runs are saved, the report is written whole or not at all."""
+    out = args.out or "out/<study name>"
+    return (
+        f"the finished runs are saved in {out}; 'flexctrl report {out}' draws the report, "
+        f"'flexctrl study {args.study} --out {out} --resume' runs the rest"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 

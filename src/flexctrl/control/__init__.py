@@ -34,7 +34,7 @@ from flexctrl.control.nmpc import NMPCController, design_nmpc
 from flexctrl.control.pd import PDController, design_pd
 from flexctrl.control.sampling_check import sampling_diagnosis
 from flexctrl.control.shaping import ShapedController, design_shaped
-from flexctrl.errors import DesignWarning, SpecError
+from flexctrl.errors import DesignWarning, SpecError, keyword_checked
 from flexctrl.linear import holding_torque_excess
 from flexctrl.spec.controller_settings import (
     SETTINGS,
@@ -99,6 +99,7 @@ def has_linear_law(kind: str) -> bool:
     return callable(getattr(CONTROLLER_CLASSES[kind], "linear_law", None))
 
 
+@keyword_checked
 def design(model, op, settings) -> Controller:
     """Build the controller that ``settings`` describe for ``model``, regulating to ``op``.
 

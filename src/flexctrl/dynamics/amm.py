@@ -91,10 +91,12 @@ from flexctrl.dynamics.amm_kinematics import (
     stretched_links,
 )
 from flexctrl.dynamics.amm_modal import frozen_modal, scheduled_modal
+from flexctrl.dynamics.coupled_damping import coupled_modal_damping
 from flexctrl.dynamics.model import Model
 from flexctrl.dynamics.natural_frequencies import locked_spectrum, natural_frequencies
 from flexctrl.errors import SpecError
-from flexctrl.spec.arm import DAMPING_FORMS, ArmSpec
+from flexctrl.spec.arm import ArmSpec
+from flexctrl.spec.damping import DAMPING_FORMS
 from flexctrl.spec.fidelity import Fidelity
 
 MODES = ("frozen", "scheduled")
@@ -161,6 +163,13 @@ def _options(
     _check_choice(modes, MODES, "modes")
     damping = arm.damping_form if damping is None else damping
     _check_choice(damping, DAMPING, "damping")
+    if damping == "modal" and (modes == "scheduled" or arm.damping_zeta is None):
+        why = "scheduled modes" if modes == "scheduled" else "the arm has no damping_zeta"
+        raise SpecError(
+            f"damping 'modal' is not allowed here ({why}); allowed: frozen modes and the model "
+            "file's damping_form = 'modal' with damping_zeta, or another damping form",
+            key="damping",
+        )
     _check_choice(solver, SOLVERS, "solver")
     _check_choice(coriolis, CORIOLIS, "coriolis")
     if axial_shortening is None:
@@ -222,7 +231,7 @@ def build_amm(
     *,
     modes: Literal["frozen", "scheduled"] = "frozen",
     reference_q: Sequence[float] | np.ndarray | None = None,
-    damping: Literal["ratio", "paper", "stiffness"] | None = None,
+    damping: Literal["ratio", "paper", "stiffness", "modal"] | None = None,
     solver: Literal["ldl", "qr"] = "ldl",
     fidelity: Fidelity | None = None,
     lookups: Sequence[ca.Function | None] | None = None,
@@ -325,6 +334,16 @@ def _build(
     K, D, E_el = _stiffness_and_damping(arm, modal, opts, stretched, names, q, ex.elastic_energy)
     expr = lagrange_equations(ex, K, D, E_el, (q, qd, u), opts.solver, scheduled)
     functions = model_functions(expr, K, D, (q, qd, u), scheduled, expansion)
+    if opts.damping == "modal" and arm.damping_zeta is not None:
+        # the coupled modes at the reference pose need M, so the equations are formed twice
+        q0 = np.concatenate([opts.q_ref, np.zeros(N - n)])
+        D = D + ca.SX(
+            coupled_modal_damping(
+                np.array(functions["M"](q0)), np.array(functions["K"]()["K"]), arm.damping_zeta
+            )
+        )
+        expr = lagrange_equations(ex, K, D, E_el, (q, qd, u), opts.solver, scheduled)
+        functions = model_functions(expr, K, D, (q, qd, u), scheduled, expansion)
     locked, free = _spectra(functions, opts.q_ref, n, scheduled)
     info = {
         "family": "amm",
@@ -370,7 +389,9 @@ def _stiffness_and_damping(
         for j in range(md.n_modes):
             omega = md.omega[j]
             stiffness.append(link.mass * omega**2)
-            if opts.damping == "stiffness":  # the finite elements' (2 zeta / omega_1) K, modal
+            if opts.damping == "modal":  # fitted on the coupled modes afterwards (_build)
+                damp.append(ca.SX(0))
+            elif opts.damping == "stiffness":  # the finite elements' (2 zeta / omega_1) K, modal
                 damp.append(2.0 * link.damping_ratio(0) / float(md.omega[0]) * link.mass * omega**2)
             else:
                 scale = link.mass if opts.damping == "ratio" else 1.0
@@ -383,7 +404,8 @@ def _stiffness_and_damping(
         E_el = E_el + 0.5 * k_axial * q[names.index(f"e{i + 1}")] ** 2
         # damped as the finite elements' links: (2 zeta / omega_1) k, omega_1 the link's first
         # clamped-mass mode
-        damp.append(ca.SX(2.0 * link.damping_ratio(0) / float(md.omega[0]) * k_axial))
+        ratio = 0.0 if opts.damping == "modal" else link.damping_ratio(0)
+        damp.append(ca.SX(2.0 * ratio / float(md.omega[0]) * k_axial))
     return ca.diag(ca.vertcat(*stiffness)), ca.diag(ca.vertcat(*damp)), E_el
 
 

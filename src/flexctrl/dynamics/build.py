@@ -17,7 +17,7 @@ import numpy as np
 from flexctrl.dynamics.amm import build_amm
 from flexctrl.dynamics.fem.fem_arm import build_fem_model
 from flexctrl.dynamics.model import Model
-from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.errors import FlexctrlError, SpecError, keyword_checked
 from flexctrl.spec.arm import ArmSpec
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 
@@ -26,6 +26,7 @@ class ModelFamilyUnavailable(FlexctrlError, NotImplementedError):
     """The requested model family cannot be built here (yet)."""
 
 
+@keyword_checked
 def build_model(
     arm: ArmSpec,
     fidelity: str | Fidelity | None = "amm:2",
@@ -105,6 +106,13 @@ def _build_fem(
         raise ModelFamilyUnavailable(
             f"modes '{modes}' applies to assumed modes only; a finite-element model has no "
             "mode option"
+        )
+    if (arm.damping_form if damping is None else damping) == "modal":
+        raise ModelFamilyUnavailable(
+            "damping form 'modal' (damping_zeta on the coupled modes) applies to assumed modes "
+            "only; a finite-element model takes its damping from damping_ratio "
+            "stiffness-proportionally (use an 'amm:N' fidelity, or damping form 'ratio' or "
+            "'stiffness')"
         )
     if (arm.damping_form if damping is None else damping) == "paper":
         raise ModelFamilyUnavailable(

@@ -18,7 +18,7 @@ import numpy as np
 
 from flexctrl.dynamics.jacobians import jacobian_function
 from flexctrl.dynamics.model import Model, derived
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.linear.model_facts import input_names, state_names
 from flexctrl.linear.operating_point import OperatingPoint
 from flexctrl.linear.output_maps import Sensors
@@ -84,6 +84,7 @@ class Linearizer:
         )
 
 
+@keyword_checked
 def linearize(
     model: Model,
     op: OperatingPoint,
@@ -120,6 +121,7 @@ def _system_name(text: str) -> str:
     return text.replace(".", "_")
 
 
+@keyword_checked
 def discretize(sys: control.StateSpace, dt: float, method: str = "zoh") -> control.StateSpace:
     """Sample ``sys`` with period ``dt`` (s), zero-order hold by default; signal names are kept.
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from flexctrl.dynamics.model import Model
 from flexctrl.dynamics.natural_frequencies import locked_spectrum
+from flexctrl.errors import keyword_checked
 from flexctrl.linear.model_facts import stiffness_matrix
 from flexctrl.linear.operating_point import OperatingPoint
 
@@ -59,6 +60,7 @@ class ModalSummary:
         ]
 
 
+@keyword_checked
 def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
     """Frequencies (Hz) and damping ratios of the eigenvalues of ``sys`` (continuous or discrete).
 
@@ -90,6 +92,7 @@ def modal_summary(sys: control.StateSpace, tol: float = 1e-9) -> ModalSummary:
     return ModalSummary(s[order], mag[order] / (2 * math.pi), zeta[order])
 
 
+@keyword_checked
 def locked_frequencies(
     model: Model, op: OperatingPoint | None = None, *, include_gravity: bool = False
 ) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.model import Model
-from flexctrl.errors import SolverError, SpecError
+from flexctrl.errors import SolverError, SpecError, keyword_checked
 from flexctrl.linear.model_facts import state_names, stiffness_matrix
 from flexctrl.spec.units import warn_if_degrees
 
@@ -125,6 +125,7 @@ def _static_functions(model: Model) -> ca.Function:
     )
 
 
+@keyword_checked
 def equilibrium(
     model: Model,
     q_joints: Sequence[float] | np.ndarray,

@@ -193,7 +193,7 @@ class Sensors:
         model: Model,
         kinds: Sequence[str] = ("joints",),
         noise: Mapping[str, float] | None = None,
-        q_joints: Sequence[float] | None = None,
+        q_joints: Sequence[float] | np.ndarray | None = None,
     ) -> Sensors:
         """Sensors of ``kinds`` on ``model`` with noise standard deviations ``noise`` (per kind).
 
@@ -221,8 +221,9 @@ class Sensors:
         u = ca.MX.sym("u", model.n_u)
         symbols = _Symbols(x, u, x[: model.n_q], x[model.n_q :])
         pieces, names, std = [], [], []
+        joints = None if q_joints is None else [float(v) for v in q_joints]
         for kind in kinds:
-            rows, labels = SENSOR_ROWS[kind](model, symbols, q_joints)
+            rows, labels = SENSOR_ROWS[kind](model, symbols, joints)
             pieces.append(rows)
             names.extend(labels)
             std.extend([float(sigma[kind])] * len(labels))

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from flexctrl.control.reference_trajectory import reference_from_move
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.loop.mismatch import plant_sensors
 from flexctrl.loop.monitors import divergence_monitor
 from flexctrl.loop.plant import accurate_plant_step
@@ -19,6 +19,7 @@ from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference, Move
 
 
+@keyword_checked
 def closed_loop(
     model,
     controller,
@@ -58,10 +59,16 @@ def closed_loop(
     x0 : array_like, optional
         Initial plant state ``(q, qd)`` (rad, m, rad/s); default at rest at the start.
     metrics : MetricSettings, optional
-        How the run is judged (residual window, bands, divergence bounds).
+        How the run is judged (residual window, bands, divergence bounds).  The run
+        diverges when a link's tip deflection exceeds its bound (by default the larger of
+        0.1 of its length and four times the static deflection ``tau L^2 / (2 EI)`` of its
+        joint's torque limit, so light arms keep room for their ordinary bending; a set
+        ``divergence_deflection`` makes it that fraction of the length), or a joint leaves
+        its move's range by more than ``divergence_angle`` (default 90 deg).
     on_divergence : {"raise", "record"}
         A diverging run raises :class:`~flexctrl.errors.SimulationError`, or stops and
-        records ``stable = 0`` with ``divergence_time`` (s).
+        records ``stable = 0`` with ``divergence_time`` (s); its residual metrics and
+        ``settling_time`` are then NaN, the reason in ``summary["metric_notes"]``.
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
 
@@ -210,7 +217,6 @@ def _result(
         path,
         judge,
         tip_target=tip_target,
-        duration=duration,
         torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
     )

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from flexctrl.errors import keyword_checked
+
 #: Link and joint line styles (the colour is the run's).
 _LINK_STYLES = ("-", "--", ":", "-.")
 
@@ -50,6 +52,7 @@ class RunCurves:
     residual_rms: float | None = None
 
 
+@keyword_checked
 def compare(results: Mapping[str, object], *, title: str | None = None):
     """Runs drawn on the same axes: ``compare({"PD": res_pd, "LQR": res_lqr})``.
 
@@ -116,6 +119,9 @@ def draw_runs(runs: Sequence[RunCurves], *, title: str | None = None, highlight:
     _legends(axes, runs, run_handles, limit_handles)
     shaded = (
         f"shaded: residual-vibration window {first.window[0]:.3g}-{first.window[1]:.3g} s"
+        if first.window and first.window[0] < first.window[1]
+        else f"no residual-vibration window: the run ended at {first.time[-1]:.3g} s, before "
+        f"it opened at {first.window[0]:.3g} s"
         if first.window
         else ""
     )
@@ -145,7 +151,7 @@ def _panels(runs: Sequence[RunCurves]):
     }
     window = runs[0].window
     for key, ax in axes.items():
-        if window is not None:
+        if window is not None and window[0] < window[1]:
             ax.axvspan(*window, color="0.9", zorder=0)
         ax.grid(True, alpha=0.3)
         ax.set_ylabel(labels[key])
@@ -162,7 +168,13 @@ def _draw_run(axes, index: int, run: RunCurves, highlight: str | None):
         "lw": 1.8 if run.label == highlight else 0.9,
         "zorder": 1.5 if run.label == highlight else 2.0,  # the others stay visible over it
     }
-    rms = "" if run.residual_rms is None else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
+    rms = (
+        ""
+        if run.residual_rms is None
+        else " (no residual: no window)"
+        if math.isnan(run.residual_rms)
+        else f" (residual RMS {1e3 * run.residual_rms:.3g} mm)"
+    )
     if "tip" in axes and run.tip_error is not None:
         axes["tip"].plot(run.time, 1e3 * run.tip_error, **style)
     for link in range(run.deflections.shape[1]):

@@ -14,7 +14,7 @@ residual-vibration window
     RMS and maximum of ``tip_error`` over that window (m).
 ``settling_time``
     Time (s, from the start of the run) after which ``tip_error`` stays below the
-    scene's band (default 1 mm) until the end; ``inf`` if it never settles.
+    scene's band (default 1 mm) until the end.
 ``peak_deflection``
     Largest absolute tip deflection w_ie of any link over the run (m).
 ``peak_torque``, ``rms_torque``
@@ -30,15 +30,22 @@ The verdicts of :func:`run_metrics`:
 
 ``settled``
     1 when the tip stays inside ``band`` to the end of a run that did not diverge;
-    otherwise 0 and ``settling_time`` is the run's ``duration`` (finite, so a study
-    row of an unstable loop stays ok; ``inf`` would mark it failed).
+    otherwise 0 and ``settling_time`` is NaN.
 ``final_tip_error``
     Largest tip error (m) of the last :data:`FINAL_WINDOW` s.
 ``stable``
-    1 when the run did not diverge and ``final_tip_error <= stable_band`` (a loop held
-    in a saturated limit cycle does not diverge, but does not converge either).
+    1 when the run did not diverge and, where a linear verdict is given, the linear closed
+    loop's spectral radius is below 1.
+``settled_within_band``
+    1 when the run did not diverge and ``final_tip_error <= stable_band`` (a stable but slow
+    loop, or one held in a saturated limit cycle, gets 0 here and 1 in ``stable``).
 ``divergence_time``
-    When the run diverged (s), else ``duration``.
+    When the run diverged (s); NaN when it did not.
+
+A metric that does not apply to a run is NaN (an empty cell in a study table), with the
+reason in :func:`metric_notes`: the residual metrics and ``settling_time`` of a run that
+diverged (the window may never have opened; what it would measure is the divergence), and
+``settling_time`` of a run that never settled.
 ``closed_loop_radius``
     The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
 ``torque_limit_exceeded``
@@ -49,6 +56,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -138,7 +147,6 @@ def run_metrics(
     settle_allowance: float,
     band: float,
     stable_band: float,
-    duration: float,
     torque_limits: Sequence[float],
     controller_stats: dict,
     step_times: Sequence[float] = (),
@@ -148,8 +156,8 @@ def run_metrics(
 
     The verdicts (``settled``, ``final_tip_error``, ``stable``, ``divergence_time``,
     ``closed_loop_radius``, ``torque_limit_exceeded``) are defined in the module docstring.
-    For a run stopped by a divergence before the residual window opens, the window
-    shrinks to the last sample.
+    A diverged run has NaN residual metrics and ``settling_time`` (:func:`metric_notes`
+    says why).
 
     Parameters
     ----------
@@ -157,7 +165,7 @@ def run_metrics(
         The plant's run; ``meta["divergence"]`` is None or ``{"time": s, ...}``.
     tip_target : (2,) m
     reference_joints : (T, n) rad, the joint reference on the trajectory's times
-    t_arrive, settle_allowance, duration : s
+    t_arrive, settle_allowance : s
     band, stable_band : m
     torque_limits : (n,) N m
     controller_stats : dict
@@ -189,9 +197,11 @@ def run_metrics(
             v for k, v in status.items() if not k.startswith(("ok", "solved", "fallback"))
         ),
     )
-    _add_verdicts(metrics, trajectory, tip_target, duration=duration, stable_band=stable_band)
+    if divergence is not None:
+        metrics["tip_residual_rms"] = metrics["tip_residual_peak"] = math.nan
     if radius is not None:
         metrics["closed_loop_radius"] = radius
+    _add_verdicts(metrics, trajectory, tip_target, stable_band=stable_band, radius=radius)
     limits = np.asarray(torque_limits, dtype=float)
     metrics["torque_limit_exceeded"] = bool(
         np.any(np.max(np.abs(trajectory.inputs), axis=0) > limits * (1 + 1e-9))
@@ -200,62 +210,144 @@ def run_metrics(
 
 
 def _add_verdicts(
-    metrics: dict, trajectory, tip_target: np.ndarray, *, duration: float, stable_band: float
+    metrics: dict,
+    trajectory,
+    tip_target: np.ndarray,
+    *,
+    stable_band: float,
+    radius: float | None,
 ) -> None:
-    """Add ``settled``, ``final_tip_error``, ``stable`` and ``divergence_time`` to ``metrics``."""
+    """Add ``settled``, ``final_tip_error``, ``settled_within_band``, ``stable`` and
+    ``divergence_time`` to ``metrics``."""
     divergence = trajectory.meta.get("divergence")
     metrics["settled"] = int(divergence is None and math.isfinite(metrics["settling_time"]))
     if not metrics["settled"]:
-        metrics["settling_time"] = float(duration)
+        metrics["settling_time"] = math.nan
     error = np.linalg.norm(trajectory.tip - tip_target[None, :], axis=1)
     final = trajectory.time >= trajectory.time[-1] - FINAL_WINDOW
     metrics["final_tip_error"] = float(np.max(error[final]))
-    metrics["stable"] = int(divergence is None and metrics["final_tip_error"] <= stable_band)
-    metrics["divergence_time"] = float(duration) if divergence is None else divergence["time"]
+    metrics["settled_within_band"] = int(
+        divergence is None and metrics["final_tip_error"] <= stable_band
+    )
+    metrics["stable"] = int(divergence is None and (radius is None or radius < 1.0))
+    metrics["divergence_time"] = math.nan if divergence is None else float(divergence["time"])
 
 
-#: Every scalar metric of a closed-loop run (:func:`run_metrics`), by name; the per-joint lists
-#: ``peak_torque`` and ``rms_torque`` appear in a study table as ``peak_torque_1``,
-#: ``peak_torque_2`` ...
-METRICS = (
-    "tip_residual_rms",
-    "tip_residual_peak",
-    "settling_time",
-    "peak_deflection",
-    "tracking_error_rms",
-    "controller_time_median",
-    "controller_time_p95",
-    "controller_time_max",
-    "fallbacks",
-    "solver_failures",
-    "settled",
-    "final_tip_error",
-    "stable",
-    "divergence_time",
-    "closed_loop_radius",
-    "torque_limit_exceeded",
-)
+def metric_notes(
+    metrics: dict, divergence: dict | None, *, window_start: float, band: float
+) -> dict[str, str]:
+    """Why each NaN metric of :func:`run_metrics` is empty, by name.
+
+    Parameters
+    ----------
+    metrics : dict
+        :func:`run_metrics`'s.
+    divergence : dict or None
+        The trajectory's ``meta["divergence"]`` (``time`` in s, ``message``).
+    window_start : float
+        s: when the residual-vibration window opens.
+    band : float
+        m: the settling band.
+
+    Returns
+    -------
+    dict
+        Metric name -> one line, for every metric that is NaN.
+    """
+    if divergence is not None:
+        t = float(divergence["time"])
+        diverged = f"the run diverged at {t:.4g} s" + (
+            f", before its residual window opened at {window_start:.4g} s"
+            if t < window_start
+            else ""
+        )
+    notes = {}
+    for name, value in metrics.items():
+        if not (isinstance(value, float) and math.isnan(value)):
+            continue
+        if name == "divergence_time":
+            notes[name] = "the run did not diverge"
+        elif divergence is not None:
+            notes[name] = diverged
+        elif name == "settling_time":
+            notes[name] = f"the tip error never stayed inside the {1e3 * band:g} mm band to the end"
+        else:
+            notes[name] = "not defined for this run"
+    return notes
+
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """What one metric of a closed-loop run is: its SI unit, which way is better, its meaning.
+
+    Attributes
+    ----------
+    unit : str
+        SI unit ("" for counts and 0/1 verdicts, "-" for a pure number).
+    better : {"lower", "higher"}
+        Which values are better; reports rank by it.
+    meaning : str
+        One line.
+    verdict : bool
+        True for a judgement of the whole run (``stable`` ...), which a diverged run keeps and
+        a ranking compares across diverged and finished runs; False for a measurement of a
+        finished run, which rankings take from finished runs only.
+    """
+
+    unit: str
+    better: Literal["lower", "higher"]
+    meaning: str
+    verdict: bool = False
+
+
+#: Every metric of a closed-loop run (:func:`run_metrics`), by name, with its unit, better
+#: direction and meaning.  The per-joint lists ``peak_torque`` and ``rms_torque`` appear in a
+#: study table as ``peak_torque_1``, ``peak_torque_2`` ...  A metric that does not apply to a
+#: run (a residual of a run stopped before its window, ``settling_time`` of a run that never
+#: settled) is NaN, written as an empty cell, with the reason in :func:`metric_notes`.
+METRIC_INFO: dict[str, MetricInfo] = {
+    "tip_residual_rms": MetricInfo("m", "lower", "RMS tip error over the residual window"),
+    "tip_residual_peak": MetricInfo("m", "lower", "largest tip error in the residual window"),
+    "settling_time": MetricInfo(
+        "s", "lower", "time after which the tip error stays inside the settling band"
+    ),
+    "peak_deflection": MetricInfo("m", "lower", "largest link tip deflection of the run"),
+    "tracking_error_rms": MetricInfo("rad", "lower", "RMS joint angle minus reference"),
+    "controller_time_median": MetricInfo("s", "lower", "median wall time of a controller step"),
+    "controller_time_p95": MetricInfo("s", "lower", "95th percentile of the controller step"),
+    "controller_time_max": MetricInfo("s", "lower", "longest controller step"),
+    "fallbacks": MetricInfo("", "lower", "controller steps that fell back", verdict=True),
+    "solver_failures": MetricInfo("", "lower", "controller solver failures", verdict=True),
+    "settled": MetricInfo(
+        "", "higher", "1: the tip stays inside the settling band to the end", verdict=True
+    ),
+    "final_tip_error": MetricInfo("m", "lower", "largest tip error of the run's last second"),
+    "settled_within_band": MetricInfo(
+        "",
+        "higher",
+        "1: the run did not diverge and final_tip_error <= stable_band",
+        verdict=True,
+    ),
+    "stable": MetricInfo(
+        "",
+        "higher",
+        "1: no divergence and, where there is one, a linear closed-loop radius below 1",
+        verdict=True,
+    ),
+    "divergence_time": MetricInfo("s", "higher", "when the run diverged", verdict=True),
+    "closed_loop_radius": MetricInfo(
+        "-", "lower", "spectral radius of the linear closed loop (< 1: stable)", verdict=True
+    ),
+    "torque_limit_exceeded": MetricInfo(
+        "", "lower", "1: an applied torque went beyond its joint's limit", verdict=True
+    ),
+    "peak_torque": MetricInfo("N m", "lower", "largest applied torque per joint"),
+    "rms_torque": MetricInfo("N m", "lower", "RMS applied torque per joint"),
+}
 #: Per-joint metrics (lists, one value per joint).
 JOINT_METRICS = ("peak_torque", "rms_torque")
-#: SI unit of every metric of :data:`METRICS` and :data:`JOINT_METRICS` ("" for counts and
-#: 0/1 verdicts, "-" for a pure number); reports convert them for reading (m -> mm, rad -> deg).
-UNITS = {
-    "tip_residual_rms": "m",
-    "tip_residual_peak": "m",
-    "settling_time": "s",
-    "peak_deflection": "m",
-    "tracking_error_rms": "rad",
-    "controller_time_median": "s",
-    "controller_time_p95": "s",
-    "controller_time_max": "s",
-    "fallbacks": "",
-    "solver_failures": "",
-    "settled": "",
-    "final_tip_error": "m",
-    "stable": "",
-    "divergence_time": "s",
-    "closed_loop_radius": "-",
-    "torque_limit_exceeded": "",
-    "peak_torque": "N m",
-    "rms_torque": "N m",
-}
+#: Every scalar metric of a closed-loop run, by name.
+METRICS = tuple(name for name in METRIC_INFO if name not in JOINT_METRICS)
+#: SI unit of every metric of :data:`METRIC_INFO`; reports convert them for reading (m -> mm,
+#: rad -> deg).
+UNITS = {name: info.unit for name, info in METRIC_INFO.items()}

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.metrics import metric_notes, run_metrics
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference
@@ -25,7 +25,6 @@ def judge_run(
     judge: MetricSettings,
     *,
     tip_target: np.ndarray,
-    duration: float,
     torque_limits: Sequence[float],
     radius: float | None,
 ) -> dict[str, Any]:
@@ -43,8 +42,6 @@ def judge_run(
         The residual window, bands and divergence bounds.
     tip_target : numpy.ndarray
         The tip at rest at the target (m).
-    duration : float
-        The run's requested length (s).
     torque_limits : sequence of float
         Per joint (N m).
     radius : float or None
@@ -58,12 +55,19 @@ def judge_run(
         settle_allowance=judge.settle_allowance,
         band=judge.band,
         stable_band=judge.stable_band,
-        duration=duration,
         torque_limits=torque_limits,
         controller_stats=controller.stats.summary(),
         step_times=controller.stats.step_times,
         radius=radius,
     )
+
+
+def _damping(plant) -> dict[str, Any] | None:
+    """The plant's damping as built (:meth:`flexctrl.spec.arm.ArmSpec.damping_summary`)."""
+    spec = getattr(plant, "spec", None)
+    if spec is None or not hasattr(spec, "damping_summary"):
+        return None
+    return spec.damping_summary(getattr(plant, "info", {}).get("damping"))
 
 
 def run_summary(
@@ -118,12 +122,19 @@ def run_summary(
             "fidelity": str(plant.fidelity),
             "n_states": plant.n_x,
             "payload_kg": payload,
+            "damping": _damping(plant),
         },
         "design": design,
         "reference": path.settings() | {"deflection": deflection},
         "tip_target": tip_target.tolist(),
         "window_s": [path.t_arrive + judge.settle_allowance, float(trajectory.time[-1])],
         "metrics": metrics,
+        "metric_notes": metric_notes(
+            metrics,
+            trajectory.meta.get("divergence"),
+            window_start=path.t_arrive + judge.settle_allowance,
+            band=judge.band,
+        ),
         "divergence": trajectory.meta.get("divergence"),
         "wall_time_s": trajectory.meta["wall_time_s"],
     }

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexctrl.beam.clamped_mass import ClampedMassModes, clamped_mass_modes
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.modal.boundary import boundary_values
 from flexctrl.spec.arm import ArmSpec
 
@@ -24,6 +24,25 @@ def _arm_spec(arm) -> ArmSpec:
     )
 
 
+def checked_link(arm: ArmSpec, link) -> int:
+    """``link`` as a 0-based index of ``arm.links``, or a :class:`SpecError` naming the value,
+    the allowed indices and the files' count from 1."""
+    n = arm.n_links
+    if isinstance(link, (bool, np.bool_)) or not isinstance(link, (int, np.integer)):
+        raise SpecError(
+            f"value {link!r} is not a link index; allowed: an integer 0..{n - 1}", key="link"
+        )
+    if not 0 <= int(link) < n:
+        raise SpecError(
+            f"value {link} is not a link of this {n}-link arm; allowed: 0..{n - 1} (Python "
+            "counts links from 0; file keys and the command line count them from 1, "
+            f"links[1]..links[{n}])",
+            key="link",
+        )
+    return int(link)
+
+
+@keyword_checked
 def link_modes(
     arm, q: np.ndarray | None, link: int, n_modes: int | None = None, convention: str | None = None
 ) -> ClampedMassModes:
@@ -42,7 +61,9 @@ def link_modes(
     q : array of float or None
         Joint angles (rad), shape (n,); None: the description's ``configuration``.
     link
-        Link index, 0-based.
+        Link index, 0-based as Python indexes ``arm.links`` (file keys and the command line
+        count links from 1: ``links[1]`` is ``link=0``); one outside ``0..n-1`` is a
+        :class:`SpecError` naming both counts.
     n_modes
         Modes to compute (default: the link's ``n_modes``).
     convention
@@ -59,6 +80,7 @@ def link_modes(
     True
     """
     arm = _arm_spec(arm)
+    link = checked_link(arm, link)
     q = arm.configuration_or_default(q)
     spec = arm.links[link]
     bv = boundary_values(arm, np.asarray(q, dtype=float), link, convention)
@@ -73,6 +95,7 @@ def link_modes(
     )
 
 
+@keyword_checked
 def arm_modes(
     arm, q: np.ndarray | None = None, n_modes: int | None = None, convention: str | None = None
 ) -> list[ClampedMassModes]:

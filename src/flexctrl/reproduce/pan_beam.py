@@ -9,6 +9,7 @@ figures are not in the text, so each figure is set beside what the paper says ab
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ def runs(reduced: bool) -> dict:
     """Every case at 4 elements and at the converged mesh (32; 16 reduced), shortening on and
     off."""
     fine = 16 if reduced else 32
-    out = {"fine": fine}
+    out: dict[Any, Any] = {"fine": fine}
     for key, case in CASES.items():
         for n in (PAPER_ELEMENTS, fine):
             for sh in (True, False):

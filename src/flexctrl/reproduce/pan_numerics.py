@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Literal, NotRequired, TypedDict
 
 import numpy as np
 
@@ -21,10 +22,22 @@ from flexctrl.dynamics.fem.newmark_dae import ConstraintViolationError
 from flexctrl.dynamics.fem.sliding_beam import FAST_PUSH, SLOW_PUSH, simulate_sliding_beam
 from flexctrl.reproduce.items import Item, Section
 
+
+class EfficiencySweep(TypedDict):
+    """One case's sweep for :func:`flexctrl.analysis.dae_efficiency.compare`."""
+
+    dts: list[float]
+    rtols: list[float]
+    rtols_order2: list[float]
+    repeats: int
+    newmark_check_dt: float | None
+    reference_rtol: NotRequired[float]
+
+
 #: Sweeps of the full run per case (beam, arm); the reduced one keeps two points per method and
 # : shorter runs.  IDAS at BDF order <= 5 costs ~1.5e5 steps on the arm whatever its rtol (see the
 # text).
-FULL = (
+FULL: tuple[EfficiencySweep, ...] = (
     {
         "dts": [4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4],
         "rtols": [1e-3, 1e-4, 1e-5, 1e-6],
@@ -40,16 +53,15 @@ FULL = (
         "newmark_check_dt": 1e-4,
     },
 )
-REDUCED = (
-    {
-        "dts": [2e-3, 1e-3],
-        "rtols": [1e-3, 1e-5],
-        "rtols_order2": [1e-3, 1e-4],
-        "repeats": 1,
-        "newmark_check_dt": None,
-        "reference_rtol": 1e-8,
-    },
-) * 2
+_REDUCED_SWEEP: EfficiencySweep = {
+    "dts": [2e-3, 1e-3],
+    "rtols": [1e-3, 1e-5],
+    "rtols_order2": [1e-3, 1e-4],
+    "repeats": 1,
+    "newmark_check_dt": None,
+    "reference_rtol": 1e-8,
+}
+REDUCED: tuple[EfficiencySweep, ...] = (_REDUCED_SWEEP,) * 2
 # : the reduced reference: IDAS at rtol 1e-10 took 61 s of the reduced run's 123 s on the arm (1.6
 # million
 # : steps); at 1e-8 it is still far below the swept points' errors (their smallest, IDAS at rtol
@@ -100,7 +112,7 @@ def baumgarte_section() -> Section:
     )
 
 
-def _violation(case, form: str, duration: float = 12.0) -> str:
+def _violation(case, form: Literal["eq49", "eq54_printed"], duration: float = 12.0) -> str:
     """The largest violation (m) of ``case`` over ``duration`` (s) with Baumgarte's ``form``, or
     where it
     passed 1e-4 m."""
@@ -174,7 +186,7 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
 def _efficiency_items(res: dict) -> list[Item]:
     """One item per IDAS variant: Newmark's wall time against IDAS's at equal accuracy."""
     items: list[Item] = []
-    by = {}
+    by: dict[str, list[dict]] = {}
     for row in res["equal_accuracy"]:
         by.setdefault(row["idas"], []).append(row)
     for method in ("idas", "idas_order2"):

@@ -12,7 +12,7 @@ import importlib.util
 import time
 from pathlib import Path
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.reproduce.items import write_reproduction
 
 #: The papers, in the order the command lists them.
@@ -40,6 +40,7 @@ def _paper_module(paper: str):
         ) from None
 
 
+@keyword_checked
 def reproduce_paper(paper: str, out_dir: str | Path, reduced: bool = False) -> dict:
     """Run the reproduction of one seed paper and write ``report.md`` and ``reproduction.json``.
 

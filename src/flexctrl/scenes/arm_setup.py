@@ -67,6 +67,8 @@ def scene_arm(scene: ArmScene) -> ArmSpec:
         )
     if scene.damping_form is not None:
         arm = dataclasses.replace(arm, damping_form=scene.damping_form)
+    if arm.damping_form == "modal" and scene.zeta is not None:  # zeta of the coupled modes
+        arm = dataclasses.replace(arm, damping_zeta=scene.zeta)
     if scene.friction is not None:
         friction = scene.friction * arm.n_links if len(scene.friction) == 1 else scene.friction
         if len(friction) != arm.n_links:

@@ -7,13 +7,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from flexctrl.dynamics.build import build_model
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.arm import arm_from_document
 from flexctrl.spec.overrides import apply_overrides, apply_values
 from flexctrl.spec.reader import read_toml
 
 
+@keyword_checked
 def load_model(
     path: str | Path,
     payload: float | None = None,

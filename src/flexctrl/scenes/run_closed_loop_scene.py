@@ -244,7 +244,6 @@ def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> Close
         setup.reference,
         judge,
         tip_target=tip_target,
-        duration=setup.plant_scene.duration,
         torque_limits=[j.torque_limit for j in setup.arm.joints],
         radius=loop_radius(setup, cache),
     )

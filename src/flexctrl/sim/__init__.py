@@ -26,9 +26,10 @@ Examples
 from __future__ import annotations
 
 import difflib
+import inspect
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.sim.euler import Euler
 from flexctrl.sim.implicit import CVODES, IDAS
 from flexctrl.sim.integrator import Integrator
@@ -74,6 +75,7 @@ def get_integrator(method: str | type[Integrator]) -> type[Integrator]:
     )
 
 
+@keyword_checked
 def simulate(
     model,
     x0,
@@ -107,7 +109,27 @@ def simulate(
     cls = get_integrator(method)
     if "scipy_method" in options:
         options["method"] = options.pop("scipy_method")
+    _check_options(cls, options)
     return cls(model, dt, **options).run(x0, duration, u=u)
+
+
+def _check_options(cls: type[Integrator], options: dict[str, Any]) -> None:
+    """A :class:`TypeError` naming the options ``cls`` takes when ``options`` has another."""
+    parameters = inspect.signature(cls.__init__).parameters.values()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        return
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    allowed = [p.name for p in parameters if p.kind in kinds and p.name not in ("self", "model")]
+    allowed = ["scipy_method" if name == "method" else name for name in allowed if name != "dt"]
+    for name in options:
+        if (name == "method" and "scipy_method" in allowed) or name in allowed:
+            continue
+        close = difflib.get_close_matches(name, allowed, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise TypeError(
+            f"simulate() got an unexpected option {name!r} for the {cls.__name__} integrator"
+            f"{hint}; allowed: dt, method, u, {', '.join(allowed)}"
+        )
 
 
 __all__ = [

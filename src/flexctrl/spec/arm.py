@@ -14,7 +14,11 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     boundary_inertia = "exact"       # or "paper" (see flexctrl.modal.boundary)
     damping_form = "ratio"           # or "paper": modal damping d = 2 zeta omega m_l, or Subedi
                                      # et al.'s Eq 68 as printed, d = 2 zeta omega, or "stiffness":
-                                     # the finite elements' (2 zeta / omega_1) K (see DAMPING_FORMS)
+                                     # the finite elements' (2 zeta / omega_1) K, or "modal": every
+                                     # coupled mode of the arm at its configuration damped to
+                                     # damping_zeta (flexctrl.spec.damping)
+    damping_zeta = 0.01              # with damping_form = "modal": the damping ratio of every
+                                     # coupled elastic mode (the links' damping_ratio unused)
     axial_shortening = true          # a bent link's foreshortening; default: on for finite
                                      # elements, off for assumed modes (docs/amm.md section 10)
     axial_stretch = true             # axially compliant assumed-modes links (EA; docs/amm.md
@@ -41,12 +45,13 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
-from flexctrl.errors import SpecError, warn_spec
+from flexctrl.errors import SpecError, keyword_checked, warn_spec
 from flexctrl.spec import shipped
+from flexctrl.spec.damping import DampingForm, damping_summary, read_damping
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
 
@@ -57,20 +62,8 @@ MAX_MODES = 6
 INERTIA_FACTOR = 2.0
 JointType = Literal["revolute", "prismatic"]
 BoundaryInertia = Literal["exact", "paper"]
-DampingForm = Literal["ratio", "paper", "stiffness"]
 JOINT_TYPES: tuple[JointType, ...] = ("revolute", "prismatic")
 BOUNDARY_INERTIA: tuple[BoundaryInertia, ...] = ("exact", "paper")
-#: Modal damping forms (``damping_form`` in model files, ``[damping] form`` in scenes,
-#: ``damping=`` in :func:`flexctrl.dynamics.build.build_model`).  ``"ratio"``:
-#: ``d = 2 zeta omega m_l`` (kg/s), so ``zeta`` is the damping ratio of the isolated mode
-#: (modes normalised to the link mass, Eq 40, have modal mass ``m_l``).  ``"paper"``: Subedi
-#: et al. (2021) Eq 68 as printed, ``d = 2 zeta sqrt(k/m_l) = 2 zeta omega`` (unit 1/s where a
-#: modal force needs kg/s; it acts as the damping ratio ``zeta / m_l``).  ``"stiffness"``: the
-#: finite elements' stiffness-proportional rule ``D_i = (2 zeta_i / omega_1i) K_i`` per link
-#: (``zeta_i`` the link's first ratio, ``omega_1i`` its first clamped-mass frequency), i.e. mode j
-#: of link i has the ratio ``zeta_i omega_j / omega_1i``: with it both families damp alike
-#: (``docs/amm.md`` section 14).
-DAMPING_FORMS: tuple[DampingForm, ...] = ("ratio", "paper", "stiffness")
 
 
 @dataclass(frozen=True)
@@ -249,8 +242,13 @@ class ArmSpec:
         Default joint angles (rad).
     boundary_inertia : {"exact", "paper"}
         How the tip inertia J_D of the clamped-mass boundary is formed.
-    damping_form : {"ratio", "paper", "stiffness"}
-        How the modal damping coefficient is formed from ``damping_ratio`` (see ``DAMPING_FORMS``).
+    damping_form : {"ratio", "paper", "stiffness", "modal"}
+        How the modal damping coefficient is formed: per clamped-mass mode from the links'
+        ``damping_ratio`` (the first three), or on the coupled modes from ``damping_zeta``
+        (see :data:`flexctrl.spec.damping.DAMPING_FORMS`).
+    damping_zeta : float or None
+        With ``damping_form = "modal"``: the damping ratio of every coupled elastic mode at
+        the arm's configuration (required then, refused otherwise).
     axial_shortening : bool or None
         Whether the models carry a bent link's axial shortening (assumed modes: second-order
         kinematics, ``docs/amm.md`` section 10; finite elements: membrane strain).  None (not
@@ -275,6 +273,7 @@ class ArmSpec:
     configuration: tuple[float, ...]
     boundary_inertia: BoundaryInertia = "exact"
     damping_form: DampingForm = "ratio"
+    damping_zeta: float | None = None
     source: str = ""
     notes: str = ""
     axial_shortening: bool | None = None
@@ -284,6 +283,12 @@ class ArmSpec:
     def n_links(self) -> int:
         """Number of links."""
         return len(self.links)
+
+    def damping_summary(self, form: str | None = None) -> dict[str, Any]:
+        """The damping as a run's summary records it: the form (``form`` if the model was built
+        with another than the file's) and its numbers, ``damping_zeta`` on the coupled modes or
+        each link's ``damping_ratio`` per clamped-mass mode."""
+        return damping_summary(self, form)
 
     def with_payload(self, mass: float) -> ArmSpec:
         """A copy carrying a payload of ``mass`` kg (the inertia is kept)."""
@@ -433,6 +438,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
     p.finish()
     gravity = r.numbers("gravity", [0.0, -9.81], length=2, unit="m/s^2")
     config_deg = r.degrees("configuration", [0.0] * len(links), length=len(links))
+    form, zeta = read_damping(r)
     arm = ArmSpec(
         name=r.string("name", Path(source).stem),
         links=links,
@@ -441,7 +447,8 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
         gravity=(gravity[0], gravity[1]),
         configuration=tuple(math.radians(a) for a in config_deg),
         boundary_inertia=r.choice("boundary_inertia", BOUNDARY_INERTIA, "exact"),
-        damping_form=r.choice("damping_form", DAMPING_FORMS, "ratio"),
+        damping_form=form,
+        damping_zeta=zeta,
         axial_shortening=r.boolean("axial_shortening", True) if r.has("axial_shortening") else None,
         axial_stretch=r.boolean("axial_stretch", True) if r.has("axial_stretch") else None,
         source=source,
@@ -451,6 +458,7 @@ def arm_from_document(document: dict, source: str) -> ArmSpec:
     return arm
 
 
+@keyword_checked
 def load_arm(path: str | Path, overrides: Iterable[str] = ()) -> ArmSpec:
     """Load and validate a model file.
 

@@ -30,8 +30,9 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
                 form = "ratio" (d = 2 zeta omega m_l, zeta the modal damping ratio) or "paper"
                 (Subedi et al. Eq 68 as printed, d = 2 zeta omega: 1/s where kg/s is needed,
                 an effective ratio zeta / m_l) or "stiffness" (the finite elements'
-                (2 zeta / omega_1) K: mode j has the ratio zeta omega_j / omega_1); default: the
-                model file's damping_form
+                (2 zeta / omega_1) K: mode j has the ratio zeta omega_j / omega_1) or "modal"
+                (zeta on every coupled elastic mode at the arm's configuration, the model
+                file's damping_zeta replaced); default: the model file's damping_form
     [input]     kind = "none" | "bangbang"; for bangbang: joint (1-based), amplitude (N m),
                 t_accel (s), t_decel (s, default t_accel), t_start (s, default 0)
     [solver]    rtol, atol (cvodes, idas, scipy), method (scipy), compile (rk4, euler), chunk,
@@ -52,7 +53,7 @@ import numpy as np
 
 from flexctrl.errors import SpecError
 from flexctrl.spec import shipped
-from flexctrl.spec.arm import DAMPING_FORMS, DampingForm
+from flexctrl.spec.damping import DAMPING_FORMS, DampingForm
 from flexctrl.spec.fidelity import FIDELITY_CHECKS, FIDELITY_WALKS, Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
 

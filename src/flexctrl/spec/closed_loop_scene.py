@@ -21,6 +21,8 @@ zero-order hold.  The extra keys::
     [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
                divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the
                                              # link's length means the closed loop diverged
+                                             # (default: the larger of 0.1 of the length and 4x
+                                             # the static deflection of the joint's torque limit)
                divergence_angle = 90.0       # deg: so does a joint this far outside its move
                stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last
                                              # second below it
@@ -57,8 +59,12 @@ class MetricSettings:
         s after the reference arrives before the residual-vibration window opens.
     band : float
         m: the settling band of the tip error.
-    divergence_deflection : float
+    divergence_deflection : float or None
         A link tip deflection beyond this fraction of the link's length means divergence.
+        None (the default): the larger of 0.1 of the length and 4 times the tip deflection
+        ``tau L^2 / (2 EI)`` the joint's torque limit ``tau`` holds statically
+        (:func:`flexctrl.loop.monitors.deflection_bounds`), so a light arm's ordinary moves
+        stay inside while a stiff arm's bound stays 0.1 of its length.
     divergence_angle : float
         rad: so does a joint this far outside the range of its move.
     stable_band : float
@@ -67,7 +73,7 @@ class MetricSettings:
 
     settle_allowance: float = 2.0
     band: float = 1e-3
-    divergence_deflection: float = 0.1
+    divergence_deflection: float | None = None
     divergence_angle: float = math.pi / 2
     stable_band: float = 0.01
 
@@ -100,7 +106,7 @@ class ClosedLoopScene:
     move_time: float = 0.0
     deflection: str = "quasi_static"
     design_q: tuple[float, ...] | None = None
-    divergence_deflection: float = 0.1
+    divergence_deflection: float | None = None
     divergence_angle: float = math.pi / 2
     stable_band: float = 0.01
     kind: str = "closed_loop"
@@ -293,7 +299,11 @@ def _read_metrics(metrics: TableReader) -> MetricSettings:
     default = MetricSettings()
     settle = metrics.nonnegative("settle_allowance", default.settle_allowance, unit="s")
     band = metrics.positive("band", default.band, unit="m")
-    div_deflection = metrics.positive("divergence_deflection", default.divergence_deflection)
+    div_deflection = (
+        metrics.positive("divergence_deflection")
+        if metrics.has("divergence_deflection")
+        else default.divergence_deflection
+    )
     div_angle = math.radians(
         metrics.positive("divergence_angle", math.degrees(default.divergence_angle), unit="degrees")
     )

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, get_args
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_settings import (
@@ -426,6 +426,7 @@ def controller_from_document(document: dict[str, Any], source: str) -> Controlle
     return _READERS[kind](r)
 
 
+@keyword_checked
 def load_controller(path: str | Path, overrides: Iterable[str] = ()) -> ControllerSettings:
     """Read ``controllers/*.toml`` (with ``KEY=VALUE`` overrides) into its settings dataclass.
 

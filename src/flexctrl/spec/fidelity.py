@@ -53,7 +53,9 @@ class Fidelity:
         return self.count if self.kind == "amm" else None
 
 
-def parse_fidelity(text: str, *, source: str | None = None, key: str = "fidelity") -> Fidelity:
+def parse_fidelity(
+    text: str, *, source: str | None = None, key: str | None = "fidelity"
+) -> Fidelity:
     """Parse a fidelity spelling.
 
     Parameters

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from flexctrl.errors import keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, InputSpec, read_arm_scene
 from flexctrl.spec.closed_loop_scene import read_closed_loop_scene
@@ -42,6 +43,7 @@ SCENE_READERS: dict[str, Callable[..., Any]] = {
 }
 
 
+@keyword_checked
 def load_scene(path: str | Path, overrides: Iterable[str] = ()):
     """Load, override and validate a scene file; the scene type depends on its ``kind``.
 

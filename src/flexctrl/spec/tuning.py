@@ -28,7 +28,7 @@ Layout (paths relative to the tuning file; SI units, angles in degrees as in eve
 
     [constraints]                            # a candidate breaking one is infeasible
                                              # (recorded, never a crash)
-    stable = true                            # stable = 1 in every scenario
+    stable = true                            # stable = 1, settled_within_band = 1 everywhere
     torque_limits = true                     # no applied torque beyond its joint's limit
     closed_loop_radius = 1.0                 # the linear closed-loop spectral radius below
                                              # this, wherever the controller has a full-state
@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.controller_reader import load_controller
 from flexctrl.spec.overrides import apply_overrides
@@ -193,6 +193,7 @@ class TuningSpec:
         }
 
 
+@keyword_checked
 def load_tuning(path: str | Path, overrides: Iterable[str] = ()) -> TuningSpec:
     """Read and validate a tuning file (see the module docstring).
 

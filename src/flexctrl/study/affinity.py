@@ -75,7 +75,7 @@ class AffinityQueue:
         """The next run for ``worker``: its group's next, a new group's first, or the end of the
         fullest group."""
         group = self.held.get(worker)
-        if group in self.groups:
+        if group is not None and group in self.groups:
             return self._take(group, from_end=False)
         taken = set(self.held.values())
         for candidate in self.groups:
@@ -150,16 +150,17 @@ def run_pinned(
     try:
         while queue or suspects or inflight:
             for worker in range(workers):
-                if pools[worker] is None:
-                    pools[worker] = make_pool()
+                pool = pools[worker]
+                if pool is None:
+                    pool = pools[worker] = make_pool()
                 if suspects:
                     if load(worker) == 0:  # alone in its process: a death is the run's own
                         run = suspects.popleft()
-                        inflight[submit(pools[worker], run)] = (run, worker, True)
+                        inflight[submit(pool, run)] = (run, worker, True)
                     continue
                 while queue and load(worker) < window:
                     run = queue.next_for(worker)
-                    inflight[submit(pools[worker], run)] = (run, worker, False)
+                    inflight[submit(pool, run)] = (run, worker, False)
             if not inflight:
                 continue
             done, _ = cf.wait(list(inflight), return_when=cf.FIRST_COMPLETED)
@@ -180,7 +181,9 @@ def run_pinned(
                 else:
                     yield run, result
             for worker in broken:
-                pools[worker].shutdown(wait=True, cancel_futures=True)
+                dead = pools[worker]
+                if dead is not None:
+                    dead.shutdown(wait=True, cancel_futures=True)
                 pools[worker] = None
     finally:
         for pool in pools:

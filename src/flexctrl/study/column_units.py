@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from flexctrl.loop.metrics import JOINT_METRICS
+from flexctrl.loop.metrics import JOINT_METRICS, METRIC_INFO, MetricInfo
 from flexctrl.loop.metrics import UNITS as LOOP_UNITS
 
 #: SI units of grid coordinates and of the other shipped executors' metrics (their docstrings).
@@ -66,6 +66,7 @@ _WORDS = {"rms": "RMS", "p95": "95th percentile"}
 #: Names whose words alone would mislead: 0/1 verdicts say which value is which.
 _NAMES = {
     "stable": "stable (1 = yes, 0 = no)",
+    "settled_within_band": "settled within the band (1 = yes, 0 = no)",
     "settled": "settled (1 = yes, 0 = no)",
     "closed_loop_radius": "closed-loop spectral radius (< 1: stable)",
     "torque_limit_exceeded": "torque limit exceeded (1 = yes)",
@@ -118,6 +119,28 @@ def si_unit(column: str, *, trajectory: bool = False) -> str | None:
     if match and (match.group(1) in JOINT_METRICS or match.group(1) in OTHER_UNITS):
         return LOOP_UNITS.get(match.group(1), OTHER_UNITS.get(match.group(1)))
     return None
+
+
+def metric_info(column: str) -> MetricInfo | None:
+    """What a closed-loop metric column is (:data:`flexctrl.loop.metrics.METRIC_INFO`), per-joint
+    columns (``peak_torque_2``) included; None for a column it does not describe.
+
+    >>> metric_info("stable").better, metric_info("peak_torque_2").better
+    ('higher', 'lower')
+    """
+    if column in METRIC_INFO:
+        return METRIC_INFO[column]
+    match = _PER_JOINT.match(column)
+    if match and match.group(1) in JOINT_METRICS:
+        return METRIC_INFO[match.group(1)]
+    return None
+
+
+def lower_is_better(column: str) -> bool:
+    """Whether lower values of ``column`` are better: its :func:`metric_info` direction, lower for
+    a column it does not describe (errors, times, costs)."""
+    info = metric_info(column)
+    return info is None or info.better == "lower"
 
 
 def display(column: str, *, trajectory: bool = False) -> Shown:

@@ -73,8 +73,12 @@ class LocalhostCluster:
     ):
         self.n_workers, self.threads, self.nanny = int(workers), int(threads), nanny
         self.blas_threads = blas_thread_budget(blas_threads, self.n_workers)
-        self._tmp = None if directory else tempfile.TemporaryDirectory(prefix="flexctrl-dask-")
-        self.directory = Path(directory or self._tmp.name)
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        if directory:
+            self.directory = Path(directory)
+        else:
+            self._tmp = tempfile.TemporaryDirectory(prefix="flexctrl-dask-")
+            self.directory = Path(self._tmp.name)
         self.scheduler_file = self.directory / "scheduler.json"
         self.scheduler: subprocess.Popen | None = None
         self.workers: list[subprocess.Popen] = []

@@ -35,6 +35,10 @@ class RunOutput:
         Optional time histories, each a 1-D numeric array, by name.  By
         convention the sample times are ``"t"`` (s).  The runner decimates them
         and stores them compressed in ``runs/<id>.npz``.
+    notes
+        Why a metric is NaN in this run, by name (e.g. ``tip_residual_rms``: the run
+        diverged before its residual window opened).  A noted NaN metric is an empty cell
+        with its note in the run's ``error`` cell, not a failed run; an unnoted NaN fails it.
 
     Raises
     ------
@@ -44,6 +48,7 @@ class RunOutput:
 
     metrics: Mapping[str, float]
     trajectories: Mapping[str, np.ndarray] = field(default_factory=dict)
+    notes: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         metrics = {}
@@ -56,10 +61,10 @@ class RunOutput:
                 raise TypeError(f"metric '{name}' = {value!r} is not a real scalar")
             metrics[name] = float(value)
         arrays = {}
-        for name, value in dict(self.trajectories).items():
+        for name, series in dict(self.trajectories).items():
             if not isinstance(name, str) or not IDENTIFIER.match(name):
                 raise TypeError(f"trajectory name {name!r} is not an identifier")
-            array = np.asarray(value)
+            array = np.asarray(series)
             if array.ndim != 1 or array.dtype.kind not in "biuf":
                 raise TypeError(
                     f"trajectory '{name}' has shape {array.shape} and dtype {array.dtype}; "
@@ -68,6 +73,10 @@ class RunOutput:
             arrays[name] = array
         object.__setattr__(self, "metrics", metrics)
         object.__setattr__(self, "trajectories", arrays)
+        unknown = sorted(set(self.notes) - set(metrics))
+        if unknown:
+            raise TypeError(f"notes name no metric: {', '.join(unknown)}")
+        object.__setattr__(self, "notes", {str(k): str(v) for k, v in self.notes.items()})
 
 
 ExecutorFn = Callable[[dict], RunOutput]

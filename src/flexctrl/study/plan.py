@@ -64,7 +64,7 @@ class ReportSpec:
     """What the report shows (see the module docstring, ``[report]``)."""
 
     metric: str | None = None
-    lower_is_better: bool = True
+    lower_is_better: bool | None = None
     map_axes: tuple[str, str] | None = None
     facet: tuple[str, ...] | None = None
     rank_by: str | None = None
@@ -85,9 +85,10 @@ class ReportSpec:
     def from_dict(cls, data: dict[str, Any]) -> ReportSpec:
         """The inverse of :meth:`to_dict` (unknown keys ignored)."""
         names = {f.name for f in dataclasses.fields(cls)}
-        return cls(
-            **{k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names}
-        )
+        kwargs: dict[str, Any] = {
+            k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k in names
+        }
+        return cls(**kwargs)
 
 
 @dataclass(frozen=True)

@@ -72,6 +72,7 @@ class Progress:
         self.failed = 0
         self.start = clock()
         self._last_draw = -float("inf")
+        self._last_line = ""
         self._closed = False
         if self.mode == "lines":
             self._emit(self.text())
@@ -91,6 +92,9 @@ class Progress:
     def text(self) -> str:
         """The status as one line of text."""
         left = self.time_left()
+        if self.total == 0:
+            prefix = f"{self.label}: " if self.label else ""
+            return prefix + f"nothing to run ({self.skipped} already recorded)"
         parts = [f"{self.done}/{self.total} runs done", f"{self.failed} failed"]
         if self.skipped:
             parts.append(f"{self.skipped} already recorded")
@@ -122,11 +126,13 @@ class Progress:
         self._closed = True
         if self.mode == "bar":
             self._emit("\r" + self.text() + "\x1b[K")
-        elif self.mode == "lines":
+        elif self.mode == "lines" and self.text() != self._last_line:
             self._emit(self.text())
 
     def _emit(self, text: str, newline: bool = True) -> None:
         if self.mode == "none":
             return
+        if newline:
+            self._last_line = text
         self.stream.write(text + ("\n" if newline else ""))
         self.stream.flush()

@@ -29,34 +29,35 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import SpecError
-from flexctrl.study.column_units import display, with_unit
+from flexctrl.errors import SpecError, keyword_checked
+from flexctrl.study.column_units import display, lower_is_better, metric_info, with_unit
 from flexctrl.study.plan import ReportSpec
 from flexctrl.study.report_context import (
     ReportContext,
     columns,
+    diverged,
     fmt,
     md_table,
     median,
     slug,
 )
+from flexctrl.study.report_diverged import diverged_section
 from flexctrl.study.report_figures import (
     draw_ranking,
     draw_signals,
 )
 from flexctrl.study.report_maps import map_section
+from flexctrl.study.report_timing import timing_section
 from flexctrl.study.store import ResultStore, atomic_write
 
-TIMING = re.compile(r"(controller|solve|solver|step|compute|cpu|qp|nlp)_?time", re.IGNORECASE)
 
-
+@keyword_checked
 def write_report(
     directory: str | Path,
     *,
@@ -97,6 +98,7 @@ def write_report(
     table = store.read_table()
     spec = ReportSpec.from_dict(study.get("study", {}).get("report", {}))
     coords, metrics = columns(table)
+    asked = spec.metric, spec.lower_is_better
     if metric is not None:
         if metric not in metrics:
             raise SpecError(
@@ -106,15 +108,23 @@ def write_report(
             )
         spec = dataclasses.replace(spec, metric=metric)
     if map_axes is not None:
+        if len(map_axes) != 2:
+            raise SpecError(
+                f"{list(map_axes)} names {len(map_axes)} columns; allowed: two grid columns "
+                f"of {', '.join(coords)}",
+                key="--map-axes",
+            )
         for axis in map_axes:
             if axis not in coords:
                 raise SpecError(
                     f"'{axis}' is not a grid column; allowed: {', '.join(coords)}", key="--map-axes"
                 )
-        spec = dataclasses.replace(spec, map_axes=tuple(map_axes))
+        spec = dataclasses.replace(spec, map_axes=(map_axes[0], map_axes[1]))
     if worst is not None:
         spec = dataclasses.replace(spec, worst=worst)
     chosen = spec.metric if spec.metric in metrics else (metrics[0] if metrics else None)
+    if chosen is not None and (asked[1] is None or chosen != asked[0]):
+        spec = dataclasses.replace(spec, lower_is_better=lower_is_better(chosen))
     figures = store.dir / "figures"
     figures.mkdir(exist_ok=True)
     for old in figures.glob("*.png"):
@@ -126,13 +136,14 @@ def write_report(
         "maps": map_section,
         "ranking": _ranking,
         "worst": _worst,
-        "timing": _timing,
+        "timing": timing_section,
         "failures": _failures,
     }
     for name in spec.plots:
         lines += ["", *sections[name](ctx)]
     if "failures" not in spec.plots:
         lines += ["", *_failures(ctx)]
+    lines += ["", *diverged_section(ctx)]
     lines += _executor_sections(ctx)
     path = store.dir / "report.md"
     atomic_write(path, ("\n".join(lines) + "\n").encode())
@@ -159,6 +170,7 @@ def _header(ctx: ReportContext) -> list[str]:
     statuses = [row["status"] for row in ctx.table.rows]
     n_plan = s.get("n_runs", len(statuses))
     ok, failed = statuses.count("ok"), statuses.count("failed")
+    diverged = len(ctx.diverged_rows())
     versions = ctx.study.get("versions", {})
     machine = ctx.study.get("machine", {})
     lines = [
@@ -166,11 +178,12 @@ def _header(ctx: ReportContext) -> list[str]:
         "",
         f"- study file: `{s.get('source', '?')}` (sha256 {s.get('sha256', '?')}), executor "
         f"`{s.get('executor', '?')}`, seed {s.get('seed', '?')}",
-        f"- runs: {n_plan} in the grid; {ok} ok, {failed} failed, {max(n_plan - ok - failed, 0)} "
-        "not run",
+        f"- runs: {n_plan} in the grid; {ok} ok"
+        + (f" ({diverged} of them diverged, listed apart)" if diverged else "")
+        + f", {failed} failed, {max(n_plan - ok - failed, 0)} not run",
         "- grid: "
         + (", ".join(f"{k} ({len(v)})" for k, v in s.get("grid", {}).items()) or "a single run"),
-        f"- report metric: `{ctx.metric}` ({'lower' if ctx.spec.lower_is_better else 'higher'} "
+        f"- report metric: `{ctx.metric}` ({'lower' if ctx.lower_is_better else 'higher'} "
         "is better)"
         if ctx.metric
         else "- no metric recorded yet",
@@ -189,34 +202,36 @@ def _header(ctx: ReportContext) -> list[str]:
 
 def _ranking(ctx: ReportContext) -> list[str]:
     lines = ["## Ranking"]
-    rank_by, group_by = ctx.spec.rank_by, ctx.spec.group_by
-    if ctx.metric is None or rank_by not in ctx.coords:
+    metric, rank_by = ctx.metric, ctx.spec.rank_by
+    group_by = ctx.spec.group_by if ctx.spec.group_by in ctx.coords else None
+    if metric is None or rank_by is None or rank_by not in ctx.coords:
         return lines + [
             "",
             "No ranking: it needs a metric and a `rank_by` column (a controller axis by default).",
         ]
-    groups = ctx.distinct(group_by) if group_by in ctx.coords else [None]
+    groups = ctx.distinct(group_by) if group_by is not None else [None]
     candidates = ctx.distinct(rank_by)
-    sign = 1 if ctx.spec.lower_is_better else -1
-    shown = display(ctx.metric)
+    sign = 1 if ctx.lower_is_better else -1
+    shown = display(metric)
     lines += [
         "",
-        f"Median {shown.label} of the ok runs per `{rank_by}`"
+        f"Median {shown.label} of the {_compared(ctx)} per `{rank_by}`"
         + (f", for each `{group_by}`" if group_by in ctx.coords else "")
         + f"; best first ({'lowest' if sign > 0 else 'highest'}); min and max over the other "
         "grid columns (poses ...).",
     ]
     values: dict[Any, dict[Any, list[float]]] = {}
+    ranked = {id(r) for r in ctx.ranked_rows()}
     for group in groups:
-        members = [r for r in ctx.table.rows if group is None or r.get(group_by) == group]
+        members = [r for r in ctx.table.rows if group_by is None or r.get(group_by) == group]
         entries = []
         values[group] = {}
         for candidate in candidates:
             mine = [r for r in members if r.get(rank_by) == candidate]
             ok = [
-                shown.value(r.get(ctx.metric))
+                shown.value(r.get(metric))
                 for r in mine
-                if r["status"] == "ok" and isinstance(r.get(ctx.metric), float)
+                if id(r) in ranked and isinstance(r.get(metric), float)
             ]
             values[group][candidate] = ok
             entries.append(
@@ -226,14 +241,15 @@ def _ranking(ctx: ReportContext) -> list[str]:
                     min(ok, default=None),
                     max(ok, default=None),
                     len(ok),
-                    len(mine) - len(ok),
+                    sum(1 for r in mine if r["status"] == "ok" and diverged(r)),
+                    sum(1 for r in mine if r["status"] != "ok"),
                 )
             )
         entries.sort(key=lambda e: (e[1] is None, sign * e[1] if e[1] is not None else 0.0))
         u = f" ({shown.unit})" if shown.unit else ""
         lines += [
             "",
-            f"### {with_unit(group_by, group)}" if group is not None else "### all runs",
+            f"### {with_unit(group_by, group)}" if group_by is not None else "### all runs",
             "",
         ]
         lines += md_table(
@@ -243,12 +259,13 @@ def _ranking(ctx: ReportContext) -> list[str]:
                 f"median {shown.label}",
                 f"min{u}",
                 f"max{u}",
-                "ok runs",
+                "runs ranked",
+                "diverged runs",
                 "failed runs",
             ],
             [(i + 1, *entry) for i, entry in enumerate(entries)],
         )
-    name = f"ranking_{slug(ctx.metric)}.png"
+    name = f"ranking_{slug(metric)}.png"
     draw_ranking(ctx.figures / name, values, candidates, rank_by, group_by, shown)
     return lines + ["", f"![ranking]({ctx.figures.name}/{name})"]
 
@@ -257,17 +274,17 @@ def _worst(ctx: ReportContext) -> list[str]:
     lines = ["## Worst cases"]
     if ctx.metric is None or ctx.spec.worst <= 0:
         return lines + ["", "None asked for." if ctx.spec.worst <= 0 else "No metric recorded."]
-    rows = [r for r in ctx.ok_rows() if isinstance(r.get(ctx.metric), float)]
-    rows.sort(key=lambda r: r[ctx.metric], reverse=ctx.spec.lower_is_better)
-    rows = rows[: ctx.spec.worst]
+    rows = [r for r in ctx.ranked_rows() if isinstance(r.get(ctx.metric), float)]
+    rows.sort(key=lambda r: r[ctx.metric], reverse=ctx.lower_is_better)
+    rank_by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
+    rows = _one_per_cell(rows, [c for c in ctx.coords if c != rank_by])[: ctx.spec.worst]
     if not rows:
         return lines + ["", "No ok run yet."]
     shown = display(ctx.metric)
-    rank_by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
     lines += [
         "",
-        f"The {len(rows)} ok runs with the "
-        f"{'largest' if ctx.spec.lower_is_better else 'smallest'} {shown.label}"
+        f"The {len(rows)} {_compared(ctx)} with the "
+        f"{'largest' if ctx.lower_is_better else 'smallest'} {shown.label}"
         + (
             f", each drawn with every `{rank_by}` of its cell on the same axes (the worst one "
             "thicker)."
@@ -306,6 +323,24 @@ def _worst(ctx: ReportContext) -> list[str]:
         _draw_cell(ctx, ctx.figures / name, stored, label, title, label(row))
         lines += ["", f"![run {row['run_id']}]({ctx.figures.name}/{name})"]
     return lines
+
+
+def _compared(ctx: ReportContext) -> str:
+    """What the ranked rows are, in words."""
+    info = None if ctx.metric is None else metric_info(ctx.metric)
+    return "ok runs" if info is not None and info.verdict else "ok runs that did not diverge"
+
+
+def _one_per_cell(rows: list[dict], cell: Sequence[str]) -> list[dict]:
+    """``rows`` in order, keeping the first of each cell (equal values of ``cell``): a worst
+    case's figure draws its whole cell, so a second run of the same cell would repeat it."""
+    seen, out = set(), []
+    for row in rows:
+        key = tuple(repr(row.get(c)) for c in cell)
+        if key not in seen:
+            seen.add(key)
+            out.append(row)
+    return out
 
 
 def _draw_cell(ctx: ReportContext, path: Path, stored, label, title: str, highlight: str) -> None:
@@ -360,97 +395,6 @@ def _run_curves(ctx: ReportContext, row: dict, arrays: dict[str, np.ndarray], la
         None if start is None else (float(start), float(time[-1])),
         metrics.get("tip_residual_rms"),
     )
-
-
-def _timing(ctx: ReportContext) -> list[str]:
-    lines = ["## Timing"]
-    timing = [
-        m
-        for m in (ctx.spec.timing or [m for m in ctx.metrics if TIMING.search(m)])
-        if m in ctx.metrics
-    ]
-    by = ctx.spec.rank_by if ctx.spec.rank_by in ctx.coords else None
-    groups = ctx.distinct(by) if by else [None]
-    header = [
-        by or "runs",
-        "ok runs",
-        "median wall time per run (s)",
-        *[f"median {display(m).label}" for m in timing],
-    ]
-    rows = []
-    for group in groups:
-        ok = [r for r in ctx.ok_rows() if group is None or r.get(by) == group]
-        rows.append(
-            (
-                group if group is not None else "all",
-                len(ok),
-                median([r.get("wall_time_s") for r in ok]),
-                *[display(m).value(median([r.get(m) for r in ok])) for m in timing],
-            )
-        )
-    lines += [
-        "",
-        "Wall time covers the whole run in its worker (build, design, simulation, metrics); "
-        "a worker builds its model once, so its first run is slower.",
-        "",
-    ]
-    return lines + md_table(header, rows) + ["", *_resources(ctx)]
-
-
-def _resources(ctx: ReportContext) -> list[str]:
-    """Throughput per session, memory and disk per run: does the study stay flat as it grows?"""
-    lines = ["### Resources", ""]
-    sessions = [s for s in ctx.study.get("sessions", []) if s.get("elapsed_s")]
-    if sessions:
-        rows = []
-        for number, s in enumerate(sessions, 1):
-            ran = int(s.get("ok", 0)) + int(s.get("failed", 0))
-            rate = 60.0 * ran / s["elapsed_s"] if s["elapsed_s"] > 0 else None
-            rows.append(
-                (
-                    number,
-                    s.get("backend", "?"),
-                    ran,
-                    s["elapsed_s"],
-                    rate,
-                    s.get("parent_peak_memory_mb"),
-                )
-            )
-        lines += md_table(
-            [
-                "session",
-                "backend",
-                "runs",
-                "wall time (s)",
-                "runs per minute",
-                "parent peak memory (MB)",
-            ],
-            rows,
-        ) + [""]
-    memory = [
-        r.get("peak_memory_mb")
-        for r in ctx.table.rows
-        if isinstance(r.get("peak_memory_mb"), (int, float))
-    ]
-    disk = [
-        r.get("bytes_written")
-        for r in ctx.table.rows
-        if isinstance(r.get("bytes_written"), (int, float))
-    ]
-    if memory:
-        lines.append(
-            f"- worker peak resident memory when a run ended: median {fmt(median(memory))} MB, "
-            f"max {fmt(max(memory))} MB "
-            "(a worker's high-water mark, so it bounds every run it did)"
-        )
-    if disk:
-        lines.append(
-            "- disk written per run (record and trajectory): median "
-            f"{fmt(median(disk) / 1024)} KiB, "
-            f"max {fmt(max(disk) / 1024)} KiB, total {fmt(sum(disk) / 2**20)} MiB over "
-            f"{len(disk)} runs"
-        )
-    return lines
 
 
 def _failures(ctx: ReportContext) -> list[str]:

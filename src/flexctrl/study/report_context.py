@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.study.column_units import with_unit
+from flexctrl.study.column_units import metric_info, with_unit
 from flexctrl.study.plan import ReportSpec
 from flexctrl.study.store import FIXED_AFTER_COORDS, FIXED_TAIL, ResultStore, Table
 
@@ -68,6 +68,28 @@ class ReportContext:
     def ok_rows(self) -> list[dict]:
         return [row for row in self.table.rows if row["status"] == "ok"]
 
+    @property
+    def lower_is_better(self) -> bool:
+        """The report metric's direction: the study's ``lower_is_better``, else the metric's."""
+        return self.spec.lower_is_better is not False
+
+    def diverged_rows(self) -> list[dict]:
+        """The ok rows of runs that diverged (a finite ``divergence_time``)."""
+        return [row for row in self.ok_rows() if diverged(row)]
+
+    def ranked_rows(self) -> list[dict]:
+        """The rows rankings, maps and worst cases compare: the ok runs, without the diverged
+        ones unless the metric judges the whole run (``stable`` ...)."""
+        info = None if self.metric is None else metric_info(self.metric)
+        keep_diverged = info is not None and info.verdict
+        return [row for row in self.ok_rows() if keep_diverged or not diverged(row)]
+
+
+def diverged(row: dict) -> bool:
+    """Whether a study row is of a run that diverged (a finite ``divergence_time``)."""
+    value = row.get("divergence_time")
+    return isinstance(value, (int, float)) and math.isfinite(value)
+
 
 def columns(table: Table) -> tuple[list[str], list[str]]:
     cols = table.columns
@@ -102,6 +124,7 @@ __all__ = [
     "ReportContext",
     "cell_medians",
     "columns",
+    "diverged",
     "facet_title",
     "fmt",
     "md_table",

@@ -102,7 +102,7 @@ def draw_value_maps(
         cmap = ListedColormap(["#d95f02", "#1f78b4"]).with_extremes(
             bad="0.85"
         )  # orange 0, blue 1: safe for red-green blindness
-        norm = BoundaryNorm([-0.5, 0.5, 1.5], 2)
+        norm: Normalize = BoundaryNorm([-0.5, 0.5, 1.5], 2)
     else:
         norm = (
             LogNorm(vmin, vmax)
@@ -224,20 +224,25 @@ def draw_best_map(
     fig.savefig(path, dpi=100)
 
 
+def _group_label(group_by: str | None, group: Any) -> str:
+    """A ranking group as a reader reads it: ``"payload = 2 kg"``, or "all runs"."""
+    from flexctrl.study.column_units import with_unit
+
+    return "all runs" if group_by is None or group is None else with_unit(group_by, group)
+
+
 def draw_ranking(
     path: Path,
     groups: dict[Any, dict[Any, list[float]]],
     candidates: Sequence[Any],
     rank_by: str,
-    group_by: str,
+    group_by: str | None,
     metric: Shown,
 ) -> None:
     """Bars of the median per candidate and group, with every ok run as a dot (the spread over
     poses)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from flexctrl.study.column_units import with_unit
 
     fig = Figure(
         figsize=(max(5.5, 0.45 * len(groups) * max(1, len(candidates)) + 3.0), 4.0),
@@ -284,11 +289,11 @@ def draw_ranking(
             fontsize=8,
         )
         only = next(iter(groups))
-        ax.set_xlabel(with_unit(group_by, only) if only is not None else "all runs")
+        ax.set_xlabel(_group_label(group_by, only))
     else:
         ax.set_xticks(
             range(len(groups)),
-            [with_unit(group_by, g) if g is not None else "all runs" for g in groups],
+            [_group_label(group_by, g) for g in groups],
         )
     ax.set_ylabel(metric.label + (", log scale" if log else ""))
     ax.set_title(

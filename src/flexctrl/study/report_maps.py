@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 
@@ -47,7 +48,7 @@ def map_section(ctx: ReportContext) -> list[str]:
             c for c in ctx.coords if c not in axes and c != "replicate" and len(ctx.distinct(c)) > 1
         ]
     )
-    rows = ctx.ok_rows()
+    rows = ctx.ranked_rows()
     xs, ys = ctx.distinct(x_axis), ctx.distinct(y_axis)
     shown = display(ctx.metric)
     panels = []
@@ -100,7 +101,9 @@ def _best_and_ratio_panels(ctx, others, candidates, xs, ys, x_axis, y_axis, sign
     shown = display(ctx.metric)
     best_panels, ratio_panels, binary = [], [], True
     for combo in itertools.product(*(ctx.distinct(f) for f in others)):
-        members = [r for r in ctx.ok_rows() if all(r.get(f) == v for f, v in zip(others, combo))]
+        members = [
+            r for r in ctx.ranked_rows() if all(r.get(f) == v for f, v in zip(others, combo))
+        ]
         grids = {
             c: cell_medians(
                 ctx, [r for r in members if r.get(rank_by) == c], xs, ys, x_axis, y_axis
@@ -109,7 +112,7 @@ def _best_and_ratio_panels(ctx, others, candidates, xs, ys, x_axis, y_axis, sign
         }
         stack = np.stack([grids[c] for c in candidates])
         binary &= bool(np.all(np.isin(stack[np.isfinite(stack)], (0.0, 1.0))))
-        cells = [[None] * len(xs) for _ in ys]
+        cells: list[list[Any]] = [[None] * len(xs) for _ in ys]
         best = np.full((len(ys), len(xs)), np.nan)
         for i, j in itertools.product(range(len(ys)), range(len(xs))):
             values = {
@@ -138,13 +141,15 @@ def _best_maps(
     ctx: ReportContext, facets: list[str], xs, ys, x_axis: str, y_axis: str
 ) -> list[str]:
     """Which ``rank_by`` value is best in each cell, and every value's ratio to that best."""
-    rank_by = ctx.spec.rank_by
-    candidates = ctx.distinct(rank_by) if rank_by in ctx.coords else []
+    rank_by, metric = ctx.spec.rank_by, ctx.metric
+    if metric is None or rank_by is None or rank_by not in ctx.coords:
+        return []
+    candidates = ctx.distinct(rank_by)
     if len(candidates) < 2 or rank_by in (x_axis, y_axis):
         return []
     others = [f for f in facets if f != rank_by]
-    shown = display(ctx.metric)
-    sign = 1.0 if ctx.spec.lower_is_better else -1.0
+    shown = display(metric)
+    sign = 1.0 if ctx.lower_is_better else -1.0
     best_panels, ratio_panels, binary = _best_and_ratio_panels(
         ctx, others, candidates, xs, ys, x_axis, y_axis, sign
     )
@@ -163,7 +168,7 @@ def _best_maps(
             "for names and values, which the ranking above and the ratio maps below give)."
         ),
     ]
-    name = f"best_{slug(ctx.metric)}.png"
+    name = f"best_{slug(metric)}.png"
     draw_best_map(
         ctx.figures / name,
         best_panels,
@@ -180,12 +185,11 @@ def _best_maps(
     if binary or ratios.size == 0:
         return lines + [
             "",
-            f"No ratio map: `{ctx.metric}` takes only the values 0 and 1, so the best map says "
-            "it all."
+            f"No ratio map: `{metric}` takes only the values 0 and 1, so the best map says it all."
             if binary
             else "No ratio map: no finite ratio.",
         ]
-    name = f"ratio_{slug(ctx.metric)}.png"
+    name = f"ratio_{slug(metric)}.png"
     draw_value_maps(
         ctx.figures / name,
         ratio_panels,

@@ -81,6 +81,7 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
                 f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput"
             )
         metrics = dict(output.metrics)
+        notes = {k: v for k, v in output.notes.items() if not math.isfinite(metrics[k])}
         clash = sorted(set(metrics) & set(RESERVED_COLUMNS))
         if clash:
             raise ValueError(
@@ -96,9 +97,9 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         missing = [
             m for m in options.get("metrics") or () if m not in metrics and m not in unavailable
         ]
-        if unavailable and not missing:
-            error = unavailable_note(unavailable)
-        bad = {k: v for k, v in metrics.items() if not math.isfinite(v)}
+        if (unavailable or notes) and not missing:
+            error = unavailable_note({**unavailable, **notes})
+        bad = {k: v for k, v in metrics.items() if not math.isfinite(v) and k not in notes}
         if missing:
             status, error = (
                 "failed",
@@ -127,8 +128,12 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
 
 
 def unavailable_note(unavailable: dict[str, str]) -> str:
-    """The one line an ok run records in its ``error`` cell for the metrics it cannot produce."""
-    return "; ".join(f"no {metric}: {reason}" for metric, reason in unavailable.items())
+    """The one line an ok run records in its ``error`` cell for the metrics it cannot produce
+    (metrics with the same reason named together)."""
+    by_reason: dict[str, list[str]] = {}
+    for metric, reason in unavailable.items():
+        by_reason.setdefault(reason, []).append(metric)
+    return "; ".join(f"no {', '.join(names)}: {reason}" for reason, names in by_reason.items())
 
 
 def failed_result(error: str) -> dict[str, Any]:

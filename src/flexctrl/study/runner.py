@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.study.backends import InProcessBackend, LocalPoolBackend, default_workers
 from flexctrl.study.dask_backend import DaskBackend
 from flexctrl.study.plan import StudySpec
@@ -141,6 +141,7 @@ def make_backend(
     return LocalPoolBackend(workers if workers is not None else default_workers(), blas_threads)
 
 
+@keyword_checked
 def run_study(
     spec: StudySpec,
     out: str | os.PathLike,

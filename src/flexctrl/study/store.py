@@ -158,8 +158,8 @@ class Table:
             }
             for row in raw
         ]
-        for row in rows:
-            row["error"] = row.get("error") or ""
+        for record in rows:
+            record["error"] = record.get("error") or ""
         return cls(columns, rows)
 
 
@@ -175,7 +175,7 @@ class ResultStore:
     def __init__(self, directory: str | os.PathLike):
         self.dir = Path(directory)
         self.runs_dir = self.dir / "runs"
-        self._lock_fh = None
+        self._lock_fh: io.TextIOWrapper | None = None
 
     # -- paths -----------------------------------------------------------------------
     @property
@@ -206,16 +206,16 @@ class ResultStore:
             If another study holds the lock on this folder.
         """
         self.runs_dir.mkdir(parents=True, exist_ok=True)
-        self._lock_fh = open(self.dir / ".lock", "a+")
+        lock = self._lock_fh = open(self.dir / ".lock", "a+")
         try:
             import fcntl
         except ImportError:  # pragma: no cover - not POSIX: no lock
-            fcntl = None
-        if fcntl is not None:
+            pass
+        else:
             try:
-                fcntl.flock(self._lock_fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
-                self._lock_fh.close()
+                lock.close()
                 self._lock_fh = None
                 raise FlexctrlError(
                     f"another flexctrl study is writing into '{self.dir}'; wait for it or choose "

@@ -46,7 +46,7 @@ File format (paths relative to the study file; angles in degrees; SI units)::
 
     [report]
     metric = "tip_residual_rms"          # default: the first metric
-    lower_is_better = true               # the worst cases are the largest values
+    lower_is_better = true               # default: the metric's own direction
     map_axes = ["q2", "q3"]              # heat-map axes (default q2, q3 if they vary)
     facet = ["payload", "controller"]    # one map per combination (default: other axes)
     rank_by = "controller"               # ranking of ... (default controller)
@@ -73,7 +73,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.overrides import apply_overrides
 from flexctrl.spec.reader import TableReader, read_toml
@@ -105,6 +105,7 @@ from flexctrl.study.study_values import (
 # -- loading ---------------------------------------------------------------------------
 
 
+@keyword_checked
 def load_study(
     path: str | os.PathLike, overrides: Sequence[str] = (), *, check_executor: bool = True
 ) -> StudySpec:
@@ -130,7 +131,7 @@ def load_study(
     SpecError
         Naming the file, the key, the value and what is allowed.
     """
-    path = shipped.find(path, "study")
+    path = shipped.find(os.fspath(path), "study")
     source = str(path)
     document = nest_dotted_keys(read_toml(path), source)
     document = apply_overrides(
@@ -429,7 +430,7 @@ def _read_report(
             )
     spec = ReportSpec(
         metric=metric,
-        lower_is_better=r.boolean("lower_is_better", True),
+        lower_is_better=r.boolean("lower_is_better") if r.has("lower_is_better") else None,
         map_axes=map_axes,  # type: ignore[arg-type]
         facet=string_list(r, "facet", columns) if r.has("facet") else None,
         rank_by=column("rank_by", "controller"),

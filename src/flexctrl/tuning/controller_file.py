@@ -48,6 +48,7 @@ def with_values(
     if header:
         out = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines()) + out
     expected = apply_values(tomllib.loads(text), dict(values), source=source)
+    written: dict[str, Any] | tomllib.TOMLDecodeError
     try:
         written = tomllib.loads(out)
     except tomllib.TOMLDecodeError as exc:

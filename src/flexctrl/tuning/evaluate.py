@@ -8,9 +8,10 @@ resume where it stopped and a replayed optimiser cost nothing.  Runs go through 
 study backends (local pool or Dask) a whole batch of candidates at a time.
 
 A candidate is *feasible* when every scenario ran, and, as the tuning's constraints ask,
-was stable (``stable = 1``), kept its torques within the limits, had a linear closed-loop
-radius below the bound (wherever the controller has a full-state gain) and solved in real
-time (``controller_time_p95`` below its sample time).  The optimiser minimises
+was stable and settled (``stable = 1`` and ``settled_within_band = 1``), kept its torques
+within the limits, had a linear closed-loop radius below the bound (wherever the controller
+has a full-state gain) and solved in real time (``controller_time_p95`` below its sample
+time).  The optimiser minimises
 :attr:`Evaluation.score`: the objective for a feasible candidate, and for an infeasible one
 :data:`PENALTY` times one plus its number of violated scenario constraints, so every
 infeasible candidate ranks below every feasible one and fewer violations rank better.
@@ -19,7 +20,7 @@ infeasible candidate ranks below every feasible one and fewer violations rank be
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +34,11 @@ from flexctrl.tuning.scenarios import candidate_overrides, candidate_runs
 
 #: Score of an infeasible candidate per violation (far above any metric in SI units).
 PENALTY = 1.0e6
-_STATISTICS = {"median": np.median, "max": np.max, "mean": np.mean}
+_STATISTICS: dict[str, Callable[[Sequence[float]], Any]] = {
+    "median": np.median,
+    "max": np.max,
+    "mean": np.mean,
+}
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,28 @@ class Evaluation:
         )
 
 
+def _stability_violations(where: str, m: dict) -> list[str]:
+    """What the ``stable`` constraint objects to: an unstable run (diverged, or a linear
+    closed-loop radius >= 1), or a stable one whose tip is not inside the band at the end."""
+    if m.get("stable", 0) != 1:
+        when = m.get("divergence_time")
+        radius = m.get("closed_loop_radius")
+        why = (
+            f"diverged at {when:.4g} s"
+            if isinstance(when, float) and math.isfinite(when)
+            else f"linear closed-loop radius {radius:.6g} >= 1"
+            if isinstance(radius, float)
+            else "stable = 0"
+        )
+        return [f"{where}: unstable ({why})"]
+    if m.get("settled_within_band", 1) != 1:
+        return [
+            f"{where}: stable but not settled within the band (final tip error "
+            f"{m.get('final_tip_error', math.nan):.3g} m)"
+        ]
+    return []
+
+
 #: Metrics kept per scenario in an evaluation's record.
 _KEPT = (
     "tip_residual_rms",
@@ -102,6 +129,8 @@ _KEPT = (
     "settling_time",
     "peak_deflection",
     "stable",
+    "settled_within_band",
+    "divergence_time",
     "final_tip_error",
     "closed_loop_radius",
     "torque_limit_exceeded",
@@ -209,15 +238,15 @@ class Evaluator:
             if record["status"] != "ok":
                 violations.append(f"{where}: the run failed ({record.get('error', '')})")
                 continue
-            if metric in m:
-                samples.append(float(m[metric]))
+            value = m.get(metric)
+            if isinstance(value, (int, float)) and math.isfinite(value):
+                samples.append(float(value))
+            elif metric in m:  # recorded empty, the reason in the run's error cell
+                violations.append(f"{where}: no {metric} ({record.get('error') or 'empty'})")
             else:
                 violations.append(f"{where}: no metric '{metric}'")
-            if c.stable and m.get("stable", 0) != 1:
-                violations.append(
-                    f"{where}: unstable (final tip error "
-                    f"{m.get('final_tip_error', math.nan):.3g} m)"
-                )
+            if c.stable:
+                violations += _stability_violations(where, m)
             if c.torque_limits and m.get("torque_limit_exceeded", 0):
                 violations.append(f"{where}: a torque beyond its joint's limit")
             radius = m.get("closed_loop_radius")

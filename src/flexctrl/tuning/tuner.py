@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.errors import FlexctrlError, SpecError
+from flexctrl.errors import FlexctrlError, SpecError, keyword_checked
 from flexctrl.spec.tuning import TuningSpec, load_tuning
 from flexctrl.study.runner import make_backend
 from flexctrl.study.store import ResultStore, atomic_write
@@ -98,6 +98,7 @@ class TuningResult:
         }
 
 
+@keyword_checked
 def tune(
     tuning: str | Path | TuningSpec,
     out: str | Path,

@@ -402,8 +402,9 @@ def design_nmpc(model, op: OperatingPoint, settings: NMPCSettings) -> NMPCContro
         mass=np.asarray(model.functions["M"](op.x[: model.n_q]), dtype=float),
         a_lin=np.asarray(plant.sys.A, dtype=float),
     )
-    if prediction.reduced:  # its own equilibrium at the target joints, all of its state measured
-        pm = prediction.model
+    pm = prediction.model
+    if prediction.reduced and pm is not None:  # its own equilibrium at the target joints, all
+        # of its state measured (a reduced prediction always carries its model)
         pop = equilibrium(pm, op.joints)
         pplant = linear_plant(
             pm, pop, build_sensors(pm, SensorSettings(), pop), settings.sample_time

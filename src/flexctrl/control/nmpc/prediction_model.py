@@ -56,8 +56,8 @@ class Prediction:
 
     Attributes
     ----------
-    model : Model
-        The model the NMPC predicts with (the design model itself when nothing is dropped).
+    model : Model or None
+        The model the NMPC predicts with (None: the design model itself, nothing dropped).
     keep : ndarray of int
         Indices of the design model's state ``x = (q, qd)`` kept, in order.
     reduced : bool
@@ -66,7 +66,7 @@ class Prediction:
         ``T`` of ``x_r = x_op,r + T (x - x_op)`` (:func:`modal_map`); None: ``x_r = x[keep]``.
     """
 
-    model: object
+    model: Model | None
     keep: np.ndarray
     reduced: bool
     state_map: np.ndarray | None = None

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from flexctrl.analysis.baumgarte import (
+    Feedback,
     fastest_decay,
     predicted_regime,
     stability_limit,
@@ -64,7 +65,7 @@ def _records(rows: Iterable[dict]) -> list[dict]:
     for row in rows:
         if row.get("status") != "ok" or any(_num(row.get(k)) is None for k in _NEEDED):
             continue
-        rec = {
+        rec: dict[str, Any] = {
             k: _num(row.get(k)) for k in CSV_COLUMNS if k not in ("feedback", "predicted_regime")
         }
         rec["feedback"] = "implicit" if row["feedback_implicit"] else "explicit"
@@ -77,8 +78,8 @@ def _records(rows: Iterable[dict]) -> list[dict]:
     return out
 
 
-def _groups(records: Sequence[dict]) -> dict[tuple[str, float], list[dict]]:
-    groups: dict[tuple[str, float], list[dict]] = {}
+def _groups(records: Sequence[dict]) -> dict[tuple[Feedback, float], list[dict]]:
+    groups: dict[tuple[Feedback, float], list[dict]] = {}
     for rec in records:
         groups.setdefault((rec["feedback"], rec["dt_s"]), []).append(rec)
     return groups
@@ -100,7 +101,7 @@ def _write_csv(path: Path, records: Sequence[dict]) -> None:
             out.writerow(row)
 
 
-def _summaries(groups: dict[tuple[str, float], list[dict]]) -> list[dict]:
+def _summaries(groups: dict[tuple[Feedback, float], list[dict]]) -> list[dict]:
     """Per (feedback, dt): predicted and observed boundary, reduction factors, slope, model
     agreement."""
     out = []
@@ -172,7 +173,7 @@ def _summaries(groups: dict[tuple[str, float], list[dict]]) -> list[dict]:
 
 
 def _draw(
-    path: Path, groups: dict[tuple[str, float], list[dict]], summaries: Sequence[dict]
+    path: Path, groups: dict[tuple[Feedback, float], list[dict]], summaries: Sequence[dict]
 ) -> None:
     from matplotlib.figure import Figure
 

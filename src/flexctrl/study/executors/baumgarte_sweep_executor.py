@@ -33,11 +33,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
 from flexctrl.analysis.baumgarte import (
     FEEDBACKS,
+    Feedback,
     constraint_states,
     propagate_errors,
     run_point,
@@ -65,7 +67,7 @@ class SweepScene:
     duration: float
     gamma: float
     beta: float
-    feedback: str
+    feedback: Feedback
     alpha: float
     delta: float
     axial_shortening: bool
@@ -137,7 +139,7 @@ def read_sweep_scene(
         duration=s.duration,
         gamma=gamma,
         beta=beta,
-        feedback=feedback,
+        feedback=cast(Feedback, feedback),  # r.string checked it against FEEDBACKS
         alpha=s.alpha,
         delta=s.delta,
         axial_shortening=s.axial_shortening,
@@ -186,7 +188,7 @@ def _reference(
         axial_shortening=axial_shortening,
         max_violation=bound,
     )
-    if not point.bounded:
+    if not point.bounded or point.result is None:
         raise SimulationError(
             f"the reference run (dt = {dt:g} s, gamma = beta = {gamma:g} 1/s) is not bounded: "
             f"{point.error}"
@@ -218,7 +220,7 @@ def _defects(
         axial_shortening=axial_shortening,
         max_violation=math.inf,
     )
-    if not point.bounded:
+    if not point.bounded or point.result is None:
         raise SimulationError(f"the gamma = 0 run at dt = {dt:g} s did not finish: {point.error}")
     model = SlidingBeamModel(case, n_elements, axial_shortening)
     states = constraint_states(model, point.result)

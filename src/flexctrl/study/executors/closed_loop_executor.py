@@ -64,7 +64,8 @@ def unavailable_metrics(settings: dict) -> dict[str, str]:
 def execute(settings: dict) -> RunOutput:
     """One closed-loop run from a settings dict (see :mod:`flexctrl.study.registry`).
 
-    Metrics are flattened to scalars (``peak_torque_1`` ...), with what the report needs to
+    Metrics are flattened to scalars (``peak_torque_1`` ...); one that does not apply to the run
+    is NaN with its reason in the output's ``notes``.  With them goes what the report needs to
     draw the run: ``window_start`` (s, the residual window's start) and the finite
     ``torque_limit_<k>`` (N m).  Trajectories (``t`` in s, ``e`` the tip's distance from
     its target in m, tip position ``tip_x``, ``tip_y`` in m, joint angles ``q<k>`` in rad,
@@ -111,7 +112,8 @@ def execute(settings: dict) -> RunOutput:
         series[f"q{i + 1}"] = traj.states[:, i]
         series[f"u{i + 1}"] = traj.inputs[:, i]
         series[f"w{i + 1}"] = traj.deflections[:, i]
-    return RunOutput(metrics=metrics, trajectories=series)
+    notes = result.summary.get("metric_notes", {})
+    return RunOutput(metrics=metrics, trajectories=series, notes=notes)
 
 
 def shared_choice(representative: dict, cache):

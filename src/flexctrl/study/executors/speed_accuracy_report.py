@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import math
 import statistics
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,7 @@ def summarise(rows: list[dict]) -> list[dict[str, Any]]:
         groups.append((ALL, rows))
     out: list[dict[str, Any]] = []
     for scene, members in groups:
-        block = []
+        block: list[dict[str, Any]] = []
         for label in methods:
             mine = [r for r in members if r.get(METHOD_COLUMN) == label]
             ok = [r for r in mine if r.get("status") == "ok"]
@@ -53,7 +54,7 @@ def summarise(rows: list[dict]) -> list[dict[str, Any]]:
                 m = parse_method(label)
                 model, integ = m.model_label, m.integrator_label
             except SpecError:
-                model, integ = label, ""
+                model, integ = str(label), ""
             block.append(
                 {
                     "scene": scene,
@@ -94,7 +95,9 @@ def summarise(rows: list[dict]) -> list[dict[str, Any]]:
             )
         # a method with failed runs is not on the front: its error is unknown for some cases
         cost = [b["wall_per_sim_s"] if b["runs_failed"] == 0 else math.nan for b in block]
-        front = pareto_front(cost, [b["tip_error_rms"] for b in block]) if block else []
+        front: Sequence[bool] | np.ndarray = (
+            pareto_front(cost, [b["tip_error_rms"] for b in block]) if block else []
+        )
         for b, flag in zip(block, front):
             b["pareto"] = bool(flag)
         out += block

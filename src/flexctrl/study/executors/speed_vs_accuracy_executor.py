@@ -464,7 +464,7 @@ def mesh_convergence(
     from flexctrl.sim.tip_error import tip_error
 
     root = data_root()
-    settings = {
+    settings: dict[str, Any] = {
         "scene": str(Path(scene).resolve()),
         "model": str(model or root / "models" / "subedi3link.toml"),
         "controller": None,
