@@ -21,7 +21,7 @@ demo: $(STAMP)
 # a file's module fixtures are built once: on this 2-core machine 9.1 min against 16 min in
 # one process.  `make test TEST_WORKERS=0` runs it in one process.  Each test process holds
 # its BLAS libraries to one thread: NumPy and SciPy each start a pool per core, and two test
-# processes on two cores spinning four pools slow each other (docs/studies.md, "Backends";
+# processes on two cores spinning four pools slow each other (docs/explanation/studies.md, "Backends";
 # warm compile cache, one after the other: 8:02 min, 788 s of CPU, against 8:45 min, 875 s).
 TEST_WORKERS ?= 2
 ONE_BLAS_THREAD := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1

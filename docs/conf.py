@@ -42,26 +42,8 @@ nb_execution_show_tb = True
 exclude_patterns = ["_build", "jupyter_execute", "**.ipynb_checkpoints"]
 # generated fragments, included by the pages that show them
 exclude_patterns += ["reproduction/table.md"]
-# figures taken out of docstrings, kept until each has its place in an explanation page
-exclude_patterns += ["from_code/*"]
-# the earlier notes, kept in the tree until every section has its place in the site
-exclude_patterns += [
-    f"{name}.md"
-    for name in (
-        "amm",
-        "architecture",
-        "auto_fidelity",
-        "baumgarte",
-        "control",
-        "fem",
-        "inputs",
-        "modal",
-        "speed_accuracy",
-        "stability",
-        "studies",
-        "tuning",
-    )
-]
+# the contributors' page, read in the repository (CONTRIBUTING.md points to it)
+exclude_patterns += ["architecture.md"]
 templates_path = ["_templates"]
 html_static_path = ["_static"]
 html_theme = "pydata_sphinx_theme"

@@ -9,14 +9,17 @@ from pathlib import Path
 from support import ROOT
 
 FIGURES = ROOT / "docs" / "figures"
-IMAGE = re.compile(r"!\[[^\]]*\]\(([^)]+\.png)\)")
+#: A Markdown image or a MyST figure directive.
+IMAGE = re.compile(r"!\[[^\]]*\]\(([^)]+\.png)\)|```\{figure\} (\S+\.png)")
 
 
 def _references() -> dict[Path, list[str]]:
     """Resolved image path -> the documents that show it."""
     shown: dict[Path, list[str]] = {}
-    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
-        for target in IMAGE.findall(doc.read_text()):
+    pages = [p for p in sorted((ROOT / "docs").rglob("*.md")) if "_build" not in p.parts]
+    for doc in [ROOT / "README.md", *pages]:
+        for image, figure in IMAGE.findall(doc.read_text()):
+            target = image or figure
             shown.setdefault((doc.parent / target).resolve(), []).append(doc.name)
     return shown
 

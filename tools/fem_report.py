@@ -1,4 +1,5 @@
-"""The figures quoted in ``docs/fem.md``: convergence tables, AMM-versus-FEM comparison, timings.
+"""The figures quoted in ``docs/explanation/finite-elements.md``: convergence tables, AMM-versus-FEM
+comparison, timings.
 
 Run ``python tools/fem_report.py --out out/fem`` (about 10 minutes; most
 of it compiling and running the 16-element RK4 reference); ``--quick`` skips the

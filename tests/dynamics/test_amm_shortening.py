@@ -1,4 +1,5 @@
-"""Axial shortening in the assumed-modes model (``axial_shortening``; ``docs/amm.md`` section 10).
+"""Axial shortening in the assumed-modes model (``axial_shortening``;
+``docs/explanation/assumed-modes.md`` section 10).
 
 References independent of the model code: the closed-form slope of a cantilever under a tip and a
 uniform load (foreshortening by numerical quadrature of it), Southwell's relation for a spinning

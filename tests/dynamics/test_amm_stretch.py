@@ -1,4 +1,5 @@
-"""Axially compliant assumed-modes links (``axial_stretch``; ``docs/amm.md`` section 14).
+"""Axially compliant assumed-modes links (``axial_stretch``; ``docs/explanation/assumed-modes.md``
+section 14).
 
 References independent of the model code: the exact first axial frequency of a clamped rod with
 a tip mass (``beta L tan(beta L) = m / M``), the exact tip elongation of a hanging rod under its

@@ -43,12 +43,12 @@ The reference
 -------------
 A converged tip path per (scene, payload, configuration): the finest affordable
 finite-element model with RK4 at its stability-limited step (see
-``docs/speed_accuracy.md`` for why not a tight implicit integrator: IDAS at rtol 1e-8
-took 70 s per 0.1 s on ``fem:4``).  Its convergence is shown, not assumed:
-:func:`compute_reference` also runs the same model with half the step (time
-discretisation) and coarser meshes (spatial discretisation) and records their tip
-distances from the reference.  References are cached on disk as ``.npz``, keyed by a
-hash of everything that determines them (:func:`reference_key`).
+``docs/explanation/speed-and-accuracy.md`` for why not a tight implicit integrator: IDAS at rtol
+1e-8 took 70 s per 0.1 s on ``fem:4``).  Its convergence is shown, not assumed:
+:func:`compute_reference` also runs the same model with half the step (time discretisation) and
+coarser meshes (spatial discretisation) and records their tip distances from the reference.
+References are cached on disk as ``.npz``, keyed by a hash of everything that determines them
+(:func:`reference_key`).
 """
 
 from __future__ import annotations

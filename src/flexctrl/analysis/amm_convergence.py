@@ -1,5 +1,6 @@
 """Does the assumed-modes model converge onto the finite elements?  Tip errors of ``amm:1..4``
-with and without axial shortening against a fine finite-element reference (``docs/amm.md``).
+with and without axial shortening against a fine finite-element reference
+(``docs/explanation/assumed-modes.md``).
 
 Three cases, each from a scene file of ``studies/scenes`` (RK4 throughout, tip position in the
 world frame compared on the output grid):
@@ -63,7 +64,8 @@ DESIGN_FIDELITY = "amm:2"
 OUTPUT_DT = 1e-3  # s, open loop; the closed loop samples every plant step of 0.5 ms multiples
 
 
-#: The model variants compared (``docs/amm.md`` sections 11 and 14): the label, ``axial_shortening``
+# : The model variants compared (``docs/explanation/assumed-modes.md`` sections 11 and 14): the
+# label, ``axial_shortening``
 #: and ``axial_stretch`` of the assumed-modes plant.
 VARIANTS = (
     ("off", False, False),
@@ -80,7 +82,8 @@ def _scene(case: str, shortening: bool, stretch: bool = False):
     if case == "fast_move":
         from flexctrl.spec.fidelity import parse_fidelity
 
-        # the finite elements' damping rule for every plant (docs/amm.md section 14): with modal
+        # the finite elements' damping rule for every plant (docs/explanation/assumed-modes.md
+        # section 14): with modal
         # ratios
         # the assumed modes' second modes are 6-13 times less damped than the finite elements'
         plant = dataclasses.replace(
@@ -204,7 +207,8 @@ def simulate(
     compile).
 
     ``hub_inertia`` (kg m^2, open-loop cases only): every hub's rotor inertia raised to at least
-    this (a diagnosis of how the light hub 3 limits the convergence; ``docs/amm.md`` section 11).
+    this (a diagnosis of how the light hub 3 limits the convergence;
+    ``docs/explanation/assumed-modes.md`` section 11).
     """
     from flexctrl.dynamics.build import build_model
     from flexctrl.scenes.arm_setup import scene_arm
@@ -352,7 +356,8 @@ def convergence(
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """The table of ``docs/amm.md`` for one :func:`convergence` result (mm)."""
+    """The table of ``docs/explanation/assumed-modes.md`` for one :func:`convergence` result
+    (mm)."""
     windows = result["windows_s"]
     variants = list(
         dict.fromkeys(
@@ -427,7 +432,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--static-correction",
         action="store_true",
-        help="assumed modes with the tip-moment correction shapes (docs/amm.md section 13)",
+        help="assumed modes with the tip-moment correction shapes "
+        "(docs/explanation/assumed-modes.md section 13)",
     )
     parser.add_argument(
         "--tag", default="", help="suffix of the output files (convergence<TAG>.json/.md)"

@@ -1,7 +1,7 @@
 """Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports sweep
 (issue 7).
 
-Constraint-error dynamics (see ``docs/baumgarte.md`` for the derivation)
+Constraint-error dynamics (see ``docs/explanation/baumgarte.md`` for the derivation)
     :mod:`flexctrl.dynamics.fem.newmark_dae` imposes Eq 49, ``Phi_q qdd = h - 2 gamma Phidot
     - beta^2 Phi``, so along the computed motion the violation ``e = Phi`` obeys
     ``e'' = -2 gamma e' - beta^2 e`` at every step, with the feedback evaluated at

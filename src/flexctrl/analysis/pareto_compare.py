@@ -3,7 +3,7 @@
 A study's report writes ``pareto.csv`` (one row per scene and method: median cost,
 median and worst tip error, Pareto flag; ``flexctrl.study.executors.speed_vs_accuracy_executor``).
 This module reads two of them, e.g. the shipped study and the same study with the
-assumed-modes models' axial shortening on (``docs/speed_accuracy.md``), and gives
+assumed-modes models' axial shortening on (``docs/explanation/speed-and-accuracy.md``), and gives
 
 * :func:`compare`: one row per (scene, method) present in either file, with both sides'
   numbers (missing side: NaN) and whether the method joined or left the Pareto front;

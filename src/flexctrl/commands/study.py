@@ -19,7 +19,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "results.csv, "
         "study.json and report.md. A run that fails is recorded with its error and the study "
         "goes on. "
-        "See docs/studies.md for the file format. Exit status: 0 when the study ran to its end "
+        "See docs/explanation/studies.md for the file format. Exit status: 0 when the study ran to "
+        "its end "
         "(whatever the runs' status; --strict: 1 if a run failed), 2 for a broken study file, "
         "130 when interrupted.",
     )

@@ -21,7 +21,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "killed tuning resumes "
         "with the same command. Writes DIR/controller.toml, DIR/tuning.json, "
         "DIR/evaluations.jsonl and "
-        "DIR/report.md. See docs/tuning.md. Exit status: 0 tuned, 2 a broken tuning file, 3 no "
+        "DIR/report.md. See docs/guide/tune-a-controller.md. Exit status: 0 tuned, 2 a broken "
+        "tuning file, 3 no "
         "feasible candidate, "
         "130 interrupted (finished runs are kept).",
     )

@@ -25,7 +25,7 @@ the feed-forward joint torque ``u_ref``.  The elastic coordinates follow one of
     path with no elastic acceleration (the forces include the damping of the elastic
     rates ``qd_f*``).  Why this one: an LQR or MPC regulating to a zero (static) deflection
     fights the bending every acceleration must cause, which is itself a torque input that
-    excites the modes (``docs/control.md`` compares the two on a move).
+    excites the modes (``docs/guide/design-a-controller.md`` compares the two on a move).
 ``"static"``
     the static equilibrium deflection at ``q_ref(t)`` (gravity only: zero in a
     horizontal plane); ``u_ref`` is the same rigid feed-forward evaluated there.

@@ -59,7 +59,7 @@ Frozen and scheduled modes
     ``K q``, i.e. ``g = dU_g/dq + dU_el/dq - K(q) q`` (the second part is
     ``1/2 q_f^T (dK/dq_r) q_f`` on the joint rows).
 
-Kinematic options (``docs/amm.md`` sections 10, 13, 14)
+Kinematic options (``docs/explanation/assumed-modes.md`` sections 10, 13, 14)
     ``axial_shortening``: a bent link's points move towards its root by
     ``1/2 int_0^x w'^2`` (second-order foreshortening).  ``tip_rotation``: the next link's
     frame turns by Eq 7's linearised rotation or exactly by the tip slope; the exact one is
@@ -105,16 +105,17 @@ SOLVERS = ("ldl", "qr")
 CORIOLIS = ("bodies", "lagrange")
 
 #: The assumed-modes default of ``axial_shortening`` when neither the call, the scene nor the
-#: model file sets it: off.  The effect is correct physics (docs/amm.md section 12), but the
+# : model file sets it: off.  The effect is correct physics (docs/explanation/assumed-modes.md
+# section 12), but the
 #: shipped controllers, tunings and studies are tuned on the model without it, and the
 #: compiled step costs more with it.  Turn it on per model file or scene
 #: (``axial_shortening = true``).
 AMM_AXIAL_SHORTENING = False
 
-#: The default of ``axial_stretch``: off (``docs/amm.md`` section 14).
+#: The default of ``axial_stretch``: off (``docs/explanation/assumed-modes.md`` section 14).
 AMM_AXIAL_STRETCH = False
 
-#: The default of ``static_correction``: off (``docs/amm.md`` section 13).
+#: The default of ``static_correction``: off (``docs/explanation/assumed-modes.md`` section 13).
 AMM_STATIC_CORRECTION = False
 
 

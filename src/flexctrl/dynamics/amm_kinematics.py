@@ -14,7 +14,7 @@ Kinematics (Eqs 1-9)
     consistent with the small-deflection assumption.  ``p_i(x) = r_i + W_i (x, w_i(x))``,
     ``r_{i+1} = r_i + W_i (L_i, w_ie)`` (Eqs 3-4), ``r_1 = 0``.
 
-Axial shortening (``axial_shortening=True``; ``docs/amm.md`` section 10)
+Axial shortening (``axial_shortening=True``; ``docs/explanation/assumed-modes.md`` section 10)
     A bent link's points also move towards its root by ``s(x) = 1/2 int_0^x w'^2 =
     sum_p N_p(x) q_j q_k`` (mode pairs ``p = (j <= k)``, :mod:`flexctrl.modal.shortening`):
     ``p_i(x) = r_i + W_i (x - s(x), w_i(x))``, extra Gram pieces ``W_i e_1 q_j q_k`` with the
@@ -336,8 +336,9 @@ def arm_expressions(
     axial_stretch
         Axially compliant links: ``q`` ends with one elongation ``e_i`` (m) per link with
         elastic modes (:func:`stretched_links`; a link without modes stays rigid), a
-        uniform strain ``e_i / L_i`` along the link (``docs/amm.md`` section 14); the strain
-        energy ``1/2 (EA_i / L_i) e_i^2`` is in :func:`flexctrl.dynamics.amm.build_amm`'s ``K``.
+        uniform strain ``e_i / L_i`` along the link (``docs/explanation/assumed-modes.md`` section
+        14); the strain energy ``1/2 (EA_i / L_i) e_i^2`` is in
+        :func:`flexctrl.dynamics.amm.build_amm`'s ``K``.
     """
     n = arm.n_links
     n_modes = [m.n_modes for m in modal]

@@ -16,7 +16,8 @@ from flexctrl.fidelity.records import RunRecord
 from flexctrl.fidelity.rungs import rung_name, tip_distance
 
 #: Bound assumed on the linear estimate's error either way: a rung whose linear estimate exceeds
-#: ``LINEAR_FACTOR`` times the tolerance is not certified (docs/auto_fidelity.md gives the ratios
+# : ``LINEAR_FACTOR`` times the tolerance is not certified (docs/explanation/automatic-fidelity.md
+# gives the ratios
 #: measured on the quickstart's loops; tests/scenes/test_auto_linear.py checks a small case).
 LINEAR_FACTOR = 3.0
 

@@ -14,7 +14,8 @@ assumed-modes kinematics then needs, besides Eqs 50-52, the integrals over the l
     ``y[l, p] = int rho phi_l N_p`` (kg/m), ``z[p, p'] = int rho N_p N_p'`` (kg/m^2),
 
 all by Gauss-Legendre quadrature (``GAUSS_POINTS`` nodes on the link; ``N_p`` at each node by
-the same rule on ``[0, x]``).  See ``docs/amm.md`` section 10 for the derivation.
+the same rule on ``[0, x]``).  See ``docs/explanation/assumed-modes.md`` section 10 for the
+derivation.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ resist the tip's rotation: the link's tip sees the joint torque's reaction, a co
 moment, and almost no rotary inertia.  The clamped-mass modes, whose tip slope is held back by
 ``J_D`` (Eq 40 bounds ``|phi_j'(L)|`` by ``sqrt(m_l / J_D)``), represent the static bending
 under a tip moment ``w = M x^2 / (2 EI)`` only through a slowly converging series, so a
-model with a few of them misses the link's quasi-static answer to the torque (``docs/amm.md``
-section 13).
+model with a few of them misses the link's quasi-static answer to the torque
+(``docs/explanation/assumed-modes.md`` section 13).
 
 The correction: the static shape of the cantilever under a unit tip moment, ``psi(x) = x^2``
 (up to scale), made mass-orthogonal to the ``N`` modes in Eq 40's inner product (link and tip

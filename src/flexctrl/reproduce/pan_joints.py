@@ -213,7 +213,8 @@ def fig3() -> Section:
             rel < 1e-3,
             f"largest relative difference {rel:.1e} (bound 1e-3: the assumed-modes links are "
             "axially rigid, "
-            "docs/fem.md section 2); in the plane the constraints are linear in the nodal "
+            "docs/explanation/finite-elements.md section 2); in the plane the constraints are "
+            "linear in the nodal "
             "values, so "
             "eliminating them is exact and leaves an ODE without drift",
         )

@@ -1,7 +1,7 @@
 """Pan, Scott & Ulsoy (1990), Sec. 4: the numerical procedure's claims.
 
 * Eq 49: ``gamma = beta = 5`` "was found to be satisfactory" (the drift of the fast push with and
-  without the Baumgarte terms; the full sweep is ``docs/baumgarte.md``);
+  without the Baumgarte terms; the full sweep is ``docs/explanation/baumgarte.md``);
 * Eq 54 as printed (``+ beta^2 Phi``) against Eq 49's sign;
 * "Computer runs showed the current method to be more efficient than existing codes based on
   Gear's algorithm": Newmark + Baumgarte against IDAS on the beam over supports and the R-P arm at
@@ -87,7 +87,7 @@ def baumgarte_section() -> Section:
             "satisfactory read as: less drift and a tip no worse than without the terms; gamma h "
             "= 0.005 is "
             "far inside the explicit-feedback stability limit gamma h < 3 - sqrt(5) "
-            "(docs/baumgarte.md)",
+            "(docs/explanation/baumgarte.md)",
         )
     ]
     eq49, printed = _violation(SLOW_PUSH, "eq49"), _violation(SLOW_PUSH, "eq54_printed")

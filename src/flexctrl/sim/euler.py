@@ -17,7 +17,7 @@ Stability
     ratio ``zeta`` (``lambda = omega (-zeta +- i sqrt(1 - zeta^2))``) is stable
     for ``omega h <= 2 zeta``.  :class:`Euler` sets ``stability_limit = 0`` (the
     undamped limit) and its advice says so.  Measured limits, beside this theory:
-    ``docs/stability.md``.
+    ``docs/explanation/numerical-stability.md``.
 """
 
 from __future__ import annotations

@@ -20,9 +20,11 @@ File layout (see ``models/subedi3link.toml`` for a documented example)::
     damping_zeta = 0.01              # with damping_form = "modal": the damping ratio of every
                                      # coupled elastic mode (the links' damping_ratio unused)
     axial_shortening = true          # a bent link's foreshortening; default: on for finite
-                                     # elements, off for assumed modes (docs/amm.md section 10)
-    axial_stretch = true             # axially compliant assumed-modes links (EA; docs/amm.md
-                                     # section 14); default off; finite elements always are
+                                     # elements, off for assumed modes
+                                     # (docs/explanation/assumed-modes.md)
+    axial_stretch = true             # axially compliant assumed-modes links (EA; default
+                                     # off; finite elements always are;
+                                     # docs/explanation/assumed-modes.md)
     [payload]  mass (kg), inertia (kg m^2 about its centre of mass)
     [[links]]  length (m), mass_per_length (kg/m), EI (N m^2), inertia
                (kg m^2 about the link's centre of mass), n_modes (0..6),
@@ -251,12 +253,12 @@ class ArmSpec:
         the arm's configuration (required then, refused otherwise).
     axial_shortening : bool or None
         Whether the models carry a bent link's axial shortening (assumed modes: second-order
-        kinematics, ``docs/amm.md`` section 10; finite elements: membrane strain).  None (not
-        in the file): each family's default, on for finite elements, off for assumed modes
-        (:data:`flexctrl.dynamics.amm.AMM_AXIAL_SHORTENING`).
+        kinematics, ``docs/explanation/assumed-modes.md`` section 10; finite elements: membrane
+        strain).  None (not in the file): each family's default, on for finite elements, off for
+        assumed modes (:data:`flexctrl.dynamics.amm.AMM_AXIAL_SHORTENING`).
     axial_stretch : bool or None
         Whether assumed-modes links are axially compliant (one elongation coordinate per link,
-        strain energy from ``EA``; ``docs/amm.md`` section 14).  None: off
+        strain energy from ``EA``; ``docs/explanation/assumed-modes.md`` section 14).  None: off
         (:data:`flexctrl.dynamics.amm.AMM_AXIAL_STRETCH`).  Finite-element links always are;
         ``False`` with a finite-element fidelity is refused when the model is built.
     source : str

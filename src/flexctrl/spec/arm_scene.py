@@ -18,7 +18,7 @@ by :func:`flexctrl.spec.scene.load_scene`, which dispatches on ``kind``.
                                       # below, no step check)
     modes = "frozen"                  # or "scheduled"
     axial_shortening = true           # a bent link's foreshortening (default: the model file's;
-                                      # docs/amm.md)
+                                      # docs/explanation/assumed-modes.md)
     axial_stretch = true              # axially compliant assumed-modes links (default: the model
                                       # file's)
     gravity = [0.0, -9.81]            # m/s^2 (default: the model file's)

@@ -15,7 +15,8 @@ DampingForm = Literal["ratio", "paper", "stiffness", "modal"]
 #: finite elements' stiffness-proportional rule ``D_i = (2 zeta_i / omega_1i) K_i`` per link
 #: (``zeta_i`` the link's first ratio, ``omega_1i`` its first clamped-mass frequency), i.e. mode j
 #: of link i has the ratio ``zeta_i omega_j / omega_1i``: with it both families damp alike
-#: (``docs/amm.md`` section 14).  The first three form the damping per clamped-mass mode of
+# : (``docs/explanation/assumed-modes.md`` section 14).  The first three form the damping per
+# clamped-mass mode of
 #: each link (Eq 68's form), which is not the damping of the arm's coupled modes: on the shipped
 #: arm ``"ratio"`` with 0.01 gives its linearisation's poles zeta 0.05-0.36.  ``"modal"``: the
 #: damping ratio ``damping_zeta`` on every coupled elastic mode of the arm at its

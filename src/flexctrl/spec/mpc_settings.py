@@ -327,7 +327,7 @@ class NMPCSettings:
         at the target before selecting the kept coordinates, so the fast modes are not fed
         back (:func:`flexctrl.control.nmpc.prediction_model.modal_map`); ``"select"`` takes the kept
         coordinates as they are (their fast-mode content destabilises the tuned loop,
-        ``docs/control.md``).
+        ``docs/guide/design-a-controller.md``).
     jacobian_every : int
         ``sensitivities = "frozen"`` only: one Jacobian of ``f`` per this many RK4 steps
         (1, default: every step), frozen over them (the transition of the frozen

@@ -7,7 +7,7 @@ cluster (:mod:`flexctrl.study.runner`), writing one record per run as it
 finishes (:mod:`flexctrl.study.store`); ``write_report(out)`` draws the report
 from the files alone (:mod:`flexctrl.study.report`).  What one run does is an
 *executor* named by the study (:mod:`flexctrl.study.executors`).  The file
-format and the folder layout are described in ``docs/studies.md``.
+format and the folder layout are described in ``docs/explanation/studies.md``.
 """
 
 from flexctrl.study.outputs import RunOutput, per_worker_cache

@@ -107,7 +107,8 @@ def write_choices(directory: str | Path, runs, records: dict[str, dict[str, Any]
     document = {
         "note": "fidelity = 'auto' with [auto] share: one choice per group, made on its "
         "representative "
-        "(first run in grid order) and used by every member (docs/auto_fidelity.md)",
+        "(first run in grid order) and used by every member "
+        "(docs/explanation/automatic-fidelity.md)",
         "groups": list(groups.values()),
     }
     path.write_text(json.dumps(document, indent=2, default=str) + "\n")

@@ -19,7 +19,7 @@ finds their runs in the store.
     :func:`scipy.optimize.minimize` with Nelder-Mead from the file's values: local and
     sequential (a batch of one), the cheapest when the start is good.
 
-``docs/tuning.md`` compares the three on the same tuning problem.
+``docs/guide/tune-a-controller.md`` compares the three on the same tuning problem.
 """
 
 from __future__ import annotations

@@ -111,7 +111,9 @@ def test_time_optimal_mpc_keeps_the_torque_limits_and_plans_a_feasible_arrival(f
     limits = np.array([200.0, 100.0, 50.0])  # N m, models/subedi3link.toml
     torques = mpc.to_pandas()[["u1", "u2", "u3"]].to_numpy()
     assert np.all(np.abs(torques) <= limits * (1 + 1e-12))
-    summary = mpc.summary["controller"]  # (solve times are benchmark figures: docs/control.md)
+    summary = mpc.summary[
+        "controller"
+    ]  # (solve times are benchmark figures: docs/guide/design-a-controller.md)
     assert summary["arrival_feasible"]
     assert (
         mpc.metrics["settling_time"] + 0.1 >= summary["arrival_time_s"]

@@ -172,7 +172,8 @@ def markdown_lines(table: Sequence[dict[str, Any]]) -> list[str]:
         "along every vibration mode by +-1e-9 m/rad (two runs; half their difference is "
         "watched) and bisects on the step h of the real integrator; a probe is unstable when "
         "a modal amplitude grows by more than its growth tolerance over its steps, or a run "
-        "fails (see flexctrl/analysis/stability/probe.py and docs/stability.md). `h_theory` "
+        "fails (see flexctrl/analysis/stability/probe.py and "
+        "docs/explanation/numerical-stability.md). `h_theory` "
         "is the largest h with |R(lambda h)| <= 1 for every eigenvalue lambda of df/dx at "
         "that equilibrium; `omega_max` = max |lambda| (rad/s).",
         "",

@@ -11,7 +11,7 @@ Theory: :func:`theoretical_step_limit`
       imaginary-axis one that governs an undamped arm, and the bound the
       integrators use (:data:`flexctrl.sim.rk4.RK4_STABILITY_LIMIT`: safe for
       every undamped mode).  We report the exact ray intersection as
-      ``h_theory`` and record the gap (``docs/stability.md``).
+      ``h_theory`` and record the gap (``docs/explanation/numerical-stability.md``).
     * ``euler``: ``R(z) = 1 + z``: ``h = 0`` if any mode is undamped, else
       ``min_i 2 zeta_i / omega_i`` (``= -2 Re(lambda) / |lambda|^2``).
     * ``newmark``: ``inf`` for ``2 alpha >= delta >= 1/2`` (the default average

@@ -27,7 +27,7 @@ Axial shortening (Eqs 11-18), switchable
     accelerations enter the axial force through the equations themselves.  (A
     Lagrangian term built from the *nominal* rigid motion instead is a second-order
     truncation of ``T`` and leaves ``M`` indefinite at tip slopes of a few milliradians;
-    see ``docs/fem.md``.)  ``axial_shortening=False`` uses the linear
+    see ``docs/explanation/finite-elements.md``.)  ``axial_shortening=False`` uses the linear
     strain ``eps = u'``.  ``K`` is the stiffness at ``q = 0`` (the Hessian of
     ``U_el``); ``g`` carries the rest: ``g = dU_g/dq + dU_el/dq - K q``.
 """

@@ -6,7 +6,7 @@ EA from :meth:`~flexctrl.spec.arm.LinkSpec.axial_stiffness` (Eqs 10, 29-33); hub
 and payload are rigid bodies; the joint angles are solved together with the
 nodal coordinates under prescribed joint torques (full coupling, Eqs 35, 43).
 The result presents the :class:`~flexctrl.dynamics.model.Model` interface.
-Decisions are argued in ``docs/fem.md``; in short:
+Decisions are argued in ``docs/explanation/finite-elements.md``; in short:
 
 Joint compatibility eliminated exactly (clamped frames)
     Pan imposes Eqs 19-20 (displacement and slope continuity at every revolute

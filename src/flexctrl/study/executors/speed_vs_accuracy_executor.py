@@ -452,7 +452,7 @@ def mesh_convergence(
     """Tip distances (m) between successive meshes, RK4 at each mesh's stable step: the evidence
     beyond the study's checks.
 
-    For ``docs/speed_accuracy.md`` (too slow to repeat for every case of the study:
+    For ``docs/explanation/speed-and-accuracy.md`` (too slow to repeat for every case of the study:
     fem:16 compiles for minutes).  Returns ``{"runs": {mesh: {"wall_per_sim_s", "step_s"}},
     "pairs": {"fem:4-fem:8": {"rms", "max"}, ...}, "against_finest": {...}}``.
 
