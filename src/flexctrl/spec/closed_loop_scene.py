@@ -24,8 +24,8 @@ zero-order hold.  The extra keys::
                                              # (default: the larger of 0.1 of the length and 4x
                                              # the static deflection of the joint's torque limit)
                divergence_angle = 90.0       # deg: so does a joint this far outside its move
-               stable_band = 0.01            # m: stable = 1 needs the tip error of the run's last
-                                             # second below it
+               stable_band = 0.01            # m: settled_within_band = 1 needs the tip error of
+                                             # the run's last second below it
 
 Angles are in degrees in the file and radians in the dataclass.  The reference
 (:mod:`flexctrl.control.reference_trajectory`) goes from the initial joint angles to the target;
