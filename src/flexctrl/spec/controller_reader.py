@@ -43,6 +43,7 @@ from flexctrl.spec.controller_settings import (
     Weights,
 )
 from flexctrl.spec.overrides import apply_overrides
+from flexctrl.spec.payload_settings import read_payload
 from flexctrl.spec.reader import TableReader, read_toml
 from flexctrl.spec.sensors import SENSOR_KINDS
 
@@ -260,6 +261,7 @@ def _read_lqr(r: TableReader) -> LQRSettings:
         "estimator": _estimator(r),
         "schedule": _schedule(r),
         "saturate": r.boolean("saturate", d.saturate),
+        "payload": read_payload(r),
     }
     return _build(r, LQRSettings, values)
 
@@ -308,6 +310,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "osqp": _osqp(r),
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
+        "payload": read_payload(r),
     }
     return _build(r, MPCSettings, values)
 

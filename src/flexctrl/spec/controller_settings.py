@@ -46,6 +46,7 @@ from flexctrl.spec.field_checks import (
     numbers_field,
 )
 from flexctrl.spec.mpc_settings import MPCSettings, NMPCSettings, OSQPSettings
+from flexctrl.spec.payload_settings import PayloadSettings
 
 
 @dataclass(frozen=True)
@@ -203,6 +204,9 @@ class LQRSettings:
         Gain scheduling over configuration.
     saturate : bool
         Clip torques at the joint limits.
+    payload : PayloadSettings or None
+        A payload range instead of the design model's one payload: the controller is
+        payload-aware (:mod:`flexctrl.control.payload`).
     """
 
     kind: Literal["lqr"] = "lqr"
@@ -212,6 +216,7 @@ class LQRSettings:
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
     schedule: ScheduleSettings | None = None
     saturate: bool = True
+    payload: PayloadSettings | None = None
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["lqr"])
@@ -289,6 +294,7 @@ __all__ = [
     "MPCSettings",
     "NMPCSettings",
     "ShapedSettings",
+    "PayloadSettings",
     "ControllerSettings",
     "SETTINGS",
     "ControllerKind",

@@ -38,6 +38,7 @@ from flexctrl.spec.field_checks import (
     integer_field,
     number_field,
 )
+from flexctrl.spec.payload_settings import PayloadSettings
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,9 @@ class MPCSettings:
         OSQP's settings (backend ``"osqp"``).
     sensors, estimator
         As for LQR.
+    payload : PayloadSettings or None
+        A payload range instead of the design model's one payload: the controller is
+        payload-aware (:mod:`flexctrl.control.payload`).
     """
 
     kind: Literal["mpc"] = "mpc"
@@ -182,6 +186,7 @@ class MPCSettings:
     osqp: OSQPSettings = field(default_factory=OSQPSettings)
     sensors: SensorSettings = field(default_factory=SensorSettings)
     estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    payload: PayloadSettings | None = None
 
     def __post_init__(self) -> None:
         choice_field("kind", self.kind, Literal["mpc"])
