@@ -221,6 +221,7 @@ def _result(
         duration=duration,
         torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
+        true_payload=plant.spec.payload.mass,
     )
     summary = run_summary(
         trajectory,
@@ -245,7 +246,14 @@ def _result(
         model=plant,
         controller=controller,
         reference=path,
+        payload_estimate=_payload_trace(controller),
     )
+
+
+def _payload_trace(controller):
+    """A payload-aware controller's estimate trace (:class:`ClosedLoopResult`), else None."""
+    trace = getattr(controller, "payload_trace", None)
+    return None if trace is None else trace()
 
 
 def _as_move(reference) -> Move:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.loop.metrics import run_metrics
+from flexctrl.loop.metrics import payload_metrics, run_metrics
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.closed_loop_scene import MetricSettings
 from flexctrl.spec.reference import JointReference
@@ -28,8 +28,12 @@ def judge_run(
     duration: float,
     torque_limits: Sequence[float],
     radius: float | None,
+    true_payload=None,
 ) -> dict[str, Any]:
     """Every metric of the run (:func:`flexctrl.loop.metrics.run_metrics`).
+
+    With a payload-aware controller (one with ``payload_trace()``) and ``true_payload``, also
+    :func:`flexctrl.loop.metrics.payload_metrics`.
 
     Parameters
     ----------
@@ -49,8 +53,10 @@ def judge_run(
         Per joint (N m).
     radius : float or None
         The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`).
+    true_payload : float or callable, optional
+        The plant's payload (kg), or ``true_payload(time) -> kg``.
     """
-    return run_metrics(
+    metrics = run_metrics(
         trajectory,
         tip_target=tip_target,
         reference_joints=path.joints(trajectory.time),
@@ -64,6 +70,10 @@ def judge_run(
         step_times=controller.stats.step_times,
         radius=radius,
     )
+    trace = getattr(controller, "payload_trace", None)
+    if trace is not None and true_payload is not None:
+        metrics.update(payload_metrics(trace(), true_payload))
+    return metrics
 
 
 def run_summary(

@@ -236,6 +236,7 @@ def _run(setup: LoopSetup, on_divergence: str):
 def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> ClosedLoopResult:
     """The run judged (metrics, linear verdict) and described (``summary.json``)."""
     scene, plant, ctrl = setup.scene, setup.plant, setup.controller
+    trace = getattr(ctrl, "payload_trace", None)
     tip_target = tip_at_rest(plant, scene.target_q)
     judge = scene.metric_settings
     metrics = judge_run(
@@ -247,6 +248,7 @@ def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> Close
         duration=setup.plant_scene.duration,
         torque_limits=[j.torque_limit for j in setup.arm.joints],
         radius=loop_radius(setup, cache),
+        true_payload=setup.arm.payload.mass,
     )
     summary = {
         "scene": requested.settings(),
@@ -276,6 +278,7 @@ def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> Close
         controller=ctrl,
         reference=setup.reference,
         scene=scene,
+        payload_estimate=None if trace is None else trace(),
     )
 
 
@@ -312,6 +315,7 @@ def loop_radius(setup, cache: SceneCache) -> float | None:
         plant.modes,
         plant.q0,
         tuple(setup.scene.target_q),
+        getattr(setup.controller, "law_key", lambda: None)(),
     )
     return cache.get("verdicts", key, compute)
 

@@ -147,6 +147,10 @@ def test_on_the_rigid_arm_the_estimate_is_the_closed_form_payload():
     assert estimate.design <= truth
     trace = c.payload_trace()
     assert trace["mean"][0] == pytest.approx(c.settings.payload.mean0, abs=1e-9)
+    assert res.payload_estimate["mean"][-1] == estimate.mean
+    assert res.metrics["payload_estimate_error"] == pytest.approx(abs(estimate.mean - truth))
+    labels = [ax.get_ylabel() for ax in res.plot().axes]
+    assert "payload estimate (kg)" in labels
 
 
 def test_before_any_motion_the_estimate_is_the_prior(ctrl):

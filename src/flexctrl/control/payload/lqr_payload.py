@@ -183,6 +183,10 @@ class PayloadAware(Controller):
         self.history.append(t, self.payload_estimate)
         return self.index
 
+    def law_key(self) -> tuple:
+        """What :meth:`linear_law` depends on besides the design: the pose and the design in use."""
+        return (self._pose(), self.index)
+
     def linear_law(self, q_joints) -> tuple[np.ndarray, ...]:
         """The LQG of the design in use about the reference at rest (the linear verdict's law).
 
