@@ -32,6 +32,7 @@ from flexctrl.control.lqr import LQRController, design_lqr
 from flexctrl.control.mpc import MPCController, design_mpc
 from flexctrl.control.nmpc import NMPCController, design_nmpc
 from flexctrl.control.payload.lqr_payload import PayloadLQRController, design_lqr_payload
+from flexctrl.control.payload.mpc_payload import PayloadMPCController, design_mpc_payload
 from flexctrl.control.pd import PDController, design_pd
 from flexctrl.control.shaping import ShapedController, design_shaped
 from flexctrl.errors import SpecError
@@ -103,6 +104,7 @@ def has_linear_law(kind: str) -> bool:
 #: Settings type -> the designer of its payload-aware controller (settings with ``payload``).
 PAYLOAD_DESIGNERS: dict[type, Callable[..., Controller]] = {
     LQRSettings: design_lqr_payload,
+    MPCSettings: design_mpc_payload,
 }
 
 
@@ -183,6 +185,8 @@ __all__ = [
     "NMPCController",
     "ShapedController",
     "PayloadLQRController",
+    "PayloadMPCController",
+    "design_mpc_payload",
     "PAYLOAD_DESIGNERS",
     "design_lqr_payload",
     "design_pd",

@@ -175,3 +175,17 @@ def test_payload_range_in_python_is_the_files_table():
         )
     with pytest.raises(fc.SpecError, match="reversed"):
         fc.design(model, fc.equilibrium(model, POSE), s, payload_range=(2.0, 1.0))
+
+
+def test_the_payload_aware_mpc_unconstrained_is_the_payload_aware_lqr(ctrl):
+    """With the DARE terminal cost and no active constraint, each grid MPC's first move is the
+    grid LQR's (two designs that share only the grid's linearisation)."""
+    model = arm(2.0)
+    s = fc.load_controller("mpc_payload")
+    s = dataclasses.replace(s, payload=dataclasses.replace(s.payload, grid_step=1.0))
+    mpc = fc.design(model, fc.equilibrium(model, POSE), s)
+    assert type(mpc).__name__ == "PayloadMPCController"
+    for i in range(len(mpc.grid.payloads)):
+        mpc.index = i
+        H = mpc.linear_law(POSE)[3]
+        np.testing.assert_allclose(H, -ctrl.grid.K[i], rtol=1e-6, atol=1e-6 * np.abs(H).max())

@@ -71,7 +71,12 @@ class PayloadAware(Controller):
         limits = torque_limits(model)
         sensors = build_sensors(model, settings.sensors, op)
         super().__init__(
-            settings, op, sensors, limits, saturate=settings.saturate, design_model=model
+            settings,
+            op,
+            sensors,
+            limits,
+            saturate=getattr(settings, "saturate", True),
+            design_model=model,
         )
         self.certify = certify
         self._grids: dict[tuple[float, ...], tuple[PayloadGrid, PayloadBank, list]] = {}
