@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from flexctrl.control.payload.grid import model_with_payload
 from flexctrl.control.reference_trajectory import ReferenceTrajectory
 from flexctrl.errors import SpecError
 from flexctrl.loop.mismatch import plant_sensors
@@ -16,7 +17,7 @@ from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.loop.verdict import linear_closed_loop_radius
 from flexctrl.sim.rk4 import RK4_STABILITY_LIMIT, rk4_step
 from flexctrl.spec.closed_loop_scene import MetricSettings
-from flexctrl.spec.reference import JointReference, Move
+from flexctrl.spec.reference import JointReference, Move, MoveSequence
 
 #: Default ``omega_max * dt`` of the plant's RK4 step.  RK4 keeps the fraction
 #: ``|R(iy)|^2 = 1 - y^6/72 + y^8/576`` of an undamped mode's energy per step, ``y = omega dt``
@@ -39,6 +40,7 @@ def closed_loop(
     metrics: MetricSettings | None = None,
     on_divergence: str = "raise",
     compile: bool | None = None,
+    payload_changes=(),
 ) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` s.
 
@@ -51,8 +53,9 @@ def closed_loop(
         The model the controller was designed on.
     controller : flexctrl.control.controller.Controller
         From :func:`flexctrl.design`; reset and given the reference.
-    reference : Move or JointReference
-        The joint path (rad, s).
+    reference : Move, MoveSequence or JointReference
+        The joint path (rad, s); a :class:`~flexctrl.spec.reference.MoveSequence` for moves one
+        after the other (out and back).
     duration : float
         Simulated time, s.
     plant : Model, optional
@@ -71,6 +74,11 @@ def closed_loop(
         records ``stable = 0`` with ``divergence_time`` (s).
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
+    payload_changes : sequence of (float, float)
+        ``(time s, mass kg)``: the plant's payload becomes ``mass`` from the first controller
+        sample at or after ``time`` (a grasp or release; give times when the arm is at rest).
+        The plant is rebuilt with that payload and the run continues from the same state.
+        The payload metrics judge the estimate against the payload at each sample.
 
     Returns
     -------
@@ -93,6 +101,7 @@ def closed_loop(
     judge = MetricSettings() if metrics is None else metrics
     _track(controller, model, move)
     sensors = _plant_sensors(model, plant, controller)
+    changes = _payload_changes(plant, controller, payload_changes)
     trajectory, _ = simulate_closed_loop(
         plant,
         controller,
@@ -104,8 +113,38 @@ def closed_loop(
         compile=compile,
         monitor=_monitor(plant, path, judge),
         stop_on_divergence=on_divergence == "record",
+        plant_changes=changes,
     )
-    return _result(trajectory, model, plant, controller, move, judge, float(duration), sensors)
+    truth = _payload_truth(plant, changes)
+    if changes:  # judged on the plant the run ends on
+        plant, sensors = changes[-1][1], changes[-1][2]
+    return _result(
+        trajectory, model, plant, controller, move, judge, float(duration), sensors, truth
+    )
+
+
+def _payload_changes(plant, controller, changes) -> list:
+    """``(time, plant, sensors)`` of every payload change, the plants rebuilt carrying it."""
+    out = []
+    for when, mass in changes:
+        for key, value, unit in (("time", when, "s"), ("mass", mass, "kg")):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+                raise SpecError(
+                    f"value {value!r} is not allowed; allowed: a number >= 0 ({unit})",
+                    key=f"payload_changes.{key}",
+                )
+        new = model_with_payload(plant, float(mass))
+        out.append((float(when), new, plant_sensors(new, controller.sensors, controller.op.joints)))
+    return sorted(out, key=lambda change: change[0])
+
+
+def _payload_truth(plant, changes):
+    """The plant's payload (kg), or a function of time (s) when it changes."""
+    if not changes:
+        return plant.spec.payload.mass
+    times = np.array([c[0] for c in changes])
+    masses = np.array([plant.spec.payload.mass] + [c[1].spec.payload.mass for c in changes])
+    return lambda t: masses[np.searchsorted(times, np.asarray(t) + 1e-9, side="right")]
 
 
 def _track(controller, model, move: Move) -> None:
@@ -207,7 +246,7 @@ def _noise(noise) -> np.random.Generator | None:
 
 
 def _result(
-    trajectory, model, plant, controller, move: Move, judge, duration: float, sensors
+    trajectory, model, plant, controller, move: Move, judge, duration: float, sensors, truth
 ) -> ClosedLoopResult:
     """The run judged (metrics, linear verdict) and described (summary)."""
     path = move.joint_reference()
@@ -221,7 +260,7 @@ def _result(
         duration=duration,
         torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
-        true_payload=plant.spec.payload.mass,
+        true_payload=truth,
     )
     summary = run_summary(
         trajectory,
@@ -257,7 +296,7 @@ def _payload_trace(controller):
 
 
 def _as_move(reference) -> Move:
-    if isinstance(reference, Move):
+    if isinstance(reference, (Move, MoveSequence)):
         return reference
     if isinstance(reference, JointReference):
         return Move(

@@ -35,6 +35,9 @@ class RunOutput:
         Optional time histories, each a 1-D numeric array, by name.  By
         convention the sample times are ``"t"`` (s).  The runner decimates them
         and stores them compressed in ``runs/<id>.npz``.
+    empty
+        Metrics this run leaves empty, with the reason (a metric undefined for this run, e.g.
+        the time an estimate settles when it never does): not missing, not a failure.
 
     Raises
     ------
@@ -44,6 +47,7 @@ class RunOutput:
 
     metrics: Mapping[str, float]
     trajectories: Mapping[str, np.ndarray] = field(default_factory=dict)
+    empty: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         metrics = {}

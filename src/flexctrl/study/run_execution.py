@@ -81,6 +81,7 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
                 f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput"
             )
         metrics = dict(output.metrics)
+        unavailable = {**unavailable, **output.empty}
         clash = sorted(set(metrics) & set(RESERVED_COLUMNS))
         if clash:
             raise ValueError(
