@@ -87,6 +87,17 @@ def test_a_failing_grid_cell_is_named():
     assert [r["design_kg"] for r in failing] == [1.0]
 
 
+def test_an_undamped_design_fails_the_certificate_and_names_the_cell():
+    """The arm as its file ships it (no structural damping): the designs are fragile."""
+    model = fc.load_model(
+        "subedi3link", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0], reference_q=START
+    )
+    c = fc.design(model, fc.equilibrium(model, POSE), settings())
+    with pytest.warns(UserWarning, match=r"too coarse for the certificate: the design at \d"):
+        rows = c.certificate
+    assert any(r["worst"] >= 1.0 for r in rows)
+
+
 def forced(ctrl_settings, design_kg: float):
     """Settings whose estimate never moves from ``design_kg`` (a wrong estimate forced)."""
     return dataclasses.replace(
