@@ -200,3 +200,21 @@ def test_the_payload_aware_mpc_unconstrained_is_the_payload_aware_lqr(ctrl):
         mpc.index = i
         H = mpc.linear_law(POSE)[3]
         np.testing.assert_allclose(H, -ctrl.grid.K[i], rtol=1e-6, atol=1e-6 * np.abs(H).max())
+
+
+def test_without_a_measurement_the_bank_predicts_and_the_estimate_stays():
+    model = arm(2.0, "rigid")
+    s = fc.load_controller("lqr_payload")
+    s = dataclasses.replace(s, sensors=dataclasses.replace(s.sensors, outputs=("joints",)))
+    c = fc.design(model, fc.equilibrium(model, POSE), s)
+    c.reset()
+    for k in range(3):
+        c.step(k * c.sample_time, np.r_[START[0] + 0.01 * k, START[1:]])
+    p, dx = c.bank.p.copy(), c.bank.dx.copy()
+    u = c._hold(3 * c.sample_time)
+    assert np.all(np.isfinite(u)) and np.array_equal(c.bank.p, p)
+    g = c.grid
+    expected = np.einsum("nij,nj->ni", g.A, dx) + np.einsum(
+        "nij,nj->ni", g.B, c.u_previous[None, :] - g.u_op
+    )
+    np.testing.assert_allclose(c.bank.dx, expected, rtol=1e-12, atol=1e-15)
