@@ -591,7 +591,7 @@ def test_study_overrides_one_controller_of_its_grid_only(monkeypatch):
     with pytest.raises(
         SpecError,
         match=r"key 'per_controller.mcp': 'mcp' is not a controller of the study \(did you "
-        r"mean 'mpc'\?\); allowed: .*lqr, mpc, pd, robust",
+        r"mean 'mpc'\?\); allowed: .*lqr, lqr_payload, mpc, mpc_payload, pd, robust",
     ):
         load_study("studies/quickstart.toml", ["per_controller.mcp.horizon=30"])
     with pytest.raises(
@@ -618,13 +618,16 @@ def test_closed_loop_radius_of_an_nmpc_is_known_unavailable_before_any_run(monke
             "grid.q3=[0]",
         ],
     )
-    assert [(spec.runs[i].coordinates["controller"], m) for i, m, _ in spec.unavailable] == [
+    radius = [entry for entry in spec.unavailable if entry[1] == "closed_loop_radius"]
+    assert [(spec.runs[i].coordinates["controller"], m) for i, m, _ in radius] == [
         ("nmpc", "closed_loop_radius")
     ]
-    assert "no linear law" in spec.unavailable[0][2]
-    assert spec.unavailable_notes() == [
-        f"closed_loop_radius stays empty in 1 of 3 runs: {spec.unavailable[0][2]}"
-    ]
+    assert "no linear law" in radius[0][2]
+    assert f"closed_loop_radius stays empty in 1 of 3 runs: {radius[0][2]}" in (
+        spec.unavailable_notes()
+    )
+    payload = {m for _, m, _ in spec.unavailable if m.startswith("payload_estimate")}
+    assert payload == {"payload_estimate_error", "payload_estimate_time"}
 
 
 @pytest.mark.parametrize("declared", [True, False])

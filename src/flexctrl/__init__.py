@@ -48,6 +48,10 @@ _EXPORTS: dict[str, str] = {
     "MPCController": "flexctrl.control.mpc.controller",
     "NMPCController": "flexctrl.control.nmpc.controller",
     "ShapedController": "flexctrl.control.shaping",
+    "PayloadLQRController": "flexctrl.control.payload.lqr_payload",
+    "PayloadMPCController": "flexctrl.control.payload.mpc_payload",
+    "PayloadEstimate": "flexctrl.control.payload.bank",
+    "PayloadSettings": "flexctrl.spec.payload_settings",
     "PDSettings": "flexctrl.spec.controller_settings",
     "LQRSettings": "flexctrl.spec.controller_settings",
     "MPCSettings": "flexctrl.spec.controller_settings",
@@ -60,6 +64,7 @@ _EXPORTS: dict[str, str] = {
     "Bound": "flexctrl.spec.mpc_constraints",
     # closed loop
     "Move": "flexctrl.spec.reference",
+    "MoveSequence": "flexctrl.spec.reference",
     "MetricSettings": "flexctrl.spec.closed_loop_scene",
     "closed_loop": "flexctrl.loop.closed_loop",
     "Plant": "flexctrl.loop.plant",

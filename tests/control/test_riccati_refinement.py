@@ -14,7 +14,7 @@ import pytest
 import scipy.linalg as sl
 
 import flexctrl as fc
-import flexctrl.control.lqr as lqr_module
+import flexctrl.control.riccati as riccati_module
 from flexctrl.control.riccati import RESIDUAL_TOL, _residual, solve_dare
 
 
@@ -22,18 +22,18 @@ from flexctrl.control.riccati import RESIDUAL_TOL, _residual, solve_dare
 def dare():
     """The (A, B, Q, R) the shipped LQR solves on the 3-mode arm at 30 deg, 2 kg."""
     seen = []
-    original = lqr_module.solve_dare
+    original = riccati_module.solve_dare
 
     def record(A, B, Q, R, **kwargs):
         seen.append((kwargs.get("what"), *(np.array(M, dtype=float) for M in (A, B, Q, R))))
         return original(A, B, Q, R, **kwargs)
 
-    lqr_module.solve_dare = record
+    riccati_module.solve_dare = record
     try:
         model = fc.load_model("subedi3link", payload=2.0, fidelity="amm:3", gravity=[0.0, 0.0])
         fc.design(model, fc.equilibrium(model, np.radians([30, 0, 0])), fc.load_controller("lqr"))
     finally:
-        lqr_module.solve_dare = original
+        riccati_module.solve_dare = original
     return next(entry[1:] for entry in seen if entry[0] == "LQR")
 
 

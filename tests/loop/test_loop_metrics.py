@@ -135,7 +135,11 @@ def test_every_metric_knows_its_unit_and_better_direction():
     from flexctrl.loop.metrics import JOINT_METRICS, METRIC_INFO, METRICS, UNITS
     from flexctrl.study.column_units import lower_is_better
 
-    keys = set(_judged(_run(4.0, 0.0), radius=0.5))
+    # the payload metrics come from payload-aware controllers only (payload_metrics)
+    keys = set(_judged(_run(4.0, 0.0), radius=0.5)) | {
+        "payload_estimate_error",
+        "payload_estimate_time",
+    }
     assert keys == set(METRICS) | set(JOINT_METRICS) == set(METRIC_INFO) == set(UNITS)
     assert not lower_is_better("stable") and not lower_is_better("settled_within_band")
     assert lower_is_better("tip_residual_rms") and lower_is_better("peak_torque_2")

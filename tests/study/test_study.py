@@ -395,6 +395,17 @@ def test_executor_outputs_are_checked():
     assert "returned no metric 'rms'" in missing["error"]
 
 
+def _empty_executor(settings):
+    return RunOutput({"tip": 1.0, "settle": float("nan")}, notes={"settle": "never settles"})
+
+
+def test_a_metric_left_empty_with_a_reason_is_no_failure():
+    register_executor("_test_empty", _empty_executor)
+    out = execute_run("_test_empty", {}, {"metrics": ["tip", "settle"]})
+    assert out["status"] == "ok" and np.isnan(out["metrics"]["settle"])
+    assert "settle: never settles" in out["error"]
+
+
 def test_progress_lines_count_runs_and_estimate_the_time_left():
     now = [0.0]
     stream = io.StringIO()

@@ -24,6 +24,7 @@ Closed loop (sampled, zero-order hold)::
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Callable
 
@@ -31,6 +32,8 @@ from flexctrl.control.controller import Controller, ControllerStats
 from flexctrl.control.lqr import LQRController, design_lqr
 from flexctrl.control.mpc import MPCController, design_mpc
 from flexctrl.control.nmpc import NMPCController, design_nmpc
+from flexctrl.control.payload.lqr_payload import PayloadLQRController, design_lqr_payload
+from flexctrl.control.payload.mpc_payload import PayloadMPCController, design_mpc_payload
 from flexctrl.control.pd import PDController, design_pd
 from flexctrl.control.sampling_check import sampling_diagnosis
 from flexctrl.control.shaping import ShapedController, design_shaped
@@ -49,6 +52,7 @@ from flexctrl.spec.controller_settings import (
     ShapedSettings,
     Weights,
 )
+from flexctrl.spec.payload_settings import PayloadSettings
 
 
 def _check_holding_torque(model, op) -> None:
@@ -99,8 +103,30 @@ def has_linear_law(kind: str) -> bool:
     return callable(getattr(CONTROLLER_CLASSES[kind], "linear_law", None))
 
 
+#: Settings type -> the designer of its payload-aware controller (settings with ``payload``).
+PAYLOAD_DESIGNERS: dict[type, Callable[..., Controller]] = {
+    LQRSettings: design_lqr_payload,
+    MPCSettings: design_mpc_payload,
+}
+
+
+def _with_payload_range(settings, payload_range):
+    """``settings`` with a ``payload`` table over ``payload_range`` (kg), or as they are."""
+    if payload_range is None:
+        return settings
+    if type(settings) not in PAYLOAD_DESIGNERS:
+        raise SpecError(
+            f"a payload range does not apply to a {type(settings).__name__}; allowed: "
+            f"{', '.join(cls.__name__ for cls in PAYLOAD_DESIGNERS)}",
+            key="payload_range",
+        )
+    table = settings.payload or PayloadSettings()
+    values = tuple(payload_range) if isinstance(payload_range, (list, tuple)) else payload_range
+    return dataclasses.replace(settings, payload=dataclasses.replace(table, range=values))
+
+
 @keyword_checked
-def design(model, op, settings) -> Controller:
+def design(model, op, settings, *, payload_range=None) -> Controller:
     """Build the controller that ``settings`` describe for ``model``, regulating to ``op``.
 
     The settings' type names the controller: :class:`PDSettings` designs a
@@ -117,7 +143,13 @@ def design(model, op, settings) -> Controller:
     op : flexctrl.linear.OperatingPoint
         Target (usually :func:`flexctrl.linear.equilibrium` at the target joint angles).
     settings : PDSettings, LQRSettings, MPCSettings, NMPCSettings or ShapedSettings
-        E.g. from :func:`flexctrl.spec.controller_reader.load_controller`.
+        E.g. from :func:`flexctrl.spec.controller_reader.load_controller`.  LQR and MPC
+        settings with a ``payload`` table design a payload-aware controller
+        (:mod:`flexctrl.control.payload`).
+    payload_range : tuple of float, optional
+        ``(lightest, heaviest)`` payload, kg: design the payload-aware LQR or MPC over it
+        (the settings' ``payload`` table, or the defaults of
+        :class:`~flexctrl.spec.payload_settings.PayloadSettings`, with this range).
 
     Returns
     -------
@@ -144,7 +176,10 @@ def design(model, op, settings) -> Controller:
             f"{', '.join(cls.__name__ for cls in DESIGNERS)}",
             key="settings",
         )
+    settings = _with_payload_range(settings, payload_range)
     _check_holding_torque(model, op)
+    if getattr(settings, "payload", None) is not None:
+        designer = PAYLOAD_DESIGNERS[type(settings)]
     controller = designer(model, op, settings)
     diagnosis = sampling_diagnosis(model, op, settings.sample_time)
     if diagnosis.flagged:
@@ -167,6 +202,11 @@ __all__ = [
     "MPCController",
     "NMPCController",
     "ShapedController",
+    "PayloadLQRController",
+    "PayloadMPCController",
+    "design_mpc_payload",
+    "PAYLOAD_DESIGNERS",
+    "design_lqr_payload",
     "design_pd",
     "design_lqr",
     "design_mpc",

@@ -52,7 +52,7 @@ from flexctrl.dynamics.parametric import parametric
 from flexctrl.errors import SolverError, SpecError
 from flexctrl.linear import OperatingPoint, stiffness_matrix
 from flexctrl.sim.compile import QUICK_FLAGS, compile_for
-from flexctrl.spec.reference import DEFLECTIONS, JointReference, Move
+from flexctrl.spec.reference import DEFLECTIONS, JointReference, JointSequence, Move, MoveSequence
 
 
 def _damping_matrix(model, q):
@@ -192,7 +192,7 @@ class ReferenceTrajectory:
     def __init__(
         self,
         model,
-        path: JointReference,
+        path: JointReference | JointSequence,
         deflection: str = "quasi_static",
         *,
         tol: float = 1e-10,
@@ -382,7 +382,7 @@ class HoldReference:
         return self.op.x, self.op.u, self.op.u
 
 
-def reference_from_move(model, move: Move) -> ReferenceTrajectory:
+def reference_from_move(model, move: Move | MoveSequence) -> ReferenceTrajectory:
     """The reference a controller designed on ``model`` tracks along ``move``.
 
     The joint path of ``move`` with its elastic part (``move.deflection``) on ``model``: what
@@ -393,7 +393,7 @@ def reference_from_move(model, move: Move) -> ReferenceTrajectory:
     ----------
     model : flexctrl.dynamics.model.Model
         The controller's design model.
-    move : Move
+    move : Move or MoveSequence
         The joint move (rad, s).
 
     Returns

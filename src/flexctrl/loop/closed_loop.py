@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from flexctrl.control.payload.grid import model_with_payload
 from flexctrl.control.reference_trajectory import reference_from_move
 from flexctrl.errors import SpecError, keyword_checked
 from flexctrl.loop.mismatch import plant_sensors
@@ -16,7 +17,7 @@ from flexctrl.loop.run_summary import judge_run, run_summary
 from flexctrl.loop.sampled import simulate_closed_loop
 from flexctrl.loop.verdict import linear_closed_loop_radius
 from flexctrl.spec.closed_loop_scene import MetricSettings
-from flexctrl.spec.reference import JointReference, Move
+from flexctrl.spec.reference import JointReference, JointSequence, Move, MoveSequence
 
 
 @keyword_checked
@@ -33,6 +34,7 @@ def closed_loop(
     metrics: MetricSettings | None = None,
     on_divergence: str = "raise",
     compile: bool | None = None,
+    payload_changes=(),
 ) -> ClosedLoopResult:
     """Run ``controller`` on ``plant`` (default ``model``) along ``reference`` for ``duration`` s.
 
@@ -45,8 +47,9 @@ def closed_loop(
         The model the controller was designed on.
     controller : flexctrl.control.controller.Controller
         From :func:`flexctrl.design`; reset and given the reference.
-    reference : Move or JointReference
-        The joint path (rad, s).
+    reference : Move, MoveSequence or JointReference
+        The joint path (rad, s); a :class:`~flexctrl.spec.reference.MoveSequence` for moves one
+        after the other (out and back).
     duration : float
         Simulated time, s.
     plant : Model, optional
@@ -71,6 +74,11 @@ def closed_loop(
         ``settling_time`` are then NaN, the reason in ``summary["metric_notes"]``.
     compile : bool, optional
         Compile the plant's step to C (default: when a compiler is present).
+    payload_changes : sequence of (float, float)
+        ``(time s, mass kg)``: the plant's payload becomes ``mass`` from the first controller
+        sample at or after ``time`` (a grasp or release; give times when the arm is at rest).
+        The plant is rebuilt with that payload and the run continues from the same state.
+        The payload metrics judge the estimate against the payload at each sample.
 
     Returns
     -------
@@ -93,6 +101,7 @@ def closed_loop(
     judge = MetricSettings() if metrics is None else metrics
     _track(controller, model, move)
     sensors = _plant_sensors(model, plant, controller)
+    changes = _payload_changes(plant, controller, payload_changes)
     trajectory, _ = simulate_closed_loop(
         plant,
         controller,
@@ -104,11 +113,41 @@ def closed_loop(
         compile=compile,
         monitor=_monitor(plant, path, judge),
         stop_on_divergence=on_divergence == "record",
+        plant_changes=changes,
     )
-    return _result(trajectory, model, plant, controller, move, judge, float(duration), sensors)
+    truth = _payload_truth(plant, changes)
+    if changes:  # judged on the plant the run ends on
+        plant, sensors = changes[-1][1], changes[-1][2]
+    return _result(
+        trajectory, model, plant, controller, move, judge, float(duration), sensors, truth
+    )
 
 
-def _track(controller, model, move: Move) -> None:
+def _payload_changes(plant, controller, changes) -> list:
+    """``(time, plant, sensors)`` of every payload change, the plants rebuilt carrying it."""
+    out = []
+    for when, mass in changes:
+        for key, value, unit in (("time", when, "s"), ("mass", mass, "kg")):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+                raise SpecError(
+                    f"value {value!r} is not allowed; allowed: a number >= 0 ({unit})",
+                    key=f"payload_changes.{key}",
+                )
+        new = model_with_payload(plant, float(mass))
+        out.append((float(when), new, plant_sensors(new, controller.sensors, controller.op.joints)))
+    return sorted(out, key=lambda change: change[0])
+
+
+def _payload_truth(plant, changes):
+    """The plant's payload (kg), or a function of time (s) when it changes."""
+    if not changes:
+        return plant.spec.payload.mass
+    times = np.array([c[0] for c in changes])
+    masses = np.array([plant.spec.payload.mass] + [c[1].spec.payload.mass for c in changes])
+    return lambda t: masses[np.searchsorted(times, np.asarray(t) + 1e-9, side="right")]
+
+
+def _track(controller, model, move: Move | MoveSequence) -> None:
     """Reset ``controller`` and give it ``move``'s reference built on its design model."""
     controller.set_reference(reference_from_move(model, move))
     controller.reset()
@@ -121,7 +160,7 @@ def _plant_sensors(model, plant, controller):
     return plant_sensors(plant, controller.sensors, tuple(controller.op.joints))
 
 
-def _monitor(plant, path: JointReference, judge: MetricSettings):
+def _monitor(plant, path: JointReference | JointSequence, judge: MetricSettings):
     return divergence_monitor(
         plant,
         plant.spec,
@@ -132,7 +171,9 @@ def _monitor(plant, path: JointReference, judge: MetricSettings):
     )
 
 
-def _checked_move(model, controller, reference, duration, on_divergence: str) -> Move:
+def _checked_move(
+    model, controller, reference, duration, on_divergence: str
+) -> Move | MoveSequence:
     """The reference as a :class:`Move`, once the arguments are checked."""
     _check_arguments(controller, on_divergence)
     move = _as_move(reference)
@@ -159,7 +200,7 @@ def _check_arguments(controller, on_divergence: str) -> None:
         )
 
 
-def _check_path(model, path: JointReference, duration) -> None:
+def _check_path(model, path: JointReference | JointSequence, duration) -> None:
     """The path has one angle per joint and the run outlasts it."""
     if len(path.q_target) != model.n_u:
         raise SpecError(
@@ -186,7 +227,7 @@ def _plant_step(plant, controller, dt: float | None) -> float:
     return accurate_plant_step(plant, controller.sample_time)
 
 
-def _initial_state(plant, path: JointReference, x0) -> np.ndarray:
+def _initial_state(plant, path: JointReference | JointSequence, x0) -> np.ndarray:
     """``x0``, or the plant at rest at the path's start with undeformed links."""
     if x0 is None:
         x0 = np.zeros(plant.n_x)
@@ -206,7 +247,7 @@ def _noise(noise) -> np.random.Generator | None:
 
 
 def _result(
-    trajectory, model, plant, controller, move: Move, judge, duration: float, sensors
+    trajectory, model, plant, controller, move: Move | MoveSequence, judge, duration, sensors, truth
 ) -> ClosedLoopResult:
     """The run judged (metrics, linear verdict) and described (summary)."""
     path = move.joint_reference()
@@ -219,6 +260,7 @@ def _result(
         tip_target=tip_target,
         torque_limits=[getattr(j, "torque_limit", math.inf) for j in plant.spec.joints],
         radius=linear_closed_loop_radius(plant, controller, path.q_target, sensors),
+        true_payload=truth,
     )
     summary = run_summary(
         trajectory,
@@ -243,11 +285,18 @@ def _result(
         model=plant,
         controller=controller,
         reference=path,
+        payload_estimate=_payload_trace(controller),
     )
 
 
-def _as_move(reference) -> Move:
-    if isinstance(reference, Move):
+def _payload_trace(controller):
+    """A payload-aware controller's estimate trace (:class:`ClosedLoopResult`), else None."""
+    trace = getattr(controller, "payload_trace", None)
+    return None if trace is None else trace()
+
+
+def _as_move(reference) -> Move | MoveSequence:
+    if isinstance(reference, (Move, MoveSequence)):
         return reference
     if isinstance(reference, JointReference):
         return Move(

@@ -38,6 +38,10 @@ class RunCurves:
     torque_limits : sequence of N m (inf: unlimited)
     window : (start, end) s of the residual-vibration window, or None
     residual_rms : m, or None
+    payload : dict or None
+        A payload-aware controller's estimate: ``time`` (s), ``mean``, ``std``, ``design`` (kg).
+    payload_truth : float or None
+        The plant's payload, kg.
     """
 
     label: str
@@ -50,6 +54,8 @@ class RunCurves:
     torque_limits: Sequence[float] = field(default_factory=tuple)
     window: tuple[float, float] | None = None
     residual_rms: float | None = None
+    payload: dict | None = None
+    payload_truth: float | None = None
 
 
 @keyword_checked
@@ -67,8 +73,10 @@ def compare(results: Mapping[str, object], *, title: str | None = None):
     Panels, sharing the time axis (s): the tip's distance from its target (mm; log scale
     when the values span more than two decades), every link's tip deflection (mm; one
     line style per link), the applied torques (N m) with the joints' limits dashed, and
-    the joint angles (deg) with the reference dotted.  The residual-vibration window of
-    the first run is shaded.
+    the joint angles (deg) with the reference dotted and, when a run has a payload-aware
+    controller, its payload estimate (kg: mean with a +-2 std band, the design payload as
+    steps, the plant's payload dashed).  The residual-vibration window of the first run is
+    shaded.
 
     Returns
     -------
@@ -96,6 +104,8 @@ def _curves(label: str, result) -> RunCurves:
         limits,
         result.residual_window,
         result.metrics.get("tip_residual_rms"),
+        getattr(result, "payload_estimate", None),
+        getattr(getattr(spec, "payload", None), "mass", None),
     )
 
 
@@ -139,6 +149,7 @@ def _panels(runs: Sequence[RunCurves]):
         ["tip"] * any(r.tip_error is not None for r in runs)
         + ["w", "u"]
         + ["q"] * any(r.joints is not None for r in runs)
+        + ["m"] * any(r.payload is not None for r in runs)
     )
     fig = Figure(figsize=(8.0, 2.25 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
@@ -148,6 +159,7 @@ def _panels(runs: Sequence[RunCurves]):
         "w": "link tip deflection (mm)",
         "u": "torque (N m)",
         "q": "joint angle (deg)",
+        "m": "payload estimate (kg)",
     }
     window = runs[0].window
     for key, ax in axes.items():
@@ -185,7 +197,22 @@ def _draw_run(axes, index: int, run: RunCurves, highlight: str | None):
             axes["q"].plot(
                 run.time, np.degrees(run.joints[:, joint]), ls=_LINK_STYLES[joint % 4], **style
             )
+    if "m" in axes and run.payload is not None:
+        _draw_payload(axes["m"], run, style)
     return Line2D([], [], label=f"{run.label}{rms}", **style)
+
+
+def _draw_payload(ax, run: RunCurves, style: dict) -> None:
+    """The estimate's mean with a +-2 std band, the design payload as steps, the truth dashed."""
+    p = run.payload
+    if p is None:
+        return
+    ax.plot(p["time"], p["mean"], **style)
+    low, high = p["mean"] - 2 * p["std"], p["mean"] + 2 * p["std"]
+    ax.fill_between(p["time"], low, high, color=style["color"], alpha=0.15, lw=0)
+    ax.step(p["time"], p["design"], where="post", ls="--", **{**style, "lw": 0.7})
+    if run.payload_truth is not None:
+        ax.axhline(run.payload_truth, color="k", ls=":", lw=0.8)
 
 
 def _draw_limits(ax, limits: Sequence[float]) -> list:

@@ -50,6 +50,14 @@ diverged (the window may never have opened; what it would measure is the diverge
     The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`), when given.
 ``torque_limit_exceeded``
     Whether any applied torque went beyond its joint's limit.
+
+For a payload-aware controller (:mod:`flexctrl.control.payload`), :func:`payload_metrics`:
+
+``payload_estimate_error``
+    ``|estimate - truth|`` of the payload at the end of the run (kg).
+``payload_estimate_time``
+    Time (s) from which the estimate stays within :data:`PAYLOAD_BAND` of the truth to the end;
+    NaN (an empty cell) when it never does.
 """
 
 from __future__ import annotations
@@ -131,6 +139,47 @@ def closed_loop_metrics(
         "fallbacks": int(fallbacks),
         "solver_failures": int(solver_failures),
     }
+
+
+#: Band (kg) the payload estimate must stay within for ``payload_estimate_time``.
+PAYLOAD_BAND = 0.2
+
+
+def payload_metrics(trace: dict, truth, band: float = PAYLOAD_BAND) -> dict:
+    """``payload_estimate_error`` (kg) and ``payload_estimate_time`` (s) of an estimate's trace.
+
+    Parameters
+    ----------
+    trace : dict
+        ``time`` (s) and ``mean`` (kg) arrays: the estimate at every controller sample.
+    truth : float or callable
+        The plant's payload, kg, or ``truth(time) -> kg`` per sample (a payload that changes).
+    band : float
+        kg.
+
+    Returns
+    -------
+    dict
+        Empty when the trace is.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = payload_metrics({"time": np.arange(4.0), "mean": np.array([2.0, 1.5, 1.1, 1.05])}, 1.0)
+    >>> round(m["payload_estimate_error"], 3), m["payload_estimate_time"]
+    (0.05, 2.0)
+    """
+    t, mean = np.asarray(trace["time"], dtype=float), np.asarray(trace["mean"], dtype=float)
+    if t.size == 0:
+        return {}
+    true = np.broadcast_to(np.asarray(truth(t) if callable(truth) else truth, dtype=float), t.shape)
+    error = np.abs(mean - true)
+    outside = np.nonzero(error > band)[0]
+    if outside.size == 0:
+        since = float(t[0])
+    else:
+        since = float(t[outside[-1] + 1]) if outside[-1] + 1 < t.size else math.nan
+    return {"payload_estimate_error": float(error[-1]), "payload_estimate_time": since}
 
 
 #: Length (s) of the end of a run whose largest tip error decides ``stable`` (with the
@@ -340,6 +389,12 @@ METRIC_INFO: dict[str, MetricInfo] = {
     ),
     "torque_limit_exceeded": MetricInfo(
         "", "lower", "1: an applied torque went beyond its joint's limit", verdict=True
+    ),
+    "payload_estimate_error": MetricInfo(
+        "kg", "lower", "|payload estimate - true payload| at the end of the run", verdict=True
+    ),
+    "payload_estimate_time": MetricInfo(
+        "s", "lower", "time from which the payload estimate stays within 0.2 kg", verdict=True
     ),
     "peak_torque": MetricInfo("N m", "lower", "largest applied torque per joint"),
     "rms_torque": MetricInfo("N m", "lower", "RMS applied torque per joint"),

@@ -46,6 +46,9 @@ class ClosedLoopResult:
         The scene, when the run came from one.
     files : list of Path
         Files written by :meth:`save`.
+    payload_estimate : dict or None
+        A payload-aware controller's estimate at every sample: ``time`` (s), ``mean``, ``std``
+        and ``design`` (the payload designed for), kg; None for other controllers.
     """
 
     trajectory: Trajectory
@@ -56,6 +59,7 @@ class ClosedLoopResult:
     reference: Any = None
     scene: Any = None
     files: list[Path] = field(default_factory=list)
+    payload_estimate: dict[str, np.ndarray] | None = None
 
     @property
     def tip_error(self) -> np.ndarray:

@@ -39,6 +39,10 @@ class LoopRun:
         Measurement noise; None measures exactly.
     monitor : callable, optional
         ``monitor(t, x) -> str | None`` (:func:`flexctrl.loop.monitors.divergence_monitor`).
+    changes : sequence of (float, Model, Sensors, casadi.Function), optional
+        Plant swaps ``(time s, plant, its sensors, its advance)``, by time: from the first
+        sample at or after ``time`` the run continues on the new plant from the same state
+        (a payload grasped or released at rest: same coordinates, new masses and modes).
     """
 
     def __init__(
@@ -55,8 +59,10 @@ class LoopRun:
         n_samples: int,
         rng: np.random.Generator | None = None,
         monitor=None,
+        changes=(),
     ):
         self.plant, self.controller, self.sensors = plant, controller, sensors
+        self.changes = sorted(changes, key=lambda change: change[0])
         self.advance, self.rng, self.monitor = advance, rng, monitor
         self.dt, self.substeps, self.stride, self.n_samples = dt, substeps, stride, n_samples
         self.per = substeps // stride
@@ -76,6 +82,12 @@ class LoopRun:
         """Run sample ``k`` in Python; True when the run diverged in it."""
         Ts, per = self.controller.sample_time, self.per
         t = k * Ts
+        while self.changes and t >= self.changes[0][0] - 1e-9 * Ts:
+            _, self.plant, self.sensors, advance = self.changes.pop(0)
+            self._outputs, self._advance = (
+                BoundFunction(self.sensors.function),
+                BoundFunction(advance),
+            )
         y = self.sensors.with_noise(self._outputs(self.x, self.u)[0].ravel(), self.rng)
         self.u = u = self.controller.step(t, y)
         block = self._advance(self.x, u, self.dt)[0]

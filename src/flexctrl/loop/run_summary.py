@@ -12,23 +12,27 @@ from typing import Any
 
 import numpy as np
 
-from flexctrl.loop.metrics import metric_notes, run_metrics
+from flexctrl.loop.metrics import metric_notes, payload_metrics, run_metrics
 from flexctrl.sim.trajectory import Trajectory
 from flexctrl.spec.closed_loop_scene import MetricSettings
-from flexctrl.spec.reference import JointReference
+from flexctrl.spec.reference import JointReference, JointSequence
 
 
 def judge_run(
     trajectory: Trajectory,
     controller,
-    path: JointReference,
+    path: JointReference | JointSequence,
     judge: MetricSettings,
     *,
     tip_target: np.ndarray,
     torque_limits: Sequence[float],
     radius: float | None,
+    true_payload=None,
 ) -> dict[str, Any]:
     """Every metric of the run (:func:`flexctrl.loop.metrics.run_metrics`).
+
+    With a payload-aware controller (one with ``payload_trace()``) and ``true_payload``, also
+    :func:`flexctrl.loop.metrics.payload_metrics`.
 
     Parameters
     ----------
@@ -46,8 +50,10 @@ def judge_run(
         Per joint (N m).
     radius : float or None
         The linear verdict (:func:`flexctrl.loop.verdict.linear_closed_loop_radius`).
+    true_payload : float or callable, optional
+        The plant's payload (kg), or ``true_payload(time) -> kg``.
     """
-    return run_metrics(
+    metrics = run_metrics(
         trajectory,
         tip_target=tip_target,
         reference_joints=path.joints(trajectory.time),
@@ -60,6 +66,10 @@ def judge_run(
         step_times=controller.stats.step_times,
         radius=radius,
     )
+    trace = getattr(controller, "payload_trace", None)
+    if trace is not None and true_payload is not None:
+        metrics.update(payload_metrics(trace(), true_payload))
+    return metrics
 
 
 def _damping(plant) -> dict[str, Any] | None:
@@ -78,7 +88,7 @@ def run_summary(
     plant,
     payload: float,
     design: dict[str, Any],
-    path: JointReference,
+    path: JointReference | JointSequence,
     deflection: str,
     tip_target: np.ndarray,
     judge: MetricSettings,

@@ -114,6 +114,7 @@ def simulate_closed_loop(
     compile: bool | None = None,
     monitor=None,
     stop_on_divergence: bool = False,
+    plant_changes=(),
 ) -> tuple[Trajectory, np.ndarray]:
     """Run ``controller`` on ``plant`` from ``x0`` for ``duration`` s with plant step ``dt`` s.
 
@@ -144,6 +145,11 @@ def simulate_closed_loop(
     stop_on_divergence : bool
         On divergence, return the trajectory up to the last finite state with
         ``meta["divergence"] = {"time": t (s), "reason": str}`` instead of raising.
+    plant_changes : sequence of (float, Model, Sensors)
+        ``(time s, plant, its sensors)``: the plant the run continues on from the first sample
+        at or after ``time`` (same coordinates; a payload grasped or released at rest).  The
+        samples then run in Python, and the tip and deflections after a change are the new
+        plant's.
 
     Returns
     -------
@@ -168,8 +174,16 @@ def simulate_closed_loop(
         compile=compile,
         monitor=monitor,
         stop_on_divergence=stop_on_divergence,
+        plant_changes=plant_changes,
     )
-    return trajectory_from_states(plant, t, X, U, meta, compile=compile), samples
+    trajectory = trajectory_from_states(plant, t, X, U, meta, compile=compile)
+    for time_s, new_plant, _sensors in plant_changes:
+        after = t >= time_s - 1e-9 * controller.sample_time
+        if np.any(after):
+            Y = evaluate(output_map(new_plant, int(after.sum()), compile, energies=False), X[after])
+            trajectory.tip[after] = Y[0][:, 0:2]
+            trajectory.deflections[after] = Y[0][:, 2:]
+    return trajectory, samples
 
 
 def integrate_closed_loop(
@@ -185,6 +199,7 @@ def integrate_closed_loop(
     monitor=None,
     stop_on_divergence: bool = False,
     stride: int = 1,
+    plant_changes=(),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
     """The loop of :func:`simulate_closed_loop` without the trajectory's derived signals.
 
@@ -195,6 +210,8 @@ def integrate_closed_loop(
     stride : int
         Keep every ``stride``-th plant sample (a whole divisor of ``Ts/dt``), e.g. to
         compare runs at different plant steps on a common grid of ``stride * dt`` s.
+    plant_changes : sequence of (float, Model, Sensors)
+        As in :func:`simulate_closed_loop`.
 
     Returns
     -------
@@ -215,6 +232,10 @@ def integrate_closed_loop(
     _check_stride(stride, substeps)
     setup = time.perf_counter()
     advance, compiled = advance_function(plant, substeps, compile)
+    changes = [
+        (float(when), new, sensors, advance_function(new, substeps, compile)[0])
+        for when, new, sensors in plant_changes
+    ]
     setup = time.perf_counter() - setup
     run = LoopRun(
         plant,
@@ -228,6 +249,7 @@ def integrate_closed_loop(
         n_samples=int(math.ceil(duration / Ts - 1e-9)),
         rng=rng,
         monitor=monitor,
+        changes=changes,
     )
     wall = time.perf_counter()
     used = run_samples(run)
@@ -259,7 +281,7 @@ def run_samples(run: LoopRun) -> str:
         return "python"
     if run.done >= run.n_samples:
         return "python"
-    law = run.controller.sampled_law()
+    law = None if run.changes else run.controller.sampled_law()
     if law is None:
         for k in range(run.done, run.n_samples):
             if run.python_sample(k):

@@ -71,6 +71,18 @@ class LoopSetup:
     #: What the designed controller depends on (the key of ``cache``'s "designs"; None for a
     #: designed controller).
     design_key: Any = None
+    #: The scene's payload changes: ``(time s, plant, its sensors)`` (:func:`payload_plants`).
+    changes: list = dataclasses.field(default_factory=list)
+
+    @property
+    def final_plant(self):
+        """The plant the run ends on (after the last payload change)."""
+        return self.changes[-1][1] if self.changes else self.plant
+
+    @property
+    def final_sensors(self):
+        """The controller's sensors on :attr:`final_plant`."""
+        return self.changes[-1][2] if self.changes else self.sensors
 
 
 def design_scene_controller(scene, design_model, settings, path: str | Path, reference=None):
@@ -186,7 +198,20 @@ def build_loop(
         ),
         time.perf_counter() - start,
         design.key,
+        payload_plants(scene, arm, ctrl, design.q, cache),
     )
+
+
+def payload_plants(scene, arm, ctrl, design_q, cache: SceneCache) -> list:
+    """``(time, plant, sensors)`` of the scene's payload changes, each plant rebuilt with it."""
+    plant_scene = scene.plant
+    out = []
+    for when, mass in scene.payload_changes:
+        plant = cache.model(
+            arm.with_payload(mass), str(plant_scene.fidelity), plant_scene.modes, plant_scene.q0
+        )
+        out.append((when, plant, plant_sensors(plant, ctrl.sensors, design_q)))
+    return out
 
 
 @dataclass(frozen=True)

@@ -229,14 +229,16 @@ def _run(setup: LoopSetup, on_divergence: str):
         compile=plant_scene.solver.get("compile"),
         monitor=setup.monitor,
         stop_on_divergence=on_divergence == "record",
+        plant_changes=setup.changes,
     )
     return trajectory
 
 
 def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> ClosedLoopResult:
     """The run judged (metrics, linear verdict) and described (``summary.json``)."""
-    scene, plant, ctrl = setup.scene, setup.plant, setup.controller
-    tip_target = tip_at_rest(plant, scene.target_q)
+    scene, plant, ctrl = setup.scene, setup.final_plant, setup.controller
+    trace = getattr(ctrl, "payload_trace", None)
+    tip_target = tip_at_rest(plant, scene.final_q)
     judge = scene.metric_settings
     metrics = judge_run(
         trajectory,
@@ -246,6 +248,7 @@ def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> Close
         tip_target=tip_target,
         torque_limits=[j.torque_limit for j in setup.arm.joints],
         radius=loop_radius(setup, cache),
+        true_payload=_payload_truth(setup),
     )
     summary = {
         "scene": requested.settings(),
@@ -275,6 +278,7 @@ def _result(setup: LoopSetup, trajectory, requested, cache: SceneCache) -> Close
         controller=ctrl,
         reference=setup.reference,
         scene=scene,
+        payload_estimate=None if trace is None else trace(),
     )
 
 
@@ -290,6 +294,16 @@ def _record_choice(result: ClosedLoopResult, choice, dt: float, choosing: float)
     result.summary["fidelity_choice"] = choice.to_dict()
 
 
+def _payload_truth(setup: LoopSetup):
+    """The plant's payload (kg), or a function of time (s) when the scene changes it."""
+    changes = setup.scene.payload_changes
+    if not changes:
+        return setup.arm.payload.mass
+    times = np.array([t for t, _ in changes])
+    masses = np.array([setup.arm.payload.mass] + [m for _, m in changes])
+    return lambda t: masses[np.searchsorted(times, np.asarray(t) + 1e-9, side="right")]
+
+
 def loop_radius(setup, cache: SceneCache) -> float | None:
     """The linear verdict of a set-up loop.
 
@@ -298,7 +312,7 @@ def loop_radius(setup, cache: SceneCache) -> float | None:
 
     def compute():
         return linear_closed_loop_radius(
-            setup.plant, setup.controller, setup.scene.target_q, setup.sensors
+            setup.final_plant, setup.controller, setup.scene.final_q, setup.final_sensors
         )
 
     if setup.design_key is None:
@@ -310,7 +324,9 @@ def loop_radius(setup, cache: SceneCache) -> float | None:
         str(plant.fidelity),
         plant.modes,
         plant.q0,
-        tuple(setup.scene.target_q),
+        tuple(setup.scene.final_q),
+        setup.scene.payload_changes,
+        getattr(setup.controller, "law_key", lambda: None)(),
     )
     return cache.get("verdicts", key, compute)
 

@@ -17,6 +17,11 @@ zero-order hold.  The extra keys::
                move_time = 1.5           # s, duration of the quintic (required with it)
                deflection = "quasi_static"   # elastic reference of LQR/MPC/NMPC: "quasi_static"
                                              # or "static"
+    [return]   t_start = 4.0             # s: move back to the initial joint angles from then on
+                                         # (same profile and move time); the run is judged there
+    [[payload_changes]]                  # the plant's payload steps at rest (a grasp, a release)
+               time = 3.0                # s
+               mass = 4.0                # kg, from then on
     [noise]    enabled = true, seed = 0  # measurement noise as set in the controller's sensors
     [metrics]  settle_allowance = 2.0 (s), band = 1e-3 (m)
                divergence_deflection = 0.1   # a link tip deflection beyond this fraction of the
@@ -46,7 +51,7 @@ from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
 from flexctrl.spec.reader import TableReader
-from flexctrl.spec.reference import DEFLECTIONS, PROFILES, JointReference
+from flexctrl.spec.reference import DEFLECTIONS, PROFILES, JointReference, JointSequence
 
 
 @dataclass(frozen=True)
@@ -86,6 +91,8 @@ _EXTRA_KEYS = (
     "target",
     "noise",
     "metrics",
+    "return",
+    "payload_changes",
 )
 
 
@@ -110,6 +117,8 @@ class ClosedLoopScene:
     divergence_angle: float = math.pi / 2
     stable_band: float = 0.01
     kind: str = "closed_loop"
+    return_at: float | None = None
+    payload_changes: tuple[tuple[float, float], ...] = ()
 
     @property
     def name(self) -> str:
@@ -130,13 +139,29 @@ class ClosedLoopScene:
         return self.design_q if self.design_q is not None else self.target_q
 
     def joint_reference(self):
-        """The :class:`~flexctrl.spec.reference.JointReference` from the start to the target."""
-        return JointReference(self.start_q, self.target_q, self.profile, self.move_time)
+        """The :class:`~flexctrl.spec.reference.JointReference` from the start to the target.
+
+        With a ``[return]`` table, a :class:`~flexctrl.spec.reference.JointSequence` that moves
+        back to the start at ``return_at``.
+        """
+        out = JointReference(self.start_q, self.target_q, self.profile, self.move_time)
+        if self.return_at is None:
+            return out
+        back = JointReference(
+            self.target_q, self.start_q, self.profile, self.move_time, self.return_at
+        )
+        return JointSequence((out, back))
+
+    @property
+    def final_q(self) -> tuple[float, ...]:
+        """Joint angles (rad) the run ends at: the target, or the start after a return move."""
+        return self.target_q if self.return_at is None else self.start_q
 
     @property
     def t_arrive(self) -> float:
-        """Time (s) the reference reaches the target: 0 for a step, ``move_time`` for a quintic."""
-        return self.move_time if self.profile == "quintic" else 0.0
+        """Time (s) the reference arrives for good: 0 for a step, ``move_time`` for a quintic
+        (after the return move with a ``[return]`` table)."""
+        return self.joint_reference().t_arrive
 
     @property
     def metric_settings(self) -> MetricSettings:
@@ -161,6 +186,8 @@ class ClosedLoopScene:
             "design_configuration_deg": [math.degrees(a) for a in self.design_configuration],
             "controller": str(self.controller) if self.controller else None,
             "design_payload_kg": self.design_payload,
+            "return_at_s": self.return_at,
+            "payload_changes": [{"time_s": t, "mass_kg": m} for t, m in self.payload_changes],
             "controller_fidelity": str(self.controller_fidelity)
             if self.controller_fidelity
             else None,
@@ -193,9 +220,11 @@ def read_closed_loop_scene(
     enabled, seed = noise.boolean("enabled", False), noise.integer("seed", 0, low=0)
     noise.finish()
     judge = _read_metrics(r.table_of("metrics", {}))
-    r.finish()
-    t_arrive = target.move_time if target.profile == "quintic" else 0.0
     move_time = target.move_time if target.profile == "quintic" else 0.0
+    return_at = _read_return(r, move_time)
+    changes = _read_payload_changes(r, plant.duration)
+    r.finish()
+    t_arrive = move_time if return_at is None else return_at + move_time
     if t_arrive + judge.settle_allowance >= plant.duration:
         raise r.error(
             "metrics.settle_allowance",
@@ -220,7 +249,33 @@ def read_closed_loop_scene(
         judge.divergence_deflection,
         judge.divergence_angle,
         judge.stable_band,
+        return_at=return_at,
+        payload_changes=changes,
     )
+
+
+def _read_return(r: TableReader, move_time: float) -> float | None:
+    """``[return]``: ``t_start`` (s) of the move back to the start, or None."""
+    if not r.has("return"):
+        return None
+    table = r.table_of("return")
+    t_start = table.number(
+        "t_start", low=move_time, unit=f"s, at or after the arrival {move_time:g}"
+    )
+    table.finish()
+    return t_start
+
+
+def _read_payload_changes(r: TableReader, duration: float) -> tuple[tuple[float, float], ...]:
+    """``[[payload_changes]]``: ``(time s, mass kg)`` by time, or none."""
+    if not r.has("payload_changes"):
+        return ()
+    changes = []
+    for table in r.tables("payload_changes", min_count=1):
+        when = table.number("time", low=0.0, high=duration, unit="s, within the run")
+        changes.append((when, table.nonnegative("mass", unit="kg")))
+        table.finish()
+    return tuple(sorted(changes))
 
 
 def _read_controller(r: TableReader, base_dir: Path) -> Path | None:

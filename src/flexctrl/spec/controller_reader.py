@@ -48,6 +48,7 @@ from flexctrl.spec.controller_settings import (
 )
 from flexctrl.spec.mpc_constraints import read_constraints
 from flexctrl.spec.overrides import apply_overrides
+from flexctrl.spec.payload_settings import read_payload
 from flexctrl.spec.raw_weights import read_raw_weights
 from flexctrl.spec.reader import TableReader, read_toml
 from flexctrl.spec.sensors import SENSOR_KINDS
@@ -276,6 +277,7 @@ def _read_lqr(r: TableReader) -> LQRSettings:
         "schedule": _schedule(r),
         "saturate": r.boolean("saturate", d.saturate),
         "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
+        "payload": read_payload(r),
     }
     return _build(r, LQRSettings, {**values, **raw})
 
@@ -327,6 +329,7 @@ def _read_mpc(r: TableReader) -> MPCSettings:
         "sensors": _sensors(r, d.sensors),
         "estimator": _estimator(r),
         "on_bad_measurement": _on_bad_measurement(r, d.on_bad_measurement),
+        "payload": read_payload(r),
     }
     return _build(r, MPCSettings, {**values, **raw})
 

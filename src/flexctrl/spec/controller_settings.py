@@ -47,6 +47,7 @@ from flexctrl.spec.field_checks import (
     numbers_field,
 )
 from flexctrl.spec.mpc_settings import MPCSettings, NMPCSettings, OSQPSettings
+from flexctrl.spec.payload_settings import PayloadSettings
 from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
@@ -229,6 +230,9 @@ class LQRSettings:
         (``"raise"``), or the sample is skipped (``"hold"``): the estimator predicts with the
         torque applied, without a correction, the gain acts on the prediction, and the
         sample is counted in ``stats.status["held"]``.  A wrong length always raises.
+    payload : PayloadSettings or None
+        A payload range instead of the design model's one payload: the controller is
+        payload-aware (:mod:`flexctrl.control.payload`).
     """
 
     kind: Literal["lqr"] = "lqr"
@@ -241,6 +245,7 @@ class LQRSettings:
     on_bad_measurement: BadMeasurement = "raise"
     Q: Matrix | None = None
     R: Matrix | None = None
+    payload: PayloadSettings | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Q", weight_matrix("Q", self.Q))
@@ -326,6 +331,7 @@ __all__ = [
     "MPCSettings",
     "NMPCSettings",
     "ShapedSettings",
+    "PayloadSettings",
     "ControllerSettings",
     "SETTINGS",
     "ControllerKind",

@@ -40,6 +40,7 @@ from flexctrl.spec.field_checks import (
     number_field,
 )
 from flexctrl.spec.mpc_constraints import Bound, checked_bounds
+from flexctrl.spec.payload_settings import PayloadSettings
 from flexctrl.spec.raw_weights import Matrix, weight_matrix
 
 
@@ -175,6 +176,9 @@ class MPCSettings:
         OSQP's settings (backend ``"osqp"``).
     sensors, estimator, on_bad_measurement
         As for LQR (a held sample solves the QP on the estimator's prediction).
+    payload : PayloadSettings or None
+        A payload range instead of the design model's one payload: the controller is
+        payload-aware (:mod:`flexctrl.control.payload`).
     """
 
     kind: Literal["mpc"] = "mpc"
@@ -203,6 +207,7 @@ class MPCSettings:
     Q: Matrix | None = None
     R: Matrix | None = None
     constraints: tuple[Bound, ...] = ()
+    payload: PayloadSettings | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Q", weight_matrix("Q", self.Q))

@@ -183,6 +183,118 @@ class Move:
         return self.joint_reference().t_arrive
 
 
+@dataclass(frozen=True)
+class JointSequence:
+    """Point-to-point joint paths one after the other (each a :class:`JointReference`).
+
+    The same interface as :class:`JointReference`: ``q_start`` is the first path's start,
+    ``q_target`` the last one's target, ``t_arrive`` the last one's arrival, and the joint
+    angles are the first start plus every path's travel so far.
+
+    Attributes
+    ----------
+    legs : tuple of JointReference
+        Each starts where the previous ends, at or after its arrival.
+    """
+
+    legs: tuple[JointReference, ...]
+
+    def __post_init__(self) -> None:
+        if not self.legs:
+            raise SpecError("no moves; allowed: one or more", key="moves")
+        for i, (a, b) in enumerate(zip(self.legs, self.legs[1:]), 2):
+            if not np.allclose(a.q_target, b.q_start, atol=1e-12):
+                raise SpecError(
+                    f"move {i} starts at {np.degrees(b.q_start).round(6).tolist()} deg, not where "
+                    f"move {i - 1} ends; allowed: consecutive moves",
+                    key="moves",
+                )
+            if b.t_start < a.t_arrive - 1e-12:
+                raise SpecError(
+                    f"move {i} starts at {b.t_start:g} s, before move {i - 1} arrives at "
+                    f"{a.t_arrive:g} s; allowed: one move at a time",
+                    key="moves",
+                )
+
+    @property
+    def q_start(self) -> tuple[float, ...]:
+        """The first move's start, rad."""
+        return self.legs[0].q_start
+
+    @property
+    def q_target(self) -> tuple[float, ...]:
+        """The last move's target, rad."""
+        return self.legs[-1].q_target
+
+    @property
+    def t_start(self) -> float:
+        """The first move's start, s."""
+        return self.legs[0].t_start
+
+    @property
+    def t_arrive(self) -> float:
+        """The last move's arrival, s."""
+        return self.legs[-1].t_arrive
+
+    def derivatives(self, t, order: int = 2) -> tuple[np.ndarray, ...]:
+        """``(q, qd, qdd[, qddd])`` at the times ``t`` (s), as in :class:`JointReference`."""
+        parts = [leg.derivatives(t, order) for leg in self.legs]
+        out = [np.sum([p[k] for p in parts], axis=0) for k in range(order + 1)]
+        starts = [np.asarray(leg.q_start, dtype=float) for leg in self.legs[1:]]
+        if starts:
+            out[0] = out[0] - np.sum(starts, axis=0)
+        return tuple(out)
+
+    def joints(self, t) -> np.ndarray:
+        """Joint angles (T, n), rad, at the times ``t`` (s)."""
+        return self.derivatives(t, order=0)[0]
+
+    def settings(self) -> dict:
+        """Plain data (angles in degrees): one entry per move."""
+        return {"moves": [leg.settings() for leg in self.legs], "t_arrive_s": self.t_arrive}
+
+
+@dataclass(frozen=True)
+class MoveSequence:
+    """Moves one after the other for :func:`flexctrl.closed_loop` (e.g. out and back).
+
+    Parameters
+    ----------
+    moves : tuple of Move
+        Each starts where the previous ends, at or after its arrival (its own ``t_start``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = Move(np.radians([0, 0, 0]), np.radians([30, 0, 0]), time=1.5)
+    >>> back = Move(np.radians([30, 0, 0]), np.radians([0, 0, 0]), time=1.5, t_start=4.0)
+    >>> both = MoveSequence((out, back))
+    >>> q = both.joint_reference().joints([3.0])[0]
+    >>> both.t_arrive, [round(float(np.degrees(a)), 3) for a in q]
+    (5.5, [30.0, 0.0, 0.0])
+    """
+
+    moves: tuple[Move, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "moves", tuple(self.moves))
+        self.joint_reference()
+
+    @property
+    def deflection(self) -> str:
+        """The first move's deflection reference."""
+        return self.moves[0].deflection
+
+    def joint_reference(self) -> JointSequence:
+        """The joint paths as a :class:`JointSequence` (rad, s)."""
+        return JointSequence(tuple(m.joint_reference() for m in self.moves))
+
+    @property
+    def t_arrive(self) -> float:
+        """Time (s) the last move arrives."""
+        return self.joint_reference().t_arrive
+
+
 def _angles(values, key: str) -> tuple[float, ...]:
     try:
         angles = tuple(float(a) for a in np.atleast_1d(np.asarray(values, dtype=float)))

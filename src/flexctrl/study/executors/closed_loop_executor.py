@@ -43,8 +43,10 @@ def check_settings(settings: dict) -> None:
 
 
 def unavailable_metrics(settings: dict) -> dict[str, str]:
-    """The metrics this run cannot produce, from its controller's kind: ``closed_loop_radius`` needs
-    a linear law."""
+    """The metrics this run cannot produce, from its controller file.
+
+    ``closed_loop_radius`` needs a linear law; the payload metrics a ``[payload]`` table.
+    """
     from flexctrl.control import has_linear_law
 
     controller = settings.get("controller") or getattr(
@@ -52,13 +54,17 @@ def unavailable_metrics(settings: dict) -> dict[str, str]:
     )
     if not controller:
         return {}
-    kind = load_controller(controller, overrides_for(settings, "controller")).kind
-    if has_linear_law(kind):
-        return {}
-    return {
-        "closed_loop_radius": f"a {kind} controller has no linear law, so no linear verdict "
-        "(flexctrl.loop.verdict)"
-    }
+    controller_settings = load_controller(controller, overrides_for(settings, "controller"))
+    kind = controller_settings.kind
+    missing = {}
+    if getattr(controller_settings, "payload", None) is None:
+        reason = "a controller without a [payload] table has no payload estimate"
+        missing = {"payload_estimate_error": reason, "payload_estimate_time": reason}
+    if not has_linear_law(kind):
+        missing["closed_loop_radius"] = (
+            f"a {kind} controller has no linear law, so no linear verdict (flexctrl.loop.verdict)"
+        )
+    return missing
 
 
 def execute(settings: dict) -> RunOutput:
@@ -112,7 +118,9 @@ def execute(settings: dict) -> RunOutput:
         series[f"q{i + 1}"] = traj.states[:, i]
         series[f"u{i + 1}"] = traj.inputs[:, i]
         series[f"w{i + 1}"] = traj.deflections[:, i]
-    notes = result.summary.get("metric_notes", {})
+    notes = dict(result.summary.get("metric_notes", {}))
+    if math.isnan(metrics.get("payload_estimate_time", 0.0)):
+        notes["payload_estimate_time"] = "the payload estimate never stays within 0.2 kg"
     return RunOutput(metrics=metrics, trajectories=series, notes=notes)
 
 
