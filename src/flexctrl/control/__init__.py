@@ -184,8 +184,9 @@ def design(model, op, settings, *, payload_range=None) -> Controller:
     diagnosis = sampling_diagnosis(model, op, settings.sample_time)
     if diagnosis.flagged:
         controller.design_diagnosis = diagnosis
+        # stacklevel 3: the caller of design, past the keyword_checked wrapper
         warnings.warn(
-            f"'{settings.kind}' controller: {diagnosis.message()}", DesignWarning, stacklevel=2
+            f"'{settings.kind}' controller: {diagnosis.message()}", DesignWarning, stacklevel=3
         )
     return controller
 
