@@ -7,8 +7,8 @@ and resumed, so a second ``make figures`` only redraws; ``--fresh`` reruns them)
     PD, LQR and MPC (``controllers/``) on the 30-degree joint-1 move at 2 kg (amm:2,
     horizontal plane, 1.5 s quintic, 8 s), drawn by ``fc.compare``: the README's example.
 ``stability_map.png``
-    ``studies/controller_stability.toml`` with PD, LQR and the robust controller only
-    (3 payloads x 12 poses x 3 controllers = 108 runs, about 2-3 minutes on 2 workers);
+    ``studies/controller_stability.toml`` with PD, LQR, the payload-aware LQR and the robust
+    controller only (3 payloads x 12 poses x 4 controllers = 144 runs);
     the study report's map of ``stable``.
 ``pareto.png``
     ``studies/speed_vs_accuracy.toml`` on the bang-bang scene at 2 kg, the straight arm,
@@ -95,7 +95,7 @@ def stability_map(args) -> Path:
         "studies/controller_stability.toml",
         [
             'grid.controller=["../controllers/pd.toml", "../controllers/lqr.toml", '
-            '"../controllers/robust.toml"]'
+            '"../controllers/lqr_payload.toml", "../controllers/robust.toml"]'
         ],
         args,
     )
