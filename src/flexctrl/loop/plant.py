@@ -136,7 +136,12 @@ def plant_measurements(model, measurements, q_joints) -> Sensors:
 
 
 class Plant:
-    """The nonlinear ``model`` stepped one sample at a time (see the module docstring).
+    """The nonlinear ``model`` stepped one sample at a time, for loops of one's own.
+
+    ``y = plant.step(u)`` holds the torques ``u`` (N m, clipped to the joints' limits) over one
+    sample and returns the next measurement; :meth:`output` is the measurement now. The step
+    is the one :func:`flexctrl.closed_loop` compiles (RK4 at ``dt``), so an own loop of
+    ``ctrl.step`` and ``plant.step`` runs what ``closed_loop`` runs.
 
     Parameters
     ----------
