@@ -1,5 +1,5 @@
-"""Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports sweep
-(issue 7).
+"""Baumgarte stabilisation under Newmark: discrete error dynamics and the beam-over-supports
+sweep.
 
 Constraint-error dynamics (see ``docs/explanation/baumgarte.md`` for the derivation)
     :mod:`flexctrl.dynamics.fem.newmark_dae` imposes Eq 49, ``Phi_q qdd = h - 2 gamma Phidot
