@@ -243,3 +243,16 @@ def test_bounds_the_model_lacks_are_named_at_design(onelink, rigid):
         MPCSettings(backend="hpipm", constraints=(Bound("du1", -1.0, 1.0),))
     with pytest.raises(SpecError, match="twice"):
         MPCSettings(constraints=(Bound("q1", -1.0, 1.0), Bound("q1", 0.0, 1.0)))
+
+
+def test_a_hard_bound_the_target_breaks_is_refused_at_design_and_a_soft_one_is_not(onelink):
+    model, op = onelink
+    q1 = float(op.x[0])
+    outside = Bound("q1", q1 + 0.1, q1 + 0.2)
+    with pytest.raises(SpecError) as info:
+        fc.design(model, op, MPCSettings(constraints=(outside,)))
+    assert info.value.key == "constraints.q1" and "could never settle" in str(info.value)
+    soft = dataclasses.replace(outside, soft=True)
+    assert fc.design(model, op, MPCSettings(constraints=(soft,))).settings.constraints == (soft,)
+    inside = Bound("q1", q1 - 0.1, q1 + 0.1)
+    fc.design(model, op, MPCSettings(constraints=(inside,)))

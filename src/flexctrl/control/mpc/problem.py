@@ -265,7 +265,8 @@ def bound_rows(model, op: OperatingPoint, bounds, weights, h: float):
     Raises
     ------
     SpecError
-        For a joint or link the model does not have, or a link without modes.
+        For a joint or link the model does not have, a link without modes, or a hard
+        bound the target itself breaks.
     """
     N = model.n_q
     q = ca.SX.sym("q", N)
@@ -303,6 +304,13 @@ def bound_rows(model, op: OperatingPoint, bounds, weights, h: float):
             value, scale = tip[b.index, 0], h
         else:
             continue
+        if not b.soft and not b.lower <= value <= b.upper:
+            raise SpecError(
+                f"the target has {b.signal} = {value:.6g}, outside the hard bound "
+                f"[{b.lower:g}, {b.upper:g}] (SI units): the MPC could never settle there; "
+                "allowed: a hard bound the target satisfies, or a soft one",
+                key=f"constraints.{b.signal}",
+            )
         out.append((row, value, b.lower, b.upper, scale, not b.soft))
     if not out:
         empty = np.zeros(0)
