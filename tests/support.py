@@ -2,6 +2,9 @@
 
 from pathlib import Path
 
+import numpy as np
+
+import flexctrl as fc
 from flexctrl.spec.shipped import data_root
 
 #: The repository (the tests, docs and README live here).
@@ -10,3 +13,16 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = data_root()
 #: The three-link arm of Subedi et al. (2021).
 MODEL = DATA / "models" / "subedi3link.toml"
+
+
+def scene_arm(payload: float, fidelity: str = "amm:2", start_deg=(0.0, 0.0, 90.0)):
+    """The move scenes' arm at ``payload`` kg: horizontal, 0.5 % structural damping on every
+    link, modes frozen at the move's start ``start_deg`` (degrees)."""
+    return fc.load_model(
+        "subedi3link",
+        payload=payload,
+        fidelity=fidelity,
+        gravity=[0.0, 0.0],
+        overrides={f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)},
+        reference_q=np.radians(start_deg),
+    )

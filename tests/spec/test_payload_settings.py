@@ -52,6 +52,15 @@ def test_rates_in_the_file_are_degrees():
         ({"excitation_rate_deg_s": -1.0}, "payload.excitation_rate_deg_s", "out of range"),
         ({"excitation_window": 0}, "payload.excitation_window", "not allowed"),
         ({"tempr": 0.1}, "payload.tempr", "did you mean 'temper'"),
+        ({"rest_torque_noise": 0.01}, "payload.rest_torque_noise", "is given alone"),
+        ({"identify_modal_force_noise": 0.01}, "payload.identify_modal_force_noise", "alone"),
+        (
+            {"rest_torque_noise": -1.0, "rest_modal_force_noise": 0.0},
+            "payload.rest_torque_noise",
+            ">= 0",
+        ),
+        ({"rest_delay": -0.1}, "payload.rest_delay", ">= 0"),
+        ({"rest_dealy": 0.1}, "payload.rest_dealy", "did you mean 'rest_delay'"),
     ],
 )
 def test_bad_values_name_the_file_key_and_what_is_allowed(table, key, words):

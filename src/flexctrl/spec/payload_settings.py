@@ -19,6 +19,11 @@ File keys (masses in kg, rates in deg/s as every angle in the files)::
     excitation_window = 5          # samples the joint rate is measured over
     err_light_sigmas = 2.0         # design at the grid point at or below mean - this * std
     coriolis = true                # remove the rigid velocity-product torques from the bank's input
+    rest_torque_noise = 0.02       # N m, the filters' torque noise while the reference rests
+    rest_modal_force_noise = 0.001 # N, their modal force noise then (both or neither)
+    rest_delay = 0.2               # s after the reference stops before the filters slow down
+    identify_torque_noise = 0.2    # N m, the identification filters' torque noise (both or neither)
+    identify_modal_force_noise = 0.01  # N, their modal force noise
 
 >>> PayloadSettings().grid_points()[:3]
 (0.0, 0.25, 0.5)
@@ -74,6 +79,21 @@ class PayloadSettings:
     coriolis : bool
         Subtract the rigid model's velocity-product torques (affine in the payload) from the
         torque each filter of the bank sees; the linearisation at rest drops them.
+    rest_torque_noise, rest_modal_force_noise : float or None
+        The filters' process noise (N m per joint, N per elastic coordinate) while the
+        reference rests; None (both): the ``[estimator]`` levels throughout.  From the sample
+        the reference stops, each filter's covariance follows the Riccati recursion from the
+        moving filter's steady state with these levels (a time-varying Kalman filter): it
+        keeps tracking the move's last vibration, then averages the sensor noise over the
+        whole time at rest, so the joints are held to a fraction of the encoder noise.
+    rest_delay : float
+        s from the reference's stop to the filters' slowing down: the move's last transient
+        is tracked by the moving filter (a slow filter would turn it into a slow offset).
+    identify_torque_noise, identify_modal_force_noise : float or None
+        Process noise (N m, N) of a second bank of filters used only to score the payloads;
+        None (both): the bank scores the control filters (the ``[estimator]`` levels).  A
+        filter that trusts its model more tells the payloads apart better, one that follows
+        the sensors more tracks the move better: with these keys each does one job.
     """
 
     range: tuple[float, float] = (0.0, 4.0)
@@ -87,6 +107,11 @@ class PayloadSettings:
     excitation_window: int = 5
     err_light_sigmas: float = 2.0
     coriolis: bool = True
+    rest_torque_noise: float | None = None
+    rest_modal_force_noise: float | None = None
+    rest_delay: float = 0.2
+    identify_torque_noise: float | None = None
+    identify_modal_force_noise: float | None = None
 
     def __post_init__(self) -> None:
         low, high = self._checked_range()
@@ -109,6 +134,33 @@ class PayloadSettings:
         integer_field("excitation_window", self.excitation_window, low=1, high=1000)
         number_field("err_light_sigmas", self.err_light_sigmas, low=0.0, unit="standard deviations")
         boolean_field("coriolis", self.coriolis)
+        self._check_rest_noise()
+
+    def _check_rest_noise(self) -> None:
+        number_field("rest_delay", self.rest_delay, low=0.0, unit="s")
+        for prefix in ("rest", "identify"):
+            names = (f"{prefix}_torque_noise", f"{prefix}_modal_force_noise")
+            pair = tuple(getattr(self, name) for name in names)
+            if (pair[0] is None) != (pair[1] is None):
+                given = names[0] if pair[1] is None else names[1]
+                raise SpecError(
+                    f"value {[v for v in pair if v is not None][0]!r} is given alone; allowed: "
+                    f"both {names[0]} (N m) and {names[1]} (N), or neither",
+                    key=given,
+                )
+            if pair[0] is not None:
+                number_field(names[0], pair[0], low=0.0, unit="N m")
+                number_field(names[1], pair[1], low=0.0, unit="N")
+
+    @property
+    def rests(self) -> bool:
+        """Whether the filters slow down while the reference rests."""
+        return self.rest_torque_noise is not None
+
+    @property
+    def identifies_apart(self) -> bool:
+        """Whether a second bank of filters scores the payloads."""
+        return self.identify_torque_noise is not None
 
     def _checked_range(self) -> tuple[float, float]:
         allowed = "[lightest, heaviest] (kg) with 0 <= lightest < heaviest"
@@ -208,7 +260,11 @@ def read_payload(reader: TableReader) -> PayloadSettings | None:
         "excitation_window": r.integer("excitation_window", d.excitation_window),
         "err_light_sigmas": r.number("err_light_sigmas", d.err_light_sigmas),
         "coriolis": r.boolean("coriolis", d.coriolis),
+        "rest_delay": r.number("rest_delay", d.rest_delay, unit="s"),
     }
+    for prefix in ("rest", "identify"):
+        for name, unit in ((f"{prefix}_torque_noise", "N m"), (f"{prefix}_modal_force_noise", "N")):
+            values[name] = r.nonnegative(name, unit=unit) if r.has(name) else None
     if r.has("grid") and r.has("grid_step"):
         raise r.error("grid", "is given with grid_step; allowed: one of grid or grid_step")
     r.finish()

@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+from support import scene_arm
 
 import flexctrl as fc
 from flexctrl.control.payload.grid import check_certificate, model_with_payload
@@ -16,19 +17,9 @@ from flexctrl.loop.verdict import linear_closed_loop_radius
 
 POSE = np.radians([30.0, 0.0, 90.0])
 START = np.radians([0.0, 0.0, 90.0])
-DAMPING = {f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)}
 
 
-def arm(payload: float, fidelity: str = "amm:2"):
-    """The scenes' horizontal arm at ``payload`` kg, modes frozen at the move's start."""
-    return fc.load_model(
-        "subedi3link",
-        payload=payload,
-        fidelity=fidelity,
-        gravity=[0.0, 0.0],
-        overrides=DAMPING,
-        reference_q=START,
-    )
+arm = scene_arm
 
 
 def settings(**payload):

@@ -20,6 +20,18 @@ payload.  The probabilities change only while a joint moves (the excitation gate
 the innovations carry model error and no payload information.  The estimate is the
 posterior mean with the posterior standard deviation; before any motion it is the prior
 (the range's middle unless the settings say otherwise).
+
+Two banks, two jobs (:class:`~flexctrl.spec.payload_settings.PayloadSettings`): with
+``identify_*`` noise levels a second set of filters, trusting the model more, gives the
+innovations that score the payloads, and the control filters (the ``[estimator]`` levels)
+give the state estimates.  With ``rest_*`` levels the control filters slow down from
+``rest_delay`` after the reference stops: each a-priori covariance starts from its moving
+steady state ``P_i`` and follows the Riccati recursion with the rest process noise::
+
+    P+ = (I - M C) P,   P <- A P+ A' + W_rest,   M = P C' (C P C' + R)^-1
+
+so the gains fall as samples accumulate and the estimate averages the sensor noise over the
+whole time at rest (the recursion tends to the steady-state filter of the rest levels).
 """
 
 from __future__ import annotations
@@ -113,15 +125,25 @@ class PayloadBank:
         self.prior = prior / prior.sum()
         self.p = self.prior.copy()
         self.dx: np.ndarray | None = None
+        #: The identification filters' deviations (None: they are the control filters).
+        self.dx_identify: np.ndarray | None = None
         self.excited = False
         self._history: deque = deque(maxlen=settings.excitation_window + 1)
+        #: The filters' gains now (the moving steady state, or the rest recursion's).
+        self.M = grid.M.copy()
+        self._P: np.ndarray | None = None
+        self.resting = False
 
     def reset(self) -> None:
         """Back to the prior, the filters to start from the next measurement."""
         self.p = self.prior.copy()
         self.dx = None
+        self.dx_identify = None
         self.excited = False
         self._history.clear()
+        self.M = self.grid.M.copy()
+        self._P = None
+        self.resting = False
         if self.coriolis is not None:
             self.coriolis.reset()
 
@@ -140,6 +162,40 @@ class PayloadBank:
         """``max(lightest, mean - err_light_sigmas * std)``, kg."""
         low = self.settings.range[0]
         return max(low, self.mean - self.settings.err_light_sigmas * self.std)
+
+    def rest(self, resting: bool) -> None:
+        """Tell the bank whether the reference rests (no effect without rest noise levels).
+
+        On the first resting sample each filter's a-priori covariance starts from its moving
+        steady state; while resting it follows the Riccati recursion with the rest levels
+        (:meth:`_advance_covariance`); when the reference moves again the moving gains return.
+        """
+        if self.grid.W_rest is None or resting == self.resting:
+            return
+        self.resting = resting
+        if resting:
+            self._P = self.grid.P.copy()
+        else:
+            self.M = self.grid.M.copy()
+            self._P = None
+
+    def _advance_covariance(self, corrected: bool) -> None:
+        """One step of the rest filters' Riccati recursion and their next gains.
+
+        ``P+ = (I - M C) P`` after a correction, ``P <- A P+ A' + W_rest``,
+        ``M = P C' (C P C' + R)^-1``.
+        """
+        if not self.resting or self._P is None:
+            return
+        g, P = self.grid, self._P
+        if corrected:
+            P = P - self.M @ (g.C @ P)
+        P = g.A @ P @ np.swapaxes(g.A, 1, 2) + g.W_rest
+        P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        PCt = P @ np.swapaxes(g.C, 1, 2)
+        S = g.C @ PCt + g.R
+        self.M = np.swapaxes(np.linalg.solve(S, np.swapaxes(PCt, 1, 2)), 1, 2)
+        self._P = P
 
     def _moving(self, q: np.ndarray) -> bool:
         history = self._history
@@ -175,10 +231,13 @@ class PayloadBank:
         moving = self._moving(q)
         if self.dx is None:
             self.dx = np.einsum("nij,nj->ni", self._pinv, dy - np.einsum("nij,nj->ni", g.D, du))
+            if g.identifies_apart:
+                self.dx_identify = self.dx.copy()
             return
-        pred = np.einsum("nij,nj->ni", g.A, self.dx) + np.einsum("nij,nj->ni", g.B, du)
-        nu = dy - np.einsum("nij,nj->ni", g.C, pred) - np.einsum("nij,nj->ni", g.D, du)
-        self.dx = pred + np.einsum("nij,nj->ni", g.M, nu)
+        self.dx, nu = self._correct(self.dx, self.M, du, dy)
+        if self.dx_identify is not None:
+            self.dx_identify, nu = self._correct(self.dx_identify, g.M_identify, du, dy)
+        self._advance_covariance(corrected=True)
         self.excited = moving
         if moving:
             loglik = -0.5 * (np.einsum("ni,nij,nj->n", nu, g.S_inv, nu) + g.logdet)
@@ -187,6 +246,13 @@ class PayloadBank:
             p = np.exp(logp - logp.max())
             self.p = p / p.sum()
 
+    def _correct(self, dx, M, du, dy) -> tuple[np.ndarray, np.ndarray]:
+        """Every filter's predict and correct from ``dx`` with gains ``M``: ``(dx, nu)``."""
+        g = self.grid
+        pred = np.einsum("nij,nj->ni", g.A, dx) + np.einsum("nij,nj->ni", g.B, du)
+        nu = dy - np.einsum("nij,nj->ni", g.C, pred) - np.einsum("nij,nj->ni", g.D, du)
+        return pred + np.einsum("nij,nj->ni", M, nu), nu
+
     def predict(self, u_previous: np.ndarray) -> None:
         """One sample without a measurement: every filter predicts; the posterior is kept."""
         if self.dx is None:
@@ -194,6 +260,11 @@ class PayloadBank:
         du = np.asarray(u_previous, dtype=float)[None, :] - self.grid.u_op
         g = self.grid
         self.dx = np.einsum("nij,nj->ni", g.A, self.dx) + np.einsum("nij,nj->ni", g.B, du)
+        if self.dx_identify is not None:
+            self.dx_identify = np.einsum("nij,nj->ni", g.A, self.dx_identify) + np.einsum(
+                "nij,nj->ni", g.B, du
+            )
+        self._advance_covariance(corrected=False)
         self.excited = False
 
     def state(self, i: int) -> np.ndarray:

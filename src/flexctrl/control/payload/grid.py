@@ -31,6 +31,7 @@ from flexctrl.control.riccati import lqr_gain
 from flexctrl.dynamics.build import build_model
 from flexctrl.errors import SpecError
 from flexctrl.linear import Linearizer, equilibrium, torque_limits
+from flexctrl.spec.controller_shared import EstimatorSettings
 
 #: A design whose certificate radius reaches this is flagged (the grid is too coarse there).
 CERTIFICATE_LIMIT = 1.0
@@ -53,7 +54,13 @@ class PointDesign:
     S : ndarray
         The control DARE's solution.
     observer : KalmanEstimator
-        The steady-state Kalman filter of the design.
+        The steady-state Kalman filter of the design while the reference moves.
+    rest_observer : KalmanEstimator or None
+        The steady-state filter with the ``[payload]`` rest noise levels (the limit of the
+        time-varying filter at rest), or None without them.
+    identify_observer : KalmanEstimator or None
+        The filter with the ``[payload]`` identification noise levels that scores this
+        payload, or None (the bank scores ``observer``).
     """
 
     payload: float
@@ -62,13 +69,27 @@ class PointDesign:
     K: np.ndarray
     S: np.ndarray
     observer: Any
+    rest_observer: Any = None
+    identify_observer: Any = None
+
+    def _law_with(self, observer) -> tuple[np.ndarray, ...]:
+        n_y, n_u = observer.C.shape[0], self.K.shape[0]
+        E, F, G = observer.linear_form(n_y, n_u)
+        return E, F, G, -self.K, np.zeros((n_u, n_y))
 
     @property
     def law(self) -> tuple[np.ndarray, ...]:
-        """``(E, F, G, H, J)`` of the LQG about the target (:mod:`flexctrl.loop.verdict`)."""
-        n_y, n_u = self.observer.C.shape[0], self.K.shape[0]
-        E, F, G = self.observer.linear_form(n_y, n_u)
-        return E, F, G, -self.K, np.zeros((n_u, n_y))
+        """``(E, F, G, H, J)`` of the LQG at rest about the target (:mod:`flexctrl.loop.verdict`).
+
+        With the rest filter when the design has one: the law a run ends with.
+        """
+        return self._law_with(self.rest_observer or self.observer)
+
+    @property
+    def laws(self) -> tuple[tuple[np.ndarray, ...], ...]:
+        """The law with the moving filter, and with the rest filter when there is one."""
+        observers = [self.observer] + ([self.rest_observer] if self.rest_observer else [])
+        return tuple(self._law_with(o) for o in observers)
 
 
 def model_with_payload(model, payload: float):
@@ -147,9 +168,15 @@ class PayloadGrid:
             for name in ("A", "B", "C", "D", "M")
         )
         self.K = np.array([d.K for d in self.designs])
-        covariances = [
-            d.observer.C @ d.observer.P @ d.observer.C.T + d.observer.R for d in self.designs
-        ]
+        self.P = np.array([d.observer.P for d in self.designs])
+        self.R = np.array([d.observer.R for d in self.designs])
+        rests = [d.rest_observer for d in self.designs]
+        self.W_rest = np.array([o.W for o in rests]) if rests[0] is not None else None
+        scorers = [d.identify_observer or d.observer for d in self.designs]
+        #: Gains of the filters that score the payloads (``M`` when they are the control ones).
+        self.M_identify = np.array([o.M for o in scorers])
+        self.identifies_apart = settings.payload.identifies_apart
+        covariances = [o.C @ o.P @ o.C.T + o.R for o in scorers]
         self.S_inv = np.array([np.linalg.inv(s) for s in covariances])
         self.logdet = np.array([np.linalg.slogdet(s)[1] for s in covariances])
         self.x_op = np.array([d.observer.op.x for d in self.designs])
@@ -179,7 +206,24 @@ class PayloadGrid:
         Q, R = weight_matrices(model_m, s.weights, torque_limits(model_m))
         K, S = lqr_gain(plant.Ad, plant.Bd, Q, R)
         observer = make_observer(model_m, op, sensors, plant.sys.A, plant.sysd, s.estimator)
-        return PointDesign(float(payload), model_m, plant, K, S, observer)
+        extra = {}
+        for prefix in ("rest", "identify"):
+            if getattr(s.payload, f"{prefix}_torque_noise") is not None:
+                levels = EstimatorSettings(
+                    torque_noise=getattr(s.payload, f"{prefix}_torque_noise"),
+                    modal_force_noise=getattr(s.payload, f"{prefix}_modal_force_noise"),
+                )
+                extra[prefix] = make_observer(model_m, op, sensors, plant.sys.A, plant.sysd, levels)
+        return PointDesign(
+            float(payload),
+            model_m,
+            plant,
+            K,
+            S,
+            observer,
+            extra.get("rest"),
+            extra.get("identify"),
+        )
 
     def index_at_or_below(self, payload: float) -> int:
         """Index of the largest grid payload at or below ``payload`` (kg; the first if none)."""
@@ -193,7 +237,9 @@ class PayloadGrid:
         -------
         list of dict
             One row per grid interval ``[m_i, m_{i+1}]``: ``design_kg``, ``plant_kg``
-            (``m_i``, the midpoint, ``m_{i+1}``) and ``radius`` (the three radii), ``worst``.
+            (``m_i``, the midpoint, ``m_{i+1}``), ``radius`` (the three radii of the law a run
+            ends with, the rest filter's when there is one), ``radius_moving`` (the same with
+            the moving filter) and ``worst`` (the largest of them).
         """
         rows = []
         for i, design in enumerate(self.designs[:-1]):
@@ -201,12 +247,14 @@ class PayloadGrid:
             middle = self._plant(design.model, 0.5 * (low + high))[1]
             plants = (design.plant, middle, self.designs[i + 1].plant)
             radii = tuple(loop_radius(p, design.law) for p in plants)
+            moving = tuple(loop_radius(p, design.laws[0]) for p in plants)
             rows.append(
                 {
                     "design_kg": float(low),
                     "plant_kg": (float(low), 0.5 * float(low + high), float(high)),
                     "radius": radii,
-                    "worst": max(radii),
+                    "radius_moving": moving,
+                    "worst": max(radii + moving),
                 }
             )
         return rows
@@ -230,7 +278,8 @@ def check_certificate(rows: list[dict], source: str = "") -> list[dict]:
     failing = [r for r in rows if r["worst"] >= CERTIFICATE_LIMIT]
     if failing:
         r = failing[0]
-        worst = r["plant_kg"][int(np.argmax(r["radius"]))]
+        per_plant = np.maximum(r["radius"], r.get("radius_moving", r["radius"]))
+        worst = r["plant_kg"][int(np.argmax(per_plant))]
         warnings.warn(
             f"{source + ': ' if source else ''}payload grid too coarse for the certificate: the "
             f"design at {r['design_kg']:g} kg has closed-loop radius {r['worst']:.4f} on the "

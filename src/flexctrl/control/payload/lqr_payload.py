@@ -4,7 +4,9 @@ Built by :func:`design_lqr_payload` from an LQR file with a ``[payload]`` table
 (:class:`~flexctrl.spec.payload_settings.PayloadSettings`).  Every sample:
 
 1. the bank (:class:`~flexctrl.control.payload.bank.PayloadBank`) filters the measurement
-   with the Kalman filter of every grid payload and, while a joint moves, reweighs them;
+   with the Kalman filter of every grid payload and, while a joint moves, reweighs them (with
+   the ``[payload]`` rest levels its control filters slow down once the reference has rested
+   for ``rest_delay``: :meth:`PayloadAware._resting`);
 2. the design runs at the largest grid payload at or below
    ``max(lightest, mean - err_light_sigmas * std)``: an over-estimated payload is the unstable
    side (a design for 0.25 kg is unstable on the bare arm at some poses), an under-estimated one
@@ -21,6 +23,7 @@ operating point with no reference), once per pose, when first needed.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -34,6 +37,8 @@ from flexctrl.linear import OperatingPoint, torque_limits
 
 #: Joint angles (rad) closer than this count as one pose (one grid).
 POSE_TOLERANCE = 1e-6
+#: Joint reference rates (rad/s) at or below this count as the reference at rest.
+REST_RATE = 1e-9
 
 
 class PayloadHistory:
@@ -88,6 +93,7 @@ class PayloadAware(Controller):
         self.history = PayloadHistory()
         #: ``(t, payload)`` of every design switch since the last reset.
         self.switches: list[tuple[float, float]] = []
+        self._last_moving = -math.inf
 
     # -- the grid at the current pose -------------------------------------------------------
     def _target(self) -> tuple[float, ...]:
@@ -166,6 +172,7 @@ class PayloadAware(Controller):
         self.history = PayloadHistory()
         self.switches = []
         self.index = self.grid.index_at_or_below(self.bank.light_side())
+        self._last_moving = -math.inf
 
     def _choose(self, t: float) -> int:
         """The design index for the light side of the estimate; records a switch."""
@@ -175,8 +182,19 @@ class PayloadAware(Controller):
             self.index = i
         return i
 
+    def _resting(self, t: float) -> bool:
+        """Whether the reference's joint rates have been zero for ``rest_delay`` at ``t`` (s)."""
+        if not isinstance(self.reference, HoldReference):
+            x_ref = self._reference(self.index).at(t, self.sample_time)[0]
+            n_q = self.design_model.n_q
+            if np.max(np.abs(x_ref[n_q : n_q + self.n_u])) > REST_RATE:
+                self._last_moving = t
+                return False
+        return t - self._last_moving >= self.settings.payload.rest_delay - 1e-9
+
     def _learn(self, t: float, y: np.ndarray) -> int:
         """Update the bank on ``y``, pick the design, record the estimate; the design index."""
+        self.bank.rest(self._resting(t))
         self.bank.update(y, self.u_previous)
         i = self._choose(t)
         self.history.append(t, self.payload_estimate)
@@ -184,6 +202,7 @@ class PayloadAware(Controller):
 
     def _coast(self, t: float) -> int:
         """Predict the bank without a measurement; the design is kept."""
+        self.bank.rest(self._resting(t))
         self.bank.predict(self.u_previous)
         self.history.append(t, self.payload_estimate)
         return self.index
