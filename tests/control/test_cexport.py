@@ -206,3 +206,14 @@ def test_mpc_parameters_are_the_controllers_shifts():
     d = condensed_data(ctrl)
     v = np.linalg.solve(d["H"], -d["F"] @ z)
     assert np.allclose(v[: pb.m], -pb.K @ z, rtol=1e-8, atol=1e-10 * np.abs(z).max())
+
+
+def test_the_command_refuses_a_payload_aware_file_by_name_before_recording(tmp_path, capsys):
+    out = tmp_path / "payload"
+    assert (
+        main(["export", "controllers/lqr_payload.toml", "--scene", SCENE, "--out", str(out)]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "controllers/lqr_payload.toml" in err and "key 'payload'" in err
+    assert "payload-aware lqr" in err and "allowed:" in err
+    assert not out.exists()  # nothing recorded, nothing written

@@ -80,16 +80,25 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Design, record, export; print what was written (and the check with --check)."""
     from flexctrl.control.cexport import StepRecorder
+    from flexctrl.control.controller import Controller
+    from flexctrl.errors import SpecError
 
     setup = _setup(args)
     ctrl = setup.controller
     replay, python = None, {}
-    if not args.no_record:
-        recorder = StepRecorder(ctrl, _source(setup, args))
-        _record(setup, recorder)
-        replay = recorder.replay()
-        python = _python_step_times(ctrl, replay, args.repeats)
-    export = ctrl.export_c(args.out, replay=replay, qp_eps=args.qp_eps)
+    try:
+        if type(ctrl).export_c is Controller.export_c:  # refused before a run is recorded
+            ctrl.export_c(args.out)
+        if not args.no_record:
+            recorder = StepRecorder(ctrl, _source(setup, args))
+            _record(setup, recorder)
+            replay = recorder.replay()
+            python = _python_step_times(ctrl, replay, args.repeats)
+        export = ctrl.export_c(args.out, replay=replay, qp_eps=args.qp_eps)
+    except SpecError as exc:
+        if exc.source is not None:
+            raise
+        raise SpecError(exc.message, source=args.controller, key=exc.key) from None
     (Path(args.out) / "python_side.json").write_text(json.dumps(python, indent=2) + "\n")
     print(
         f"wrote {len(export.files)} files to {args.out} (route {export.route}, "

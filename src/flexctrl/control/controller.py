@@ -413,10 +413,19 @@ class Controller(ABC):
             For a kind with no C export (allowed: an LQR/LQG without a gain schedule, a
             linear MPC), which this base method is.
         """
+        if getattr(self.settings, "payload", None) is not None:
+            raise SpecError(
+                f"a payload-aware {self.kind} (a [payload] table) has no C export: its payload "
+                "bank and grid run in Python; allowed: an LQR/LQG without a gain schedule or "
+                "payload table, or a linear MPC",
+                key="payload",
+                source=getattr(self.settings, "source", None),
+            )
         raise SpecError(
             f"value {self.kind or type(self).__name__!r} has no C export; allowed: an LQR/LQG "
             "without a gain schedule, or a linear MPC ('lqr', 'mpc')",
             key="kind",
+            source=getattr(self.settings, "source", None),
         )
 
     def __repr__(self) -> str:
