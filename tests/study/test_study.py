@@ -478,3 +478,26 @@ def test_executors_without_a_model_need_no_model_key(root):
         ["grid.scene.dt=[1e-3]", "grid.scene.baumgarte=[5.0]", "grid.scene.feedback=['explicit']"],
     )
     assert len(spec.runs) == 1 and spec.runs[0].settings["model"] is None
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_warnings_of_runs_are_recorded_summed_up_and_listed_in_the_report(study, tmp_path, workers):
+    path = variant(study, "warning.toml", {"q3 = [-90, 0, 90]": "q3 = [0]"})
+    path = variant(path, "warning.toml", append='\n[set]\n"scene.warn_payload" = 2.0\n')
+    out = tmp_path / "out"
+    result = run_study(load_study(path), out, workers=workers, progress="none")
+    warned = [r for r in result.table().rows if r["payload"] == 2.0]
+    quiet = [r for r in result.table().rows if r["payload"] != 2.0]
+    assert warned and quiet
+    line = "UserWarning: selftest warning requested for payload 2 kg (scene key warn_payload)"
+    for row in warned:
+        record = json.loads((out / "runs" / f"{row['run_id']}.json").read_text())
+        assert record["status"] == "ok" and record["warnings"] == [line]
+    for row in quiet:
+        assert json.loads((out / "runs" / f"{row['run_id']}.json").read_text())["warnings"] == []
+    assert result.warnings == [
+        f"{len(warned)} run(s) warned (1 distinct warning(s); report.md lists each), the first: "
+        + line
+    ]
+    section = result.report.read_text().split("## Warnings")[1]
+    assert f"| {len(warned)} | " in section and line in section

@@ -143,6 +143,7 @@ def write_report(
         lines += ["", *sections[name](ctx)]
     if "failures" not in spec.plots:
         lines += ["", *_failures(ctx)]
+    lines += _warnings(ctx)
     lines += ["", *diverged_section(ctx)]
     lines += _executor_sections(ctx)
     path = store.dir / "report.md"
@@ -420,3 +421,26 @@ def _failures(ctx: ReportContext) -> list[str]:
             "run `flexctrl study STUDY --out DIR --resume` to complete it.",
         ]
     return lines
+
+
+def _warnings(ctx: ReportContext) -> list[str]:
+    """A section listing each distinct warning the runs raised, with its count (none: empty)."""
+    seen: dict[str, list] = {}
+    for row in ctx.table.rows:
+        record = ctx.store.read_record(row["run_id"]) or {}
+        for line in record.get("warnings") or ():
+            seen.setdefault(line, []).append(row)
+    if not seen:
+        return []
+    lines = [
+        "",
+        "## Warnings",
+        "",
+        "What the runs warned of (each warning once, with its runs):",
+        "",
+    ]
+    rows = [
+        (len(runs), runs[0]["run_id"], ", ".join(f"{c}={runs[0].get(c)}" for c in ctx.coords), line)
+        for line, runs in seen.items()
+    ]
+    return lines + md_table(["runs", "first run", "its coordinates", "warning"], rows)

@@ -15,6 +15,7 @@ import platform
 import socket
 import time
 import traceback
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +64,8 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``status`` (``"ok"``/``"failed"``), ``error`` (one line), ``metrics``,
+        ``status`` (``"ok"``/``"failed"``), ``error`` (one line), ``warnings`` (the
+        distinct warnings the run raised, one line each: a worker prints none), ``metrics``,
         ``trajectories`` (decimated arrays or {}), ``wall_time_s``,
         ``peak_memory_mb`` (of this worker process so far) and ``worker``.
         Never raises for a failure of the run itself.
@@ -73,9 +75,12 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
 
     start = time.perf_counter()
     status, error, metrics, arrays, unavailable = "ok", "", {}, {}, {}
+    caught: list[warnings.WarningMessage] = []
     try:
         unavailable = get_executor(executor).unavailable_metrics(dict(settings))
-        output = get_executor(executor).run(dict(settings))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            output = get_executor(executor).run(dict(settings))
         if not isinstance(output, RunOutput):
             raise TypeError(
                 f"executor '{executor}' returned {type(output).__name__}; expected a RunOutput"
@@ -118,6 +123,7 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
     return {
         "status": status,
         "error": error,
+        "warnings": warning_lines(caught),
         "unavailable": unavailable,
         "metrics": metrics,
         "trajectories": arrays,
@@ -125,6 +131,14 @@ def execute_run(executor: str, settings: dict, options: dict) -> dict[str, Any]:
         "peak_memory_mb": peak_memory_mb(),
         "worker": _worker_name(),
     }
+
+
+def warning_lines(caught) -> list[str]:
+    """The distinct warnings of a run, one line each (``Category: message``), in order."""
+    lines: dict[str, None] = {}
+    for w in caught:
+        lines[f"{w.category.__name__}: {w.message}".replace("\n", " ")] = None
+    return list(lines)
 
 
 def unavailable_note(unavailable: dict[str, str]) -> str:

@@ -288,10 +288,15 @@ def _run(
         document, session = _open_session(store, spec, previous, backend, resume, todo, skip)
         bar = Progress(len(todo), skipped=len(skip), label=spec.name, mode=progress, stream=stream)
         interrupted = False
+        warned: dict[str, int] = {}
+        runs_warned = 0
         try:
             if todo:
                 for run, result in backend.run(todo, spec.executor, options):
                     store.save(run, result)
+                    for line in result.get("warnings") or ():
+                        warned[line] = warned.get(line, 0) + 1
+                    runs_warned += bool(result.get("warnings"))
                     session[result["status"]] += 1
                     bar.update(result["status"] == "ok")
         except KeyboardInterrupt:
@@ -312,7 +317,7 @@ def _run(
         ]
         if counts.get("extra")
         else []
-    )
+    ) + _warning_note(warned, runs_warned, report)
     return StudyResult(
         store.dir,
         counts,
@@ -322,3 +327,15 @@ def _run(
         backend.description,
         notes,
     )
+
+
+def _warning_note(warned: dict[str, int], runs: int, report: bool) -> list[str]:
+    """One line for the warnings of a session's runs: how many, the first, where the rest are."""
+    if not warned:
+        return []
+    first = next(iter(warned))
+    where = "report.md lists each" if report else "each run's record (runs/*.json) lists its own"
+    return [
+        f"{runs} run(s) warned ({len(warned)} distinct warning(s); {where}), the first: "
+        f"{first if len(first) <= 200 else first[:197] + '...'}"
+    ]

@@ -318,6 +318,7 @@ class ResultStore:
             "settings": run.settings,
             "status": result["status"],
             "error": result.get("error", ""),
+            "warnings": list(result.get("warnings") or []),
             "metrics": {k: _json_value(v) for k, v in (result.get("metrics") or {}).items()},
             "wall_time_s": result.get("wall_time_s"),
             "peak_memory_mb": result.get("peak_memory_mb"),

@@ -5,11 +5,11 @@ its damping the controller file.  It needs no controller code, so it checks the 
 the store, the report and a Dask cluster end to end; the test suite uses it.  Scene keys
 (all optional): ``duration`` (s, 2), ``dt`` (s, 1e-3), ``amplitude`` (m, 0.01),
 ``noise_std`` (m, 0), ``sleep_s`` (s, 0: pretend to be slow), ``fail_payload`` (kg: raise
-for that payload), ``crash_payload`` (kg: kill the worker process for that payload;
-refused in the main process).  Controller keys: ``damping_ratio`` (-1..10, negative
-diverges), ``stiffness_gain`` (> -1).  Metrics: ``tip_residual_rms``, ``tip_peak``,
-``settling_time``, ``frequency_hz``; trajectories ``t``, ``w`` (deflection, m),
-``w_measured``, ``w_dot``.
+for that payload), ``warn_payload`` (kg: warn for that payload), ``crash_payload`` (kg: kill
+the worker process for that payload; refused in the main process).  Controller keys:
+``damping_ratio`` (-1..10, negative diverges), ``stiffness_gain`` (> -1).  Metrics:
+``tip_residual_rms``, ``tip_peak``, ``settling_time``, ``frequency_hz``; trajectories ``t``,
+``w`` (deflection, m), ``w_measured``, ``w_dot``.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import math
 import multiprocessing
 import os
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -36,6 +37,7 @@ class _SelftestScene:
     noise_std: float
     sleep_s: float
     fail_payload: float | None
+    warn_payload: float | None
     crash_payload: float | None
 
 
@@ -59,6 +61,7 @@ def _selftest_documents(
         noise_std=r.nonnegative("noise_std", 0.0, unit="m"),
         sleep_s=r.number("sleep_s", 0.0, low=0.0, high=60.0, unit="s"),
         fail_payload=r.nonnegative("fail_payload", unit="kg") if r.has("fail_payload") else None,
+        warn_payload=r.nonnegative("warn_payload", unit="kg") if r.has("warn_payload") else None,
         crash_payload=r.nonnegative("crash_payload", unit="kg") if r.has("crash_payload") else None,
     )
     r.string("source", "")
@@ -140,6 +143,11 @@ def execute(settings: dict) -> RunOutput:
     if scene.fail_payload is not None and payload == scene.fail_payload:
         raise RuntimeError(
             f"selftest failure requested for payload {payload:g} kg (scene key fail_payload)"
+        )
+    if scene.warn_payload is not None and payload == scene.warn_payload:
+        warnings.warn(
+            f"selftest warning requested for payload {payload:g} kg (scene key warn_payload)",
+            stacklevel=2,
         )
     if scene.crash_payload is not None and payload == scene.crash_payload:
         if _in_main_process():
