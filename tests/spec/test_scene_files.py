@@ -241,3 +241,16 @@ def test_scene_kinds_and_integrators_are_in_one_place():
 
     assert set(INTEGRATOR_NAMES) == set(INTEGRATORS)
     assert "arm" in SCENE_KINDS
+
+
+@pytest.mark.parametrize("integrator", ["cvodes", "euler"])
+def test_a_closed_loop_scene_refuses_an_integrator_it_would_not_use(integrator):
+    """The closed loop steps its plant with the compiled RK4; another name is refused, not
+    silently replaced."""
+    with pytest.raises(SpecError) as info:
+        load_scene("studies/scenes/move_joint1_30deg.toml", [f"integrator={integrator}"])
+    message = str(info.value)
+    assert "move_joint1_30deg.toml" in message and "key 'integrator'" in message
+    assert f"value '{integrator}' is not allowed in a closed-loop scene" in message
+    assert "allowed: 'rk4'" in message
+    assert load_scene("studies/scenes/move_joint1_30deg.toml", ["integrator=rk4"]).plant.dt > 0

@@ -168,16 +168,10 @@ def check_closed_loop_auto(scene, controller=None) -> None:
     Raises
     ------
     SpecError
-        Naming the scene file and key: the plant's integrator (``rk4``), the design model
-        (``controller_fidelity`` not ``auto``) or a missing controller.
+        Naming the scene file and key: the design model (``controller_fidelity`` not
+        ``auto``) or a missing controller (a closed-loop scene's integrator is always RK4:
+        :func:`flexctrl.spec.closed_loop_scene.read_closed_loop_scene`).
     """
-    if scene.plant.integrator != "rk4":
-        raise SpecError(
-            f"value '{scene.plant.integrator}' is not allowed with fidelity = 'auto' in a closed "
-            "loop; allowed: 'rk4' (the loop integrates the plant with RK4)",
-            source=scene.source,
-            key="integrator",
-        )
     if scene.controller_fidelity is not None and scene.controller_fidelity.kind == "auto":
         raise SpecError(
             "value 'auto' is not allowed for the design model; allowed: 'rigid', 'amm:N' or "

@@ -206,6 +206,14 @@ def read_closed_loop_scene(
 ) -> ClosedLoopScene:
     """Validate a ``kind = "closed_loop"`` document (see module docstring)."""
     plant = read_arm_scene(document, source, base_dir, kind="closed_loop", accept=_EXTRA_KEYS)
+    if plant.integrator != "rk4":
+        raise SpecError(
+            f"value {plant.integrator!r} is not allowed in a closed-loop scene: the plant steps "
+            "between the controller's samples with the compiled fixed-step RK4 at dt; allowed: "
+            "'rk4' (other integrators: an open-loop scene, kind = \"arm\")",
+            source=source,
+            key="integrator",
+        )
     r = TableReader({k: document[k] for k in _EXTRA_KEYS if k in document}, source)
     controller = _read_controller(r, base_dir)
     design_payload = r.nonnegative("design_payload", unit="kg") if r.has("design_payload") else None
