@@ -3,6 +3,7 @@ unknown key in a file is (python-control's kwargs test does the same for its fun
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 
 import numpy as np
@@ -34,3 +35,24 @@ def test_functions_taking_options_name_the_allowed_ones_too():
     model = fc.load_model("subedi3link", fidelity="rigid", gravity=[0.0, 0.0])
     with pytest.raises((TypeError, fc.SpecError), match="allowed"):
         fc.simulate(model, np.zeros(model.n_x), 0.01, dt=1e-3, integrator="rk4", stepp=1e-3)
+
+
+#: The public dataclasses built from keywords; the others (a trajectory, a result, the sensors)
+#: are what the toolkit builds and hands back.
+SETTINGS = [
+    name
+    for name in _EXPORTS
+    if dataclasses.is_dataclass(getattr(fc, name))
+    and name not in ("Trajectory", "ClosedLoopResult", "Sensors")
+]
+
+
+@pytest.mark.parametrize("name", SETTINGS)
+def test_a_misspelt_keyword_of_a_public_dataclass_lists_the_allowed_ones(name):
+    cls = getattr(fc, name)
+    fields = [f.name for f in dataclasses.fields(cls) if f.init]
+    misspelt = fields[-1] + "s"
+    with pytest.raises(TypeError, match=rf"{name}\(\) got .*'{misspelt}' \(did you mean"):
+        cls(**{misspelt: None})
+    with pytest.raises(TypeError, match="allowed: " + ", ".join(fields)):
+        cls(**{misspelt: None})

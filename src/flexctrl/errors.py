@@ -19,6 +19,7 @@ from typing import ParamSpec, TypeVar
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
+_T = TypeVar("_T")
 
 
 class FlexctrlError(Exception):
@@ -143,7 +144,9 @@ def keyword_checked(fn: Callable[_P, _R]) -> Callable[_P, _R]:
         p.name
         for p in parameters
         if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+        and p.name != "self"
     ]
+    title = fn.__qualname__.split(".")[0] if fn.__name__ == "__init__" else fn.__name__
 
     @functools.wraps(fn)
     def checked(*args: _P.args, **kwargs: _P.kwargs) -> _R:
@@ -152,9 +155,19 @@ def keyword_checked(fn: Callable[_P, _R]) -> Callable[_P, _R]:
                 close = difflib.get_close_matches(name, allowed, n=1)
                 hint = f" (did you mean {close[0]!r}?)" if close else ""
                 raise TypeError(
-                    f"{fn.__name__}() got an unexpected keyword argument {name!r}{hint}; "
+                    f"{title}() got an unexpected keyword argument {name!r}{hint}; "
                     f"allowed: {', '.join(allowed)}"
                 )
         return fn(*args, **kwargs)
 
     return checked
+
+
+def keywords_checked(cls: type[_T]) -> type[_T]:
+    """``cls`` (a dataclass) whose constructor answers a misspelt keyword as
+    :func:`keyword_checked` does: ``LQRSettings(sample_tim=0.01)`` names ``sample_time``.
+
+    Apply it above ``@dataclass``, so that it wraps the generated ``__init__``.
+    """
+    cls.__init__ = keyword_checked(cls.__init__)  # type: ignore[method-assign]
+    return cls

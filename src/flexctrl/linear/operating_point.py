@@ -18,11 +18,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from flexctrl.dynamics.model import Model
-from flexctrl.errors import SolverError, SpecError, keyword_checked
+from flexctrl.errors import SolverError, SpecError, keyword_checked, keywords_checked
 from flexctrl.linear.model_facts import state_names, stiffness_matrix
 from flexctrl.spec.units import warn_if_degrees
 
 
+@keywords_checked
 @dataclass(frozen=True, eq=False)
 class OperatingPoint:
     """A state and input about which a model is linearised.

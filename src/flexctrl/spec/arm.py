@@ -51,7 +51,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flexctrl.errors import SpecError, keyword_checked, warn_spec
+from flexctrl.errors import SpecError, keyword_checked, keywords_checked, warn_spec
 from flexctrl.spec import shipped
 from flexctrl.spec.damping import DampingForm, damping_summary, read_damping
 from flexctrl.spec.overrides import apply_overrides
@@ -68,6 +68,7 @@ JOINT_TYPES: tuple[JointType, ...] = ("revolute", "prismatic")
 BOUNDARY_INERTIA: tuple[BoundaryInertia, ...] = ("exact", "paper")
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class SectionSpec:
     """Hollow rectangular cross-section; used to derive the axial stiffness EA.
@@ -99,6 +100,7 @@ class SectionSpec:
         return (self.width * self.height**3 - inner_w * inner_h**3) / 12.0
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class LinkSpec:
     """One flexible link (Euler-Bernoulli beam).
@@ -169,6 +171,7 @@ class LinkSpec:
         return youngs * self.section.area
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class JointSpec:
     """A joint at the base of a link, with its hub (motor housing) as a rigid body.
@@ -197,6 +200,7 @@ class JointSpec:
     source: str = ""
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class PayloadSpec:
     """Payload at the tip of the last link.
@@ -224,6 +228,7 @@ class PayloadSpec:
         return self.inertia if self.mass > 0.0 else 0.0
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class ArmSpec:
     """A planar serial arm with flexible links.

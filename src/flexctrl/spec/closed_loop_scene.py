@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec import shipped
 from flexctrl.spec.arm_scene import ArmScene, read_arm_scene
 from flexctrl.spec.fidelity import Fidelity, parse_fidelity
@@ -54,6 +54,7 @@ from flexctrl.spec.reader import TableReader
 from flexctrl.spec.reference import DEFLECTIONS, PROFILES, JointReference, JointSequence
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class MetricSettings:
     """How a closed-loop run is judged: a scene's ``[metrics]`` table (the defaults are the file's).

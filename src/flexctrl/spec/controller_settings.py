@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
     BadMeasurement,
     ControllerKind,
@@ -92,6 +92,7 @@ class ScheduleSettings:
 # --------------------------------------------------------------------------------------
 # controllers
 # --------------------------------------------------------------------------------------
+@keywords_checked
 @dataclass(frozen=True)
 class PDSettings:
     """Joint PD control with gravity compensation.
@@ -193,6 +194,7 @@ class PDSettings:
             )
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class LQRSettings:
     """Settings of a discrete LQR on the flexible linearization (LQG with a Kalman filter).
@@ -256,6 +258,7 @@ class LQRSettings:
         choice_field("on_bad_measurement", self.on_bad_measurement, BadMeasurement)
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class ShapedSettings:
     """Input shaping (ZV/ZVD) of the joint reference, tracked by PD: the open-loop comparison.

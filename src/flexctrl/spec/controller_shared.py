@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Literal
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec.field_checks import choice_field, number_field
 from flexctrl.spec.sensors import DEFAULT_NOISE, SENSOR_KINDS, SensorKind
 
@@ -37,6 +37,7 @@ BadMeasurement = Literal["raise", "hold"]
 # --------------------------------------------------------------------------------------
 # shared pieces
 # --------------------------------------------------------------------------------------
+@keywords_checked
 @dataclass(frozen=True)
 class SensorSettings:
     """What the controller measures and the noise standard deviation of each sensor.
@@ -95,6 +96,7 @@ class SensorSettings:
         return self.outputs == ("state",)
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class Weights:
     """LQR/MPC weights as acceptable magnitudes (Bryson's rule), in the units of each quantity.
@@ -128,6 +130,7 @@ class Weights:
             number_field(f.name, getattr(self, f.name), low=0.0, low_open=True)
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class EstimatorSettings:
     """Steady-state discrete Kalman filter on the linearisation at the target.

@@ -49,7 +49,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 
 #: The signals a bound may name (joints and links from 1).
 SIGNAL_PATTERN = r"q[1-9]\d*|dq[1-9]\d*|w[1-9]\d*|du[1-9]\d*|tip_x|tip_y"
@@ -57,6 +57,7 @@ _ALLOWED = "q<i> (rad), dq<i> (rad/s), w<i> (m), tip_x, tip_y (m), du<i> (N m/s)
 _DEG = math.pi / 180.0
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class Bound:
     """A bound on one signal of the linear MPC's prediction (:mod:`flexctrl.spec.mpc_constraints`).

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Literal
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec.arrival import ArrivalSettings
 from flexctrl.spec.controller_shared import (  # noqa: F401  (re-exported)
     BadMeasurement,
@@ -112,6 +112,7 @@ class OSQPSettings:
         return out
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class MPCSettings:
     """Linear MPC on the discretised linearization at the target, solved as one QP per sample.
@@ -276,6 +277,7 @@ class MPCSettings:
             )
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class NMPCSettings:
     """Nonlinear MPC in CasADi: multiple shooting with RK4 on the full model.

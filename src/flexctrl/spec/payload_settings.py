@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec.field_checks import boolean_field, integer_field, number_field
 from flexctrl.spec.reader import TableReader
 
@@ -43,6 +43,7 @@ from flexctrl.spec.reader import TableReader
 GRID_TOLERANCE = 1e-9
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class PayloadSettings:
     """How a payload-aware controller covers a payload range (see the module docstring).

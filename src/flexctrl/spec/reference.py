@@ -20,7 +20,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from flexctrl.errors import SpecError
+from flexctrl.errors import SpecError, keywords_checked
 from flexctrl.spec.units import warn_if_degrees
 
 Profile = Literal["step", "quintic"]
@@ -122,6 +122,7 @@ class JointReference:
         }
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class Move:
     """A joint move for :func:`flexctrl.closed_loop` from ``start`` to ``target`` (rad).
@@ -254,6 +255,7 @@ class JointSequence:
         return {"moves": [leg.settings() for leg in self.legs], "t_arrive_s": self.t_arrive}
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class MoveSequence:
     """Moves one after the other for :func:`flexctrl.closed_loop` (e.g. out and back).

@@ -42,8 +42,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctrl.dynamics.build import build_model
+from flexctrl.errors import keywords_checked
 
 
+@keywords_checked
 @dataclass(frozen=True)
 class PayloadEstimate:
     """What a payload-aware controller believes now.
