@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from support import MODEL
 
+import flexctrl as fc
 from flexctrl.cli import main
 from flexctrl.errors import SpecError
 from flexctrl.scenes import run_scene
@@ -254,3 +255,12 @@ def test_a_closed_loop_scene_refuses_an_integrator_it_would_not_use(integrator):
     assert f"value '{integrator}' is not allowed in a closed-loop scene" in message
     assert "allowed: 'rk4'" in message
     assert load_scene("studies/scenes/move_joint1_30deg.toml", ["integrator=rk4"]).plant.dt > 0
+
+
+@pytest.mark.parametrize("fidelity", ["rigid", "amm:2", "fem:2"])
+def test_a_prismatic_joint_in_an_arm_file_is_refused_not_built_revolute(fidelity):
+    with pytest.raises(SpecError) as info:
+        fc.load_model("subedi3link", fidelity=fidelity, overrides={"joints[2].type": "prismatic"})
+    message = str(info.value)
+    assert "subedi3link.toml" in message and "key 'joints[2].type'" in message
+    assert "value 'prismatic' is not supported" in message and "allowed: 'revolute'" in message

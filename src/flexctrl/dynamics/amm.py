@@ -282,6 +282,10 @@ def build_amm(
         (see :mod:`flexctrl.dynamics.model`).
     """
     start = time.perf_counter()
+    arm.require_revolute(
+        "the assumed-modes and rigid arm",
+        "prismatic joints: model files of kind rp_arm or telescoping, as models/rp_arm.toml",
+    )
     opts = _options(
         arm,
         n_modes,

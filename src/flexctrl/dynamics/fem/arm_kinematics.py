@@ -178,14 +178,7 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
             "(elements per link)",
             key="n_elements",
         )
-    for i, joint in enumerate(arm.joints):
-        if joint.type != "revolute":
-            raise SpecError(
-                f"value {joint.type!r} is not supported by the finite-element arm; allowed: "
-                "'revolute' (prismatic joints: flexctrl.dynamics.fem.rp_arm)",
-                source=arm.source,
-                key=f"joints[{i + 1}].type",
-            )
+    arm.require_revolute("the finite-element arm", "prismatic joints: flexctrl.dynamics.fem.rp_arm")
 
 
 @dataclass(frozen=True)
