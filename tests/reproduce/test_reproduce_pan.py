@@ -51,6 +51,7 @@ def test_figures_are_written_and_the_report_names_them(reproduction):
     report = (out / "report.md").read_text()
     for s in sections:
         for fig in s.figures:
+            assert fig.startswith("figures/"), fig  # as the Subedi reproduction's
             assert (out / fig).stat().st_size > 10_000, fig
             assert f"]({fig})" in report
     for fig in FIGURES:

@@ -27,7 +27,7 @@ TITLE = (
 
 
 def run(out_dir: Path, reduced: bool) -> list[Section]:
-    """Run the reproduction; figures are written into ``out_dir`` (created).
+    """Run the reproduction; figures are written into ``out_dir/figures`` (created).
 
     Returns
     -------
@@ -37,7 +37,7 @@ def run(out_dir: Path, reduced: bool) -> list[Section]:
     from flexctrl.reproduce import pan_beam, pan_joints, pan_numerics
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     sections = (
         pan_joints.sections(out_dir, reduced)
         + pan_beam.sections(out_dir, reduced)

@@ -130,8 +130,8 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
     r = runs(reduced)
     fine = r["fine"]
     out_dir = Path(out_dir)
-    _geometry(out_dir / "fig6_geometry.png")
-    _overlay(r, out_dir / "figs7-9_tip.png")
+    _geometry(out_dir / "figures" / "fig6_geometry.png")
+    _overlay(r, out_dir / "figures" / "figs7-9_tip.png")
     secs = _convergence_items(r, fine)
     secs[1][2].extend(_fig8_items(r, fine))
     secs[2][2].extend(_fig9_items(r, fine))
@@ -155,7 +155,7 @@ def sections(out_dir: Path, reduced: bool) -> list[Section]:
                 f"{fig}: tip displacement, {CASES[key].name}",
                 text[fig] + common,
                 items,
-                ["figs7-9_tip.png"] if k == 0 else [],
+                ["figures/figs7-9_tip.png"] if k == 0 else [],
             )
         )
     return out
@@ -199,7 +199,7 @@ def _fig6_section(r, fine) -> Section:
         "cases "
         "draw the long H-side overhang in through the supports; the pull case mirrors it.",
         geometry,
-        ["fig6_geometry.png"],
+        ["figures/fig6_geometry.png"],
     )
 
     return sec6

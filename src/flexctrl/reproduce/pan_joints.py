@@ -94,7 +94,7 @@ def fig1(out_dir: Path, reduced: bool) -> Section:
             "tracking)",
         ),
     ]
-    _draw_arm(part, spec, out_dir / "fig1_rp_arm.png")
+    _draw_arm(part, spec, out_dir / "figures" / "fig1_rp_arm.png")
     return Section(
         "Fig 1: two-link robot with a revolute and a prismatic joint",
         "`models/rp_arm.toml` (chosen laboratory-scale parameters: the paper's Part II data are "
@@ -102,7 +102,7 @@ def fig1(out_dir: Path, reduced: bool) -> Section:
         "the text): the link extends from W = 0.3 to 0.7 m while the housing turns 60 deg in 1 s, "
         f"{n} elements, Newmark + Baumgarte, dt = 1 ms.",
         items,
-        ["fig1_rp_arm.png"],
+        ["figures/fig1_rp_arm.png"],
     )
 
 
@@ -280,7 +280,7 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
         ),
     ]
     _time_plot(
-        out_dir / "fig4_clamped_joint.png",
+        out_dir / "figures" / "fig4_clamped_joint.png",
         "Extend 0.4 m and turn 60 deg in 1 s",
         "tip H transverse displacement (mm)",
         [
@@ -295,7 +295,7 @@ def fig4(out_dir: Path, reduced: bool) -> Section:
         "`models/rp_arm.toml` clamped at its inner end E in the carriage and held by one bilateral "
         f"bearing at the housing mouth; the move of Fig 1, {n} elements.",
         items,
-        ["fig4_clamped_joint.png"],
+        ["figures/fig4_clamped_joint.png"],
     )
 
 
@@ -349,7 +349,7 @@ def fig5(out_dir: Path, reduced: bool) -> Section:
         ),
     ]
     _time_plot(
-        out_dir / "fig5_telescoping.png",
+        out_dir / "figures" / "fig5_telescoping.png",
         "Telescoping pair: W 0.1 -> 0.5 m, 60 deg in 0.6 s",
         "transverse displacement (mm)",
         [
@@ -363,7 +363,7 @@ def fig5(out_dir: Path, reduced: bool) -> Section:
         "Fig 5: prismatic joint between two flexible links",
         f"`models/telescoping.toml`, {n} + {n} elements, dt = 1 ms.",
         items,
-        ["fig5_telescoping.png"],
+        ["figures/fig5_telescoping.png"],
     )
 
 

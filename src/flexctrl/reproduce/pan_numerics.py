@@ -158,7 +158,7 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
         )
         for c, k in zip(cases, cfg)
     ]
-    eff.plot(results, out_dir / "efficiency.png")
+    eff.plot(results, out_dir / "figures" / "efficiency.png")
     items: list[Item] = []
     lines = [
         "| case | method | setting | wall time (s) | max tip error (m) | max \\|Phi\\| (m) | "
@@ -179,7 +179,7 @@ def efficiency_section(out_dir: Path, reduced: bool) -> Section:
         "Sec. 4: Newmark + Baumgarte against a Gear-type code (IDAS)",
         _efficiency_text(results, cfg, cases, lines),
         items,
-        ["efficiency.png"],
+        ["figures/efficiency.png"],
     )
 
 
