@@ -98,6 +98,7 @@ from flexctrl.errors import SpecError
 from flexctrl.spec.arm import ArmSpec
 from flexctrl.spec.damping import DAMPING_FORMS
 from flexctrl.spec.fidelity import Fidelity
+from flexctrl.spec.joint_support import require_revolute
 
 MODES = ("frozen", "scheduled")
 DAMPING = DAMPING_FORMS
@@ -282,7 +283,8 @@ def build_amm(
         (see :mod:`flexctrl.dynamics.model`).
     """
     start = time.perf_counter()
-    arm.require_revolute(
+    require_revolute(
+        arm,
         "the assumed-modes and rigid arm",
         "prismatic joints: model files of kind rp_arm or telescoping, as models/rp_arm.toml",
     )

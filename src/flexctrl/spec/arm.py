@@ -297,24 +297,6 @@ class ArmSpec:
         each link's ``damping_ratio`` per clamped-mass mode."""
         return damping_summary(self, form)
 
-    def require_revolute(self, builder: str, instead: str) -> None:
-        """Refuse a joint other than revolute: ``builder`` (a model family) models no other.
-
-        Raises
-        ------
-        SpecError
-            Naming the file, ``joints[i].type``, the value and ``instead`` (where such a
-            joint is modelled).
-        """
-        for i, joint in enumerate(self.joints):
-            if joint.type != "revolute":
-                raise SpecError(
-                    f"value {joint.type!r} is not supported by {builder}; allowed: 'revolute' "
-                    f"({instead})",
-                    source=self.source,
-                    key=f"joints[{i + 1}].type",
-                )
-
     def with_payload(self, mass: float) -> ArmSpec:
         """A copy carrying a payload of ``mass`` kg (the inertia is kept)."""
         if not (math.isfinite(mass) and mass >= 0.0):

@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike
 from flexctrl.dynamics.fem.link_matrices import LinkMatrices, link_matrices
 from flexctrl.errors import SpecError
 from flexctrl.spec.arm import ArmSpec
+from flexctrl.spec.joint_support import require_revolute
 
 MAX_ELEMENTS = 64
 
@@ -178,7 +179,9 @@ def _check(arm: ArmSpec, n_elements: int) -> None:
             "(elements per link)",
             key="n_elements",
         )
-    arm.require_revolute("the finite-element arm", "prismatic joints: flexctrl.dynamics.fem.rp_arm")
+    require_revolute(
+        arm, "the finite-element arm", "prismatic joints: flexctrl.dynamics.fem.rp_arm"
+    )
 
 
 @dataclass(frozen=True)
