@@ -15,14 +15,20 @@ DATA = data_root()
 MODEL = DATA / "models" / "subedi3link.toml"
 
 
-def scene_arm(payload: float, fidelity: str = "amm:2", start_deg=(0.0, 0.0, 90.0)):
-    """The move scenes' arm at ``payload`` kg: horizontal, 0.5 % structural damping on every
-    link, modes frozen at the move's start ``start_deg`` (degrees)."""
+def scene_arm(
+    payload: float = 2.0,
+    fidelity: str = "amm:2",
+    start_deg: tuple[float, ...] | None = (0.0, 0.0, 90.0),
+    zeta: float = 0.005,
+):
+    """The move scenes' arm at ``payload`` kg: horizontal, structural damping ratio ``zeta`` on
+    every link, modes frozen at the move's start ``start_deg`` (degrees; None: the file's
+    configuration)."""
     return fc.load_model(
         "subedi3link",
         payload=payload,
         fidelity=fidelity,
         gravity=[0.0, 0.0],
-        overrides={f"links[{i}].damping_ratio": 0.005 for i in (1, 2, 3)},
-        reference_q=np.radians(start_deg),
+        overrides={f"links[{i}].damping_ratio": zeta for i in (1, 2, 3)},
+        reference_q=None if start_deg is None else np.radians(start_deg),
     )

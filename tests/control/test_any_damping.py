@@ -9,6 +9,7 @@ import warnings
 
 import numpy as np
 import pytest
+from support import scene_arm
 
 import flexctrl as fc
 from flexctrl.loop.verdict import linear_closed_loop_radius
@@ -18,13 +19,7 @@ TARGET = np.radians([30.0, 0.0, 0.0])
 
 def arm(zeta: float):
     """The horizontal 2 kg arm, two modes per link, damping ratio ``zeta`` on every link."""
-    return fc.load_model(
-        "models/subedi3link.toml",
-        payload=2.0,
-        fidelity="amm:2",
-        gravity=[0.0, 0.0],
-        overrides={f"links[{i}].damping_ratio": zeta for i in (1, 2, 3)},
-    )
+    return scene_arm(2.0, start_deg=None, zeta=zeta)
 
 
 def designed(name: str, model):

@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 import pytest
 import scipy.linalg
+from support import scene_arm
 
 import flexctrl as fc
 from flexctrl.control.sampling_check import ALIAS_TOLERANCE, alias_distance, sampling_diagnosis
@@ -21,14 +22,8 @@ TARGET = np.radians([30.0, 0.0, 0.0])
 
 
 def arm(zeta: float):
-    """The horizontal 2 kg arm, two modes per link, structural damping ``zeta`` on every link."""
-    return fc.load_model(
-        "models/subedi3link.toml",
-        payload=2.0,
-        fidelity="amm:2",
-        gravity=[0.0, 0.0],
-        overrides={f"links[{i}].damping_ratio": zeta for i in (1, 2, 3)},
-    )
+    """The horizontal 2 kg arm, two modes per link, damping ratio ``zeta`` on every link."""
+    return scene_arm(2.0, start_deg=None, zeta=zeta)
 
 
 @pytest.fixture(scope="module")

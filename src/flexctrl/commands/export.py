@@ -143,20 +143,10 @@ def _setup(args: argparse.Namespace):
 def _record(setup, recorder) -> None:
     """The scene's closed loop with every controller step recorded."""
     from flexctrl.loop.sampled import integrate_closed_loop
+    from flexctrl.scenes.run_closed_loop_scene import loop_arguments
 
-    scene, plant_scene = setup.scene, setup.plant_scene
     recorder.reset()
-    integrate_closed_loop(
-        setup.plant,
-        recorder,
-        setup.x0,
-        plant_scene.duration,
-        plant_scene.dt,
-        sensors=setup.sensors,
-        rng=np.random.default_rng(scene.seed) if scene.noise else None,
-        compile=plant_scene.solver.get("compile"),
-        monitor=setup.monitor,
-    )
+    integrate_closed_loop(controller=recorder, **loop_arguments(setup), plant_changes=setup.changes)
 
 
 def _source(setup, args: argparse.Namespace) -> str:

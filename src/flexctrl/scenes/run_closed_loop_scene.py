@@ -215,19 +215,28 @@ def _from_choice_run(setup: LoopSetup, whole: dict[str, Any]):
     )
 
 
+def loop_arguments(setup: LoopSetup) -> dict:
+    """The scene's plant, start, duration, step, sensors, noise, compile option and monitor,
+    as the keywords of :func:`flexctrl.loop.sampled.integrate_closed_loop` (and
+    :func:`~flexctrl.loop.sampled.simulate_closed_loop`) after the controller."""
+    scene, plant_scene = setup.scene, setup.plant_scene
+    return {
+        "plant": setup.plant,
+        "x0": setup.x0,
+        "duration": plant_scene.duration,
+        "dt": plant_scene.dt,
+        "sensors": setup.sensors,
+        "rng": np.random.default_rng(scene.seed) if scene.noise else None,
+        "compile": plant_scene.solver.get("compile"),
+        "monitor": setup.monitor,
+    }
+
+
 def _run(setup: LoopSetup, on_divergence: str):
     """The scene's closed loop (:func:`flexctrl.loop.sampled.simulate_closed_loop`)."""
-    scene, plant_scene = setup.scene, setup.plant_scene
     trajectory, _ = simulate_closed_loop(
-        setup.plant,
-        setup.controller,
-        setup.x0,
-        plant_scene.duration,
-        plant_scene.dt,
-        sensors=setup.sensors,
-        rng=np.random.default_rng(scene.seed) if scene.noise else None,
-        compile=plant_scene.solver.get("compile"),
-        monitor=setup.monitor,
+        controller=setup.controller,
+        **loop_arguments(setup),
         stop_on_divergence=on_divergence == "record",
         plant_changes=setup.changes,
     )
