@@ -233,7 +233,7 @@ class PayloadBank:
         moving = self._moving(q)
         if self.dx is None:
             self.dx = np.einsum("nij,nj->ni", self._pinv, dy - np.einsum("nij,nj->ni", g.D, du))
-            if g.identifies_apart:
+            if self.settings.identifies_apart:
                 self.dx_identify = self.dx.copy()
             return
         self.dx, nu = self._correct(self.dx, self.M, du, dy)

@@ -175,7 +175,6 @@ class PayloadGrid:
         scorers = [d.identify_observer or d.observer for d in self.designs]
         #: Gains of the filters that score the payloads (``M`` when they are the control ones).
         self.M_identify = np.array([o.M for o in scorers])
-        self.identifies_apart = settings.payload.identifies_apart
         covariances = [o.C @ o.P @ o.C.T + o.R for o in scorers]
         self.S_inv = np.array([np.linalg.inv(s) for s in covariances])
         self.logdet = np.array([np.linalg.slogdet(s)[1] for s in covariances])
