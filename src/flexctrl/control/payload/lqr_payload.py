@@ -223,7 +223,16 @@ class PayloadAware(Controller):
 class PayloadLQRController(PayloadAware):
     """The payload-aware LQG (module docstring); built by :func:`design_lqr_payload`.
 
-    Parameters are :class:`PayloadAware`'s, ``settings`` an :class:`LQRSettings`.
+    Parameters
+    ----------
+    settings : LQRSettings
+        The recipe with its ``payload`` table.
+    model : flexctrl.dynamics.model.Model
+        The design model (its payload is replaced by the grid's).
+    op : OperatingPoint
+        The target without a reference.
+    certify : bool
+        Compute the grid certificate when a grid is built and warn on a failing cell.
     """
 
     kind = "lqr"

@@ -46,8 +46,16 @@ class BankState:
 class PayloadMPCController(PayloadAware):
     """The payload-aware MPC (module docstring); built by :func:`design_mpc_payload`.
 
-    Parameters are :class:`~flexctrl.control.payload.lqr_payload.PayloadAware`'s,
-    ``settings`` an :class:`MPCSettings`.
+    Parameters
+    ----------
+    settings : MPCSettings
+        The recipe with its ``payload`` table.
+    model : flexctrl.dynamics.model.Model
+        The design model (its payload is replaced by the grid's).
+    op : OperatingPoint
+        The target without a reference.
+    certify : bool
+        Compute the grid certificate when a grid is built and warn on a failing cell.
     """
 
     kind = "mpc"
