@@ -16,13 +16,17 @@ and the posterior over the grid is updated by the tempered innovation likelihood
 (``c0 + m c1`` from the rigid model at two payloads), with the joint rates from encoder
 differences over two samples: the linearisation at rest drops it, and during a move it
 reaches several N m on the outer joints, which the filters would otherwise blame on the
-payload.  The probabilities change only while a joint moves (the excitation gate): at rest
-the innovations carry model error and no payload information.  The estimate is the
-posterior mean with the posterior standard deviation; before any motion it is the prior
-(the range's middle unless the settings say otherwise).
+payload.  It is applied only while a joint moves (the excitation gate below): at rest the
+encoder differences are noise, and a velocity product squares it into a torque bias that
+never averages out (with 0.005 deg encoder noise, 4 kg at pose (30, 0, 90) deg: up to
+0.03 N m at a 2 ms sample, 0.002 N m at 8.5 ms; it grows as 1/T^2), which the slow rest
+filter turns into a standing joint offset (0.007 deg at 2 ms).  The probabilities change
+only while a joint moves: at rest the innovations carry model error and no payload
+information.  The estimate is the posterior mean with the posterior standard deviation;
+before any motion it is the prior (the range's middle unless the settings say otherwise).
 
 Two banks, two jobs (:class:`~flexctrl.spec.payload_settings.PayloadSettings`): with
-``identify_*`` noise levels a second set of filters, trusting the model more, gives the
+``identify_*`` noise levels a second set of filters, with their own process noise, gives the
 innovations that score the payloads, and the control filters (the ``[estimator]`` levels)
 give the state estimates.  With ``rest_*`` levels the control filters slow down from
 ``rest_delay`` after the reference stops: each a-priori covariance starts from its moving
@@ -209,10 +213,13 @@ class PayloadBank:
         )
         return bool(np.max(rate) > self.settings.excitation_rate)
 
-    def _inputs(self, q: np.ndarray, u_previous: np.ndarray) -> np.ndarray:
+    def _inputs(self, q: np.ndarray, u_previous: np.ndarray, moving: bool) -> np.ndarray:
+        """Each filter's input deviation; the velocity-product torques only while ``moving``."""
         du = np.asarray(u_previous, dtype=float)[None, :] - self.grid.u_op
         if self.coriolis is not None:
-            c0, c1 = self.coriolis.terms(q)
+            c0, c1 = self.coriolis.terms(q)  # every sample: it keeps the encoder history
+            if not moving:
+                return du
             du = du - c0[None, :] - self.grid.payloads[:, None] * c1[None, :]
         return du
 
@@ -228,9 +235,9 @@ class PayloadBank:
         """
         g = self.grid
         q = np.asarray(y, dtype=float)[self.joints]
-        du = self._inputs(q, u_previous)
-        dy = np.asarray(y, dtype=float)[None, :] - g.y_op
         moving = self._moving(q)
+        du = self._inputs(q, u_previous, moving)
+        dy = np.asarray(y, dtype=float)[None, :] - g.y_op
         if self.dx is None:
             self.dx = np.einsum("nij,nj->ni", self._pinv, dy - np.einsum("nij,nj->ni", g.D, du))
             if self.settings.identifies_apart:
