@@ -79,7 +79,8 @@ def test_a_failing_grid_cell_is_named():
 
 
 def test_an_undamped_design_fails_the_certificate_and_names_the_cell():
-    """The arm as its file ships it (no structural damping): the designs are fragile."""
+    """The arm as its file ships it (no structural damping) on a 1 kg grid: a cell fails and
+    the warning names it."""
     model = fc.load_model(
         "subedi3link", payload=2.0, fidelity="amm:2", gravity=[0.0, 0.0], reference_q=START
     )
@@ -161,6 +162,36 @@ def test_before_any_motion_the_estimate_is_the_prior(ctrl):
     assert ctrl.payload_estimate.mean == pytest.approx(s.mean0, abs=0.01)
     low = max(s.range[0], s.mean0 - s.err_light_sigmas * s.std0)
     assert ctrl.payload_estimate.design == ctrl.grid.payloads[ctrl.grid.index_at_or_below(low)]
+
+
+def test_a_posterior_on_one_grid_payload_designs_there_not_a_step_below(ctrl):
+    """The neighbours' leftover probability (1e-9) spreads the posterior by about 1e-5 kg:
+    the light side falls just below the grid payload, and the snap keeps the design there."""
+    ctrl.reset()
+    bank, grid = ctrl.bank, ctrl.grid
+    k = 3
+    bank.p = np.full(len(grid.payloads), 1e-9)
+    bank.p[k] = 1.0
+    bank.p /= bank.p.sum()
+    assert bank.light_side() < grid.payloads[k]
+    assert ctrl._choose(1.0) == k
+    step = grid.payloads[k] - grid.payloads[k - 1]
+    assert grid.index_at_or_below(grid.payloads[k] - 0.01 * step) == k
+    assert grid.index_at_or_below(grid.payloads[k] - 0.05 * step) == k - 1
+    ctrl.reset()
+
+
+def test_a_design_switch_restarts_the_rest_delay(ctrl):
+    """A design chosen at rest first tracks at moving gains for rest_delay."""
+    ctrl.reset()
+    delay = ctrl.settings.payload.rest_delay
+    assert ctrl._resting(1.0)  # holding, never moved
+    bank = ctrl.bank
+    bank.p = np.eye(len(ctrl.grid.payloads))[2]  # a confident estimate: another design
+    assert ctrl._choose(1.0) != ctrl.grid.index_at_or_below(0.0)
+    assert not ctrl._resting(1.0 + 0.5 * delay)
+    assert ctrl._resting(1.0 + delay)
+    ctrl.reset()
 
 
 def test_payload_range_in_python_is_the_files_table():

@@ -35,6 +35,8 @@ from flexctrl.spec.controller_shared import EstimatorSettings
 
 #: A design whose certificate radius reaches this is flagged (the grid is too coarse there).
 CERTIFICATE_LIMIT = 1.0
+#: Fraction of a grid step below a grid payload that still designs at it (index_at_or_below).
+SNAP = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,9 +227,20 @@ class PayloadGrid:
         )
 
     def index_at_or_below(self, payload: float) -> int:
-        """Index of the largest grid payload at or below ``payload`` (kg; the first if none)."""
-        i = int(np.searchsorted(self.payloads, payload + 1e-9, side="right")) - 1
-        return max(i, 0)
+        """Index of the largest grid payload at or below ``payload`` (kg; the first if none).
+
+        A payload within ``SNAP`` of a grid step below a grid payload counts as that payload:
+        a posterior concentrated on one grid payload keeps a spread of order
+        ``step * sqrt(p)`` from the probabilities ``p`` left on its neighbours (1e-9 leaves
+        1e-5 kg), and without the snap the light side would always run one step light.
+        """
+        payloads = self.payloads
+        i = max(int(np.searchsorted(payloads, payload + 1e-9, side="right")) - 1, 0)
+        if i + 1 < len(payloads) and payloads[i + 1] - payload <= SNAP * (
+            payloads[i + 1] - payloads[i]
+        ):
+            i += 1
+        return i
 
     def certificate(self) -> list[dict]:
         """The linear verdict of each design on the plants it may run on.

@@ -180,6 +180,7 @@ class PayloadAware(Controller):
         if i != self.index:
             self.switches.append((t, float(self.grid.payloads[i])))
             self.index = i
+            self._last_moving = t  # the new design's filter tracks at moving gains first
         return i
 
     def _resting(self, t: float) -> bool:
