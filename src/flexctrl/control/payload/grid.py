@@ -235,7 +235,7 @@ class PayloadGrid:
         1e-5 kg), and without the snap the light side would always run one step light.
         """
         payloads = self.payloads
-        i = max(int(np.searchsorted(payloads, payload + 1e-9, side="right")) - 1, 0)
+        i = max(int(np.searchsorted(payloads, payload, side="right")) - 1, 0)
         if i + 1 < len(payloads) and payloads[i + 1] - payload <= SNAP * (
             payloads[i + 1] - payloads[i]
         ):
